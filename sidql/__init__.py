@@ -1,0 +1,2 @@
+"""The keyframe problem: spherical charts, reconstruction, metrics, selection methods,
+environment, DQN and evaluation. Pure numpy/torch: never imports MuJoCo."""

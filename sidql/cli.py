@@ -1,0 +1,44 @@
+"""The ``sidql`` command line: a thin layer over library functions.
+
+Each subcommand lives in its own module under ``sidql.commands`` and exposes
+``register(subparsers)``, which adds its parser and sets ``func`` to a callable taking the parsed
+arguments and returning an exit code. Adding a command = one module + one line below.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from sim.errors import MotionDataError
+
+COMMAND_MODULES = (
+    "sidql.commands.ingest",
+    "sidql.commands.dataset",
+    "sidql.commands.demo",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sidql",
+        description="MuJoCo testbed for motion-capture keyframe extraction and reconstruction.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except MotionDataError as e:
+        print(f"sidql {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

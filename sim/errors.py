@@ -1,0 +1,20 @@
+"""The project's one error hierarchy for bad input."""
+
+from __future__ import annotations
+
+
+class MotionDataError(ValueError):
+    """Bad motion data: names the file, the line (when known) and the problem.
+
+    Subclasses ``ValueError`` so generic callers can still catch it, but code in this project raises
+    only this type for malformed input, never a bare IndexError/KeyError/ValueError from deep inside.
+    """
+
+    def __init__(self, path: str | None, line: int | None, problem: str):
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.problem = problem
+        where = self.path or "<input>"
+        if line is not None:
+            where = f"{where}:{line}"
+        super().__init__(f"{where}: {problem}")
