@@ -26,19 +26,16 @@ from .spherical import SphericalSeries
 SEPARABLE_VARIANTS: tuple[str, ...] = ("hermite", "linear")
 
 
-@numba.njit(cache=True, inline="always")
-def _abs_wrapped(d):
-    a = abs(d)
-    if a > np.pi:
-        a = a % (2.0 * np.pi)
-        if a > np.pi:
-            a = 2.0 * np.pi - a
-    return a
+_TWO_PI = 2.0 * np.pi
+_INV_TWO_PI = 1.0 / _TWO_PI
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=True)
 def _cost_matrix(X, R, linear):
-    """X: (N, D) angles [rad]; R: (N, D) rates times dt [rad/frame]; linear: bool."""
+    """X: (N, D) angles [rad]; R: (N, D) rates times dt [rad/frame]; linear: bool.
+
+    Wrapping is branch-free (``v - 2 pi floor(v / 2 pi + 1/2)``) so the inner loop vectorises.
+    """
     N, D = X.shape
     C = np.zeros((N, N))
     for i in range(N):
@@ -60,8 +57,9 @@ def _cost_matrix(X, R, linear):
                     h10 = (s3 - 2.0 * s2 + s) * L
                     h11 = (s3 - s2) * L
                 for d in range(D):
-                    e = h00 * X[i, d] + h01 * X[j, d] + h10 * R[i, d] + h11 * R[j, d] - X[n, d]
-                    total += _abs_wrapped(e)
+                    v = h00 * X[i, d] + h01 * X[j, d] + h10 * R[i, d] + h11 * R[j, d] - X[n, d]
+                    v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                    total += abs(v)
             C[i, j] = total
     return C
 
