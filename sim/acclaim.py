@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .errors import MotionDataError
+from .errors import MotionDataError, MotionDataWarning
 
 INCH = 0.0254  # [m]
 ROTATION_DOFS = ("rx", "ry", "rz")
@@ -103,12 +104,15 @@ class Motion:
         angles: dict bone name -> (T, len(bone.dofs)) rotations [deg] in the bone's dof order.
             Bones with dofs that the file never mentions are zeros.
         first_frame: the file's number of its first frame (usually 1).
+        notes: repairs made while reading (e.g. an incomplete final frame dropped), each naming
+            the file and line.
     """
 
     path: str
     root: np.ndarray
     angles: dict
     first_frame: int = 1
+    notes: tuple[str, ...] = ()
 
     @property
     def n_frames(self) -> int:
@@ -406,8 +410,12 @@ def _topological(parent_of: dict[str, str], by_name: dict, path: str) -> list[st
 # ----------------------------------------------------------------------------------------- AMC
 
 
-def parse_amc(path: str | os.PathLike, skeleton: Skeleton) -> Motion:
+def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = False) -> Motion:
     """Read an AMC motion for ``skeleton`` (``:FULLY-SPECIFIED``, ``:DEGREES``; LF or CRLF).
+
+    A file that ends part-way through its final frame (whole lines missing, as in CMU's own
+    07_12.amc) loses that frame with a :class:`MotionDataWarning` and a note in ``Motion.notes``,
+    unless ``strict``, where it is an error like any other truncated frame.
 
     Returns:
         The motion with root translations in metres and rotations in degrees.
@@ -439,8 +447,10 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton) -> Motion:
     layout["root"] = 6
     parsed = _parse_frames_fast(lines, body_start, layout)
     if parsed is None:
-        parsed = _parse_frames_checked(lines, body_start, layout, path)
-    first, columns = parsed
+        parsed = _parse_frames_checked(lines, body_start, layout, path, strict)
+    first, columns, notes = parsed if len(parsed) == 3 else (*parsed, ())
+    for note in notes:
+        warnings.warn(note, MotionDataWarning, stacklevel=2)
     T = len(next(iter(columns.values())))
     root = np.asarray(columns.pop("root"), dtype=np.float64).reshape(T, 6)
     root = root[:, [skeleton.root_order.index(c) for c in ROOT_CHANNELS]]
@@ -457,7 +467,7 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton) -> Motion:
         angles = {k: np.rad2deg(v) for k, v in angles.items()}
     if not (np.isfinite(root).all() and all(np.isfinite(v).all() for v in angles.values())):
         raise MotionDataError(path, None, "non-finite value (nan or inf) in the motion")
-    return Motion(path=path, root=root, angles=angles, first_frame=first)
+    return Motion(path=path, root=root, angles=angles, first_frame=first, notes=tuple(notes))
 
 
 def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
@@ -516,7 +526,7 @@ def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
     return first, columns
 
 
-def _parse_frames_checked(lines, start, layout, path):
+def _parse_frames_checked(lines, start, layout, path, strict):
     """Line-by-line parse with precise errors (the slow path)."""
     frames: list[dict[str, list[float]]] = []
     frame_lines: list[int] = []
@@ -576,8 +586,15 @@ def _parse_frames_checked(lines, start, layout, path):
         current[name] = _floats(tokens[1:], path, ln, f"bone {name!r}")
     if not frames:
         raise MotionDataError(path, None, "no frames")
-    close(None)
+    notes = []
+    try:
+        close(None)
+    except MotionDataError as e:
+        if strict or len(frames) < 2 or not e.problem.startswith("truncated frame"):
+            raise
+        frames.pop()
+        notes.append(f"{e}; dropped the incomplete final frame")
     if "root" not in expected_names:
         raise MotionDataError(path, frame_lines[0], "frame has no 'root' line")
     columns = {n: np.array([f[n] for f in frames]) for n in expected_names}
-    return first, columns
+    return first, columns, notes

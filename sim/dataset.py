@@ -67,10 +67,14 @@ def find_trials(root: str | os.PathLike) -> list[Trial]:
 
 
 def _ingest_one(trial: Trial, out_dir: str, skeleton: str, fps: float) -> dict:
+    import warnings
+
     from .clip import save_npz
     from .ingest import load_motion
 
-    clip = load_motion(trial.asf, trial.amc, skeleton=skeleton, fps=fps)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        clip = load_motion(trial.asf, trial.amc, skeleton=skeleton, fps=fps)
     out = Path(out_dir) / trial.subject / f"{trial.name}.npz"
     save_npz(clip, out)
     return {
@@ -81,6 +85,7 @@ def _ingest_one(trial: Trial, out_dir: str, skeleton: str, fps: float) -> dict:
         "file": str(out.relative_to(out_dir)),
         "frames": clip.n_frames,
         "fps": clip.fps,
+        "notes": [str(w.message) for w in caught],
     }
 
 

@@ -18,3 +18,11 @@ class MotionDataError(ValueError):
         if line is not None:
             where = f"{where}:{line}"
         super().__init__(f"{where}: {problem}")
+
+    def __reduce__(self):
+        # Worker processes send errors back pickled; rebuild from the three fields.
+        return (type(self), (self.path, self.line, self.problem))
+
+
+class MotionDataWarning(UserWarning):
+    """Input that was repaired rather than rejected (e.g. an incomplete final AMC frame dropped)."""

@@ -1,0 +1,61 @@
+"""``sidql ingest ASF AMC``: one trial -> one ``.npz`` of positions and true velocities."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "ingest",
+        help="ingest one CMU trial (ASF + AMC) into an .npz clip",
+        description="Parse an ASF skeleton and AMC motion, retarget onto a MuJoCo humanoid, and "
+        "write positions (T, J, 3) [m, z up], true velocities [m/s], qpos, qvel at the output rate.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    p.add_argument(
+        "--skeleton",
+        choices=("subject", "humanoid"),
+        default="subject",
+        help="the subject's own generated model, or the shared models/cmu_humanoid.xml",
+    )
+    p.add_argument("--fps", type=float, default=30.0, help="output frame rate (divides 120)")
+    p.add_argument("--source-fps", type=float, default=120.0, help="frame rate of the AMC file")
+    p.add_argument("--out", required=True, help="output .npz")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from sim.clip import save_npz
+    from sim.ingest import load_motion
+
+    clip = load_motion(
+        args.asf, args.amc, skeleton=args.skeleton, fps=args.fps, source_fps=args.source_fps
+    )
+    path = save_npz(clip, args.out)
+    print(describe(clip))
+    print(f"wrote {path}")
+    return 0
+
+
+def describe(clip) -> str:
+    """A few lines a person can read: size, duration, extents, speeds."""
+    import numpy as np
+
+    T, J = clip.positions.shape[:2]
+    speed = np.linalg.norm(clip.velocities, axis=-1)
+    root = clip.positions[:, 0]
+    travel = np.linalg.norm(np.diff(root[:, :2], axis=0), axis=-1).sum()
+    return "\n".join(
+        [
+            f"source       {clip.source}",
+            f"frames       {T} at {clip.fps:g} fps ({T / clip.fps:.2f} s), {J} points, "
+            f"{T // 60} clips of 60 frames",
+            f"height       {clip.positions[..., 2].min():.3f} .. {clip.positions[..., 2].max():.3f} m",
+            f"root travel  {travel:.2f} m",
+            f"point speed  median {np.median(speed):.2f} m/s, max {speed.max():.2f} m/s "
+            f"({clip.names[int(np.unravel_index(speed.argmax(), speed.shape)[1])]})",
+        ]
+    )

@@ -1,0 +1,29 @@
+"""Shared fixtures: the real CMU files beside the repository (../shared/cmu)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+REPO = Path(__file__).resolve().parent.parent
+CMU = Path(os.environ.get("SIDQL_CMU", REPO.parent / "shared" / "cmu"))
+
+
+@pytest.fixture(scope="session")
+def cmu_dir() -> Path:
+    """The real CMU data folder; tests that need it skip (saying why) when it is absent."""
+    if not (CMU / "MANIFEST.tsv").exists():
+        pytest.skip(f"real CMU data not found at {CMU} (set SIDQL_CMU)")
+    return CMU
+
+
+@pytest.fixture(scope="session")
+def walk_clip(cmu_dir):
+    """Subject 02's walk 02_01 at 30 fps on its own skeleton."""
+    from sim.ingest import load_motion
+
+    return load_motion(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
