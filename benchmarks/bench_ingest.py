@@ -1,0 +1,65 @@
+"""Ingest throughput: 120 Hz source frames per second per core (parse + retarget + velocities).
+
+Usage: .venv/bin/python benchmarks/bench_ingest.py [CMU_DIR]
+
+One process, one core. The baseline, measured in the same run, is the same pipeline with the
+line-by-line checked AMC parser (the precise-error path) instead of the vectorised one.
+Target (issue 2): at least 20,000 source frames per second per core.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+import sim.acclaim as acclaim  # noqa: E402
+from sim.dataset import find_trials  # noqa: E402
+from sim.ingest import load_motion  # noqa: E402
+
+
+def run(trials, repeats: int = 3) -> tuple[float, dict]:
+    frames, best = 0, np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        frames = 0
+        for t in trials:
+            frames += load_motion(t.asf, t.amc, fps=30).n_frames * 4
+        best = min(best, time.perf_counter() - start)
+    return frames / best, {"frames": frames, "seconds": best}
+
+
+def main() -> None:
+    root = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).parents[2] / "shared" / "cmu")
+    trials = find_trials(root)
+    warnings.simplefilter("ignore", acclaim.MotionDataWarning)
+    for t in trials:  # build (and cache) every subject's model outside the timing
+        load_motion(t.asf, t.amc)
+    fast, info = run(trials)
+    original = acclaim._parse_frames_fast
+    acclaim._parse_frames_fast = lambda *a: None  # force the checked line-by-line parser
+    try:
+        slow, _ = run(trials, repeats=1)
+    finally:
+        acclaim._parse_frames_fast = original
+
+    t0 = time.perf_counter()
+    for t in trials:
+        acclaim.parse_amc(t.amc, acclaim.parse_asf(t.asf))
+    parse_only = info["frames"] / (time.perf_counter() - t0)
+    print(f"trials: {len(trials)}, source frames: {info['frames']} (120 Hz)")
+    print(f"ingest (parse + retarget + velocities): {fast:,.0f} source frames/s per core")
+    print(f"  of which parsing alone:              {parse_only:,.0f} frames/s")
+    print(f"baseline (line-by-line parser):        {slow:,.0f} source frames/s per core")
+    print(f"ratio vs baseline:                     {fast / slow:.2f}x")
+    print(f"target >= 20,000 frames/s: {'met' if fast >= 20000 else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()
