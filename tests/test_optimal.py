@@ -1,0 +1,92 @@
+"""Segment costs and the exact optimum: against full reconstruction and brute force."""
+
+import itertools
+
+import numpy as np
+import pytest
+from keyframe_synth import smooth_clip
+
+from sidql.methods import greedy_from_costs, uniform_indices
+from sidql.metrics import q_error
+from sidql.optimal import optimal_table, solve
+from sidql.segment_costs import segment_cost_matrix
+from sidql.spherical import chart
+
+
+@pytest.fixture(scope="module")
+def series():
+    return chart(smooth_clip(60, 30.0, seed=11))
+
+
+@pytest.mark.parametrize("variant", ["hermite", "linear"])
+def test_segment_costs_sum_to_q_of_full_reconstruction(series, variant):
+    C = segment_cost_matrix(series, variant)
+    N, M = series.n_frames, series.n_bones
+    rng = np.random.default_rng(0)
+    for W in (2, 3, 7, 20, 60):
+        k = np.sort(np.concatenate([[0, N - 1], rng.choice(np.arange(1, N - 1), W - 2, False)]))
+        assert C[k[:-1], k[1:]].sum() / (N * M) == pytest.approx(q_error(series, k, variant), 1e-12)
+    assert np.all(np.diag(C, 1) == 0) and np.all(np.tril(C) == 0) and np.all(C >= 0)
+
+
+def test_segment_costs_wrap_phi_differences():
+    """Adding multiples of 2 pi to phi strictly inside a segment leaves its cost unchanged."""
+    s = chart(smooth_clip(20, 30.0, seed=12))
+    from dataclasses import replace
+
+    shift = 2 * np.pi * np.random.default_rng(1).integers(-2, 3, s.phi.shape)
+    shift[[0, -1]] = 0
+    shifted = replace(s, phi=s.phi + shift)
+    assert segment_cost_matrix(shifted)[0, -1] == pytest.approx(segment_cost_matrix(s)[0, -1])
+    assert segment_cost_matrix(shifted)[0, -1] > 0
+
+
+@pytest.mark.parametrize("variant", ["hermite", "linear"])
+def test_optimum_equals_brute_force_enumeration(variant):
+    s = chart(smooth_clip(60, 30.0, seed=13))
+    # a short clip keeps the enumeration small: first 13 frames
+    from dataclasses import replace
+
+    n = 13
+    small = replace(
+        s,
+        theta=s.theta[:n],
+        phi=s.phi[:n],
+        dtheta=s.dtheta[:n],
+        dphi=s.dphi[:n],
+        root_pos=s.root_pos[:n],
+        root_vel=s.root_vel[:n],
+    )
+    table = optimal_table(small, variant)
+    for W in range(2, 8):
+        best = min(
+            q_error(small, np.array((0, *inner, n - 1)), variant)
+            for inner in itertools.combinations(range(1, n - 1), W - 2)
+        )
+        k = table.keyframes(W)
+        assert len(k) == W and k[0] == 0 and k[-1] == n - 1
+        assert table.q(W) == pytest.approx(best, rel=1e-12)
+        assert q_error(small, k, variant) == pytest.approx(best, rel=1e-12)
+
+
+def test_optimum_is_never_worse_than_greedy_or_uniform(series, walk_clip):
+    for s in (series, chart(walk_clip.slice(20, 80))):
+        C = segment_cost_matrix(s)
+        table = solve(C, s.n_bones)
+        N = s.n_frames
+        prev = np.inf
+        for W in range(2, N + 1):
+            q_opt = table.q(W)
+            assert q_opt <= q_error(s, greedy_from_costs(C, W)) + 1e-12
+            assert q_opt <= q_error(s, uniform_indices(N, W)) + 1e-12
+            assert q_opt <= prev + 1e-12
+            prev = q_opt
+        assert table.q(N) == 0.0
+
+
+def test_solve_rejects_bad_sizes(series):
+    C = segment_cost_matrix(series)
+    with pytest.raises(ValueError):
+        solve(C, 22, w_max=1)
+    with pytest.raises(ValueError):
+        solve(C, 22, w_max=5).keyframes(6)

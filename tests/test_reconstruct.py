@@ -1,0 +1,108 @@
+"""Reconstruction: exact on representable motion, constant bone lengths, exact keyframes,
+velocities that are the derivatives of the positions."""
+
+import numpy as np
+import pytest
+from keyframe_synth import piecewise_clip, smooth_clip
+
+from sidql.metrics import bone_vectors, q_error
+from sidql.reconstruct import VARIANTS, interpolate, keyframe_rates, reconstruct
+from sidql.spherical import POINTS, chart
+
+KEYS = np.array([0, 7, 19, 20, 33, 59])
+
+
+def truth(clip):
+    idx = [clip.index(p) for p in POINTS]
+    return clip.positions[:, idx], clip.velocities[:, idx]
+
+
+@pytest.mark.parametrize("variant", ["hermite", "linear"])
+def test_motion_of_the_variants_own_curves_is_rebuilt_exactly(variant):
+    clip = piecewise_clip(KEYS, 60, 30.0, seed=4, variant=variant)
+    rec = reconstruct(clip, KEYS, variant)
+    pos, vel = truth(clip)
+    assert np.allclose(rec.positions, pos, atol=1e-9)
+    s = chart(clip)
+    assert np.allclose(rec.theta, s.theta, atol=1e-9) and np.allclose(rec.phi, s.phi, atol=1e-9)
+    assert q_error(s, KEYS, variant) == pytest.approx(0.0, abs=1e-10)
+    if variant == "hermite":  # linear velocities are one-sided at keyframes
+        assert np.allclose(rec.velocities, vel, atol=1e-8)
+
+
+def test_catmull_rom_is_exact_on_motion_linear_in_the_chart():
+    N, M = 60, 22
+    t = np.arange(N)[:, None] / 30.0
+    rng = np.random.default_rng(5)
+    a, b = rng.uniform(-0.4, 0.4, (2, M))
+    theta, phi = 1.3 + a * t, rng.uniform(-3, 3, M) + b * t
+    from sidql.spherical import clip_from_chart
+
+    root = 0.5 * t * np.ones(3)
+    clip = clip_from_chart(
+        theta, phi, a + 0 * t, b + 0 * t, root, 0.5 + 0 * root, rng.uniform(0.1, 0.4, M), fps=30.0
+    )
+    rec = reconstruct(clip, KEYS, "catmull_rom")
+    assert np.allclose(rec.positions, truth(clip)[0], atol=1e-9)
+
+
+def test_catmull_rom_rates_are_central_differences_over_neighbour_keyframes():
+    x = np.random.default_rng(6).normal(size=(60, 4))
+    m = keyframe_rates(x, KEYS, 0.1)
+    w = 2
+    assert np.allclose(
+        m[w], (x[KEYS[w + 1]] - x[KEYS[w - 1]]) / ((KEYS[w + 1] - KEYS[w - 1]) * 0.1)
+    )
+    assert np.allclose(m[0], (x[KEYS[1]] - x[0]) / (KEYS[1] * 0.1))
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_bone_lengths_are_constant_and_keyframes_exact(variant):
+    clip = smooth_clip(60, 30.0, seed=7)
+    rec = reconstruct(clip, np.array([0, 11, 40, 59]), variant)
+    lengths = np.linalg.norm(bone_vectors(rec.positions, rec.parents), axis=-1)
+    assert np.abs(lengths - chart(clip).lengths).max() < 1e-9
+    keys = rec.keyframes
+    assert np.allclose(rec.positions[keys], truth(clip)[0][keys], atol=1e-12)
+    assert rec.names == POINTS and rec.positions.shape == (60, 23, 3)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_velocities_are_the_derivative_of_positions(variant):
+    """At 600 fps, central differences of the rebuilt positions match the reported velocities
+    away from keyframes (where linear and Catmull-Rom have kinks)."""
+    N = 601
+    clip = smooth_clip(N, 600.0, seed=8)
+    keys = np.array([0, 150, 420, 600])
+    rec = reconstruct(clip, keys, variant)
+    fd = (rec.positions[2:] - rec.positions[:-2]) / (2 * rec.dt)
+    inner = np.ones(N, bool)
+    for k in keys:
+        inner[max(k - 1, 0) : k + 2] = False
+    err = np.abs(fd - rec.velocities[1:-1])[inner[1:-1]]
+    assert err.max() < 1e-3 * np.abs(rec.velocities).max()
+
+
+def test_all_frames_as_keyframes_reproduce_the_clip_and_q_is_zero():
+    clip = smooth_clip(30, 30.0, seed=9)
+    rec = reconstruct(clip, np.arange(30))
+    pos, vel = truth(clip)
+    assert np.allclose(rec.positions, pos, atol=1e-12) and np.allclose(rec.velocities, vel)
+    assert q_error(chart(clip), np.arange(30)) == 0.0
+
+
+def test_bad_keyframes_and_variants_are_rejected():
+    clip = smooth_clip(10)
+    for bad in ([1, 9], [0, 5, 5, 9], [0, 8], [0], [0.0, 9.0]):
+        with pytest.raises(ValueError):
+            reconstruct(clip, bad)
+    with pytest.raises(ValueError, match="known"):
+        reconstruct(clip, [0, 9], "spline")
+
+
+def test_interpolate_hermite_reproduces_cubics_on_any_grid():
+    t = np.arange(25) * 0.05
+    x = (1.0 - 2.0 * t + 0.5 * t**2 - 0.3 * t**3)[:, None]
+    xd = (-2.0 + t - 0.9 * t**2)[:, None]
+    rec, rate = interpolate(x, xd, [0, 24], 0.05, "hermite")
+    assert np.allclose(rec, x) and np.allclose(rate, xd)
