@@ -1,0 +1,92 @@
+"""Selection methods: the interface contract, determinism, greedy against a naive greedy."""
+
+import sys
+
+import numpy as np
+import pytest
+from keyframe_synth import smooth_clip
+
+from sidql import methods
+from sidql.metrics import q_error
+from sidql.spherical import chart
+
+
+@pytest.fixture(scope="module")
+def clip():
+    return smooth_clip(60, 30.0, seed=21)
+
+
+@pytest.mark.parametrize("name", ["random", "uniform", "greedy", "optimal", "pitch"])
+@pytest.mark.parametrize("W", [2, 3, 5, 15, 60])
+def test_every_method_returns_w_sorted_keyframes_with_both_ends(clip, name, W):
+    k = methods.select(name, clip, W, seed=3)
+    assert k.dtype == np.int64 and k.shape == (W,)
+    assert k[0] == 0 and k[-1] == 59 and np.all(np.diff(k) > 0)
+
+
+def test_random_is_reproducible_by_seed_and_varies_with_it(clip):
+    a = methods.select("random", clip, 8, seed=1)
+    assert np.array_equal(a, methods.select("random", clip, 8, seed=1))
+    assert any(
+        not np.array_equal(a, methods.select("random", clip, 8, seed=s)) for s in range(2, 6)
+    )
+
+
+def test_uniform_is_evenly_spaced(clip):
+    k = methods.select("uniform", clip, 5)
+    assert k.tolist() == [0, 15, 30, 44, 59]  # 59/4 = 14.75 -> 0, 14.75, 29.5, 44.25, 59
+    assert np.ptp(np.diff(methods.uniform_indices(61, 7))) == 0
+
+
+def naive_greedy(series, W):
+    """The paper's greedy: rebuild the whole clip for every candidate frame."""
+    keys = [0, series.n_frames - 1]
+    for _ in range(W - 2):
+        cands = [f for f in range(series.n_frames) if f not in keys]
+        errs = [q_error(series, np.array(sorted(keys + [f]))) for f in cands]
+        keys.append(cands[int(np.argmin(errs))])
+    return np.array(sorted(keys))
+
+
+def test_greedy_equals_the_naive_greedy(clip):
+    s = chart(clip)
+    for W in (3, 6, 9):
+        assert np.array_equal(methods.select("greedy", clip, W), naive_greedy(s, W))
+
+
+def test_register_adds_a_method_and_select_checks_its_output(clip):
+    @methods.register("every_other_test")
+    def every_other(c, W, *, seed=0):
+        return np.arange(W)
+
+    try:
+        assert "every_other_test" in methods.available()
+        with pytest.raises(RuntimeError, match="bad keyframes"):
+            methods.select("every_other_test", clip, 4)
+    finally:
+        del methods.METHODS["every_other_test"]
+
+
+def test_lazy_methods_are_imported_on_demand(clip, tmp_path, monkeypatch):
+    (tmp_path / "lazy_kf_method.py").write_text(
+        "import numpy as np\n"
+        "from sidql.methods import register, uniform_indices\n"
+        "@register('lazy_test')\n"
+        "def f(clip, W, *, seed=0):\n"
+        "    return uniform_indices(clip.n_frames, W)\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(methods.LAZY_METHODS, "lazy_test", "lazy_kf_method")
+    try:
+        assert methods.select("lazy_test", clip, 4).tolist() == [0, 20, 39, 59]
+    finally:
+        methods.METHODS.pop("lazy_test", None)
+        sys.modules.pop("lazy_kf_method", None)
+
+
+def test_unknown_names_and_bad_counts_are_clear_errors(clip):
+    with pytest.raises(KeyError, match="known: .*greedy"):
+        methods.select("nope", clip, 5)
+    for W in (1, 61):
+        with pytest.raises(ValueError, match="W must be"):
+            methods.select("uniform", clip, W)
