@@ -17,6 +17,8 @@ COMMAND_MODULES = (
     "sidql.commands.ingest",
     "sidql.commands.dataset",
     "sidql.commands.demo",
+    "sidql.commands.report",
+    "sidql.commands.eval", "sidql.commands.extract",
 )
 
 
