@@ -26,15 +26,24 @@ system_packages() {
     fi
 }
 
+quiet() {
+    # pip's notes about this machine's local package mirrors are noise; errors still show.
+    set +o pipefail
+    "$@" 2>&1 | { grep -v -e "^WARNING: Location" -e "^ *$" || true; } >&2
+    local rc=${PIPESTATUS[0]}
+    set -o pipefail
+    return "$rc"
+}
+
 python_env() {
     local want
     want=$(cat pyproject.toml run.sh | sha256sum | cut -d' ' -f1)
     if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$want" ]; then return 0; fi
     [ -x "$VENV/bin/python" ] || "$PY" -m venv "$VENV"
-    "$VENV/bin/python" -m pip install -q --upgrade pip >&2
+    quiet "$VENV/bin/python" -m pip install -q --upgrade pip
     # The CPU build of torch first: a bare 'torch' requirement would pull a multi-GB CUDA build.
-    "$VENV/bin/python" -m pip install -q "torch==2.13.0" >&2
-    "$VENV/bin/python" -m pip install -q -e ".[test]" >&2
+    quiet "$VENV/bin/python" -m pip install -q "torch==2.13.0"
+    quiet "$VENV/bin/python" -m pip install -q -e ".[test]"
     echo "$want" >"$STAMP"
 }
 
