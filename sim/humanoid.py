@@ -141,7 +141,7 @@ def build_mjcf(skeleton: Skeleton, *, model_name: str | None = None) -> str:
 
 
 @lru_cache(maxsize=64)
-def _model_for_asf(path: str, mtime: float):
+def _model_for_asf(path: str, version: tuple):
     import mujoco
 
     skeleton = parse_asf(path)
@@ -151,7 +151,8 @@ def _model_for_asf(path: str, mtime: float):
 def subject_model(asf_path: str | os.PathLike):
     """(skeleton, MjModel) of a subject's own humanoid, cached per file version."""
     path = str(Path(asf_path).resolve())
-    return _model_for_asf(path, os.path.getmtime(path))
+    st = os.stat(path)
+    return _model_for_asf(path, (st.st_mtime_ns, st.st_size))
 
 
 @lru_cache(maxsize=1)
