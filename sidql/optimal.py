@@ -90,3 +90,94 @@ def optimal_table(
 def optimal_keyframes(series: SphericalSeries, W: int, variant: str = "hermite") -> np.ndarray:
     """(W,) keyframes minimising Q exactly (eq. 19) under a separable variant."""
     return optimal_table(series, variant, w_max=W).keyframes(W)
+
+
+@numba.njit(cache=True)
+def _cr_dp(Q, w_max):
+    """Exact DP over triples of consecutive keyframes for the Catmull-Rom costs Q."""
+    N = Q.shape[1]
+    best = np.full(w_max + 1, np.inf)
+    last = np.full((w_max + 1, 2), -1, dtype=np.int64)  # (x + 1, y) of the best final state
+    back = np.full((w_max + 1, N + 1, N, N), -1, dtype=np.int16)
+    G = np.full((N + 1, N, N), np.inf)  # state (x + 1, y, z): the last three keyframes
+    for z in range(1, N):
+        G[0, 0, z] = 0.0  # two keyframes 0 < z, nothing finalised yet
+    for w in range(2, w_max + 1):
+        # close the clip: the state's last keyframe must be N - 1
+        for xi in range(N + 1):
+            for y in range(N - 1):
+                g = G[xi, y, N - 1]
+                if g < np.inf:
+                    v = g + Q[xi, y, N - 1, N]
+                    if v < best[w]:
+                        best[w] = v
+                        last[w, 0] = xi
+                        last[w, 1] = y
+        if w == w_max:
+            break
+        H = np.full((N + 1, N, N), np.inf)
+        for xi in range(N + 1):
+            for y in range(N):
+                for z in range(y + 1, N - 1):
+                    g = G[xi, y, z]
+                    if g == np.inf:
+                        continue
+                    for n in range(z + 1, N):
+                        v = g + Q[xi, y, z, n]
+                        if v < H[y + 1, z, n]:
+                            H[y + 1, z, n] = v
+                            back[w + 1, y + 1, z, n] = xi
+        G = H
+    return best, last, back
+
+
+@dataclass(frozen=True)
+class CatmullRomTable:
+    """Exact optima of Q under Catmull-Rom reconstruction for W = 2..w_max.
+
+    Attributes:
+        cost: (w_max + 1,) least total cost [rad] (inf for W < 2); n_frames, n_bones: N, M.
+    """
+
+    cost: np.ndarray
+    last: np.ndarray
+    back: np.ndarray
+    n_frames: int
+    n_bones: int
+
+    def keyframes(self, W: int) -> np.ndarray:
+        """(W,) sorted optimal keyframes, 0 and N-1 included."""
+        if not 2 <= W < len(self.cost):
+            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+        N = self.n_frames
+        xi, y = int(self.last[W, 0]), int(self.last[W, 1])
+        out = [N - 1, y]
+        z = N - 1
+        w = W
+        while xi > 0:  # walk back: state (xi, y, z) at layer w came from (back, xi - 1, y)
+            out.append(xi - 1)
+            prev = int(self.back[w, xi, y, z])
+            xi, y, z = prev, xi - 1, y
+            w -= 1
+        return np.array(sorted(out), dtype=np.int64)
+
+    def q(self, W: int) -> float:
+        """The optimal Q [rad] for W keyframes."""
+        return float(self.cost[W] / (self.n_frames * self.n_bones))
+
+
+def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
+    """Exact minima of Q under the Catmull-Rom variant for every W from 2 to ``w_max``.
+
+    A segment's curve depends on four keyframes (its ends and their neighbours), so the programme
+    runs over triples of consecutive keyframes: O(N^5 M) for the costs, O(w_max N^4) for the DP.
+    About a second per 60-frame clip.
+    """
+    from .segment_costs import catmull_rom_costs
+
+    N = series.n_frames
+    if not 2 <= w_max <= N:
+        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+    Q = catmull_rom_costs(series)
+    best, last, back = _cr_dp(Q, w_max)
+    return CatmullRomTable(best, last, back, N, series.n_bones)

@@ -207,11 +207,12 @@ def _segments(keyframes: np.ndarray, N: int):
     return seg, a, b, (n - a) / (b - a)
 
 
-def reconstruct(clip: Clip, keyframes) -> Reconstruction:
+def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction:
     """Li et al. 2015 reconstruction of ``clip``'s 23 protocol points from its keyframes.
 
     Local rotations are slerped between keyframes (shorter arc), the root position interpolated
-    linearly, and points rebuilt by forward kinematics with offsets fitted to the clip.
+    linearly, and points rebuilt by forward kinematics with offsets fitted to the clip (or the
+    given ``rig``, from :func:`fit_rig`, to save refitting).
 
     Returns:
         A :class:`~sidql.reconstruct.Reconstruction` (variant "pitch"): positions and velocities
@@ -222,7 +223,8 @@ def reconstruct(clip: Clip, keyframes) -> Reconstruction:
     N = clip.n_frames
     k = validate_keyframes(keyframes, N)
     dt = clip.dt
-    rig, _ = fit_rig(pos, local, parents)
+    if rig is None:
+        rig, _ = fit_rig(pos, local, parents)
     seg, a, b, s = _segments(k, N)
     h = (b - a) * dt
     # Root position: linear; velocity: slope (inner keyframes: mean of both sides).

@@ -88,3 +88,65 @@ def segment_cost_matrix(series: SphericalSeries, variant: str = "hermite") -> np
         )
     X, R = stacked(series)
     return _cost_matrix(X, R, variant == "linear")
+
+
+@numba.njit(cache=True, fastmath=True)
+def _catmull_rom_costs(X):
+    """(N+1, N, N, N+1) costs of segment (y, z) given the keyframes x before and n after it.
+
+    Index ``x + 1`` (0: no keyframe before, only when y = 0) and ``n`` (N: none, only when
+    z = N - 1); invalid combinations are inf. X: (N, D) angles [rad].
+    """
+    N, D = X.shape
+    Q = np.full((N + 1, N, N, N + 1), np.inf)
+    A = np.empty((N, D))
+    ha = np.empty(N)
+    hb = np.empty(N)
+    ma = np.empty(D)
+    mb = np.empty(D)
+    for y in range(N - 1):
+        for z in range(y + 1, N):
+            L = z - y
+            for f in range(y + 1, z):
+                s = (f - y) / L
+                s2 = s * s
+                s3 = s2 * s
+                h00 = 2.0 * s3 - 3.0 * s2 + 1.0
+                h01 = -2.0 * s3 + 3.0 * s2
+                ha[f] = (s3 - 2.0 * s2 + s) * L
+                hb[f] = (s3 - s2) * L
+                for d in range(D):
+                    A[f, d] = h00 * X[y, d] + h01 * X[z, d] - X[f, d]
+            x_lo, x_hi = (-1, 0) if y == 0 else (0, y)
+            n_lo, n_hi = (N, N + 1) if z == N - 1 else (z + 1, N)
+            for x in range(x_lo, x_hi):
+                for d in range(D):
+                    if x < 0:
+                        ma[d] = (X[z, d] - X[y, d]) / L
+                    else:
+                        ma[d] = (X[z, d] - X[x, d]) / (z - x)
+                for n in range(n_lo, n_hi):
+                    for d in range(D):
+                        if n == N:
+                            mb[d] = (X[z, d] - X[y, d]) / L
+                        else:
+                            mb[d] = (X[n, d] - X[y, d]) / (n - y)
+                    total = 0.0
+                    for f in range(y + 1, z):
+                        for d in range(D):
+                            v = A[f, d] + ha[f] * ma[d] + hb[f] * mb[d]
+                            v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                            total += abs(v)
+                    Q[x + 1, y, z, n] = total
+    return Q
+
+
+def catmull_rom_costs(series: SphericalSeries) -> np.ndarray:
+    """(N+1, N, N, N+1) Catmull-Rom segment costs [rad]: entry ``[x + 1, y, z, n]`` is the summed
+    |angle error| over the frames strictly inside segment (y, z) when the keyframes around it are
+    x (``x + 1 = 0``: none, y = 0) and n (``n = N``: none, z = N - 1); inf where invalid.
+
+    Q(K) = sum over segments of these entries / (N * M).
+    """
+    X, _ = stacked(series)
+    return _catmull_rom_costs(X)
