@@ -1,0 +1,178 @@
+"""Evaluation, the CLI commands and the rate/distortion sweep."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from keyframe_synth import smooth_clip
+
+from sidql import cli
+from sidql.evaluate import PAPER_TABLE3, evaluate, make_case, table3_markdown
+from sidql.metrics import q_error
+from sidql.rate import (
+    CURVES,
+    PAYLOAD_BYTES,
+    bytes_per_second,
+    rate_distortion,
+    raw_bytes_per_second,
+    write_plot,
+)
+
+
+@pytest.fixture(scope="module")
+def cases():
+    return [make_case(smooth_clip(60, 30.0, seed=40 + i), i) for i in range(3)]
+
+
+def test_evaluate_rows_are_consistent_with_per_clip_scores(cases):
+    out = evaluate(
+        cases, ["random", "uniform", "greedy", "optimal", "pitch"], [3, 6], progress=False
+    )
+    assert len(out["results"]) == 10 and len(out["per_clip"]) == 30
+    for r in out["results"]:
+        rows = [
+            p
+            for p in out["per_clip"]
+            if p["method"] == r["method"] and p["keyframes"] == r["keyframes"]
+        ]
+        assert r["clips"] == 3 and r["mean_q"] == pytest.approx(np.mean([p["q"] for p in rows]))
+        for p, case in zip(rows, cases, strict=True):
+            assert len(p["indices"]) == r["keyframes"]
+            assert p["q_hermite"] == pytest.approx(q_error(case.series, np.array(p["indices"])))
+            if r["method"] != "pitch":
+                assert p["q"] == p["q_hermite"]
+    per = {
+        (p["method"], p["keyframes"], p["source"], i % 3): p["q"]
+        for i, p in enumerate(out["per_clip"])
+    }
+    for (m, W, src, i), qv in per.items():
+        if m in ("greedy", "uniform", "random"):
+            assert per[("optimal", W, src, i)] <= qv + 1e-12
+    table = table3_markdown(out["results"])
+    assert "random (RC)" in table and "optimal" in table and "| pitch | 6 |" in table
+
+
+def test_random_method_is_seeded_per_clip(cases):
+    a = evaluate(cases, ["random"], [5], seed=1, progress=False)["per_clip"]
+    b = evaluate(cases, ["random"], [5], seed=1, progress=False)["per_clip"]
+    c = evaluate(cases, ["random"], [5], seed=2, progress=False)["per_clip"]
+    assert [r["indices"] for r in a] == [r["indices"] for r in b]
+    assert [r["indices"] for r in a] != [r["indices"] for r in c]
+    assert len({tuple(r["indices"]) for r in a}) > 1  # clips do not share one draw
+
+
+def test_table_shows_the_papers_figures():
+    rows = [
+        {
+            "method": "greedy",
+            "keyframes": W,
+            "clips": 1,
+            "mean_q": 0.1,
+            "mean_q_hermite": 0.1,
+            "mean_geodesic_deg": 1,
+            "mpjpe_mm": 1,
+            "mean_velocity_error": 1,
+            "mean_li_error_mm": 1,
+            "median_decision_ms": 1,
+        }
+        for W in (5, 10)
+    ]
+    t = table3_markdown(rows)
+    assert f"({PAPER_TABLE3['Greedy'][5]:.4f})" in t and f"({PAPER_TABLE3['Greedy'][10]:.4f})" in t
+
+
+def test_rate_distortion_optima_beat_uniform_and_bytes_add_up(tmp_path):
+    cases = [make_case(smooth_clip(24, 30.0, seed=50 + i), i) for i in range(2)]
+    rd = rate_distortion(cases, counts=(2, 3, 5, 8), progress=False)
+    curves = {(c["method"], c["scheme"]): c for c in rd["curves"]}
+    assert set(curves) == set(CURVES)
+    for scheme in ("hermite", "linear", "catmull_rom"):
+        opt, uni = curves[("optimal", scheme)], curves[("uniform", scheme)]
+        assert all(o <= u + 1e-12 for o, u in zip(opt["mean_q"], uni["mean_q"], strict=True))
+    assert curves[("optimal", "hermite")]["bytes_per_second"][0] == pytest.approx(
+        2 * PAYLOAD_BYTES["hermite"] * 30 / 24
+    )
+    assert PAYLOAD_BYTES["hermite"] - 1 == 2 * (PAYLOAD_BYTES["linear"] - 1)
+    assert bytes_per_second("linear", 60) == pytest.approx(raw_bytes_per_second() + 30)
+    write_plot(rd, tmp_path / "rd.png")
+    assert (tmp_path / "rd.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture
+def tiny_data(cmu_dir, tmp_path):
+    """One real trial (symlinked, never copied) and one broken AMC beside it."""
+    good = tmp_path / "data" / "02"
+    good.mkdir(parents=True)
+    os.symlink(cmu_dir / "02" / "02.asf", good / "02.asf")
+    os.symlink(cmu_dir / "02" / "02_02.amc", good / "02_02.amc")
+    (good / "02_99.amc").write_text(":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 nonsense\n")
+    return tmp_path / "data"
+
+
+def test_eval_command_writes_results_and_skips_bad_files(tiny_data, tmp_path, capsys):
+    out = tmp_path / "res.json"
+    rc = cli.main(
+        [
+            "eval",
+            "--data",
+            str(tiny_data),
+            "--keyframes",
+            "3",
+            "5",
+            "--methods",
+            "uniform",
+            "optimal",
+            "pitch",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
+    assert rc == 0
+    res = json.loads(out.read_text())
+    assert len(res["skipped"]) == 1 and "02_99" in res["skipped"][0]["amc"]
+    assert {(r["method"], r["keyframes"]) for r in res["results"]} == {
+        (m, W) for m in ("uniform", "optimal", "pitch") for W in (3, 5)
+    }
+    clips = res["protocol"]["clips"]
+    assert clips == 1  # 298 frames at 120 fps -> 75 at 30 fps -> one 60-frame clip
+    row = res["per_clip"][0]
+    assert {"source", "start_frame", "method", "keyframes", "indices", "q"} <= set(row)
+    assert "| optimal |" in capsys.readouterr().out
+
+
+def test_extract_command_prints_and_writes_keyframes(cmu_dir, tmp_path, capsys):
+    out = tmp_path / "k.json"
+    rc = cli.main(
+        [
+            "extract",
+            str(cmu_dir / "02" / "02.asf"),
+            str(cmu_dir / "02" / "02_01.amc"),
+            "--keyframes",
+            "6",
+            "--method",
+            "greedy",
+            "--out",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    rows = json.loads(out.read_text())["clips"]
+    assert rows and all(len(r["indices"]) == 6 and r["indices"][-1] == 59 for r in rows)
+    assert "keyframes 0" in capsys.readouterr().out
+
+
+def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path):
+    with pytest.raises(KeyError, match="known"):
+        cli.main(
+            [
+                "extract",
+                str(cmu_dir / "02" / "02.asf"),
+                str(cmu_dir / "02" / "02_01.amc"),
+                "--keyframes",
+                "6",
+                "--method",
+                "nope",
+            ]
+        )
