@@ -24,7 +24,7 @@ import numpy as np
 from sim.clip import Clip
 
 from .optimal import optimal_table
-from .segment_costs import segment_cost_matrix
+from .segment_costs import greedy_keyframes
 from .spherical import chart
 
 MethodFn = Callable[..., np.ndarray]
@@ -117,11 +117,6 @@ def greedy_from_costs(C: np.ndarray, W: int) -> np.ndarray:
         delta[keys] = np.inf
         keys = np.sort(np.append(keys, int(np.argmin(delta))))
     return keys
-
-
-def greedy_keyframes(series, W: int, variant: str = "hermite") -> np.ndarray:
-    """Greedy keyframes (the paper's skyline) of a chart under a separable variant."""
-    return greedy_from_costs(segment_cost_matrix(series, variant), W)
 
 
 @register("greedy")

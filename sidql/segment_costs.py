@@ -64,6 +64,83 @@ def _cost_matrix(X, R, linear):
     return C
 
 
+@numba.njit(cache=True, fastmath=True)
+def _segment_cost(X, R, i, j, linear):
+    """C[i, j] alone (see :func:`_cost_matrix`)."""
+    D = X.shape[1]
+    L = j - i
+    total = 0.0
+    for n in range(i + 1, j):
+        s = (n - i) / L
+        if linear:
+            h00 = 1.0 - s
+            h01 = s
+            h10 = 0.0
+            h11 = 0.0
+        else:
+            s2 = s * s
+            s3 = s2 * s
+            h00 = 2.0 * s3 - 3.0 * s2 + 1.0
+            h01 = -2.0 * s3 + 3.0 * s2
+            h10 = (s3 - 2.0 * s2 + s) * L
+            h11 = (s3 - s2) * L
+        for d in range(D):
+            v = h00 * X[i, d] + h01 * X[j, d] + h10 * R[i, d] + h11 * R[j, d] - X[n, d]
+            v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+            total += abs(v)
+    return total
+
+
+@numba.njit(cache=True)
+def _greedy(X, R, W, linear):
+    """Greedy keyframes computing only the segment costs it needs (O(W N^2 D) at worst)."""
+    N = X.shape[0]
+    key = np.zeros(N, dtype=np.bool_)
+    key[0] = True
+    key[N - 1] = True
+    left = np.zeros(N)  # C[a, f] for the segment (a, b) holding f
+    right = np.zeros(N)  # C[f, b]
+    start = np.zeros(N, dtype=np.int64)
+    seg_total = np.zeros(N)  # C[a, b] indexed by the segment's start a
+    seg_total[0] = _segment_cost(X, R, 0, N - 1, linear)
+    for f in range(1, N - 1):
+        left[f] = _segment_cost(X, R, 0, f, linear)
+        right[f] = _segment_cost(X, R, f, N - 1, linear)
+    for _ in range(W - 2):
+        best = np.inf
+        arg = -1
+        for f in range(1, N - 1):
+            if not key[f]:
+                delta = left[f] + right[f] - seg_total[start[f]]
+                if delta < best:
+                    best = delta
+                    arg = f
+        a = start[arg]
+        b = arg + 1
+        while not key[b]:
+            b += 1
+        key[arg] = True
+        seg_total[a] = left[arg]
+        seg_total[arg] = right[arg]
+        for g in range(a + 1, arg):
+            right[g] = _segment_cost(X, R, g, arg, linear)
+        for g in range(arg + 1, b):
+            start[g] = arg
+            left[g] = _segment_cost(X, R, arg, g, linear)
+    return np.flatnonzero(key)
+
+
+def greedy_keyframes(series: SphericalSeries, W: int, variant: str = "hermite") -> np.ndarray:
+    """(W,) greedy keyframes under a separable variant: from both ends, W - 2 times add the frame
+    that lowers Q the most (ties: the lowest index). Computes only the segment costs it needs."""
+    if variant not in SEPARABLE_VARIANTS:
+        raise ValueError(f"greedy needs a separable variant: {', '.join(SEPARABLE_VARIANTS)}")
+    if not 2 <= W <= series.n_frames:
+        raise ValueError(f"W must be in [2, {series.n_frames}]; got {W}")
+    X, R = stacked(series)
+    return _greedy(X, R, W, variant == "linear").astype(np.int64)
+
+
 def stacked(series: SphericalSeries) -> tuple[np.ndarray, np.ndarray]:
     """(N, 2M) angles [theta | phi] [rad] and (N, 2M) rates times dt [rad per frame], C-ordered."""
     X = np.ascontiguousarray(np.concatenate([series.theta, series.phi], axis=1))

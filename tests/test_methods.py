@@ -90,3 +90,15 @@ def test_unknown_names_and_bad_counts_are_clear_errors(clip):
     for W in (1, 61):
         with pytest.raises(ValueError, match="W must be"):
             methods.select("uniform", clip, W)
+
+
+def test_lazy_greedy_equals_greedy_over_the_full_cost_matrix():
+    from sidql.methods import greedy_from_costs
+    from sidql.segment_costs import greedy_keyframes, segment_cost_matrix
+
+    for seed in range(3):
+        s = chart(smooth_clip(40, 30.0, seed=60 + seed))
+        for variant in ("hermite", "linear"):
+            C = segment_cost_matrix(s, variant)
+            for W in (2, 4, 9, 40):
+                assert np.array_equal(greedy_keyframes(s, W, variant), greedy_from_costs(C, W))
