@@ -498,31 +498,30 @@ def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
         return None
     T = len(body) // L
     first = int(body[0])
-    tokens = " ".join(body).split()
-    per_frame = 1 + sum(1 + k for _, k in frame_layout)
-    if len(tokens) != T * per_frame:
-        return None
     try:
-        numbers = np.array(tokens[0::per_frame], dtype=np.int64)
+        numbers = np.array(body[0::L], dtype=np.int64)
     except ValueError:
         return None
     if not np.array_equal(numbers, np.arange(first, first + T)):
         return None
-    value_tokens, col = [], 1
-    for name, count in frame_layout:
-        if tokens[col::per_frame] != [name] * T:
+    columns = {}
+    for k, (name, count) in enumerate(frame_layout, start=1):
+        slot = body[k::L]
+        prefix = name + " " if count else name
+        # Every line of the slot starts with the bone's name: T - 1 line starts after the first.
+        joined = "\n".join(slot)
+        if not joined.startswith(prefix) or joined.count("\n" + prefix) != T - 1:
             return None
-        for j in range(col + 1, col + 1 + count):
-            value_tokens += tokens[j::per_frame]
-        col += 1 + count
-    try:
-        values = np.array(value_tokens, dtype=np.float64).reshape(-1, T).T
-    except ValueError:
-        return None
-    columns, start = {}, 0
-    for name, count in frame_layout:
-        columns[name] = values[:, start : start + count]
-        start += count
+        if count == 0:
+            continue
+        n = len(prefix)
+        try:  # numpy's C reader; a wrong count or a bad token raises
+            values = np.loadtxt([line[n:] for line in slot], dtype=np.float64, ndmin=2)
+        except (ValueError, IndexError):
+            return None
+        if values.shape != (T, count):
+            return None
+        columns[name] = values
     return first, columns
 
 
