@@ -37,6 +37,8 @@ class Clip:
         start_frame: index of the first frame in the source file's own frame rate.
         source_fps: frame rate of the source file [1/s] (CMU: 120).
         joint_names: (nq-7,) names of the hinge joints that follow the free joint in ``qpos``.
+        angular_velocities: (T, J, 3) world angular velocity [rad/s] of each point's body, from the
+            kinematic chain (None when unknown, e.g. for reconstructions).
     """
 
     names: tuple[str, ...]
@@ -51,6 +53,7 @@ class Clip:
     start_frame: int = 0
     source_fps: float = 120.0
     joint_names: tuple[str, ...] = field(default_factory=tuple)
+    angular_velocities: np.ndarray | None = None
 
     def __post_init__(self):
         T, J = self.positions.shape[:2]
@@ -65,6 +68,10 @@ class Clip:
             raise ValueError(f"rotations must be (T, J, 4); got {self.rotations.shape}")
         if self.qpos.shape[0] != T or self.qvel.shape[0] != T:
             raise ValueError("qpos and qvel must have T rows")
+        if self.angular_velocities is not None and self.angular_velocities.shape != (T, J, 3):
+            raise ValueError(
+                f"angular_velocities must be (T, J, 3); got {self.angular_velocities.shape}"
+            )
         if self.fps <= 0:
             raise ValueError(f"fps must be positive; got {self.fps}")
 
@@ -105,6 +112,9 @@ class Clip:
             qpos=self.qpos[start:stop],
             qvel=self.qvel[start:stop],
             rotations=self.rotations[start:stop],
+            angular_velocities=None
+            if self.angular_velocities is None
+            else self.angular_velocities[start:stop],
             start_frame=int(round(self.start_frame + start * step)),
         )
 
@@ -120,11 +130,13 @@ def save_npz(clip: Clip, path: str | os.PathLike) -> Path:
     """Write ``clip`` to ``path`` atomically (temporary file in the same folder, then rename).
 
     Keys: names, parents, positions, velocities, qpos, qvel, rotations, fps, source, start_frame,
-    source_fps, joint_names.
+    source_fps, joint_names, and angular_velocities when known.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {k: getattr(clip, k) for k in _ARRAY_KEYS}
+    if clip.angular_velocities is not None:
+        payload["angular_velocities"] = clip.angular_velocities
     payload.update(
         names=np.array(clip.names),
         joint_names=np.array(clip.joint_names, dtype=str),
@@ -148,6 +160,7 @@ def load_npz(path: str | os.PathLike) -> Clip:
                 source=str(z["source"]),
                 start_frame=int(z["start_frame"]),
                 source_fps=float(z["source_fps"]),
+                angular_velocities=z["angular_velocities"] if "angular_velocities" in z else None,
                 **{k: z[k] for k in _ARRAY_KEYS},
             )
     except (OSError, KeyError, ValueError) as e:

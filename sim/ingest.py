@@ -60,7 +60,7 @@ def clip_from_qpos(
         body_ids.append(model.body(n).id)
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
     data = mujoco.MjData(model)
-    pos, vel, xquat = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
+    pos, vel, xquat, omega = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
     return Clip(
         names=tuple(names),
@@ -75,6 +75,7 @@ def clip_from_qpos(
         start_frame=0,
         source_fps=float(source_fps),
         joint_names=joint_names,
+        angular_velocities=omega,
     )
 
 

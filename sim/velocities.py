@@ -41,7 +41,8 @@ def point_kinematics(model, data, qpos, qvel, body_ids, site_ids):
         body_ids: (J,) body of each point; site_ids: (J,) site at each point (-1: the body origin).
 
     Returns:
-        positions (T, J, 3) [m], velocities (T, J, 3) [m/s], body quaternions (T, J, 4) ``wxyz``.
+        positions (T, J, 3) [m], velocities (T, J, 3) [m/s], body quaternions (T, J, 4) ``wxyz``,
+        body angular velocities (T, J, 3) [rad/s], all in the world frame.
     """
     T = qpos.shape[0]
     body_ids = np.asarray(body_ids)
@@ -68,4 +69,4 @@ def point_kinematics(model, data, qpos, qvel, body_ids, site_ids):
     pos[:, has_site] = site_xpos[:, site_ids[has_site]]
     v = cvel[:, body_ids]
     vel = v[..., 3:] + np.cross(v[..., :3], pos - com[:, root_of])
-    return pos, vel, xquat[:, body_ids]
+    return pos, vel, xquat[:, body_ids], v[..., :3]

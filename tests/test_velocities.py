@@ -38,6 +38,9 @@ def test_constant_rate_hinge_sweep_is_recovered_exactly():
         axis = data.xmat[body].reshape(3, 3) @ np.array([1.0, 0.0, 0.0])
         r = clip.positions[t, j] - data.xpos[body]
         np.testing.assert_allclose(clip.velocities[t, j], omega * np.cross(axis, r), atol=1e-9)
+        # Bodies below the hinge turn at omega about its axis; bodies elsewhere do not turn.
+        np.testing.assert_allclose(clip.angular_velocities[t, j], omega * axis, atol=1e-12)
+        np.testing.assert_allclose(clip.angular_velocities[t, clip.index("lradius")], 0, atol=1e-12)
 
 
 def test_qvel_matches_analytic_hinge_rates_to_second_order():
