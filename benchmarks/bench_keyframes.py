@@ -107,13 +107,12 @@ def main() -> int:
     clips, what = load(args.data, args.clips)
     series = [chart(c) for c in clips]
     # compile the numba kernels outside the timings
-    solve(segment_cost_matrix(series[0]), series[0].n_bones)
+    solve(segment_cost_matrix(series[0]), series[0].n_bones).all_keyframes()
     greedy_keyframes(series[0], 5)
 
     def all_w(clip):
         s = chart(clip)
-        table = solve(segment_cost_matrix(s), s.n_bones)
-        return [table.keyframes(W) for W in range(2, s.n_frames + 1)]
+        return solve(segment_cost_matrix(s), s.n_bones).all_keyframes()
 
     rows = {
         "optimal, all W = 2..60": [best_of(lambda c=c: all_w(c), args.repeats) for c in clips],

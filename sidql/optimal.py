@@ -40,6 +40,19 @@ def _dp(C, w_max):
     return D, P
 
 
+@numba.njit(cache=True)
+def _backtrack_all(P, n_frames):
+    w_max = P.shape[0] - 1
+    out = np.full((w_max + 1, n_frames), -1, dtype=np.int64)
+    for W in range(2, w_max + 1):
+        j = n_frames - 1
+        out[W, W - 1] = j
+        for w in range(W, 1, -1):
+            j = P[w, j]
+            out[W, w - 2] = j
+    return out
+
+
 @dataclass(frozen=True)
 class OptimalTable:
     """Exact optima of a segment-cost matrix for every keyframe count.
@@ -63,6 +76,11 @@ class OptimalTable:
         for w in range(W, 1, -1):
             out.append(int(self.pointers[w, out[-1]]))
         return np.array(out[::-1], dtype=np.int64)
+
+    def all_keyframes(self) -> np.ndarray:
+        """(w_max + 1, N) int64: row W holds the optimal keyframes for W in its first W entries
+        (-1 after them; rows 0 and 1 are all -1)."""
+        return _backtrack_all(self.pointers, self.n_frames)
 
     def q(self, W: int) -> float:
         """The optimal Q [rad] for W keyframes."""

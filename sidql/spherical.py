@@ -27,6 +27,7 @@ Pure numpy. Units: metres, seconds, radians.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -260,6 +261,12 @@ def protocol_indices(clip: Clip) -> np.ndarray:
     return np.array([clip.names.index(p) for p in POINTS], dtype=np.int64)
 
 
+@functools.lru_cache(maxsize=64)
+def _skeleton_maps(names: tuple[str, ...], parents: tuple[int, ...]):
+    idx = np.array([names.index(p) for p in POINTS], dtype=np.int64)
+    return idx, protocol_parents(names, np.array(parents))
+
+
 def chart(clip: Clip) -> SphericalSeries:
     """The spherical chart of a clip's 23 protocol points (see the module docstring).
 
@@ -272,9 +279,9 @@ def chart(clip: Clip) -> SphericalSeries:
     Raises:
         MotionDataError: a protocol point is missing, or the data holds non-finite values.
     """
-    idx = protocol_indices(clip)
+    protocol_indices(clip)  # a clear error naming any missing point
     try:
-        parents = protocol_parents(clip.names, clip.parents)
+        idx, parents = _skeleton_maps(tuple(clip.names), tuple(int(p) for p in clip.parents))
     except MotionDataError as e:
         raise MotionDataError(clip.source or None, None, e.problem) from None
     pos = clip.positions[:, idx]

@@ -82,6 +82,9 @@ def test_optimum_is_never_worse_than_greedy_or_uniform(series, walk_clip):
             assert q_opt <= prev + 1e-12
             prev = q_opt
         assert table.q(N) == 0.0
+        rows = table.all_keyframes()
+        for W in (2, 5, N):
+            assert np.array_equal(rows[W, :W], table.keyframes(W)) and np.all(rows[W, W:] == -1)
 
 
 def test_solve_rejects_bad_sizes(series):
