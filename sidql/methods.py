@@ -33,7 +33,7 @@ MethodFn = Callable[..., np.ndarray]
 METHODS: dict[str, MethodFn] = {}
 
 #: name -> module that registers it when imported (for methods with heavy dependencies).
-LAZY_METHODS: dict[str, str] = {}
+LAZY_METHODS: dict[str, str] = {"dqn": "sidql.policy"}
 
 
 def register(name: str) -> Callable[[MethodFn], MethodFn]:

@@ -81,18 +81,18 @@ def fit_rig(positions: np.ndarray, local: np.ndarray, parents: np.ndarray) -> tu
     """
     world = world_rotations(local, parents)
     J = len(parents)
+    child = np.arange(1, J)
+    par = np.asarray(parents)[child]
+    R = quat.to_matrix(world)  # (N, J, 3, 3)
+    # p_j - p_parent = R_parent o_j + R_j d_j: 3N equations, 6 unknowns per joint (batched)
+    A = np.concatenate([R[:, par], R[:, child]], axis=-1)  # (N, J-1, 3, 6)
+    A = A.transpose(1, 0, 2, 3).reshape(J - 1, -1, 6)
+    b = (positions[:, child] - positions[:, par]).transpose(1, 0, 2).reshape(J - 1, -1)
+    x = np.einsum("jik,jk->ji", np.linalg.pinv(A, rcond=1e-10), b)  # minimum-norm least squares
+    worst = float(np.abs(np.einsum("jki,ji->jk", A, x) - b).max())
     origin = np.zeros((J, 3))
     offset = np.zeros((J, 3))
-    worst = 0.0
-    for j in range(1, J):
-        p = parents[j]
-        Rp = quat.to_matrix(world[:, p])  # (N, 3, 3)
-        Rj = quat.to_matrix(world[:, j])
-        A = np.concatenate([Rp, Rj], axis=2).reshape(-1, 6)
-        b = (positions[:, j] - positions[:, p]).reshape(-1)
-        x, *_ = np.linalg.lstsq(A, b, rcond=None)
-        origin[j], offset[j] = x[:3], x[3:]
-        worst = max(worst, float(np.abs(A @ x - b).max()))
+    origin[child], offset[child] = x[:, :3], x[:, 3:]
     return Rig(parents=np.asarray(parents, np.int64), origin=origin, offset=offset), worst
 
 
@@ -127,9 +127,13 @@ def pitch_distances(local: np.ndarray) -> np.ndarray:
     """(N, N) inter-frame pitch [rad]: sum over joints of the rotation angle between frames.
 
     Args:
-        local: (N, J, 4) local joint rotations (wxyz; q and -q give the same distance).
+        local: (N, J, 4) local joint rotations (wxyz, unit; q and -q give the same distance).
+
+    The angle between unit quaternions a and b is ``2 arccos |a . b|`` (accurate to about 1e-8
+    rad near zero, ample for thresholding).
     """
-    return quat.angle_between(local[:, None], local[None, :]).sum(axis=-1)
+    dots = np.abs(np.einsum("ajk,bjk->abj", local, local))
+    return (2.0 * np.arccos(np.minimum(dots, 1.0))).sum(axis=-1)
 
 
 @numba.njit(cache=True)
@@ -252,8 +256,8 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
         Om[:, j] = Om[:, p] + Om[:, j]
         V[:, j] = (
             V[:, p]
-            + np.cross(Om[:, p], quat.rotate(world[:, p], rig.origin[j]))
-            + np.cross(Om[:, j], quat.rotate(world[:, j], rig.offset[j]))
+            + quat.cross(Om[:, p], quat.rotate(world[:, p], rig.origin[j]))
+            + quat.cross(Om[:, j], quat.rotate(world[:, j], rig.offset[j]))
         )
     child = np.arange(1, len(parents))
     theta, phi, _, _ = angles_and_rates(world_to_chart(P[:, child] - P[:, parents[child]]))
