@@ -163,16 +163,11 @@ def test_extract_command_prints_and_writes_keyframes(cmu_dir, tmp_path, capsys):
     assert "keyframes 0" in capsys.readouterr().out
 
 
-def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path):
-    with pytest.raises(KeyError, match="known"):
-        cli.main(
-            [
-                "extract",
-                str(cmu_dir / "02" / "02.asf"),
-                str(cmu_dir / "02" / "02_01.amc"),
-                "--keyframes",
-                "6",
-                "--method",
-                "nope",
-            ]
-        )
+def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path, capsys):
+    asf, amc = str(cmu_dir / "02" / "02.asf"), str(cmu_dir / "02" / "02_01.amc")
+    assert cli.main(["extract", asf, amc, "--keyframes", "6", "--method", "nope"]) == 2
+    assert "known:" in capsys.readouterr().err
+    rc = cli.main(
+        ["eval", "--data", str(cmu_dir), "--methods", "nope", "--out", str(tmp_path / "r")]
+    )
+    assert rc == 2 and "greedy" in capsys.readouterr().err

@@ -40,11 +40,19 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import json
+    import sys
     from pathlib import Path
 
     from sidql.evaluate import evaluate, load_cases, table3_markdown
+    from sidql.methods import get
     from sim.clip import write_atomic
 
+    for name in args.methods:  # unknown names fail before the (slow) ingest
+        try:
+            get(name)
+        except (KeyError, ImportError) as e:
+            print(f"sidql eval: error: {e}", file=sys.stderr)
+            return 2
     for W in args.keyframes:
         if not 2 <= W <= args.length:
             raise SystemExit(f"sidql eval: --keyframes values must be in [2, {args.length}]")

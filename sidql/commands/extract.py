@@ -28,6 +28,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import json
+    import sys
     from pathlib import Path
 
     from sidql.evaluate import clip_seed, make_case, score
@@ -35,7 +36,11 @@ def run(args) -> int:
     from sim.clip import write_atomic
     from sim.ingest import load_clips
 
-    get(args.method)  # unknown names fail before the (slow) ingest
+    try:
+        get(args.method)  # unknown names fail before the (slow) ingest
+    except (KeyError, ImportError) as e:
+        print(f"sidql extract: error: {e}", file=sys.stderr)
+        return 2
     if not 2 <= args.keyframes <= args.length:
         raise SystemExit(f"sidql extract: --keyframes must be in [2, {args.length}]")
     clips = load_clips(args.asf, args.amc, fps=args.fps, length=args.length, skeleton=args.skeleton)
