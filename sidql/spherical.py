@@ -30,6 +30,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from sim.clip import Clip
@@ -215,6 +216,61 @@ def direction_rates(
     )
 
 
+@numba.njit(cache=True)
+def _chart_kernel(P, V, parents, sin_eps):
+    """Numba version of :func:`chart_arrays` (world-axes (N, J, 3) inputs)."""
+    N, J, _ = P.shape
+    M = J - 1
+    theta = np.empty((N, M))
+    phi = np.empty((N, M))
+    dtheta = np.empty((N, M))
+    dphi = np.empty((N, M))
+    lengths = np.zeros(M)
+    for m in range(M):
+        c = m + 1
+        p = parents[c]
+        prev = 0.0
+        for n in range(N):
+            # chart axes: (x, y, z)_cmu = (x_w, z_w, -y_w)
+            x = P[n, c, 0] - P[n, p, 0]
+            y = P[n, c, 2] - P[n, p, 2]
+            z = -(P[n, c, 1] - P[n, p, 1])
+            xd = V[n, c, 0] - V[n, p, 0]
+            yd = V[n, c, 2] - V[n, p, 2]
+            zd = -(V[n, c, 1] - V[n, p, 1])
+            rho = np.sqrt(x * x + y * y)
+            r = np.sqrt(rho * rho + z * z)
+            lengths[m] += r
+            rs = r if r > 0.0 else 1.0
+            t = np.arccos(min(1.0, max(-1.0, z / rs)))
+            raw = np.arctan2(y, x)
+            f = raw
+            if n > 0:  # unwrap like numpy: steps of pi or more are taken modulo 2 pi
+                d = raw - prev
+                if abs(d) >= np.pi:
+                    dm = (d + np.pi) % (2.0 * np.pi) - np.pi
+                    if dm == -np.pi and d > 0:
+                        dm = np.pi
+                    d = dm
+                f = phi[n - 1, m] + d
+            prev = raw
+            # sines and cosines from the components (the same as of the angles)
+            st = min(rho / rs, 1.0)
+            ct = min(1.0, max(-1.0, z / rs))
+            if rho > 0.0:
+                sp = y / rho
+                cp = x / rho
+            else:
+                sp = 0.0
+                cp = 1.0
+            theta[n, m] = t
+            phi[n, m] = f
+            dtheta[n, m] = (ct * cp * xd + ct * sp * yd - st * zd) / rs
+            dphi[n, m] = (-sp * xd + cp * yd) / (rs * max(st, sin_eps))
+        lengths[m] /= N
+    return theta, phi, dtheta, dphi, lengths
+
+
 def chart_arrays(
     positions_w: np.ndarray,
     velocities_w: np.ndarray,
@@ -229,21 +285,18 @@ def chart_arrays(
         parents: (23,) parent indices into POINTS (-1 for the root).
         dt: time between frames [s].
     """
-    P = world_to_chart(positions_w)
-    V = world_to_chart(velocities_w)
     parents = np.asarray(parents, dtype=np.int64)
-    child = np.arange(1, len(parents))
-    bones = P[:, child] - P[:, parents[child]]
-    bone_vel = V[:, child] - V[:, parents[child]]
-    theta, phi, dtheta, dphi = angles_and_rates(bones, bone_vel)
+    P = np.ascontiguousarray(positions_w, dtype=np.float64)
+    V = np.ascontiguousarray(velocities_w, dtype=np.float64)
+    theta, phi, dtheta, dphi, lengths = _chart_kernel(P, V, parents, SIN_EPS)
     return SphericalSeries(
         theta=theta,
         phi=phi,
         dtheta=dtheta,
         dphi=dphi,
-        root_pos=P[:, 0].copy(),
-        root_vel=V[:, 0].copy(),
-        lengths=np.linalg.norm(bones, axis=-1).mean(axis=0),
+        root_pos=world_to_chart(P[:, 0]),
+        root_vel=world_to_chart(V[:, 0]),
+        lengths=lengths,
         parents=parents,
         dt=float(dt),
     )
