@@ -34,60 +34,64 @@ _INV_TWO_PI = 1.0 / _TWO_PI
 def _cost_matrix(X, R, linear):
     """X: (N, D) angles [rad]; R: (N, D) rates times dt [rad/frame]; linear: bool.
 
-    Wrapping is branch-free (``v - 2 pi floor(v / 2 pi + 1/2)``) so the inner loop vectorises.
+    The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01), and the
+    wrapping is branch-free (``v - 2 pi floor(v / 2 pi + 1/2)``) so the inner loop vectorises.
     """
     N, D = X.shape
     C = np.zeros((N, N))
+    dX = np.empty(D)
     for i in range(N):
         for j in range(i + 2, N):
+            for d in range(D):
+                dX[d] = X[j, d] - X[i, d]
             L = j - i
             total = 0.0
             for n in range(i + 1, j):
                 s = (n - i) / L
                 if linear:
-                    h00 = 1.0 - s
                     h01 = s
                     h10 = 0.0
                     h11 = 0.0
                 else:
                     s2 = s * s
                     s3 = s2 * s
-                    h00 = 2.0 * s3 - 3.0 * s2 + 1.0
                     h01 = -2.0 * s3 + 3.0 * s2
                     h10 = (s3 - 2.0 * s2 + s) * L
                     h11 = (s3 - s2) * L
+                acc = 0.0
                 for d in range(D):
-                    v = h00 * X[i, d] + h01 * X[j, d] + h10 * R[i, d] + h11 * R[j, d] - X[n, d]
+                    v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
                     v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
-                    total += abs(v)
+                    acc += abs(v)
+                total += acc
             C[i, j] = total
     return C
 
 
 @numba.njit(cache=True, fastmath=True)
 def _segment_cost(X, R, i, j, linear):
-    """C[i, j] alone (see :func:`_cost_matrix`)."""
+    """C[i, j] alone, with the same arithmetic as :func:`_cost_matrix`."""
     D = X.shape[1]
     L = j - i
     total = 0.0
     for n in range(i + 1, j):
         s = (n - i) / L
         if linear:
-            h00 = 1.0 - s
             h01 = s
             h10 = 0.0
             h11 = 0.0
         else:
             s2 = s * s
             s3 = s2 * s
-            h00 = 2.0 * s3 - 3.0 * s2 + 1.0
             h01 = -2.0 * s3 + 3.0 * s2
             h10 = (s3 - 2.0 * s2 + s) * L
             h11 = (s3 - s2) * L
+        acc = 0.0
         for d in range(D):
-            v = h00 * X[i, d] + h01 * X[j, d] + h10 * R[i, d] + h11 * R[j, d] - X[n, d]
+            v = (X[i, d] - X[n, d]) + h01 * (X[j, d] - X[i, d]) + h10 * R[i, d] + h11 * R[j, d]
             v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
-            total += abs(v)
+            acc += abs(v)
+        total += acc
     return total
 
 
