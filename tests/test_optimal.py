@@ -93,3 +93,32 @@ def test_solve_rejects_bad_sizes(series):
         solve(C, 22, w_max=1)
     with pytest.raises(ValueError):
         solve(C, 22, w_max=5).keyframes(6)
+
+
+def test_catmull_rom_optimum_equals_brute_force_enumeration():
+    """The triple-state programme against enumeration, with Q from full reconstruction."""
+    from dataclasses import replace
+
+    from sidql.optimal import catmull_rom_optimal
+
+    s = chart(smooth_clip(60, 30.0, seed=14))
+    n = 12
+    small = replace(
+        s,
+        theta=s.theta[:n],
+        phi=s.phi[:n],
+        dtheta=s.dtheta[:n],
+        dphi=s.dphi[:n],
+        root_pos=s.root_pos[:n],
+        root_vel=s.root_vel[:n],
+    )
+    table = catmull_rom_optimal(small, 7)
+    for W in range(2, 8):
+        best = min(
+            q_error(small, np.array((0, *inner, n - 1)), "catmull_rom")
+            for inner in itertools.combinations(range(1, n - 1), W - 2)
+        )
+        k = table.keyframes(W)
+        assert len(k) == W and k[0] == 0 and k[-1] == n - 1
+        assert table.q(W) == pytest.approx(best, rel=1e-12)
+        assert q_error(small, k, "catmull_rom") == pytest.approx(best, rel=1e-12)

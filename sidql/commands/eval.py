@@ -62,7 +62,11 @@ def run(args) -> int:
     if not cases:
         print(f"sidql eval: no {args.length}-frame clips under {args.data}")
         return 1
-    out = evaluate(cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet)
+    try:
+        out = evaluate(cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet)
+    except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
+        print(f"sidql eval: error: {e}", file=sys.stderr)
+        return 2
     out["skipped"] = skipped
     out["protocol"] = {
         "data": str(args.data),
