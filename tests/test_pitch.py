@@ -116,3 +116,12 @@ def test_pitch_reconstruction_keeps_lengths_keyframes_and_velocity_is_the_deriva
     err = np.abs(fd - rec.velocities[1:-1])[inner[1:-1]]
     assert err.max() < 1e-3 * np.abs(rec.velocities).max()
     assert pitch.pitch_error(clip.positions, rec.positions) > 0
+
+
+def test_count_search_tops_up_when_no_threshold_gives_w():
+    """All distances equal: thresholds give 4 or 2 keyframes, never 3; the fall-back adds the
+    frame farthest from its preceding keyframe (the first on ties)."""
+    D = np.ones((4, 4)) - np.eye(4)
+    assert sorted({len(pitch.threshold_keyframes(D, t)) for t in (-1.0, 0.5, 1.0, 2.0)}) == [2, 4]
+    k, tau = pitch.keyframes_for_count(D, 3)
+    assert k.tolist() == [0, 1, 3]
