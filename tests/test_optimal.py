@@ -69,8 +69,11 @@ def test_optimum_equals_brute_force_enumeration(variant):
         assert q_error(small, k, variant) == pytest.approx(best, rel=1e-12)
 
 
-def test_optimum_is_never_worse_than_greedy_or_uniform(series, walk_clip):
-    for s in (series, chart(walk_clip.slice(20, 80))):
+@pytest.mark.parametrize("source", ["synthetic", "real walk"])
+def test_optimum_is_never_worse_than_greedy_or_uniform(series, source, request):
+    if source == "real walk":
+        series = chart(request.getfixturevalue("walk_clip").slice(20, 80))
+    for s in (series,):
         C = segment_cost_matrix(s)
         table = solve(C, s.n_bones)
         N = s.n_frames

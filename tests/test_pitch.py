@@ -62,8 +62,13 @@ def test_threshold_rule_and_count_search():
             assert k.tolist() == brute_threshold(D, tau)
 
 
-def test_forward_kinematics_rebuilds_synthetic_and_real_clips(walk_clip):
-    for clip in (smooth_clip(30, 30.0, seed=32), walk_clip.slice(0, 60)):
+@pytest.mark.parametrize("source", ["synthetic", "real walk"])
+def test_forward_kinematics_rebuilds_synthetic_and_real_clips(source, request):
+    if source == "real walk":
+        clip = request.getfixturevalue("walk_clip").slice(0, 60)
+    else:
+        clip = smooth_clip(30, 30.0, seed=32)
+    for clip in (clip,):
         pos, local, parents = pitch.protocol_rotations(clip)
         rig, worst = pitch.fit_rig(pos, local, parents)
         assert worst < 1e-9

@@ -147,8 +147,13 @@ def test_rates_of_real_walk_match_differences_of_its_angles(cmu_dir):
     assert np.median(err) < 0.01 * np.median(np.abs(s.dtheta))
 
 
-def test_compiled_chart_agrees_with_the_vectorised_formulas(walk_clip):
-    for clip in (walk_clip.slice(0, 60), smooth_clip(40, 30.0, seed=4)):
+@pytest.mark.parametrize("source", ["synthetic", "real walk"])
+def test_compiled_chart_agrees_with_the_vectorised_formulas(source, request):
+    if source == "real walk":
+        clip = request.getfixturevalue("walk_clip").slice(0, 60)
+    else:
+        clip = smooth_clip(40, 30.0, seed=4)
+    for clip in (clip,):
         s = chart(clip)
         idx = [clip.index(p) for p in POINTS]
         P, V = world_to_chart(clip.positions[:, idx]), world_to_chart(clip.velocities[:, idx])
