@@ -71,23 +71,23 @@ def test_optimum_equals_brute_force_enumeration(variant):
 
 @pytest.mark.parametrize("source", ["synthetic", "real walk"])
 def test_optimum_is_never_worse_than_greedy_or_uniform(series, source, request):
+    s = series
     if source == "real walk":
-        series = chart(request.getfixturevalue("walk_clip").slice(20, 80))
-    for s in (series,):
-        C = segment_cost_matrix(s)
-        table = solve(C, s.n_bones)
-        N = s.n_frames
-        prev = np.inf
-        for W in range(2, N + 1):
-            q_opt = table.q(W)
-            assert q_opt <= q_error(s, greedy_from_costs(C, W)) + 1e-12
-            assert q_opt <= q_error(s, uniform_indices(N, W)) + 1e-12
-            assert q_opt <= prev + 1e-12
-            prev = q_opt
-        assert table.q(N) == 0.0
-        rows = table.all_keyframes()
-        for W in (2, 5, N):
-            assert np.array_equal(rows[W, :W], table.keyframes(W)) and np.all(rows[W, W:] == -1)
+        s = chart(request.getfixturevalue("walk_clip").slice(20, 80))
+    C = segment_cost_matrix(s)
+    table = solve(C, s.n_bones)
+    N = s.n_frames
+    prev = np.inf
+    for W in range(2, N + 1):
+        q_opt = table.q(W)
+        assert q_opt <= q_error(s, greedy_from_costs(C, W)) + 1e-12
+        assert q_opt <= q_error(s, uniform_indices(N, W)) + 1e-12
+        assert q_opt <= prev + 1e-12
+        prev = q_opt
+    assert table.q(N) == 0.0
+    rows = table.all_keyframes()
+    for W in (2, 5, N):
+        assert np.array_equal(rows[W, :W], table.keyframes(W)) and np.all(rows[W, W:] == -1)
 
 
 def test_solve_rejects_bad_sizes(series):

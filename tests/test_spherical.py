@@ -153,14 +153,13 @@ def test_compiled_chart_agrees_with_the_vectorised_formulas(source, request):
         clip = request.getfixturevalue("walk_clip").slice(0, 60)
     else:
         clip = smooth_clip(40, 30.0, seed=4)
-    for clip in (clip,):
-        s = chart(clip)
-        idx = [clip.index(p) for p in POINTS]
-        P, V = world_to_chart(clip.positions[:, idx]), world_to_chart(clip.velocities[:, idx])
-        child = np.arange(1, 23)
-        parent = s.parents[child]
-        theta, phi, dtheta, dphi = angles_and_rates(
-            P[:, child] - P[:, parent], V[:, child] - V[:, parent]
-        )
-        assert np.allclose(s.theta, theta, atol=1e-12) and np.allclose(s.phi, phi, atol=1e-12)
-        assert np.allclose(s.dtheta, dtheta, atol=1e-10) and np.allclose(s.dphi, dphi, rtol=1e-9)
+    s = chart(clip)
+    idx = [clip.index(p) for p in POINTS]
+    P, V = world_to_chart(clip.positions[:, idx]), world_to_chart(clip.velocities[:, idx])
+    child = np.arange(1, 23)
+    parent = s.parents[child]
+    theta, phi, dtheta, dphi = angles_and_rates(
+        P[:, child] - P[:, parent], V[:, child] - V[:, parent]
+    )
+    assert np.allclose(s.theta, theta, atol=1e-12) and np.allclose(s.phi, phi, atol=1e-12)
+    assert np.allclose(s.dtheta, dtheta, atol=1e-10) and np.allclose(s.dphi, dphi, rtol=1e-9)
