@@ -24,7 +24,7 @@ import numpy as np
 
 from .evaluate import Case, clip_seed
 from .methods import greedy_from_costs, uniform_indices
-from .metrics import mpjpe_mm, q_from_angles
+from .metrics import mpjpe_mm, q_from_angles, velocity_error
 from .optimal import catmull_rom_optimal, solve
 from .pitch import fit_rig, keyframes_for_count, pitch_distances, protocol_rotations
 from .pitch import reconstruct as pitch_reconstruct
@@ -96,17 +96,19 @@ def rate_distortion(
     seed: int = 0,
     progress: bool = True,
 ) -> dict:
-    """Mean Q [rad] and MPJPE [mm] against bytes per second for every curve of :data:`CURVES`.
+    """Mean Q [rad], MPJPE [mm] and velocity error [m/s] against bytes per second for every
+    curve of :data:`CURVES`.
 
     Returns:
         ``{"raw_bytes_per_second", "clips", "curves": [{"method", "scheme", "keyframes",
-        "bytes_per_second", "mean_q", "mpjpe_mm"}]}``.
+        "bytes_per_second", "mean_q", "mpjpe_mm", "velocity_error"}]}``.
     """
     from tqdm import tqdm
 
     counts = sorted(counts)
     q = {c: np.zeros(len(counts)) for c in CURVES}
     e = {c: np.zeros(len(counts)) for c in CURVES}
+    v = {c: np.zeros(len(counts)) for c in CURVES}
     for case in tqdm(cases, desc="rate/distortion", unit="clip", disable=not progress):
         s = case.series
         cache = {}
@@ -126,6 +128,7 @@ def rate_distortion(
                     rec = reconstruct_series(s, k, scheme)
                 q[(method, scheme)][i] += q_from_angles(s, rec.theta, rec.phi)
                 e[(method, scheme)][i] += mpjpe_mm(case.pos, rec.positions)
+                v[(method, scheme)][i] += velocity_error(case.vel, rec.velocities)
     n = max(len(cases), 1)
     N = cases[0].series.n_frames if cases else 60
     fps = 1.0 / cases[0].series.dt if cases else 30.0
@@ -137,6 +140,7 @@ def rate_distortion(
             "bytes_per_second": [bytes_per_second(scheme, W, N, fps) for W in counts],
             "mean_q": (q[(method, scheme)] / n).tolist(),
             "mpjpe_mm": (e[(method, scheme)] / n).tolist(),
+            "velocity_error": (v[(method, scheme)] / n).tolist(),
         }
         for method, scheme in CURVES
     ]
@@ -157,8 +161,8 @@ _COLOR = {"optimal": "C0", "greedy": "C1", "uniform": "C2", "random": "C3", "pit
 
 
 def write_plot(rd: dict, path) -> None:
-    """Write the rate/distortion figure (Q and MPJPE against bytes per second) to ``path`` (PNG),
-    atomically."""
+    """Write the rate/distortion figure (Q, MPJPE and velocity error against bytes per second)
+    to ``path`` (PNG), atomically."""
     import io
 
     import matplotlib
@@ -168,10 +172,11 @@ def write_plot(rd: dict, path) -> None:
 
     from sim.clip import write_atomic
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    fig, axes = plt.subplots(1, 3, figsize=(18, 5))
     for ax, key, label in (
         (axes[0], "mean_q", "mean Q, eq. 18 [rad]"),
         (axes[1], "mpjpe_mm", "MPJPE [mm]"),
+        (axes[2], "velocity_error", "mean velocity error [m/s]"),
     ):
         for c in rd["curves"]:
             ax.plot(
