@@ -341,7 +341,7 @@ def chart(clip: Clip) -> SphericalSeries:
     vel = clip.velocities[:, idx]
     if not (np.isfinite(pos).all() and np.isfinite(vel).all()):
         raise MotionDataError(clip.source or None, None, "non-finite positions or velocities")
-    return chart_arrays(pos, vel, parents, clip.dt)
+    return chart_arrays(pos, vel, parents.copy(), clip.dt)  # the cached array stays private
 
 
 def positions_from_chart(

@@ -163,3 +163,13 @@ def test_compiled_chart_agrees_with_the_vectorised_formulas(source, request):
     )
     assert np.allclose(s.theta, theta, atol=1e-12) and np.allclose(s.phi, phi, atol=1e-12)
     assert np.allclose(s.dtheta, dtheta, atol=1e-10) and np.allclose(s.dphi, dphi, rtol=1e-9)
+
+
+def test_non_finite_motion_is_a_motion_data_error():
+    from dataclasses import replace
+
+    clip = smooth_clip(6)
+    pos = clip.positions.copy()
+    pos[3, 5, 1] = np.nan
+    with pytest.raises(MotionDataError, match="non-finite"):
+        chart(replace(clip, positions=pos))
