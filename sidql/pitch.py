@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from sim import quaternion as quat
 from sim.clip import Clip
 from sim.errors import MotionDataError
 
-from . import quaternion as quat
 from .reconstruct import Reconstruction, validate_keyframes
 from .spherical import (
     POINTS,

@@ -33,10 +33,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from sim import quaternion as quat
 from sim.clip import Clip
 from sim.errors import MotionDataError
-
-from . import quaternion as quat
 
 #: The 23 protocol points, root first, every parent before its children.
 POINTS: tuple[str, ...] = (

@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from . import quaternion as quat
 from .acclaim import Skeleton, parse_asf
-from .rotations import euler_matrix, quat_from_matrix
+from .rotations import euler_matrix
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 CANONICAL_ASF = Path(__file__).resolve().parent / "data" / "canonical.asf"
@@ -80,7 +81,7 @@ def build_mjcf(skeleton: Skeleton, *, model_name: str | None = None) -> str:
 
     def body(b, depth: int, pos: np.ndarray):
         ind = "  " * depth
-        q = quat_from_matrix(C[b.parent].T @ C[b.name])
+        q = quat.from_matrix(C[b.parent].T @ C[b.name])
         w(f'{ind}<body name="{b.name}" pos="{_fmt(pos)}" quat="{_fmt(q)}">')
         for dof, (lo, hi) in reversed(list(zip(b.dofs, b.limits, strict=True))):
             axis = {"rx": "1 0 0", "ry": "0 1 0", "rz": "0 0 1"}[dof]

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import quaternion as quat
 from .acclaim import Motion, Skeleton
 from .errors import MotionDataError
 from .humanoid import bone_frames
-from .rotations import Y_UP_TO_Z_UP, euler_matrix, quat_from_matrix
+from .rotations import Y_UP_TO_Z_UP, euler_matrix
 
 
 def dof_order(dofs: tuple[str, ...]) -> str:
@@ -31,7 +32,7 @@ def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarra
     C_o = bone_frames(skeleton)["root"]
     M = euler_matrix(motion.root[:, 3:], skeleton.root_axis_order)
     pos = motion.root[:, :3] @ Y_UP_TO_Z_UP.T
-    return pos, quat_from_matrix(Y_UP_TO_Z_UP @ C_o @ M)
+    return pos, quat.from_matrix(Y_UP_TO_Z_UP @ C_o @ M)
 
 
 def joint_qpos_addresses(model) -> dict[str, int]:
@@ -86,12 +87,10 @@ def leg_length(skeleton: Skeleton) -> float:
 
 def local_rotations_from_world(xquat: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """(T, J, 4) rotation of each body relative to its parent body (root: world), ``wxyz``."""
-    from .rotations import quat_canonical, quat_conj, quat_mul
-
     parent = np.where(parents < 0, 0, parents)
-    local = quat_mul(quat_conj(xquat[:, parent]), xquat)
+    local = quat.mul(quat.conj(xquat[:, parent]), xquat)
     local[:, parents < 0] = xquat[:, parents < 0]
-    return quat_canonical(local)
+    return quat.canonical(local)
 
 
 def acclaim_matrices(skeleton: Skeleton, motion: Motion) -> dict[str, np.ndarray]:

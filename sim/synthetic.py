@@ -12,11 +12,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from . import quaternion as quat
 from .clip import Clip
 from .humanoid import humanoid_model
 from .ingest import CMU_FPS, clip_from_qpos
 from .kinematics import point_names, point_parents
-from .rotations import Y_UP_TO_Z_UP, axis_rotation, quat_from_matrix
+from .rotations import Y_UP_TO_Z_UP, axis_rotation
 
 
 def synthetic_qpos(
@@ -55,7 +56,7 @@ def synthetic_qpos(
     qpos[:, 2] = 1.0
     upright = Y_UP_TO_Z_UP  # CMU's y-up skeleton stood on the z-up floor
     R = axis_rotation("Z", yaw + np.pi / 2) @ upright
-    qpos[:, 3:7] = quat_from_matrix(R)
+    qpos[:, 3:7] = quat.from_matrix(R)
     qpos[:, 7:] = hinges
     _stand_on_floor(model, qpos)
     return qpos, dhinges

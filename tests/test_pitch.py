@@ -5,9 +5,9 @@ import pytest
 from keyframe_synth import smooth_clip
 
 from sidql import pitch
-from sidql import quaternion as quat
 from sidql.metrics import bone_vectors
 from sidql.spherical import POINTS
+from sim import quaternion as quat
 
 
 def random_quats(rng, shape):

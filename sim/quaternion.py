@@ -24,6 +24,12 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
+def canonical(q: np.ndarray) -> np.ndarray:
+    """(..., 4) quaternions with w >= 0 (q and -q are the same rotation)."""
+    q = np.asarray(q, dtype=float)
+    return np.where(q[..., :1] < 0, -q, q)
+
+
 def conj(q: np.ndarray) -> np.ndarray:
     """Conjugate (the inverse of a unit quaternion), (..., 4)."""
     q = np.asarray(q, dtype=float)
