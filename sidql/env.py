@@ -2,16 +2,17 @@
 
 The core is pure over arrays. A *task* is one clip reduced to what the decision needs:
 
-- ``features`` (N, C) float32: per-frame inputs of the policy (the paper's F and V: bone angles [rad]
-  and angular rates [rad/frame]; see :func:`sidql.tasks.clip_features`);
+- ``features`` (N, C) float32: per-frame inputs of the policy (the paper's F and V: bone angles
+  [rad] and angular rates [rad/frame]; see :func:`sidql.tasks.clip_features`);
 - ``cost`` (N, N) float64: the segment-cost matrix of issue 3, ``cost[i, j]`` (i < j) = summed
-  |Δθ| + |Δφ| [rad] over the frames strictly between keyframes i and j and over the M bones, so the
-  paper's error of a sorted keyframe set K is ``Q(K) = sum_w cost[k_w, k_{w+1}] / (N * M)`` (eq. 18).
+  |Δθ| + |Δφ| [rad] over the frames strictly between keyframes i and j and over the M bones, so
+  the paper's error of a sorted keyframe set K is ``Q(K) = sum_w cost[k_w, k_{w+1}] / (N M)``
+  (eq. 18).
 
-State s_i = (F, V, X_i) with X_i the (N,) keyframe mask; an episode starts with X_0 = {0, N-1} and each
-action adds one frame until W keyframes are chosen (W counts both ends). The reward is the paper's
-r_i = R_{i+1} - R_i with R_i = 1 - Q_i / Q_0 (eq. 21-22). Because the normalisation 1 / (N M) cancels
-in Q_i / Q_0, rewards are computed from sums of cost entries (O(W) per step).
+State s_i = (F, V, X_i) with X_i the (N,) keyframe mask; an episode starts with X_0 = {0, N-1} and
+each action adds one frame until W keyframes are chosen (W counts both ends). The reward is the
+paper's r_i = R_{i+1} - R_i with R_i = 1 - Q_i / Q_0 (eq. 21-22). Because the normalisation
+1 / (N M) cancels in Q_i / Q_0, rewards are computed from sums of cost entries (O(W) per step).
 
 A clip whose Q_0 is zero (nothing to reconstruct: the first and last keyframes already reproduce it)
 gives R_i = 0 and zero rewards throughout.
@@ -58,7 +59,8 @@ class KeyframeTask:
     Attributes:
         features: (N, C) float32 per-frame policy inputs (angles [rad], rates [rad/frame]).
         cost: (N, N) segment costs [rad summed over frames and bones]; only i < j is read.
-        n_bones: M, the number of bones summed in ``cost`` (22 for the CMU protocol); Q = sum / (N M).
+        n_bones: M, the number of bones summed in ``cost`` (22 for the CMU protocol);
+            Q = sum / (N M).
         source: where the clip came from (file and start frame), for reports.
         subject: subject id of the trial (for subject-wise splits); "" if unknown.
     """
@@ -123,6 +125,7 @@ class KeyframeEnv(gym.Env):
 
     Observation (a ``Dict``):
         ``features``: (N, C) float32, the clip's F and V (constant during an episode);
+        ``cost``: (N, N) float32, the clip's segment costs (a function of F and V; constant);
         ``keyframes``: (N,) int8 mask X of the chosen keyframes;
         ``remaining``: int, keyframes still to choose (W minus the number chosen).
     Action: ``Discrete(N)``, the index of the next keyframe (``action_space.sample()`` draws a
@@ -169,6 +172,7 @@ class KeyframeEnv(gym.Env):
         self.observation_space = spaces.Dict(
             {
                 "features": spaces.Box(-np.inf, np.inf, (n, c), np.float32),
+                "cost": spaces.Box(0.0, np.inf, (n, n), np.float32),
                 "keyframes": spaces.MultiBinary(n),
                 "remaining": spaces.Discrete(n - 1),
             }
@@ -191,6 +195,7 @@ class KeyframeEnv(gym.Env):
     def _obs(self) -> dict:
         return {
             "features": self._task.features.copy(),
+            "cost": np.maximum(self._task.cost, 0.0).astype(np.float32),
             "keyframes": self._mask.astype(np.int8),
             "remaining": int(self._budget - self._mask.sum()),
         }

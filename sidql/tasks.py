@@ -3,8 +3,9 @@
 - :func:`synthetic_tasks`: a small deterministic problem without data (smooth random signals whose
   cost is the error of *linear* interpolation between keyframes), used by ``gymnasium.make`` without
   arguments and by CI's tiny training run.
-- :func:`clip_features` / :func:`clip_task`: a 60-frame motion clip -> the paper's state inputs
-  F, V (bone angles and rates of the spherical chart) and the Hermite segment-cost matrix of issue 3.
+- :func:`clip_features` / :func:`clip_task`: a 60-frame motion clip -> the paper's state
+  inputs F, V (bone angles and rates of the spherical chart) and the Hermite segment-cost matrix
+  of issue 3.
 - :func:`load_tasks`: every trial under a CMU directory, cut into 60-frame clips (optionally with a
   stride smaller than 60 for more, overlapping training clips), cached per trial as ``.npz``.
 
@@ -200,9 +201,9 @@ def load_tasks(
 
     Bad trials are skipped and reported on stderr; ``subjects`` (a set of ids) keeps only those.
     """
+    from sim.dataset import find_trials
     from tqdm import tqdm
 
-    from sim.dataset import find_trials
     from sim.errors import MotionDataError
 
     trials = [t for t in find_trials(data_dir) if subjects is None or t.subject in subjects]
