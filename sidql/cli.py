@@ -19,6 +19,7 @@ COMMAND_MODULES = (
     "sidql.commands.demo",
     "sidql.commands.report",
     "sidql.commands.eval", "sidql.commands.extract",
+    "sidql.commands.train",
 )
 
 
