@@ -201,9 +201,9 @@ def load_tasks(
 
     Bad trials are skipped and reported on stderr; ``subjects`` (a set of ids) keeps only those.
     """
-    from sim.dataset import find_trials
     from tqdm import tqdm
 
+    from sim.dataset import find_trials
     from sim.errors import MotionDataError
 
     trials = [t for t in find_trials(data_dir) if subjects is None or t.subject in subjects]
