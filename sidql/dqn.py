@@ -39,7 +39,7 @@ class Args:
     """directory of CMU trials (``sim.dataset.find_trials``); None: synthetic tasks (for tests)"""
     keyframes: tuple[int, ...] = (5, 10, 15)
     """keyframe counts W the policy learns (one drawn per episode)"""
-    steps: int = 60_000
+    steps: int = 16_000
     """environment steps (keyframes chosen) in total"""
     out: str = "policy.pt"
     """where the trained policy goes; OUT.ckpt, OUT.csv and OUT.png are written beside it"""
@@ -49,7 +49,7 @@ class Args:
     """seeds numpy, torch, the environments and the subject split"""
     test_subjects: tuple[str, ...] | None = None
     """held-out subjects (never trained on); None: every 4th subject in sorted order, offset by seed"""
-    stride: int = 4
+    stride: int = 2
     """training clips start every ``stride`` frames (30 fps) of each training trial"""
     cache_dir: str | None = None
     """cache of per-trial (features, costs); None: ``sidql.tasks.default_cache_dir()``"""
@@ -62,21 +62,21 @@ class Args:
     """minibatch (paper: 256)"""
     learning_rate: float = 3e-4
     """Adam step size (paper: 0.01)"""
-    gamma: float = 1.0
+    gamma: float = 0.5
     """discount (paper: 0.5)"""
-    n_step: int = 3
+    n_step: int = 1
     """n-step returns"""
     double: bool = True
     """double DQN: the main network picks the next action, the target network values it"""
-    train_frequency: int = 8
+    train_frequency: int = 4
     """one gradient step every this many environment steps (paper: 100-200)"""
     target_update: int = 250
     """copy the main network into the target network every this many gradient steps"""
-    learning_starts: int = 1_000
+    learning_starts: int = 500
     """environment steps before the first gradient step"""
-    eps_start: float = 1.0
+    eps_start: float = 0.2
     """ε of the ε-greedy exploration at the start"""
-    eps_end: float = 0.05
+    eps_end: float = 0.02
     """ε at the end of the linear schedule"""
     eps_fraction: float = 0.4
     """fraction of ``steps`` over which ε falls linearly"""
@@ -94,7 +94,7 @@ class Args:
     """episodes played in parallel"""
     grad_clip: float = 10.0
     """gradient-norm clip"""
-    eval_every: int = 5_000
+    eval_every: int = 2_000
     """evaluate on the held-out clips and checkpoint every this many environment steps"""
     threads: int = 1
     """torch threads"""
@@ -462,6 +462,8 @@ def train(args: Args) -> dict:
         frac = min(1.0, step / max(1.0, args.eps_fraction * args.steps))
         return args.eps_start + frac * (args.eps_end - args.eps_start)
 
+    if not log_rows:
+        log_eval()  # step 0: the untrained network ranks frames exactly as greedy does
     bar = tqdm(total=args.steps, initial=step, desc="train", disable=not args.progress)
     losses = []
     while step < args.steps:

@@ -125,12 +125,13 @@ def test_tiny_training_beats_random_resumes_and_ships_a_loadable_policy(tmp_path
     args.steps, args.resume = 360, True
     train(args)
     steps = [int(line.split(",")[0]) for line in out.with_suffix(".csv").read_text().split()[1:]]
-    assert steps == [120, 240, 360]
+    assert steps == [0, 120, 240, 360]
 
 
 def test_policy_round_trip_and_bad_inputs(tmp_path, tasks):
     net = KeyframeQNet(tasks[0].features.shape[1])
-    torch.nn.init.normal_(net.mlp[-1].weight, std=0.1)
+    torch.nn.init.normal_(net.mlp[-1].weight, std=0.5)
+    torch.nn.init.normal_(net.value[-1].weight, std=0.5)
     path = tmp_path / "p.pt"
     save_policy(net, path, Args(keyframes=(5,)), {"train": [], "test": []}, {}, {})
     loaded = load_policy(path)
@@ -139,6 +140,11 @@ def test_policy_round_trip_and_bad_inputs(tmp_path, tasks):
     np.testing.assert_array_equal(
         loaded.decide(feats, costs, 7), Policy(net, (5,), {}).decide(feats, costs, 7)
     )
+    # the compiled decision kernel takes the same decisions as the torch head
+    for w in (3, 8, 15):
+        np.testing.assert_array_equal(
+            loaded.decide(feats, costs, w), loaded.decide_torch(feats, costs, w)
+        )
     with pytest.raises(ValueError, match="features"):
         loaded.decide(feats[..., :2], costs, 5)
     with pytest.raises(ValueError, match="W must"):
