@@ -149,7 +149,6 @@ def _decide_clip(proj, glob, cost, W, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2
     adv = np.zeros(n)
     z = np.zeros(k)
     zsum = np.zeros(k)
-    h1 = np.zeros(hdim)
     for step in range(W - 2):
         rem = W - 2 - step
         last = 0
