@@ -115,3 +115,19 @@ def test_zero_initial_error_gives_zero_rewards():
     env.reset(seed=0)
     _, r, _, _, info = env.step(2)
     assert r == 0.0 and info["R"] == 0.0
+
+
+def test_vector_env_runs_episodes_with_masks_from_infos():
+    envs = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="sync")
+    obs, infos = envs.reset(seed=0)
+    assert obs["features"].shape[0] == 2 and infos["action_mask"].shape == (2, 60)
+    rng = np.random.default_rng(0)
+    finished = 0
+    for _ in range(30):
+        actions = np.array([rng.choice(np.flatnonzero(m)) for m in infos["action_mask"]])
+        obs, rewards, terminated, truncated, infos = envs.step(actions)
+        finished += int(terminated.sum())
+        if finished >= 2:
+            break
+    assert finished >= 2
+    envs.close()
