@@ -88,6 +88,9 @@ class Args:
     """DQfD margin [normalised reward] by which optimal frames must beat others on demonstrations"""
     margin_weight: float = 0.0
     """weight of the margin loss (0: plain TD learning from demonstrations)"""
+    prior: str = "rollout"
+    """what the learned part starts from: "greedy" (Q ranks like greedy untrained) or "rollout"
+    (Q starts at the exact value of finishing greedily, sidql.rollout; use with gamma 1)"""
     hidden: int = 32
     """width of the Q-network"""
     n_envs: int = 16
@@ -231,16 +234,31 @@ def optimal_keyframes(cost: np.ndarray, w: int) -> np.ndarray:
 # --- acting --------------------------------------------------------------------------------------
 
 
-def act(net, features, costs, masks, remaining) -> np.ndarray:
-    """Masked argmax of the network for a batch: (B, N, C), (B, N, N), (B, N) bool, (B,) ->
-    (B,) actions."""
+def prior_values(net, costs_np, task, mask, rem):
+    """The rollout prior (B, N) of states (task indices into ``costs_np`` (K, N, N) float64,
+    masks (B, N), remaining (B,)) as a tensor, or None for a greedy-prior network."""
+    if net.config["prior"] != "rollout":
+        return None
+    import torch
+
+    from .rollout import rollout_values_batch
+
+    vals = rollout_values_batch(
+        costs_np, np.asarray(task, np.int64), np.asarray(mask, bool), np.asarray(rem, np.int64)
+    )
+    return torch.as_tensor(vals, dtype=torch.float32)
+
+
+def act(net, features, costs, masks, remaining, prior=None) -> np.ndarray:
+    """Masked argmax of the network for a batch: (B, N, C), (B, N, N), (B, N) bool, (B,), and the
+    rollout prior (B, N) if the network uses one -> (B,) actions."""
     import torch
 
     from .qnet import masked_q
 
     t = torch.as_tensor
     with torch.no_grad():
-        q = net(t(features), t(costs), t(masks), t(remaining))
+        q = net(t(features), t(costs), t(masks), t(remaining), prior)
         return masked_q(q, t(masks)).argmax(1).numpy()
 
 
@@ -303,7 +321,7 @@ def _gain(cost, mask, a):
     return insertion_gain(cost, mask, a)
 
 
-def _margin_loss(net, feats, costs, batch, args):
+def _margin_loss(net, feats, costs, costs_np, batch, args):
     """DQfD's large-margin loss on demonstration states: the best frame of the optimum must beat
     every other free frame by ``args.margin`` (in units of the normalised reward)."""
     import torch
@@ -311,7 +329,8 @@ def _margin_loss(net, feats, costs, batch, args):
     from .qnet import masked_q
 
     task, mask, rem, *_, expert = batch
-    q = masked_q(net(feats[task], costs[task], mask, rem), mask)
+    prior = prior_values(net, costs_np, task.numpy(), mask.numpy(), rem.numpy())
+    q = masked_q(net(feats[task], costs[task], mask, rem, prior), mask)
     best_expert = q.masked_fill(~expert, float("-inf")).amax(1)
     best_other = q.masked_fill(expert | mask, float("-inf")).amax(1)
     has_other = torch.isfinite(best_other)
@@ -319,7 +338,7 @@ def _margin_loss(net, feats, costs, batch, args):
     return torch.where(has_other, gap, torch.zeros_like(gap)).mean()
 
 
-def _td_loss(net, target, feats, costs, batch, args):
+def _td_loss(net, target, feats, costs, costs_np, batch, args):
     """Huber loss between Q(s, a) and the n-step double-DQN target."""
     import torch
     import torch.nn.functional as F
@@ -328,13 +347,15 @@ def _td_loss(net, target, feats, costs, batch, args):
 
     task, mask, rem, action, ret, nmask, nrem, done, disc, _ = batch
     f, c = feats[task], costs[task]
+    prior = prior_values(net, costs_np, task.numpy(), mask.numpy(), rem.numpy())
+    nprior = prior_values(net, costs_np, task.numpy(), nmask.numpy(), nrem.numpy())
     enc = net.encode(f)
-    q = net.head(enc, c, mask, rem).gather(1, action[:, None])[:, 0]
+    q = net.head(enc, c, mask, rem, prior).gather(1, action[:, None])[:, 0]
     with torch.no_grad():
         tenc = target.encode(f)
-        q_next_t = masked_q(target.head(tenc, c, nmask, nrem), nmask)
+        q_next_t = masked_q(target.head(tenc, c, nmask, nrem, nprior), nmask)
         if args.double:
-            a_next = masked_q(net.head(enc.detach(), c, nmask, nrem), nmask).argmax(1)
+            a_next = masked_q(net.head(enc.detach(), c, nmask, nrem, nprior), nmask).argmax(1)
         else:
             a_next = q_next_t.argmax(1)
         v_next = q_next_t.gather(1, a_next[:, None])[:, 0]
@@ -383,7 +404,8 @@ def train(args: Args) -> dict:
     train_tasks, test_tasks, split = make_tasks(args)
     n, c = train_tasks[0].features.shape
     feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
-    costs = torch.as_tensor(np.stack([t.cost for t in train_tasks]).astype(np.float32))
+    costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
+    costs = torch.as_tensor(costs_np.astype(np.float32))
     baselines = {
         name: {
             w: float(np.mean([keyframe_error_sum(t.cost, fn(t.cost, w)) / (n * t.n_bones)
@@ -393,10 +415,10 @@ def train(args: Args) -> dict:
         for name, fn in (("greedy", greedy_keyframes), ("optimal", optimal_keyframes))
     }  # fmt: skip
 
-    net = KeyframeQNet(c, hidden=args.hidden)
+    net = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
     flat = feats.reshape(-1, c)
     net.set_normalisation(flat.mean(0), flat.std(0))
-    target = KeyframeQNet(c, hidden=args.hidden)
+    target = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
     target.load_state_dict(net.state_dict())
     opt = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
 
@@ -463,16 +485,17 @@ def train(args: Args) -> dict:
         return args.eps_start + frac * (args.eps_end - args.eps_start)
 
     if not log_rows:
-        log_eval()  # step 0: the untrained network ranks frames exactly as greedy does
+        log_eval()  # step 0: the untrained network = its prior (greedy, or the greedy rollout)
     bar = tqdm(total=args.steps, initial=step, desc="train", disable=not args.progress)
     losses = []
     while step < args.steps:
         # act in every environment: ε-greedy over valid frames, masked argmax otherwise
         masks = np.stack([o["keyframes"].astype(bool) for o in obs])
         rems = np.array([o["remaining"] for o in obs])
+        tasks_now = [env._task_index for env in envs]
         greedy = act(
             net, np.stack([o["features"] for o in obs]), np.stack([o["cost"] for o in obs]),
-            masks, rems,
+            masks, rems, prior_values(net, costs_np, tasks_now, masks, rems),
         )  # fmt: skip
         for i, env in enumerate(envs):
             if rng.random() < epsilon():
@@ -497,10 +520,10 @@ def train(args: Args) -> dict:
                 if n_demo:
                     demo_batch = _batch(demos, demos.sample(rng, n_demo))
                     batch = _cat(batch, demo_batch)
-                loss, qm = _td_loss(net, target, feats, costs, batch, args)
+                loss, qm = _td_loss(net, target, feats, costs, costs_np, batch, args)
                 if n_demo and args.margin_weight > 0:
                     loss = loss + args.margin_weight * _margin_loss(
-                        net, feats, costs, demo_batch, args
+                        net, feats, costs, costs_np, demo_batch, args
                     )
                 opt.zero_grad()
                 loss.backward()

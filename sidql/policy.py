@@ -17,6 +17,7 @@ import torch
 
 from .methods import register
 from .qnet import KeyframeQNet, masked_q
+from .rollout import rollout_values_batch, rollout_values_memo
 
 #: The policy shipped with the repository.
 DEFAULT_POLICY = Path(__file__).resolve().parent / "data" / "policy.pt"
@@ -33,6 +34,7 @@ class Policy:
 
     def __init__(self, net: KeyframeQNet, keyframes, meta: dict):
         self.net, self.keyframes, self.meta = net.eval(), tuple(keyframes), meta
+        self.uses_prior = net.config.get("prior", "greedy") == "rollout"
 
     def decide(self, features: np.ndarray, costs: np.ndarray, W: int) -> np.ndarray:
         """Greedy (masked argmax) decisions for a batch of clips: one batched torch pass of the
@@ -54,19 +56,20 @@ class Policy:
         w = self._weights()
         out = np.empty((len(feats), W), np.int64)
         for i in range(len(feats)):
-            out[i] = _decide_clip(proj[i], glob[i], cost[i].astype(np.float64), W, *w)
+            out[i] = _decide_clip(
+                proj[i], glob[i], cost[i].astype(np.float64), W, self.uses_prior, *w
+            )
         return out
 
     def _weights(self):
-        if not hasattr(self, "_w"):
-            net = self.net
-            f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
-            self._w = (
-                f(net.scal.weight), f(net.scal.bias), f(net.mlp[1].weight), f(net.mlp[1].bias),
-                f(net.mlp[3].weight)[0], float(net.mlp[3].bias.detach()[0]), f(net.value[0].weight),
-                f(net.value[0].bias), f(net.value[2].weight)[0], float(net.value[2].bias.detach()[0]),
-            )  # fmt: skip
-        return self._w
+        """The head's weights as float64 arrays (read afresh: the network may have changed)."""
+        net = self.net
+        f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
+        return (
+            f(net.scal.weight), f(net.scal.bias), f(net.mlp[1].weight), f(net.mlp[1].bias),
+            f(net.mlp[3].weight)[0], float(net.mlp[3].bias.detach()[0]), f(net.value[0].weight),
+            f(net.value[0].bias), f(net.value[2].weight)[0], float(net.value[2].bias.detach()[0]),
+        )  # fmt: skip
 
     def _check(self, features, costs, W):
         feats = np.ascontiguousarray(features, dtype=np.float32)
@@ -98,9 +101,17 @@ class Policy:
         mask = torch.zeros(b, n, dtype=torch.bool)
         mask[:, [0, n - 1]] = True
         rows = torch.arange(b)
+        cost64 = np.ascontiguousarray(costs, dtype=np.float64)
         for k in range(W - 2):
             rem = torch.full((b,), W - 2 - k)
-            mask[rows, masked_q(self.net.head(enc, cost, mask, rem), mask).argmax(1)] = True
+            prior = None
+            if self.uses_prior:
+                prior = torch.as_tensor(
+                    rollout_values_batch(cost64, np.arange(b), mask.numpy(), rem.numpy()),
+                    dtype=torch.float32,
+                )
+            q = self.net.head(enc, cost, mask, rem, prior)
+            mask[rows, masked_q(q, mask).argmax(1)] = True
         return np.nonzero(mask.numpy())[1].reshape(b, W).astype(np.int64)
 
     def select(self, clip, W: int) -> np.ndarray:
@@ -115,7 +126,7 @@ class Policy:
 
 
 @numba.njit(cache=True, fastmath=True)
-def _decide_clip(proj, glob, cost, W, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2):
+def _decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2):
     """W sorted keyframes of one clip by the head of :class:`sidql.qnet.KeyframeQNet`.
 
     The same arithmetic as the torch head, step by step, but incremental: a frame's segment
@@ -125,7 +136,8 @@ def _decide_clip(proj, glob, cost, W, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2
 
     Args:
         proj: (N, 4K) the head's per-frame projections of the encoder output (self, left, right,
-            segment); glob: (K,) its clip-wide term; cost: (N, N) segment costs; W: keyframes.
+            segment); glob: (K,) its clip-wide term; cost: (N, N) segment costs; W: keyframes;
+            use_prior: add the greedy-rollout prior (:mod:`sidql.rollout`) as the torch head does.
         ws, bs: the scalar-input layer (K, 11), (K,); w1, b1, w2, b2: the advantage MLP;
         wv1, bv1, wv2, bv2: the value MLP (weights as in torch, ``out x in``).
     """
@@ -147,6 +159,9 @@ def _decide_clip(proj, glob, cost, W, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2
     g1 = np.zeros(n)
     base = np.zeros((n, k))
     adv = np.zeros(n)
+    prior = np.zeros(n)
+    memo_g = np.zeros((n, n))
+    memo_m = np.full((n, n), -2, np.int64)
     z = np.zeros(k)
     zsum = np.zeros(k)
     for step in range(W - 2):
@@ -166,6 +181,8 @@ def _decide_clip(proj, glob, cost, W, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2
             if mask[i]:
                 e += cost[i, new_right[i + 1]]
         e /= s0
+        if use_prior:
+            prior = rollout_values_memo(cost, mask, rem, memo_g, memo_m)
         # segment features of frames whose segment changed
         for a in range(n):
             if mask[a] or (new_left[a] == left[a] and new_right[a] == right[a]):
@@ -251,7 +268,12 @@ def _decide_clip(proj, glob, cost, W, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2
                 continue
             q = g1[a]
             if rem > 1:
-                q += (e - g1[a]) / (1.0 + np.exp(-(value + adv[a] - adv_mean)))
+                logit = value + adv[a] - adv_mean
+                e_after = e - g1[a]
+                if use_prior:
+                    share = min(max(prior[a] / max(e_after, 1e-9), 1e-4), 1.0 - 1e-4)
+                    logit += np.log(share / (1.0 - share))
+                q += e_after / (1.0 + np.exp(-logit))
             if q > best_q:
                 best_q = q
                 best_a = a
@@ -274,7 +296,9 @@ def _load(path: str, _mtime: int) -> Policy:
     if payload.get("format") != "sidql-dqn-policy/1":
         raise ValueError(f"{path} is not a sidql DQN policy")
     cfg = payload["config"]
-    net = KeyframeQNet(cfg["n_features"], hidden=cfg["hidden"], dilations=cfg["dilations"])
+    net = KeyframeQNet(
+        cfg["n_features"], cfg["hidden"], cfg["dilations"], prior=cfg.get("prior", "greedy")
+    )
     net.load_state_dict(payload["state_dict"])
     meta = {k: v for k, v in payload.items() if k not in ("state_dict",)}
     return Policy(net, payload["keyframes"], meta)

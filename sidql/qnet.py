@@ -28,6 +28,12 @@ Two parts, so that a decision of W keyframes costs one encoder pass and W - 2 ch
   untrained network ranks frames exactly as the paper's greedy method; TD learning then moves it
   towards the optimum. On the last step (one keyframe left) Q is the reward alone.
 
+  With ``prior="rollout"`` the share's logit is offset by the exact share that finishing the
+  episode greedily removes (:mod:`sidql.rollout`, an input computed outside the network), and
+  the value head also starts at zero: the untrained network is then Q^greedy (γ = 1), whose
+  argmax is the rollout algorithm's improvement over greedy, and TD learning learns Q* - Q^greedy
+  in logit space.
+
 Q-values of frames that are already keyframes are set to -inf by :func:`masked_q`; the argmax over
 the rest is the policy (both when acting and in the Bellman target).
 """
@@ -36,6 +42,10 @@ from __future__ import annotations
 
 import torch
 from torch import nn
+
+#: What the learned part starts from: "greedy" (an untrained network ranks like greedy) or
+#: "rollout" (it ranks by the exact value of finishing greedily, :mod:`sidql.rollout`).
+PRIORS = ("greedy", "rollout")
 
 #: Number of scalar per-frame inputs of the head (see :meth:`KeyframeQNet.head`).
 N_SCALARS = 11
@@ -50,9 +60,16 @@ class KeyframeQNet(nn.Module):
         dilations: dilations of the residual temporal convolutions (kernel 3).
     """
 
-    def __init__(self, n_features: int, hidden: int = 32, dilations=(1, 2, 4, 8)):
+    def __init__(
+        self, n_features: int, hidden: int = 32, dilations=(1, 2, 4, 8), prior: str = "greedy"
+    ):
         super().__init__()
-        self.config = {"n_features": n_features, "hidden": hidden, "dilations": tuple(dilations)}
+        if prior not in PRIORS:
+            raise ValueError(f"unknown prior {prior!r}; choose from {', '.join(PRIORS)}")
+        self.config = {
+            "n_features": n_features, "hidden": hidden, "dilations": tuple(dilations),
+            "prior": prior,
+        }  # fmt: skip
         self.register_buffer("feature_mean", torch.zeros(n_features))
         self.register_buffer("feature_std", torch.ones(n_features))
         self.inp = nn.Conv1d(n_features + 1, hidden, 1)
@@ -69,6 +86,9 @@ class KeyframeQNet(nn.Module):
         self.value = nn.Sequential(nn.Linear(k, hidden), nn.ReLU(), nn.Linear(hidden, 1))
         nn.init.zeros_(self.mlp[-1].weight)
         nn.init.zeros_(self.mlp[-1].bias)
+        if prior == "rollout":  # start exactly at the prior: Q = g1 + greedy-completion value
+            nn.init.zeros_(self.value[-1].weight)
+            nn.init.zeros_(self.value[-1].bias)
 
     def set_normalisation(self, mean: torch.Tensor, std: torch.Tensor) -> None:
         """Standardise inputs with per-channel ``mean``, ``std`` (C,) from the training clips."""
@@ -92,9 +112,11 @@ class KeyframeQNet(nn.Module):
         cost: torch.Tensor,
         mask: torch.Tensor,
         remaining: torch.Tensor,
+        prior: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Q-values from embeddings (B, N, H), segment costs (B, N, N), keyframe mask (B, N) bool
-        and keyframes still to choose (B,) -> (B, N). Entries of frames that are keyframes are meaningless (see :func:`masked_q`)."""
+        and keyframes still to choose (B,) -> (B, N). With ``config["prior"] == "rollout"``,
+        ``prior`` (B, N) is :func:`sidql.rollout.rollout_values` of the state. Entries of frames that are keyframes are meaningless (see :func:`masked_q`)."""
         b, n, _ = enc.shape
         idx = torch.arange(n, device=enc.device).expand(b, n)
         # nearest keyframe at or left of / at or right of each frame (0 and N-1 are keyframes)
@@ -130,11 +152,17 @@ class KeyframeQNet(nn.Module):
         # the future can remove at most the error left after a: predict the fraction it removes
         e_after = current_error(cost, mask, right) - g1
         more = (remaining > 1).to(enc.dtype)[:, None]
+        if self.config["prior"] == "rollout":
+            if prior is None:
+                raise ValueError("this network needs the rollout prior (sidql.rollout)")
+            share = (prior.to(enc.dtype) / e_after.clamp(min=1e-9)).clamp(1e-4, 1 - 1e-4)
+            logit = logit + torch.log(share / (1 - share))
         return g1 + more * e_after * torch.sigmoid(logit)
 
-    def forward(self, features, cost, mask, remaining):
-        """Q-values (B, N) of (B, N, C) features, (B, N, N) costs, (B, N) bool mask, (B,)."""
-        return self.head(self.encode(features), cost, mask, remaining)
+    def forward(self, features, cost, mask, remaining, prior=None):
+        """Q-values (B, N) of (B, N, C) features, (B, N, N) costs, (B, N) bool mask, (B,)
+        remaining and, for a rollout-prior network, (B, N) prior."""
+        return self.head(self.encode(features), cost, mask, remaining, prior)
 
 
 def gain_features(cost, idx, left, right):

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from sidql.dqn import Args, NStep, ReplayMemory, save_policy, train
-from sidql.env import KeyframeEnv, keyframe_error_sum
+from sidql.env import KeyframeEnv, insertion_gain, keyframe_error_sum
 from sidql.methods import greedy_from_costs
 from sidql.policy import Policy, load_policy
 from sidql.qnet import KeyframeQNet, current_error, gain_features
@@ -194,3 +194,62 @@ def test_every_pair_of_tiny_costs_has_the_brute_force_optimum_in_the_logged_base
         for k in itertools.combinations(range(1, 7), 3)
     )
     assert keyframe_error_sum(cost, optimal_keyframes(cost, 5)) == pytest.approx(best[0])
+
+
+def brute_greedy_completion(cost, keys, k):
+    """Total gain of adding k keyframes greedily to sorted ``keys`` (full recomputation)."""
+    keys = sorted(keys)
+    total = 0.0
+    for _ in range(k):
+        err = keyframe_error_sum(cost, keys)
+        free = [a for a in range(cost.shape[0]) if a not in keys]
+        gains = [err - keyframe_error_sum(cost, sorted(keys + [a])) for a in free]
+        j = int(np.argmax(gains))
+        total += gains[j]
+        keys = sorted(keys + [free[j]])
+    return total
+
+
+def test_rollout_values_equal_a_brute_force_greedy_completion():
+    from sidql.rollout import rollout_values
+
+    rng = np.random.default_rng(4)
+    n = 12
+    cost = np.triu(rng.uniform(0, 1, (n, n)), 1) * np.arange(n)[None, :] ** 0.5
+    mask = np.zeros(n, bool)
+    mask[[0, 5, n - 1]] = True
+    for rem in (1, 2, 4):
+        vals = rollout_values(cost, mask, rem)
+        for a in np.flatnonzero(~mask):
+            keys = [*np.flatnonzero(mask).tolist(), int(a)]
+            expect = brute_greedy_completion(cost, keys, rem - 1) / cost[0, n - 1]
+            assert vals[a] == pytest.approx(expect, abs=1e-12)
+        assert np.all(vals[mask] == 0)
+
+
+def test_untrained_rollout_prior_network_is_the_rollout_algorithm(tasks):
+    """With the rollout prior, Q starts at Q^greedy (γ = 1): argmax = reward + greedy completion;
+    the compiled kernel and the torch head agree, also once the learned part is not zero."""
+    from sidql.rollout import rollout_values
+
+    net = KeyframeQNet(tasks[0].features.shape[1], prior="rollout")
+    policy = Policy(net, (5,), {})
+    feats = np.stack([t.features for t in tasks])
+    costs = np.stack([t.cost for t in tasks])
+    w = 6
+    keys = policy.decide(feats, costs, w)
+    for t, k in zip(tasks, keys, strict=True):
+        mask = np.zeros(t.n_frames, bool)
+        mask[[0, -1]] = True
+        for step in range(w - 2):
+            s0 = t.cost[0, -1]
+            g1 = np.full(t.n_frames, -np.inf)
+            for a in np.flatnonzero(~mask):
+                g1[a] = insertion_gain(t.cost, mask, a) / s0
+            mask[int(np.argmax(g1 + rollout_values(t.cost, mask, w - 2 - step)))] = True
+        np.testing.assert_array_equal(k, np.flatnonzero(mask))
+    torch.nn.init.normal_(net.mlp[-1].weight, std=0.5)
+    torch.nn.init.normal_(net.value[-1].weight, std=0.5)
+    np.testing.assert_array_equal(
+        policy.decide(feats, costs, 9), policy.decide_torch(feats, costs, 9)
+    )
