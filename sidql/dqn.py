@@ -6,7 +6,9 @@
   optimum (``sidql.optimal``) through the same environment; a fixed share of every minibatch comes
   from them, so it stays a Q-learner (the same Huber TD loss) that also learns from its own play;
 - a network that sees the whole clip (``sidql.qnet``) and one policy for several W (the number of
-  keyframes still to choose is part of the state);
+  keyframes still to choose is part of the state); its learned part sits on an exact prior: the
+  reward of the action plus, with ``prior="rollout"``, the value of finishing greedily
+  (``sidql.rollout``), so an untrained network is already the rollout improvement of greedy;
 - parallel episodes (one batched forward pass per step) and hard target updates.
 
 Everything is in :func:`train`, top to bottom, cleanrl style; :class:`Args` documents each knob. The
@@ -60,10 +62,11 @@ class Args:
     """replay memory of the agent's own transitions (paper: 10,000)"""
     batch_size: int = 128
     """minibatch (paper: 256)"""
-    learning_rate: float = 3e-4
-    """Adam step size (paper: 0.01)"""
-    gamma: float = 0.5
-    """discount (paper: 0.5)"""
+    learning_rate: float = 1e-4
+    """Adam step size (paper: 0.01; larger rates drift away from the prior quickly)"""
+    gamma: float = 1.0
+    """discount (paper: 0.5, best with the greedy prior; 1 with the rollout prior, whose value is
+    undiscounted)"""
     n_step: int = 1
     """n-step returns"""
     double: bool = True
