@@ -17,7 +17,7 @@ import torch
 
 from .methods import register
 from .qnet import KeyframeQNet, masked_q
-from .rollout import rollout_values_batch, rollout_values_memo
+from .rollout import greedy_sequences, rollout_values_batch, rollout_values_seq
 
 #: The policy shipped with the repository.
 DEFAULT_POLICY = Path(__file__).resolve().parent / "data" / "policy.pt"
@@ -160,8 +160,7 @@ def _decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv
     base = np.zeros((n, k))
     adv = np.zeros(n)
     prior = np.zeros(n)
-    memo_g = np.zeros((n, n))
-    memo_m = np.full((n, n), -2, np.int64)
+    seq, length = greedy_sequences(cost, max(W - 3, 0) if use_prior else 0)
     z = np.zeros(k)
     zsum = np.zeros(k)
     for step in range(W - 2):
@@ -182,7 +181,7 @@ def _decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv
                 e += cost[i, new_right[i + 1]]
         e /= s0
         if use_prior:
-            prior = rollout_values_memo(cost, mask, rem, memo_g, memo_m)
+            prior = rollout_values_seq(cost, mask, rem, seq, length)
         # segment features of frames whose segment changed
         for a in range(n):
             if mask[a] or (new_left[a] == left[a] and new_right[a] == right[a]):
