@@ -7,8 +7,11 @@ is exactly Q^greedy(s, a), the action value of the greedy policy, so ``argmax_a`
 of policy improvement over greedy (the classical rollout algorithm). The DQN learns Q* on top of
 it (see :mod:`sidql.qnet`).
 
-Pure numba over a (N, N) segment-cost matrix: every segment's own greedy gains are tabulated once
-per clip (:func:`greedy_sequences`), after which a state costs O(W^2 (W + N)).
+Pure numba over a (N, N) segment-cost matrix, two ways with the same values: for one state,
+simulate the greedy completion of every candidate with memoised best splits
+(:func:`rollout_values`, used in training batches); for a whole decision, tabulate every segment's
+own greedy gains once per clip (:func:`greedy_sequences`) and merge them per state
+(:func:`rollout_values_seq`, used by the decision kernel).
 """
 
 from __future__ import annotations
@@ -134,6 +137,70 @@ def rollout_values_seq(cost, mask, rem, seq, length):
 
 
 @numba.njit(cache=True)
+def _best_split(cost, l, r, memo_g, memo_m):
+    if memo_m[l, r] == -2:
+        best = -np.inf
+        arg = -1
+        for m in range(l + 1, r):
+            g = cost[l, r] - cost[l, m] - cost[m, r]
+            if g > best:
+                best = g
+                arg = m
+        memo_g[l, r] = best
+        memo_m[l, r] = arg
+    return memo_g[l, r], memo_m[l, r]
+
+
+@numba.njit(cache=True)
+def rollout_values_memo(cost, mask, rem, memo_g, memo_m):
+    """As :func:`rollout_values`, with caller-owned memo tables (N, N) float64 and int64 (the
+    latter filled with -2 for "not computed"), reusable across the states of one clip."""
+    n = cost.shape[0]
+    keys = np.flatnonzero(mask)
+    nk = len(keys)
+    out = np.zeros(n)
+    segl = np.zeros(n + 2, np.int64)
+    segr = np.zeros(n + 2, np.int64)
+    sg = np.zeros(n + 2)
+    sm = np.zeros(n + 2, np.int64)
+    s0 = max(cost[0, n - 1], 1e-12)
+    for i in range(nk - 1):
+        l0 = keys[i]
+        r0 = keys[i + 1]
+        for a in range(l0 + 1, r0):
+            ns = 0
+            for j in range(nk - 1):
+                if j == i:
+                    segl[ns], segr[ns] = l0, a
+                    segl[ns + 1], segr[ns + 1] = a, r0
+                    ns += 2
+                else:
+                    segl[ns], segr[ns] = keys[j], keys[j + 1]
+                    ns += 1
+            for s in range(ns):
+                sg[s], sm[s] = _best_split(cost, segl[s], segr[s], memo_g, memo_m)
+            total = 0.0
+            for _ in range(rem - 1):
+                bs = -1
+                bg = -np.inf
+                for s in range(ns):
+                    if sm[s] >= 0 and (sg[s] > bg or (sg[s] == bg and sm[s] < sm[bs])):
+                        bg = sg[s]
+                        bs = s
+                if bs < 0:
+                    break
+                total += bg
+                m, l, r = sm[bs], segl[bs], segr[bs]
+                segr[bs] = m
+                sg[bs], sm[bs] = _best_split(cost, l, m, memo_g, memo_m)
+                segl[ns], segr[ns] = m, r
+                sg[ns], sm[ns] = _best_split(cost, m, r, memo_g, memo_m)
+                ns += 1
+            out[a] = total / s0
+    return out
+
+
+@numba.njit(cache=True)
 def rollout_values(cost, mask, rem):
     """Greedy-completion value of every frame.
 
@@ -145,8 +212,10 @@ def rollout_values(cost, mask, rem):
         that follow adding a, divided by C[0, N-1] (the future part of Q^greedy(s, a) with γ = 1);
         0 for keyframes.
     """
-    seq, length = greedy_sequences(cost, max(rem - 1, 0))
-    return rollout_values_seq(cost, mask, rem, seq, length)
+    n = cost.shape[0]
+    memo_g = np.zeros((n, n))
+    memo_m = np.full((n, n), -2, np.int64)
+    return rollout_values_memo(cost, mask, rem, memo_g, memo_m)
 
 
 @numba.njit(cache=True)

@@ -211,15 +211,25 @@ def brute_greedy_completion(cost, keys, k):
 
 
 def test_rollout_values_equal_a_brute_force_greedy_completion():
-    from sidql.rollout import rollout_values
 
     rng = np.random.default_rng(4)
     n = 12
     cost = np.triu(rng.uniform(0, 1, (n, n)), 1) * np.arange(n)[None, :] ** 0.5
-    mask = np.zeros(n, bool)
-    mask[[0, 5, n - 1]] = True
+    for keys in ([0, 5, n - 1], [0, 2, 6, 8, n - 1]):
+        mask = np.zeros(n, bool)
+        mask[keys] = True
+        check_rollout(cost, mask, n)
+
+
+def check_rollout(cost, mask, n):
+    from sidql.rollout import greedy_sequences, rollout_values, rollout_values_seq
+
     for rem in (1, 2, 4):
         vals = rollout_values(cost, mask, rem)
+        seq, length = greedy_sequences(cost, 5)
+        np.testing.assert_allclose(
+            rollout_values_seq(cost, mask, rem, seq, length), vals, atol=1e-12
+        )
         for a in np.flatnonzero(~mask):
             keys = [*np.flatnonzero(mask).tolist(), int(a)]
             expect = brute_greedy_completion(cost, keys, rem - 1) / cost[0, n - 1]
