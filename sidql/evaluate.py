@@ -75,8 +75,11 @@ def load_cases(
     length: int = 60,
     skeleton: str = "subject",
     progress: bool = True,
+    subjects=None,
 ) -> tuple[list[Case], list[dict]]:
     """Every ``length``-frame clip of every trial under ``data_dir``.
+
+    ``subjects``: keep only these subject ids (e.g. a policy's held-out subjects); None keeps all.
 
     Returns:
         The cases, and ``{"amc", "problem"}`` for each trial skipped as bad input (also reported
@@ -90,6 +93,8 @@ def load_cases(
     cases: list[Case] = []
     skipped: list[dict] = []
     trials = find_trials(data_dir)
+    if subjects is not None:
+        trials = [t for t in trials if t.subject in set(subjects)]
     for trial in tqdm(trials, desc="load trials", unit="trial", disable=not progress):
         try:
             clips = load_clips(trial.asf, trial.amc, fps=fps, length=length, skeleton=skeleton)

@@ -174,3 +174,11 @@ def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path, capsys):
         ["eval", "--data", str(cmu_dir), "--methods", "nope", "--out", str(tmp_path / "r")]
     )
     assert rc == 2 and "greedy" in capsys.readouterr().err
+
+
+def test_load_cases_keeps_only_the_named_subjects(cmu_dir):
+    from sidql.evaluate import load_cases
+
+    cases, skipped = load_cases(cmu_dir, subjects=["02", "35"], progress=False)
+    sources = {c.clip.source.replace("\\", "/").split("/")[-2] for c in cases}
+    assert sources == {"02", "35"} and not skipped

@@ -34,6 +34,9 @@ def register(sub) -> None:
         metavar="PNG",
         help="also sweep W and write the rate/distortion plot here (and its data beside it)",
     )
+    p.add_argument(
+        "--subjects", nargs="+", default=None, help="only these subject ids, e.g. 01 07 18 61"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -57,7 +60,12 @@ def run(args) -> int:
         if not 2 <= W <= args.length:
             raise SystemExit(f"sidql eval: --keyframes values must be in [2, {args.length}]")
     cases, skipped = load_cases(
-        args.data, fps=args.fps, length=args.length, skeleton=args.skeleton, progress=not args.quiet
+        args.data,
+        fps=args.fps,
+        length=args.length,
+        skeleton=args.skeleton,
+        progress=not args.quiet,
+        subjects=args.subjects,
     )
     if not cases:
         print(f"sidql eval: no {args.length}-frame clips under {args.data}")
