@@ -98,6 +98,7 @@ def scene_xml(
     floor_z: float = 0.0,
     floor_margin: float = 0.0,
     visual: bool = False,
+    quality: tuple[int, int, int, int] = (0, 16, 8, 0),
 ) -> str:
     """MJCF text of ``len(skeletons)`` copies of ``bones`` as mocap capsules plus a floor.
 
@@ -111,10 +112,15 @@ def scene_xml(
         floor_z: floor height [m].
         floor_margin: contact margin [m] of bone/floor pairs: contacts closer than this are reported.
         visual: add a checker floor texture, a headlight and a light for rendering.
+        quality: ``(offsamples, numslices, numstacks, shadowsize)`` of MuJoCo's ``<quality>``:
+            multisampling, capsule tessellation and shadow-map size (MuJoCo's defaults: 4, 28, 16,
+            4096; ours are cheap for software rendering).
     """
+    ms, slices, stacks, shadow = quality
     w: list[str] = ['<mujoco model="capsules">', '  <option gravity="0 0 0"/>']
     w.append(
-        '  <visual><global offwidth="1920" offheight="1080"/><quality shadowsize="0" offsamples="0" numslices="16" numstacks="8"/>'
+        '  <visual><global offwidth="1920" offheight="1080"/>'
+        f'<quality shadowsize="{shadow}" offsamples="{ms}" numslices="{slices}" numstacks="{stacks}"/>'
         '<headlight ambient="0.45 0.45 0.45" diffuse="0.5 0.5 0.5" specular="0.1 0.1 0.1"/></visual>'
     )
     if visual:

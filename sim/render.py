@@ -28,6 +28,7 @@ from .replay import PointMotion
 ORIGINAL_RGBA = (0.35, 0.45, 0.65, 1.0)
 GHOST_RGBA = (1.0, 0.55, 0.15, 0.45)
 KEY_RGBA = (0.15, 0.8, 0.3, 0.7)
+SKY_TOP, SKY_BOTTOM = (150, 180, 215), (225, 232, 240)
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,8 @@ class RenderStyle:
         layout: ``"overlay"`` (ghost over the original) or ``"side"`` (ghost beside it).
         side_offset: lateral gap between the two figures in ``"side"`` layout [m].
         shadows, reflections: MuJoCo's costly effects (off by default).
+        multisample: MSAA samples of the offscreen buffer (MuJoCo's default 4; 0 here).
+        slices, stacks: capsule tessellation (MuJoCo's defaults 28, 16).
     """
 
     width: int = 640
@@ -50,6 +53,9 @@ class RenderStyle:
     side_offset: float = 1.0
     shadows: bool = False
     reflections: bool = False
+    multisample: int = 0
+    slices: int = 16
+    stacks: int = 8
 
     def __post_init__(self):
         if self.layout not in ("overlay", "side"):
@@ -73,7 +79,10 @@ class SkeletonRenderer:
         self.style = style
         self.bones = bones_of(names, parents, lengths)
         xml = scene_xml(
-            self.bones, skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)), visual=True
+            self.bones,
+            skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)),
+            visual=True,
+            quality=(style.multisample, style.slices, style.stacks, 4096 if style.shadows else 0),
         )
         self.model = mujoco.MjModel.from_xml_string(xml)
         self.data = mujoco.MjData(self.model)
@@ -85,6 +94,13 @@ class SkeletonRenderer:
         flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(style.shadows)
         flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = int(style.reflections)
         flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
+        # MuJoCo clears to black without a skybox: paint the empty background as a sky gradient
+        h = np.linspace(0.0, 1.0, style.height)[:, None, None]
+        sky = np.array(SKY_TOP) * (1 - h) + np.array(SKY_BOTTOM) * h
+        self._sky = np.broadcast_to(sky, (style.height, style.width, 3)).astype(np.uint8)
+        # Looking down, the centre of the view hits the floor a few metres away, well inside the far
+        # clipping distance, so only the upper half (plus a margin) can show the empty background.
+        self._sky_rows = style.height // 2 + 8 if style.elevation <= -5 else style.height
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera.distance = style.distance
@@ -118,7 +134,11 @@ class SkeletonRenderer:
         self.camera.lookat[:] = lookat
         self.camera.azimuth = azimuth
         self.renderer.update_scene(d, camera=self.camera)
-        return self.renderer.render()
+        img = self.renderer.render()
+        top = img[: self._sky_rows]
+        empty = (top[..., 0] | top[..., 1] | top[..., 2]) == 0
+        np.copyto(top, self._sky[: self._sky_rows], where=empty[..., None])
+        return img
 
 
 def camera_path(root: np.ndarray, fps: float, *, height: float = 0.9, smooth_s: float = 0.3):
