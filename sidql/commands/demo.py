@@ -14,11 +14,21 @@ def register(sub) -> None:
         "demo",
         help="run the main job on the embedded default",
         description="Ingest a real CMU trial (from ../shared/cmu when present, else a motion "
-        "generated on the humanoid) and print its summary.",
+        "generated on the humanoid) and print its summary; then choose keyframes of its first "
+        "60-frame clip with every method, reconstruct, replay in MuJoCo, render and write the "
+        "HTML report (OUT/report/index.html).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--data", default=str(DEFAULT_DATA), help="folder of CMU files")
     p.add_argument("--out", default="out/demo", help="output folder")
+    p.add_argument("--keyframes", "-W", type=int, default=10, help="keyframes of the report's clip")
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        help="keyframe methods (default: every registered one)",
+    )
+    p.add_argument("--no-report", action="store_true", help="stop after ingesting")
     p.set_defaults(func=run)
 
 
@@ -44,4 +54,26 @@ def run(args) -> int:
     print(describe(clip))
     path = save_npz(clip, Path(args.out) / "motion.npz")
     print(f"wrote {path}")
+    if args.no_report:
+        return 0
+    return report_step(clip, args)
+
+
+def report_step(clip, args) -> int:
+    """Keyframes by every method on the first 60-frame clip, reconstruction, replay, report."""
+    from sidql.methods import available
+    from sim.humanoid import humanoid_model, subject_model
+    from sim.report import joint_ranges, report_clips
+
+    subject, _ = DEFAULT_TRIAL
+    asf = Path(args.data) / subject / f"{subject}.asf"
+    model = subject_model(asf)[1] if clip.source and asf.exists() else humanoid_model()[1]
+    methods = args.methods or available()
+    first = clip.slice(0, min(60, clip.n_frames))
+    page = report_clips(
+        [first], Path(args.out) / "report", W=args.keyframes, methods=methods,
+        joint_ranges=joint_ranges(model), title=f"Replay checks: {Path(clip.source).name or 'synthetic'}",
+        meta={"source": clip.source or "synthetic motion", "clip": "frames 0-59 at 30 fps"},
+    )  # fmt: skip
+    print(f"report: {page.resolve()}")
     return 0
