@@ -34,12 +34,22 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    import sys
+
+    from sim.errors import MotionDataError
     from sim.render import RenderStyle
     from sim.report import report_trial
 
-    page = report_trial(
-        args.asf, args.amc, args.out, W=args.keyframes, methods=args.methods, clips=args.clips,
-        seed=args.seed, videos=not args.no_video, style=RenderStyle(layout=args.layout),
-    )  # fmt: skip
+    try:
+        page = report_trial(
+            args.asf, args.amc, args.out, W=args.keyframes, methods=args.methods,
+            clips=args.clips, seed=args.seed, videos=not args.no_video,
+            style=RenderStyle(layout=args.layout),
+        )  # fmt: skip
+    except MotionDataError:
+        raise
+    except (ValueError, KeyError) as e:  # bad clip number, W or method name: say which
+        print(f"sidql report: error: {e}", file=sys.stderr)
+        return 2
     print(f"report: {page}")
     return 0
