@@ -18,7 +18,8 @@ COMMAND_MODULES = (
     "sidql.commands.dataset",
     "sidql.commands.demo",
     "sidql.commands.report",
-    "sidql.commands.eval", "sidql.commands.extract",
+    "sidql.commands.eval",
+    "sidql.commands.extract",
     "sidql.commands.train",
 )
 
