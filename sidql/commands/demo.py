@@ -75,5 +75,28 @@ def report_step(clip, args) -> int:
         joint_ranges=joint_ranges(model), title=f"Replay checks: {Path(clip.source).name or 'synthetic'}",
         meta={"source": clip.source or "synthetic motion", "clip": "frames 0-59 at 30 fps"},
     )  # fmt: skip
+    print(summary_table(Path(args.out) / "report" / "checks.json"))
     print(f"report: {page.resolve()}")
     return 0
+
+
+def summary_table(checks_path: Path) -> str:
+    """The report's headline figures per method, as a Markdown table for the terminal."""
+    import json
+
+    doc = json.loads(Path(checks_path).read_text())
+    clip = doc["clips"][0]
+    rows = [
+        f"W = {clip['keyframes']}, {clip['frames']} frames; floor and skating as excess over the "
+        "original",
+        "| method | reconstruction | keyframes | MPJPE mm | vel. err mm/s | floor +mm | skate +mm/s |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for m in clip["methods"]:
+        s, e = m["summary"], m["excess"]
+        rows.append(
+            f"| {m['method']} | {m['reconstruction']} | {' '.join(map(str, m['indices']))} | "
+            f"{s['mpjpe_mm']:.1f} | {s['velocity_error_mm_s']:.0f} | "
+            f"{e['floor_depth_max_mm']:+.1f} | {e['skate_mean_mm_s']:+.0f} |"
+        )
+    return "\n".join(rows)
