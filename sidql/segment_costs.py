@@ -47,17 +47,7 @@ def _cost_matrix(X, R, linear):
             L = j - i
             total = 0.0
             for n in range(i + 1, j):
-                s = (n - i) / L
-                if linear:
-                    h01 = s
-                    h10 = 0.0
-                    h11 = 0.0
-                else:
-                    s2 = s * s
-                    s3 = s2 * s
-                    h01 = -2.0 * s3 + 3.0 * s2
-                    h10 = (s3 - 2.0 * s2 + s) * L
-                    h11 = (s3 - s2) * L
+                h01, h10, h11 = _weights(n, i, L, linear)
                 acc = 0.0
                 for d in range(D):
                     v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
@@ -68,6 +58,17 @@ def _cost_matrix(X, R, linear):
     return C
 
 
+@numba.njit(cache=True, fastmath=True, inline="always")
+def _weights(n, i, L, linear):
+    """Hermite weights (h01, h10 * L, h11 * L) of frame n in segment [i, i + L] (linear: s, 0, 0)."""
+    s = (n - i) / L
+    if linear:
+        return s, 0.0, 0.0
+    s2 = s * s
+    s3 = s2 * s
+    return -2.0 * s3 + 3.0 * s2, (s3 - 2.0 * s2 + s) * L, (s3 - s2) * L
+
+
 @numba.njit(cache=True, fastmath=True)
 def _segment_cost(X, R, i, j, linear):
     """C[i, j] alone, with the same arithmetic as :func:`_cost_matrix`."""
@@ -75,17 +76,7 @@ def _segment_cost(X, R, i, j, linear):
     L = j - i
     total = 0.0
     for n in range(i + 1, j):
-        s = (n - i) / L
-        if linear:
-            h01 = s
-            h10 = 0.0
-            h11 = 0.0
-        else:
-            s2 = s * s
-            s3 = s2 * s
-            h01 = -2.0 * s3 + 3.0 * s2
-            h10 = (s3 - 2.0 * s2 + s) * L
-            h11 = (s3 - s2) * L
+        h01, h10, h11 = _weights(n, i, L, linear)
         acc = 0.0
         for d in range(D):
             v = (X[i, d] - X[n, d]) + h01 * (X[j, d] - X[i, d]) + h10 * R[i, d] + h11 * R[j, d]
