@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from sidql.metrics import q_error  # noqa: E402
+from sidql.methods import naive_greedy  # noqa: E402
 from sidql.optimal import solve  # noqa: E402
 from sidql.segment_costs import greedy_keyframes, segment_cost_matrix  # noqa: E402
 from sidql.spherical import chart, wrap_angle  # noqa: E402
@@ -60,15 +60,6 @@ def best_of(fn, repeats: int) -> float:
         fn()
         out = min(out, time.perf_counter() - t0)
     return 1000.0 * out
-
-
-def naive_greedy(series, W: int) -> np.ndarray:
-    keys = [0, series.n_frames - 1]
-    for _ in range(W - 2):
-        cands = [f for f in range(series.n_frames) if f not in keys]
-        errs = [q_error(series, np.array(sorted(keys + [f]))) for f in cands]
-        keys.append(cands[int(np.argmin(errs))])
-    return np.array(sorted(keys))
 
 
 def numpy_cost_matrix(series) -> np.ndarray:

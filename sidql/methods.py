@@ -119,6 +119,22 @@ def greedy_from_costs(C: np.ndarray, W: int) -> np.ndarray:
     return keys
 
 
+def naive_greedy(series, W: int) -> np.ndarray:
+    """The paper's greedy taken literally: rebuild and score the whole clip for every candidate.
+
+    O(W N) full reconstructions; the reference that :func:`greedy` must equal and the baseline its
+    benchmark is measured against. ``series``: a :class:`~sidql.spherical.SphericalSeries`.
+    """
+    from .metrics import q_error
+
+    keys = [0, series.n_frames - 1]
+    for _ in range(W - 2):
+        cands = [f for f in range(series.n_frames) if f not in keys]
+        errs = [q_error(series, np.array(sorted(keys + [f]))) for f in cands]
+        keys.append(cands[int(np.argmin(errs))])
+    return np.array(sorted(keys))
+
+
 @register("greedy")
 def greedy(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
     """Greedy (paper): repeatedly add the frame whose addition lowers Q (eq. 18) the most."""

@@ -56,3 +56,15 @@ def piecewise_clip(keyframes, N: int, fps: float, seed: int, variant: str = "her
         lengths,
         fps=fps,
     )
+
+
+def assert_velocities_match_differences(rec, keys) -> None:
+    """A reconstruction's velocities equal central differences of its positions, away from the
+    keyframes (where piecewise curves may have kinks): relative error below 1e-3."""
+    N = rec.positions.shape[0]
+    fd = (rec.positions[2:] - rec.positions[:-2]) / (2 * rec.dt)
+    inner = np.ones(N, bool)
+    for k in keys:
+        inner[max(k - 1, 0) : k + 2] = False
+    err = np.abs(fd - rec.velocities[1:-1])[inner[1:-1]]
+    assert err.max() < 1e-3 * np.abs(rec.velocities).max()
