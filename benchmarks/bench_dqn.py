@@ -42,13 +42,13 @@ def main() -> int:
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    from sidql.methods import greedy_from_costs
-    from sidql.optimal import solve
-    from sidql.policy import load_policy
+    from sidql.keyframes.methods import greedy_from_costs
+    from sidql.keyframes.optimal import solve
+    from sidql.learning.policy import load_policy
 
     policy = load_policy(args.policy)
     if Path(args.data).is_dir():
-        from sidql.tasks import load_tasks
+        from sidql.learning.tasks import load_tasks
 
         trials = load_tasks(args.data, stride=60, progress=False)
         feats = np.concatenate([t.features for t in trials])
@@ -80,10 +80,10 @@ def main() -> int:
         print(f"| {w} | {batched:.3f} | {single:.3f} | {greedy:.3f} | {optimal:.3f} | "
               f"{greedy / batched:.2f} |")  # fmt: skip
     if Path(args.data).is_dir():
-        from sidql.segment_costs import segment_cost_matrix
-        from sidql.spherical import chart
-        from sim.dataset import find_trials
-        from sim.ingest import load_clips
+        from sidql.keyframes.segment_costs import segment_cost_matrix
+        from sidql.keyframes.spherical import chart
+        from sim.motion.dataset import find_trials
+        from sim.motion.ingest import load_clips
 
         trial = find_trials(args.data)[0]
         clips = load_clips(trial.asf, trial.amc)[:10]

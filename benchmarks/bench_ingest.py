@@ -20,9 +20,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-import sim.acclaim as acclaim  # noqa: E402
-from sim.dataset import find_trials  # noqa: E402
-from sim.ingest import load_motion  # noqa: E402
+import sim.acclaim.reader as acclaim  # noqa: E402
+from sim.motion.dataset import find_trials  # noqa: E402
+from sim.motion.ingest import load_motion  # noqa: E402
 
 
 def run(trials, repeats: int = 3) -> tuple[float, dict]:

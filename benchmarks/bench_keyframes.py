@@ -28,17 +28,17 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from sidql.methods import naive_greedy  # noqa: E402
-from sidql.optimal import solve  # noqa: E402
-from sidql.segment_costs import greedy_keyframes, segment_cost_matrix  # noqa: E402
-from sidql.spherical import chart, wrap_angle  # noqa: E402
+from sidql.keyframes.methods import naive_greedy  # noqa: E402
+from sidql.keyframes.optimal import solve  # noqa: E402
+from sidql.keyframes.segment_costs import greedy_keyframes, segment_cost_matrix  # noqa: E402
+from sidql.keyframes.spherical import chart, wrap_angle  # noqa: E402
 
 
 def load(data: Path, n_clips: int):
     """Real 60-frame clips from ``data`` (spread over trials), or synthetic ones if absent."""
     if (data / "MANIFEST.tsv").exists():
-        from sim.dataset import find_trials
-        from sim.ingest import load_clips
+        from sim.motion.dataset import find_trials
+        from sim.motion.ingest import load_clips
 
         clips = []
         for t in find_trials(data):
@@ -46,7 +46,7 @@ def load(data: Path, n_clips: int):
             if len(clips) >= n_clips:
                 break
         return clips[:n_clips], f"{data} (real CMU)"
-    from sim.synthetic import synthetic_motion
+    from sim.motion.synthetic import synthetic_motion
 
     clips = synthetic_motion(seconds=2.0 * n_clips, seed=0).split(60)[:n_clips]
     return clips, "synthetic motion (no CMU data found)"

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 import sim  # noqa: F401  (sets MUJOCO_GL=egl before MuJoCo loads)
-from sim.render import RenderStyle, SkeletonRenderer, annotate, camera_path, write_video
-from sim.replay import PointMotion, from_clip
-from sim.synthetic import synthetic_motion
+from sim.motion.synthetic import synthetic_motion
+from sim.replay.checks import PointMotion, from_clip
+from sim.replay.render import RenderStyle, SkeletonRenderer, annotate, camera_path, write_video
 
 MUJOCO_DEFAULTS = RenderStyle(shadows=True, reflections=True, multisample=4, slices=28, stacks=16)
 OURS = RenderStyle()

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim import parse_asf
-from sim.humanoid import write_humanoid_xml
+from sim.acclaim.reader import parse_asf
+from sim.model.humanoid import write_humanoid_xml
 
 
 def main(src: str, dst: str) -> None:

@@ -24,6 +24,6 @@ def cmu_dir() -> Path:
 @pytest.fixture(scope="session")
 def walk_clip(cmu_dir):
     """Subject 02's walk 02_01 at 30 fps on its own skeleton."""
-    from sim.ingest import load_motion
+    from sim.motion.ingest import load_motion
 
     return load_motion(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")

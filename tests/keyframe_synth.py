@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sidql.reconstruct import interpolate
-from sidql.spherical import M_BONES, clip_from_chart
+from sidql.keyframes.reconstruct import interpolate
+from sidql.keyframes.spherical import M_BONES, clip_from_chart
 
 
 def smooth_chart(N: int, fps: float, seed: int, *, M: int = M_BONES):

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.acclaim import parse_amc, parse_asf
+from sim.acclaim.reader import parse_amc, parse_asf
 from sim.errors import MotionDataError, MotionDataWarning
 
 

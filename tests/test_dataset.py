@@ -8,10 +8,10 @@ import shutil
 import numpy as np
 import pytest
 
-from sidql.cli import main
-from sim.clip import load_npz, save_npz
-from sim.dataset import find_trials, ingest_directory
+from sidql.commands.main import main
 from sim.errors import MotionDataError
+from sim.motion.clip import load_npz, save_npz
+from sim.motion.dataset import find_trials, ingest_directory
 
 
 @pytest.fixture()
@@ -106,7 +106,7 @@ def test_clip_start_frames_count_source_frames(walk_clip):
 def test_atomic_writes_get_ordinary_file_permissions(tmp_path):
     import os
 
-    from sim.clip import write_atomic
+    from sim.motion.clip import write_atomic
 
     mask = os.umask(0o022)
     try:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from sidql.cli import main
+from sidql.commands.main import main
 
 
 def test_demo_without_data_runs_the_pipeline_on_synthetic_motion(tmp_path, capsys):

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import torch
 
-from sidql.dqn import Args, NStep, ReplayMemory, save_policy, train
-from sidql.env import KeyframeEnv, insertion_gain, keyframe_error_sum
-from sidql.methods import greedy_from_costs
-from sidql.policy import Policy, load_policy
-from sidql.qnet import KeyframeQNet, current_error, gain_features
-from sidql.tasks import synthetic_tasks
+from sidql.keyframes.methods import greedy_from_costs
+from sidql.learning.dqn import Args, NStep, ReplayMemory, save_policy, train
+from sidql.learning.env import KeyframeEnv, insertion_gain, keyframe_error_sum
+from sidql.learning.policy import Policy, load_policy
+from sidql.learning.qnet import KeyframeQNet, current_error, gain_features
+from sidql.learning.tasks import synthetic_tasks
 
 torch.set_num_threads(1)
 
@@ -155,7 +155,7 @@ def test_policy_round_trip_and_bad_inputs(tmp_path, tasks):
 
 def test_dqn_method_is_lazy_and_the_env_accepts_its_actions(tasks):
     code = (
-        "import sys, sidql.methods as m; assert 'torch' not in sys.modules; "
+        "import sys, sidql.keyframes.methods as m; assert 'torch' not in sys.modules; "
         "assert 'dqn' in m.available(); print('ok')"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
@@ -173,7 +173,7 @@ def test_dqn_method_is_lazy_and_the_env_accepts_its_actions(tasks):
 
 
 def test_subject_split_never_overlaps():
-    from sidql.dqn import split_subjects
+    from sidql.learning.dqn import split_subjects
 
     subjects = [f"{i:02d}" for i in range(10)]
     for seed in range(4):
@@ -185,7 +185,7 @@ def test_subject_split_never_overlaps():
 
 
 def test_every_pair_of_tiny_costs_has_the_brute_force_optimum_in_the_logged_baseline():
-    from sidql.dqn import optimal_keyframes
+    from sidql.learning.dqn import optimal_keyframes
 
     rng = np.random.default_rng(1)
     cost = np.triu(rng.uniform(0, 1, (8, 8)), 1)
@@ -222,7 +222,7 @@ def test_rollout_values_equal_a_brute_force_greedy_completion():
 
 
 def check_rollout(cost, mask, n):
-    from sidql.rollout import greedy_sequences, rollout_values, rollout_values_seq
+    from sidql.learning.rollout import greedy_sequences, rollout_values, rollout_values_seq
 
     for rem in (1, 2, 4):
         vals = rollout_values(cost, mask, rem)
@@ -240,7 +240,7 @@ def check_rollout(cost, mask, n):
 def test_untrained_rollout_prior_network_is_the_rollout_algorithm(tasks):
     """With the rollout prior, Q starts at Q^greedy (γ = 1): argmax = reward + greedy completion;
     the compiled kernel and the torch head agree, also once the learned part is not zero."""
-    from sidql.rollout import rollout_values
+    from sidql.learning.rollout import rollout_values
 
     net = KeyframeQNet(tasks[0].features.shape[1], prior="rollout")
     policy = Policy(net, (5,), {})

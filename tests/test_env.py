@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from sidql.env import ENV_ID, InvalidActionError, KeyframeEnv, KeyframeTask, keyframe_q
-from sidql.tasks import linear_cost_matrix, synthetic_tasks
+from sidql.learning.env import ENV_ID, InvalidActionError, KeyframeEnv, KeyframeTask, keyframe_q
+from sidql.learning.tasks import linear_cost_matrix, synthetic_tasks
 
 
 @pytest.fixture(scope="module")

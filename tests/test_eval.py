@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 from keyframe_synth import smooth_clip
 
-from sidql import cli
-from sidql.evaluate import PAPER_TABLE3, evaluate, make_case, table3_markdown
-from sidql.metrics import q_error
-from sidql.rate import (
+from sidql.commands import main as cli
+from sidql.evaluation.evaluate import PAPER_TABLE3, evaluate, make_case, table3_markdown
+from sidql.evaluation.rate import (
     CURVES,
     PAYLOAD_BYTES,
     bytes_per_second,
@@ -18,6 +17,7 @@ from sidql.rate import (
     raw_bytes_per_second,
     write_plot,
 )
+from sidql.keyframes.metrics import q_error
 
 
 @pytest.fixture(scope="module")
@@ -177,7 +177,7 @@ def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path, capsys):
 
 
 def test_load_cases_keeps_only_the_named_subjects(cmu_dir):
-    from sidql.evaluate import load_cases
+    from sidql.evaluation.evaluate import load_cases
 
     cases, skipped = load_cases(cmu_dir, subjects=["02", "35"], progress=False)
     sources = {c.clip.source.replace("\\", "/").split("/")[-2] for c in cases}

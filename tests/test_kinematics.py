@@ -8,11 +8,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.acclaim import parse_amc, parse_asf
+from sim.acclaim.reader import parse_amc, parse_asf
 from sim.errors import MotionDataWarning
-from sim.humanoid import HUMANOID_XML, build_mjcf, canonical_skeleton
-from sim.ingest import load_motion
-from sim.kinematics import forward_kinematics, point_names
+from sim.model.humanoid import HUMANOID_XML, build_mjcf, canonical_skeleton
+from sim.model.kinematics import forward_kinematics, point_names
+from sim.motion.ingest import load_motion
 
 TRIALS = ["01/01_01", "05/05_06", "07/07_12", "17/17_10", "60/60_01"]
 
@@ -52,7 +52,7 @@ def test_shared_humanoid_is_the_generated_canonical_model():
 
 
 def test_humanoid_retarget_copies_angles_and_scales_the_root(cmu_dir):
-    from sim.retarget import leg_length
+    from sim.motion.retarget import leg_length
 
     asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
     own = load_motion(asf, amc)
@@ -68,7 +68,7 @@ def test_humanoid_retarget_copies_angles_and_scales_the_root(cmu_dir):
 
 
 def test_local_rotations_compose_back_to_world_orientations(walk_clip):
-    from sim.quaternion import mul as quat_mul
+    from sim.model.quaternion import mul as quat_mul
 
     world = {}
     for j, p in enumerate(walk_clip.parents):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from keyframe_synth import smooth_clip
 
-from sidql import methods
-from sidql.spherical import chart
+from sidql.keyframes import methods
+from sidql.keyframes.spherical import chart
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_register_adds_a_method_and_select_checks_its_output(clip):
 def test_lazy_methods_are_imported_on_demand(clip, tmp_path, monkeypatch):
     (tmp_path / "lazy_kf_method.py").write_text(
         "import numpy as np\n"
-        "from sidql.methods import register, uniform_indices\n"
+        "from sidql.keyframes.methods import register, uniform_indices\n"
         "@register('lazy_test')\n"
         "def f(clip, W, *, seed=0):\n"
         "    return uniform_indices(clip.n_frames, W)\n"
@@ -82,8 +82,8 @@ def test_unknown_names_and_bad_counts_are_clear_errors(clip):
 
 
 def test_lazy_greedy_equals_greedy_over_the_full_cost_matrix():
-    from sidql.methods import greedy_from_costs
-    from sidql.segment_costs import greedy_keyframes, segment_cost_matrix
+    from sidql.keyframes.methods import greedy_from_costs
+    from sidql.keyframes.segment_costs import greedy_keyframes, segment_cost_matrix
 
     for seed in range(3):
         s = chart(smooth_clip(40, 30.0, seed=60 + seed))

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from keyframe_synth import smooth_clip
 
-from sidql.methods import greedy_from_costs, uniform_indices
-from sidql.metrics import q_error
-from sidql.optimal import optimal_table, solve
-from sidql.segment_costs import segment_cost_matrix
-from sidql.spherical import chart
+from sidql.keyframes.methods import greedy_from_costs, uniform_indices
+from sidql.keyframes.metrics import q_error
+from sidql.keyframes.optimal import optimal_table, solve
+from sidql.keyframes.segment_costs import segment_cost_matrix
+from sidql.keyframes.spherical import chart
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +102,7 @@ def test_catmull_rom_optimum_equals_brute_force_enumeration():
     """The triple-state programme against enumeration, with Q from full reconstruction."""
     from dataclasses import replace
 
-    from sidql.optimal import catmull_rom_optimal
+    from sidql.keyframes.optimal import catmull_rom_optimal
 
     s = chart(smooth_clip(60, 30.0, seed=14))
     n = 12

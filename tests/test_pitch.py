@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from keyframe_synth import assert_velocities_match_differences, smooth_clip
 
-from sidql import pitch
-from sidql.metrics import bone_vectors
-from sidql.spherical import POINTS
-from sim import quaternion as quat
+from sidql.keyframes import pitch
+from sidql.keyframes.metrics import bone_vectors
+from sidql.keyframes.spherical import POINTS
+from sim.model import quaternion as quat
 
 
 def random_quats(rng, shape):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from keyframe_synth import assert_velocities_match_differences, piecewise_clip, smooth_clip
 
-from sidql.metrics import bone_vectors, q_error
-from sidql.reconstruct import VARIANTS, interpolate, keyframe_rates, reconstruct
-from sidql.spherical import POINTS, chart
+from sidql.keyframes.metrics import bone_vectors, q_error
+from sidql.keyframes.reconstruct import VARIANTS, interpolate, keyframe_rates, reconstruct
+from sidql.keyframes.spherical import POINTS, chart
 
 KEYS = np.array([0, 7, 19, 20, 33, 59])
 
@@ -36,7 +36,7 @@ def test_catmull_rom_is_exact_on_motion_linear_in_the_chart():
     rng = np.random.default_rng(5)
     a, b = rng.uniform(-0.4, 0.4, (2, M))
     theta, phi = 1.3 + a * t, rng.uniform(-3, 3, M) + b * t
-    from sidql.spherical import clip_from_chart
+    from sidql.keyframes.spherical import clip_from_chart
 
     root = 0.5 * t * np.ones(3)
     clip = clip_from_chart(

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.render import (
+from sim.replay.checks import PointMotion, from_clip
+from sim.replay.render import (
     RenderStyle,
     SkeletonRenderer,
     annotate,
@@ -14,14 +15,13 @@ from sim.render import (
     render_frames,
     write_video,
 )
-from sim.replay import PointMotion, from_clip
 
 SMALL = RenderStyle(width=192, height=144)  # multiples of 16: no resizing by the encoder
 
 
 @pytest.fixture(scope="module")
 def motion() -> PointMotion:
-    from sim.synthetic import synthetic_motion
+    from sim.motion.synthetic import synthetic_motion
 
     return from_clip(synthetic_motion(1.0, seed=1))
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.capsules import adjacent_pairs, bone_poses, bones_of
-from sim.replay import (
+from sim.replay.capsules import adjacent_pairs, bone_poses, bones_of
+from sim.replay.checks import (
     CollisionScene,
     PointMotion,
     excess,
@@ -205,9 +205,9 @@ def test_excess_is_the_difference_to_the_baseline():
 
 
 def test_synthetic_clip_against_itself_and_hermite_keeps_bone_lengths():
-    from sidql.methods import select
-    from sidql.reconstruct import reconstruct
-    from sim.synthetic import synthetic_motion
+    from sidql.keyframes.methods import select
+    from sidql.keyframes.reconstruct import reconstruct
+    from sim.motion.synthetic import synthetic_motion
 
     clip = synthetic_motion(2.0, seed=3)
     full = from_clip(clip)
@@ -222,8 +222,8 @@ def test_synthetic_clip_against_itself_and_hermite_keeps_bone_lengths():
 
 
 def test_real_walk_hermite_reconstruction_keeps_bone_lengths(walk_clip):
-    from sidql.methods import select
-    from sidql.reconstruct import reconstruct
+    from sidql.keyframes.methods import select
+    from sidql.keyframes.reconstruct import reconstruct
 
     clip = walk_clip.slice(0, 60)
     rec = reconstruct(clip, select("optimal", clip, 5))

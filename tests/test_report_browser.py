@@ -17,7 +17,7 @@ import time
 import numpy as np
 import pytest
 
-from sim.render import RenderStyle
+from sim.replay.render import RenderStyle
 
 CHROMIUM = next(
     (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
@@ -118,11 +118,11 @@ class DevTools:
 
 @pytest.fixture(scope="module")
 def report_dir(tmp_path_factory):
-    from sim.report import report_clips
-    from sim.synthetic import synthetic_motion
+    from sidql.evaluation.report import report_clips
+    from sim.motion.synthetic import synthetic_motion
 
     try:
-        from sim.render import SkeletonRenderer
+        from sim.replay.render import SkeletonRenderer
 
         SkeletonRenderer(("root", "a"), np.array([-1, 0]), RenderStyle(64, 48)).close()
     except Exception as e:

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from keyframe_synth import smooth_chart, smooth_clip
 
-from sidql.reconstruct import reconstruct
-from sidql.spherical import (
+from sidql.keyframes.reconstruct import reconstruct
+from sidql.keyframes.spherical import (
     BONES,
     POINTS,
     SIN_EPS,
@@ -138,7 +138,7 @@ def test_chart_of_real_walk_rebuilds_its_points(walk_clip):
 
 def test_rates_of_real_walk_match_differences_of_its_angles(cmu_dir):
     """Eqs. 6-7 on real data against central differences of theta at the full 120 fps."""
-    from sim.ingest import load_motion
+    from sim.motion.ingest import load_motion
 
     clip = load_motion(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc", fps=120.0)
     s = chart(clip)

@@ -6,11 +6,11 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from sim.humanoid import humanoid_model
-from sim.ingest import clip_from_qpos
-from sim.kinematics import point_names, point_parents
-from sim.synthetic import synthetic_qpos
-from sim.velocities import qvel_from_qpos
+from sim.model.humanoid import humanoid_model
+from sim.model.kinematics import point_names, point_parents
+from sim.motion.ingest import clip_from_qpos
+from sim.motion.synthetic import synthetic_qpos
+from sim.motion.velocities import qvel_from_qpos
 
 
 def test_constant_rate_hinge_sweep_is_recovered_exactly():
@@ -69,7 +69,7 @@ def test_point_velocities_agree_with_position_differences(walk_clip):
 
 
 def test_real_clip_velocities_are_consistent_with_positions(cmu_dir):
-    from sim.ingest import load_motion
+    from sim.motion.ingest import load_motion
 
     c = load_motion(cmu_dir / "09" / "09.asf", cmu_dir / "09" / "09_06.amc", fps=120)
     fd = (c.positions[2:] - c.positions[:-2]) * 60.0

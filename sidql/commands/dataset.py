@@ -23,7 +23,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from sim.dataset import ingest_directory
+    from sim.motion.dataset import ingest_directory
 
     s = ingest_directory(
         args.dir, args.out, skeleton=args.skeleton, fps=args.fps, workers=args.workers

@@ -34,8 +34,8 @@ def register(sub) -> None:
 
 def default_clip(data: str | Path):
     """The demo's motion: CMU trial 02_01 (walk) if present, else synthetic motion."""
-    from sim.ingest import load_motion
-    from sim.synthetic import synthetic_motion
+    from sim.motion.ingest import load_motion
+    from sim.motion.synthetic import synthetic_motion
 
     subject, trial = DEFAULT_TRIAL
     asf, amc = Path(data) / subject / f"{subject}.asf", Path(data) / subject / f"{trial}.amc"
@@ -46,9 +46,8 @@ def default_clip(data: str | Path):
 
 
 def run(args) -> int:
-    from sim.clip import save_npz
-
-    from .ingest import describe
+    from sidql.commands.ingest import describe
+    from sim.motion.clip import save_npz
 
     clip = default_clip(args.data)
     print(describe(clip))
@@ -61,9 +60,9 @@ def run(args) -> int:
 
 def report_step(clip, args) -> int:
     """Keyframes by every method on the first 60-frame clip, reconstruction, replay, report."""
-    from sidql.methods import available
-    from sim.humanoid import humanoid_model, subject_model
-    from sim.report import joint_ranges, report_clips
+    from sidql.evaluation.report import joint_ranges, report_clips
+    from sidql.keyframes.methods import available
+    from sim.model.humanoid import humanoid_model, subject_model
 
     subject, _ = DEFAULT_TRIAL
     asf = Path(args.data) / subject / f"{subject}.asf"

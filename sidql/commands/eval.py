@@ -21,7 +21,7 @@ def register(sub) -> None:
         "--methods",
         nargs="+",
         default=["random", "uniform", "greedy", "optimal", "pitch"],
-        help="methods to run (registered in sidql.methods; e.g. dqn once trained)",
+        help="methods to run (registered in sidql.keyframes.methods; e.g. dqn once trained)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the random method")
     p.add_argument("--fps", type=float, default=30.0, help="clip frame rate (divides 120)")
@@ -46,9 +46,9 @@ def run(args) -> int:
     import sys
     from pathlib import Path
 
-    from sidql.evaluate import evaluate, load_cases, table3_markdown
-    from sidql.methods import get
-    from sim.clip import write_atomic
+    from sidql.evaluation.evaluate import evaluate, load_cases, table3_markdown
+    from sidql.keyframes.methods import get
+    from sim.motion.clip import write_atomic
 
     for name in args.methods:  # unknown names fail before the (slow) ingest
         try:
@@ -91,7 +91,7 @@ def run(args) -> int:
     print(table3_markdown(out["results"]))
     print(f"wrote {path}")
     if args.rate_plot:
-        from sidql.rate import rate_distortion, write_plot
+        from sidql.evaluation.rate import rate_distortion, write_plot
 
         rd = rate_distortion(cases, seed=args.seed, progress=not args.quiet)
         png = Path(args.rate_plot)

@@ -17,7 +17,9 @@ def register(sub) -> None:
     p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
     p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
     p.add_argument("--keyframes", type=int, required=True, help="keyframes W per clip")
-    p.add_argument("--method", default="optimal", help="a method registered in sidql.methods")
+    p.add_argument(
+        "--method", default="optimal", help="a method registered in sidql.keyframes.methods"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of randomised methods")
     p.add_argument("--fps", type=float, default=30.0, help="clip frame rate (divides 120)")
     p.add_argument("--length", type=int, default=60, help="frames per clip")
@@ -31,10 +33,10 @@ def run(args) -> int:
     import sys
     from pathlib import Path
 
-    from sidql.evaluate import clip_seed, make_case, score
-    from sidql.methods import get, select
-    from sim.clip import write_atomic
-    from sim.ingest import load_clips
+    from sidql.evaluation.evaluate import clip_seed, make_case, score
+    from sidql.keyframes.methods import get, select
+    from sim.motion.clip import write_atomic
+    from sim.motion.ingest import load_clips
 
     try:
         get(args.method)  # unknown names fail before the (slow) ingest

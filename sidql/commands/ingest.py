@@ -28,8 +28,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from sim.clip import save_npz
-    from sim.ingest import load_motion
+    from sim.motion.clip import save_npz
+    from sim.motion.ingest import load_motion
 
     clip = load_motion(
         args.asf, args.amc, skeleton=args.skeleton, fps=args.fps, source_fps=args.source_fps

@@ -36,9 +36,9 @@ def register(sub) -> None:
 def run(args) -> int:
     import sys
 
+    from sidql.evaluation.report import report_trial
     from sim.errors import MotionDataError
-    from sim.render import RenderStyle
-    from sim.report import report_trial
+    from sim.replay.render import RenderStyle
 
     try:
         page = report_trial(

@@ -7,7 +7,7 @@ import dataclasses
 
 
 def register(sub) -> None:
-    from sidql.dqn import Args  # light: the module imports torch only when training starts
+    from sidql.learning.dqn import Args  # light: the module imports torch only when training starts
 
     d = Args()
     p = sub.add_parser(
@@ -31,7 +31,7 @@ def register(sub) -> None:
     )
     p.add_argument("--cache-dir", default=None, help="cache of per-trial features and costs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.dqn.Args)")
+    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.dqn.Args)")
     for f in dataclasses.fields(Args):
         if f.name in {"data", "keyframes", "steps", "out", "resume", "seed", "test_subjects",
                       "cache_dir", "progress", "extra", "synthetic_tasks"}:  # fmt: skip
@@ -54,7 +54,7 @@ def _bool(text: str) -> bool:
 
 
 def run(args) -> int:
-    from sidql.dqn import Args, train
+    from sidql.learning.dqn import Args, train
 
     for w in args.keyframes:
         if w < 3:

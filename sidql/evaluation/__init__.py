@@ -1,0 +1,1 @@
+"""Evaluation: the protocol and Table 3, rate/distortion, and the physical-validation report."""

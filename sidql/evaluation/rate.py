@@ -1,0 +1,207 @@
+"""Rate and distortion: bytes per second of transmitted keyframes against reconstruction error.
+
+Payload per keyframe (float32 values, one byte for the frame index within a 60-frame clip):
+
+* ``hermite`` (the paper): pose and rates, ``2 (2 M + 3)`` floats (M = 22 bone angle pairs plus
+  the root position, and the same again for their rates);
+* ``linear`` and ``catmull_rom``: the pose only, ``2 M + 3`` floats;
+* ``pitch`` (Li et al. 2015): 23 local rotations as quaternions plus the root position,
+  ``23 * 4 + 3`` floats.
+
+Bone lengths (or the pitch rig's offsets) are constant per subject and sent once: not counted.
+The raw stream is the pose of every frame at 30 fps, ``30 (2 M + 3)`` floats per second.
+
+For every clip and every W of a sweep we choose keyframes with each (method, reconstruction)
+pair, among them the exact optimum of each reconstruction's own Q (for Catmull-Rom a dynamic
+programme over keyframe triples), and average Q and MPJPE over clips.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from sidql.evaluation.evaluate import Case, clip_seed
+from sidql.keyframes.methods import greedy_from_costs, uniform_indices
+from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error
+from sidql.keyframes.optimal import catmull_rom_optimal, solve
+from sidql.keyframes.pitch import fit_rig, keyframes_for_count, pitch_distances, protocol_rotations
+from sidql.keyframes.pitch import reconstruct as pitch_reconstruct
+from sidql.keyframes.reconstruct import reconstruct_series
+from sidql.keyframes.segment_costs import segment_cost_matrix
+from sidql.keyframes.spherical import M_BONES
+
+FLOAT_BYTES = 4
+INDEX_BYTES = 1
+POSE_FLOATS = 2 * M_BONES + 3
+
+#: bytes per keyframe of each reconstruction scheme.
+PAYLOAD_BYTES: dict[str, int] = {
+    "hermite": 2 * POSE_FLOATS * FLOAT_BYTES + INDEX_BYTES,
+    "linear": POSE_FLOATS * FLOAT_BYTES + INDEX_BYTES,
+    "catmull_rom": POSE_FLOATS * FLOAT_BYTES + INDEX_BYTES,
+    "pitch": (23 * 4 + 3) * FLOAT_BYTES + INDEX_BYTES,
+}
+
+#: (method, reconstruction) pairs plotted.
+CURVES: tuple[tuple[str, str], ...] = (
+    ("optimal", "hermite"),
+    ("greedy", "hermite"),
+    ("uniform", "hermite"),
+    ("random", "hermite"),
+    ("optimal", "linear"),
+    ("uniform", "linear"),
+    ("optimal", "catmull_rom"),
+    ("uniform", "catmull_rom"),
+    ("pitch", "pitch"),
+)
+
+DEFAULT_COUNTS: tuple[int, ...] = (2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30)
+
+
+def raw_bytes_per_second(fps: float = 30.0) -> float:
+    """Bytes per second [B/s] of the raw pose stream at ``fps``."""
+    return fps * POSE_FLOATS * FLOAT_BYTES
+
+
+def bytes_per_second(scheme: str, W: int, n_frames: int = 60, fps: float = 30.0) -> float:
+    """Bytes per second [B/s] of sending W keyframes of ``scheme`` per ``n_frames``-frame clip."""
+    return W * PAYLOAD_BYTES[scheme] * fps / n_frames
+
+
+def _keyframes(case: Case, W: int, method: str, scheme: str, cache: dict, seed: int):
+    s = case.series
+    N = s.n_frames
+    if method == "uniform":
+        return uniform_indices(N, W)
+    if method == "random":
+        rng = np.random.default_rng(clip_seed(seed, case.index, W))
+        return np.concatenate(
+            [[0], np.sort(rng.choice(np.arange(1, N - 1), W - 2, False)), [N - 1]]
+        )
+    if method == "pitch":
+        return keyframes_for_count(cache["pitch_D"], W)[0]
+    if method == "greedy":
+        return greedy_from_costs(cache["C_hermite"], W)
+    if scheme == "catmull_rom":
+        return cache["T_catmull_rom"].keyframes(W)
+    return cache[f"T_{scheme}"].keyframes(W)
+
+
+def rate_distortion(
+    cases: Sequence[Case],
+    counts: Sequence[int] = DEFAULT_COUNTS,
+    *,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict:
+    """Mean Q [rad], MPJPE [mm] and velocity error [m/s] against bytes per second for every
+    curve of :data:`CURVES`.
+
+    Returns:
+        ``{"raw_bytes_per_second", "clips", "curves": [{"method", "scheme", "keyframes",
+        "bytes_per_second", "mean_q", "mpjpe_mm", "velocity_error"}]}``.
+    """
+    from tqdm import tqdm
+
+    counts = sorted(counts)
+    q = {c: np.zeros(len(counts)) for c in CURVES}
+    e = {c: np.zeros(len(counts)) for c in CURVES}
+    v = {c: np.zeros(len(counts)) for c in CURVES}
+    for case in tqdm(cases, desc="rate/distortion", unit="clip", disable=not progress):
+        s = case.series
+        cache = {}
+        cache["C_hermite"] = segment_cost_matrix(s, "hermite")
+        cache["T_hermite"] = solve(cache["C_hermite"], s.n_bones)
+        cache["T_linear"] = solve(segment_cost_matrix(s, "linear"), s.n_bones)
+        cache["T_catmull_rom"] = catmull_rom_optimal(s, max(counts))
+        pos, local, parents = protocol_rotations(case.clip)
+        cache["pitch_D"] = pitch_distances(local)
+        rig, _ = fit_rig(pos, local, parents)
+        for i, W in enumerate(counts):
+            for method, scheme in CURVES:
+                k = _keyframes(case, W, method, scheme, cache, seed)
+                if scheme == "pitch":
+                    rec = pitch_reconstruct(case.clip, k, rig)
+                else:
+                    rec = reconstruct_series(s, k, scheme)
+                q[(method, scheme)][i] += q_from_angles(s, rec.theta, rec.phi)
+                e[(method, scheme)][i] += mpjpe_mm(case.pos, rec.positions)
+                v[(method, scheme)][i] += velocity_error(case.vel, rec.velocities)
+    n = max(len(cases), 1)
+    N = cases[0].series.n_frames if cases else 60
+    fps = 1.0 / cases[0].series.dt if cases else 30.0
+    curves = [
+        {
+            "method": method,
+            "scheme": scheme,
+            "keyframes": list(counts),
+            "bytes_per_second": [bytes_per_second(scheme, W, N, fps) for W in counts],
+            "mean_q": (q[(method, scheme)] / n).tolist(),
+            "mpjpe_mm": (e[(method, scheme)] / n).tolist(),
+            "velocity_error": (v[(method, scheme)] / n).tolist(),
+        }
+        for method, scheme in CURVES
+    ]
+    return {
+        "raw_bytes_per_second": raw_bytes_per_second(fps),
+        "clips": len(cases),
+        "curves": curves,
+    }
+
+
+_STYLE = {
+    "hermite": "-",
+    "linear": "--",
+    "catmull_rom": "-.",
+    "pitch": ":",
+}
+_COLOR = {"optimal": "C0", "greedy": "C1", "uniform": "C2", "random": "C3", "pitch": "C4"}
+
+
+def write_plot(rd: dict, path) -> None:
+    """Write the rate/distortion figure (Q, MPJPE and velocity error against bytes per second)
+    to ``path`` (PNG), atomically."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sim.motion.clip import write_atomic
+
+    fig, axes = plt.subplots(1, 3, figsize=(18, 5))
+    for ax, key, label in (
+        (axes[0], "mean_q", "mean Q, eq. 18 [rad]"),
+        (axes[1], "mpjpe_mm", "MPJPE [mm]"),
+        (axes[2], "velocity_error", "mean velocity error [m/s]"),
+    ):
+        for c in rd["curves"]:
+            ax.plot(
+                c["bytes_per_second"],
+                c[key],
+                _STYLE[c["scheme"]],
+                color=_COLOR[c["method"]],
+                marker="o",
+                ms=3,
+                label=f"{c['method']} / {c['scheme']}",
+            )
+        ax.axvline(rd["raw_bytes_per_second"], color="k", lw=0.8)
+        ax.text(rd["raw_bytes_per_second"], ax.get_ylim()[1], " raw 30 fps", va="top", fontsize=8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("bytes per second of motion")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(
+        f"Rate/distortion on {rd['clips']} CMU clips (60 frames, 30 fps), W = "
+        f"{rd['curves'][0]['keyframes'][0]}..{rd['curves'][0]['keyframes'][-1]}"
+    )
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_atomic(path, lambda f: f.write(buf.getvalue()))

@@ -1,0 +1,1 @@
+"""The keyframe problem: spherical chart, reconstruction, segment costs, optimum, methods, metrics."""

@@ -1,0 +1,154 @@
+"""Keyframe selection methods behind one interface: ``(clip, W, *, seed) -> keyframe indices``.
+
+Every method returns W sorted, unique int64 frame indices that include the first (0) and last
+(N - 1) frame. Adding a method = one function plus one registration::
+
+    from sidql.keyframes.methods import register
+
+    @register("mine")
+    def mine(clip, W, *, seed=0):
+        ...
+
+A method living in a module that should only be imported on demand (e.g. one that needs torch
+weights) is named in :data:`LAZY_METHODS` instead (``name -> module``); :func:`select` imports that
+module, which must call :func:`register` at import time.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+
+import numpy as np
+
+from sidql.keyframes.optimal import optimal_table
+from sidql.keyframes.segment_costs import greedy_keyframes
+from sidql.keyframes.spherical import chart
+from sim.motion.clip import Clip
+
+MethodFn = Callable[..., np.ndarray]
+
+#: name -> function(clip, W, *, seed=0) -> (W,) indices.
+METHODS: dict[str, MethodFn] = {}
+
+#: name -> module that registers it when imported (for methods with heavy dependencies).
+LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy"}
+
+
+def register(name: str) -> Callable[[MethodFn], MethodFn]:
+    """Decorator registering ``fn(clip, W, *, seed=0) -> indices`` under ``name``."""
+
+    def deco(fn: MethodFn) -> MethodFn:
+        METHODS[name] = fn
+        return fn
+
+    return deco
+
+
+def available() -> list[str]:
+    """Names of every method, registered or lazily importable."""
+    return sorted(set(METHODS) | set(LAZY_METHODS))
+
+
+def get(name: str) -> MethodFn:
+    """The method registered as ``name`` (importing its module if lazy); KeyError lists choices."""
+    if name not in METHODS and name in LAZY_METHODS:
+        importlib.import_module(LAZY_METHODS[name])
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise KeyError(f"unknown method {name!r}; known: {', '.join(available())}") from None
+
+
+def select(name: str, clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """Choose W keyframes of ``clip`` with method ``name``.
+
+    Args:
+        name: a registered method (see :func:`available`).
+        clip: the motion (N frames).
+        W: keyframe count, both ends included, 2 <= W <= N.
+        seed: seed of any randomness the method uses.
+
+    Returns:
+        (W,) sorted unique int64 indices with first 0 and last N - 1.
+    """
+    N = clip.n_frames
+    if not 2 <= W <= N:
+        raise ValueError(f"W must be in [2, {N}] for a {N}-frame clip; got {W}")
+    k = np.asarray(get(name)(clip, W, seed=seed), dtype=np.int64)
+    if k.shape != (W,) or k[0] != 0 or k[-1] != N - 1 or np.any(np.diff(k) <= 0):
+        raise RuntimeError(f"method {name!r} returned bad keyframes {k.tolist()} for W={W}")
+    return k
+
+
+@register("random")
+def random_choice(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """RC: both ends plus W - 2 distinct inner frames drawn uniformly (``default_rng(seed)``)."""
+    N = clip.n_frames
+    inner = np.random.default_rng(seed).choice(np.arange(1, N - 1), size=W - 2, replace=False)
+    return np.concatenate([[0], np.sort(inner), [N - 1]]).astype(np.int64)
+
+
+def uniform_indices(N: int, W: int) -> np.ndarray:
+    """(W,) evenly spaced frame indices from 0 to N - 1 (rounded half up; unique for W <= N)."""
+    return np.floor(np.linspace(0.0, N - 1.0, W) + 0.5).astype(np.int64)
+
+
+@register("uniform")
+def uniform_choice(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """UC: W evenly spaced frames from first to last."""
+    return uniform_indices(clip.n_frames, W)
+
+
+def greedy_from_costs(C: np.ndarray, W: int) -> np.ndarray:
+    """Greedy keyframes from a segment-cost matrix: start from both ends, then W - 2 times add
+    the frame that lowers Q the most (ties: the lowest index).
+
+    Adding frame f inside segment (a, b) changes the total cost by ``C[a,f] + C[f,b] - C[a,b]``.
+    """
+    N = C.shape[0]
+    keys = np.array([0, N - 1], dtype=np.int64)
+    frames = np.arange(N)
+    for _ in range(W - 2):
+        seg = np.clip(np.searchsorted(keys, frames, side="right") - 1, 0, len(keys) - 2)
+        a, b = keys[seg], keys[seg + 1]
+        delta = C[a, frames] + C[frames, b] - C[a, b]
+        delta[keys] = np.inf
+        keys = np.sort(np.append(keys, int(np.argmin(delta))))
+    return keys
+
+
+def naive_greedy(series, W: int) -> np.ndarray:
+    """The paper's greedy taken literally: rebuild and score the whole clip for every candidate.
+
+    O(W N) full reconstructions; the reference that :func:`greedy` must equal and the baseline its
+    benchmark is measured against. ``series``: a :class:`~sidql.keyframes.spherical.SphericalSeries`.
+    """
+    from sidql.keyframes.metrics import q_error
+
+    keys = [0, series.n_frames - 1]
+    for _ in range(W - 2):
+        cands = [f for f in range(series.n_frames) if f not in keys]
+        errs = [q_error(series, np.array(sorted(keys + [f]))) for f in cands]
+        keys.append(cands[int(np.argmin(errs))])
+    return np.array(sorted(keys))
+
+
+@register("greedy")
+def greedy(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """Greedy (paper): repeatedly add the frame whose addition lowers Q (eq. 18) the most."""
+    return greedy_keyframes(chart(clip), W)
+
+
+@register("optimal")
+def optimal(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """The exact minimiser of Q (eq. 18) over all W-keyframe sets (dynamic programme)."""
+    return optimal_table(chart(clip), "hermite", w_max=W).keyframes(W)
+
+
+@register("pitch")
+def pitch(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """Li et al. 2015: inter-frame pitch threshold, searched to give exactly W keyframes."""
+    from sidql.keyframes.pitch import pitch_keyframes
+
+    return pitch_keyframes(clip, W)

@@ -1,0 +1,201 @@
+"""The exact minimum of Q over all keyframe sets, for every keyframe count at once.
+
+Q separates over segments (see :mod:`sidql.keyframes.segment_costs`), so with ``D[w, j]`` the least cost of
+covering frames ``0..j`` with ``w`` keyframes of which the last is ``j``::
+
+    D[1, 0] = 0,   D[w, j] = min_{i < j} D[w - 1, i] + C[i, j]
+
+and the optimum for W keyframes is ``D[W, N - 1]``. One table answers every W from 2 to N in
+O(N^3) (O(W N^2) per W). Ties go to the smallest predecessor index, so results are deterministic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from sidql.keyframes.segment_costs import segment_cost_matrix
+from sidql.keyframes.spherical import SphericalSeries
+
+
+@numba.njit(cache=True)
+def _dp(C, w_max):
+    N = C.shape[0]
+    D = np.full((w_max + 1, N), np.inf)
+    P = np.full((w_max + 1, N), -1, dtype=np.int64)
+    D[1, 0] = 0.0
+    for w in range(2, w_max + 1):
+        for j in range(w - 1, N):
+            best = np.inf
+            arg = -1
+            for i in range(w - 2, j):
+                v = D[w - 1, i] + C[i, j]
+                if v < best:
+                    best = v
+                    arg = i
+            D[w, j] = best
+            P[w, j] = arg
+    return D, P
+
+
+@numba.njit(cache=True)
+def _backtrack_all(P, n_frames):
+    w_max = P.shape[0] - 1
+    out = np.full((w_max + 1, n_frames), -1, dtype=np.int64)
+    for W in range(2, w_max + 1):
+        j = n_frames - 1
+        out[W, W - 1] = j
+        for w in range(W, 1, -1):
+            j = P[w, j]
+            out[W, w - 2] = j
+    return out
+
+
+@dataclass(frozen=True)
+class OptimalTable:
+    """Exact optima of a segment-cost matrix for every keyframe count.
+
+    Attributes:
+        cost: (w_max + 1,) least total segment cost [rad] for W keyframes (inf for W < 2).
+        pointers: (w_max + 1, N) predecessor of keyframe j in the best W-keyframe cover of 0..j.
+        n_frames: N; n_bones: M (the normaliser of Q is N * M).
+    """
+
+    cost: np.ndarray
+    pointers: np.ndarray
+    n_frames: int
+    n_bones: int
+
+    def keyframes(self, W: int) -> np.ndarray:
+        """(W,) sorted optimal keyframe indices, 0 and N-1 included."""
+        if not 2 <= W < len(self.cost):
+            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+        out = [self.n_frames - 1]
+        for w in range(W, 1, -1):
+            out.append(int(self.pointers[w, out[-1]]))
+        return np.array(out[::-1], dtype=np.int64)
+
+    def all_keyframes(self) -> np.ndarray:
+        """(w_max + 1, N) int64: row W holds the optimal keyframes for W in its first W entries
+        (-1 after them; rows 0 and 1 are all -1)."""
+        return _backtrack_all(self.pointers, self.n_frames)
+
+    def q(self, W: int) -> float:
+        """The optimal Q [rad] for W keyframes."""
+        return float(self.cost[W] / (self.n_frames * self.n_bones))
+
+
+def solve(C: np.ndarray, n_bones: int, w_max: int | None = None) -> OptimalTable:
+    """Exact optima of an (N, N) segment-cost matrix for all W from 2 to ``w_max`` (default N)."""
+    C = np.ascontiguousarray(C, dtype=np.float64)
+    N = C.shape[0]
+    w_max = N if w_max is None else int(w_max)
+    if not 2 <= w_max <= N:
+        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+    D, P = _dp(C, w_max)
+    return OptimalTable(cost=D[:, N - 1].copy(), pointers=P, n_frames=N, n_bones=n_bones)
+
+
+def optimal_table(
+    series: SphericalSeries, variant: str = "hermite", w_max: int | None = None
+) -> OptimalTable:
+    """Exact optima of Q (eq. 18) for ``series`` under a separable variant, all W at once."""
+    return solve(segment_cost_matrix(series, variant), series.n_bones, w_max)
+
+
+def optimal_keyframes(series: SphericalSeries, W: int, variant: str = "hermite") -> np.ndarray:
+    """(W,) keyframes minimising Q exactly (eq. 19) under a separable variant."""
+    return optimal_table(series, variant, w_max=W).keyframes(W)
+
+
+@numba.njit(cache=True)
+def _cr_dp(Q, w_max):
+    """Exact DP over triples of consecutive keyframes for the Catmull-Rom costs Q."""
+    N = Q.shape[1]
+    best = np.full(w_max + 1, np.inf)
+    last = np.full((w_max + 1, 2), -1, dtype=np.int64)  # (x + 1, y) of the best final state
+    back = np.full((w_max + 1, N + 1, N, N), -1, dtype=np.int16)
+    G = np.full((N + 1, N, N), np.inf)  # state (x + 1, y, z): the last three keyframes
+    for z in range(1, N):
+        G[0, 0, z] = 0.0  # two keyframes 0 < z, nothing finalised yet
+    for w in range(2, w_max + 1):
+        # close the clip: the state's last keyframe must be N - 1
+        for xi in range(N + 1):
+            for y in range(N - 1):
+                g = G[xi, y, N - 1]
+                if g < np.inf:
+                    v = g + Q[xi, y, N - 1, N]
+                    if v < best[w]:
+                        best[w] = v
+                        last[w, 0] = xi
+                        last[w, 1] = y
+        if w == w_max:
+            break
+        H = np.full((N + 1, N, N), np.inf)
+        for xi in range(N + 1):
+            for y in range(N):
+                for z in range(y + 1, N - 1):
+                    g = G[xi, y, z]
+                    if g == np.inf:
+                        continue
+                    for n in range(z + 1, N):
+                        v = g + Q[xi, y, z, n]
+                        if v < H[y + 1, z, n]:
+                            H[y + 1, z, n] = v
+                            back[w + 1, y + 1, z, n] = xi
+        G = H
+    return best, last, back
+
+
+@dataclass(frozen=True)
+class CatmullRomTable:
+    """Exact optima of Q under Catmull-Rom reconstruction for W = 2..w_max.
+
+    Attributes:
+        cost: (w_max + 1,) least total cost [rad] (inf for W < 2); n_frames, n_bones: N, M.
+    """
+
+    cost: np.ndarray
+    last: np.ndarray
+    back: np.ndarray
+    n_frames: int
+    n_bones: int
+
+    def keyframes(self, W: int) -> np.ndarray:
+        """(W,) sorted optimal keyframes, 0 and N-1 included."""
+        if not 2 <= W < len(self.cost):
+            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+        N = self.n_frames
+        xi, y = int(self.last[W, 0]), int(self.last[W, 1])
+        out = [N - 1, y]
+        z = N - 1
+        w = W
+        while xi > 0:  # walk back: state (xi, y, z) at layer w came from (back, xi - 1, y)
+            out.append(xi - 1)
+            prev = int(self.back[w, xi, y, z])
+            xi, y, z = prev, xi - 1, y
+            w -= 1
+        return np.array(sorted(out), dtype=np.int64)
+
+    def q(self, W: int) -> float:
+        """The optimal Q [rad] for W keyframes."""
+        return float(self.cost[W] / (self.n_frames * self.n_bones))
+
+
+def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
+    """Exact minima of Q under the Catmull-Rom variant for every W from 2 to ``w_max``.
+
+    A segment's curve depends on four keyframes (its ends and their neighbours), so the programme
+    runs over triples of consecutive keyframes: O(N^5 M) for the costs, O(w_max N^4) for the DP.
+    About a second per 60-frame clip.
+    """
+    from sidql.keyframes.segment_costs import catmull_rom_costs
+
+    N = series.n_frames
+    if not 2 <= w_max <= N:
+        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+    Q = catmull_rom_costs(series)
+    best, last, back = _cr_dp(Q, w_max)
+    return CatmullRomTable(best, last, back, N, series.n_bones)

@@ -1,0 +1,205 @@
+"""Reconstruction of a clip from its keyframes in the spherical chart.
+
+Between consecutive keyframes ``k_w < k_{w+1}`` every bone's ``theta(t)`` and ``phi(t)`` and the
+root position (Cartesian, CMU axes) follow one curve per coordinate, chosen by ``variant``:
+
+``"hermite"`` (the paper's eqs. 9-13)
+    the cubic that matches value and rate at both ends (cubic Hermite). Needs pose and rates.
+``"linear"``
+    the straight line between the two end values. Needs the pose only.
+``"catmull_rom"``
+    the cubic Hermite whose end rates are *estimated* from neighbouring keyframes,
+    ``m_w = (x[k_{w+1}] - x[k_{w-1}]) / (t_{w+1} - t_{w-1})`` (one-sided at the clip ends).
+    Needs the pose only; a segment's curve depends on four keyframes.
+
+Points are then rebuilt down the 23-point tree with the fixed bone lengths, so every bone keeps its
+length exactly. Keyframes are reproduced exactly by every variant.
+
+Pure numpy. Units: metres, seconds, radians; output positions in world axes (z up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sidql.keyframes.spherical import (
+    POINTS,
+    SphericalSeries,
+    chart,
+    positions_from_chart,
+)
+from sim.motion.clip import Clip
+
+VARIANTS: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
+
+
+def validate_keyframes(keyframes, n_frames: int) -> np.ndarray:
+    """Keyframe indices as a sorted (W,) int64 array; ValueError unless they are strictly
+    increasing, start at 0, end at ``n_frames - 1`` and W >= 2."""
+    k = np.asarray(keyframes)
+    if k.ndim != 1 or k.size < 2 or not np.issubdtype(k.dtype, np.integer):
+        raise ValueError(f"keyframes must be >= 2 integer indices; got {keyframes!r}")
+    k = k.astype(np.int64)
+    if k[0] != 0 or k[-1] != n_frames - 1 or np.any(np.diff(k) <= 0):
+        raise ValueError(
+            f"keyframes must increase strictly from 0 to {n_frames - 1}; got {k.tolist()}"
+        )
+    return k
+
+
+def _check_variant(variant: str) -> None:
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)}")
+
+
+def keyframe_rates(values: np.ndarray, keyframes: np.ndarray, dt: float) -> np.ndarray:
+    """Catmull-Rom rate estimates at the keyframes.
+
+    Args:
+        values: (N, D) samples; keyframes: (W,) indices; dt: frame interval [s].
+
+    Returns:
+        (W, D) rates [units/s]: central difference over the neighbouring keyframes, one-sided at
+        the first and last keyframe.
+    """
+    k = keyframes
+    xk = values[k]
+    tk = k * dt
+    m = np.empty_like(xk)
+    m[1:-1] = (xk[2:] - xk[:-2]) / (tk[2:] - tk[:-2])[:, None]
+    m[0] = (xk[1] - xk[0]) / (tk[1] - tk[0])
+    m[-1] = (xk[-1] - xk[-2]) / (tk[-1] - tk[-2])
+    return m
+
+
+def interpolate(
+    values: np.ndarray,
+    rates: np.ndarray | None,
+    keyframes,
+    dt: float,
+    variant: str = "hermite",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rebuild every frame of ``values`` from its keyframes.
+
+    Args:
+        values: (N, D) samples (any units u).
+        rates: (N, D) their time derivatives [u/s]; only read at keyframes, only by "hermite"
+            (may be None for the other variants).
+        keyframes: (W,) strictly increasing indices from 0 to N-1.
+        dt: frame interval [s].
+        variant: one of :data:`VARIANTS`.
+
+    Returns:
+        (N, D) reconstructed values and (N, D) their time derivatives [u/s]. For "linear" the
+        derivative at an inner keyframe is the mean of the two adjacent slopes.
+    """
+    _check_variant(variant)
+    values = np.asarray(values, dtype=float)
+    N = values.shape[0]
+    k = validate_keyframes(keyframes, N)
+    n = np.arange(N)
+    seg = np.clip(np.searchsorted(k, n, side="right") - 1, 0, len(k) - 2)
+    a, b = k[seg], k[seg + 1]
+    h = ((b - a) * dt)[:, None]
+    s = ((n - a) / (b - a))[:, None]
+    xa, xb = values[a], values[b]
+    if variant == "linear":
+        slope = (xb - xa) / h
+        out = xa + s * (xb - xa)
+        rate = slope.copy()
+        inner = k[1:-1]
+        if len(inner):
+            left = (values[inner] - values[k[:-2]]) / ((inner - k[:-2]) * dt)[:, None]
+            right = (values[k[2:]] - values[inner]) / ((k[2:] - inner) * dt)[:, None]
+            rate[inner] = 0.5 * (left + right)
+        return out, rate
+    if variant == "hermite":
+        if rates is None:
+            raise ValueError("the hermite variant needs rates")
+        ma, mb = rates[a], rates[b]
+    else:
+        mk = keyframe_rates(values, k, dt)
+        ma, mb = mk[seg], mk[seg + 1]
+    s2, s3 = s * s, s * s * s
+    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
+    out = h00 * xa + h10 * h * ma + h01 * xb + h11 * h * mb
+    d00, d10, d01, d11 = 6 * s2 - 6 * s, 3 * s2 - 4 * s + 1, -6 * s2 + 6 * s, 3 * s2 - 2 * s
+    rate = (d00 * xa + d01 * xb) / h + d10 * ma + d11 * mb
+    # The last frame belongs to the last segment at s = 1; the formulas already give x_b, m_b.
+    return out, rate
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """A clip rebuilt from keyframes: the 23 protocol points, ready to replay.
+
+    Attributes:
+        positions: (N, 23, 3) point positions [m], world axes (z up).
+        velocities: (N, 23, 3) point velocities [m/s], world axes (derivative of the curves).
+        names: (23,) point names (:data:`sidql.keyframes.spherical.POINTS`).
+        parents: (23,) parent indices into ``names`` (-1 for the root).
+        theta: (N, 22) reconstructed polar angles [rad]; phi: (N, 22) azimuths [rad].
+        keyframes: (W,) keyframe indices used.
+        variant: reconstruction variant ("hermite", "linear", "catmull_rom" or "pitch").
+        dt: frame interval [s].
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    names: tuple[str, ...]
+    parents: np.ndarray
+    theta: np.ndarray
+    phi: np.ndarray
+    keyframes: np.ndarray
+    variant: str
+    dt: float
+
+
+def reconstruct_series(
+    series: SphericalSeries, keyframes, variant: str = "hermite"
+) -> Reconstruction:
+    """Reconstruct a chart from its keyframes (see the module docstring).
+
+    Args:
+        series: the true motion's chart (N frames, M bones).
+        keyframes: (W,) strictly increasing indices from 0 to N-1.
+        variant: one of :data:`VARIANTS`.
+    """
+    _check_variant(variant)
+    k = validate_keyframes(keyframes, series.n_frames)
+    M = series.n_bones
+    values = np.concatenate([series.theta, series.phi, series.root_pos], axis=1)
+    rates = np.concatenate([series.dtheta, series.dphi, series.root_vel], axis=1)
+    x, xd = interpolate(values, rates, k, series.dt, variant)
+    theta, phi, root = x[:, :M], x[:, M : 2 * M], x[:, 2 * M :]
+    dtheta, dphi, root_vel = xd[:, :M], xd[:, M : 2 * M], xd[:, 2 * M :]
+    P, V = positions_from_chart(
+        root, root_vel, theta, phi, dtheta, dphi, series.lengths, series.parents
+    )
+    return Reconstruction(
+        positions=P,
+        velocities=V,
+        names=POINTS,
+        parents=series.parents.copy(),
+        theta=theta,
+        phi=phi,
+        keyframes=k,
+        variant=variant,
+        dt=series.dt,
+    )
+
+
+def reconstruct(clip: Clip, keyframes, variant: str = "hermite") -> Reconstruction:
+    """Reconstruct ``clip``'s 23 protocol points from its keyframes.
+
+    Args:
+        clip: the true motion (names must include :data:`sidql.keyframes.spherical.POINTS`).
+        keyframes: (W,) strictly increasing indices from 0 to clip.n_frames - 1.
+        variant: "hermite" (paper), "linear" or "catmull_rom".
+
+    Returns:
+        A :class:`Reconstruction`: positions/velocities (N, 23, 3) world z-up [m, m/s].
+    """
+    return reconstruct_series(chart(clip), keyframes, variant)

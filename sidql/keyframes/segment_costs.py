@@ -1,0 +1,224 @@
+"""The segment-cost matrix: the error of eq. 18 split over the segments between keyframes.
+
+For the "hermite" and "linear" variants the curve between keyframes ``i < j`` depends on those two
+frames only, so the error of eq. 18 separates::
+
+    Q(K) = sum_w C[k_w, k_{w+1}] / (N * M)
+
+    C[i, j] = sum over frames n with i < n < j, over bones m, of
+              |wrap(theta~[n, m] - theta[n, m])| + |wrap(phi~[n, m] - phi[n, m])|
+
+(keyframes themselves are reproduced exactly and cost nothing). Entries with ``i >= j`` or
+``j = i + 1`` are 0. The kernels are compiled with numba (cached on disk); one (N, N) matrix costs
+O(N^3 M / 6) operations.
+
+The "catmull_rom" variant does not separate this way (a segment's curve depends on four
+keyframes); see :func:`sidql.keyframes.optimal.catmull_rom_optimal`.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from sidql.keyframes.spherical import SphericalSeries
+
+SEPARABLE_VARIANTS: tuple[str, ...] = ("hermite", "linear")
+
+
+_TWO_PI = 2.0 * np.pi
+_INV_TWO_PI = 1.0 / _TWO_PI
+
+
+@numba.njit(cache=True, fastmath=True)
+def _cost_matrix(X, R, linear):
+    """X: (N, D) angles [rad]; R: (N, D) rates times dt [rad/frame]; linear: bool.
+
+    The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01), and the
+    wrapping is branch-free (``v - 2 pi floor(v / 2 pi + 1/2)``) so the inner loop vectorises.
+    """
+    N, D = X.shape
+    C = np.zeros((N, N))
+    dX = np.empty(D)
+    for i in range(N):
+        for j in range(i + 2, N):
+            for d in range(D):
+                dX[d] = X[j, d] - X[i, d]
+            L = j - i
+            total = 0.0
+            for n in range(i + 1, j):
+                h01, h10, h11 = _weights(n, i, L, linear)
+                acc = 0.0
+                for d in range(D):
+                    v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
+                    v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                    acc += abs(v)
+                total += acc
+            C[i, j] = total
+    return C
+
+
+@numba.njit(cache=True, fastmath=True, inline="always")
+def _weights(n, i, L, linear):
+    """Hermite weights (h01, h10 * L, h11 * L) of frame n in segment [i, i + L] (linear: s, 0, 0)."""
+    s = (n - i) / L
+    if linear:
+        return s, 0.0, 0.0
+    s2 = s * s
+    s3 = s2 * s
+    return -2.0 * s3 + 3.0 * s2, (s3 - 2.0 * s2 + s) * L, (s3 - s2) * L
+
+
+@numba.njit(cache=True, fastmath=True)
+def _segment_cost(X, R, i, j, linear):
+    """C[i, j] alone, with the same arithmetic as :func:`_cost_matrix`."""
+    D = X.shape[1]
+    L = j - i
+    total = 0.0
+    for n in range(i + 1, j):
+        h01, h10, h11 = _weights(n, i, L, linear)
+        acc = 0.0
+        for d in range(D):
+            v = (X[i, d] - X[n, d]) + h01 * (X[j, d] - X[i, d]) + h10 * R[i, d] + h11 * R[j, d]
+            v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+            acc += abs(v)
+        total += acc
+    return total
+
+
+@numba.njit(cache=True)
+def _greedy(X, R, W, linear):
+    """Greedy keyframes computing only the segment costs it needs (O(W N^2 D) at worst)."""
+    N = X.shape[0]
+    key = np.zeros(N, dtype=np.bool_)
+    key[0] = True
+    key[N - 1] = True
+    left = np.zeros(N)  # C[a, f] for the segment (a, b) holding f
+    right = np.zeros(N)  # C[f, b]
+    start = np.zeros(N, dtype=np.int64)
+    seg_total = np.zeros(N)  # C[a, b] indexed by the segment's start a
+    seg_total[0] = _segment_cost(X, R, 0, N - 1, linear)
+    for f in range(1, N - 1):
+        left[f] = _segment_cost(X, R, 0, f, linear)
+        right[f] = _segment_cost(X, R, f, N - 1, linear)
+    for _ in range(W - 2):
+        best = np.inf
+        arg = -1
+        for f in range(1, N - 1):
+            if not key[f]:
+                delta = left[f] + right[f] - seg_total[start[f]]
+                if delta < best:
+                    best = delta
+                    arg = f
+        a = start[arg]
+        b = arg + 1
+        while not key[b]:
+            b += 1
+        key[arg] = True
+        seg_total[a] = left[arg]
+        seg_total[arg] = right[arg]
+        for g in range(a + 1, arg):
+            right[g] = _segment_cost(X, R, g, arg, linear)
+        for g in range(arg + 1, b):
+            start[g] = arg
+            left[g] = _segment_cost(X, R, arg, g, linear)
+    return np.flatnonzero(key)
+
+
+def greedy_keyframes(series: SphericalSeries, W: int, variant: str = "hermite") -> np.ndarray:
+    """(W,) greedy keyframes under a separable variant: from both ends, W - 2 times add the frame
+    that lowers Q the most (ties: the lowest index). Computes only the segment costs it needs."""
+    if variant not in SEPARABLE_VARIANTS:
+        raise ValueError(f"greedy needs a separable variant: {', '.join(SEPARABLE_VARIANTS)}")
+    if not 2 <= W <= series.n_frames:
+        raise ValueError(f"W must be in [2, {series.n_frames}]; got {W}")
+    X, R = stacked(series)
+    return _greedy(X, R, W, variant == "linear").astype(np.int64)
+
+
+def stacked(series: SphericalSeries) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2M) angles [theta | phi] [rad] and (N, 2M) rates times dt [rad per frame], C-ordered."""
+    X = np.ascontiguousarray(np.concatenate([series.theta, series.phi], axis=1))
+    R = np.ascontiguousarray(np.concatenate([series.dtheta, series.dphi], axis=1) * series.dt)
+    return X, R
+
+
+def segment_cost_matrix(series: SphericalSeries, variant: str = "hermite") -> np.ndarray:
+    """The (N, N) segment-cost matrix C [rad] of ``series`` (see the module docstring).
+
+    Args:
+        series: a chart with N frames and M bones.
+        variant: "hermite" (cubic Hermite with transmitted rates) or "linear".
+
+    Returns:
+        (N, N) float64; ``Q(K) = sum_w C[k_w, k_{w+1}] / (N * M)``.
+    """
+    if variant not in SEPARABLE_VARIANTS:
+        raise ValueError(
+            f"variant {variant!r} has no (N, N) segment-cost matrix; separable variants: "
+            f"{', '.join(SEPARABLE_VARIANTS)} (catmull_rom: see sidql.keyframes.optimal.catmull_rom_optimal)"
+        )
+    X, R = stacked(series)
+    return _cost_matrix(X, R, variant == "linear")
+
+
+@numba.njit(cache=True, fastmath=True)
+def _catmull_rom_costs(X):
+    """(N+1, N, N, N+1) costs of segment (y, z) given the keyframes x before and n after it.
+
+    Index ``x + 1`` (0: no keyframe before, only when y = 0) and ``n`` (N: none, only when
+    z = N - 1); invalid combinations are inf. X: (N, D) angles [rad].
+    """
+    N, D = X.shape
+    Q = np.full((N + 1, N, N, N + 1), np.inf)
+    A = np.empty((N, D))
+    ha = np.empty(N)
+    hb = np.empty(N)
+    ma = np.empty(D)
+    mb = np.empty(D)
+    for y in range(N - 1):
+        for z in range(y + 1, N):
+            L = z - y
+            for f in range(y + 1, z):
+                s = (f - y) / L
+                s2 = s * s
+                s3 = s2 * s
+                h00 = 2.0 * s3 - 3.0 * s2 + 1.0
+                h01 = -2.0 * s3 + 3.0 * s2
+                ha[f] = (s3 - 2.0 * s2 + s) * L
+                hb[f] = (s3 - s2) * L
+                for d in range(D):
+                    A[f, d] = h00 * X[y, d] + h01 * X[z, d] - X[f, d]
+            x_lo, x_hi = (-1, 0) if y == 0 else (0, y)
+            n_lo, n_hi = (N, N + 1) if z == N - 1 else (z + 1, N)
+            for x in range(x_lo, x_hi):
+                for d in range(D):
+                    if x < 0:
+                        ma[d] = (X[z, d] - X[y, d]) / L
+                    else:
+                        ma[d] = (X[z, d] - X[x, d]) / (z - x)
+                for n in range(n_lo, n_hi):
+                    for d in range(D):
+                        if n == N:
+                            mb[d] = (X[z, d] - X[y, d]) / L
+                        else:
+                            mb[d] = (X[n, d] - X[y, d]) / (n - y)
+                    total = 0.0
+                    for f in range(y + 1, z):
+                        for d in range(D):
+                            v = A[f, d] + ha[f] * ma[d] + hb[f] * mb[d]
+                            v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                            total += abs(v)
+                    Q[x + 1, y, z, n] = total
+    return Q
+
+
+def catmull_rom_costs(series: SphericalSeries) -> np.ndarray:
+    """(N+1, N, N, N+1) Catmull-Rom segment costs [rad]: entry ``[x + 1, y, z, n]`` is the summed
+    |angle error| over the frames strictly inside segment (y, z) when the keyframes around it are
+    x (``x + 1 = 0``: none, y = 0) and n (``n = N``: none, z = N - 1); inf where invalid.
+
+    Q(K) = sum over segments of these entries / (N * M).
+    """
+    X, _ = stacked(series)
+    return _catmull_rom_costs(X)

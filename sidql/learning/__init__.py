@@ -1,0 +1,1 @@
+"""Learning keyframe policies: Gymnasium environment, tasks, Q-network, DQN trainer, shipped policy."""

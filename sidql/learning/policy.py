@@ -1,0 +1,309 @@
+"""The trained keyframe policy: load it, decide keyframes, and the ``dqn`` selection method.
+
+Importing this module imports torch; ``sidql.keyframes.methods`` names it in ``LAZY_METHODS`` so that only
+``--methods dqn`` pays for that. The shipped policy is ``sidql/data/policy.pt``; the environment
+variable ``SIDQL_POLICY`` points the ``dqn`` method at another file.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+import numba
+import numpy as np
+import torch
+
+from sidql.keyframes.methods import register
+from sidql.learning.qnet import KeyframeQNet, masked_q
+from sidql.learning.rollout import greedy_sequences, rollout_values_batch, rollout_values_seq
+
+#: The policy shipped with the repository.
+DEFAULT_POLICY = Path(__file__).resolve().parents[1] / "data" / "policy.pt"
+
+
+class Policy:
+    """A trained Q-network and what it was trained for.
+
+    Attributes:
+        net: the :class:`sidql.learning.qnet.KeyframeQNet` (eval mode).
+        keyframes: the W it was trained on (it accepts any 3 <= W <= N).
+        meta: training arguments, subject split and held-out figures stored with it.
+    """
+
+    def __init__(self, net: KeyframeQNet, keyframes, meta: dict):
+        self.net, self.keyframes, self.meta = net.eval(), tuple(keyframes), meta
+        self.uses_prior = net.config.get("prior", "greedy") == "rollout"
+
+    def decide(self, features: np.ndarray, costs: np.ndarray, W: int) -> np.ndarray:
+        """Greedy (masked argmax) decisions for a batch of clips: one batched torch pass of the
+        encoder, then the head's W - 2 steps per clip in a compiled kernel (:func:`_decide_clip`,
+        the same arithmetic as :meth:`KeyframeQNet.head` in float32).
+
+        Args:
+            features: (B, N, C) float32 per-frame features (:func:`sidql.learning.tasks.clip_features`).
+            costs: (B, N, N) segment-cost matrices of the same clips (``sidql.keyframes.segment_costs``).
+            W: keyframe count including both ends, 2 <= W <= N.
+        Returns:
+            (B, W) int64 sorted keyframe indices.
+        """
+        feats, cost = self._check(features, costs, W)
+        with torch.no_grad():
+            enc = self.net.encode(torch.as_tensor(feats))
+            proj = self.net.proj(enc).numpy().astype(np.float64)  # (B, N, 4K)
+            glob = self.net.glob(enc.mean(1)).numpy().astype(np.float64)  # (B, K)
+        w = self._weights()
+        out = np.empty((len(feats), W), np.int64)
+        for i in range(len(feats)):
+            out[i] = _decide_clip(
+                proj[i], glob[i], cost[i].astype(np.float64), W, self.uses_prior, *w
+            )
+        return out
+
+    def _weights(self):
+        """The head's weights as float64 arrays (read afresh: the network may have changed)."""
+        net = self.net
+        f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
+        return (
+            f(net.scal.weight), f(net.scal.bias), f(net.mlp[1].weight), f(net.mlp[1].bias),
+            f(net.mlp[3].weight)[0], float(net.mlp[3].bias.detach()[0]), f(net.value[0].weight),
+            f(net.value[0].bias), f(net.value[2].weight)[0], float(net.value[2].bias.detach()[0]),
+        )  # fmt: skip
+
+    def _check(self, features, costs, W):
+        feats = np.ascontiguousarray(features, dtype=np.float32)
+        c = self.net.config["n_features"]
+        if feats.ndim != 3 or feats.shape[-1] != c:
+            raise ValueError(f"features must be (B, N, {c}); got {feats.shape}")
+        b, n, _ = feats.shape
+        if not 2 <= W <= n:
+            raise ValueError(f"W must be in [2, {n}]; got {W}")
+        cost = np.ascontiguousarray(costs, dtype=np.float32)
+        if cost.shape != (b, n, n):
+            raise ValueError(f"costs must be ({b}, {n}, {n}); got {cost.shape}")
+        return feats, cost
+
+    @torch.no_grad()
+    def decide_torch(self, features: np.ndarray, costs: np.ndarray, W: int) -> np.ndarray:
+        """The same decisions as :meth:`decide`, all in torch (the reference implementation).
+
+        Args:
+            features: (B, N, C) float32 per-frame features (:func:`sidql.learning.tasks.clip_features`).
+            costs: (B, N, N) segment-cost matrices of the same clips (``sidql.keyframes.segment_costs``).
+            W: keyframe count including both ends, 2 <= W <= N.
+        Returns:
+            (B, W) int64 sorted keyframe indices; one encoder pass, then W - 2 masked argmaxes.
+        """
+        feats, cost = (torch.as_tensor(x) for x in self._check(features, costs, W))
+        b, n, _ = feats.shape
+        enc = self.net.encode(feats)
+        mask = torch.zeros(b, n, dtype=torch.bool)
+        mask[:, [0, n - 1]] = True
+        rows = torch.arange(b)
+        cost64 = np.ascontiguousarray(costs, dtype=np.float64)
+        for k in range(W - 2):
+            rem = torch.full((b,), W - 2 - k)
+            prior = None
+            if self.uses_prior:
+                prior = torch.as_tensor(
+                    rollout_values_batch(cost64, np.arange(b), mask.numpy(), rem.numpy()),
+                    dtype=torch.float32,
+                )
+            q = self.net.head(enc, cost, mask, rem, prior)
+            mask[rows, masked_q(q, mask).argmax(1)] = True
+        return np.nonzero(mask.numpy())[1].reshape(b, W).astype(np.int64)
+
+    def select(self, clip, W: int) -> np.ndarray:
+        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart, features, costs, :meth:`decide`)."""
+        from sidql.keyframes.segment_costs import segment_cost_matrix
+        from sidql.keyframes.spherical import chart
+        from sidql.learning.tasks import clip_features
+
+        series = chart(clip)
+        cost = segment_cost_matrix(series, "hermite")
+        return self.decide(clip_features(series)[None], cost[None], W)[0]
+
+
+@numba.njit(cache=True, fastmath=True)
+def _decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1, wv2, bv2):
+    """W sorted keyframes of one clip by the head of :class:`sidql.learning.qnet.KeyframeQNet`.
+
+    The same arithmetic as the torch head, step by step, but incremental: a frame's segment
+    features (and the part of the head's first layer that depends on them) are recomputed only
+    when its segment was split by the last keyframe; each step then only adds the terms for
+    ``remaining`` and the best reward elsewhere, and runs the small MLPs.
+
+    Args:
+        proj: (N, 4K) the head's per-frame projections of the encoder output (self, left, right,
+            segment); glob: (K,) its clip-wide term; cost: (N, N) segment costs; W: keyframes;
+            use_prior: add the greedy-rollout prior (:mod:`sidql.learning.rollout`) as the torch head does.
+        ws, bs: the scalar-input layer (K, 11), (K,); w1, b1, w2, b2: the advantage MLP;
+        wv1, bv1, wv2, bv2: the value MLP (weights as in torch, ``out x in``).
+    """
+    n = cost.shape[0]
+    k = glob.shape[0]
+    hdim = b1.shape[0]
+    mask = np.zeros(n, np.bool_)
+    mask[0] = True
+    mask[n - 1] = True
+    csum = np.zeros((n + 1, k))
+    for i in range(n):
+        for j in range(k):
+            csum[i + 1, j] = csum[i, j] + proj[i, 3 * k + j]
+    s0 = max(cost[0, n - 1], 1e-12)
+    left = np.full(n, -1, np.int64)
+    right = np.full(n, -1, np.int64)
+    new_left = np.zeros(n, np.int64)
+    new_right = np.zeros(n, np.int64)
+    g1 = np.zeros(n)
+    base = np.zeros((n, k))
+    adv = np.zeros(n)
+    prior = np.zeros(n)
+    seq, length = greedy_sequences(cost, max(W - 3, 0) if use_prior else 0)
+    z = np.zeros(k)
+    zsum = np.zeros(k)
+    for step in range(W - 2):
+        rem = W - 2 - step
+        last = 0
+        for i in range(n):
+            if mask[i]:
+                last = i
+            new_left[i] = last
+        last = n - 1
+        for i in range(n - 1, -1, -1):
+            if mask[i]:
+                last = i
+            new_right[i] = last
+        e = 0.0
+        for i in range(n - 1):
+            if mask[i]:
+                e += cost[i, new_right[i + 1]]
+        e /= s0
+        if use_prior:
+            prior = rollout_values_seq(cost, mask, rem, seq, length)
+        # segment features of frames whose segment changed
+        for a in range(n):
+            if mask[a] or (new_left[a] == left[a] and new_right[a] == right[a]):
+                continue
+            l = new_left[a]
+            r = new_right[a]
+            left[a] = l
+            right[a] = r
+            c_lr = cost[l, r]
+            c_la = cost[l, a]
+            c_ar = cost[a, r]
+            g1[a] = (c_lr - c_la - c_ar) / s0
+            g2l = 0.0
+            for m in range(l + 1, a):
+                g2l = max(g2l, c_la - cost[l, m] - cost[m, a])
+            g2r = 0.0
+            for m in range(a + 1, r):
+                g2r = max(g2r, c_ar - cost[a, m] - cost[m, r])
+            s_0 = (a - l) / n
+            s_1 = (r - a) / n
+            s_2 = (r - l) / n
+            inv = 1.0 / (r - l + 1)
+            for j in range(k):
+                base[a, j] = (
+                    proj[a, j] + proj[l, k + j] + proj[r, 2 * k + j]
+                    + (csum[r + 1, j] - csum[l, j]) * inv + glob[j] + bs[j]
+                    + ws[j, 0] * s_0 + ws[j, 1] * s_1 + ws[j, 2] * s_2 + ws[j, 4] * g1[a]
+                    + ws[j, 5] * g2l / s0 + ws[j, 6] * g2r / s0 + ws[j, 7] * c_lr / s0
+                    + ws[j, 8] * c_la / s0 + ws[j, 9] * c_ar / s0
+                )  # fmt: skip
+        # best reward per segment, and the two best segments
+        top1 = -np.inf
+        top2 = -np.inf
+        for i in range(n):  # segment starts are keyframes; scan each segment's free frames
+            if not mask[i] or i == n - 1:
+                continue
+            best = -np.inf
+            for a in range(i + 1, new_right[i + 1]):
+                best = max(best, g1[a])
+            if best > top1:
+                top2 = top1
+                top1 = best
+            elif best > top2:
+                top2 = best
+        n_free = 0
+        adv_sum = 0.0
+        zsum[:] = 0.0
+        for a in range(n):
+            if mask[a]:
+                continue
+            n_free += 1
+            own = -np.inf
+            for m in range(left[a] + 1, right[a]):
+                own = max(own, g1[m])
+            other = top2 if own >= top1 else top1
+            if not np.isfinite(other) or other < 0.0:
+                other = 0.0
+            for j in range(k):
+                v = base[a, j] + ws[j, 3] * rem / n + ws[j, 10] * other
+                z[j] = v if v > 0.0 else 0.0
+                zsum[j] += z[j]
+            out = b2
+            for i in range(hdim):
+                acc = b1[i]
+                for j in range(k):
+                    acc += w1[i, j] * z[j]
+                if acc > 0.0:
+                    out += w2[i] * acc
+            adv[a] = out
+            adv_sum += out
+        value = bv2
+        for i in range(hdim):
+            acc = bv1[i]
+            for j in range(k):
+                acc += wv1[i, j] * zsum[j] / max(n_free, 1)
+            if acc > 0.0:
+                value += wv2[i] * acc
+        adv_mean = adv_sum / max(n_free, 1)
+        best_q = -np.inf
+        best_a = -1
+        for a in range(n):
+            if mask[a]:
+                continue
+            q = g1[a]
+            if rem > 1:
+                logit = value + adv[a] - adv_mean
+                e_after = e - g1[a]
+                if use_prior:
+                    share = min(max(prior[a] / max(e_after, 1e-9), 1e-4), 1.0 - 1e-4)
+                    logit += np.log(share / (1.0 - share))
+                q += e_after / (1.0 + np.exp(-logit))
+            if q > best_q:
+                best_q = q
+                best_a = a
+        mask[best_a] = True
+    return np.flatnonzero(mask)
+
+
+def load_policy(path: str | os.PathLike | None = None) -> Policy:
+    """Load a policy file written by :func:`sidql.learning.dqn.save_policy` (default: ``$SIDQL_POLICY`` or
+    the shipped one). Raises FileNotFoundError with the path when it is missing."""
+    path = Path(path or os.environ.get("SIDQL_POLICY") or DEFAULT_POLICY)
+    return _load(str(path.resolve()), path.stat().st_mtime_ns if path.exists() else 0)
+
+
+@lru_cache(maxsize=4)
+def _load(path: str, _mtime: int) -> Policy:
+    if not Path(path).exists():
+        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`")
+    payload = torch.load(path, map_location="cpu", weights_only=False)
+    if payload.get("format") != "sidql-dqn-policy/1":
+        raise ValueError(f"{path} is not a sidql DQN policy")
+    cfg = payload["config"]
+    net = KeyframeQNet(
+        cfg["n_features"], cfg["hidden"], cfg["dilations"], prior=cfg.get("prior", "greedy")
+    )
+    net.load_state_dict(payload["state_dict"])
+    meta = {k: v for k, v in payload.items() if k not in ("state_dict",)}
+    return Policy(net, payload["keyframes"], meta)
+
+
+@register("dqn")
+def dqn(clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """SIDQL: the trained Deep Q-Network's greedy (masked argmax) keyframes; deterministic."""
+    return load_policy().select(clip, W)

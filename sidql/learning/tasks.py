@@ -1,0 +1,223 @@
+"""Where the keyframe environment's tasks come from: clips reduced to (features, cost matrix).
+
+- :func:`synthetic_tasks`: a small deterministic problem without data (smooth random signals whose
+  cost is the error of *linear* interpolation between keyframes), used by ``gymnasium.make`` without
+  arguments and by CI's tiny training run.
+- :func:`clip_features` / :func:`clip_task`: a 60-frame motion clip -> the paper's state
+  inputs F, V (bone angles and rates of the spherical chart) and the Hermite segment-cost matrix
+  of issue 3.
+- :func:`load_tasks`: every trial under a CMU directory, cut into 60-frame clips (optionally with a
+  stride smaller than 60 for more, overlapping training clips), cached per trial as ``.npz``.
+
+Pure numpy: the motion files are read by ``sim.motion.ingest`` (imported lazily, no MuJoCo needed here).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sidql.learning.env import KeyframeTask
+
+#: Bump when features or costs change: cached task files carry it in their name.
+CACHE_VERSION = 1
+
+
+def linear_cost_matrix(x: np.ndarray) -> np.ndarray:
+    """Segment costs of linear interpolation: ``C[i, j]`` (i < j) = sum over frames i < n < j and
+    channels c of |x[n, c] - lerp(x[i, c], x[j, c])|; zero on and below the diagonal.
+
+    Args:
+        x: (N, C) signals.
+    Returns:
+        (N, N) float64.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[0]
+    cost = np.zeros((n, n))
+    frames = np.arange(n)
+    for i in range(n - 2):
+        j = np.arange(i + 2, n)  # (J,)
+        t = (frames[None, :] - i) / (j[:, None] - i)  # (J, N)
+        inside = (frames[None, :] > i) & (frames[None, :] < j[:, None])
+        interp = x[i][None, None, :] + t[..., None] * (x[j] - x[i])[:, None, :]  # (J, N, C)
+        err = np.abs(interp - x[None]).sum(-1)
+        cost[i, j] = np.where(inside, err, 0.0).sum(-1)
+    return cost
+
+
+def synthetic_tasks(
+    n: int, *, n_frames: int = 60, n_channels: int = 6, seed: int = 0
+) -> list[KeyframeTask]:
+    """``n`` deterministic synthetic tasks: per channel a sum of three sinusoids (0.1 to 2 cycles
+    per clip, random phases and amplitudes up to 1 rad) plus a random kink, so that good keyframes
+    sit at the kinks and turning points. Features: the signals [rad] and their per-frame central
+    differences [rad/frame], (N, 2 C). Cost: :func:`linear_cost_matrix` of the signals, M = C.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, n_frames)
+    tasks = []
+    for k in range(n):
+        freq = rng.uniform(0.1, 2.0, (3, n_channels))
+        phase = rng.uniform(0, 2 * np.pi, (3, n_channels))
+        amp = rng.uniform(0.0, 1.0, (3, n_channels))
+        x = (amp[None] * np.sin(2 * np.pi * freq[None] * t[:, None, None] + phase[None])).sum(1)
+        kink = rng.uniform(0.1, 0.9, n_channels)
+        x += rng.uniform(-3, 3, n_channels) * np.maximum(t[:, None] - kink[None], 0.0)
+        rate = np.gradient(x, axis=0)
+        features = np.concatenate([x, rate], axis=1).astype(np.float32)
+        tasks.append(
+            KeyframeTask(
+                features=features,
+                cost=linear_cost_matrix(x),
+                n_bones=n_channels,
+                source=f"synthetic:{seed}:{k}",
+                subject=f"s{k % 4}",
+            )
+        )
+    return tasks
+
+
+# --- real clips ----------------------------------------------------------------------------------
+
+
+def clip_features(series) -> np.ndarray:
+    """The paper's per-frame state inputs (F, V) from a spherical chart.
+
+    Args:
+        series: a :class:`sidql.keyframes.spherical.SphericalSeries` with theta, phi, dtheta, dphi (N, M)
+            [rad, rad/s] and dt [s].
+    Returns:
+        (N, 4 M) float32: θ [rad]; φ minus its clip mean [rad] (the chart's azimuth is only
+        defined up to the heading, and the cost sees only differences); θ̇ Δ and φ̇ Δ [rad/frame].
+    """
+    theta = np.asarray(series.theta, dtype=np.float64)
+    phi = np.asarray(series.phi, dtype=np.float64)
+    phi = phi - phi.mean(axis=0, keepdims=True)
+    dt = float(series.dt)
+    rates = np.concatenate([series.dtheta * dt, series.dphi * dt], axis=1)
+    return np.concatenate([theta, phi, rates], axis=1).astype(np.float32)
+
+
+def clip_task(clip, *, subject: str = "") -> KeyframeTask:
+    """A motion clip (:class:`sim.motion.clip.Clip`, N frames) -> its :class:`KeyframeTask`
+    (features from :func:`clip_features`, Hermite costs of :mod:`sidql.keyframes.segment_costs`)."""
+    from sidql.keyframes.segment_costs import segment_cost_matrix
+    from sidql.keyframes.spherical import chart
+
+    series = chart(clip)
+    return KeyframeTask(
+        features=clip_features(series),
+        cost=np.asarray(segment_cost_matrix(series, variant="hermite"), dtype=np.float64),
+        n_bones=int(series.theta.shape[1]),
+        source=f"{clip.source}@{clip.start_frame}",
+        subject=subject,
+    )
+
+
+@dataclass(frozen=True)
+class TrialTasks:
+    """The tasks of one trial: ``features`` (K, N, C) float32, ``costs`` (K, N, N) float64,
+    ``starts`` (K,) first frame of each clip [frames of the 30 fps trial]."""
+
+    subject: str
+    source: str
+    features: np.ndarray
+    costs: np.ndarray
+    starts: np.ndarray
+    n_bones: int
+
+    def tasks(self) -> list[KeyframeTask]:
+        return [
+            KeyframeTask(f, c, self.n_bones, f"{self.source}@{int(s)}", self.subject)
+            for f, c, s in zip(self.features, self.costs, self.starts, strict=True)
+        ]
+
+
+def _cache_path(cache_dir: Path, amc: Path, length: int, stride: int, fps: float) -> Path:
+    st = amc.stat()
+    key = f"{amc.resolve()}|{st.st_size}|{st.st_mtime_ns}|{length}|{stride}|{fps}|{CACHE_VERSION}"
+    return cache_dir / f"{amc.stem}-{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
+
+
+def trial_tasks(
+    trial, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None
+) -> TrialTasks:
+    """Cut one trial (``sim.motion.dataset.Trial``) into ``length``-frame clips starting every ``stride``
+    frames from frame 0 and reduce each to features and costs; cached in ``cache_dir`` if given.
+
+    Raises:
+        MotionDataError: the trial cannot be read, or is shorter than one clip.
+    """
+    from sim.errors import MotionDataError
+    from sim.motion.clip import write_atomic
+
+    amc = Path(trial.amc)
+    path = None
+    if cache_dir is not None:
+        path = _cache_path(Path(cache_dir), amc, length, stride, fps)
+        if path.exists():
+            with np.load(path) as z:
+                return TrialTasks(
+                    trial.subject, str(amc), z["features"], z["costs"], z["starts"],
+                    int(z["n_bones"]),
+                )  # fmt: skip
+    from sim.motion.ingest import load_motion
+
+    motion = load_motion(trial.asf, trial.amc, fps=fps)
+    if motion.n_frames < length:
+        raise MotionDataError(str(amc), None, f"{motion.n_frames} frames < one {length}-frame clip")
+    starts = np.arange(0, motion.n_frames - length + 1, stride)
+    tasks = [clip_task(motion.slice(int(s), int(s) + length)) for s in starts]
+    out = TrialTasks(
+        trial.subject,
+        str(amc),
+        np.stack([t.features for t in tasks]),
+        np.stack([t.cost for t in tasks]),
+        starts,
+        tasks[0].n_bones,
+    )
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(
+            path,
+            lambda f: np.savez(
+                f, features=out.features, costs=out.costs, starts=starts, n_bones=out.n_bones
+            ),
+        )
+    return out
+
+
+def load_tasks(
+    data_dir, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None,
+    subjects=None, progress: bool = True,
+) -> list[TrialTasks]:  # fmt: skip
+    """Every trial under ``data_dir`` (``sim.motion.dataset.find_trials``) as :class:`TrialTasks`.
+
+    Bad trials are skipped and reported on stderr; ``subjects`` (a set of ids) keeps only those.
+    """
+    from tqdm import tqdm
+
+    from sim.errors import MotionDataError
+    from sim.motion.dataset import find_trials
+
+    trials = [t for t in find_trials(data_dir) if subjects is None or t.subject in subjects]
+    out = []
+    for trial in tqdm(trials, desc=f"clips (stride {stride})", disable=not progress, leave=False):
+        try:
+            out.append(
+                trial_tasks(trial, length=length, stride=stride, fps=fps, cache_dir=cache_dir)
+            )
+        except MotionDataError as e:
+            print(f"skipping {trial.amc}: {e}", file=sys.stderr)
+    return out
+
+
+def default_cache_dir() -> Path:
+    """``$SIDQL_CACHE`` or ``~/.cache/sidql/tasks``."""
+    return Path(os.environ.get("SIDQL_CACHE", Path.home() / ".cache" / "sidql" / "tasks"))

@@ -1,0 +1,1 @@
+"""Acclaim (ASF skeleton + AMC motion) files: reading (and, for the codec, writing)."""

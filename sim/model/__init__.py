@@ -1,0 +1,1 @@
+"""The MuJoCo humanoid: MJCF generation from a skeleton, rotations, quaternions, the FK oracle."""

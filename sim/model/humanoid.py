@@ -1,0 +1,184 @@
+"""MJCF humanoids generated from ASF skeletons.
+
+One body per ASF bone, named after it; the root is a free joint; one hinge per ASF dof about the
+bone's ``axis`` frame, with the ASF limits; capsules sized from bone lengths; a floor plane and two
+cameras that track the root.
+
+Frames: body ``b`` sits at the start of bone ``b`` (its parent's end). Its rest orientation in the
+file's axes is the bone's axis frame ``C_b``, so relative to its parent the body is rotated by
+``C_parent^-1 C_b`` and the bone end lies at ``length * C_b^-1 direction`` in the body frame (site
+``<bone>_end``). Acclaim composes a bone's motion as ``Rz Ry Rx`` for ``dof rx ry rz`` (first dof
+applied first); MuJoCo composes a body's hinges left to right, so hinges are listed in reverse
+dof order. The free joint's orientation carries the y-up to z-up turn of the whole figure.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from sim.acclaim.reader import Skeleton, parse_asf
+from sim.model import quaternion as quat
+from sim.model.rotations import euler_matrix
+
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+CANONICAL_ASF = Path(__file__).resolve().parents[1] / "data" / "canonical.asf"
+HUMANOID_XML = MODELS_DIR / "cmu_humanoid.xml"
+
+# Capsule radii [m] for CMU's bone names; other bones get one from their length.
+_RADIUS = {
+    "lhipjoint": 0.045, "rhipjoint": 0.045, "lfemur": 0.065, "rfemur": 0.065,
+    "ltibia": 0.05, "rtibia": 0.05, "lfoot": 0.04, "rfoot": 0.04, "ltoes": 0.03, "rtoes": 0.03,
+    "lowerback": 0.09, "upperback": 0.1, "thorax": 0.1, "lowerneck": 0.05, "upperneck": 0.045,
+    "head": 0.09, "lclavicle": 0.05, "rclavicle": 0.05, "lhumerus": 0.045, "rhumerus": 0.045,
+    "lradius": 0.04, "rradius": 0.04, "lwrist": 0.03, "rwrist": 0.03, "lhand": 0.035,
+    "rhand": 0.035, "lfingers": 0.02, "rfingers": 0.02, "lthumb": 0.02, "rthumb": 0.02,
+}  # fmt: skip
+
+
+def capsule_radius(name: str, length: float) -> float:
+    """Capsule radius [m] for bone ``name`` of ``length`` [m]."""
+    return _RADIUS.get(name, float(np.clip(0.2 * length, 0.015, 0.07)))
+
+
+def _fmt(v) -> str:
+    # Round to 1e-12 first: rounding noise (~1e-18) differs between numpy builds and would make
+    # the generated model text machine-dependent; "+ 0.0" turns -0 into 0.
+    x = np.round(np.atleast_1d(np.asarray(v, dtype=np.float64)), 12) + 0.0
+    return " ".join(f"{a:.9g}" for a in x)
+
+
+def bone_frames(skeleton: Skeleton) -> dict[str, np.ndarray]:
+    """Rest axis frame ``C`` (3, 3) of every bone and of ``"root"``, in the file's axes."""
+    frames = {"root": euler_matrix(skeleton.root_orientation, skeleton.root_axis_order)}
+    for b in skeleton.bones:
+        frames[b.name] = euler_matrix(b.axis, b.axis_order)
+    return frames
+
+
+def bone_end_offsets(skeleton: Skeleton) -> dict[str, np.ndarray]:
+    """(3,) bone end in its own body frame [m]: ``length * C^-1 direction``."""
+    C = bone_frames(skeleton)
+    return {b.name: b.length * (C[b.name].T @ b.direction) for b in skeleton.bones}
+
+
+def build_mjcf(skeleton: Skeleton, *, model_name: str | None = None) -> str:
+    """MJCF text of a humanoid for ``skeleton``.
+
+    Returns:
+        XML with bodies named after bones, hinge joints ``<bone>_<dof>`` (radians, ASF limits),
+        sites ``<bone>_end`` at bone ends, a floor at z = 0 and cameras ``follow`` and ``side``.
+    """
+    C = bone_frames(skeleton)
+    ends = bone_end_offsets(skeleton)
+    children: dict[str, list] = {}
+    for b in skeleton.bones:
+        children.setdefault(b.parent, []).append(b)
+    name = model_name or f"cmu_humanoid_{skeleton.name or 'skeleton'}"
+
+    out: list[str] = []
+    w = out.append
+
+    def body(b, depth: int, pos: np.ndarray):
+        ind = "  " * depth
+        q = quat.from_matrix(C[b.parent].T @ C[b.name])
+        w(f'{ind}<body name="{b.name}" pos="{_fmt(pos)}" quat="{_fmt(q)}">')
+        for dof, (lo, hi) in reversed(list(zip(b.dofs, b.limits, strict=True))):
+            axis = {"rx": "1 0 0", "ry": "0 1 0", "rz": "0 0 1"}[dof]
+            rng = _fmt(np.deg2rad([lo, hi]))
+            w(f'{ind}  <joint name="{b.name}_{dof}" axis="{axis}" range="{rng}"/>')
+        end = ends[b.name]
+        r = capsule_radius(b.name, b.length)
+        if b.length > 2 * r:
+            # Shorten the capsule by its radius at both ends so neighbours touch, not overlap.
+            u = end / b.length
+            w(f'{ind}  <geom name="{b.name}" fromto="{_fmt(u * r * 0.5)} {_fmt(end - u * r * 0.5)}"'
+              f' size="{r:.4g}"/>')  # fmt: skip
+        else:
+            w(f'{ind}  <geom name="{b.name}" type="sphere" pos="{_fmt(end / 2)}" size="{r:.4g}"/>')
+        w(f'{ind}  <site name="{b.name}_end" pos="{_fmt(end)}"/>')
+        for c in children.get(b.name, []):
+            body(c, depth + 1, end)
+        w(f"{ind}</body>")
+
+    w(f'<mujoco model="{name}">')
+    w('  <compiler angle="radian" autolimits="true"/>')
+    w('  <option timestep="0.002" gravity="0 0 -9.81"/>')
+    w("  <visual>")
+    w('    <global offwidth="1280" offheight="720" elevation="-15"/>')
+    w('    <quality shadowsize="0"/>')
+    w('    <headlight ambient="0.35 0.35 0.35" diffuse="0.6 0.6 0.6" specular="0.1 0.1 0.1"/>')
+    w("  </visual>")
+    w("  <asset>")
+    w(
+        '    <texture name="grid" type="2d" builtin="checker" width="256" height="256"'
+        ' rgb1="0.82 0.84 0.86" rgb2="0.7 0.73 0.76" mark="edge" markrgb="0.55 0.58 0.62"/>'
+    )
+    w(
+        '    <material name="grid" texture="grid" texrepeat="1 1" texuniform="true" reflectance="0"/>'
+    )
+    w('    <material name="body" rgba="0.85 0.55 0.3 1"/>')
+    w("  </asset>")
+    w("  <default>")
+    w('    <joint type="hinge" damping="0.5" armature="0.01"/>')
+    w('    <geom type="capsule" material="body" contype="1" conaffinity="1" density="1000"/>')
+    w('    <site size="0.012" rgba="0.2 0.3 0.9 1" group="3"/>')
+    w("  </default>")
+    w("  <worldbody>")
+    w('    <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="false"/>')
+    w('    <geom name="floor" type="plane" size="0 0 0.05" material="grid"/>')
+    w('    <body name="root" pos="0 0 1">')
+    w('      <freejoint name="root"/>')
+    w('      <camera name="follow" mode="trackcom" pos="0 -3.6 0.4" xyaxes="1 0 0 0 0.15 1"/>')
+    w('      <camera name="side" mode="trackcom" pos="3.6 0 0.4" xyaxes="0 1 0 -0.15 0 1"/>')
+    w('      <geom name="root" type="sphere" size="0.07"/>')
+    w('      <site name="root_end" pos="0 0 0"/>')
+    for b in children.get("root", []):
+        body(b, 3, np.zeros(3))
+    w("    </body>")
+    w("  </worldbody>")
+    w("</mujoco>")
+    return "\n".join(out) + "\n"
+
+
+@lru_cache(maxsize=64)
+def _model_for_asf(path: str, version: tuple):
+    import mujoco
+
+    skeleton = parse_asf(path)
+    return skeleton, mujoco.MjModel.from_xml_string(build_mjcf(skeleton))
+
+
+def subject_model(asf_path: str | os.PathLike):
+    """(skeleton, MjModel) of a subject's own humanoid, cached per file version."""
+    path = str(Path(asf_path).resolve())
+    st = os.stat(path)
+    return _model_for_asf(path, (st.st_mtime_ns, st.st_size))
+
+
+@lru_cache(maxsize=1)
+def canonical_skeleton() -> Skeleton:
+    """The canonical CMU skeleton behind ``models/cmu_humanoid.xml``."""
+    return parse_asf(CANONICAL_ASF)
+
+
+@lru_cache(maxsize=1)
+def humanoid_model():
+    """(skeleton, MjModel) of the shared humanoid ``models/cmu_humanoid.xml``."""
+    import mujoco
+
+    return canonical_skeleton(), mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
+
+
+def write_humanoid_xml(path: str | os.PathLike = HUMANOID_XML) -> Path:
+    """Regenerate ``models/cmu_humanoid.xml`` from the canonical skeleton."""
+    from sim.motion.clip import write_atomic
+
+    text = build_mjcf(canonical_skeleton(), model_name="cmu_humanoid")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, lambda f: f.write(text.encode()))
+    return path

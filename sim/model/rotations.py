@@ -1,0 +1,43 @@
+"""Rotation helpers over arrays: Euler angles and matrices (quaternions: ``sim.model.quaternion``).
+
+All functions broadcast over leading axes. Angles in radians unless a name says ``deg``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def axis_rotation(axis: str, angle: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices about ``axis`` ('X', 'Y' or 'Z') by ``angle`` [rad]."""
+    angle = np.asarray(angle, dtype=np.float64)
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.zeros(angle.shape + (3, 3))
+    i = _AXIS[axis.upper()]
+    j, k = (i + 1) % 3, (i + 2) % 3
+    R[..., i, i] = 1.0
+    R[..., j, j] = c
+    R[..., k, k] = c
+    R[..., j, k] = -s
+    R[..., k, j] = s
+    return R
+
+
+def euler_matrix(angles_deg: np.ndarray, order: str) -> np.ndarray:
+    """(..., 3, 3) matrix of Euler angles ``angles_deg[..., i]`` about axis ``order[i]`` [deg].
+
+    The rotation about ``order[0]`` is applied first: for ``"XYZ"`` the result is Rz @ Ry @ Rx
+    (Acclaim's convention for ``axis`` and for ``dof rx ry rz``).
+    """
+    angles = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))
+    R = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3)).copy()
+    for i, ax in enumerate(order):
+        R = axis_rotation(ax, angles[..., i]) @ R
+    return R
+
+
+# Acclaim's CMU axes are y up; the project's world frame is z up: (x, y, z) -> (x, -z, y),
+# a +90 degree rotation about x.
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])

@@ -1,0 +1,1 @@
+"""Motion on the humanoid: retargeting, true velocities, clips, ingest, batch datasets, procedural motion."""

@@ -1,0 +1,145 @@
+"""Ingest: ASF + AMC -> a :class:`~sim.motion.clip.Clip` of positions and true velocities.
+
+Parse, retarget to a humanoid (the subject's own or the shared one), differentiate ``qpos`` at the
+source rate, resample by taking every k-th frame, and read positions, velocities and orientations
+off the kinematic chain.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from sim.acclaim.reader import parse_amc, parse_asf
+from sim.errors import MotionDataError
+from sim.model.humanoid import humanoid_model, subject_model
+from sim.model.kinematics import point_names, point_parents
+from sim.motion.clip import Clip
+from sim.motion.retarget import leg_length, local_rotations_from_world, motion_to_qpos
+from sim.motion.velocities import point_kinematics, qvel_from_qpos
+
+SKELETONS = ("subject", "humanoid")
+CMU_FPS = 120.0
+
+
+def resample_step(source_fps: float, fps: float) -> int:
+    """Frames of the source per output frame; the ratio must be a whole number."""
+    if fps <= 0 or source_fps <= 0:
+        raise ValueError(f"frame rates must be positive (source {source_fps}, output {fps})")
+    step = source_fps / fps
+    if abs(step - round(step)) > 1e-9 or round(step) < 1:
+        raise ValueError(
+            f"output rate {fps} fps must divide the source rate {source_fps} fps by a whole number"
+        )
+    return int(round(step))
+
+
+def clip_from_qpos(
+    model,
+    names: tuple[str, ...],
+    parents: np.ndarray,
+    qpos: np.ndarray,
+    *,
+    source_fps: float,
+    fps: float,
+    source: str = "",
+) -> Clip:
+    """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
+
+    Point ``j`` is the site ``<names[j]>_end`` (the root: the root body's origin). Velocities are
+    taken at the source rate (central differences of qpos), then mapped through the chain.
+    """
+    step = resample_step(source_fps, fps)
+    frames = np.arange(0, qpos.shape[0], step)
+    qvel = qvel_from_qpos(model, qpos, source_fps, frames)
+    body_ids, site_ids = [], []
+    for n in names:
+        body_ids.append(model.body(n).id)
+        site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
+    data = mujoco.MjData(model)
+    pos, vel, xquat, omega = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
+    joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
+    return Clip(
+        names=tuple(names),
+        parents=np.asarray(parents, dtype=np.int64),
+        positions=pos,
+        velocities=vel,
+        qpos=qpos[frames].copy(),
+        qvel=qvel,
+        rotations=local_rotations_from_world(xquat, np.asarray(parents)),
+        fps=float(fps),
+        source=source,
+        start_frame=0,
+        source_fps=float(source_fps),
+        joint_names=joint_names,
+        angular_velocities=omega,
+    )
+
+
+def load_motion(
+    asf: str | os.PathLike,
+    amc: str | os.PathLike,
+    *,
+    skeleton: str = "subject",
+    fps: float = 30.0,
+    source_fps: float = CMU_FPS,
+) -> Clip:
+    """A whole trial as one clip at ``fps``.
+
+    Args:
+        asf, amc: the subject's skeleton and one of its motions.
+        skeleton: ``"subject"`` (the subject's own generated model: exact ASF/AMC kinematics) or
+            ``"humanoid"`` (the shared ``models/cmu_humanoid.xml``; angles copied, root translation
+            scaled by the leg-length ratio).
+        fps: output rate; ``source_fps / fps`` must be a whole number (CMU: 120 -> 30 takes every
+            4th frame).
+
+    Raises:
+        MotionDataError: malformed files (naming file, line and problem).
+    """
+    if skeleton not in SKELETONS:
+        raise ValueError(f"unknown skeleton {skeleton!r}; choose from {', '.join(SKELETONS)}")
+    try:
+        subject, model = subject_model(asf)
+    except FileNotFoundError as e:
+        raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
+    except ValueError as e:  # MuJoCo's compiler on a degenerate skeleton
+        if isinstance(e, MotionDataError):
+            raise
+        raise MotionDataError(str(asf), None, f"cannot build a model: {e}") from e
+    motion = parse_amc(amc, subject)
+    root_scale = 1.0
+    target = subject
+    if skeleton == "humanoid":
+        target, model = humanoid_model()
+        root_scale = leg_length(target) / leg_length(subject)
+    qpos = motion_to_qpos(subject, motion, model, root_scale=root_scale)
+    return clip_from_qpos(
+        model,
+        point_names(target),
+        point_parents(target),
+        qpos,
+        source_fps=source_fps,
+        fps=fps,
+        source=str(Path(amc)),
+    )
+
+
+def load_clips(
+    asf: str | os.PathLike,
+    amc: str | os.PathLike,
+    *,
+    fps: float = 30.0,
+    length: int = 60,
+    skeleton: str = "subject",
+) -> list[Clip]:
+    """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``."""
+    return load_motion(asf, amc, skeleton=skeleton, fps=fps).split(length)
+
+
+def parse_and_check(asf: str | os.PathLike, amc: str | os.PathLike) -> None:
+    """Parse both files, raising :class:`MotionDataError` on malformed input (no retargeting)."""
+    parse_amc(amc, parse_asf(asf))

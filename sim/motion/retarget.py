@@ -1,0 +1,113 @@
+"""AMC frames -> MuJoCo ``qpos`` for a generated humanoid.
+
+Two targets:
+(a) the subject's own model (``sim.model.humanoid.build_mjcf`` of its ASF): body positions then equal the
+    ASF/AMC forward kinematics exactly;
+(b) the shared ``models/cmu_humanoid.xml``: joint angles are copied by name and the root
+    translation is scaled by the ratio of leg lengths (femur + tibia).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.acclaim.reader import Motion, Skeleton
+from sim.errors import MotionDataError
+from sim.model import quaternion as quat
+from sim.model.humanoid import bone_frames
+from sim.model.rotations import Y_UP_TO_Z_UP, euler_matrix
+
+
+def dof_order(dofs: tuple[str, ...]) -> str:
+    """Euler order string of a bone's dofs, e.g. ``("rx", "rz") -> "XZ"``."""
+    return "".join(d[1].upper() for d in dofs)
+
+
+def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """World root position (T, 3) [m] and orientation (T, 4) ``wxyz``, z up.
+
+    The root body's frame is ``C_o M`` in the file's axes (``C_o`` the ASF root orientation,
+    ``M`` the AMC root rotation), turned from y up to z up.
+    """
+    C_o = bone_frames(skeleton)["root"]
+    M = euler_matrix(motion.root[:, 3:], skeleton.root_axis_order)
+    pos = motion.root[:, :3] @ Y_UP_TO_Z_UP.T
+    return pos, quat.from_matrix(Y_UP_TO_Z_UP @ C_o @ M)
+
+
+def joint_qpos_addresses(model) -> dict[str, int]:
+    """Hinge joint name -> its ``qpos`` address in ``model``."""
+    import mujoco
+
+    out = {}
+    for j in range(model.njnt):
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+            out[model.joint(j).name] = int(model.jnt_qposadr[j])
+    return out
+
+
+def motion_to_qpos(
+    skeleton: Skeleton, motion: Motion, model, *, root_scale: float = 1.0
+) -> np.ndarray:
+    """(T, nq) ``qpos`` of ``motion`` on ``model`` (free root first, hinges ``<bone>_<dof>``).
+
+    Joints of the model that the skeleton lacks stay at 0; dofs the model lacks are dropped, so the
+    same call serves the subject's own model and the shared humanoid.
+
+    Args:
+        root_scale: factor on the root translation (leg-length ratio for the shared humanoid).
+    """
+    T = motion.n_frames
+    qpos = np.zeros((T, model.nq))
+    pos, quat = root_pose(skeleton, motion)
+    qpos[:, :3] = pos * root_scale
+    qpos[:, 3:7] = quat
+    adr = joint_qpos_addresses(model)
+    for b in skeleton.bones:
+        if not b.dofs:
+            continue
+        values = np.deg2rad(motion.angles[b.name])
+        for k, dof in enumerate(b.dofs):
+            a = adr.get(f"{b.name}_{dof}")
+            if a is not None:
+                qpos[:, a] = values[:, k]
+    return qpos
+
+
+def leg_length(skeleton: Skeleton) -> float:
+    """Mean femur + tibia length [m] of the two legs (the root-scaling yardstick)."""
+    try:
+        legs = [skeleton.bone(f"{s}femur").length + skeleton.bone(f"{s}tibia").length for s in "lr"]
+    except KeyError as e:
+        raise MotionDataError(
+            skeleton.path, None, f"cannot retarget to the humanoid: {e.args[0]}"
+        ) from None
+    return float(np.mean(legs))
+
+
+def local_rotations_from_world(xquat: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """(T, J, 4) rotation of each body relative to its parent body (root: world), ``wxyz``."""
+    parent = np.where(parents < 0, 0, parents)
+    local = quat.mul(quat.conj(xquat[:, parent]), xquat)
+    local[:, parents < 0] = xquat[:, parents < 0]
+    return quat.canonical(local)
+
+
+def acclaim_matrices(skeleton: Skeleton, motion: Motion) -> dict[str, np.ndarray]:
+    """Acclaim global rotation ``G`` (T, 3, 3) of the root and every bone, file axes.
+
+    ``G_child = G_parent C M C^-1`` with ``C`` the bone's axis frame and ``M`` its AMC rotation.
+    Used by the independent forward kinematics in ``sim.model.kinematics``.
+    """
+    C = bone_frames(skeleton)
+    T = motion.n_frames
+    G = {
+        "root": C["root"] @ euler_matrix(motion.root[:, 3:], skeleton.root_axis_order) @ C["root"].T
+    }
+    for b in skeleton.bones:
+        if b.dofs:
+            M = euler_matrix(motion.angles[b.name], dof_order(b.dofs))
+        else:
+            M = np.broadcast_to(np.eye(3), (T, 3, 3))
+        G[b.name] = G[b.parent] @ C[b.name] @ M @ C[b.name].T
+    return G
