@@ -22,6 +22,7 @@ import numpy as np
 
 from sim.acclaim.reader import Skeleton, parse_asf
 from sim.model import quaternion as quat
+from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
@@ -65,15 +66,40 @@ def bone_end_offsets(skeleton: Skeleton) -> dict[str, np.ndarray]:
     return {b.name: b.length * (C[b.name].T @ b.direction) for b in skeleton.bones}
 
 
-def build_mjcf(skeleton: Skeleton, *, model_name: str | None = None) -> str:
+ROOT_RADIUS = 0.07  # [m] the pelvis sphere on the root body
+
+
+def geom_volumes(skeleton: Skeleton) -> dict[str, float]:
+    """Volume [m^3] of every body's geom (``"root"``: the pelvis sphere), as ``build_mjcf`` shapes it."""
+    out = {"root": capsule_volume(ROOT_RADIUS, 0.0)}
+    for b in skeleton.bones:
+        r = capsule_radius(b.name, b.length)
+        out[b.name] = capsule_volume(r, b.length - r) if b.length > 2 * r else capsule_volume(r, 0)
+    return out
+
+
+def build_mjcf(
+    skeleton: Skeleton,
+    *,
+    model_name: str | None = None,
+    body_mass_kg: float = DEFAULT_BODY_MASS_KG,
+) -> str:
     """MJCF text of a humanoid for ``skeleton``.
+
+    Args:
+        skeleton: the ASF skeleton (bone lengths in metres).
+        model_name: the model's name (default ``cmu_humanoid_<skeleton name>``).
+        body_mass_kg: total body mass [kg], shared among the bodies by de Leva's segment table
+            (``sim.model.mass``).
 
     Returns:
         XML with bodies named after bones, hinge joints ``<bone>_<dof>`` (radians, ASF limits),
         sites ``<bone>_end`` at bone ends, a floor at z = 0 and cameras ``follow`` and ``side``.
+        Each body's one geom carries its segment mass; inertia follows from the geom's shape.
     """
     C = bone_frames(skeleton)
     ends = bone_end_offsets(skeleton)
+    mass = body_masses(geom_volumes(skeleton), body_mass_kg)
     children: dict[str, list] = {}
     for b in skeleton.bones:
         children.setdefault(b.parent, []).append(b)
@@ -96,9 +122,10 @@ def build_mjcf(skeleton: Skeleton, *, model_name: str | None = None) -> str:
             # Shorten the capsule by its radius at both ends so neighbours touch, not overlap.
             u = end / b.length
             w(f'{ind}  <geom name="{b.name}" fromto="{_fmt(u * r * 0.5)} {_fmt(end - u * r * 0.5)}"'
-              f' size="{r:.4g}"/>')  # fmt: skip
+              f' size="{r:.4g}" mass="{mass[b.name]:.6g}"/>')  # fmt: skip
         else:
-            w(f'{ind}  <geom name="{b.name}" type="sphere" pos="{_fmt(end / 2)}" size="{r:.4g}"/>')
+            w(f'{ind}  <geom name="{b.name}" type="sphere" pos="{_fmt(end / 2)}" size="{r:.4g}"'
+              f' mass="{mass[b.name]:.6g}"/>')  # fmt: skip
         w(f'{ind}  <site name="{b.name}_end" pos="{_fmt(end)}"/>')
         for c in children.get(b.name, []):
             body(c, depth + 1, end)
@@ -134,7 +161,7 @@ def build_mjcf(skeleton: Skeleton, *, model_name: str | None = None) -> str:
     w('      <freejoint name="root"/>')
     w('      <camera name="follow" mode="trackcom" pos="0 -3.6 0.4" xyaxes="1 0 0 0 0.15 1"/>')
     w('      <camera name="side" mode="trackcom" pos="3.6 0 0.4" xyaxes="0 1 0 -0.15 0 1"/>')
-    w('      <geom name="root" type="sphere" size="0.07"/>')
+    w(f'      <geom name="root" type="sphere" size="{ROOT_RADIUS}" mass="{mass["root"]:.6g}"/>')
     w('      <site name="root_end" pos="0 0 0"/>')
     for b in children.get("root", []):
         body(b, 3, np.zeros(3))
