@@ -32,7 +32,7 @@ from sidql.keyframes.spherical import (
 )
 from sim.motion.clip import Clip
 
-VARIANTS: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
+SPHERICAL_CURVES: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
 
 
 def validate_keyframes(keyframes, n_frames: int) -> np.ndarray:
@@ -50,8 +50,8 @@ def validate_keyframes(keyframes, n_frames: int) -> np.ndarray:
 
 
 def _check_variant(variant: str) -> None:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)}")
+    if variant not in SPHERICAL_CURVES:
+        raise ValueError(f"unknown variant {variant!r}; known: {', '.join(SPHERICAL_CURVES)}")
 
 
 def keyframe_rates(values: np.ndarray, keyframes: np.ndarray, dt: float) -> np.ndarray:
@@ -89,7 +89,7 @@ def interpolate(
             (may be None for the other variants).
         keyframes: (W,) strictly increasing indices from 0 to N-1.
         dt: frame interval [s].
-        variant: one of :data:`VARIANTS`.
+        variant: one of :data:`SPHERICAL_CURVES`.
 
     Returns:
         (N, D) reconstructed values and (N, D) their time derivatives [u/s]. For "linear" the
@@ -165,7 +165,7 @@ def reconstruct_series(
     Args:
         series: the true motion's chart (N frames, M bones).
         keyframes: (W,) strictly increasing indices from 0 to N-1.
-        variant: one of :data:`VARIANTS`.
+        variant: one of :data:`SPHERICAL_CURVES`.
     """
     _check_variant(variant)
     k = validate_keyframes(keyframes, series.n_frames)
