@@ -9,6 +9,7 @@ Two targets:
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 from sim.acclaim.reader import Motion, Skeleton
@@ -37,8 +38,6 @@ def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarra
 
 def joint_qpos_addresses(model) -> dict[str, int]:
     """Hinge joint name -> its ``qpos`` address in ``model``."""
-    import mujoco
-
     out = {}
     for j in range(model.njnt):
         if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:

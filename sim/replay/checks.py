@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import mujoco
 import numpy as np
 
 from sim.replay.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
@@ -185,9 +186,6 @@ class CollisionScene:
     """
 
     def __init__(self, bones: Bones, *, floor_z=0.0, contact_height=0.02, hops: int = 2):
-        import mujoco
-
-        self._mj = mujoco
         self.bones = bones
         pairs = {(a, b) for a in range(len(bones.child)) for b in range(a + 1, len(bones.child))}
         self.pairs = sorted(pairs - adjacent_pairs(bones, hops))
@@ -218,8 +216,8 @@ class CollisionScene:
         d.mocap_quat[:] = quat
         m.geom_size[self._geom, 1] = half
         m.geom_rbound[self._geom] = half + self.bones.radius
-        self._mj.mj_kinematics(m, d)
-        self._mj.mj_collision(m, d)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
         floor_gap = np.full(len(self.bones.child), np.inf)
         deepest: dict[tuple[int, int], float] = {}
         if d.ncon:

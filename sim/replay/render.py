@@ -18,8 +18,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
+from tqdm import tqdm
 
 from sim.motion.clip import write_atomic
 from sim.replay.capsules import bone_poses, bones_of, scene_xml
@@ -73,9 +75,6 @@ class SkeletonRenderer:
     """
 
     def __init__(self, names, parents, style: RenderStyle = DEFAULT_STYLE, lengths=None):
-        import mujoco
-
-        self._mj = mujoco
         self.style = style
         self.bones = bones_of(names, parents, lengths)
         xml = scene_xml(
@@ -130,7 +129,7 @@ class SkeletonRenderer:
         m.geom_rgba[self._ghost] = KEY_RGBA if key else GHOST_RGBA
         if ghost is None:
             m.geom_rgba[self._ghost, 3] = 0.0
-        self._mj.mj_kinematics(m, d)
+        mujoco.mj_kinematics(m, d)
         self.camera.lookat[:] = lookat
         self.camera.azimuth = azimuth
         self.renderer.update_scene(d, camera=self.camera)
@@ -232,8 +231,6 @@ def render_frames(
     frames = range(T) if frames is None else frames
     it = frames
     if progress:
-        from tqdm import tqdm
-
         it = tqdm(frames, desc=f"render {method or 'original'}", unit="frame", leave=False)
     with SkeletonRenderer(orig.names, orig.parents, style) as r:
         for t in it:
@@ -251,7 +248,7 @@ def render_frames(
 
 def write_video(frames, path: str | os.PathLike, fps: float) -> Path:
     """Encode (H, W, 3) uint8 frames as an H.264 mp4 (yuv420p, fast start) atomically."""
-    import imageio.v2 as imageio
+    import imageio.v2 as imageio  # lazy: heavy optional video dependency, only to write an mp4
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
