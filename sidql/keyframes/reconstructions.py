@@ -96,6 +96,11 @@ def rebuild(name: str, clip: Clip, keyframes, series: SphericalSeries | None = N
     return get(name).rebuild(clip, keyframes, series)
 
 
+def reconstruct(clip: Clip, keyframes, variant: str = "hermite") -> Reconstruction:
+    """``clip`` rebuilt from ``keyframes`` by any registered variant (default: the paper's)."""
+    return rebuild(variant, clip, keyframes)
+
+
 def _chart(clip: Clip, series: SphericalSeries | None) -> SphericalSeries:
     return chart(clip) if series is None else series
 
