@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import imageio.v2 as imageio
 import numpy as np
 import pytest
+from PIL import Image
 
+from sim.motion.synthetic import synthetic_motion
 from sim.replay.checks import PointMotion, from_clip
 from sim.replay.render import (
     RenderStyle,
@@ -21,19 +24,14 @@ SMALL = RenderStyle(width=192, height=144)  # multiples of 16: no resizing by th
 
 @pytest.fixture(scope="module")
 def motion() -> PointMotion:
-    from sim.motion.synthetic import synthetic_motion
-
     return from_clip(synthetic_motion(1.0, seed=1))
 
 
 @pytest.fixture(scope="module")
-def renderer(motion):
-    try:
-        r = SkeletonRenderer(motion.names, motion.parents, SMALL)
-    except Exception as e:  # no EGL / OpenGL on this machine
-        pytest.skip(f"offscreen rendering unavailable (MUJOCO_GL=egl): {e}")
-    yield r
-    r.close()
+def renderer(gl_context, motion):
+    # skips only when no GL context exists (conftest.gl_context); our scene's errors fail
+    with SkeletonRenderer(motion.names, motion.parents, SMALL) as r:
+        yield r
 
 
 def test_frame_shows_the_figure_against_the_scene(renderer, motion):
@@ -86,9 +84,6 @@ def test_ghost_and_keyframe_marks_change_the_picture(renderer, motion):
 
 
 def test_video_and_contact_sheet_read_back(tmp_path, renderer, motion):
-    import imageio.v2 as imageio
-    from PIL import Image
-
     rec = PointMotion(motion.names, motion.parents, motion.positions + [0, 0.05, 0], motion.fps)
     frames = list(render_frames(motion, rec, keyframes=[0, 10, 29], method="m", style=SMALL))
     assert len(frames) == motion.n_frames

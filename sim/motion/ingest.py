@@ -13,7 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.reader import parse_amc
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
@@ -138,8 +138,3 @@ def load_clips(
 ) -> list[Clip]:
     """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``."""
     return load_motion(asf, amc, skeleton=skeleton, fps=fps).split(length)
-
-
-def parse_and_check(asf: str | os.PathLike, amc: str | os.PathLike) -> None:
-    """Parse both files, raising :class:`MotionDataError` on malformed input (no retargeting)."""
-    parse_amc(amc, parse_asf(asf))
