@@ -94,3 +94,26 @@ def test_video_and_contact_sheet_read_back(tmp_path, renderer, motion):
     assert not list(tmp_path.glob(".*"))  # no temporary file left behind
     sheet = contact_sheet(frames[:5], [str(i) for i in range(5)], tmp_path / "s.png", cols=2)
     assert Image.open(sheet).size == (2 * 192, 3 * 144)
+
+
+def same_picture(a, b) -> bool:
+    """Equal up to the GL rasteriser's rounding: a few pixels may differ by one grey level."""
+    d = np.abs(a.astype(int) - b.astype(int))
+    return d.max() <= 1 and (d > 0).mean() < 1e-3
+
+
+def test_a_reused_renderer_draws_what_a_fresh_one_draws(renderer, motion):
+    rec = PointMotion(motion.names, motion.parents, motion.positions + [0, 0.1, 0], motion.fps)
+    keys, frames = [0, 15, 29], [0, 7, 15]
+    kw = dict(keyframes=keys, method="m", style=SMALL, frames=frames)
+    fresh = list(render_frames(motion, rec, **kw))
+    shared = list(render_frames(motion, rec, renderer=renderer, **kw))
+    alone = list(render_frames(motion, None, renderer=renderer, **kw))  # ghost hidden, then back
+    again = list(render_frames(motion, rec, renderer=renderer, **kw))
+    for a, b, c in zip(fresh, shared, again, strict=True):
+        assert same_picture(a, b) and same_picture(a, c)
+    assert not any(same_picture(a, b) for a, b in zip(alone, fresh, strict=True))
+    with pytest.raises(ValueError, match="other points or another style"):
+        list(
+            render_frames(motion, rec, keyframes=keys, style=RenderStyle(64, 48), renderer=renderer)
+        )

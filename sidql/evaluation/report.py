@@ -19,6 +19,7 @@ import io
 import json
 import math
 import os
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +35,7 @@ from sim.motion.clip import Clip, write_atomic
 from sim.motion.ingest import load_clips
 from sim.replay.checks import (
     PHYSICAL_KEYS,
+    CollisionScene,
     FrameChecks,
     PointMotion,
     excess,
@@ -42,7 +44,14 @@ from sim.replay.checks import (
     replay,
     summarise,
 )
-from sim.replay.render import DEFAULT_STYLE, RenderStyle, keyframe_sheet, render_frames, write_video
+from sim.replay.render import (
+    DEFAULT_STYLE,
+    RenderStyle,
+    SkeletonRenderer,
+    keyframe_sheet,
+    render_frames,
+    write_video,
+)
 
 
 @dataclass
@@ -106,9 +115,11 @@ def validate_clip(
         W: keyframes per clip, both ends included.
         joint_ranges: hinge ranges [rad] for the joint-limit check of motions with joint angles.
     """
-    kw = dict(floor_z=floor_z, contact_height=contact_height, hops=hops, joint_ranges=joint_ranges)
     full = from_clip(clip)
     orig = full.restrict(POINTS)
+    floor = dict(floor_z=floor_z, contact_height=contact_height, hops=hops)
+    scene = CollisionScene.for_reference(orig, **floor)  # one MuJoCo scene per clip, reused
+    kw = dict(**floor, joint_ranges=joint_ranges, scene=scene)
     base_checks = replay(orig, full, **kw)
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks))
     for m in methods:
@@ -328,35 +339,48 @@ def write_report(
             f"frame {start}, {T} frames at {v.clip.fps:g} fps, W = {v.W}</h2>"
         )
         parts.append(_table(v))
-        for r in v.runs:
-            stem = f"clip{ci:02d}_{_slug(r.label)}"
-            block = [f"<div class='method'><h3>{html.escape(r.label)}</h3>"]
-            if videos:
-                mp4 = write_video(
-                    render_frames(
-                        v.original, r.motion, keyframes=r.keyframes, method=r.label, style=style
-                    ),
-                    out / f"{stem}.mp4",
-                    v.clip.fps,
-                )
-                block.append(
-                    f"<video controls loop muted playsinline preload='auto' width='{style.width}' "
-                    f"data-file='{mp4.name}' src='{_data_uri('video/mp4', mp4.read_bytes())}'>"
-                    f"</video><p class='note'>video: <a href='{mp4.name}'>{mp4.name}</a> "
-                    "(orange ghost: reconstruction; green: keyframe)</p>"
-                )
-            sheet = keyframe_sheet(
-                v.original, r.motion, r.keyframes, out / f"{stem}_keyframes.png",
-                method=r.label, style=RenderStyle(320, 240, layout=style.layout),
-            )  # fmt: skip
-            png = error_plot(v, r)
-            write_atomic(out / f"{stem}_error.png", lambda f, png=png: f.write(png))
-            block.append(f"<img alt='per-frame error' src='{_data_uri('image/png', png)}'>")
-            block.append(
-                f"<img alt='keyframes' src='{_data_uri('image/png', sheet.read_bytes())}'></div>"
+        # One MuJoCo renderer per clip and image size, reused by every method's video and sheet.
+        sheet_style = RenderStyle(320, 240, layout=style.layout)
+        names, parents = v.original.names, v.original.parents
+        with ExitStack() as stack:  # closes both GL contexts, also on error
+            video_r = (
+                stack.enter_context(SkeletonRenderer(names, parents, style)) if videos else None
             )
-            parts.append("".join(block))
-            bar.update()
+            sheet_r = stack.enter_context(SkeletonRenderer(names, parents, sheet_style))
+            for r in v.runs:
+                stem = f"clip{ci:02d}_{_slug(r.label)}"
+                block = [f"<div class='method'><h3>{html.escape(r.label)}</h3>"]
+                if videos:
+                    mp4 = write_video(
+                        render_frames(
+                            v.original,
+                            r.motion,
+                            keyframes=r.keyframes,
+                            method=r.label,
+                            style=style,
+                            renderer=video_r,
+                        ),  # fmt: skip
+                        out / f"{stem}.mp4",
+                        v.clip.fps,
+                    )
+                    block.append(
+                        f"<video controls loop muted playsinline preload='auto' width='{style.width}' "
+                        f"data-file='{mp4.name}' src='{_data_uri('video/mp4', mp4.read_bytes())}'>"
+                        f"</video><p class='note'>video: <a href='{mp4.name}'>{mp4.name}</a> "
+                        "(orange ghost: reconstruction; green: keyframe)</p>"
+                    )
+                sheet = keyframe_sheet(
+                    v.original, r.motion, r.keyframes, out / f"{stem}_keyframes.png",
+                    method=r.label, style=sheet_style, renderer=sheet_r,
+                )  # fmt: skip
+                png = error_plot(v, r)
+                write_atomic(out / f"{stem}_error.png", lambda f, png=png: f.write(png))
+                block.append(f"<img alt='per-frame error' src='{_data_uri('image/png', png)}'>")
+                block.append(
+                    f"<img alt='keyframes' src='{_data_uri('image/png', sheet.read_bytes())}'></div>"
+                )
+                parts.append("".join(block))
+                bar.update()
     bar.close()
     page = (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"

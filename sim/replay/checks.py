@@ -176,6 +176,9 @@ class FrameChecks:
 class CollisionScene:
     """Owns the MuJoCo model and data of one capsule skeleton plus floor; measures frames.
 
+    The MuJoCo state of the replay job: build one per clip (:meth:`for_reference`) and pass it to
+    every :func:`replay` of that clip's motions on the same points.
+
     Args:
         bones: the point set's bones.
         floor_z: floor height [m].
@@ -187,6 +190,7 @@ class CollisionScene:
 
     def __init__(self, bones: Bones, *, floor_z=0.0, contact_height=0.02, hops: int = 2):
         self.bones = bones
+        self.settings = (float(floor_z), float(contact_height), int(hops))
         pairs = {(a, b) for a in range(len(bones.child)) for b in range(a + 1, len(bones.child))}
         self.pairs = sorted(pairs - adjacent_pairs(bones, hops))
         xml = scene_xml(
@@ -199,6 +203,15 @@ class CollisionScene:
         self._geom = np.arange(1, B + 1)  # geom 0 is the floor; then one capsule per bone
         self._bone_of_geom = np.full(self.model.ngeom, -1)
         self._bone_of_geom[self._geom] = np.arange(B)
+
+    @classmethod
+    def for_reference(
+        cls, reference: PointMotion, *, floor_z=0.0, contact_height=0.02, hops: int = 2
+    ) -> CollisionScene:
+        """The scene of ``reference``'s points with its mean bone lengths (what :func:`replay`
+        builds for a motion on those points checked against ``reference``)."""
+        bones = bones_of(reference.names, reference.parents, _lengths(reference))
+        return cls(bones, floor_z=floor_z, contact_height=contact_height, hops=hops)
 
     def measure(self, positions: np.ndarray):
         """Collisions of one frame.
@@ -271,7 +284,9 @@ def replay(
             frames: true bone lengths, MPJPE and velocity error come from it. Default: ``motion``.
         floor_z, contact_height, hops: see :class:`CollisionScene`.
         joint_ranges: hinge name -> (lo, hi) [rad], used when ``motion`` has ``qpos``.
-        scene: a :class:`CollisionScene` for ``motion``'s point set, to reuse across calls.
+        scene: the clip's :class:`CollisionScene` (:meth:`CollisionScene.for_reference` of the
+            restricted reference), reused across calls; built here when None. ValueError when it
+            was built for other bones or other floor settings.
     """
     ref = motion if reference is None else reference.restrict(motion.names)
     if ref.n_frames != motion.n_frames:
@@ -282,6 +297,13 @@ def replay(
     bones = bones_of(motion.names, motion.parents, _lengths(ref))
     if scene is None:
         scene = CollisionScene(bones, floor_z=floor_z, contact_height=contact_height, hops=hops)
+    elif not (
+        scene.bones.names == bones.names
+        and np.array_equal(scene.bones.parents, bones.parents)
+        and np.array_equal(scene.bones.radius, bones.radius)
+        and scene.settings == (float(floor_z), float(contact_height), int(hops))
+    ):
+        raise ValueError("the scene was built for other bones or floor settings than this replay")
     true_len = _lengths(ref)[bones.child]
     cur_len = np.linalg.norm(
         motion.positions[:, bones.child] - motion.positions[:, bones.parent], axis=-1

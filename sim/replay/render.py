@@ -209,6 +209,7 @@ def render_frames(
     style: RenderStyle = DEFAULT_STYLE,
     frames=None,
     progress: bool = False,
+    renderer: SkeletonRenderer | None = None,
 ):
     """Yield annotated (H, W, 3) uint8 frames of ``original`` with ``reconstruction`` as a ghost.
 
@@ -218,6 +219,8 @@ def render_frames(
         keyframes: frame indices marked as they pass.
         method: name in the caption.
         frames: which frame indices to render (default all).
+        renderer: the clip's :class:`SkeletonRenderer` (same points and style), reused and left
+            open; one is made and closed here when None.
     """
     rec = reconstruction
     orig = original if rec is None else original.restrict(rec.names)
@@ -232,7 +235,11 @@ def render_frames(
     it = frames
     if progress:
         it = tqdm(frames, desc=f"render {method or 'original'}", unit="frame", leave=False)
-    with SkeletonRenderer(orig.names, orig.parents, style) as r:
+    if renderer is not None and (renderer.bones.names != orig.names or renderer.style != style):
+        raise ValueError("the renderer was built for other points or another style")
+    owned = renderer is None
+    r = SkeletonRenderer(orig.names, orig.parents, style) if owned else renderer
+    try:
         for t in it:
             img = r.draw(
                 orig.positions[t], None if rec is None else rec.positions[t],
@@ -244,6 +251,9 @@ def render_frames(
                     f"MPJPE now {1e3 * err[t]:.1f} mm, running mean {1e3 * err[: t + 1].mean():.1f} mm"
                 )
             yield annotate(img, lines, t=t, n=T, keyframes=keys, key=t in keyset)
+    finally:
+        if owned:
+            r.close()
 
 
 def write_video(frames, path: str | os.PathLike, fps: float) -> Path:
@@ -299,12 +309,20 @@ def keyframe_sheet(
     method: str = "",
     style: RenderStyle = DEFAULT_STYLE,
     cols: int = 5,
+    renderer: SkeletonRenderer | None = None,
 ) -> Path:
-    """PNG contact sheet of the keyframes (original with the reconstruction's ghost)."""
+    """PNG contact sheet of the keyframes (original with the reconstruction's ghost);
+    ``renderer`` as in :func:`render_frames`."""
     keys = sorted(int(k) for k in keyframes)
     imgs = list(
         render_frames(
-            original, reconstruction, keyframes=keys, method=method, style=style, frames=keys
-        )
+            original,
+            reconstruction,
+            keyframes=keys,
+            method=method,
+            style=style,
+            frames=keys,
+            renderer=renderer,
+        )  # fmt: skip
     )
     return contact_sheet(imgs, [f"keyframe {k}" for k in keys], path, cols=cols)
