@@ -24,7 +24,7 @@ _API = {
     "synthetic_motion": "sim.motion.synthetic",
     "humanoid_model": "sim.model.humanoid",
     "subject_model": "sim.model.humanoid",
-    "PointMotion": "sim.replay.checks",
+    "PointMotion": "sim.motion.points",
     "from_clip": "sim.replay.checks",
     "replay": "sim.replay.checks",
     "summarise": "sim.replay.checks",

@@ -269,7 +269,7 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
         phi=phi,
         keyframes=k,
         variant="slerp",
-        dt=dt,
+        fps=clip.fps,
     )
 
 

@@ -31,6 +31,7 @@ from sidql.keyframes.spherical import (
     positions_from_chart,
 )
 from sim.motion.clip import Clip
+from sim.motion.points import PointMotion
 
 SPHERICAL_CURVES: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
 
@@ -131,30 +132,29 @@ def interpolate(
     return out, rate
 
 
-@dataclass(frozen=True)
-class Reconstruction:
-    """A clip rebuilt from keyframes: the 23 protocol points, ready to replay.
+@dataclass(frozen=True, kw_only=True)
+class Reconstruction(PointMotion):
+    """A clip rebuilt from keyframes: the 23 protocol points, ready to replay (a
+    :class:`~sim.motion.points.PointMotion`, so replay and render take it as it is).
 
-    Attributes:
+    Attributes (besides the point motion's names, parents, positions, fps, velocities):
         positions: (N, 23, 3) point positions [m], world axes (z up).
         velocities: (N, 23, 3) point velocities [m/s], world axes (derivative of the curves).
-        names: (23,) point names (:data:`sidql.keyframes.spherical.POINTS`).
-        parents: (23,) parent indices into ``names`` (-1 for the root).
-        theta: (N, 22) reconstructed polar angles [rad]; phi: (N, 22) azimuths [rad].
+        names: (23,) point names (:data:`sidql.keyframes.spherical.POINTS`); parents: (23,).
+        theta: (N, 22) polar angles [rad] of the rebuilt bones; phi: (N, 22) azimuths [rad].
         keyframes: (W,) keyframe indices used.
-        variant: reconstruction variant ("hermite", "linear", "catmull_rom" or "pitch").
-        dt: frame interval [s].
+        variant: the reconstruction (a name in :mod:`sidql.keyframes.reconstructions`).
     """
 
-    positions: np.ndarray
-    velocities: np.ndarray
-    names: tuple[str, ...]
-    parents: np.ndarray
     theta: np.ndarray
     phi: np.ndarray
     keyframes: np.ndarray
     variant: str
-    dt: float
+
+    @property
+    def dt(self) -> float:
+        """Frame interval [s]."""
+        return 1.0 / self.fps
 
 
 def reconstruct_series(
@@ -187,7 +187,7 @@ def reconstruct_series(
         phi=phi,
         keyframes=k,
         variant=variant,
-        dt=series.dt,
+        fps=1.0 / series.dt,
     )
 
 

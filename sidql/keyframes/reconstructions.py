@@ -175,5 +175,5 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
         phi=phi,
         keyframes=k,
         variant="cartesian",
-        dt=clip.dt,
+        fps=clip.fps,
     )

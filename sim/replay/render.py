@@ -24,8 +24,8 @@ from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
 from sim.motion.clip import write_atomic
+from sim.motion.points import PointMotion
 from sim.replay.capsules import bone_poses, bones_of, scene_xml
-from sim.replay.checks import PointMotion
 
 ORIGINAL_RGBA = (0.35, 0.45, 0.65, 1.0)
 GHOST_RGBA = (1.0, 0.55, 0.15, 0.45)
