@@ -81,3 +81,11 @@ def test_the_dropped_final_frame_warns_in_one_line_through_the_cli(cmu_dir, tmp_
     assert rc == 0
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and err[0].startswith(f"warning: {amc}:"), err
+
+
+def test_a_folder_without_clips_exits_2_with_one_line(tmp_path, capsys):
+    assert (
+        cli.main(["eval", "--data", str(tmp_path), "--out", str(tmp_path / "r.json"), "--quiet"])
+        == 2
+    )
+    assert "no 60-frame clips" in one_error_line(capsys, "eval")

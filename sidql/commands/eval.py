@@ -67,8 +67,7 @@ def run(args) -> int:
         subjects=args.subjects,
     )
     if not cases:
-        print(f"sidql eval: no {args.length}-frame clips under {args.data}")
-        return 1
+        raise UsageError(f"{args.data}: no {args.length}-frame clips (skipped {len(skipped)} bad)")
     try:
         out = evaluate(cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet)
     except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
