@@ -18,7 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import sim  # noqa: F401  (sets MUJOCO_GL=egl before MuJoCo loads)
+os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen, before MuJoCo loads (importing sim sets nothing)
+
 from sim.motion.synthetic import synthetic_motion
 from sim.replay.checks import PointMotion, from_clip
 from sim.replay.render import RenderStyle, SkeletonRenderer, annotate, camera_path, write_video

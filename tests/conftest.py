@@ -27,3 +27,20 @@ def walk_clip(cmu_dir):
     from sim.motion.ingest import load_motion
 
     return load_motion(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+
+
+@pytest.fixture(scope="session")
+def gl_context() -> None:
+    """Skip (saying why) only when no offscreen OpenGL context can be created on this machine.
+
+    The probe is a bare MuJoCo GL context, nothing of ours: any failure after it (a bad scene,
+    a bad material) fails the test instead of skipping it.
+    """
+    try:
+        import mujoco  # after MUJOCO_GL is set above
+
+        ctx = mujoco.GLContext(64, 64)
+        ctx.make_current()
+        ctx.free()
+    except (ImportError, RuntimeError, OSError) as e:
+        pytest.skip(f"no offscreen GL context (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {e}")

@@ -1,4 +1,5 @@
-"""Retargeting: MuJoCo's bodies on the subject's own model equal an independent numpy FK."""
+"""Retargeting: MuJoCo's bodies on the subject's own model equal an independent FK
+(``tests/acclaim_fk.py``: scipy rotations, no code shared with the model builder)."""
 
 from __future__ import annotations
 
@@ -7,11 +8,12 @@ import warnings
 import mujoco
 import numpy as np
 import pytest
+from acclaim_fk import acclaim_points
 
 from sim.acclaim.reader import parse_amc, parse_asf
 from sim.errors import MotionDataWarning
 from sim.model.humanoid import HUMANOID_XML, build_mjcf, canonical_skeleton
-from sim.model.kinematics import forward_kinematics, point_names
+from sim.model.kinematics import point_names
 from sim.motion.ingest import load_motion
 
 TRIALS = ["01/01_01", "05/05_06", "07/07_12", "17/17_10", "60/60_01"]
@@ -25,7 +27,7 @@ def test_mujoco_bodies_match_numpy_forward_kinematics(cmu_dir, trial):
         warnings.simplefilter("ignore", MotionDataWarning)
         clip = load_motion(asf, amc, fps=30)
         skel = parse_asf(asf)
-        expected = forward_kinematics(skel, parse_amc(amc, skel))[::4]
+        expected = acclaim_points(skel, parse_amc(amc, skel))[::4]
     assert clip.names == point_names(skel)
     np.testing.assert_allclose(clip.positions, expected, atol=1e-6)
 

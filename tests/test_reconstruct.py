@@ -6,7 +6,7 @@ import pytest
 from keyframe_synth import assert_velocities_match_differences, piecewise_clip, smooth_clip
 
 from sidql.keyframes.metrics import bone_vectors, q_error
-from sidql.keyframes.reconstruct import VARIANTS, interpolate, keyframe_rates, reconstruct
+from sidql.keyframes.reconstruct import SPHERICAL_CURVES, interpolate, keyframe_rates, reconstruct
 from sidql.keyframes.spherical import POINTS, chart
 
 KEYS = np.array([0, 7, 19, 20, 33, 59])
@@ -56,7 +56,7 @@ def test_catmull_rom_rates_are_central_differences_over_neighbour_keyframes():
     assert np.allclose(m[0], (x[KEYS[1]] - x[0]) / (KEYS[1] * 0.1))
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", SPHERICAL_CURVES)
 def test_bone_lengths_are_constant_and_keyframes_exact(variant):
     clip = smooth_clip(60, 30.0, seed=7)
     rec = reconstruct(clip, np.array([0, 11, 40, 59]), variant)
@@ -67,7 +67,7 @@ def test_bone_lengths_are_constant_and_keyframes_exact(variant):
     assert rec.names == POINTS and rec.positions.shape == (60, 23, 3)
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", SPHERICAL_CURVES)
 def test_velocities_are_the_derivative_of_positions(variant):
     """At 600 fps, central differences of the rebuilt positions match the reported velocities
     away from keyframes (where linear and Catmull-Rom have kinks)."""

@@ -230,3 +230,29 @@ def test_real_walk_hermite_reconstruction_keeps_bone_lengths(walk_clip):
     c = replay(from_reconstruction(rec, clip.fps), from_clip(clip))
     assert c.bone_drift.max() < 1e-9
     assert np.isfinite(c.floor_depth).all() and np.isfinite(c.skate_speed).all()
+
+
+def test_one_scene_per_clip_gives_the_figures_of_a_fresh_scene_per_replay():
+    from dataclasses import astuple
+
+    from sidql.keyframes.methods import select
+    from sidql.keyframes.reconstructions import rebuild
+    from sidql.keyframes.spherical import POINTS
+    from sim.motion.synthetic import synthetic_motion
+
+    clip = synthetic_motion(1.0, seed=4)
+    full = from_clip(clip)
+    orig = full.restrict(POINTS)
+    scene = CollisionScene.for_reference(orig)
+    motions = [orig] + [
+        from_reconstruction(rebuild(v, clip, select("uniform", clip, 5)), clip.fps)
+        for v in ("hermite", "cartesian", "hermite")
+    ]
+    for m in motions:  # reused scene (state left by the previous motion) == a new one
+        shared, fresh = astuple(replay(m, full, scene=scene)), astuple(replay(m, full))
+        for a, b in zip(shared, fresh, strict=True):
+            np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="other bones or floor settings"):
+        replay(orig, full, scene=scene, hops=1)
+    with pytest.raises(ValueError, match="other bones or floor settings"):
+        replay(full, full, scene=scene)

@@ -16,7 +16,10 @@ import time
 
 import numpy as np
 import pytest
+from PIL import Image
 
+from sidql.evaluation.report import report_clips
+from sim.motion.synthetic import synthetic_motion
 from sim.replay.render import RenderStyle
 
 CHROMIUM = next(
@@ -105,7 +108,7 @@ class DevTools:
     def close(self):
         try:
             self.call("Browser.close", timeout=5)
-        except Exception:
+        except (RuntimeError, TimeoutError, OSError):  # already gone
             pass
         try:
             self.proc.wait(timeout=10)
@@ -117,16 +120,8 @@ class DevTools:
 
 
 @pytest.fixture(scope="module")
-def report_dir(tmp_path_factory):
-    from sidql.evaluation.report import report_clips
-    from sim.motion.synthetic import synthetic_motion
-
-    try:
-        from sim.replay.render import SkeletonRenderer
-
-        SkeletonRenderer(("root", "a"), np.array([-1, 0]), RenderStyle(64, 48)).close()
-    except Exception as e:
-        pytest.skip(f"offscreen rendering unavailable (MUJOCO_GL=egl): {e}")
+def report_dir(gl_context, tmp_path_factory):
+    # skips only when no GL context exists (conftest.gl_context); errors of ours fail
     out = tmp_path_factory.mktemp("report")
     clip = synthetic_motion(1.0, seed=2)
     report_clips(
@@ -151,10 +146,26 @@ def test_report_files_and_checks(report_dir):
     assert "http://" not in page and "https://" not in page  # needs no network
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install chromium)")
-def test_page_loads_in_chromium_with_playable_videos(report_dir, tmp_path):
-    from PIL import Image
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    """Skip (saying why) only when no headless Chromium can be started and answer the DevTools
+    protocol; everything after that probe fails the test instead."""
+    if CHROMIUM is None:
+        pytest.skip("chromium not installed (apt-get install chromium)")
+    try:
+        dt = DevTools("about:blank", str(tmp_path_factory.mktemp("probe")))
+    except OSError as e:
+        pytest.skip(f"cannot start {CHROMIUM}: {e}")
+    try:
+        dt.call("Browser.getVersion", timeout=30)
+    except (RuntimeError, TimeoutError) as e:
+        pytest.skip(f"{CHROMIUM} does not answer the DevTools protocol: {e}")
+    finally:
+        dt.close()
+    return CHROMIUM
 
+
+def test_page_loads_in_chromium_with_playable_videos(browser, report_dir, tmp_path):
     url = (report_dir / "index.html").resolve().as_uri()
     dt = DevTools("about:blank", str(tmp_path / "profile"))
     try:

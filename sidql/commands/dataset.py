@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from sim.motion.dataset import ingest_directory
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -23,8 +25,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from sim.motion.dataset import ingest_directory
-
     s = ingest_directory(
         args.dir, args.out, skeleton=args.skeleton, fps=args.fps, workers=args.workers
     )

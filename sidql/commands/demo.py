@@ -3,7 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
+
+from sidql.commands.ingest import describe
+from sidql.evaluation.report import joint_ranges, report_clips
+from sidql.keyframes.methods import available
+from sim.model.humanoid import humanoid_model, subject_model
+from sim.motion.clip import save_npz
+from sim.motion.ingest import load_motion
+from sim.motion.synthetic import synthetic_motion
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "cmu"
 DEFAULT_TRIAL = ("02", "02_01")
@@ -34,9 +43,6 @@ def register(sub) -> None:
 
 def default_clip(data: str | Path):
     """The demo's motion: CMU trial 02_01 (walk) if present, else synthetic motion."""
-    from sim.motion.ingest import load_motion
-    from sim.motion.synthetic import synthetic_motion
-
     subject, trial = DEFAULT_TRIAL
     asf, amc = Path(data) / subject / f"{subject}.asf", Path(data) / subject / f"{trial}.amc"
     if asf.exists() and amc.exists():
@@ -46,9 +52,6 @@ def default_clip(data: str | Path):
 
 
 def run(args) -> int:
-    from sidql.commands.ingest import describe
-    from sim.motion.clip import save_npz
-
     clip = default_clip(args.data)
     print(describe(clip))
     path = save_npz(clip, Path(args.out) / "motion.npz")
@@ -60,10 +63,6 @@ def run(args) -> int:
 
 def report_step(clip, args) -> int:
     """Keyframes by every method on the first 60-frame clip, reconstruction, replay, report."""
-    from sidql.evaluation.report import joint_ranges, report_clips
-    from sidql.keyframes.methods import available
-    from sim.model.humanoid import humanoid_model, subject_model
-
     subject, _ = DEFAULT_TRIAL
     asf = Path(args.data) / subject / f"{subject}.asf"
     model = subject_model(asf)[1] if clip.source and asf.exists() else humanoid_model()[1]
@@ -81,8 +80,6 @@ def report_step(clip, args) -> int:
 
 def summary_table(checks_path: Path) -> str:
     """The report's headline figures per method, as a Markdown table for the terminal."""
-    import json
-
     doc = json.loads(Path(checks_path).read_text())
     clip = doc["clips"][0]
     rows = [

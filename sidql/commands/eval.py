@@ -3,6 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
+
+from sidql.commands.usage import UsageError
+from sidql.evaluation.evaluate import evaluate, load_cases, table3_markdown
+from sidql.evaluation.rate import rate_distortion, write_plot
+from sidql.keyframes.methods import get
+from sim.motion.clip import write_atomic
 
 
 def register(sub) -> None:
@@ -42,23 +50,14 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import json
-    import sys
-    from pathlib import Path
-
-    from sidql.evaluation.evaluate import evaluate, load_cases, table3_markdown
-    from sidql.keyframes.methods import get
-    from sim.motion.clip import write_atomic
-
     for name in args.methods:  # unknown names fail before the (slow) ingest
         try:
             get(name)
-        except (KeyError, ImportError) as e:
-            print(f"sidql eval: error: {e}", file=sys.stderr)
-            return 2
+        except KeyError as e:
+            raise UsageError(e.args[0]) from None
     for W in args.keyframes:
         if not 2 <= W <= args.length:
-            raise SystemExit(f"sidql eval: --keyframes values must be in [2, {args.length}]")
+            raise UsageError(f"--keyframes values must be in [2, {args.length}]; got {W}")
     cases, skipped = load_cases(
         args.data,
         fps=args.fps,
@@ -68,13 +67,11 @@ def run(args) -> int:
         subjects=args.subjects,
     )
     if not cases:
-        print(f"sidql eval: no {args.length}-frame clips under {args.data}")
-        return 1
+        raise UsageError(f"{args.data}: no {args.length}-frame clips (skipped {len(skipped)} bad)")
     try:
         out = evaluate(cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet)
     except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
-        print(f"sidql eval: error: {e}", file=sys.stderr)
-        return 2
+        raise UsageError(str(e)) from None
     out["skipped"] = skipped
     out["protocol"] = {
         "data": str(args.data),
@@ -91,8 +88,6 @@ def run(args) -> int:
     print(table3_markdown(out["results"]))
     print(f"wrote {path}")
     if args.rate_plot:
-        from sidql.evaluation.rate import rate_distortion, write_plot
-
         rd = rate_distortion(cases, seed=args.seed, progress=not args.quiet)
         png = Path(args.rate_plot)
         png.parent.mkdir(parents=True, exist_ok=True)

@@ -3,6 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
+
+from sidql.commands.usage import UsageError
+from sidql.evaluation.evaluate import clip_seed, make_case, score
+from sidql.keyframes.methods import get, select
+from sim.motion.clip import write_atomic
+from sim.motion.ingest import load_clips
 
 
 def register(sub) -> None:
@@ -29,22 +37,12 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import json
-    import sys
-    from pathlib import Path
-
-    from sidql.evaluation.evaluate import clip_seed, make_case, score
-    from sidql.keyframes.methods import get, select
-    from sim.motion.clip import write_atomic
-    from sim.motion.ingest import load_clips
-
     try:
         get(args.method)  # unknown names fail before the (slow) ingest
-    except (KeyError, ImportError) as e:
-        print(f"sidql extract: error: {e}", file=sys.stderr)
-        return 2
+    except KeyError as e:
+        raise UsageError(e.args[0]) from None
     if not 2 <= args.keyframes <= args.length:
-        raise SystemExit(f"sidql extract: --keyframes must be in [2, {args.length}]")
+        raise UsageError(f"--keyframes must be in [2, {args.length}]; got {args.keyframes}")
     clips = load_clips(args.asf, args.amc, fps=args.fps, length=args.length, skeleton=args.skeleton)
     rows = []
     for i, clip in enumerate(clips):

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
+from sim.motion.clip import save_npz
+from sim.motion.ingest import load_motion
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -28,9 +33,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from sim.motion.clip import save_npz
-    from sim.motion.ingest import load_motion
-
     clip = load_motion(
         args.asf, args.amc, skeleton=args.skeleton, fps=args.fps, source_fps=args.source_fps
     )
@@ -42,8 +44,6 @@ def run(args) -> int:
 
 def describe(clip) -> str:
     """A few lines a person can read: size, duration, extents, speeds."""
-    import numpy as np
-
     T, J = clip.positions.shape[:2]
     speed = np.linalg.norm(clip.velocities, axis=-1)
     root = clip.positions[:, 0]

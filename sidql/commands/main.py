@@ -7,10 +7,12 @@ arguments and returning an exit code. Adding a command = one module + one line b
 
 from __future__ import annotations
 
-import argparse
 import importlib
+import os
 import sys
+import warnings
 
+from sidql.commands.usage import ArgumentParser, UsageError, one_line_warning
 from sim.errors import MotionDataError
 
 COMMAND_MODULES = (
@@ -24,8 +26,8 @@ COMMAND_MODULES = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
         prog="sidql",
         description="MuJoCo testbed for motion-capture keyframe extraction and reconstruction.",
     )
@@ -36,12 +38,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except MotionDataError as e:
-        print(f"sidql {args.command}: error: {e}", file=sys.stderr)
-        return 2
+    """Run one command; bad input exits 2 with one line (see :mod:`sidql.commands.usage`)."""
+    # Offscreen rendering: EGL (Mesa's llvmpipe without a GPU) unless the user chose another
+    # backend. Set here, before any command module imports MuJoCo; library users set it themselves.
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    with warnings.catch_warnings():
+        warnings.showwarning = one_line_warning
+        args = build_parser().parse_args(argv)
+        try:
+            return int(args.func(args) or 0)
+        except (MotionDataError, UsageError) as e:
+            print(f"sidql {args.command}: error: {e}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":

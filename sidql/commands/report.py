@@ -4,6 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from sidql.commands.usage import UsageError
+from sidql.evaluation.report import report_trial
+from sidql.keyframes.methods import get
+from sim.errors import MotionDataError
+from sim.replay.render import RenderStyle
+
 DEFAULT_METHODS = ("random", "uniform", "greedy", "optimal", "pitch")
 
 
@@ -34,22 +40,22 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import sys
-
-    from sidql.evaluation.report import report_trial
-    from sim.errors import MotionDataError
-    from sim.replay.render import RenderStyle
-
+    for name in args.methods:  # unknown names fail before the (slow) ingest
+        try:
+            get(name)
+        except KeyError as e:
+            raise UsageError(e.args[0]) from None
+    if not 2 <= args.keyframes <= 60:
+        raise UsageError(f"--keyframes must be in [2, 60]; got {args.keyframes}")
     try:
         page = report_trial(
             args.asf, args.amc, args.out, W=args.keyframes, methods=args.methods,
             clips=args.clips, seed=args.seed, videos=not args.no_video,
             style=RenderStyle(layout=args.layout),
         )  # fmt: skip
-    except MotionDataError:
-        raise
-    except (ValueError, KeyError) as e:  # bad clip number, W or method name: say which
-        print(f"sidql report: error: {e}", file=sys.stderr)
-        return 2
+    except ValueError as e:  # a clip number out of range (MotionDataError passes through)
+        if isinstance(e, MotionDataError):
+            raise
+        raise UsageError(str(e)) from None
     print(f"report: {page}")
     return 0

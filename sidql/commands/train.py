@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+from sidql.commands.usage import UsageError
+
 
 def register(sub) -> None:
-    from sidql.learning.dqn import Args  # light: the module imports torch only when training starts
+    from sidql.learning.dqn import Args  # lazy: the learner needs torch; other commands do not
 
     d = Args()
     p = sub.add_parser(
@@ -54,11 +56,11 @@ def _bool(text: str) -> bool:
 
 
 def run(args) -> int:
-    from sidql.learning.dqn import Args, train
+    from sidql.learning.dqn import Args, train  # lazy: torch, only for this command
 
     for w in args.keyframes:
         if w < 3:
-            raise SystemExit("sidql train: --keyframes values must be at least 3")
+            raise UsageError(f"--keyframes values must be at least 3; got {w}")
     values = {
         f.name: getattr(args, f.name) for f in dataclasses.fields(Args) if hasattr(args, f.name)
     }

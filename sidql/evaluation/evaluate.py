@@ -2,12 +2,13 @@
 
 Protocol: every CMU trial at 30 fps (every 4th frame of 120 fps), cut into non-overlapping 60-frame
 clips from frame 0; each method chooses W keyframes per clip (both ends included); the clip is
-rebuilt (spherical cubic Hermite for every method except ``pitch``, which uses its own slerp
-reconstruction) and scored by
+rebuilt with the reconstruction the method declares (:mod:`sidql.keyframes.reconstructions`:
+spherical cubic Hermite for every method except ``pitch``, which declares Li et al.'s slerp) and
+scored by
 
 * ``q``: the paper's eq. 18 [rad] on the reconstruction's angles (22 bones);
 * ``q_hermite``: eq. 18 of the same keyframes under the Hermite reconstruction (equal to ``q``
-  except for pitch: it separates the choice of keyframes from the way they are interpolated);
+  for methods that declare Hermite: it separates the choice of keyframes from the way they are interpolated);
 * ``geodesic_deg``: mean angle between true and rebuilt bone directions [deg];
 * ``mpjpe_mm``: mean joint position error over the 23 points [mm];
 * ``velocity_error``: mean joint velocity error over the 23 points [m/s];
@@ -25,14 +26,16 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from tqdm import tqdm
 
-from sidql.keyframes import methods as methods_mod
-from sidql.keyframes import pitch as pitch_mod
+from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
-from sidql.keyframes.reconstruct import reconstruct_series
+from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import SphericalSeries, chart, protocol_indices
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip
+from sim.motion.dataset import find_trials
+from sim.motion.ingest import load_clips
 
 #: The paper's Table 3 (mean Q at W = 5, 10, 15); "SIDQL" is its DQN.
 PAPER_TABLE3: dict[str, dict[int, float]] = {
@@ -84,11 +87,6 @@ def load_cases(
         The cases, and ``{"amc", "problem"}`` for each trial skipped as bad input (also reported
         on stderr); good trials are kept.
     """
-    from tqdm import tqdm
-
-    from sim.motion.dataset import find_trials
-    from sim.motion.ingest import load_clips
-
     cases: list[Case] = []
     skipped: list[dict] = []
     trials = find_trials(data_dir)
@@ -112,22 +110,18 @@ def clip_seed(seed: int, index: int, W: int) -> int:
 
 
 def score(case: Case, keyframes: np.ndarray, method: str) -> dict:
-    """Every error measure of one clip rebuilt from ``keyframes`` (see the module docstring)."""
+    """Every error measure of one clip rebuilt from ``keyframes`` with the reconstruction
+    ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
+    docstring)."""
     s = case.series
-    q_h = q_error(s, keyframes, "hermite")
-    if method == "pitch":
-        rec = pitch_mod.reconstruct(case.clip, keyframes)
-        q = q_from_angles(s, rec.theta, rec.phi)
-    else:
-        rec = reconstruct_series(s, keyframes, "hermite")
-        q = q_h
+    rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
     return {
-        "q": q,
-        "q_hermite": q_h,
+        "q": q_from_angles(s, rec.theta, rec.phi),
+        "q_hermite": q_error(s, keyframes, "hermite"),
         "geodesic_deg": geodesic_deg(case.pos, rec.positions, rec.parents),
         "mpjpe_mm": mpjpe_mm(case.pos, rec.positions),
         "velocity_error": velocity_error(case.vel, rec.velocities),
-        "li_error_mm": 1000.0 * pitch_mod.pitch_error(case.pos, rec.positions),
+        "li_error_mm": 1000.0 * pitch_error(case.pos, rec.positions),
     }
 
 
@@ -147,12 +141,10 @@ def evaluate(
         mean_li_error_mm, median_decision_ms; a per-clip row holds source, start_frame, method,
         keyframes, indices, q and the other scores.
     """
-    from tqdm import tqdm
-
     method_names = list(method_names)
     counts = list(keyframe_counts)
     for name in method_names:
-        methods_mod.get(name)  # fail early, listing the known methods
+        methods.get(name)  # fail early, listing the known methods
     per_clip: list[dict] = []
     results: list[dict] = []
     jobs = [(m, W) for m in method_names for W in counts]
@@ -160,7 +152,7 @@ def evaluate(
         rows = []
         for case in cases:
             t0 = time.perf_counter()
-            k = methods_mod.select(name, case.clip, W, seed=clip_seed(seed, case.index, W))
+            k = methods.select(name, case.clip, W, seed=clip_seed(seed, case.index, W))
             ms = 1000.0 * (time.perf_counter() - t0)
             row = {
                 "source": case.clip.source,

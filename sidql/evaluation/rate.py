@@ -1,11 +1,12 @@
 """Rate and distortion: bytes per second of transmitted keyframes against reconstruction error.
 
-Payload per keyframe (float32 values, one byte for the frame index within a 60-frame clip):
+Payload per keyframe (float32 values, one byte for the frame index within a 60-frame clip), as
+registered in :mod:`sidql.keyframes.reconstructions`:
 
 * ``hermite`` (the paper): pose and rates, ``2 (2 M + 3)`` floats (M = 22 bone angle pairs plus
   the root position, and the same again for their rates);
 * ``linear`` and ``catmull_rom``: the pose only, ``2 M + 3`` floats;
-* ``pitch`` (Li et al. 2015): 23 local rotations as quaternions plus the root position,
+* ``slerp`` (Li et al. 2015, the ``pitch`` method's own): 23 local rotations as quaternions plus the root position,
   ``23 * 4 + 3`` floats.
 
 Bone lengths (or the pitch rig's offsets) are constant per subject and sent once: not counted.
@@ -18,33 +19,21 @@ programme over keyframe triples), and average Q and MPJPE over clips.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Sequence
 
 import numpy as np
+from tqdm import tqdm
 
 from sidql.evaluation.evaluate import Case, clip_seed
-from sidql.keyframes.methods import greedy_from_costs, uniform_indices
+from sidql.keyframes import reconstructions
+from sidql.keyframes.methods import select
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error
-from sidql.keyframes.optimal import catmull_rom_optimal, solve
-from sidql.keyframes.pitch import fit_rig, keyframes_for_count, pitch_distances, protocol_rotations
-from sidql.keyframes.pitch import reconstruct as pitch_reconstruct
-from sidql.keyframes.reconstruct import reconstruct_series
-from sidql.keyframes.segment_costs import segment_cost_matrix
-from sidql.keyframes.spherical import M_BONES
+from sidql.keyframes.reconstructions import FLOAT_BYTES, POSE_FLOATS
+from sim.motion.clip import write_atomic
 
-FLOAT_BYTES = 4
-INDEX_BYTES = 1
-POSE_FLOATS = 2 * M_BONES + 3
-
-#: bytes per keyframe of each reconstruction scheme.
-PAYLOAD_BYTES: dict[str, int] = {
-    "hermite": 2 * POSE_FLOATS * FLOAT_BYTES + INDEX_BYTES,
-    "linear": POSE_FLOATS * FLOAT_BYTES + INDEX_BYTES,
-    "catmull_rom": POSE_FLOATS * FLOAT_BYTES + INDEX_BYTES,
-    "pitch": (23 * 4 + 3) * FLOAT_BYTES + INDEX_BYTES,
-}
-
-#: (method, reconstruction) pairs plotted.
+#: (method, reconstruction) pairs plotted; keyframes by ``methods.select(method, ...,
+#: reconstruction=...)``, so "optimal" is the optimum of that reconstruction's own Q.
 CURVES: tuple[tuple[str, str], ...] = (
     ("optimal", "hermite"),
     ("greedy", "hermite"),
@@ -54,7 +43,7 @@ CURVES: tuple[tuple[str, str], ...] = (
     ("uniform", "linear"),
     ("optimal", "catmull_rom"),
     ("uniform", "catmull_rom"),
-    ("pitch", "pitch"),
+    ("pitch", "slerp"),
 )
 
 DEFAULT_COUNTS: tuple[int, ...] = (2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30)
@@ -66,27 +55,9 @@ def raw_bytes_per_second(fps: float = 30.0) -> float:
 
 
 def bytes_per_second(scheme: str, W: int, n_frames: int = 60, fps: float = 30.0) -> float:
-    """Bytes per second [B/s] of sending W keyframes of ``scheme`` per ``n_frames``-frame clip."""
-    return W * PAYLOAD_BYTES[scheme] * fps / n_frames
-
-
-def _keyframes(case: Case, W: int, method: str, scheme: str, cache: dict, seed: int):
-    s = case.series
-    N = s.n_frames
-    if method == "uniform":
-        return uniform_indices(N, W)
-    if method == "random":
-        rng = np.random.default_rng(clip_seed(seed, case.index, W))
-        return np.concatenate(
-            [[0], np.sort(rng.choice(np.arange(1, N - 1), W - 2, False)), [N - 1]]
-        )
-    if method == "pitch":
-        return keyframes_for_count(cache["pitch_D"], W)[0]
-    if method == "greedy":
-        return greedy_from_costs(cache["C_hermite"], W)
-    if scheme == "catmull_rom":
-        return cache["T_catmull_rom"].keyframes(W)
-    return cache[f"T_{scheme}"].keyframes(W)
+    """Bytes per second [B/s] of sending W keyframes of reconstruction ``scheme`` per
+    ``n_frames``-frame clip (its registered payload)."""
+    return W * reconstructions.get(scheme).payload_bytes * fps / n_frames
 
 
 def rate_distortion(
@@ -103,29 +74,24 @@ def rate_distortion(
         ``{"raw_bytes_per_second", "clips", "curves": [{"method", "scheme", "keyframes",
         "bytes_per_second", "mean_q", "mpjpe_mm", "velocity_error"}]}``.
     """
-    from tqdm import tqdm
-
     counts = sorted(counts)
     q = {c: np.zeros(len(counts)) for c in CURVES}
     e = {c: np.zeros(len(counts)) for c in CURVES}
     v = {c: np.zeros(len(counts)) for c in CURVES}
     for case in tqdm(cases, desc="rate/distortion", unit="clip", disable=not progress):
         s = case.series
-        cache = {}
-        cache["C_hermite"] = segment_cost_matrix(s, "hermite")
-        cache["T_hermite"] = solve(cache["C_hermite"], s.n_bones)
-        cache["T_linear"] = solve(segment_cost_matrix(s, "linear"), s.n_bones)
-        cache["T_catmull_rom"] = catmull_rom_optimal(s, max(counts))
-        pos, local, parents = protocol_rotations(case.clip)
-        cache["pitch_D"] = pitch_distances(local)
-        rig, _ = fit_rig(pos, local, parents)
+        memo = {"chart": s, "w_max": max(counts)}  # one optimum table per clip serves every W
         for i, W in enumerate(counts):
             for method, scheme in CURVES:
-                k = _keyframes(case, W, method, scheme, cache, seed)
-                if scheme == "pitch":
-                    rec = pitch_reconstruct(case.clip, k, rig)
-                else:
-                    rec = reconstruct_series(s, k, scheme)
+                k = select(
+                    method,
+                    case.clip,
+                    W,
+                    seed=clip_seed(seed, case.index, W),
+                    reconstruction=scheme,
+                    memo=memo,
+                )
+                rec = reconstructions.rebuild(scheme, case.clip, k, s)
                 q[(method, scheme)][i] += q_from_angles(s, rec.theta, rec.phi)
                 e[(method, scheme)][i] += mpjpe_mm(case.pos, rec.positions)
                 v[(method, scheme)][i] += velocity_error(case.vel, rec.velocities)
@@ -155,7 +121,8 @@ _STYLE = {
     "hermite": "-",
     "linear": "--",
     "catmull_rom": "-.",
-    "pitch": ":",
+    "slerp": ":",
+    "cartesian": (0, (1, 3)),
 }
 _COLOR = {"optimal": "C0", "greedy": "C1", "uniform": "C2", "random": "C3", "pitch": "C4"}
 
@@ -163,14 +130,10 @@ _COLOR = {"optimal": "C0", "greedy": "C1", "uniform": "C2", "random": "C3", "pit
 def write_plot(rd: dict, path) -> None:
     """Write the rate/distortion figure (Q, MPJPE and velocity error against bytes per second)
     to ``path`` (PNG), atomically."""
-    import io
-
-    import matplotlib
+    import matplotlib  # lazy: a heavy optional plotting dependency, only for the figure
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sim.motion.clip import write_atomic
+    import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
 
     fig, axes = plt.subplots(1, 3, figsize=(18, 5))
     for ax, key, label in (

@@ -19,14 +19,23 @@ import io
 import json
 import math
 import os
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from sidql.keyframes import reconstructions
+from sidql.keyframes.methods import reconstruction_of, select
+from sidql.keyframes.spherical import POINTS
+from sim.errors import MotionDataError
+from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip, write_atomic
+from sim.motion.ingest import load_clips
 from sim.replay.checks import (
     PHYSICAL_KEYS,
+    CollisionScene,
     FrameChecks,
     PointMotion,
     excess,
@@ -35,11 +44,14 @@ from sim.replay.checks import (
     replay,
     summarise,
 )
-from sim.replay.render import DEFAULT_STYLE, RenderStyle, keyframe_sheet, render_frames, write_video
-
-# Reconstructions shown for a method: the project's spherical Hermite for every method, and Li et
-# al.'s own slerp reconstruction for their keyframes.
-OWN_RECONSTRUCTION = {"pitch": "slerp"}
+from sim.replay.render import (
+    DEFAULT_STYLE,
+    RenderStyle,
+    SkeletonRenderer,
+    keyframe_sheet,
+    render_frames,
+    write_video,
+)
 
 
 @dataclass
@@ -84,18 +96,6 @@ def joint_ranges(model) -> dict[str, tuple[float, float]]:
     return out
 
 
-def reconstruct_with(clip: Clip, keyframes, reconstruction: str):
-    """``"hermite"`` (spherical Hermite, :func:`sidql.keyframes.reconstruct.reconstruct`; also ``"linear"``,
-    ``"catmull_rom"``) or ``"slerp"`` (Li et al.'s, :func:`sidql.keyframes.pitch.reconstruct`)."""
-    if reconstruction == "slerp":
-        from sidql.keyframes.pitch import reconstruct
-    else:
-        from sidql.keyframes.reconstruct import reconstruct
-
-        return reconstruct(clip, keyframes, reconstruction)
-    return reconstruct(clip, keyframes)
-
-
 def validate_clip(
     clip: Clip,
     methods,
@@ -115,18 +115,18 @@ def validate_clip(
         W: keyframes per clip, both ends included.
         joint_ranges: hinge ranges [rad] for the joint-limit check of motions with joint angles.
     """
-    from sidql.keyframes.methods import select
-    from sidql.keyframes.spherical import POINTS
-
-    kw = dict(floor_z=floor_z, contact_height=contact_height, hops=hops, joint_ranges=joint_ranges)
     full = from_clip(clip)
     orig = full.restrict(POINTS)
+    floor = dict(floor_z=floor_z, contact_height=contact_height, hops=hops)
+    scene = CollisionScene.for_reference(orig, **floor)  # one MuJoCo scene per clip, reused
+    kw = dict(**floor, joint_ranges=joint_ranges, scene=scene)
     base_checks = replay(orig, full, **kw)
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks))
     for m in methods:
         keys = np.asarray(select(m, clip, W, seed=seed))
-        for variant in ["hermite"] + ([OWN_RECONSTRUCTION[m]] if m in OWN_RECONSTRUCTION else []):
-            rec = from_reconstruction(reconstruct_with(clip, keys, variant), clip.fps)
+        own = reconstruction_of(m)  # every method under Hermite, and under its own if other
+        for variant in ["hermite"] + ([own] if own != "hermite" else []):
+            rec = from_reconstruction(reconstructions.rebuild(variant, clip, keys), clip.fps)
             checks = replay(rec, full, **kw)
             s = summarise(checks)
             out.runs.append(MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline)))
@@ -202,10 +202,10 @@ def _slug(s: str) -> str:
 def error_plot(v: ClipValidation, run: MethodRun) -> bytes:
     """PNG of per-frame MPJPE and velocity error, floor and self-penetration depth, keyframes as
     vertical lines."""
-    import matplotlib
+    import matplotlib  # lazy: a heavy optional plotting dependency, only for the figure
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
 
     T = v.clip.n_frames
     t = np.arange(T)
@@ -315,8 +315,6 @@ def write_report(
 ) -> Path:
     """Write ``index.html``, ``checks.json``, one ``.mp4`` and one keyframe ``.png`` per clip and
     method, and the error plots, into ``out_dir``. Returns the page's path."""
-    from tqdm import tqdm
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     meta = dict(meta or {})
@@ -341,35 +339,48 @@ def write_report(
             f"frame {start}, {T} frames at {v.clip.fps:g} fps, W = {v.W}</h2>"
         )
         parts.append(_table(v))
-        for r in v.runs:
-            stem = f"clip{ci:02d}_{_slug(r.label)}"
-            block = [f"<div class='method'><h3>{html.escape(r.label)}</h3>"]
-            if videos:
-                mp4 = write_video(
-                    render_frames(
-                        v.original, r.motion, keyframes=r.keyframes, method=r.label, style=style
-                    ),
-                    out / f"{stem}.mp4",
-                    v.clip.fps,
-                )
-                block.append(
-                    f"<video controls loop muted playsinline preload='auto' width='{style.width}' "
-                    f"data-file='{mp4.name}' src='{_data_uri('video/mp4', mp4.read_bytes())}'>"
-                    f"</video><p class='note'>video: <a href='{mp4.name}'>{mp4.name}</a> "
-                    "(orange ghost: reconstruction; green: keyframe)</p>"
-                )
-            sheet = keyframe_sheet(
-                v.original, r.motion, r.keyframes, out / f"{stem}_keyframes.png",
-                method=r.label, style=RenderStyle(320, 240, layout=style.layout),
-            )  # fmt: skip
-            png = error_plot(v, r)
-            write_atomic(out / f"{stem}_error.png", lambda f, png=png: f.write(png))
-            block.append(f"<img alt='per-frame error' src='{_data_uri('image/png', png)}'>")
-            block.append(
-                f"<img alt='keyframes' src='{_data_uri('image/png', sheet.read_bytes())}'></div>"
+        # One MuJoCo renderer per clip and image size, reused by every method's video and sheet.
+        sheet_style = RenderStyle(320, 240, layout=style.layout)
+        names, parents = v.original.names, v.original.parents
+        with ExitStack() as stack:  # closes both GL contexts, also on error
+            video_r = (
+                stack.enter_context(SkeletonRenderer(names, parents, style)) if videos else None
             )
-            parts.append("".join(block))
-            bar.update()
+            sheet_r = stack.enter_context(SkeletonRenderer(names, parents, sheet_style))
+            for r in v.runs:
+                stem = f"clip{ci:02d}_{_slug(r.label)}"
+                block = [f"<div class='method'><h3>{html.escape(r.label)}</h3>"]
+                if videos:
+                    mp4 = write_video(
+                        render_frames(
+                            v.original,
+                            r.motion,
+                            keyframes=r.keyframes,
+                            method=r.label,
+                            style=style,
+                            renderer=video_r,
+                        ),  # fmt: skip
+                        out / f"{stem}.mp4",
+                        v.clip.fps,
+                    )
+                    block.append(
+                        f"<video controls loop muted playsinline preload='auto' width='{style.width}' "
+                        f"data-file='{mp4.name}' src='{_data_uri('video/mp4', mp4.read_bytes())}'>"
+                        f"</video><p class='note'>video: <a href='{mp4.name}'>{mp4.name}</a> "
+                        "(orange ghost: reconstruction; green: keyframe)</p>"
+                    )
+                sheet = keyframe_sheet(
+                    v.original, r.motion, r.keyframes, out / f"{stem}_keyframes.png",
+                    method=r.label, style=sheet_style, renderer=sheet_r,
+                )  # fmt: skip
+                png = error_plot(v, r)
+                write_atomic(out / f"{stem}_error.png", lambda f, png=png: f.write(png))
+                block.append(f"<img alt='per-frame error' src='{_data_uri('image/png', png)}'>")
+                block.append(
+                    f"<img alt='keyframes' src='{_data_uri('image/png', sheet.read_bytes())}'></div>"
+                )
+                parts.append("".join(block))
+                bar.update()
     bar.close()
     page = (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
@@ -398,8 +409,6 @@ def report_clips(
 ) -> Path:
     """Validate every clip in ``clips`` with every method and write the report; returns
     ``out_dir/index.html``."""
-    from tqdm import tqdm
-
     vals = [
         validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges)
         for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
@@ -425,10 +434,6 @@ def report_trial(
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid."""
-    from sim.errors import MotionDataError
-    from sim.model.humanoid import subject_model
-    from sim.motion.ingest import load_clips
-
     all_clips = load_clips(asf, amc)
     if not all_clips:
         raise MotionDataError(str(amc), None, "trial is shorter than one 60-frame clip")

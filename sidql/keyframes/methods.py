@@ -5,9 +5,15 @@ Every method returns W sorted, unique int64 frame indices that include the first
 
     from sidql.keyframes.methods import register
 
-    @register("mine")
+    @register("mine")  # or register("mine", reconstruction="slerp")
     def mine(clip, W, *, seed=0):
         ...
+
+A method declares the reconstruction it is meant for (:data:`RECONSTRUCTION`, default
+``"hermite"``; names from :mod:`sidql.keyframes.reconstructions`). A method whose choice depends on
+the reconstruction (the optimum, greedy) also accepts ``reconstruction=`` and ``memo=`` (a dict
+the caller keeps per clip, so that one table serves every W); :func:`select` passes them only to
+methods whose signature names them.
 
 A method living in a module that should only be imported on demand (e.g. one that needs torch
 weights) is named in :data:`LAZY_METHODS` instead (``name -> module``); :func:`select` imports that
@@ -17,11 +23,14 @@ module, which must call :func:`register` at import time.
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable
 
 import numpy as np
 
-from sidql.keyframes.optimal import optimal_table
+from sidql.keyframes import reconstructions
+from sidql.keyframes.metrics import q_error
+from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
 from sidql.keyframes.segment_costs import greedy_keyframes
 from sidql.keyframes.spherical import chart
 from sim.motion.clip import Clip
@@ -31,18 +40,34 @@ MethodFn = Callable[..., np.ndarray]
 #: name -> function(clip, W, *, seed=0) -> (W,) indices.
 METHODS: dict[str, MethodFn] = {}
 
+#: name -> the reconstruction the method is meant for (see :mod:`sidql.keyframes.reconstructions`).
+RECONSTRUCTION: dict[str, str] = {}
+
 #: name -> module that registers it when imported (for methods with heavy dependencies).
 LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy"}
 
+_OPTIONS = ("reconstruction", "memo")
+_TAKES: dict[str, tuple[str, ...]] = {}
 
-def register(name: str) -> Callable[[MethodFn], MethodFn]:
-    """Decorator registering ``fn(clip, W, *, seed=0) -> indices`` under ``name``."""
+
+def register(name: str, reconstruction: str = "hermite") -> Callable[[MethodFn], MethodFn]:
+    """Decorator registering ``fn(clip, W, *, seed=0) -> indices`` under ``name``, meant for
+    ``reconstruction``."""
 
     def deco(fn: MethodFn) -> MethodFn:
         METHODS[name] = fn
+        RECONSTRUCTION[name] = reconstruction
+        params = inspect.signature(fn).parameters
+        _TAKES[name] = tuple(p for p in _OPTIONS if p in params)
         return fn
 
     return deco
+
+
+def reconstruction_of(name: str) -> str:
+    """The reconstruction method ``name`` is meant for (importing it if lazy)."""
+    get(name)
+    return RECONSTRUCTION.get(name, "hermite")
 
 
 def available() -> list[str]:
@@ -60,7 +85,15 @@ def get(name: str) -> MethodFn:
         raise KeyError(f"unknown method {name!r}; known: {', '.join(available())}") from None
 
 
-def select(name: str, clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+def select(
+    name: str,
+    clip: Clip,
+    W: int,
+    *,
+    seed: int = 0,
+    reconstruction: str | None = None,
+    memo: dict | None = None,
+) -> np.ndarray:
     """Choose W keyframes of ``clip`` with method ``name``.
 
     Args:
@@ -68,6 +101,10 @@ def select(name: str, clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
         clip: the motion (N frames).
         W: keyframe count, both ends included, 2 <= W <= N.
         seed: seed of any randomness the method uses.
+        reconstruction: the reconstruction the keyframes will be rebuilt with, for methods whose
+            choice depends on it (default: the method's own, :func:`reconstruction_of`).
+        memo: a dict kept by the caller for this clip only; methods cache per-clip work there
+            (the chart, an optimum table for every W, pitch distances).
 
     Returns:
         (W,) sorted unique int64 indices with first 0 and last N - 1.
@@ -75,10 +112,21 @@ def select(name: str, clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
     N = clip.n_frames
     if not 2 <= W <= N:
         raise ValueError(f"W must be in [2, {N}] for a {N}-frame clip; got {W}")
-    k = np.asarray(get(name)(clip, W, seed=seed), dtype=np.int64)
+    fn = get(name)
+    options = {"reconstruction": reconstruction or RECONSTRUCTION[name], "memo": memo}
+    kw = {p: options[p] for p in _TAKES.get(name, ())}
+    k = np.asarray(fn(clip, W, seed=seed, **kw), dtype=np.int64)
     if k.shape != (W,) or k[0] != 0 or k[-1] != N - 1 or np.any(np.diff(k) <= 0):
         raise RuntimeError(f"method {name!r} returned bad keyframes {k.tolist()} for W={W}")
     return k
+
+
+def _memo_chart(clip: Clip, memo: dict | None):
+    if memo is None:
+        return chart(clip)
+    if "chart" not in memo:
+        memo["chart"] = chart(clip)
+    return memo["chart"]
 
 
 @register("random")
@@ -124,8 +172,6 @@ def naive_greedy(series, W: int) -> np.ndarray:
     O(W N) full reconstructions; the reference that :func:`greedy` must equal and the baseline its
     benchmark is measured against. ``series``: a :class:`~sidql.keyframes.spherical.SphericalSeries`.
     """
-    from sidql.keyframes.metrics import q_error
-
     keys = [0, series.n_frames - 1]
     for _ in range(W - 2):
         cands = [f for f in range(series.n_frames) if f not in keys]
@@ -135,20 +181,43 @@ def naive_greedy(series, W: int) -> np.ndarray:
 
 
 @register("greedy")
-def greedy(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
-    """Greedy (paper): repeatedly add the frame whose addition lowers Q (eq. 18) the most."""
-    return greedy_keyframes(chart(clip), W)
+def greedy(
+    clip: Clip, W: int, *, seed: int = 0, reconstruction: str = "hermite", memo=None
+) -> np.ndarray:
+    """Greedy (paper): repeatedly add the frame whose addition lowers Q (eq. 18) the most, Q of
+    ``reconstruction`` (one with a segment-cost kernel)."""
+    if reconstructions.get(reconstruction).cost_matrix is None:
+        raise ValueError(
+            f"greedy needs a reconstruction with a segment-cost kernel; got {reconstruction!r}"
+        )
+    return greedy_keyframes(_memo_chart(clip, memo), W, reconstruction)
 
 
 @register("optimal")
-def optimal(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
-    """The exact minimiser of Q (eq. 18) over all W-keyframe sets (dynamic programme)."""
-    return optimal_table(chart(clip), "hermite", w_max=W).keyframes(W)
+def optimal(
+    clip: Clip, W: int, *, seed: int = 0, reconstruction: str = "hermite", memo=None
+) -> np.ndarray:
+    """The exact minimiser of Q (eq. 18) of ``reconstruction`` over all W-keyframe sets (its
+    registered optimum). With a ``memo`` one table serves every W up to ``memo["w_max"]``."""
+    optimum = reconstructions.get(reconstruction).optimum
+    if optimum is None:
+        raise ValueError(f"reconstruction {reconstruction!r} has no registered optimum")
+    series = _memo_chart(clip, memo)
+    if memo is None:
+        return optimum(series, w_max=W).keyframes(W)
+    key = ("optimum", reconstruction)
+    if key not in memo or len(memo[key].cost) <= W:
+        memo[key] = optimum(series, w_max=max(W, memo.get("w_max", W)))
+    return memo[key].keyframes(W)
 
 
-@register("pitch")
-def pitch(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+@register("pitch", reconstruction="slerp")
+def pitch(clip: Clip, W: int, *, seed: int = 0, memo=None) -> np.ndarray:
     """Li et al. 2015: inter-frame pitch threshold, searched to give exactly W keyframes."""
-    from sidql.keyframes.pitch import pitch_keyframes
-
-    return pitch_keyframes(clip, W)
+    if memo is None or "pitch_distances" not in memo:
+        D = pitch_distances(protocol_rotations(clip)[1])
+        if memo is not None:
+            memo["pitch_distances"] = D
+    else:
+        D = memo["pitch_distances"]
+    return keyframes_for_count(D, W)[0]

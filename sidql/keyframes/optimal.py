@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sidql.keyframes.segment_costs import segment_cost_matrix
+from sidql.keyframes.segment_costs import catmull_rom_costs, segment_cost_matrix
 from sidql.keyframes.spherical import SphericalSeries
 
 
@@ -191,8 +191,6 @@ def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
     runs over triples of consecutive keyframes: O(N^5 M) for the costs, O(w_max N^4) for the DP.
     About a second per 60-frame clip.
     """
-    from sidql.keyframes.segment_costs import catmull_rom_costs
-
     N = series.n_frames
     if not 2 <= w_max <= N:
         raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")

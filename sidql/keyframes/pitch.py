@@ -218,7 +218,7 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
     given ``rig``, from :func:`fit_rig`, to save refitting).
 
     Returns:
-        A :class:`~sidql.keyframes.reconstruct.Reconstruction` (variant "pitch"): positions and velocities
+        A :class:`~sidql.keyframes.reconstruct.Reconstruction` (variant "slerp"): positions and velocities
         (N, 23, 3) world z-up [m, m/s] (velocities are the exact derivatives of the interpolants;
         at an inner keyframe the mean of both sides), theta/phi (N, 22) of the rebuilt bones.
     """
@@ -235,8 +235,8 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
     root_rec = root[a] + s[:, None] * (root[b] - root[a])
     slope = (root[b] - root[a]) / h[:, None]
     # Local rotations: slerp; body-frame angular velocity: log(q_a^-1 q_b) / h, constant per segment.
+    local_rec = quat.slerp(local[a], local[b], s[:, None])
     rel = quat.log(quat.mul(quat.conj(local[a]), local[b]))  # (N, 23, 3)
-    local_rec = quat.mul(local[a], quat.exp(s[:, None, None] * rel))
     omega = rel / h[:, None, None]
     inner = k[1:-1]
     if len(inner):
@@ -268,8 +268,8 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
         theta=theta,
         phi=phi,
         keyframes=k,
-        variant="pitch",
-        dt=dt,
+        variant="slerp",
+        fps=clip.fps,
     )
 
 

@@ -31,8 +31,9 @@ from sidql.keyframes.spherical import (
     positions_from_chart,
 )
 from sim.motion.clip import Clip
+from sim.motion.points import PointMotion
 
-VARIANTS: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
+SPHERICAL_CURVES: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
 
 
 def validate_keyframes(keyframes, n_frames: int) -> np.ndarray:
@@ -50,8 +51,8 @@ def validate_keyframes(keyframes, n_frames: int) -> np.ndarray:
 
 
 def _check_variant(variant: str) -> None:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)}")
+    if variant not in SPHERICAL_CURVES:
+        raise ValueError(f"unknown variant {variant!r}; known: {', '.join(SPHERICAL_CURVES)}")
 
 
 def keyframe_rates(values: np.ndarray, keyframes: np.ndarray, dt: float) -> np.ndarray:
@@ -89,7 +90,7 @@ def interpolate(
             (may be None for the other variants).
         keyframes: (W,) strictly increasing indices from 0 to N-1.
         dt: frame interval [s].
-        variant: one of :data:`VARIANTS`.
+        variant: one of :data:`SPHERICAL_CURVES`.
 
     Returns:
         (N, D) reconstructed values and (N, D) their time derivatives [u/s]. For "linear" the
@@ -131,30 +132,29 @@ def interpolate(
     return out, rate
 
 
-@dataclass(frozen=True)
-class Reconstruction:
-    """A clip rebuilt from keyframes: the 23 protocol points, ready to replay.
+@dataclass(frozen=True, kw_only=True)
+class Reconstruction(PointMotion):
+    """A clip rebuilt from keyframes: the 23 protocol points, ready to replay (a
+    :class:`~sim.motion.points.PointMotion`, so replay and render take it as it is).
 
-    Attributes:
+    Attributes (besides the point motion's names, parents, positions, fps, velocities):
         positions: (N, 23, 3) point positions [m], world axes (z up).
         velocities: (N, 23, 3) point velocities [m/s], world axes (derivative of the curves).
-        names: (23,) point names (:data:`sidql.keyframes.spherical.POINTS`).
-        parents: (23,) parent indices into ``names`` (-1 for the root).
-        theta: (N, 22) reconstructed polar angles [rad]; phi: (N, 22) azimuths [rad].
+        names: (23,) point names (:data:`sidql.keyframes.spherical.POINTS`); parents: (23,).
+        theta: (N, 22) polar angles [rad] of the rebuilt bones; phi: (N, 22) azimuths [rad].
         keyframes: (W,) keyframe indices used.
-        variant: reconstruction variant ("hermite", "linear", "catmull_rom" or "pitch").
-        dt: frame interval [s].
+        variant: the reconstruction (a name in :mod:`sidql.keyframes.reconstructions`).
     """
 
-    positions: np.ndarray
-    velocities: np.ndarray
-    names: tuple[str, ...]
-    parents: np.ndarray
     theta: np.ndarray
     phi: np.ndarray
     keyframes: np.ndarray
     variant: str
-    dt: float
+
+    @property
+    def dt(self) -> float:
+        """Frame interval [s]."""
+        return 1.0 / self.fps
 
 
 def reconstruct_series(
@@ -165,7 +165,7 @@ def reconstruct_series(
     Args:
         series: the true motion's chart (N frames, M bones).
         keyframes: (W,) strictly increasing indices from 0 to N-1.
-        variant: one of :data:`VARIANTS`.
+        variant: one of :data:`SPHERICAL_CURVES`.
     """
     _check_variant(variant)
     k = validate_keyframes(keyframes, series.n_frames)
@@ -187,7 +187,7 @@ def reconstruct_series(
         phi=phi,
         keyframes=k,
         variant=variant,
-        dt=series.dt,
+        fps=1.0 / series.dt,
     )
 
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
+from sim.model.rotations import y_up_to_z_up, z_up_to_y_up
 from sim.motion.clip import Clip
 
 #: The 23 protocol points, root first, every parent before its children.
@@ -73,20 +74,10 @@ M_BONES = len(BONES)
 #: Lower bound on ``sin(theta)`` in the ``phi`` rate (see the module docstring).
 SIN_EPS = 1e-6
 
-#: (3, 3) matrix taking chart (CMU) axes to world axes: ``v_w = CHART_TO_WORLD @ v_c``.
-CHART_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-
-
-def world_to_chart(v_w: np.ndarray) -> np.ndarray:
-    """(..., 3) world vectors (z up) -> (..., 3) CMU-axes vectors (y up): (x, z, -y)."""
-    v_w = np.asarray(v_w, dtype=float)
-    return np.stack([v_w[..., 0], v_w[..., 2], -v_w[..., 1]], axis=-1)
-
-
-def chart_to_world(v_c: np.ndarray) -> np.ndarray:
-    """(..., 3) CMU-axes vectors (y up) -> (..., 3) world vectors (z up): (x, -z, y)."""
-    v_c = np.asarray(v_c, dtype=float)
-    return np.stack([v_c[..., 0], -v_c[..., 2], v_c[..., 1]], axis=-1)
+#: Chart (CMU, y up) axes <-> world (z up) axes: the one axis change of
+#: :data:`sim.model.rotations.Y_UP_TO_Z_UP`.
+world_to_chart = z_up_to_y_up
+chart_to_world = y_up_to_z_up
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -429,7 +420,7 @@ def clip_from_chart(
     Returns:
         A Clip with names :data:`POINTS`, positions/velocities in world axes, and local rotations
         consistent with them: the world rotation of bone m's body is ``A Rz(phi) Ry(theta) A^T``
-        (A = :data:`CHART_TO_WORLD`), so the bone is that rotation applied to ``(0, -r_m, 0)``
+        (A = :data:`sim.model.rotations.Y_UP_TO_Z_UP`), so the bone is that rotation applied to ``(0, -r_m, 0)``
         (the CMU z axis in world axes); the root's orientation is the identity.
     """
     parents = protocol_parent_indices()

@@ -18,12 +18,14 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 from sim.acclaim.reader import Skeleton, parse_asf
 from sim.model import quaternion as quat
 from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
+from sim.motion.clip import write_atomic
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 CANONICAL_ASF = Path(__file__).resolve().parents[1] / "data" / "canonical.asf"
@@ -173,8 +175,6 @@ def build_mjcf(
 
 @lru_cache(maxsize=64)
 def _model_for_asf(path: str, version: tuple):
-    import mujoco
-
     skeleton = parse_asf(path)
     return skeleton, mujoco.MjModel.from_xml_string(build_mjcf(skeleton))
 
@@ -195,15 +195,11 @@ def canonical_skeleton() -> Skeleton:
 @lru_cache(maxsize=1)
 def humanoid_model():
     """(skeleton, MjModel) of the shared humanoid ``models/cmu_humanoid.xml``."""
-    import mujoco
-
     return canonical_skeleton(), mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
 
 
 def write_humanoid_xml(path: str | os.PathLike = HUMANOID_XML) -> Path:
     """Regenerate ``models/cmu_humanoid.xml`` from the canonical skeleton."""
-    from sim.motion.clip import write_atomic
-
     text = build_mjcf(canonical_skeleton(), model_name="cmu_humanoid")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

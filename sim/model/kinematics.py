@@ -1,16 +1,14 @@
-"""Independent forward kinematics of ASF/AMC in numpy (no MuJoCo): the oracle for retargeting.
+"""The points of a skeleton: the root, then every ASF bone's end, with their parents.
 
-Acclaim's rule: a bone's global rotation is ``G = G_parent C M C^-1`` and its end lies at
-``end_parent + length * G direction``; the root sits at the AMC root translation.
+(The independent forward kinematics that checks retargeting lives with the tests,
+``tests/acclaim_fk.py``: it shares no code with the model builder.)
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from sim.acclaim.reader import Motion, Skeleton
-from sim.model.rotations import Y_UP_TO_Z_UP
-from sim.motion.retarget import acclaim_matrices
+from sim.acclaim.reader import Skeleton
 
 
 def point_names(skeleton: Skeleton) -> tuple[str, ...]:
@@ -23,14 +21,3 @@ def point_parents(skeleton: Skeleton) -> np.ndarray:
     names = point_names(skeleton)
     index = {n: i for i, n in enumerate(names)}
     return np.array([-1] + [index[b.parent] for b in skeleton.bones], dtype=np.int64)
-
-
-def forward_kinematics(skeleton: Skeleton, motion: Motion) -> np.ndarray:
-    """(T, J, 3) world positions [m], z up, of the root and every bone end."""
-    G = acclaim_matrices(skeleton, motion)
-    T = motion.n_frames
-    ends = {"root": motion.root[:, :3]}
-    for b in skeleton.bones:
-        ends[b.name] = ends[b.parent] + b.length * (G[b.name] @ b.direction)
-    pts = np.stack([ends[n] for n in point_names(skeleton)], axis=1).reshape(T, -1, 3)
-    return pts @ Y_UP_TO_Z_UP.T

@@ -119,12 +119,6 @@ def from_matrix(R: np.ndarray) -> np.ndarray:
     return np.where(q[..., :1] < 0, -q, q)
 
 
-def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(...) rotation angle [rad] in [0, pi] taking unit quaternion a to b (q and -q alike)."""
-    d = mul(conj(a), b)
-    return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
-
-
 def log(q: np.ndarray) -> np.ndarray:
     """(..., 3) rotation vector (axis * angle) [rad] of (..., 4) unit quaternions, angle <= pi
     (the sign of q is chosen so that w >= 0)."""

@@ -38,6 +38,19 @@ def euler_matrix(angles_deg: np.ndarray, order: str) -> np.ndarray:
     return R
 
 
-# Acclaim's CMU axes are y up; the project's world frame is z up: (x, y, z) -> (x, -z, y),
-# a +90 degree rotation about x.
+#: (3, 3) the one axis change: Acclaim's CMU axes (and the spherical chart's) are y up, the
+#: project's world frame is z up. ``v_z_up = Y_UP_TO_Z_UP @ v_y_up``: (x, y, z) -> (x, -z, y), a
+#: +90 degree rotation about x.
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def y_up_to_z_up(v: np.ndarray) -> np.ndarray:
+    """(..., 3) y-up vectors -> (..., 3) z-up: ``Y_UP_TO_Z_UP @ v``, as an exact permutation."""
+    v = np.asarray(v, dtype=float)
+    return np.stack([v[..., 0], -v[..., 2], v[..., 1]], axis=-1)
+
+
+def z_up_to_y_up(v: np.ndarray) -> np.ndarray:
+    """(..., 3) z-up vectors -> (..., 3) y-up: ``Y_UP_TO_Z_UP.T @ v`` = (x, z, -y)."""
+    v = np.asarray(v, dtype=float)
+    return np.stack([v[..., 0], v[..., 2], -v[..., 1]], axis=-1)

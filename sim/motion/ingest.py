@@ -13,7 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.reader import parse_amc
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
@@ -46,11 +46,14 @@ def clip_from_qpos(
     source_fps: float,
     fps: float,
     source: str = "",
+    data: mujoco.MjData | None = None,
 ) -> Clip:
     """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
 
     Point ``j`` is the site ``<names[j]>_end`` (the root: the root body's origin). Velocities are
     taken at the source rate (central differences of qpos), then mapped through the chain.
+    ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
+    per trial).
     """
     step = resample_step(source_fps, fps)
     frames = np.arange(0, qpos.shape[0], step)
@@ -59,7 +62,7 @@ def clip_from_qpos(
     for n in names:
         body_ids.append(model.body(n).id)
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
-    data = mujoco.MjData(model)
+    data = mujoco.MjData(model) if data is None else data
     pos, vel, xquat, omega = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
     return Clip(
@@ -138,8 +141,3 @@ def load_clips(
 ) -> list[Clip]:
     """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``."""
     return load_motion(asf, amc, skeleton=skeleton, fps=fps).split(length)
-
-
-def parse_and_check(asf: str | os.PathLike, amc: str | os.PathLike) -> None:
-    """Parse both files, raising :class:`MotionDataError` on malformed input (no retargeting)."""
-    parse_amc(amc, parse_asf(asf))

@@ -9,18 +9,14 @@ Two targets:
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 from sim.acclaim.reader import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
 from sim.model.humanoid import bone_frames
-from sim.model.rotations import Y_UP_TO_Z_UP, euler_matrix
-
-
-def dof_order(dofs: tuple[str, ...]) -> str:
-    """Euler order string of a bone's dofs, e.g. ``("rx", "rz") -> "XZ"``."""
-    return "".join(d[1].upper() for d in dofs)
+from sim.model.rotations import Y_UP_TO_Z_UP, euler_matrix, y_up_to_z_up
 
 
 def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
@@ -31,14 +27,12 @@ def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarra
     """
     C_o = bone_frames(skeleton)["root"]
     M = euler_matrix(motion.root[:, 3:], skeleton.root_axis_order)
-    pos = motion.root[:, :3] @ Y_UP_TO_Z_UP.T
+    pos = y_up_to_z_up(motion.root[:, :3])
     return pos, quat.from_matrix(Y_UP_TO_Z_UP @ C_o @ M)
 
 
 def joint_qpos_addresses(model) -> dict[str, int]:
     """Hinge joint name -> its ``qpos`` address in ``model``."""
-    import mujoco
-
     out = {}
     for j in range(model.njnt):
         if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
@@ -91,23 +85,3 @@ def local_rotations_from_world(xquat: np.ndarray, parents: np.ndarray) -> np.nda
     local = quat.mul(quat.conj(xquat[:, parent]), xquat)
     local[:, parents < 0] = xquat[:, parents < 0]
     return quat.canonical(local)
-
-
-def acclaim_matrices(skeleton: Skeleton, motion: Motion) -> dict[str, np.ndarray]:
-    """Acclaim global rotation ``G`` (T, 3, 3) of the root and every bone, file axes.
-
-    ``G_child = G_parent C M C^-1`` with ``C`` the bone's axis frame and ``M`` its AMC rotation.
-    Used by the independent forward kinematics in ``sim.model.kinematics``.
-    """
-    C = bone_frames(skeleton)
-    T = motion.n_frames
-    G = {
-        "root": C["root"] @ euler_matrix(motion.root[:, 3:], skeleton.root_axis_order) @ C["root"].T
-    }
-    for b in skeleton.bones:
-        if b.dofs:
-            M = euler_matrix(motion.angles[b.name], dof_order(b.dofs))
-        else:
-            M = np.broadcast_to(np.eye(3), (T, 3, 3))
-        G[b.name] = G[b.parent] @ C[b.name] @ M @ C[b.name].T
-    return G

@@ -21,13 +21,20 @@ from sim.motion.ingest import CMU_FPS, clip_from_qpos
 
 
 def synthetic_qpos(
-    model, seconds: float, *, seed: int = 0, rate: float = CMU_FPS, energy: float = 0.35
+    model,
+    seconds: float,
+    *,
+    seed: int = 0,
+    rate: float = CMU_FPS,
+    energy: float = 0.35,
+    data: mujoco.MjData | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Sinusoidal motion of ``model``'s hinges and free root.
 
     Args:
         seconds: duration [s]; rate: sampling rate [1/s].
         energy: fraction of each joint's half range used as amplitude (0..1).
+        data: the job's ``MjData`` of ``model`` (made here when None).
 
     Returns:
         qpos (T, nq) and the analytic hinge velocities (T, nq - 7) [rad/s].
@@ -58,13 +65,12 @@ def synthetic_qpos(
     R = axis_rotation("Z", yaw + np.pi / 2) @ upright
     qpos[:, 3:7] = quat.from_matrix(R)
     qpos[:, 7:] = hinges
-    _stand_on_floor(model, qpos)
+    _stand_on_floor(model, mujoco.MjData(model) if data is None else data, qpos)
     return qpos, dhinges
 
 
-def _stand_on_floor(model, qpos: np.ndarray) -> None:
+def _stand_on_floor(model, data, qpos: np.ndarray) -> None:
     """Shift the root height so the lowest foot site touches z = 0 (smoothed over time)."""
-    data = mujoco.MjData(model)
     feet = [model.site(n).id for n in ("lfoot_end", "rfoot_end", "ltoes_end", "rtoes_end")]
     low = np.empty(len(qpos))
     for i, q in enumerate(qpos):
@@ -84,7 +90,8 @@ def synthetic_motion(seconds: float = 4.0, *, seed: int = 0, fps: float = 30.0) 
     Points and parents follow the canonical CMU skeleton (root + 30 bones).
     """
     skeleton, model = humanoid_model()
-    qpos, _ = synthetic_qpos(model, seconds, seed=seed)
+    data = mujoco.MjData(model)  # the job's MuJoCo state, shared by both passes
+    qpos, _ = synthetic_qpos(model, seconds, seed=seed, data=data)
     return clip_from_qpos(
         model,
         point_names(skeleton),
@@ -93,4 +100,5 @@ def synthetic_motion(seconds: float = 4.0, *, seed: int = 0, fps: float = 30.0) 
         source_fps=CMU_FPS,
         fps=fps,
         source=f"synthetic(seed={seed})",
+        data=data,
     )

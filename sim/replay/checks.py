@@ -18,94 +18,15 @@ Units: metres, seconds, radians; world z up; the floor is the plane z = ``floor_
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
+from sim.motion.points import PointMotion, finite_velocity
 from sim.replay.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
 
 FEET = ("lfoot", "rfoot", "ltoes", "rtoes")
-
-
-@dataclass(frozen=True)
-class PointMotion:
-    """Positions of a point set over time: what every replay check consumes.
-
-    Attributes:
-        names: (P,) point names (root first).
-        parents: (P,) parent index, -1 for the root.
-        positions: (T, P, 3) [m], z up.
-        fps: frames per second [1/s].
-        velocities: (T, P, 3) [m/s] if the motion knows them exactly, else ``None`` (finite
-            differences of ``positions`` are used).
-        qpos: (T, 7 + H) joint angles (free root, then hinges [rad]) if the motion maps to them.
-        joint_names: (H,) hinge names for ``qpos[:, 7:]``.
-    """
-
-    names: tuple[str, ...]
-    parents: np.ndarray
-    positions: np.ndarray
-    fps: float
-    velocities: np.ndarray | None = None
-    qpos: np.ndarray | None = None
-    joint_names: tuple[str, ...] = field(default_factory=tuple)
-
-    def __post_init__(self):
-        T, P = self.positions.shape[:2]
-        if self.positions.shape != (T, P, 3):
-            raise ValueError(f"positions must be (T, P, 3); got {self.positions.shape}")
-        if len(self.names) != P or np.shape(self.parents) != (P,):
-            raise ValueError(f"names and parents must have P={P} entries")
-        if self.velocities is not None and self.velocities.shape != (T, P, 3):
-            raise ValueError(f"velocities must be {(T, P, 3)}; got {self.velocities.shape}")
-        if self.qpos is not None and (
-            self.qpos.shape[0] != T or self.qpos.shape[1] != 7 + len(self.joint_names)
-        ):
-            raise ValueError(
-                f"qpos must be (T, 7 + {len(self.joint_names)}); got {self.qpos.shape}"
-            )
-        if self.fps <= 0:
-            raise ValueError(f"fps must be positive; got {self.fps}")
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.positions.shape[0])
-
-    def velocity(self) -> np.ndarray:
-        """(T, P, 3) [m/s]: the exact velocities if known, else central differences."""
-        if self.velocities is not None:
-            return self.velocities
-        return finite_velocity(self.positions, self.fps)
-
-    def restrict(self, names) -> PointMotion:
-        """The same motion on the points ``names`` (a subset, any order with parents first); each
-        point's parent becomes its nearest ancestor in the subset."""
-        idx = []
-        for n in names:
-            if n not in self.names:
-                raise KeyError(f"unknown point {n!r}; known: {', '.join(self.names)}")
-            idx.append(self.names.index(n))
-        where = {j: k for k, j in enumerate(idx)}
-        parents = []
-        for j in idx:
-            p = int(self.parents[j])
-            while p >= 0 and p not in where:
-                p = int(self.parents[p])
-            parents.append(where[p] if p >= 0 else -1)
-        vel = None if self.velocities is None else self.velocities[:, idx]
-        return PointMotion(
-            tuple(names), np.array(parents), self.positions[:, idx], self.fps, vel,
-            self.qpos, self.joint_names,
-        )  # fmt: skip
-
-    def slice(self, start: int, stop: int) -> PointMotion:
-        """Frames ``[start, stop)``."""
-        s = slice(start, stop)
-        return PointMotion(
-            self.names, self.parents, self.positions[s], self.fps,
-            None if self.velocities is None else self.velocities[s],
-            None if self.qpos is None else self.qpos[s], self.joint_names,
-        )  # fmt: skip
 
 
 def from_clip(clip) -> PointMotion:
@@ -127,14 +48,6 @@ def from_reconstruction(rec, fps: float) -> PointMotion:
         None if qpos is None else np.asarray(qpos),
         tuple(getattr(rec, "joint_names", ())) if qpos is not None else (),
     )  # fmt: skip
-
-
-def finite_velocity(positions: np.ndarray, fps: float) -> np.ndarray:
-    """(T, ..., 3) central-difference velocity [m/s] of ``positions`` (T, ..., 3) [m] (one-sided at
-    the ends; zero for a single frame)."""
-    if positions.shape[0] < 2:
-        return np.zeros_like(positions)
-    return np.gradient(positions, 1.0 / fps, axis=0)
 
 
 @dataclass(frozen=True)
@@ -175,6 +88,9 @@ class FrameChecks:
 class CollisionScene:
     """Owns the MuJoCo model and data of one capsule skeleton plus floor; measures frames.
 
+    The MuJoCo state of the replay job: build one per clip (:meth:`for_reference`) and pass it to
+    every :func:`replay` of that clip's motions on the same points.
+
     Args:
         bones: the point set's bones.
         floor_z: floor height [m].
@@ -185,10 +101,8 @@ class CollisionScene:
     """
 
     def __init__(self, bones: Bones, *, floor_z=0.0, contact_height=0.02, hops: int = 2):
-        import mujoco
-
-        self._mj = mujoco
         self.bones = bones
+        self.settings = (float(floor_z), float(contact_height), int(hops))
         pairs = {(a, b) for a in range(len(bones.child)) for b in range(a + 1, len(bones.child))}
         self.pairs = sorted(pairs - adjacent_pairs(bones, hops))
         xml = scene_xml(
@@ -201,6 +115,15 @@ class CollisionScene:
         self._geom = np.arange(1, B + 1)  # geom 0 is the floor; then one capsule per bone
         self._bone_of_geom = np.full(self.model.ngeom, -1)
         self._bone_of_geom[self._geom] = np.arange(B)
+
+    @classmethod
+    def for_reference(
+        cls, reference: PointMotion, *, floor_z=0.0, contact_height=0.02, hops: int = 2
+    ) -> CollisionScene:
+        """The scene of ``reference``'s points with its mean bone lengths (what :func:`replay`
+        builds for a motion on those points checked against ``reference``)."""
+        bones = bones_of(reference.names, reference.parents, _lengths(reference))
+        return cls(bones, floor_z=floor_z, contact_height=contact_height, hops=hops)
 
     def measure(self, positions: np.ndarray):
         """Collisions of one frame.
@@ -218,8 +141,8 @@ class CollisionScene:
         d.mocap_quat[:] = quat
         m.geom_size[self._geom, 1] = half
         m.geom_rbound[self._geom] = half + self.bones.radius
-        self._mj.mj_kinematics(m, d)
-        self._mj.mj_collision(m, d)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
         floor_gap = np.full(len(self.bones.child), np.inf)
         deepest: dict[tuple[int, int], float] = {}
         if d.ncon:
@@ -273,7 +196,9 @@ def replay(
             frames: true bone lengths, MPJPE and velocity error come from it. Default: ``motion``.
         floor_z, contact_height, hops: see :class:`CollisionScene`.
         joint_ranges: hinge name -> (lo, hi) [rad], used when ``motion`` has ``qpos``.
-        scene: a :class:`CollisionScene` for ``motion``'s point set, to reuse across calls.
+        scene: the clip's :class:`CollisionScene` (:meth:`CollisionScene.for_reference` of the
+            restricted reference), reused across calls; built here when None. ValueError when it
+            was built for other bones or other floor settings.
     """
     ref = motion if reference is None else reference.restrict(motion.names)
     if ref.n_frames != motion.n_frames:
@@ -284,6 +209,13 @@ def replay(
     bones = bones_of(motion.names, motion.parents, _lengths(ref))
     if scene is None:
         scene = CollisionScene(bones, floor_z=floor_z, contact_height=contact_height, hops=hops)
+    elif not (
+        scene.bones.names == bones.names
+        and np.array_equal(scene.bones.parents, bones.parents)
+        and np.array_equal(scene.bones.radius, bones.radius)
+        and scene.settings == (float(floor_z), float(contact_height), int(hops))
+    ):
+        raise ValueError("the scene was built for other bones or floor settings than this replay")
     true_len = _lengths(ref)[bones.child]
     cur_len = np.linalg.norm(
         motion.positions[:, bones.child] - motion.positions[:, bones.parent], axis=-1

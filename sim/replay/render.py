@@ -18,12 +18,14 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
+from tqdm import tqdm
 
 from sim.motion.clip import write_atomic
+from sim.motion.points import PointMotion
 from sim.replay.capsules import bone_poses, bones_of, scene_xml
-from sim.replay.checks import PointMotion
 
 ORIGINAL_RGBA = (0.35, 0.45, 0.65, 1.0)
 GHOST_RGBA = (1.0, 0.55, 0.15, 0.45)
@@ -73,9 +75,6 @@ class SkeletonRenderer:
     """
 
     def __init__(self, names, parents, style: RenderStyle = DEFAULT_STYLE, lengths=None):
-        import mujoco
-
-        self._mj = mujoco
         self.style = style
         self.bones = bones_of(names, parents, lengths)
         xml = scene_xml(
@@ -130,7 +129,7 @@ class SkeletonRenderer:
         m.geom_rgba[self._ghost] = KEY_RGBA if key else GHOST_RGBA
         if ghost is None:
             m.geom_rgba[self._ghost, 3] = 0.0
-        self._mj.mj_kinematics(m, d)
+        mujoco.mj_kinematics(m, d)
         self.camera.lookat[:] = lookat
         self.camera.azimuth = azimuth
         self.renderer.update_scene(d, camera=self.camera)
@@ -210,6 +209,7 @@ def render_frames(
     style: RenderStyle = DEFAULT_STYLE,
     frames=None,
     progress: bool = False,
+    renderer: SkeletonRenderer | None = None,
 ):
     """Yield annotated (H, W, 3) uint8 frames of ``original`` with ``reconstruction`` as a ghost.
 
@@ -219,6 +219,8 @@ def render_frames(
         keyframes: frame indices marked as they pass.
         method: name in the caption.
         frames: which frame indices to render (default all).
+        renderer: the clip's :class:`SkeletonRenderer` (same points and style), reused and left
+            open; one is made and closed here when None.
     """
     rec = reconstruction
     orig = original if rec is None else original.restrict(rec.names)
@@ -232,10 +234,12 @@ def render_frames(
     frames = range(T) if frames is None else frames
     it = frames
     if progress:
-        from tqdm import tqdm
-
         it = tqdm(frames, desc=f"render {method or 'original'}", unit="frame", leave=False)
-    with SkeletonRenderer(orig.names, orig.parents, style) as r:
+    if renderer is not None and (renderer.bones.names != orig.names or renderer.style != style):
+        raise ValueError("the renderer was built for other points or another style")
+    owned = renderer is None
+    r = SkeletonRenderer(orig.names, orig.parents, style) if owned else renderer
+    try:
         for t in it:
             img = r.draw(
                 orig.positions[t], None if rec is None else rec.positions[t],
@@ -247,11 +251,14 @@ def render_frames(
                     f"MPJPE now {1e3 * err[t]:.1f} mm, running mean {1e3 * err[: t + 1].mean():.1f} mm"
                 )
             yield annotate(img, lines, t=t, n=T, keyframes=keys, key=t in keyset)
+    finally:
+        if owned:
+            r.close()
 
 
 def write_video(frames, path: str | os.PathLike, fps: float) -> Path:
     """Encode (H, W, 3) uint8 frames as an H.264 mp4 (yuv420p, fast start) atomically."""
-    import imageio.v2 as imageio
+    import imageio.v2 as imageio  # lazy: heavy optional video dependency, only to write an mp4
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -302,12 +309,20 @@ def keyframe_sheet(
     method: str = "",
     style: RenderStyle = DEFAULT_STYLE,
     cols: int = 5,
+    renderer: SkeletonRenderer | None = None,
 ) -> Path:
-    """PNG contact sheet of the keyframes (original with the reconstruction's ghost)."""
+    """PNG contact sheet of the keyframes (original with the reconstruction's ghost);
+    ``renderer`` as in :func:`render_frames`."""
     keys = sorted(int(k) for k in keyframes)
     imgs = list(
         render_frames(
-            original, reconstruction, keyframes=keys, method=method, style=style, frames=keys
-        )
+            original,
+            reconstruction,
+            keyframes=keys,
+            method=method,
+            style=style,
+            frames=keys,
+            renderer=renderer,
+        )  # fmt: skip
     )
     return contact_sheet(imgs, [f"keyframe {k}" for k in keys], path, cols=cols)

@@ -1,0 +1,36 @@
+"""What every command shares for bad input: one exception, one-line errors and warnings.
+
+Every bad input exits 2 with one line on stderr: ``sidql COMMAND: error: PROBLEM``, where PROBLEM
+names the file and line when there is one (:class:`sim.errors.MotionDataError`). Warnings print as
+one line ``warning: FILE:LINE: MESSAGE`` (no Python source line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from sim.errors import MotionDataWarning
+
+
+class UsageError(Exception):
+    """A bad command-line value (e.g. W out of range, an unknown method); exits 2 with one line."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse, but a parse error is one line ``PROG: error: MESSAGE`` (exit 2), no usage dump."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` replacement: ``warning: FILE:LINE: MESSAGE`` on one line.
+
+    A :class:`~sim.errors.MotionDataWarning` already starts with the data file and line it is
+    about; any other warning gets the Python file and line that raised it.
+    """
+    text = str(message).replace("\n", " ")
+    if not issubclass(category, MotionDataWarning):
+        text = f"{filename}:{lineno}: {text}"
+    print(f"warning: {text}", file=sys.stderr if file is None else file)

@@ -1,0 +1,91 @@
+"""Every bad input of the CLI exits 2 with one clean line; warnings print as one line."""
+
+import warnings
+
+import pytest
+
+from sidql.commands import main as cli
+from sidql.commands.usage import one_line_warning
+from sim.errors import MotionDataWarning
+
+
+def one_error_line(capsys, command: str) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"sidql {command}: error: "), err
+    assert "Traceback" not in err and "KeyError" not in err and "SystemExit" not in err
+    return lines[0]
+
+
+@pytest.fixture
+def trial(cmu_dir):
+    return str(cmu_dir / "02" / "02.asf"), str(cmu_dir / "02" / "02_01.amc")
+
+
+def test_bad_w_exits_2_with_one_line(trial, tmp_path, capsys):
+    asf, amc = trial
+    for argv, command in (
+        (["extract", asf, amc, "--keyframes", "1"], "extract"),
+        (["eval", "--data", str(tmp_path), "--keyframes", "99", "--out", "x"], "eval"),
+        (["report", asf, amc, "-W", "0", "--out", str(tmp_path / "r")], "report"),
+        (["train", "--data", str(tmp_path), "--keyframes", "2"], "train"),
+    ):
+        assert cli.main(argv) == 2, argv
+        assert "--keyframes" in one_error_line(capsys, command)
+
+
+def test_unknown_method_exits_2_with_one_unquoted_line(trial, tmp_path, capsys):
+    asf, amc = trial
+    assert cli.main(["extract", asf, amc, "--keyframes", "6", "--method", "nope"]) == 2
+    line = one_error_line(capsys, "extract")
+    assert "unknown method 'nope'; known:" in line and not line.endswith('"')
+    assert cli.main(["report", asf, amc, "--methods", "nope", "--out", str(tmp_path)]) == 2
+    assert "known:" in one_error_line(capsys, "report")
+
+
+def test_unparsable_argument_exits_2_with_one_line(capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["extract", "a.asf", "b.amc", "--keyframes", "six"])
+    assert e.value.code == 2
+    assert "invalid int value: 'six'" in one_error_line(capsys, "extract")
+
+
+def test_missing_file_exits_2_naming_it(tmp_path, capsys):
+    missing = tmp_path / "none.asf"
+    assert cli.main(["ingest", str(missing), str(tmp_path / "x.amc"), "--out", "o.npz"]) == 2
+    assert "none.asf" in one_error_line(capsys, "ingest")
+
+
+def test_warnings_print_as_one_line_naming_the_data_file(capsys):
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = one_line_warning
+        warnings.warn(MotionDataWarning("/d/07_12.amc:7324: truncated frame 245"), stacklevel=1)
+        warnings.warn("plain", UserWarning, stacklevel=1)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "warning: /d/07_12.amc:7324: truncated frame 245"
+    assert err[1].startswith("warning: ") and "test_cli.py:" in err[1]
+    assert err[1].endswith(": plain")
+    assert len(err) == 2
+
+
+def test_the_dropped_final_frame_warns_in_one_line_through_the_cli(cmu_dir, tmp_path, capsys):
+    amc = tmp_path / "02_cut.amc"
+    lines = (cmu_dir / "02" / "02_01.amc").read_text().splitlines()
+    frame_starts = [i for i, ln in enumerate(lines) if ln.strip().isdigit()]
+    amc.write_text("\n".join(lines[: frame_starts[12] + 5]) + "\n")  # frame 12 incomplete
+    rc = cli.main(
+        ["ingest", str(cmu_dir / "02" / "02.asf"), str(amc), "--out", str(tmp_path / "o.npz")]
+    )
+    assert rc == 0
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith(f"warning: {amc}:"), err
+
+
+def test_a_folder_without_clips_exits_2_with_one_line(tmp_path, capsys):
+    assert (
+        cli.main(["eval", "--data", str(tmp_path), "--out", str(tmp_path / "r.json"), "--quiet"])
+        == 2
+    )
+    assert "no 60-frame clips" in one_error_line(capsys, "eval")
