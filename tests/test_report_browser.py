@@ -6,6 +6,7 @@ extra package is needed."""
 from __future__ import annotations
 
 import base64
+import fcntl
 import io
 import json
 import os
@@ -58,6 +59,12 @@ class DevTools:
     def __init__(self, url: str, profile: str, *, width=1280, height=1600):
         to_chrome_r, self._w = os.pipe()
         self._r, from_chrome_w = os.pipe()
+        # move the child's ends above 4, so dup2 onto 3 and 4 never clobbers one with the other or
+        # keeps a close-on-exec flag (dup2(3, 3) is a no-op): happens in a process with few fds open
+        high = [fcntl.fcntl(fd, fcntl.F_DUPFD, 10) for fd in (to_chrome_r, from_chrome_w)]
+        os.close(to_chrome_r)
+        os.close(from_chrome_w)
+        to_chrome_r, from_chrome_w = high
 
         def fds():  # runs in the child: the pipe ends become fds 3 (read) and 4 (write)
             os.dup2(to_chrome_r, 3)
