@@ -62,6 +62,7 @@ class RenderStyle:
         shadows, reflections: MuJoCo's costly effects (off by default).
         multisample: MSAA samples of the offscreen buffer (MuJoCo's default 4; 0 here).
         slices, stacks: capsule tessellation (MuJoCo's defaults 28, 16).
+        blob_shadow: a soft disc under the body (nearly free; a stand-in for shadow maps).
     """
 
     width: int = 640
@@ -75,6 +76,7 @@ class RenderStyle:
     multisample: int = 0
     slices: int = 16
     stacks: int = 8
+    blob_shadow: bool = True
 
     def __post_init__(self):
         if self.layout not in ("overlay", "side"):
@@ -184,7 +186,8 @@ class SkeletonRenderer:
         self.camera.lookat[:] = lookat
         self.camera.azimuth = azimuth
         self.renderer.update_scene(d, camera=self.camera)
-        self._add_geoms(marks + self._shadow(original + shift[0]))
+        shadow = self._shadow(original + shift[0]) if self.style.blob_shadow else []
+        self._add_geoms(marks + shadow)
         img = self.renderer.render()
         top = img[: self._sky_rows]
         empty = (top[..., 0] | top[..., 1] | top[..., 2]) == 0
