@@ -144,7 +144,20 @@ def test_feet_in_contact_turn_teal_and_flags_show(renderer, motion):
     i = flagged.astype(int)
     changed = np.any(flagged != unflagged, axis=-1)
     red = changed & (i[..., 0] - i[..., 1] > 60) & (i[..., 0] - i[..., 2] > 60)
-    assert red.sum() > 10  # a red ball where the ghost's left ball sinks
+    assert red.sum() > 10  # a red ball and ring where the ghost's left ball sinks
+    u, w = renderer.project(ghost[[motion.names.index("lfoot")]])[0]
+    rows, cols = np.nonzero(red)
+    assert np.hypot(cols - u, rows - w).min() < 8  # the ring is drawn around that point
+
+
+def test_projection_puts_the_camera_target_in_the_middle(renderer, motion):
+    p = motion.positions[0]
+    look = np.array([p[0, 0], p[0, 1], 0.9])
+    renderer.draw(p, None, lookat=look, azimuth=37.0)
+    np.testing.assert_allclose(renderer.project([look])[0], [96, 72], atol=0.5)
+    # one metre up goes straight up the screen (no roll)
+    u, w = renderer.project([look + [0, 0, 0.3]])[0]
+    assert abs(u - 96) < 0.5 and w < 72 - 5
 
 
 def test_caption_numbers_frames_from_zero():

@@ -745,9 +745,11 @@ def write_report(
                 f"src='{_data_uri('image/png', sheet.read_bytes())}'>"
             )
             bar.update()
-        if videos:
-            parts.append("<h3>Videos</h3>" + _player(T, v.clip.fps))
-        parts.append(f"<div class='videos'>{''.join(cards)}</div>")
+        player = ("<h3>Videos</h3>" + _player(T, v.clip.fps)) if videos else ""
+        # the player sticks to the top of the window while its videos are in view
+        parts.append(
+            f"<div class='vblock'>{player}<div class='videos'>{''.join(cards)}</div></div>"
+        )
         plot = metrics_plot(v, colours)
         if plot is not None:
             write_atomic(out / f"clip{number:02d}_metrics.png", lambda f, b=plot: f.write(b))

@@ -179,9 +179,9 @@ class SkeletonRenderer:
         m.geom_rgba[self._ghost] = KEY_RGBA if key else GHOST_RGBA
         if ghost is None:
             m.geom_rgba[self._ghost, 3] = 0.0
-        marks = []
+        marks, rings = [], []
         if feet is not None:
-            marks = self._foot_marks(original, ghost, shift, *feet)
+            marks, rings = self._foot_marks(original, ghost, shift, *feet)
         self._mj.mj_kinematics(m, d)
         self.camera.lookat[:] = lookat
         self.camera.azimuth = azimuth
@@ -192,7 +192,39 @@ class SkeletonRenderer:
         top = img[: self._sky_rows]
         empty = (top[..., 0] | top[..., 1] | top[..., 2]) == 0
         np.copyto(top, self._sky[: self._sky_rows], where=empty[..., None])
+        if rings:
+            img = self._rings(img, rings)
         return img
+
+    def project(self, points) -> np.ndarray:
+        """(N, 2) pixel coordinates (x right, y down) of world ``points`` (N, 3) [m] in the last
+        rendered view (MuJoCo's OpenGL camera of the scene)."""
+        # MuJoCo places two eye cameras ipd apart even in mono and renders from their mean
+        cams = self.renderer.scene.camera
+        pos, fwd, up = (
+            np.mean([np.asarray(getattr(c, a), dtype=np.float64) for c in cams], axis=0)
+            for a in ("pos", "forward", "up")
+        )
+        right = np.cross(fwd, up)
+        v = np.asarray(points, dtype=np.float64) - pos
+        z = np.maximum(v @ fwd, 1e-9)
+        half = np.tan(np.radians(self.model.vis.global_.fovy) / 2)  # vertical half-extent / depth
+        aspect = self.style.width / self.style.height
+        u = (1 + (v @ right) / (z * half * aspect)) / 2 * self.style.width
+        w = (1 - (v @ up) / (z * half)) / 2 * self.style.height
+        return np.column_stack([u, w])
+
+    def _rings(self, img, rings):
+        """Circle each flagged foot point in its flag's colour, on top of everything (a ball can
+        hide behind a leg)."""
+        pil = Image.fromarray(img)
+        g = ImageDraw.Draw(pil)
+        xy = self.project([p for p, _ in rings])
+        r = max(6, self.style.height // 40)
+        for (u, w), (_, rgba) in zip(xy, rings, strict=True):
+            colour = tuple(int(255 * c) for c in rgba[:3])
+            g.ellipse([u - r, w - r, u + r, w + r], outline=colour, width=max(2, r // 4))
+        return np.asarray(pil)
 
     def _disc(self, xy, radius, rgba, lift):
         """A flat disc lying on the ground, ``lift`` [m] above it (separate layers never fight)."""
@@ -208,8 +240,9 @@ class SkeletonRenderer:
         return [self._disc(p[:, :2].mean(axis=0), 0.32, rgba, 0.001)]
 
     def _foot_marks(self, original, ghost, shift, points, state):
-        """Recolour the original's foot capsules in contact; footprints and flag balls."""
-        marks = []
+        """Recolour the original's foot capsules in contact; footprints and flag balls. Returns the
+        marks (for :meth:`_add_geoms`) and the rings ``(position, rgba)`` of flagged points."""
+        marks, rings = [], []
         contact = np.asarray(state.get("contact", np.zeros(len(points), bool)))
         for f, name in enumerate(points):
             j = self._index.get(name)
@@ -225,8 +258,9 @@ class SkeletonRenderer:
                 if np.asarray(state.get(flag, np.zeros(len(points), bool)))[f]:
                     pos = ghost[j] + shift[1]
                     marks.append((self._mj.mjtGeom.mjGEOM_SPHERE, [0.045, 0, 0], pos, rgba))
+                    rings.append((pos, rgba))
                     break
-        return marks
+        return marks, rings
 
     def _add_geoms(self, geoms):
         scn = self.renderer.scene
