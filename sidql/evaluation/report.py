@@ -730,7 +730,7 @@ def write_report(
             card.append(
                 f"<p class='note'>mean MPJPE {float(err.mean()):.1f} mm; "
                 f"<a data-goto='{worst}' href='#'>worst frame {worst}</a> "
-                f"({float(err[worst]):.1f} mm, the poster)"
+                f"({float(err[worst]):.1f} mm{', the poster' if videos else ''})"
                 + (f"; file <a href='{stem}.mp4'>{stem}.mp4</a>" if videos else "")
                 + "</p></div>"
             )
