@@ -420,22 +420,21 @@ VIDEO_LEGEND = (
 def summary_plot(v: ClipValidation, colours) -> bytes | None:
     """PNG: one small panel per ranked metric of the table, a bar per method on the panel's one
     scale, the original's own value as a dashed line (for excess metrics the bars are the excess
-    over it, so the line is at 0). ``None`` when nothing is ranked."""
+    over it, so the line is at 0). Metrics on which every method shows the same (within the
+    metric's resolution) get no panel. ``None`` when nothing is left."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     ms = [m for m in shown_metrics(v) if m.better]
-    ms = [
-        m
-        for m in ms
-        if any(metric_value(m, r.summary, r.excess) is not None for r in v.runs)
-        and not (
-            m.resolution
-            and not best_rows(m, [metric_value(m, r.summary, r.excess) for r in v.runs])
-        )
-    ]  # (a metric tied within its resolution for every method has nothing to show)
+
+    def informative(m):  # some value, and not every method showing the same one
+        vals = [metric_value(m, r.summary, r.excess) for r in v.runs]
+        shown = [x for x in vals if x is not None]
+        return bool(shown) and (len(shown) < 2 or bool(best_rows(m, vals)))
+
+    ms = [m for m in ms if informative(m)]
     if not ms:
         return None
     cols = min(len(ms), 5)
