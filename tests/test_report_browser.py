@@ -1,11 +1,13 @@
 """The report page in a real browser: headless Chromium loads it, its videos report a duration and a
-playable state, and a screenshot is not blank. Driven through the DevTools protocol over a pipe
+playable state, the one control plays, pauses and seeks all videos together, every poster is the
+worst-error frame, and a screenshot is not blank. Driven through the DevTools protocol over a pipe
 (``--remote-debugging-pipe``: JSON messages separated by NUL on file descriptors 3 and 4), so no
 extra package is needed."""
 
 from __future__ import annotations
 
 import base64
+import fcntl
 import io
 import json
 import os
@@ -61,6 +63,12 @@ class DevTools:
     def __init__(self, url: str, profile: str, *, width=1280, height=1600):
         to_chrome_r, self._w = os.pipe()
         self._r, from_chrome_w = os.pipe()
+        # move the child's ends above 4, so dup2 onto 3 and 4 never clobbers one with the other or
+        # keeps a close-on-exec flag (dup2(3, 3) is a no-op): happens in a process with few fds open
+        high = [fcntl.fcntl(fd, fcntl.F_DUPFD, 10) for fd in (to_chrome_r, from_chrome_w)]
+        os.close(to_chrome_r)
+        os.close(from_chrome_w)
+        to_chrome_r, from_chrome_w = high
 
         def fds():  # runs in the child: the pipe ends become fds 3 (read) and 4 (write)
             os.dup2(to_chrome_r, 3)
@@ -126,7 +134,7 @@ def report_dir(gl_context, tmp_path_factory):
     clip = synthetic_motion(1.0, seed=2)
     report_clips(
         [clip], out, W=4, methods=["uniform", "optimal"], style=RenderStyle(320, 240),
-        title="browser test", progress=False,
+        title="browser test", progress=False, clip_numbers=[3],
     )  # fmt: skip
     return out
 
@@ -139,11 +147,38 @@ def test_report_files_and_checks(report_dir):
         assert len(m["indices"]) == 4 and len(m["per_frame"]["mpjpe_mm"]) == clip["frames"]
         assert m["summary"]["bone_drift_max_mm"] < 1e-6
         assert set(m["excess"]) <= set(m["summary"])
-        assert (report_dir / f"clip00_{m['method']}.mp4").stat().st_size > 1000
-        assert (report_dir / f"clip00_{m['method']}_keyframes.png").exists()
-    assert clip["original"]["summary"]["mpjpe_mm"] == 0.0
+        # files carry the clip's real number in its trial (3 here), not its place in the list
+        assert (report_dir / f"clip03_{m['method']}.mp4").stat().st_size > 1000
+        assert (report_dir / f"clip03_{m['method']}_keyframes.png").exists()
+        assert (report_dir / f"clip03_{m['method']}_poster.jpg").exists()
+    assert not list(report_dir.glob("clip00_*"))
+    assert clip["clip"] == 3 and clip["original"]["summary"]["mpjpe_mm"] == 0.0
     page = (report_dir / "index.html").read_text()
     assert "http://" not in page and "https://" not in page  # needs no network
+    assert "<h2>Clip 3:" in page and "Clip 0" not in page
+    assert "frames (0-29)" in page  # numbered from 0
+
+
+def test_best_value_per_column_and_declared_metrics():
+    from sidql.evaluation.report import METRICS, Metric, best_rows, metric_value
+
+    low = Metric("k", "k", "", "lower", "d", "{:.1f}")
+    assert best_rows(low, [3.0, 1.0, None, 1.04, 2.0]) == {1, 3}  # equal as shown: 1.0
+    assert best_rows(Metric("k", "k", "", "higher", "d", "{:.2f}"), [0.5, 0.9, 0.1]) == {1}
+    zero = Metric("k", "k", "", "zero", "d", "{:+.1f}", excess=True)
+    assert best_rows(zero, [-0.2, 3.0, 0.3, -5.0]) == {0}
+    assert best_rows(low, [2.0, 2.0]) == set() and best_rows(low, [1.0, None]) == set()
+    assert best_rows(Metric("k", "k", "", "", "d"), [1.0, 2.0]) == set()  # not ranked
+    drift = next(m for m in METRICS if m.key == "bone_drift_max_mm")
+    assert best_rows(drift, [4e-13, 2e-12, 5e-13]) == set()  # rounding, not a better method
+    # excess metrics read the excess for methods; absent keys are n/a (None)
+    assert metric_value(zero, {"k": 9.0}, {"k": -1.0}) == -1.0
+    assert metric_value(zero, {"k": 9.0}) == 9.0 and metric_value(low, {}) is None
+    keys = {m.key for m in METRICS}
+    assert len(keys) == len(METRICS)
+    assert {"penetration_mm", "float_mm", "skate_mm_s", "contact_precision", "contact_recall",
+            "self_pen_excess_mm", "residual_force_bw", "joint_torque_rms_nm_kg"} <= keys  # fmt: skip
+    assert all(m.better in ("lower", "higher", "zero", "") for m in METRICS)
 
 
 @pytest.fixture(scope="module")
@@ -195,3 +230,78 @@ def test_page_loads_in_chromium_with_playable_videos(browser, report_dir, tmp_pa
     assert all(w > 0 for w in state["images"]) and state["rows"] == 4
     img = np.asarray(Image.open(io.BytesIO(base64.b64decode(shot))).convert("L"), dtype=float)
     assert img.std() > 20  # not blank: text, table, video frames, plots
+
+
+_SYNC = """
+(async () => {
+  if (document.readyState !== 'complete') {
+    await new Promise(r => window.addEventListener('load', r, {once: true}));
+  }
+  const clip = document.querySelector('.clip');
+  const vids = Array.from(clip.querySelectorAll('video'));
+  await Promise.all(vids.map(v => v.readyState >= 3 ? 0 :
+    new Promise(r => v.addEventListener('canplay', r, {once: true}))));
+  const sleep = ms => new Promise(r => setTimeout(r, ms));
+  const times = () => vids.map(v => v.currentTime);
+  clip.querySelector('.play').click();
+  await sleep(500);
+  const playing = {times: times(), paused: vids.map(v => v.paused)};
+  clip.querySelector('.play').click();
+  await sleep(200);
+  const paused = {times: times(), paused: vids.map(v => v.paused)};
+  const seek = clip.querySelector('.seek');
+  seek.value = 12;
+  seek.dispatchEvent(new Event('input'));
+  await sleep(300);
+  const sought = {times: times(), label: clip.querySelector('.frame').textContent};
+  const worst = clip.querySelector('[data-goto]');
+  worst.click();
+  await sleep(300);
+  const posters = await Promise.all(vids.map(v => new Promise(res => {
+    const im = new Image();
+    im.onload = () => res({w: im.naturalWidth, h: im.naturalHeight, worst: +v.dataset.worst});
+    im.onerror = () => res(null);
+    im.src = v.poster;
+  })));
+  return {playing, paused, sought, posters, worstGoto: +worst.dataset.goto,
+          afterWorst: times(), fps: +clip.dataset.fps};
+})()
+"""
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install chromium)")
+def test_one_control_plays_pauses_and_seeks_all_videos(report_dir, tmp_path):
+    url = (report_dir / "index.html").resolve().as_uri()
+    dt = DevTools("about:blank", str(tmp_path / "profile"))
+    try:
+        page = next(t for t in dt.call("Target.getTargets")["targetInfos"] if t["type"] == "page")
+        session = dt.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})[
+            "sessionId"
+        ]
+        dt.call("Page.navigate", {"url": url}, session)
+        res = dt.call(
+            "Runtime.evaluate",
+            {"expression": _SYNC, "awaitPromise": True, "returnByValue": True},
+            session,
+            timeout=90,
+        )
+        state = res["result"]["value"]
+    finally:
+        dt.close()
+    fps = state["fps"]
+    assert fps == 30
+    t = state["playing"]["times"]
+    assert not any(state["playing"]["paused"]) and min(t) > 0.1  # all play from one button
+    assert max(t) - min(t) <= 1.5 / fps  # together, within a frame and a half
+    assert all(state["paused"]["paused"])
+    assert max(state["paused"]["times"]) - min(state["paused"]["times"]) < 0.5 / fps
+    # seeking to frame 12 (numbered from 0) puts every video in frame 12
+    assert all(abs(x - 12.5 / fps) < 0.2 / fps for x in state["sought"]["times"])
+    assert state["sought"]["label"] == "frame 12 of 0-29"
+    # the link to the first method's worst frame moves all videos there
+    w = state["worstGoto"]
+    assert all(abs(x - (w + 0.5) / fps) < 0.2 / fps for x in state["afterWorst"])
+    checks = json.loads((report_dir / "checks.json").read_text())
+    for p, m in zip(state["posters"], checks["clips"][0]["methods"], strict=True):
+        assert p is not None and (p["w"], p["h"]) == (320, 240)  # a real poster image
+        assert p["worst"] == int(np.argmax(m["per_frame"]["mpjpe_mm"]))  # of the worst frame

@@ -2,10 +2,16 @@
 
 :func:`validate_clip` chooses keyframes with each method, reconstructs, replays the original and
 every reconstruction (:mod:`sim.replay.checks`) and returns JSON-ready figures with each method's excess
-over the original. :func:`write_report` renders the videos and keyframe contact sheets
-(:mod:`sim.replay.render`), plots per-frame error with the keyframes marked, and writes ``index.html`` (one
-self-contained page: images and videos embedded as base64, copies beside it), the ``.mp4`` and
-``.png`` files and ``checks.json`` atomically.
+over the original. :func:`write_report` renders the videos and keyframe filmstrips
+(:mod:`sim.replay.render`), plots every per-frame metric for all methods on one shared axis each, and
+writes ``index.html`` (one self-contained page: images and videos embedded as base64, copies beside
+it), the ``.mp4`` and ``.png`` files and ``checks.json`` atomically.
+
+The page is driven by :data:`METRICS`, a declarative list (key, label, unit, which way is better,
+description, per-frame series): the table's columns, the best value per column, the plots and the
+legend all come from it, so a new figure in the summaries is one line there. Clips are labelled by
+their real numbers in the trial, frames are numbered from 0 everywhere, every video's poster is its
+worst-error frame, and one control plays, pauses and seeks all videos of a clip together.
 
 Units in the figures: millimetres (``*_mm``), millimetres per second (``*_mm_s``), degrees
 (``*_deg``), frame counts.
@@ -24,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 from tqdm import tqdm
 
 from sidql.keyframes import reconstructions
@@ -34,7 +41,6 @@ from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip, write_atomic
 from sim.motion.ingest import load_clips
 from sim.replay.checks import (
-    PHYSICAL_KEYS,
     CollisionScene,
     FrameChecks,
     PointMotion,
@@ -44,6 +50,7 @@ from sim.replay.checks import (
     replay,
     summarise,
 )
+from sim.replay.foot_state import FootState, simple_foot_states, simple_ground
 from sim.replay.render import (
     DEFAULT_STYLE,
     RenderStyle,
@@ -199,38 +206,267 @@ def _slug(s: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in s)
 
 
-def error_plot(v: ClipValidation, run: MethodRun) -> bytes:
-    """PNG of per-frame MPJPE and velocity error, floor and self-penetration depth, keyframes as
-    vertical lines."""
+@dataclass(frozen=True)
+class Metric:
+    """One figure of the page: a table column, a legend line and (with ``per_frame``) a plot.
+
+    Attributes:
+        key: key in the summaries (``MethodRun.summary``/``excess``, ``ClipValidation.baseline``).
+        label: column heading; unit: shown beside it (``""`` for counts and ratios).
+        better: ``"lower"``, ``"higher"``, ``"zero"`` (closest to 0 is best: an excess over the
+            original either way) or ``""`` (not ranked).
+        description: one sentence for the legend.
+        fmt: Python format of a value; ``excess``: method rows show ``MethodRun.excess[key]``.
+        per_frame: key of the :func:`per_frame` array plotted per frame, if any.
+        resolution: differences below this are ties when choosing the best (e.g. bone drift of
+            1e-13 mm is rounding, not a better method); 0: compare as shown.
+    """
+
+    key: str
+    label: str
+    unit: str
+    better: str
+    description: str
+    fmt: str = "{:.1f}"
+    excess: bool = False
+    per_frame: str | None = None
+    resolution: float = 0.0
+
+
+#: Every figure the page knows, in column order. Keys absent from a run show ``n/a``; keys absent
+#: from every row of a clip are left out of its table and plots (the legend still lists them).
+METRICS: tuple[Metric, ...] = (
+    Metric("mpjpe_mm", "MPJPE", "mm", "lower",
+           "mean distance of the reconstruction's points from the original's", "{:.1f}",
+           per_frame="mpjpe_mm"),
+    Metric("velocity_error_mm_s", "velocity error", "mm/s", "lower",
+           "mean |v - v_original| over points", "{:.0f}", per_frame="velocity_error_mm_s"),
+    Metric("bone_drift_max_mm", "bone drift", "mm", "lower",
+           "largest change of a bone's length against the original", "{:.2g}",
+           resolution=0.01),
+    Metric("floor_depth_max_mm", "floor depth", "mm", "zero",
+           "deepest capsule below the floor z = 0; methods: excess over the original", "{:+.1f}",
+           excess=True, per_frame="floor_depth_mm"),
+    Metric("floor_frames", "floor frames", "", "zero",
+           "frames with a capsule > 1 mm below the floor; methods: excess over the original",
+           "{:+d}", excess=True),
+    Metric("self_pen_frames", "self-pen. frames", "", "zero",
+           "frames where non-adjacent bones overlap; methods: excess over the original", "{:+d}",
+           excess=True),
+    Metric("self_pen_depth_max_mm", "self-pen. depth", "mm", "zero",
+           "deepest overlap of non-adjacent bones; methods: excess over the original", "{:+.1f}",
+           excess=True, per_frame="self_pen_depth_mm"),
+    Metric("skate_mean_mm_s", "skate", "mm/s", "zero",
+           "mean horizontal foot speed while a foot touches the floor; methods: excess over the "
+           "original", "{:+.0f}", excess=True, per_frame="skate_speed_mm_s"),
+    Metric("joint_limit_max_deg", "joint limit", "deg", "zero",
+           "largest hinge angle past its ASF limit (needs joint angles); methods: excess",
+           "{:+.1f}", excess=True),
+    # physics (issue 10): filled by sim.physics where it runs
+    Metric("ground_z_m", "ground", "m", "", "estimated ground height of the trial", "{:.3f}"),
+    Metric("penetration_mm", "penetration", "mm", "lower",
+           "mean depth of foot points below the ground", "{:.1f}"),
+    Metric("float_mm", "float", "mm", "lower",
+           "mean height of a foot point while the original's is in contact", "{:.1f}"),
+    Metric("skate_mm_s", "skate (contact)", "mm/s", "lower",
+           "mean horizontal foot speed while the original's foot is in contact", "{:.0f}"),
+    Metric("contact_precision", "contact precision", "", "higher",
+           "share of the reconstruction's contacts that the original also has", "{:.2f}"),
+    Metric("contact_recall", "contact recall", "", "higher",
+           "share of the original's contacts that the reconstruction keeps", "{:.2f}"),
+    Metric("self_pen_excess_mm", "self-pen. excess", "mm", "lower",
+           "mean per-pair overlap beyond the original's in the same frame", "{:.1f}"),
+    Metric("lost_contacts", "lost contacts", "", "lower",
+           "touching bone pairs of the original that the reconstruction separates", "{:d}"),
+    Metric("limit_excess_deg", "limit excess", "deg", "lower",
+           "anatomical joint angles past their limits, beyond the original", "{:.1f}"),
+    Metric("residual_force_bw", "residual force", "BW", "lower",
+           "mean external force no ground contact can supply, in body weights", "{:.2f}"),
+    Metric("residual_force_bw_p95", "residual force p95", "BW", "lower",
+           "95th percentile of the residual force, in body weights", "{:.2f}"),
+    Metric("residual_torque_nm_kg", "residual torque", "N m/kg", "lower",
+           "mean residual torque per kg of body mass", "{:.2f}"),
+    Metric("joint_torque_rms_nm_kg", "joint torque RMS", "N m/kg", "lower",
+           "RMS joint torque per kg from inverse dynamics", "{:.2f}"),
+)  # fmt: skip
+
+_BETTER = {"lower": "lower is better", "higher": "higher is better",
+           "zero": "closest to 0 (the original) is best", "": "not ranked"}  # fmt: skip
+_ARROW = {"lower": "\u2193", "higher": "\u2191", "zero": "\u21950", "": ""}
+#: Method colours shared by plots, table swatches and video cards.
+PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",
+           "#bcbd22", "#ff7f0e", "#7f7f7f")  # fmt: skip
+
+
+def _number(value):
+    """A finite float, or ``None`` (absent, ``None`` or NaN)."""
+    if value is None:
+        return None
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return None if math.isnan(x) else x
+
+
+def metric_value(m: Metric, summary: dict, excess: dict | None = None):
+    """The value a table cell shows: ``excess[key]`` for an excess metric of a method row (when
+    present), else ``summary[key]``; ``None`` when absent or NaN."""
+    if m.excess and excess is not None and m.key in excess:
+        return _number(excess[m.key])
+    return _number(summary.get(m.key))
+
+
+def _cell(fmt: str, value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    if "d}" in fmt:
+        value = int(round(value))
+    return fmt.format(value)
+
+
+def best_rows(m: Metric, values) -> set[int]:
+    """Indices of the best of ``values`` (``None`` skipped) by ``m.better``, compared as shown
+    (formatted); empty when not ranked, fewer than two values, or all show the same."""
+    shown = [(i, v) for i, v in enumerate(values) if v is not None]
+    if not m.better or len(shown) < 2:
+        return set()
+    score = {"lower": lambda v: v, "higher": lambda v: -v, "zero": abs}[m.better]
+    if m.resolution > 0:
+        text = {i: str(round(v / m.resolution)) for i, v in shown}
+    else:
+        text = {i: _cell(m.fmt.replace("+", ""), v) for i, v in shown}
+    if m.better == "zero":
+        text = {i: t.lstrip("+-") for i, t in text.items()}
+    if len(set(text.values())) == 1:
+        return set()
+    top = min(score(v) for _, v in shown)
+    best = next(text[i] for i, v in shown if score(v) == top)
+    return {i for i, _ in shown if text[i] == best}
+
+
+def shown_metrics(v: ClipValidation) -> list[Metric]:
+    """The metrics with a value in at least one row of the clip."""
+    rows = [(v.baseline, None)] + [(r.summary, r.excess) for r in v.runs]
+    return [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]
+
+
+def _table(v: ClipValidation, colours) -> str:
+    ms = shown_metrics(v)
+    head = "".join(
+        f"<th title='{html.escape(m.description)} ({_BETTER[m.better]})'>{html.escape(m.label)}"
+        f"{'<br><small>' + html.escape(m.unit) + '</small>' if m.unit else ''}"
+        f"<span class='dir'>{_ARROW[m.better]}</span></th>"
+        for m in ms
+    )
+    vals = {m.key: [metric_value(m, r.summary, r.excess) for r in v.runs] for m in ms}
+    best = {m.key: best_rows(m, vals[m.key]) for m in ms}
+    base = "".join(
+        f"<td>{html.escape(_cell(m.fmt.replace('+', ''), metric_value(m, v.baseline)))}</td>"
+        for m in ms
+    )
+    rows = [f"<tr class='orig'><td>original (baseline)</td><td>-</td>{base}</tr>"]
+    for i, (r, colour) in enumerate(zip(v.runs, colours, strict=True)):
+        cells = "".join(
+            f"<td{' class=best' if i in best[m.key] else ''}>"
+            f"{html.escape(_cell(m.fmt, vals[m.key][i]))}</td>"
+            for m in ms
+        )
+        keys = " ".join(str(int(k)) for k in r.keyframes)
+        rows.append(
+            f"<tr><td><span class='sw' style='background:{colour}'></span>{html.escape(r.label)}"
+            f"</td><td class='k'>{keys}</td>{cells}</tr>"
+        )
+    return (
+        f"<table class='metrics'><tr><th>method</th><th>keyframes (frame numbers from 0)</th>{head}"
+        f"</tr>{''.join(rows)}</table><p class='note'>Green cell: the best method in that column "
+        "(none marked when all methods show the same). Original row: its own figures; method rows: "
+        "MPJPE, velocity error and bone drift against the original, columns marked \u21950 the "
+        "excess over the original (0 = as the original). Joint limits need joint angles: "
+        "reconstructions are point sets (n/a).</p>"
+    )
+
+
+def legend_html(metrics=METRICS, *, full: bool = False) -> str:
+    """A short legend of ``metrics``: label, unit, which way is better, what it means. ``full``: a
+    closed ``<details>`` listing every declared metric instead."""
+    items = "".join(
+        f"<div><b>{html.escape(m.label)}</b>{' [' + html.escape(m.unit) + ']' if m.unit else ''} "
+        f"<span class='dir'>{_ARROW[m.better]} {_BETTER[m.better]}</span>: "
+        f"{html.escape(m.description)}</div>"
+        for m in metrics
+    )
+    if full:
+        return (
+            "<details class='legend'><summary>Every metric the page knows (those a run did not "
+            f"measure are left out of its table; n/a where only some rows have them)</summary>"
+            f"<div class='legend'>{items}</div></details>"
+        )
+    return f"<div class='legend'>{items}</div>"
+
+
+VIDEO_LEGEND = (
+    "<p class='note'><b>Videos and filmstrips:</b> the original in blue; the reconstruction as a "
+    "thinner orange ghost, so orange shows only where it departs from the original; "
+    "<b style='color:#009e8f'>teal</b> foot and footprint: the original's foot is on the ground; "
+    "a ball on the reconstruction's foot: <b style='color:#2673ff'>blue</b> floats above the "
+    "ground while the original stands, <b style='color:#e01a1a'>red</b> sinks below it, "
+    "<b style='color:#d926d9'>magenta</b> skates (slides while the original stands). Each poster "
+    "is the method's worst frame; the bar above the videos plays, pauses and seeks them all "
+    "together (click a video, or use the arrows to step). Frames are numbered from 0 "
+    "everywhere.</p>"
+)
+
+
+def summary_plot(v: ClipValidation, colours) -> bytes | None:
+    """PNG: one small panel per ranked metric of the table, a bar per method on the panel's one
+    scale, the original's own value as a dashed line (for excess metrics the bars are the excess
+    over it, so the line is at 0). Metrics on which every method shows the same (within the
+    metric's resolution) get no panel. ``None`` when nothing is left."""
     import matplotlib  # lazy: a heavy optional plotting dependency, only for the figure
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
 
-    T = v.clip.n_frames
-    t = np.arange(T)
-    c, b = run.checks, v.baseline_checks
-    fig, ax = plt.subplots(2, 1, figsize=(6.4, 3.6), sharex=True, dpi=100)
-    ax[0].plot(t, 1e3 * c.mpjpe, color="tab:orange", label="MPJPE [mm]")
-    ax0b = ax[0].twinx()
-    ax0b.plot(t, 1e3 * c.velocity_error, color="tab:purple", lw=0.8, label="velocity error [mm/s]")
-    ax0b.set_ylabel("mm/s", fontsize=8)
-    ax[0].set_ylabel("mm", fontsize=8)
-    ax[1].plot(t, 1e3 * c.floor_depth, color="tab:red", label="floor depth")
-    ax[1].plot(t, 1e3 * b.floor_depth, color="tab:red", ls=":", label="floor depth, original")
-    ax[1].plot(t, 1e3 * c.self_depth, color="tab:blue", label="self-penetration depth")
-    ax[1].plot(t, 1e3 * b.self_depth, color="tab:blue", ls=":", label="self-pen., original")
-    ax[1].set_ylabel("mm", fontsize=8)
-    ax[1].set_xlabel("frame", fontsize=8)
-    for a in ax:
-        for k in run.keyframes:
-            a.axvline(k, color="tab:green", lw=0.8, alpha=0.7)
-        a.tick_params(labelsize=7)
-    h0, l0 = ax[0].get_legend_handles_labels()
-    h1, l1 = ax0b.get_legend_handles_labels()
-    ax[0].legend(h0 + h1, l0 + l1, fontsize=7, loc="upper left")
-    ax[1].legend(fontsize=6, loc="upper left", ncol=2)
-    ax[0].set_title(f"{run.label}: per-frame error (green: keyframes)", fontsize=9)
+    ms = [m for m in shown_metrics(v) if m.better]
+
+    def informative(m):  # some value, and not every method showing the same one
+        vals = [metric_value(m, r.summary, r.excess) for r in v.runs]
+        shown = [x for x in vals if x is not None]
+        return bool(shown) and (len(shown) < 2 or bool(best_rows(m, vals)))
+
+    ms = [m for m in ms if informative(m)]
+    if not ms:
+        return None
+    cols = min(len(ms), 5)
+    rows = -(-len(ms) // cols)
+    n = len(v.runs)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(2.2 * cols, 0.45 + 0.22 * n * rows + 0.7 * rows), dpi=100,
+        squeeze=False,
+    )  # fmt: skip
+    y = np.arange(n)
+    for ax, m in zip(axes.flat, ms, strict=False):
+        vals = [metric_value(m, r.summary, r.excess) for r in v.runs]
+        best = best_rows(m, vals)
+        x = [0.0 if a is None else a for a in vals]
+        ax.barh(y, x, color=colours, height=0.7)
+        for i, a in enumerate(vals):
+            if a is None:
+                ax.text(0, i, " n/a", va="center", fontsize=7, color="#666")
+            elif i in best:
+                ax.text(a, i, " \u2605", va="center", fontsize=8, color="#1a7f37")
+        ref = 0.0 if m.excess else metric_value(m, v.baseline)
+        if ref is not None and not (m.key in ("mpjpe_mm", "velocity_error_mm_s") and ref == 0):
+            ax.axvline(ref, color="k", ls="--", lw=0.8)
+        unit = f" [{m.unit}]" if m.unit else ""
+        ax.set_title(f"{m.label}{unit} {_ARROW[m.better]}", fontsize=8)
+        ax.set_yticks(y, [r.label for r in v.runs] if ax in axes[:, 0] else [], fontsize=7)
+        ax.invert_yaxis()
+        ax.tick_params(axis="x", labelsize=6)
+        ax.grid(axis="x", alpha=0.3)
+    for ax in list(axes.flat)[len(ms) :]:
+        ax.axis("off")
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -238,65 +474,163 @@ def error_plot(v: ClipValidation, run: MethodRun) -> bytes:
     return buf.getvalue()
 
 
-_COLUMNS = (
-    ("mpjpe_mm", "MPJPE mm", "{:.1f}"),
-    ("velocity_error_mm_s", "vel. err mm/s", "{:.0f}"),
-    ("bone_drift_max_mm", "bone drift mm", "{:.2g}"),
-    ("floor_depth_max_mm", "floor depth mm", "{:+.1f}"),
-    ("floor_frames", "floor frames", "{:+d}"),
-    ("self_pen_frames", "self-pen frames", "{:+d}"),
-    ("self_pen_depth_max_mm", "self-pen depth mm", "{:+.1f}"),
-    ("skate_mean_mm_s", "skate mm/s", "{:+.0f}"),
-    ("joint_limit_max_deg", "joint limit deg", "{:+.1f}"),
-)
+def metrics_plot(v: ClipValidation, colours) -> bytes | None:
+    """PNG: one panel per per-frame metric, every method on the panel's one y scale, the original
+    dotted, each method's keyframes as ticks in its colour under the axis. ``None`` when no
+    per-frame metric is available."""
+    import matplotlib  # lazy: a heavy optional plotting dependency, only for the figure
 
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
 
-def _cell(key: str, fmt: str, value) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "n/a"
-    if "d}" in fmt:
-        value = int(value)
-    return fmt.format(value)
-
-
-def _table(v: ClipValidation) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for _, h, _ in _COLUMNS)
-    rows = []
-    base = []
-    for key, _, fmt in _COLUMNS:
-        val = v.baseline[key]
-        base.append(f"<td>{html.escape(_cell(key, fmt.replace('+', ''), val))}</td>")
-    rows.append(f"<tr class='orig'><td>original (baseline)</td><td>-</td>{''.join(base)}</tr>")
-    for r in v.runs:
-        cells = []
-        for key, _, fmt in _COLUMNS:
-            val = r.excess[key] if key in PHYSICAL_KEYS and key != "bone_drift_max_mm" else None
-            val = r.summary[key] if val is None else val
-            cells.append(f"<td>{html.escape(_cell(key, fmt, val))}</td>")
-        keys = " ".join(str(int(k)) for k in r.keyframes)
-        rows.append(
-            f"<tr><td>{html.escape(r.label)}</td><td class='k'>{keys}</td>{''.join(cells)}</tr>"
-        )
-    return (
-        f"<table><tr><th>method</th><th>keyframes</th>{head}</tr>{''.join(rows)}</table>"
-        "<p class='note'>Original row: its own figures. Method rows: MPJPE, velocity error and bone "
-        "drift against the original; the other columns are the excess over the original (+ is "
-        "worse). Joint limits need joint angles: reconstructions are point sets (n/a).</p>"
-    )
+    series = [m for m in shown_metrics(v) if m.per_frame]
+    frames = {id(r): per_frame(r.checks) for r in v.runs}
+    base = per_frame(v.baseline_checks)
+    series = [m for m in series if m.per_frame in base]
+    if not series:
+        return None
+    T = v.clip.n_frames
+    t = np.arange(T)
+    cols = 2
+    rows = -(-len(series) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 2.6 * rows), dpi=100, squeeze=False)
+    n = len(v.runs)
+    for ax, m in zip(axes.flat, series, strict=False):
+        top = 0.0
+        if m.key != "mpjpe_mm" and m.key != "velocity_error_mm_s":
+            y0 = np.asarray(base[m.per_frame], dtype=float)
+            if np.any(y0):
+                ax.plot(t, y0, color="k", ls=":", lw=1.2, label="original")
+                top = max(top, float(np.nanmax(y0)))
+        for r, colour in zip(v.runs, colours, strict=True):
+            y = np.asarray(frames[id(r)][m.per_frame], dtype=float)
+            ax.plot(t, y, color=colour, lw=1.4, label=r.label)
+            top = max(top, float(np.nanmax(y)) if y.size else 0.0)
+        top = top if top > 0 else 1.0
+        for i, (r, colour) in enumerate(zip(v.runs, colours, strict=True)):
+            yk = -top * (0.06 + 0.05 * i)
+            ax.plot(r.keyframes, np.full(len(r.keyframes), yk), "|", color=colour, ms=6, mew=1.5)
+        ax.set_ylim(-top * (0.08 + 0.05 * n), top * 1.08)
+        ax.set_yticks([y for y in ax.get_yticks() if 0 <= y <= top * 1.08])
+        unit = f" [{m.unit}]" if m.unit else ""
+        ax.set_title(f"{m.label}{unit}  ({_BETTER[m.better]})", fontsize=9)
+        ax.set_xlim(0, T - 1)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+        ax.set_xlabel("frame (from 0); ticks below: each method's keyframes", fontsize=7)
+    for ax in list(axes.flat)[len(series) :]:
+        ax.axis("off")
+    h, lab = axes.flat[0].get_legend_handles_labels()
+    for ax in axes.flat[1 : len(series)]:
+        for hh, ll in zip(*ax.get_legend_handles_labels(), strict=True):
+            if ll not in lab:
+                h.append(hh)
+                lab.append(ll)
+    fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / (2.6 * rows)))
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
 
 
 _CSS = """
-body{font-family:system-ui,sans-serif;margin:20px;color:#222;max-width:1400px}
+body{font-family:system-ui,sans-serif;margin:20px auto;color:#222;max-width:1400px;padding:0 16px}
+h1{margin-bottom:4px}h2{margin-top:28px;border-bottom:2px solid #ddd;padding-bottom:4px}
 table{border-collapse:collapse;font-size:13px;margin:8px 0}
 td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
-td:first-child,th:first-child{text-align:left}
+th{background:#f4f5f7;font-weight:600;vertical-align:bottom}
+th small{font-weight:normal;color:#666}
+th .dir{display:block;color:#888;font-weight:normal}
+td:first-child,th:first-child{text-align:left;white-space:nowrap}
 td.k{font-family:monospace;font-size:11px;text-align:left}
+td.best{background:#c9efcf;font-weight:700}
 tr.orig{background:#eef}
-.note{font-size:12px;color:#555}
-.method{display:inline-block;vertical-align:top;margin:6px;border:1px solid #ddd;padding:6px}
-.method h3{margin:2px 0 6px 0;font-size:15px}
-video,img{display:block;max-width:640px}
+details.legend{margin:18px 0 4px 0;font-size:13px}
+details.legend summary{cursor:pointer;font-weight:600}
+.note{font-size:12px;color:#555;max-width:1100px}
+.sw{display:inline-block;width:10px;height:10px;border-radius:2px;margin-right:6px}
+.player{position:sticky;top:0;z-index:2;background:#fafbfc;border:1px solid #ddd;
+  padding:6px 10px;margin:10px 0;display:flex;gap:10px;align-items:center;font-size:14px}
+.player input[type=range]{flex:1}
+.player button{font-size:14px;min-width:2.6em}
+.player .frame{font-variant-numeric:tabular-nums;min-width:8.5em}
+.videos{display:grid;grid-template-columns:repeat(auto-fill,minmax(440px,1fr));gap:10px}
+.card{border:1px solid #ddd;border-top:4px solid var(--c);padding:6px;background:#fff}
+.card h3{margin:2px 0 4px 0;font-size:15px}
+.card video{width:100%;height:auto;display:block;cursor:pointer;background:#dde3ea}
+.card .note a{cursor:pointer}
+img.plot,img.sheet{display:block;max-width:100%;margin:6px 0}
+div.legend{columns:2;column-gap:24px;font-size:12px;color:#333;max-width:1300px;margin:6px 0}
+div.legend div{break-inside:avoid;margin:2px 0}
+div.legend .dir{color:#777}
+.sheetcap{font-weight:600;margin:12px 0 0 0;font-size:14px}
 """
+
+#: One control per clip plays, pauses and seeks all its videos together; the first video is the
+#: clock, the others are pulled to it whenever they drift by half a frame.
+_JS = """
+function syncPlayer(root){
+  const vids=[...root.querySelectorAll('video')]; if(!vids.length) return;
+  const fps=+root.dataset.fps, n=+root.dataset.frames, clock=vids[0];
+  const btn=root.querySelector('.play'), seek=root.querySelector('.seek'),
+        out=root.querySelector('.frame');
+  let playing=false;
+  const frameOf=t=>Math.max(0,Math.min(n-1,Math.floor(t*fps+1e-6)));
+  const show=()=>{const f=frameOf(clock.currentTime); seek.value=f;
+    out.textContent='frame '+f+' of 0-'+(n-1);};
+  const align=()=>{const t=clock.currentTime;
+    for(const v of vids) if(v!==clock && Math.abs(v.currentTime-t)>0.5/fps) v.currentTime=t;};
+  function tick(){ if(!playing) return; align(); show(); requestAnimationFrame(tick); }
+  function play(){ const t=clock.currentTime; for(const v of vids){v.currentTime=t;}
+    Promise.all(vids.map(v=>v.play())).catch(()=>{}); playing=true; btn.textContent='\\u23f8';
+    requestAnimationFrame(tick); }
+  function pause(){ for(const v of vids) v.pause(); playing=false; align(); show();
+    btn.textContent='\\u25b6'; }
+  function goto(f){ pause(); f=Math.max(0,Math.min(n-1,f));
+    for(const v of vids) v.currentTime=(f+0.5)/fps; seek.value=f;
+    out.textContent='frame '+f+' of 0-'+(n-1); }
+  root.syncPlay=play; root.syncPause=pause; root.syncGoto=goto;
+  btn.addEventListener('click',()=>playing?pause():play());
+  seek.addEventListener('input',()=>goto(+seek.value));
+  root.querySelector('.prev').addEventListener('click',()=>goto(frameOf(clock.currentTime)-1));
+  root.querySelector('.next').addEventListener('click',()=>goto(frameOf(clock.currentTime)+1));
+  root.querySelector('.rate').addEventListener('change',e=>{
+    for(const v of vids) v.playbackRate=+e.target.value;});
+  for(const v of vids) v.addEventListener('click',()=>playing?pause():play());
+  for(const a of root.querySelectorAll('[data-goto]'))
+    a.addEventListener('click',e=>{e.preventDefault(); goto(+a.dataset.goto);});
+  clock.addEventListener('timeupdate',show);
+}
+document.querySelectorAll('.clip').forEach(syncPlayer);
+"""
+
+
+def _player(T: int, fps: float) -> str:
+    return (
+        "<div class='player'><button class='play' title='play/pause all videos'>\u25b6</button>"
+        "<button class='prev' title='previous frame'>\u25c0|</button>"
+        "<button class='next' title='next frame'>|\u25b6</button>"
+        f"<input class='seek' type='range' min='0' max='{T - 1}' value='0' step='1' "
+        "title='seek all videos'>"
+        f"<span class='frame'>frame 0 of 0-{T - 1}</span>"
+        "<select class='rate' title='speed'><option value='0.25'>0.25x</option>"
+        "<option value='0.5'>0.5x</option><option value='1' selected>1x</option></select>"
+        "<span class='note'>one control for all videos of this clip</span></div>"
+    )
+
+
+def _jpeg(image: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="JPEG", quality=85)
+    return buf.getvalue()
+
+
+def ground_and_feet(v: ClipValidation, run: MethodRun) -> tuple[float, FootState]:
+    """Ground height [m] and foot states drawn for one method's video: the simple estimates of
+    :mod:`sim.replay.foot_state` (swap here for a calibrated ground and contact labels)."""
+    ground = simple_ground(v.original)
+    return ground, simple_foot_states(v.original, run.motion, ground_z=ground)
 
 
 def _data_uri(mime: str, data: bytes) -> str:
@@ -312,13 +646,21 @@ def write_report(
     videos: bool = True,
     style: RenderStyle = DEFAULT_STYLE,
     progress: bool = True,
+    clip_numbers=None,
 ) -> Path:
-    """Write ``index.html``, ``checks.json``, one ``.mp4`` and one keyframe ``.png`` per clip and
-    method, and the error plots, into ``out_dir``. Returns the page's path."""
+    """Write ``index.html``, ``checks.json``, one ``.mp4`` and one keyframe filmstrip ``.png`` per
+    clip and method, and one per-frame metrics plot per clip, into ``out_dir``; files are named
+    ``clipNN_*`` by the clip's real number ``clip_numbers[i]`` (default 0, 1, ...). Returns the
+    page's path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    numbers = list(range(len(validations)) if clip_numbers is None else clip_numbers)
+    if len(numbers) != len(validations):
+        raise ValueError(f"{len(numbers)} clip numbers for {len(validations)} clips")
     meta = dict(meta or {})
     doc = checks_document(validations, meta)
+    for c, number in zip(doc["clips"], numbers, strict=True):
+        c["clip"] = int(number)
     text = json.dumps(doc, indent=1)
     write_atomic(out / "checks.json", lambda f: f.write(text.encode()))
 
@@ -329,64 +671,111 @@ def write_report(
             + "; ".join(f"{html.escape(str(k))}: {html.escape(str(v))}" for k, v in meta.items())
             + "</p>"
         )
+    parts.append(VIDEO_LEGEND)
     jobs = [(ci, r) for ci, v in enumerate(validations) for r in v.runs]
     bar = tqdm(total=len(jobs), desc="report", unit="video", disable=not progress)
-    for ci, v in enumerate(validations):
-        T = v.clip.n_frames
-        start = v.clip.start_frame
-        parts.append(
-            f"<h2>Clip {ci}: {html.escape(Path(v.clip.source).name or 'synthetic')} from source "
-            f"frame {start}, {T} frames at {v.clip.fps:g} fps, W = {v.W}</h2>"
-        )
-        parts.append(_table(v))
-        # One MuJoCo renderer per clip and image size, reused by every method's video and sheet.
-        sheet_style = RenderStyle(320, 240, layout=style.layout)
-        names, parents = v.original.names, v.original.parents
-        with ExitStack() as stack:  # closes both GL contexts, also on error
-            video_r = (
-                stack.enter_context(SkeletonRenderer(names, parents, style)) if videos else None
+    stack = ExitStack()
+    try:
+        for number, v in zip(numbers, validations, strict=True):
+            stack.close()  # the previous clip's renderer
+            T = v.clip.n_frames
+            start = v.clip.start_frame
+            colours = [PALETTE[i % len(PALETTE)] for i in range(len(v.runs))]
+            parts.append(
+                f"<section class='clip' data-fps='{v.clip.fps:g}' data-frames='{T}'>"
+                f"<h2>Clip {number}: {html.escape(Path(v.clip.source).name or 'synthetic')} from "
+                f"source frame {start}, {T} frames (0-{T - 1}) at {v.clip.fps:g} fps, W = {v.W}</h2>"
             )
-            sheet_r = stack.enter_context(SkeletonRenderer(names, parents, sheet_style))
-            for r in v.runs:
-                stem = f"clip{ci:02d}_{_slug(r.label)}"
-                block = [f"<div class='method'><h3>{html.escape(r.label)}</h3>"]
+            parts.append(_table(v, colours))
+            parts.append(legend_html(shown_metrics(v)))
+            bars = summary_plot(v, colours)
+            if bars is not None:
+                write_atomic(out / f"clip{number:02d}_summary.png", lambda f, b=bars: f.write(b))
+                parts.append(
+                    "<h3>Per metric, every method on one scale (dashed: the original; \u2605 best)</h3>"
+                    f"<img class='plot' alt='metrics per method' src='{_data_uri('image/png', bars)}'>"
+                )
+            cards, sheets = [], []
+            # One MuJoCo renderer per clip for the videos, reused by every method (closed on error too).
+            video_r = None
+            if videos:
+                ground = ground_and_feet(v, v.runs[0])[0] if v.runs else 0.0
+                video_r = stack.enter_context(
+                    SkeletonRenderer(v.original.names, v.original.parents, style, ground_z=ground)
+                )
+            for r, colour in zip(v.runs, colours, strict=True):
+                stem = f"clip{number:02d}_{_slug(r.label)}"
+                ground, feet = ground_and_feet(v, r)
+                err = 1e3 * r.checks.mpjpe
+                worst = int(np.argmax(err)) if err.size else 0
+                card = [f"<div class='card' style='--c:{colour}'><h3>{html.escape(r.label)}</h3>"]
                 if videos:
+                    poster = {}
+
+                    def keep(frames, poster=poster, worst=worst):
+                        for t, f in enumerate(frames):
+                            if t == worst:
+                                poster["jpg"] = _jpeg(f)
+                            yield f
+
                     mp4 = write_video(
-                        render_frames(
-                            v.original,
-                            r.motion,
-                            keyframes=r.keyframes,
-                            method=r.label,
-                            style=style,
-                            renderer=video_r,
-                        ),  # fmt: skip
+                        keep(render_frames(
+                            v.original, r.motion, keyframes=r.keyframes, method=r.label, style=style,
+                            feet=feet, ground_z=ground, renderer=video_r,
+                        )),
                         out / f"{stem}.mp4",
                         v.clip.fps,
+                    )  # fmt: skip
+                    write_atomic(out / f"{stem}_poster.jpg", lambda f, b=poster["jpg"]: f.write(b))
+                    card.append(
+                        f"<video loop muted playsinline preload='auto' width='{style.width}' "
+                        f"height='{style.height}' data-file='{mp4.name}' data-worst='{worst}' "
+                        f"poster='{_data_uri('image/jpeg', poster['jpg'])}' "
+                        f"src='{_data_uri('video/mp4', mp4.read_bytes())}'></video>"
                     )
-                    block.append(
-                        f"<video controls loop muted playsinline preload='auto' width='{style.width}' "
-                        f"data-file='{mp4.name}' src='{_data_uri('video/mp4', mp4.read_bytes())}'>"
-                        f"</video><p class='note'>video: <a href='{mp4.name}'>{mp4.name}</a> "
-                        "(orange ghost: reconstruction; green: keyframe)</p>"
-                    )
+                card.append(
+                    f"<p class='note'>mean MPJPE {float(err.mean()):.1f} mm; "
+                    f"<a data-goto='{worst}' href='#'>worst frame {worst}</a> "
+                    f"({float(err[worst]):.1f} mm{', the poster' if videos else ''})"
+                    + (f"; file <a href='{stem}.mp4'>{stem}.mp4</a>" if videos else "")
+                    + "</p></div>"
+                )
+                cards.append("".join(card))
                 sheet = keyframe_sheet(
                     v.original, r.motion, r.keyframes, out / f"{stem}_keyframes.png",
-                    method=r.label, style=sheet_style, renderer=sheet_r,
+                    method=r.label, feet=feet, ground_z=ground,
                 )  # fmt: skip
-                png = error_plot(v, r)
-                write_atomic(out / f"{stem}_error.png", lambda f, png=png: f.write(png))
-                block.append(f"<img alt='per-frame error' src='{_data_uri('image/png', png)}'>")
-                block.append(
-                    f"<img alt='keyframes' src='{_data_uri('image/png', sheet.read_bytes())}'></div>"
+                sheets.append(
+                    f"<p class='sheetcap' style='color:{colour}'>{html.escape(r.label)}</p>"
+                    f"<img class='sheet' alt='{html.escape(r.label)} keyframes' "
+                    f"src='{_data_uri('image/png', sheet.read_bytes())}'>"
                 )
-                parts.append("".join(block))
                 bar.update()
+            player = ("<h3>Videos</h3>" + _player(T, v.clip.fps)) if videos else ""
+            # the player sticks to the top of the window while its videos are in view
+            parts.append(
+                f"<div class='vblock'>{player}<div class='videos'>{''.join(cards)}</div></div>"
+            )
+            plot = metrics_plot(v, colours)
+            if plot is not None:
+                write_atomic(out / f"clip{number:02d}_metrics.png", lambda f, b=plot: f.write(b))
+                parts.append(
+                    "<h3>Per frame, every method on one scale</h3>"
+                    f"<img class='plot' alt='per-frame metrics' src='{_data_uri('image/png', plot)}'>"
+                )
+            parts.append(
+                "<h3>Keyframes and the worst frame between each pair</h3>" + "".join(sheets)
+            )
+            parts.append("</section>")
+    finally:
+        stack.close()
     bar.close()
+    parts.append(legend_html(full=True))
     page = (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>"
         + "\n".join(parts)
-        + "</body></html>"
+        + f"<script>{_JS}</script></body></html>"
     )
     path = out / "index.html"
     write_atomic(path, lambda f: f.write(page.encode()))
@@ -406,17 +795,20 @@ def report_clips(
     title: str = "Replay checks",
     meta: dict | None = None,
     progress: bool = True,
+    clip_numbers=None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method and write the report; returns
-    ``out_dir/index.html``."""
+    ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for labels and
+    file names (default 0, 1, ...)."""
     vals = [
         validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges)
         for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
     ]
     meta = {"keyframes": W, "methods": " ".join(methods), "seed": seed, **(meta or {})}
     return write_report(
-        vals, out_dir, title=title, meta=meta, videos=videos, style=style, progress=progress
-    )
+        vals, out_dir, title=title, meta=meta, videos=videos, style=style, progress=progress,
+        clip_numbers=clip_numbers,
+    )  # fmt: skip
 
 
 def report_trial(
@@ -446,5 +838,5 @@ def report_trial(
         joint_ranges=joint_ranges(model), videos=videos, style=style,
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
-        progress=progress,
+        progress=progress, clip_numbers=list(clips),
     )  # fmt: skip

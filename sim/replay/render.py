@@ -1,9 +1,17 @@
 """Offscreen rendering of an original motion and its reconstruction: mp4 videos and contact sheets.
 
 The original is drawn as solid blue-grey capsules, the reconstruction as a translucent orange ghost
-over it (``layout="overlay"``) or beside it (``layout="side"``); on keyframes the ghost turns green
-and a badge says so. The camera follows the original's root from the side of its travel. A caption
-gives method, W, frame number and running error; a timeline at the bottom marks every keyframe.
+over it (``layout="overlay"``) or beside it (``layout="side"``); on keyframes a badge and a green
+border say so. The ghost's capsules are thinner than the original's (:data:`GHOST_RADIUS_SCALE`), so
+where the two coincide the ghost lies inside the original and the two surfaces never fight for the
+same pixels (no stripes that look like error): only where the reconstruction departs does orange show.
+Feet (:class:`sim.replay.foot_state.FootState`): the original's foot capsules turn teal and a teal
+footprint lies on the ground while a foot point is in contact; the reconstruction's foot point is
+marked by a blue ball when it floats, red when it sinks, magenta when it skates. A soft disc under
+the body stands in for a shadow (real shadow maps cost most of a frame in software). The camera
+follows the original's root from the side of its travel. A caption gives method, W, frame number
+(from 0, as everywhere in the report) and running error; a timeline at the bottom marks every
+keyframe.
 
 Defaults chosen for software rendering (Mesa llvmpipe under ``MUJOCO_GL=egl``): no shadows, no
 reflections, no skybox, 640x480, no multisampling: these cost most of a frame without a GPU (see
@@ -26,10 +34,21 @@ from tqdm import tqdm
 from sim.motion.clip import write_atomic
 from sim.motion.points import PointMotion
 from sim.replay.capsules import bone_poses, bones_of, scene_xml
+from sim.replay.foot_state import FootState
 
 ORIGINAL_RGBA = (0.35, 0.45, 0.65, 1.0)
-GHOST_RGBA = (1.0, 0.55, 0.15, 0.45)
+GHOST_RGBA = (1.0, 0.55, 0.15, 0.5)
 KEY_RGBA = (0.15, 0.8, 0.3, 0.7)
+CONTACT_RGBA = (0.0, 0.62, 0.56, 1.0)  # original's foot in contact: capsule and footprint
+SHADOW_RGBA = (0.15, 0.17, 0.2, 0.22)
+#: Reconstruction's foot point flags: ball colour per flag (float, sink, skate).
+FLAG_RGBA = {
+    "float": (0.15, 0.45, 1.0, 0.95),
+    "sink": (0.9, 0.1, 0.1, 0.95),
+    "skate": (0.85, 0.15, 0.85, 0.95),
+}
+#: Ghost capsule radius / original's: thinner, so coinciding surfaces never z-fight.
+GHOST_RADIUS_SCALE = 0.78
 SKY_TOP, SKY_BOTTOM = (150, 180, 215), (225, 232, 240)
 
 
@@ -45,6 +64,7 @@ class RenderStyle:
         shadows, reflections: MuJoCo's costly effects (off by default).
         multisample: MSAA samples of the offscreen buffer (MuJoCo's default 4; 0 here).
         slices, stacks: capsule tessellation (MuJoCo's defaults 28, 16).
+        blob_shadow: a soft disc under the body (nearly free; a stand-in for shadow maps).
     """
 
     width: int = 640
@@ -58,6 +78,7 @@ class RenderStyle:
     multisample: int = 0
     slices: int = 16
     stacks: int = 8
+    blob_shadow: bool = True
 
     def __post_init__(self):
         if self.layout not in ("overlay", "side"):
@@ -74,12 +95,16 @@ class SkeletonRenderer:
     lookat (3,), azimuth [deg], key)`` returns an (H, W, 3) uint8 image.
     """
 
-    def __init__(self, names, parents, style: RenderStyle = DEFAULT_STYLE, lengths=None):
+    def __init__(
+        self, names, parents, style: RenderStyle = DEFAULT_STYLE, lengths=None, *, ground_z=0.0
+    ):
         self.style = style
+        self.ground_z = float(ground_z)
         self.bones = bones_of(names, parents, lengths)
         xml = scene_xml(
             self.bones,
             skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)),
+            floor_z=self.ground_z,
             visual=True,
             quality=(style.multisample, style.slices, style.stacks, 4096 if style.shadows else 0),
         )
@@ -87,7 +112,16 @@ class SkeletonRenderer:
         self.data = mujoco.MjData(self.model)
         B = len(self.bones.child)
         self._geo = np.arange(1, 2 * B + 1)
+        self._orig = np.arange(1, B + 1)
         self._ghost = np.arange(B + 1, 2 * B + 1)
+        self.model.geom_size[self._ghost, 0] *= GHOST_RADIUS_SCALE
+        # foot capsules of each foot point's side: the bones ending at that side's ball and toes
+        self._foot_bones = {
+            side: [b for b, j in enumerate(self.bones.child) if self.bones.names[j] in
+                   (side + "foot", side + "toes")]
+            for side in "lr"
+        }  # fmt: skip
+        self._index = {n: i for i, n in enumerate(self.bones.names)}
         self.renderer = mujoco.Renderer(self.model, style.height, style.width)
         flags = self.renderer.scene.flags
         flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(style.shadows)
@@ -114,30 +148,130 @@ class SkeletonRenderer:
     def close(self):
         self.renderer.close()
 
-    def draw(self, original, ghost=None, *, lookat, azimuth: float, key: bool = False):
+    def draw(self, original, ghost=None, *, lookat, azimuth: float, key: bool = False, feet=None):
+        """Render one frame.
+
+        Args:
+            original: (P, 3) points [m]; ghost: (P, 3) or ``None``.
+            lookat: (3,) camera target [m]; azimuth [deg].
+            key: a keyframe (the ghost is tinted green where it shows).
+            feet: ``None`` or ``(points (F,), state)``: foot point names and a mapping of
+                ``"contact"``, ``"float"``, ``"sink"``, ``"skate"`` to (F,) bools for this frame
+                (one row of a :class:`~sim.replay.foot_state.FootState`).
+        Returns:
+            (H, W, 3) uint8 image.
+        """
         m, d = self.model, self.data
         poses = [original, original if ghost is None else ghost]
         c, q, h = bone_poses(self.bones, np.stack(poses))
+        shift = np.zeros((2, 3))
         if self.style.layout == "side" and ghost is not None:
             a = np.radians(azimuth)
             right = np.array([np.sin(a), -np.cos(a), 0.0])  # camera's right on screen
-            c[0] -= 0.5 * self.style.side_offset * right
-            c[1] += 0.5 * self.style.side_offset * right
+            shift[0] = -0.5 * self.style.side_offset * right
+            shift[1] = 0.5 * self.style.side_offset * right
+            c += shift[:, None, :]
         d.mocap_pos[:] = c.reshape(-1, 3)
         d.mocap_quat[:] = q.reshape(-1, 4)
         m.geom_size[self._geo, 1] = h.reshape(-1)
+        m.geom_rgba[self._orig] = ORIGINAL_RGBA
         m.geom_rgba[self._ghost] = KEY_RGBA if key else GHOST_RGBA
         if ghost is None:
             m.geom_rgba[self._ghost, 3] = 0.0
+        marks, rings = [], []
+        if feet is not None:
+            marks, rings = self._foot_marks(original, ghost, shift, *feet)
         mujoco.mj_kinematics(m, d)
         self.camera.lookat[:] = lookat
         self.camera.azimuth = azimuth
         self.renderer.update_scene(d, camera=self.camera)
+        shadow = self._shadow(original + shift[0]) if self.style.blob_shadow else []
+        self._add_geoms(marks + shadow)
         img = self.renderer.render()
         top = img[: self._sky_rows]
         empty = (top[..., 0] | top[..., 1] | top[..., 2]) == 0
         np.copyto(top, self._sky[: self._sky_rows], where=empty[..., None])
+        if rings:
+            img = self._rings(img, rings)
         return img
+
+    def project(self, points) -> np.ndarray:
+        """(N, 2) pixel coordinates (x right, y down) of world ``points`` (N, 3) [m] in the last
+        rendered view (MuJoCo's OpenGL camera of the scene)."""
+        # MuJoCo places two eye cameras ipd apart even in mono and renders from their mean
+        cams = self.renderer.scene.camera
+        pos, fwd, up = (
+            np.mean([np.asarray(getattr(c, a), dtype=np.float64) for c in cams], axis=0)
+            for a in ("pos", "forward", "up")
+        )
+        right = np.cross(fwd, up)
+        v = np.asarray(points, dtype=np.float64) - pos
+        z = np.maximum(v @ fwd, 1e-9)
+        half = np.tan(np.radians(self.model.vis.global_.fovy) / 2)  # vertical half-extent / depth
+        aspect = self.style.width / self.style.height
+        u = (1 + (v @ right) / (z * half * aspect)) / 2 * self.style.width
+        w = (1 - (v @ up) / (z * half)) / 2 * self.style.height
+        return np.column_stack([u, w])
+
+    def _rings(self, img, rings):
+        """Circle each flagged foot point in its flag's colour, on top of everything (a ball can
+        hide behind a leg)."""
+        pil = Image.fromarray(img)
+        g = ImageDraw.Draw(pil)
+        xy = self.project([p for p, _ in rings])
+        r = max(6, self.style.height // 40)
+        for (u, w), (_, rgba) in zip(xy, rings, strict=True):
+            colour = tuple(int(255 * c) for c in rgba[:3])
+            g.ellipse([u - r, w - r, u + r, w + r], outline=colour, width=max(2, r // 4))
+        return np.asarray(pil)
+
+    def _disc(self, xy, radius, rgba, lift):
+        """A flat disc lying on the ground, ``lift`` [m] above it (separate layers never fight)."""
+        pos = np.array([xy[0], xy[1], self.ground_z + lift])
+        return (mujoco.mjtGeom.mjGEOM_CYLINDER, [radius, 0.0005, 0.0], pos, rgba)
+
+    def _shadow(self, points):
+        """A soft blob under the body: a disc below the points' mean, fading with the height of
+        the lowest point (a cheap stand-in for a shadow map)."""
+        p = np.asarray(points)
+        up = max(0.0, float(p[:, 2].min() - self.ground_z))
+        rgba = (*SHADOW_RGBA[:3], SHADOW_RGBA[3] * max(0.3, 1.0 - up / 0.5))
+        return [self._disc(p[:, :2].mean(axis=0), 0.32, rgba, 0.001)]
+
+    def _foot_marks(self, original, ghost, shift, points, state):
+        """Recolour the original's foot capsules in contact; footprints and flag balls. Returns the
+        marks (for :meth:`_add_geoms`) and the rings ``(position, rgba)`` of flagged points."""
+        marks, rings = [], []
+        contact = np.asarray(state.get("contact", np.zeros(len(points), bool)))
+        for f, name in enumerate(points):
+            j = self._index.get(name)
+            if j is None:
+                continue
+            if contact[f]:
+                for b in self._foot_bones.get(name[0], []):
+                    self.model.geom_rgba[self._orig[b]] = CONTACT_RGBA
+                marks.append(self._disc(original[j, :2] + shift[0, :2], 0.06, CONTACT_RGBA, 0.002))
+            if ghost is None:
+                continue
+            for flag, rgba in FLAG_RGBA.items():
+                if np.asarray(state.get(flag, np.zeros(len(points), bool)))[f]:
+                    pos = ghost[j] + shift[1]
+                    marks.append((mujoco.mjtGeom.mjGEOM_SPHERE, [0.045, 0, 0], pos, rgba))
+                    rings.append((pos, rgba))
+                    break
+        return marks, rings
+
+    def _add_geoms(self, geoms):
+        scn = self.renderer.scene
+        eye = np.eye(3).reshape(-1)
+        for kind, size, pos, rgba in geoms:
+            if scn.ngeom >= scn.maxgeom:
+                break
+            mujoco.mjv_initGeom(
+                scn.geoms[scn.ngeom], kind, np.asarray(size, np.float64),
+                np.asarray(pos, np.float64), eye, np.asarray(rgba, np.float32),
+            )  # fmt: skip
+            scn.ngeom += 1
 
 
 def camera_path(root: np.ndarray, fps: float, *, height: float = 0.9, smooth_s: float = 0.3):
@@ -200,6 +334,42 @@ def annotate(image: np.ndarray, lines, *, t: int, n: int, keyframes, key: bool) 
     return np.asarray(img)
 
 
+def caption(method: str, t: int, n: int, W: int, err=None, flags=()) -> list[str]:
+    """Caption lines of frame ``t`` (numbered from 0, as in the report's tables and sheets) of
+    ``n``: method, W, frame; running error when ``err`` (T,) [m] is given; foot flags
+    (``"L ball sinks"``...) when any."""
+    lines = [f"{method or 'original'}   W = {W}   frame {t} of 0-{n - 1}"]
+    if err is not None:
+        lines.append(
+            f"MPJPE now {1e3 * err[t]:.1f} mm, running mean {1e3 * err[: t + 1].mean():.1f} mm"
+        )
+    if flags:
+        lines.append("feet: " + ", ".join(flags))
+    return lines
+
+
+_FOOT_WORD = {"tibia": "heel", "foot": "ball", "toes": "toes"}
+_FLAG_VERB = {"float": "floats", "sink": "sinks", "skate": "skates"}
+
+
+def foot_frame(state: FootState | None, t: int):
+    """``(points, {"contact", "float", "sink", "skate": (F,) bool})`` of frame ``t`` for
+    :meth:`SkeletonRenderer.draw`, and the caption's flag phrases; ``(None, [])`` without state."""
+    if state is None or not state.points:
+        return None, []
+    row = {
+        "contact": state.contact[t], "float": state.floating[t], "sink": state.sinking[t],
+        "skate": state.skating[t],
+    }  # fmt: skip
+    phrases = []
+    for f, n in enumerate(state.points):
+        for flag, verb in _FLAG_VERB.items():
+            if row[flag][f]:
+                phrases.append(f"{n[0].upper()} {_FOOT_WORD.get(n[1:], n[1:])} {verb}")
+                break
+    return (state.points, row), phrases
+
+
 def render_frames(
     original: PointMotion,
     reconstruction: PointMotion | None = None,
@@ -209,6 +379,8 @@ def render_frames(
     style: RenderStyle = DEFAULT_STYLE,
     frames=None,
     progress: bool = False,
+    feet: FootState | None = None,
+    ground_z: float = 0.0,
     renderer: SkeletonRenderer | None = None,
 ):
     """Yield annotated (H, W, 3) uint8 frames of ``original`` with ``reconstruction`` as a ghost.
@@ -219,8 +391,10 @@ def render_frames(
         keyframes: frame indices marked as they pass.
         method: name in the caption.
         frames: which frame indices to render (default all).
-        renderer: the clip's :class:`SkeletonRenderer` (same points and style), reused and left
-            open; one is made and closed here when None.
+        feet: foot contact and flags per frame (e.g. :func:`sim.replay.foot_state.simple_foot_states`).
+        ground_z: height of the drawn floor [m].
+        renderer: the clip's :class:`SkeletonRenderer` (same points, style and ground), reused
+            and left open; one is made and closed here when None.
     """
     rec = reconstruction
     orig = original if rec is None else original.restrict(rec.names)
@@ -235,21 +409,22 @@ def render_frames(
     it = frames
     if progress:
         it = tqdm(frames, desc=f"render {method or 'original'}", unit="frame", leave=False)
-    if renderer is not None and (renderer.bones.names != orig.names or renderer.style != style):
-        raise ValueError("the renderer was built for other points or another style")
+    if renderer is not None and (
+        renderer.bones.names != orig.names
+        or renderer.style != style
+        or renderer.ground_z != float(ground_z)
+    ):
+        raise ValueError("the renderer was built for other points, another style or ground")
     owned = renderer is None
-    r = SkeletonRenderer(orig.names, orig.parents, style) if owned else renderer
+    r = SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z) if owned else renderer
     try:
         for t in it:
+            marks, flags = foot_frame(feet, t)
             img = r.draw(
                 orig.positions[t], None if rec is None else rec.positions[t],
-                lookat=lookat[t], azimuth=azimuth, key=t in keyset,
+                lookat=lookat[t], azimuth=azimuth, key=t in keyset, feet=marks,
             )  # fmt: skip
-            lines = [f"{method or 'original'}   W = {len(keys)}   frame {t + 1}/{T}"]
-            if err is not None:
-                lines.append(
-                    f"MPJPE now {1e3 * err[t]:.1f} mm, running mean {1e3 * err[: t + 1].mean():.1f} mm"
-                )
+            lines = caption(method, t, T, len(keys), err, flags)
             yield annotate(img, lines, t=t, n=T, keyframes=keys, key=t in keyset)
     finally:
         if owned:
@@ -300,6 +475,20 @@ def contact_sheet(images, labels, path: str | os.PathLike, *, cols: int = 4) -> 
     return path
 
 
+def worst_frames(err: np.ndarray, keyframes) -> list[int]:
+    """Per interval between consecutive keyframes, the frame of largest ``err`` (T,) strictly
+    inside it (intervals without an inner frame are skipped)."""
+    keys = sorted(int(k) for k in keyframes)
+    out = []
+    for a, b in zip(keys[:-1], keys[1:], strict=False):
+        if b - a > 1:
+            out.append(a + 1 + int(np.argmax(err[a + 1 : b])))
+    return out
+
+
+SHEET_TILE = RenderStyle(width=224, height=320, distance=2.5, elevation=-8.0)
+
+
 def keyframe_sheet(
     original: PointMotion,
     reconstruction: PointMotion | None,
@@ -307,22 +496,57 @@ def keyframe_sheet(
     path,
     *,
     method: str = "",
-    style: RenderStyle = DEFAULT_STYLE,
-    cols: int = 5,
-    renderer: SkeletonRenderer | None = None,
+    style: RenderStyle = SHEET_TILE,
+    feet: FootState | None = None,
+    ground_z: float = 0.0,
 ) -> Path:
-    """PNG contact sheet of the keyframes (original with the reconstruction's ghost);
-    ``renderer`` as in :func:`render_frames`."""
+    """PNG filmstrip of a method's keyframes and what happens between them.
+
+    Top row: the original at each keyframe (the poses the method kept; the reconstruction equals
+    them there). Bottom row, set between its two keyframes: the frame of largest MPJPE inside each
+    interval, the reconstruction's ghost over the original, labelled with frame and error. Frames
+    numbered from 0. Tiles are portrait crops (``style``, default 224x320) with the camera on the
+    tile's own root, all from the clip's side, so poses read large and distinct.
+    """
     keys = sorted(int(k) for k in keyframes)
-    imgs = list(
-        render_frames(
-            original,
-            reconstruction,
-            keyframes=keys,
-            method=method,
-            style=style,
-            frames=keys,
-            renderer=renderer,
-        )  # fmt: skip
+    rec = reconstruction
+    orig = original if rec is None else original.restrict(rec.names)
+    err = np.zeros(orig.n_frames)
+    if rec is not None:
+        err = np.linalg.norm(rec.positions - orig.positions, axis=-1).mean(axis=1)
+    worst = worst_frames(err, keys) if rec is not None else []
+    _, azimuth = camera_path(orig.positions[:, 0], orig.fps)
+    tw, th = style.width, style.height
+    top = 34
+    sheet = Image.new("RGB", (max(len(keys), 1) * tw, 2 * th + top if worst else th + top), "white")
+    g = ImageDraw.Draw(sheet)
+    font = _font(max(15, th // 18))
+    head = f"{method or 'original'}: keyframes (top)" + (
+        ", the worst frame between each pair (bottom, orange ghost: the reconstruction)"
+        if worst
+        else ""
     )
-    return contact_sheet(imgs, [f"keyframe {k}" for k in keys], path, cols=cols)
+    g.text((6, 6), head, fill=(30, 30, 30), font=_font(22))
+    with SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z) as r:
+
+        def tile(t, ghost, x, y, label, colour):
+            look = np.array([*orig.positions[t, 0, :2], ground_z + 0.9])
+            marks, _ = foot_frame(feet, t)
+            img = r.draw(orig.positions[t], ghost, lookat=look, azimuth=azimuth, feet=marks)
+            sheet.paste(Image.fromarray(img), (x, y))
+            g.rectangle([x, y, x + tw - 1, y + th - 1], outline=(255, 255, 255), width=2)
+            w = g.textlength(label, font=font)
+            fs = font.size
+            g.rectangle([x + 4, y + th - fs - 12, x + 12 + w, y + th - 4], fill=colour)
+            g.text((x + 8, y + th - fs - 9), label, fill=(255, 255, 255), font=font)
+
+        for i, k in enumerate(keys):
+            tile(k, None, i * tw, top, f"key {k}", (30, 150, 70))
+        for t in worst:
+            i = next(i for i in range(len(keys) - 1) if keys[i] < t < keys[i + 1])
+            label = f"frame {t}: {1e3 * err[t]:.0f} mm"
+            tile(t, rec.positions[t], i * tw + tw // 2, top + th, label, (190, 90, 20))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, lambda f: sheet.save(f, format="PNG", optimize=True))
+    return path
