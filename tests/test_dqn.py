@@ -130,8 +130,8 @@ def test_tiny_training_beats_random_resumes_and_ships_a_loadable_policy(tmp_path
 
 def test_policy_round_trip_and_bad_inputs(tmp_path, tasks):
     net = KeyframeQNet(tasks[0].features.shape[1])
-    torch.nn.init.normal_(net.mlp[-1].weight, std=0.5)
-    torch.nn.init.normal_(net.value[-1].weight, std=0.5)
+    torch.nn.init.normal_(net.adv_out.weight, std=0.5)
+    torch.nn.init.normal_(net.value_out.weight, std=0.5)
     path = tmp_path / "p.pt"
     save_policy(net, path, Args(keyframes=(5,)), {"train": [], "test": []}, {}, {})
     loaded = load_policy(path)
@@ -165,7 +165,8 @@ def test_dqn_method_is_lazy_and_the_env_accepts_its_actions(tasks):
     obs, info = env.reset(seed=0)
     done = False
     while not done:
-        q = net(*(torch.as_tensor(obs[k])[None] for k in ("features", "cost")),
+        task = env.tasks[info["task_index"]]  # the network reads the raw arrays
+        q = net(torch.as_tensor(task.features)[None], torch.as_tensor(task.cost)[None].float(),
                 torch.as_tensor(obs["keyframes"].astype(bool))[None], torch.tensor([obs["remaining"]]))  # fmt: skip
         a = int(q.masked_fill(~torch.as_tensor(info["action_mask"])[None], -np.inf).argmax())
         obs, r, done, _, info = env.step(a)
@@ -258,8 +259,8 @@ def test_untrained_rollout_prior_network_is_the_rollout_algorithm(tasks):
                 g1[a] = insertion_gain(t.cost, mask, a) / s0
             mask[int(np.argmax(g1 + rollout_values(t.cost, mask, w - 2 - step)))] = True
         np.testing.assert_array_equal(k, np.flatnonzero(mask))
-    torch.nn.init.normal_(net.mlp[-1].weight, std=0.5)
-    torch.nn.init.normal_(net.value[-1].weight, std=0.5)
+    torch.nn.init.normal_(net.adv_out.weight, std=0.5)
+    torch.nn.init.normal_(net.value_out.weight, std=0.5)
     np.testing.assert_array_equal(
         policy.decide(feats, costs, 9), policy.decide_torch(feats, costs, 9)
     )

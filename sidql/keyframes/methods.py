@@ -32,7 +32,8 @@ MethodFn = Callable[..., np.ndarray]
 METHODS: dict[str, MethodFn] = {}
 
 #: name -> module that registers it when imported (for methods with heavy dependencies).
-LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy"}
+#: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
+LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
 
 
 def register(name: str) -> Callable[[MethodFn], MethodFn]:
@@ -53,7 +54,10 @@ def available() -> list[str]:
 def get(name: str) -> MethodFn:
     """The method registered as ``name`` (importing its module if lazy); KeyError lists choices."""
     if name not in METHODS and name in LAZY_METHODS:
-        importlib.import_module(LAZY_METHODS[name])
+        module, _, function = LAZY_METHODS[name].partition(":")
+        loaded = importlib.import_module(module)
+        if function:
+            METHODS[name] = getattr(loaded, function)
     try:
         return METHODS[name]
     except KeyError:

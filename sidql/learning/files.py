@@ -1,0 +1,78 @@
+"""Policy and checkpoint files: tensors and plain values only, with a format version.
+
+A file is one ``torch.save`` of a dict whose ``"format"`` entry names its kind and version
+(:data:`POLICY_FORMAT`, :data:`CHECKPOINT_FORMAT`). Loading uses ``torch.load(weights_only=True)``,
+which rebuilds only tensors and plain Python values (dict, list, tuple, str, int, float, bool,
+None) and refuses any other pickled object *before* constructing it, so a crafted file cannot run
+code. Anything refused, unreadable or of another format raises :class:`ModelFileError` (a
+:class:`sim.errors.MotionDataError`: the CLI prints one line and exits 2).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+
+#: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
+#: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
+#: ``value_out``).
+POLICY_FORMAT = "sidql-dqn-policy/2"
+#: Kind and version of a training checkpoint (OUT.ckpt); replay memories are stored as tensors.
+CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
+
+
+class ModelFileError(MotionDataError):
+    """A policy or checkpoint file that is refused: not a plain tensor file (e.g. a pickle that
+    would construct arbitrary objects), unreadable, or of another format or version."""
+
+
+def save_payload(path: str | os.PathLike, payload: dict) -> None:
+    """Write ``payload`` (a dict with a ``"format"`` entry; tensors and plain values only)
+    atomically to ``path``."""
+    import torch  # lazy: the command line imports this module without needing torch
+
+    if "format" not in payload:
+        raise ValueError("a payload must name its format")
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    write_atomic(path, lambda f: f.write(buf.getvalue()))
+
+
+def load_payload(path: str | os.PathLike, expected_format: str) -> dict:
+    """Load a file written by :func:`save_payload` with ``torch.load(weights_only=True)``.
+
+    Args:
+        path: the file.
+        expected_format: the only accepted ``"format"`` entry, e.g. :data:`POLICY_FORMAT`.
+    Returns:
+        The payload dict (tensors on the CPU).
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ModelFileError: anything else is wrong (one line naming the file and the problem).
+    """
+    import pickle
+
+    import torch  # lazy: see save_payload
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"no file at {path}")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        found = re.search(r"GLOBAL ([\w.]+)", str(e))
+        what = f" ({found.group(1)})" if found else ""
+        raise ModelFileError(
+            path, None, f"refused: holds objects other than tensors and plain values{what}"
+        ) from None
+    except Exception as e:  # truncated, not a torch file, not a zip, ...
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ModelFileError(path, None, f"unreadable as a {expected_format} file: {first}") from None
+    found = payload.get("format") if isinstance(payload, dict) else None
+    if found != expected_format:
+        raise ModelFileError(path, None, f"format {found!r}; expected {expected_format!r}")
+    return payload
