@@ -153,9 +153,7 @@ def test_zero_initial_error_gives_zero_rewards():
 def test_vector_env_runs_thousands_of_steps_with_episodes_out_of_step(mode):
     """Default settings (synthetic clips, W drawn from 5, 10, 15 per episode), so the two
     environments end their episodes at different steps; every info entry has a fixed shape."""
-    envs = gym.make_vec(
-        "sidql.learning.env:sidql/Keyframe-v0", num_envs=2, vectorization_mode=mode
-    )
+    envs = gym.make_vec("sidql.learning.env:sidql/Keyframe-v0", num_envs=2, vectorization_mode=mode)
     obs, infos = envs.reset(seed=0)
     assert obs["features"].shape == (2, 60, 12) and infos["action_mask"].shape == (2, 60)
     rng = np.random.default_rng(0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 
 
 def register(sub) -> None:
@@ -17,7 +18,11 @@ def register(sub) -> None:
         "60-frame clips of the training subjects, evaluating every --eval-every steps on the "
         "held-out subjects' clips against greedy and the exact optimum. Writes OUT (the policy), "
         "OUT.ckpt (resumable state, atomically at every evaluation), OUT with .csv (log) and "
-        ".png (learning curve). A killed run continues from its last checkpoint with --resume.",
+        ".png (learning curve). A killed run continues from its last checkpoint with --resume, "
+        "which refuses a checkpoint written with other settings (only --steps, --out, "
+        "--cache-dir, --eval-every, --threads, --data and --quiet may change). Policy and "
+        "checkpoint files are read as tensors and plain values only (torch weights_only=True); "
+        "anything else is refused with exit status 2.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--data", required=True, help="folder of CMU trials, e.g. ../shared/cmu")
@@ -56,9 +61,12 @@ def _bool(text: str) -> bool:
 def run(args) -> int:
     from sidql.learning.dqn import Args, train
 
-    for w in args.keyframes:
-        if w < 3:
-            raise SystemExit("sidql train: --keyframes values must be at least 3")
+    bad = [w for w in args.keyframes if not 3 <= w <= 60]
+    if bad:
+        print(
+            f"sidql train: error: --keyframes values must be in [3, 60]; got {bad}", file=sys.stderr
+        )
+        return 2
     values = {
         f.name: getattr(args, f.name) for f in dataclasses.fields(Args) if hasattr(args, f.name)
     }

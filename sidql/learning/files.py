@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import os
 import re
+import warnings
 
 from sim.errors import MotionDataError
 from sim.motion.clip import write_atomic
@@ -62,16 +63,22 @@ def load_payload(path: str | os.PathLike, expected_format: str) -> dict:
     if not os.path.exists(path):
         raise FileNotFoundError(f"no file at {path}")
     try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # e.g. "Detected pickle protocol 4": the verdict follows
+            warnings.simplefilter("ignore")
+            payload = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
         found = re.search(r"GLOBAL ([\w.]+)", str(e))
-        what = f" ({found.group(1)})" if found else ""
-        raise ModelFileError(
-            path, None, f"refused: holds objects other than tensors and plain values{what}"
-        ) from None
+        if found:  # a pickled object of some class or function: exactly what must never load
+            problem = f"holds objects other than tensors and plain values ({found.group(1)})"
+        else:  # an opcode the safe unpickler does not accept, or not a pickle at all
+            why = re.search(r"WeightsUnpickler error:\s*(.+)", str(e))
+            problem = f"not a file of tensors and plain values ({why.group(1) if why else e})"
+        raise ModelFileError(path, None, f"refused: {problem}"[:240]) from None
     except Exception as e:  # truncated, not a torch file, not a zip, ...
         first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
-        raise ModelFileError(path, None, f"unreadable as a {expected_format} file: {first}") from None
+        raise ModelFileError(
+            path, None, f"unreadable as a {expected_format} file: {first}"
+        ) from None
     found = payload.get("format") if isinstance(payload, dict) else None
     if found != expected_format:
         raise ModelFileError(path, None, f"format {found!r}; expected {expected_format!r}")

@@ -108,7 +108,6 @@ def insertion_gain(cost: np.ndarray, mask: np.ndarray, frame: int) -> float:
     return float(cost[left, right] - cost[left, frame] - cost[frame, right])
 
 
-
 def linear_cost_matrix(x: np.ndarray) -> np.ndarray:
     """Segment costs of linear interpolation: ``C[i, j]`` (i < j) = sum over frames i < n < j and
     channels c of |x[n, c] - lerp(x[i, c], x[j, c])|; zero on and below the diagonal.
