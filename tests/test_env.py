@@ -235,3 +235,32 @@ def test_real_clip_observations_stay_in_bounds_and_env_q_is_q_error(walk_clip):
             q = q_error(series, np.flatnonzero(info["keyframe_mask"]))
             assert info["q"] == pytest.approx(q, rel=1e-9)
             assert r == pytest.approx((info["q_prev"] - q) / info["q0"], rel=1e-9, abs=1e-12)
+
+
+def test_load_tasks_gives_env_tasks_and_a_repeated_load_reads_only_the_default_cache(
+    tmp_path, monkeypatch, cmu_dir
+):
+    import sidql.learning.tasks as tasks_module
+
+    data = tmp_path / "data" / "02"
+    data.mkdir(parents=True)
+    for name in ("02.asf", "02_02.amc"):
+        (data / name).symlink_to(cmu_dir / "02" / name)
+    monkeypatch.setenv("SIDQL_CACHE", str(tmp_path / "cache"))
+    first = tasks_module.load_tasks(tmp_path / "data", progress=False)  # no cache_dir given
+    tasks = first.tasks()  # the README's line
+    assert len(tasks) == 1 and isinstance(tasks[0], KeyframeTask) and first.skipped == []
+    assert len(list((tmp_path / "cache").glob("02_02-*.npz"))) == 1
+
+    def no_motion_reading(*args, **kwargs):
+        raise AssertionError("a repeated load read the motion files")
+
+    monkeypatch.setattr(tasks_module, "load_motion", no_motion_reading)
+    again = tasks_module.load_tasks(tmp_path / "data", progress=False).tasks()
+    np.testing.assert_array_equal(again[0].cost, tasks[0].cost)
+    np.testing.assert_array_equal(again[0].features, tasks[0].features)
+    env = KeyframeEnv(again)
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    with pytest.raises(AssertionError, match="read the motion files"):  # False: no cache at all
+        tasks_module.load_tasks(tmp_path / "data", progress=False, cache_dir=False)
