@@ -6,10 +6,10 @@ import argparse
 import dataclasses
 import sys
 
+from sidql.learning.settings import Args
+
 
 def register(sub) -> None:
-    from sidql.learning.dqn import Args  # light: the module imports torch only when training starts
-
     d = Args()
     p = sub.add_parser(
         "train",
@@ -36,7 +36,7 @@ def register(sub) -> None:
     )
     p.add_argument("--cache-dir", default=None, help="cache of per-trial features and costs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.dqn.Args)")
+    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.settings.Args)")
     for f in dataclasses.fields(Args):
         if f.name in {"data", "keyframes", "steps", "out", "resume", "seed", "test_subjects",
                       "cache_dir", "progress", "extra", "synthetic_tasks"}:  # fmt: skip
@@ -59,7 +59,7 @@ def _bool(text: str) -> bool:
 
 
 def run(args) -> int:
-    from sidql.learning.dqn import Args, train
+    from sidql.learning.dqn import train  # lazy: imports torch, needed only when training starts
 
     bad = [w for w in args.keyframes if not 3 <= w <= 60]
     if bad:

@@ -31,10 +31,12 @@ import csv
 import io
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
+import torch.nn.functional as F
 from tqdm import tqdm
 
 from sidql.keyframes.methods import greedy_from_costs
@@ -47,7 +49,10 @@ from sidql.learning.files import (
     load_payload,
     save_payload,
 )
+from sidql.learning.policy import Policy
+from sidql.learning.qnet import KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
+from sidql.learning.settings import RESUME_MAY_CHANGE, Args
 from sidql.learning.tasks import (
     KeyframeTask,
     insertion_gain,
@@ -58,91 +63,6 @@ from sidql.learning.tasks import (
 from sim.errors import MotionDataError
 from sim.motion.clip import write_atomic
 from sim.motion.dataset import find_trials
-
-# torch (and sidql.learning.qnet / sidql.learning.policy, which import it) and matplotlib are
-# imported inside the functions that need them, so that building the command line (which reads
-# Args) stays light.
-
-#: Args that may differ between a checkpoint and the run that resumes it (everything else must
-#: match: the network, the replay memories and the data split are built from it).
-RESUME_MAY_CHANGE = ("steps", "resume", "out", "cache_dir", "progress", "threads", "eval_every",
-                     "extra", "data")  # fmt: skip
-
-
-@dataclass
-class Args:
-    data: str | None = None
-    """directory of CMU trials (``sim.motion.dataset.find_trials``); None: synthetic tasks (for tests)"""
-    keyframes: tuple[int, ...] = (5, 10, 15)
-    """keyframe counts W the policy learns (one drawn per episode)"""
-    steps: int = 16_000
-    """environment steps (keyframes chosen) in total"""
-    out: str = "policy.pt"
-    """where the trained policy goes; OUT.ckpt, OUT.csv and OUT.png are written beside it"""
-    resume: bool = False
-    """continue from OUT.ckpt if it exists"""
-    seed: int = 0
-    """seeds numpy, torch, the environments and the subject split"""
-    test_subjects: tuple[str, ...] | None = None
-    """held-out subjects (never trained on); None: every 4th subject in sorted order, offset by seed"""
-    stride: int = 2
-    """training clips start every ``stride`` frames (30 fps) of each training trial"""
-    cache_dir: str | None = None
-    """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
-    synthetic_tasks: int = 64
-    """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
-    # -- DQN -------------------------------------------------------------------------------------
-    buffer_size: int = 10_000
-    """replay memory of the agent's own transitions (paper: 10,000)"""
-    batch_size: int = 128
-    """minibatch (paper: 256)"""
-    learning_rate: float = 1e-4
-    """Adam step size (paper: 0.01; larger rates drift away from the prior quickly)"""
-    gamma: float = 1.0
-    """discount (paper: 0.5, best with the greedy prior; 1 with the rollout prior, whose value is
-    undiscounted)"""
-    n_step: int = 1
-    """n-step returns"""
-    double: bool = True
-    """double DQN: the main network picks the next action, the target network values it"""
-    train_frequency: int = 4
-    """one gradient step every this many environment steps (paper: 100-200)"""
-    target_update: int = 250
-    """copy the main network into the target network every this many gradient steps"""
-    learning_starts: int = 500
-    """environment steps before the first gradient step"""
-    eps_start: float = 0.2
-    """ε of the ε-greedy exploration at the start"""
-    eps_end: float = 0.02
-    """ε at the end of the linear schedule"""
-    eps_fraction: float = 0.4
-    """fraction of ``steps`` over which ε falls linearly"""
-    demo_episodes: int = 3_000
-    """demonstration episodes from the exact optimum seeded into their own replay memory (0: none)"""
-    demo_fraction: float = 0.25
-    """share of every minibatch drawn from the demonstrations"""
-    margin: float = 0.02
-    """DQfD margin [normalised reward] by which optimal frames must beat others on demonstrations"""
-    margin_weight: float = 0.0
-    """weight of the margin loss (0: plain TD learning from demonstrations)"""
-    prior: str = "rollout"
-    """what the learned part starts from: "greedy" (Q ranks like greedy untrained) or "rollout"
-    (Q starts at the exact value of finishing greedily, sidql.learning.rollout; use with gamma 1)"""
-    hidden: int = 32
-    """width of the Q-network"""
-    n_envs: int = 16
-    """episodes played in parallel"""
-    grad_clip: float = 10.0
-    """gradient-norm clip"""
-    eval_every: int = 2_000
-    """evaluate on the held-out clips and checkpoint every this many environment steps"""
-    threads: int = 1
-    """torch threads"""
-    progress: bool = True
-    """tqdm progress bar"""
-    extra: dict = field(default_factory=dict)
-    """free-form notes stored with the policy"""
-
 
 # --- replay memory -------------------------------------------------------------------------------
 
@@ -180,8 +100,6 @@ class ReplayMemory:
 
     def state_dict(self) -> dict:
         """Tensors and plain values only (a checkpoint is loaded with ``weights_only=True``)."""
-        import torch  # lazy: see the module's imports
-
         return {k: torch.from_numpy(v.copy()) if isinstance(v, np.ndarray) else v
                 for k, v in vars(self).items()}  # fmt: skip
 
@@ -312,8 +230,6 @@ def prior_values(net, costs_np, task, mask, rem):
     masks (B, N), remaining (B,)) as a tensor, or None for a greedy-prior network."""
     if net.config["prior"] != "rollout":
         return None
-    import torch  # lazy: see the module's imports
-
     vals = rollout_values_batch(
         costs_np, np.asarray(task, np.int64), np.asarray(mask, bool), np.asarray(rem, np.int64)
     )
@@ -323,10 +239,6 @@ def prior_values(net, costs_np, task, mask, rem):
 def act(net, features, costs, masks, remaining, prior=None) -> np.ndarray:
     """Masked argmax of the network for a batch: (B, N, C), (B, N, N), (B, N) bool, (B,), and the
     rollout prior (B, N) if the network uses one -> (B,) actions."""
-    import torch  # lazy: see the module's imports
-
-    from sidql.learning.qnet import masked_q
-
     t = torch.as_tensor
     with torch.no_grad():
         q = net(t(features), t(costs), t(masks), t(remaining), prior)
@@ -335,8 +247,6 @@ def act(net, features, costs, masks, remaining, prior=None) -> np.ndarray:
 
 def evaluate(net, tasks, keyframes) -> dict[int, float]:
     """Mean Q (eq. 18) of the network's greedy decisions over ``tasks`` for each W."""
-    from sidql.learning.policy import Policy  # lazy: imports torch
-
     policy = Policy(net, keyframes, {})
     feats = np.stack([t.features for t in tasks])
     costs = np.stack([t.cost for t in tasks])
@@ -378,10 +288,6 @@ def play_demonstrations(env: KeyframeEnv, memory: ReplayMemory, args: Args, rng)
 def margin_loss(net, feats, costs, costs_np, batch, args):
     """DQfD's large-margin loss on demonstration states: the best frame of the optimum must beat
     every other free frame by ``args.margin`` (in units of the normalised reward)."""
-    import torch  # lazy: see the module's imports
-
-    from sidql.learning.qnet import masked_q
-
     task, mask, rem, *_, expert = batch
     prior = prior_values(net, costs_np, task.numpy(), mask.numpy(), rem.numpy())
     q = masked_q(net(feats[task], costs[task], mask, rem, prior), mask)
@@ -394,11 +300,6 @@ def margin_loss(net, feats, costs, costs_np, batch, args):
 
 def td_loss(net, target, feats, costs, costs_np, batch, args):
     """Huber loss between Q(s, a) and the n-step (double) DQN target; and the mean Q(s, a)."""
-    import torch  # lazy: see the module's imports
-    import torch.nn.functional as F
-
-    from sidql.learning.qnet import masked_q
-
     task, mask, rem, action, ret, nmask, nrem, done, disc, _ = batch
     f, c = feats[task], costs[task]
     prior = prior_values(net, costs_np, task.numpy(), mask.numpy(), rem.numpy())
@@ -422,7 +323,6 @@ def sample_batch(memory: ReplayMemory, demos: ReplayMemory, rng, args: Args):
     """A minibatch of tensors: ``batch_size - n_demo`` transitions of the agent's own play and
     ``n_demo`` (= ``demo_fraction`` of the batch, 0 without demonstrations) demonstrations.
     Returns (batch, demonstration part or None)."""
-    import torch  # lazy: see the module's imports
 
     def take(m: ReplayMemory, k: int):
         idx = m.sample(rng, k)
@@ -580,10 +480,6 @@ def train(args: Args) -> dict:
         MotionDataError: no usable clips for the split, or (as :class:`ModelFileError`) a
             checkpoint that ``--resume`` refuses (unsafe file, other format or other settings).
     """
-    import torch  # lazy: see the module's imports
-
-    from sidql.learning.qnet import KeyframeQNet
-
     # setup: files, checkpoint (checked before any data is read), data, networks, environments
     torch.set_num_threads(args.threads)
     files = RunFiles.beside(args.out)

@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import io
 import os
+import pickle
 import re
 import warnings
+
+import torch
 
 from sim.errors import MotionDataError
 from sim.motion.clip import write_atomic
@@ -34,8 +37,6 @@ class ModelFileError(MotionDataError):
 def save_payload(path: str | os.PathLike, payload: dict) -> None:
     """Write ``payload`` (a dict with a ``"format"`` entry; tensors and plain values only)
     atomically to ``path``."""
-    import torch  # lazy: the command line imports this module without needing torch
-
     if "format" not in payload:
         raise ValueError("a payload must name its format")
     buf = io.BytesIO()
@@ -55,10 +56,6 @@ def load_payload(path: str | os.PathLike, expected_format: str) -> dict:
         FileNotFoundError: no file at ``path``.
         ModelFileError: anything else is wrong (one line naming the file and the problem).
     """
-    import pickle
-
-    import torch  # lazy: see save_payload
-
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"no file at {path}")
