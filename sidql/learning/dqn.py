@@ -467,6 +467,40 @@ def record(files: RunFiles, log_rows: list[dict], row: dict, keyframes) -> None:
     plot_curve(log_rows, keyframes, files.curve)
 
 
+def make_networks(args: Args, feats: torch.Tensor):
+    """(Q-network, target network, Adam optimiser) for (K, N, C) training features: the network
+    standardises its inputs with their per-channel mean and standard deviation."""
+    c = feats.shape[-1]
+    net = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
+    flat = feats.reshape(-1, c)
+    net.set_normalisation(flat.mean(0), flat.std(0))
+    target = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
+    target.load_state_dict(net.state_dict())
+    return net, target, torch.optim.Adam(net.parameters(), lr=args.learning_rate)
+
+
+def training_state(net, target, opt, memory, demos, counters, log_rows, rng, split, n_tasks):
+    """Everything :func:`restore` needs, as tensors and plain values (for :func:`save_checkpoint`)."""
+    return {
+        **counters, "net": net.state_dict(), "target": target.state_dict(),
+        "opt": opt.state_dict(), "memory": memory.state_dict(), "demos": demos.state_dict(),
+        "log": list(log_rows), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+        "split": split, "n_tasks": n_tasks,
+    }  # fmt: skip
+
+
+def restore(ck: dict, net, target, opt, memory, demos, rng) -> tuple[dict, list[dict]]:
+    """Load a checkpoint's state into the run's objects; returns (counters, log rows)."""
+    net.load_state_dict(ck["net"])
+    target.load_state_dict(ck["target"])
+    opt.load_state_dict(ck["opt"])
+    memory.load_state_dict(ck["memory"])
+    demos.load_state_dict(ck["demos"])
+    rng.bit_generator.state = ck["rng"]
+    torch.set_rng_state(ck["torch_rng"])
+    return {k: int(ck[k]) for k in ("step", "updates", "episodes")}, list(ck["log"])
+
+
 # --- the algorithm -------------------------------------------------------------------------------
 
 
@@ -495,38 +529,25 @@ def train(args: Args) -> dict:
             str(files.checkpoint), None, f"written for another data split ({ck.get('n_tasks')} "
             f"training clips, {ck.get('split')}); this run has {len(train_tasks)}, {split}",
         )  # fmt: skip
-    n, c = train_tasks[0].features.shape
+    n = train_tasks[0].n_frames
     feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
     costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
     costs = torch.as_tensor(costs_np.astype(np.float32))
     base = baselines(test_tasks, args.keyframes)
 
-    net = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
-    flat = feats.reshape(-1, c)
-    net.set_normalisation(flat.mean(0), flat.std(0))
-    target = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
-    target.load_state_dict(net.state_dict())
-    opt = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
+    net, target, opt = make_networks(args, feats)
     envs = [KeyframeEnv(train_tasks, args.keyframes) for _ in range(args.n_envs)]
     memory = ReplayMemory(args.buffer_size, n)
     demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
-    step = updates = episodes = 0
-    log_rows: list[dict] = []
     if ck is not None:
-        net.load_state_dict(ck["net"])
-        target.load_state_dict(ck["target"])
-        opt.load_state_dict(ck["opt"])
-        memory.load_state_dict(ck["memory"])
-        demos.load_state_dict(ck["demos"])
-        step, updates, episodes = int(ck["step"]), int(ck["updates"]), int(ck["episodes"])
-        log_rows = list(ck["log"])
-        rng.bit_generator.state = ck["rng"]
-        torch.set_rng_state(ck["torch_rng"])
-        seeds = [args.seed + 1000 * (step + 1) + i for i in range(len(envs))]
+        counters, log_rows = restore(ck, net, target, opt, memory, demos, rng)
+        seeds = [args.seed + 1000 * (counters["step"] + 1) + i for i in range(len(envs))]
     else:
+        counters, log_rows = {"step": 0, "updates": 0, "episodes": 0}, []
         if args.demo_episodes:
             play_demonstrations(KeyframeEnv(train_tasks, args.keyframes), demos, args, rng)
         seeds = [args.seed + i for i in range(len(envs))]
+    step, updates, episodes = counters["step"], counters["updates"], counters["episodes"]
     started = [env.reset(seed=s) for env, s in zip(envs, seeds, strict=True)]
     obs, infos = [o for o, _ in started], [i for _, i in started]
     nsteps = [NStep(args.n_step, args.gamma) for _ in envs]
@@ -593,17 +614,11 @@ def train(args: Args) -> dict:
                 )  # fmt: skip
                 losses = []
                 record(files, log_rows, row, args.keyframes)
-                save_checkpoint(
-                    files.checkpoint,
-                    {
-                        **counters, "net": net.state_dict(), "target": target.state_dict(),
-                        "opt": opt.state_dict(), "memory": memory.state_dict(),
-                        "demos": demos.state_dict(), "log": log_rows,
-                        "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
-                        "split": split, "n_tasks": len(train_tasks),
-                    },
-                    args,
+                state = training_state(
+                    net, target, opt, memory, demos, counters, log_rows, rng, split,
+                    len(train_tasks),
                 )  # fmt: skip
+                save_checkpoint(files.checkpoint, state, args)
                 bar.set_postfix(
                     {f"W{w}": f"{heldout[w] / base['optimal'][w]:.3f}" for w in heldout}
                 )
