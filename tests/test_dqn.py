@@ -1,19 +1,34 @@
 """The SIDQL DQN: network features, n-step returns, policy files, and a tiny training run."""
 
+import dataclasses
 import itertools
+import os
+import pickle
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
 from sidql.keyframes.methods import greedy_from_costs
-from sidql.learning.dqn import Args, NStep, ReplayMemory, save_policy, train
-from sidql.learning.env import KeyframeEnv, insertion_gain, keyframe_error_sum
-from sidql.learning.policy import Policy, load_policy
+from sidql.learning.dqn import (
+    Args,
+    NStep,
+    ReplayMemory,
+    load_checkpoint,
+    make_tasks,
+    save_checkpoint,
+    save_policy,
+    train,
+)
+from sidql.learning.env import KeyframeEnv
+from sidql.learning.files import CHECKPOINT_FORMAT, POLICY_FORMAT, ModelFileError
+from sidql.learning.policy import DEFAULT_POLICY, Policy, load_policy
 from sidql.learning.qnet import KeyframeQNet, current_error, gain_features
-from sidql.learning.tasks import synthetic_tasks
+from sidql.learning.tasks import insertion_gain, keyframe_error_sum, synthetic_tasks
+from sim.errors import MotionDataError
 
 torch.set_num_threads(1)
 
@@ -130,8 +145,8 @@ def test_tiny_training_beats_random_resumes_and_ships_a_loadable_policy(tmp_path
 
 def test_policy_round_trip_and_bad_inputs(tmp_path, tasks):
     net = KeyframeQNet(tasks[0].features.shape[1])
-    torch.nn.init.normal_(net.mlp[-1].weight, std=0.5)
-    torch.nn.init.normal_(net.value[-1].weight, std=0.5)
+    torch.nn.init.normal_(net.adv_out.weight, std=0.5)
+    torch.nn.init.normal_(net.value_out.weight, std=0.5)
     path = tmp_path / "p.pt"
     save_policy(net, path, Args(keyframes=(5,)), {"train": [], "test": []}, {}, {})
     loaded = load_policy(path)
@@ -165,7 +180,8 @@ def test_dqn_method_is_lazy_and_the_env_accepts_its_actions(tasks):
     obs, info = env.reset(seed=0)
     done = False
     while not done:
-        q = net(*(torch.as_tensor(obs[k])[None] for k in ("features", "cost")),
+        task = env.tasks[info["task_index"]]  # the network reads the raw arrays
+        q = net(torch.as_tensor(task.features)[None], torch.as_tensor(task.cost)[None].float(),
                 torch.as_tensor(obs["keyframes"].astype(bool))[None], torch.tensor([obs["remaining"]]))  # fmt: skip
         a = int(q.masked_fill(~torch.as_tensor(info["action_mask"])[None], -np.inf).argmax())
         obs, r, done, _, info = env.step(a)
@@ -258,8 +274,180 @@ def test_untrained_rollout_prior_network_is_the_rollout_algorithm(tasks):
                 g1[a] = insertion_gain(t.cost, mask, a) / s0
             mask[int(np.argmax(g1 + rollout_values(t.cost, mask, w - 2 - step)))] = True
         np.testing.assert_array_equal(k, np.flatnonzero(mask))
-    torch.nn.init.normal_(net.mlp[-1].weight, std=0.5)
-    torch.nn.init.normal_(net.value[-1].weight, std=0.5)
+    torch.nn.init.normal_(net.adv_out.weight, std=0.5)
+    torch.nn.init.normal_(net.value_out.weight, std=0.5)
     np.testing.assert_array_equal(
         policy.decide(feats, costs, 9), policy.decide_torch(feats, costs, 9)
     )
+
+
+# --- hostile files, refused settings, the kernel's named modules (issue 8 part 1 and 3, issue 9) ---
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+class Armed:
+    """A pickled object whose reconstruction creates ``marker`` (stands in for any command)."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def plant(path, marker, kind):
+    """A malicious file at ``path``: a torch file whose dict of the right format holds an armed
+    object, or a plain pickle of one."""
+    if kind == "torch":
+        fmt = CHECKPOINT_FORMAT if str(path).endswith(".ckpt") else POLICY_FORMAT
+        torch.save({"format": fmt, "state_dict": {"x": Armed(marker)}}, path)
+    else:
+        path.write_bytes(pickle.dumps(Armed(marker)))
+
+
+def cli(*argv, env=None):
+    return subprocess.run(
+        [sys.executable, "-m", "sidql.commands.main", *argv], capture_output=True, text=True,
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})}, timeout=300,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", ["torch", "pickle"])
+def test_a_malicious_policy_file_is_refused_and_runs_nothing(tmp_path, monkeypatch, kind):
+    marker, path = tmp_path / "pwned", tmp_path / "evil.pt"
+    plant(path, marker, kind)
+    monkeypatch.setenv("SIDQL_POLICY", str(path))
+    with pytest.raises(ModelFileError, match="evil.pt: refused: "):
+        load_policy()
+    assert not marker.exists()
+    # the payload is armed: an unsafe load would have run it
+    if kind == "torch":
+        torch.load(path, weights_only=False)
+    else:
+        pickle.loads(path.read_bytes())
+    assert marker.exists()
+
+
+def test_a_malicious_policy_through_the_cli_is_one_line_and_exit_2(tmp_path, cmu_dir):
+    marker, path = tmp_path / "pwned", tmp_path / "evil.pt"
+    plant(path, marker, "torch")
+    out = cli("extract", str(cmu_dir / "02" / "02.asf"), str(cmu_dir / "02" / "02_02.amc"),
+              "--keyframes", "5", "--method", "dqn", env={"SIDQL_POLICY": str(path)})  # fmt: skip
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.count("\n") == 1 and "evil.pt: refused" in out.stderr
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("kind", ["torch", "pickle"])
+def test_a_planted_checkpoint_is_refused_by_resume_and_runs_nothing(tmp_path, kind):
+    marker, out = tmp_path / "pwned", tmp_path / "run" / "policy.pt"
+    out.parent.mkdir()
+    plant(out.with_name("policy.pt.ckpt"), marker, kind)
+    res = cli("train", "--data", str(tmp_path), "--out", str(out), "--resume", "--quiet")
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.count("\n") == 1 and "policy.pt.ckpt: refused" in res.stderr
+    assert not marker.exists() and not out.exists()
+
+
+def test_policy_files_of_another_format_version_are_refused(tmp_path, tasks):
+    net = KeyframeQNet(tasks[0].features.shape[1])
+    path = tmp_path / "p.pt"
+    save_policy(net, path, Args(keyframes=(5,)), {"train": [], "test": []}, {}, {})
+    payload = torch.load(path, weights_only=True)
+    assert payload["format"] == POLICY_FORMAT
+    for bad in ("sidql-dqn-policy/1", CHECKPOINT_FORMAT, None):
+        payload["format"] = bad
+        torch.save(payload, path)
+        with pytest.raises(ModelFileError, match="format .*expected 'sidql-dqn-policy/2'"):
+            load_policy(path)
+    path.write_bytes(b"not a torch file at all")
+    with pytest.raises(ModelFileError, match="p.pt: refused: not a file of tensors"):
+        load_policy(path)
+    path.write_bytes(b"PK\x03\x04 truncated zip")
+    with pytest.raises(ModelFileError, match="p.pt: (refused|unreadable)"):
+        load_policy(path)
+
+
+def test_the_shipped_policy_loads_safely_with_its_format():
+    policy = load_policy(DEFAULT_POLICY)
+    assert policy.meta["format"] == POLICY_FORMAT and policy.net.config["hidden"] == 32
+
+
+def test_resume_with_other_settings_is_one_line_and_exit_2(tmp_path):
+    out = tmp_path / "policy.pt"
+    save_checkpoint(out.with_name("policy.pt.ckpt"), {}, Args(data=str(tmp_path), hidden=32))
+    res = cli("train", "--data", str(tmp_path), "--out", str(out), "--resume", "--hidden", "16")
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.count("\n") == 1
+    assert "written with --hidden 32, this run has --hidden 16" in res.stderr
+    with pytest.raises(ModelFileError, match="--keyframes 5 10 15, this run has --keyframes 5 10"):
+        load_checkpoint(out.with_name("policy.pt.ckpt"), Args(keyframes=(5, 10)))
+    # what may change does not matter
+    load_checkpoint(out.with_name("policy.pt.ckpt"), Args(steps=99, out="x", threads=2))
+
+
+def test_train_without_clips_for_the_held_out_subjects_is_one_line_and_exit_2(tmp_path, cmu_dir):
+    res = cli("train", "--data", str(cmu_dir), "--test-subjects", "99", "--out",
+              str(tmp_path / "p.pt"), "--quiet")  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.count("\n") == 1 and "no trials of held-out subject(s) 99" in res.stderr
+    # held-out trials that exist but give no usable clip: refused before training data is read
+    data = tmp_path / "data"
+    (data / "98").mkdir(parents=True)
+    (data / "98" / "98.asf").write_text(":version 1.10\n")
+    (data / "98" / "98_01.amc").write_text(":FULLY-SPECIFIED\n1\n")
+    (data / "02").mkdir()
+    for name in ("02.asf", "02_02.amc"):
+        (data / "02" / name).symlink_to(cmu_dir / "02" / name)
+    args = Args(
+        data=str(data), test_subjects=("98",), cache_dir=str(tmp_path / "c"), progress=False
+    )
+    with pytest.raises(MotionDataError, match="no usable 60-frame clips of the held-out subjects"):
+        make_tasks(args)
+    assert not (tmp_path / "c").exists()  # subject 02 (training) was never read
+
+
+def test_resume_of_a_real_run_refuses_another_width(tmp_path):
+    args = Args(
+        out=str(tmp_path / "p.pt"), steps=40, synthetic_tasks=8, keyframes=(4,), batch_size=8,
+        buffer_size=100, learning_starts=10, n_envs=2, demo_episodes=4, eval_every=40,
+        progress=False, hidden=8,
+    )  # fmt: skip
+    train(args)
+    with pytest.raises(ModelFileError, match="--hidden 8, this run has --hidden 16"):
+        train(dataclasses.replace(args, resume=True, steps=80, hidden=16))
+    assert train(dataclasses.replace(args, resume=True, steps=80))["steps"] == 80
+
+
+def test_the_decision_kernel_reads_named_modules_and_refuses_a_changed_head(tasks):
+    feats = np.stack([t.features for t in tasks])[:2]
+    costs = np.stack([t.cost for t in tasks])[:2]
+    c = feats.shape[-1]
+    Policy(KeyframeQNet(c, hidden=16), (5,), {}).decide(feats, costs, 5)  # the real head works
+    changes = {
+        "a layer replaced by a block": lambda n: setattr(
+            n, "adv_hidden", torch.nn.Sequential(torch.nn.Linear(16, 16), torch.nn.Tanh())
+        ),
+        "a wider layer": lambda n: (setattr(n, "value_hidden", torch.nn.Linear(16, 24)),
+                                    setattr(n, "value_out", torch.nn.Linear(24, 1))),
+        "a layer added": lambda n: setattr(n, "adv_extra", torch.nn.Linear(16, 16)),
+        "a layer removed": lambda n: delattr(n, "value_hidden"),
+        "a layer without bias": lambda n: setattr(n, "adv_out", torch.nn.Linear(16, 1, bias=False)),
+    }  # fmt: skip
+    for what, change in changes.items():
+        net = KeyframeQNet(c, hidden=16)
+        change(net)
+        with pytest.raises(TypeError, match="decision kernel"):
+            Policy(net, (5,), {}).decide(feats, costs, 5)
+            pytest.fail(f"{what} was not caught")
+
+
+def test_import_of_the_method_registry_does_not_import_the_policy_or_torch():
+    code = (
+        "import sys, sidql.keyframes.methods as m; "
+        "assert 'torch' not in sys.modules and 'sidql.learning.policy' not in sys.modules; "
+        "f = m.get('dqn'); import sidql.learning.policy as p; assert f is p.dqn; print('ok')"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr

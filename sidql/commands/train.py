@@ -6,11 +6,10 @@ import argparse
 import dataclasses
 
 from sidql.commands.usage import UsageError
+from sidql.learning.settings import Args
 
 
 def register(sub) -> None:
-    from sidql.learning.dqn import Args  # lazy: the learner needs torch; other commands do not
-
     d = Args()
     p = sub.add_parser(
         "train",
@@ -19,7 +18,11 @@ def register(sub) -> None:
         "60-frame clips of the training subjects, evaluating every --eval-every steps on the "
         "held-out subjects' clips against greedy and the exact optimum. Writes OUT (the policy), "
         "OUT.ckpt (resumable state, atomically at every evaluation), OUT with .csv (log) and "
-        ".png (learning curve). A killed run continues from its last checkpoint with --resume.",
+        ".png (learning curve). A killed run continues from its last checkpoint with --resume, "
+        "which refuses a checkpoint written with other settings (only --steps, --out, "
+        "--cache-dir, --eval-every, --threads, --data and --quiet may change). Policy and "
+        "checkpoint files are read as tensors and plain values only (torch weights_only=True); "
+        "anything else is refused with exit status 2.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--data", required=True, help="folder of CMU trials, e.g. ../shared/cmu")
@@ -33,7 +36,7 @@ def register(sub) -> None:
     )
     p.add_argument("--cache-dir", default=None, help="cache of per-trial features and costs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.dqn.Args)")
+    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.settings.Args)")
     for f in dataclasses.fields(Args):
         if f.name in {"data", "keyframes", "steps", "out", "resume", "seed", "test_subjects",
                       "cache_dir", "progress", "extra", "synthetic_tasks"}:  # fmt: skip
@@ -56,11 +59,11 @@ def _bool(text: str) -> bool:
 
 
 def run(args) -> int:
-    from sidql.learning.dqn import Args, train  # lazy: torch, only for this command
+    from sidql.learning.dqn import train  # lazy: imports torch, needed only when training starts
 
-    for w in args.keyframes:
-        if w < 3:
-            raise UsageError(f"--keyframes values must be at least 3; got {w}")
+    bad = [w for w in args.keyframes if not 3 <= w <= 60]
+    if bad:
+        raise UsageError(f"--keyframes values must be in [3, 60]; got {bad}")
     values = {
         f.name: getattr(args, f.name) for f in dataclasses.fields(Args) if hasattr(args, f.name)
     }

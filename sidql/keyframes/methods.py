@@ -16,8 +16,8 @@ the caller keeps per clip, so that one table serves every W); :func:`select` pas
 methods whose signature names them.
 
 A method living in a module that should only be imported on demand (e.g. one that needs torch
-weights) is named in :data:`LAZY_METHODS` instead (``name -> module``); :func:`select` imports that
-module, which must call :func:`register` at import time.
+weights) is named in :data:`LAZY_METHODS` instead (``name -> "module:function"``, registered for
+the Hermite reconstruction on first use; a bare ``"module"`` must call :func:`register` itself).
 """
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ METHODS: dict[str, MethodFn] = {}
 RECONSTRUCTION: dict[str, str] = {}
 
 #: name -> module that registers it when imported (for methods with heavy dependencies).
-LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy"}
+#: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
+LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
 
 _OPTIONS = ("reconstruction", "memo")
 _TAKES: dict[str, tuple[str, ...]] = {}
@@ -78,7 +79,10 @@ def available() -> list[str]:
 def get(name: str) -> MethodFn:
     """The method registered as ``name`` (importing its module if lazy); KeyError lists choices."""
     if name not in METHODS and name in LAZY_METHODS:
-        importlib.import_module(LAZY_METHODS[name])
+        module, _, function = LAZY_METHODS[name].partition(":")
+        loaded = importlib.import_module(module)
+        if function:
+            register(name)(getattr(loaded, function))
     try:
         return METHODS[name]
     except KeyError:

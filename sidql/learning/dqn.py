@@ -11,11 +11,18 @@
   (``sidql.learning.rollout``), so an untrained network is already the rollout improvement of greedy;
 - parallel episodes (one batched forward pass per step) and hard target updates.
 
-Everything is in :func:`train`, top to bottom, cleanrl style; :class:`Args` documents each knob. The
-paper's values are the defaults where it gives them (memory 10,000, minibatch 256, γ = 0.5 were
-its choices; the defaults here are the tuned ones, see the README's tuning table).
+:func:`train` reads top to bottom, cleanrl style (setup, then one loop: act, step, store, learn,
+evaluate and checkpoint), with every piece it calls defined above it; :class:`Args` documents each
+knob. The paper's values are the defaults where it gives them (memory 10,000, minibatch 256,
+γ = 0.5 were its choices; the defaults here are the tuned ones, see the README's tuning table).
 A run writes ``OUT`` (the policy), ``OUT.ckpt`` (everything needed to resume, written atomically
-at every evaluation), ``OUT.csv`` (the log) and ``OUT.png`` (the learning curve).
+at every evaluation), ``OUT.csv`` (the log) and ``OUT.png`` (the learning curve). Policy and
+checkpoint files hold tensors and plain values only and are read with ``weights_only=True``
+(:mod:`sidql.learning.files`); ``--resume`` refuses a checkpoint whose settings differ.
+
+The network reads the raw task arrays (``env.tasks[info["task_index"]]``: radians, its own input
+standardisation), not the environment's unit-scale observations; the mask and the keyframes still
+to choose come from the observation.
 """
 
 from __future__ import annotations
@@ -24,91 +31,38 @@ import csv
 import io
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
 
-from sidql.learning.env import KeyframeEnv, KeyframeTask, keyframe_error_sum
-
-# torch is imported inside the functions that need it, so that building the command line
-# (which reads Args) stays light.
-
-
-@dataclass
-class Args:
-    data: str | None = None
-    """directory of CMU trials (``sim.motion.dataset.find_trials``); None: synthetic tasks (for tests)"""
-    keyframes: tuple[int, ...] = (5, 10, 15)
-    """keyframe counts W the policy learns (one drawn per episode)"""
-    steps: int = 16_000
-    """environment steps (keyframes chosen) in total"""
-    out: str = "policy.pt"
-    """where the trained policy goes; OUT.ckpt, OUT.csv and OUT.png are written beside it"""
-    resume: bool = False
-    """continue from OUT.ckpt if it exists"""
-    seed: int = 0
-    """seeds numpy, torch, the environments and the subject split"""
-    test_subjects: tuple[str, ...] | None = None
-    """held-out subjects (never trained on); None: every 4th subject in sorted order, offset by seed"""
-    stride: int = 2
-    """training clips start every ``stride`` frames (30 fps) of each training trial"""
-    cache_dir: str | None = None
-    """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
-    synthetic_tasks: int = 64
-    """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
-    # -- DQN -------------------------------------------------------------------------------------
-    buffer_size: int = 10_000
-    """replay memory of the agent's own transitions (paper: 10,000)"""
-    batch_size: int = 128
-    """minibatch (paper: 256)"""
-    learning_rate: float = 1e-4
-    """Adam step size (paper: 0.01; larger rates drift away from the prior quickly)"""
-    gamma: float = 1.0
-    """discount (paper: 0.5, best with the greedy prior; 1 with the rollout prior, whose value is
-    undiscounted)"""
-    n_step: int = 1
-    """n-step returns"""
-    double: bool = True
-    """double DQN: the main network picks the next action, the target network values it"""
-    train_frequency: int = 4
-    """one gradient step every this many environment steps (paper: 100-200)"""
-    target_update: int = 250
-    """copy the main network into the target network every this many gradient steps"""
-    learning_starts: int = 500
-    """environment steps before the first gradient step"""
-    eps_start: float = 0.2
-    """ε of the ε-greedy exploration at the start"""
-    eps_end: float = 0.02
-    """ε at the end of the linear schedule"""
-    eps_fraction: float = 0.4
-    """fraction of ``steps`` over which ε falls linearly"""
-    demo_episodes: int = 3_000
-    """demonstration episodes from the exact optimum seeded into their own replay memory (0: none)"""
-    demo_fraction: float = 0.25
-    """share of every minibatch drawn from the demonstrations"""
-    margin: float = 0.02
-    """DQfD margin [normalised reward] by which optimal frames must beat others on demonstrations"""
-    margin_weight: float = 0.0
-    """weight of the margin loss (0: plain TD learning from demonstrations)"""
-    prior: str = "rollout"
-    """what the learned part starts from: "greedy" (Q ranks like greedy untrained) or "rollout"
-    (Q starts at the exact value of finishing greedily, sidql.learning.rollout; use with gamma 1)"""
-    hidden: int = 32
-    """width of the Q-network"""
-    n_envs: int = 16
-    """episodes played in parallel"""
-    grad_clip: float = 10.0
-    """gradient-norm clip"""
-    eval_every: int = 2_000
-    """evaluate on the held-out clips and checkpoint every this many environment steps"""
-    threads: int = 1
-    """torch threads"""
-    progress: bool = True
-    """tqdm progress bar"""
-    extra: dict = field(default_factory=dict)
-    """free-form notes stored with the policy"""
-
+from sidql.keyframes.methods import greedy_from_costs
+from sidql.keyframes.optimal import solve
+from sidql.learning.env import KeyframeEnv
+from sidql.learning.files import (
+    CHECKPOINT_FORMAT,
+    POLICY_FORMAT,
+    ModelFileError,
+    load_payload,
+    save_payload,
+)
+from sidql.learning.policy import Policy
+from sidql.learning.qnet import KeyframeQNet, masked_q
+from sidql.learning.rollout import rollout_values_batch
+from sidql.learning.settings import RESUME_MAY_CHANGE, Args
+from sidql.learning.tasks import (
+    KeyframeTask,
+    insertion_gain,
+    keyframe_q,
+    load_tasks,
+    synthetic_tasks,
+)
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+from sim.motion.dataset import find_trials
 
 # --- replay memory -------------------------------------------------------------------------------
 
@@ -145,10 +99,18 @@ class ReplayMemory:
         return rng.integers(len(self), size=k)
 
     def state_dict(self) -> dict:
-        return {k: v for k, v in vars(self).items()}
+        """Tensors and plain values only (a checkpoint is loaded with ``weights_only=True``)."""
+        return {k: torch.from_numpy(v.copy()) if isinstance(v, np.ndarray) else v
+                for k, v in vars(self).items()}  # fmt: skip
 
     def load_state_dict(self, d: dict) -> None:
-        vars(self).update(d)
+        arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray)}
+        for k, v in d.items():
+            if k in arrays:
+                v = np.asarray(v.numpy(), dtype=arrays[k].dtype)
+                if v.shape != arrays[k].shape:
+                    raise ValueError(f"replay memory {k}: shape {v.shape} != {arrays[k].shape}")
+            setattr(self, k, v)
 
 
 class NStep:
@@ -192,27 +154,38 @@ def split_subjects(subjects, test_subjects=None, seed: int = 0) -> tuple[list[st
 
 def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict]:
     """(training tasks, held-out tasks, split description). Held-out tasks are the evaluation
-    protocol's clips (non-overlapping 60-frame clips from frame 0) of subjects never trained on."""
-    if args.data is None:
-        from sidql.learning.tasks import synthetic_tasks
+    protocol's clips (non-overlapping 60-frame clips from frame 0) of subjects never trained on.
 
+    Raises:
+        MotionDataError: no trials, a held-out subject without trials, or no usable clips on
+            either side of the split (one line naming the folder).
+    """
+    if args.data is None:
         tasks = synthetic_tasks(args.synthetic_tasks, seed=args.seed)
         n_test = max(1, len(tasks) // 4)
         return tasks[n_test:], tasks[:n_test], {"train": "synthetic", "test": "synthetic"}
-    from sidql.learning.tasks import default_cache_dir, load_tasks
-    from sim.motion.dataset import find_trials
-
-    cache = Path(args.cache_dir) if args.cache_dir else default_cache_dir()
-    train_s, test_s = split_subjects(
-        [t.subject for t in find_trials(args.data)], args.test_subjects, args.seed
-    )
-    kw = dict(cache_dir=cache, progress=args.progress)
-    train = load_tasks(args.data, stride=args.stride, subjects=set(train_s), **kw)
-    test = load_tasks(args.data, stride=60, subjects=set(test_s), **kw)
-    train_tasks = [t for trial in train for t in trial.tasks()]
-    test_tasks = [t for trial in test for t in trial.tasks()]
-    if not train_tasks or not test_tasks:
-        raise ValueError(f"no usable clips under {args.data} for the split {train_s} / {test_s}")
+    found = sorted({t.subject for t in find_trials(args.data)})
+    missing = sorted(set(args.test_subjects or ()) - set(found))
+    if missing:
+        raise MotionDataError(
+            args.data, None, f"no trials of held-out subject(s) {', '.join(missing)} "
+            f"(subjects here: {', '.join(found) or 'none'})",
+        )  # fmt: skip
+    try:
+        train_s, test_s = split_subjects(found, args.test_subjects, args.seed)
+    except ValueError as e:
+        raise MotionDataError(args.data, None, str(e)) from None
+    kw = dict(cache_dir=args.cache_dir, progress=args.progress)  # None: the default task cache
+    test_tasks = load_tasks(args.data, stride=60, subjects=set(test_s), **kw).tasks()
+    if not test_tasks:
+        raise MotionDataError(
+            args.data, None, f"no usable 60-frame clips of the held-out subjects {test_s}"
+        )
+    train_tasks = load_tasks(args.data, stride=args.stride, subjects=set(train_s), **kw).tasks()
+    if not train_tasks:
+        raise MotionDataError(
+            args.data, None, f"no usable 60-frame clips of the training subjects {train_s}"
+        )
     return train_tasks, test_tasks, {"train": train_s, "test": test_s}
 
 
@@ -221,19 +194,35 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
 
 def greedy_keyframes(cost: np.ndarray, w: int) -> np.ndarray:
     """The paper's greedy on a cost matrix (``sidql.keyframes.methods.greedy_from_costs``)."""
-    from sidql.keyframes.methods import greedy_from_costs
-
     return greedy_from_costs(cost, w)
 
 
 def optimal_keyframes(cost: np.ndarray, w: int) -> np.ndarray:
     """The exact optimum of ``sidql.keyframes.optimal`` for W = ``w`` (sorted indices)."""
-    from sidql.keyframes.optimal import solve
-
     return solve(cost, 1, w_max=w).keyframes(w)
 
 
+def mean_q(tasks: list[KeyframeTask], keyframes) -> float:
+    """Mean Q (eq. 18, :func:`sidql.learning.tasks.keyframe_q`) of one keyframe set per task."""
+    return float(np.mean([keyframe_q(t, k) for t, k in zip(tasks, keyframes, strict=True)]))
+
+
+def baselines(tasks: list[KeyframeTask], keyframes) -> dict[str, dict[int, float]]:
+    """{"greedy": {W: mean Q}, "optimal": {W: mean Q}} on ``tasks``."""
+    return {
+        name: {w: mean_q(tasks, [fn(t.cost, w) for t in tasks]) for w in keyframes}
+        for name, fn in (("greedy", greedy_keyframes), ("optimal", optimal_keyframes))
+    }
+
+
 # --- acting --------------------------------------------------------------------------------------
+
+
+def linear_schedule(start: float, end: float, duration: float, t: int) -> float:
+    """ε of the ε-greedy exploration: ``start`` falling linearly to ``end`` over ``duration``
+    steps, then ``end``."""
+    frac = min(1.0, t / max(1.0, duration))
+    return start + frac * (end - start)
 
 
 def prior_values(net, costs_np, task, mask, rem):
@@ -241,10 +230,6 @@ def prior_values(net, costs_np, task, mask, rem):
     masks (B, N), remaining (B,)) as a tensor, or None for a greedy-prior network."""
     if net.config["prior"] != "rollout":
         return None
-    import torch
-
-    from sidql.learning.rollout import rollout_values_batch
-
     vals = rollout_values_batch(
         costs_np, np.asarray(task, np.int64), np.asarray(mask, bool), np.asarray(rem, np.int64)
     )
@@ -254,10 +239,6 @@ def prior_values(net, costs_np, task, mask, rem):
 def act(net, features, costs, masks, remaining, prior=None) -> np.ndarray:
     """Masked argmax of the network for a batch: (B, N, C), (B, N, N), (B, N) bool, (B,), and the
     rollout prior (B, N) if the network uses one -> (B,) actions."""
-    import torch
-
-    from sidql.learning.qnet import masked_q
-
     t = torch.as_tensor
     with torch.no_grad():
         q = net(t(features), t(costs), t(masks), t(remaining), prior)
@@ -266,29 +247,13 @@ def act(net, features, costs, masks, remaining, prior=None) -> np.ndarray:
 
 def evaluate(net, tasks, keyframes) -> dict[int, float]:
     """Mean Q (eq. 18) of the network's greedy decisions over ``tasks`` for each W."""
-    from sidql.learning.policy import Policy
-
     policy = Policy(net, keyframes, {})
     feats = np.stack([t.features for t in tasks])
     costs = np.stack([t.cost for t in tasks])
-    out = {}
-    for w in keyframes:
-        keys = policy.decide(feats, costs, w)
-        out[w] = float(
-            np.mean(
-                [
-                    keyframe_error_sum(t.cost, k) / (t.n_frames * t.n_bones)
-                    for t, k in zip(tasks, keys, strict=True)
-                ]
-            )
-        )
-    return out
+    return {w: mean_q(tasks, policy.decide(feats, costs, w)) for w in keyframes}
 
 
-# --- the algorithm -------------------------------------------------------------------------------
-
-
-def _demonstrations(env: KeyframeEnv, memory: ReplayMemory, args: Args, rng) -> None:
+def play_demonstrations(env: KeyframeEnv, memory: ReplayMemory, args: Args, rng) -> None:
     """Play ``args.demo_episodes`` episodes through ``env`` that add the optimum's keyframes
     (largest immediate reward first) and store their n-step transitions in ``memory``."""
     cache: dict[tuple[int, int], np.ndarray] = {}
@@ -304,7 +269,7 @@ def _demonstrations(env: KeyframeEnv, memory: ReplayMemory, args: Args, rng) -> 
         while not done:
             mask = obs["keyframes"].astype(bool)
             cost = env.tasks[i].cost
-            gains = {a: _gain(cost, mask, a) for a in todo}
+            gains = {a: insertion_gain(cost, mask, a) for a in todo}
             a = max(gains, key=gains.get)
             expert = np.zeros_like(mask)
             expert[list(todo)] = True
@@ -317,19 +282,12 @@ def _demonstrations(env: KeyframeEnv, memory: ReplayMemory, args: Args, rng) -> 
             obs = nobs
 
 
-def _gain(cost, mask, a):
-    from sidql.learning.env import insertion_gain
-
-    return insertion_gain(cost, mask, a)
+# --- learning ------------------------------------------------------------------------------------
 
 
-def _margin_loss(net, feats, costs, costs_np, batch, args):
+def margin_loss(net, feats, costs, costs_np, batch, args):
     """DQfD's large-margin loss on demonstration states: the best frame of the optimum must beat
     every other free frame by ``args.margin`` (in units of the normalised reward)."""
-    import torch
-
-    from sidql.learning.qnet import masked_q
-
     task, mask, rem, *_, expert = batch
     prior = prior_values(net, costs_np, task.numpy(), mask.numpy(), rem.numpy())
     q = masked_q(net(feats[task], costs[task], mask, rem, prior), mask)
@@ -340,13 +298,8 @@ def _margin_loss(net, feats, costs, costs_np, batch, args):
     return torch.where(has_other, gap, torch.zeros_like(gap)).mean()
 
 
-def _td_loss(net, target, feats, costs, costs_np, batch, args):
-    """Huber loss between Q(s, a) and the n-step double-DQN target."""
-    import torch
-    import torch.nn.functional as F
-
-    from sidql.learning.qnet import masked_q
-
+def td_loss(net, target, feats, costs, costs_np, batch, args):
+    """Huber loss between Q(s, a) and the n-step (double) DQN target; and the mean Q(s, a)."""
     task, mask, rem, action, ret, nmask, nrem, done, disc, _ = batch
     f, c = feats[task], costs[task]
     prior = prior_values(net, costs_np, task.numpy(), mask.numpy(), rem.numpy())
@@ -366,204 +319,71 @@ def _td_loss(net, target, feats, costs, costs_np, batch, args):
     return F.smooth_l1_loss(q, y), q.detach().mean()
 
 
-def _batch(memory: ReplayMemory, idx: np.ndarray):
-    import torch
+def sample_batch(memory: ReplayMemory, demos: ReplayMemory, rng, args: Args):
+    """A minibatch of tensors: ``batch_size - n_demo`` transitions of the agent's own play and
+    ``n_demo`` (= ``demo_fraction`` of the batch, 0 without demonstrations) demonstrations.
+    Returns (batch, demonstration part or None)."""
 
-    m = memory
-    t = torch.as_tensor
-    return (
-        t(m.task[idx]), t(m.mask[idx]), t(m.rem[idx]), t(m.action[idx]), t(m.ret[idx]),
-        t(m.next_mask[idx]), t(m.next_rem[idx]), t(m.done[idx]), t(m.disc[idx]),
-        t(m.expert[idx]),
-    )  # fmt: skip
-
-
-def _cat(a, b):
-    import torch
-
-    return tuple(torch.cat([x, y]) for x, y in zip(a, b, strict=True))
-
-
-def train(args: Args) -> dict:
-    """Train a keyframe policy; returns the final held-out evaluation and baselines.
-
-    Writes ``args.out`` (policy), ``args.out + '.ckpt'`` (resumable state), ``.csv`` log and
-    ``.png`` learning curve. Deterministic for a given seed and thread count.
-    """
-    import torch
-    from tqdm import tqdm
-
-    from sidql.learning.qnet import KeyframeQNet
-
-    torch.set_num_threads(args.threads)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    ckpt_path = out.with_name(out.name + ".ckpt")
-    log_path, png_path = out.with_suffix(".csv"), out.with_suffix(".png")
-    rng = np.random.default_rng(args.seed)
-    torch.manual_seed(args.seed)
-
-    train_tasks, test_tasks, split = make_tasks(args)
-    n, c = train_tasks[0].features.shape
-    feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
-    costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
-    costs = torch.as_tensor(costs_np.astype(np.float32))
-    baselines = {
-        name: {
-            w: float(np.mean([keyframe_error_sum(t.cost, fn(t.cost, w)) / (n * t.n_bones)
-                              for t in test_tasks]))
-            for w in args.keyframes
-        }
-        for name, fn in (("greedy", greedy_keyframes), ("optimal", optimal_keyframes))
-    }  # fmt: skip
-
-    net = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
-    flat = feats.reshape(-1, c)
-    net.set_normalisation(flat.mean(0), flat.std(0))
-    target = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
-    target.load_state_dict(net.state_dict())
-    opt = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
-
-    envs = [KeyframeEnv(train_tasks, args.keyframes) for _ in range(args.n_envs)]
-    memory = ReplayMemory(args.buffer_size, n)
-    demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
-    step, updates, episodes, log_rows = 0, 0, 0, []
-    if args.resume and ckpt_path.exists():
-        ck = torch.load(ckpt_path, weights_only=False)
-        net.load_state_dict(ck["net"])
-        target.load_state_dict(ck["target"])
-        opt.load_state_dict(ck["opt"])
-        memory.load_state_dict(ck["memory"])
-        demos.load_state_dict(ck["demos"])
-        step, updates, episodes, log_rows = ck["step"], ck["updates"], ck["episodes"], ck["log"]
-        rng.bit_generator.state = ck["rng"]
-        torch.set_rng_state(ck["torch_rng"])
-        obs = [e.reset(seed=args.seed + 1000 * (step + 1) + i)[0] for i, e in enumerate(envs)]
-    else:
-        if args.demo_episodes:
-            _demonstrations(KeyframeEnv(train_tasks, args.keyframes), demos, args, rng)
-        obs = [e.reset(seed=args.seed + i)[0] for i, e in enumerate(envs)]
-    nsteps = [NStep(args.n_step, args.gamma) for _ in envs]
-    elapsed0 = log_rows[-1]["seconds"] if log_rows else 0.0
-    t0 = time.perf_counter()
-    n_demo = int(round(args.batch_size * args.demo_fraction)) if len(demos) else 0
-    loss_avg, qmean = math.nan, math.nan
-
-    def checkpoint():
-        def write(f):
-            torch.save(
-                {
-                    "net": net.state_dict(), "target": target.state_dict(),
-                    "opt": opt.state_dict(), "memory": memory.state_dict(),
-                    "demos": demos.state_dict(), "step": step, "updates": updates,
-                    "episodes": episodes, "log": log_rows, "rng": rng.bit_generator.state,
-                    "torch_rng": torch.get_rng_state(), "args": asdict(args),
-                },
-                f,
-            )  # fmt: skip
-
-        from sim.motion.clip import write_atomic
-
-        write_atomic(ckpt_path, write)
-
-    def log_eval():
-        ev = evaluate(net, test_tasks, args.keyframes)
-        row = {
-            "step": step, "updates": updates, "episodes": episodes,
-            "seconds": round(elapsed0 + time.perf_counter() - t0, 1),
-            "epsilon": round(epsilon(), 4), "loss": loss_avg, "q_mean": qmean,
-        }  # fmt: skip
-        for w in args.keyframes:
-            row[f"dqn_W{w}"] = ev[w]
-            row[f"greedy_W{w}"] = baselines["greedy"][w]
-            row[f"optimal_W{w}"] = baselines["optimal"][w]
-        log_rows.append(row)
-        _write_log(log_rows, log_path)
-        _plot(log_rows, args.keyframes, png_path)
-        return ev
-
-    def epsilon():
-        frac = min(1.0, step / max(1.0, args.eps_fraction * args.steps))
-        return args.eps_start + frac * (args.eps_end - args.eps_start)
-
-    if not log_rows:
-        log_eval()  # step 0: the untrained network = its prior (greedy, or the greedy rollout)
-    bar = tqdm(total=args.steps, initial=step, desc="train", disable=not args.progress)
-    losses = []
-    while step < args.steps:
-        # act in every environment: ε-greedy over valid frames, masked argmax otherwise
-        masks = np.stack([o["keyframes"].astype(bool) for o in obs])
-        rems = np.array([o["remaining"] for o in obs])
-        tasks_now = [env._task_index for env in envs]
-        greedy = act(
-            net, np.stack([o["features"] for o in obs]), np.stack([o["cost"] for o in obs]),
-            masks, rems, prior_values(net, costs_np, tasks_now, masks, rems),
+    def take(m: ReplayMemory, k: int):
+        idx = m.sample(rng, k)
+        return tuple(
+            torch.as_tensor(x[idx])
+            for x in (m.task, m.mask, m.rem, m.action, m.ret, m.next_mask, m.next_rem, m.done,
+                      m.disc, m.expert)
         )  # fmt: skip
-        for i, env in enumerate(envs):
-            if rng.random() < epsilon():
-                a = int(rng.choice(np.flatnonzero(~masks[i])))
-            else:
-                a = int(greedy[i])
-            task_i = env._task_index
-            nobs, r, done, trunc, info = env.step(a)
-            nsteps[i].push(
-                memory, task_i, masks[i], rems[i], a, r,
-                nobs["keyframes"].astype(bool), nobs["remaining"], done,
+
+    n_demo = int(round(args.batch_size * args.demo_fraction)) if len(demos) else 0
+    batch = take(memory, args.batch_size - n_demo)
+    if not n_demo:
+        return batch, None
+    demo = take(demos, n_demo)
+    return tuple(torch.cat([x, y]) for x, y in zip(batch, demo, strict=True)), demo
+
+
+# --- files: checkpoint, policy, log, plot --------------------------------------------------------
+
+
+def save_checkpoint(path: Path, state: dict, args: Args) -> None:
+    """Write everything needed to resume (``state``: networks, optimiser, memories, counters,
+    random states, log, split) with the run's settings, atomically."""
+    save_payload(path, {"format": CHECKPOINT_FORMAT, "args": asdict(args), **state})
+
+
+def load_checkpoint(path: Path, args: Args) -> dict:
+    """The checkpoint at ``path`` (tensors and plain values only), after checking it was written
+    with the same settings as ``args`` (all but :data:`RESUME_MAY_CHANGE`).
+
+    Raises:
+        ModelFileError: refused file, other format, or other settings (one line naming the file,
+            the setting and both values).
+    """
+    ck = load_payload(path, CHECKPOINT_FORMAT)
+    stored, now = ck.get("args"), asdict(args)
+    if not isinstance(stored, dict):
+        raise ModelFileError(str(path), None, "holds no training settings")
+    for key, value in now.items():
+        if key in RESUME_MAY_CHANGE:
+            continue
+        old = stored.get(key)
+        if isinstance(value, tuple) and isinstance(old, list | tuple):
+            old = tuple(old)
+        if old != value:
+            flag = "--" + key.replace("_", "-")
+            raise ModelFileError(
+                str(path), None, f"written with {flag} {_show(old)}, this run has {flag} "
+                f"{_show(value)}; resume with the same settings or choose another --out",
             )  # fmt: skip
-            if done or trunc:
-                episodes += 1
-                nobs, _ = env.reset()
-            obs[i] = nobs
-            step += 1
-            bar.update(1)
-            # learn
-            if step >= args.learning_starts and step % args.train_frequency == 0 and len(memory):
-                batch = _batch(memory, memory.sample(rng, args.batch_size - n_demo))
-                if n_demo:
-                    demo_batch = _batch(demos, demos.sample(rng, n_demo))
-                    batch = _cat(batch, demo_batch)
-                loss, qm = _td_loss(net, target, feats, costs, costs_np, batch, args)
-                if n_demo and args.margin_weight > 0:
-                    loss = loss + args.margin_weight * _margin_loss(
-                        net, feats, costs, costs_np, demo_batch, args
-                    )
-                opt.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(net.parameters(), args.grad_clip)
-                opt.step()
-                updates += 1
-                losses.append(float(loss.detach()))
-                qmean = float(qm)
-                if updates % args.target_update == 0:
-                    target.load_state_dict(net.state_dict())
-            if step % args.eval_every == 0 or step == args.steps:
-                loss_avg = float(np.mean(losses)) if losses else math.nan
-                losses = []
-                ev = log_eval()
-                bar.set_postfix({f"W{w}": f"{ev[w] / baselines['optimal'][w]:.3f}" for w in ev})
-                checkpoint()
-            if step >= args.steps:
-                break
-    bar.close()
-    if not log_rows or log_rows[-1]["step"] != step:
-        log_eval()
-        checkpoint()
-    final = {w: log_rows[-1][f"dqn_W{w}"] for w in args.keyframes}
-    save_policy(net, out, args, split, final, baselines)
-    return {"dqn": final, **baselines, "split": split, "steps": step}
+    return ck
 
 
-# --- policy files, log, plot ---------------------------------------------------------------------
+def _show(value) -> str:
+    return " ".join(map(str, value)) if isinstance(value, list | tuple) else str(value)
 
 
 def save_policy(net, path, args, split, final, baselines) -> None:
     """Write the policy (weights, network config, training args, held-out figures) atomically."""
-    import torch
-
-    from sim.motion.clip import write_atomic
-
     payload = {
-        "format": "sidql-dqn-policy/1",
+        "format": POLICY_FORMAT,
         "config": dict(net.config),
         "state_dict": {k: v.clone() for k, v in net.state_dict().items()},
         "keyframes": list(args.keyframes),
@@ -571,13 +391,11 @@ def save_policy(net, path, args, split, final, baselines) -> None:
         "split": split,
         "heldout": {"dqn": final, **baselines},
     }
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    write_atomic(path, lambda f: f.write(buf.getvalue()))
+    save_payload(path, payload)
 
 
-def _write_log(rows: list[dict], path: Path) -> None:
-    from sim.motion.clip import write_atomic
+def write_log(rows: list[dict], path: Path) -> None:
+    """The evaluation log as CSV, atomically."""
 
     def write(f):
         text = io.StringIO()
@@ -589,13 +407,12 @@ def _write_log(rows: list[dict], path: Path) -> None:
     write_atomic(path, write)
 
 
-def _plot(rows: list[dict], keyframes, path: Path) -> None:
-    import matplotlib
+def plot_curve(rows: list[dict], keyframes, path: Path) -> None:
+    """Held-out mean Q / optimal per W over the run (dashed: greedy), as PNG."""
+    import matplotlib  # lazy: heavy and only needed here
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sim.motion.clip import write_atomic
+    import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
 
     fig, ax = plt.subplots(figsize=(6, 3.6))
     steps = [r["step"] for r in rows]
@@ -611,3 +428,203 @@ def _plot(rows: list[dict], keyframes, path: Path) -> None:
     fig.tight_layout()
     write_atomic(path, lambda f: fig.savefig(f, format="png", dpi=110))
     plt.close(fig)
+
+
+def log_row(counters: dict, seconds: float, epsilon: float, loss: float, q_mean: float,
+            heldout: dict[int, float], base: dict, keyframes) -> dict:  # fmt: skip
+    """One line of the log: counters, time, ε, mean loss and Q since the last line, and the
+    held-out mean Q of the network, greedy and the optimum for every W."""
+    row = {**counters, "seconds": round(seconds, 1), "epsilon": round(epsilon, 4), "loss": loss,
+           "q_mean": q_mean}  # fmt: skip
+    for w in keyframes:
+        row[f"dqn_W{w}"] = heldout[w]
+        row[f"greedy_W{w}"] = base["greedy"][w]
+        row[f"optimal_W{w}"] = base["optimal"][w]
+    return row
+
+
+@dataclass(frozen=True)
+class RunFiles:
+    """What a run writes: ``policy`` (OUT), ``checkpoint`` (OUT.ckpt), ``log`` (.csv), ``curve``
+    (.png)."""
+
+    policy: Path
+    checkpoint: Path
+    log: Path
+    curve: Path
+
+    @classmethod
+    def beside(cls, out: str | Path) -> RunFiles:
+        out = Path(out)
+        return cls(out, out.with_name(out.name + ".ckpt"), out.with_suffix(".csv"),
+                   out.with_suffix(".png"))  # fmt: skip
+
+
+def record(files: RunFiles, log_rows: list[dict], row: dict, keyframes) -> None:
+    """Append ``row`` to the log and rewrite the CSV and the learning curve."""
+    log_rows.append(row)
+    write_log(log_rows, files.log)
+    plot_curve(log_rows, keyframes, files.curve)
+
+
+def make_networks(args: Args, feats: torch.Tensor):
+    """(Q-network, target network, Adam optimiser) for (K, N, C) training features: the network
+    standardises its inputs with their per-channel mean and standard deviation."""
+    c = feats.shape[-1]
+    net = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
+    flat = feats.reshape(-1, c)
+    net.set_normalisation(flat.mean(0), flat.std(0))
+    target = KeyframeQNet(c, hidden=args.hidden, prior=args.prior)
+    target.load_state_dict(net.state_dict())
+    return net, target, torch.optim.Adam(net.parameters(), lr=args.learning_rate)
+
+
+def training_state(net, target, opt, memory, demos, counters, log_rows, rng, split, n_tasks):
+    """Everything :func:`restore` needs, as tensors and plain values (for :func:`save_checkpoint`)."""
+    return {
+        **counters, "net": net.state_dict(), "target": target.state_dict(),
+        "opt": opt.state_dict(), "memory": memory.state_dict(), "demos": demos.state_dict(),
+        "log": list(log_rows), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+        "split": split, "n_tasks": n_tasks,
+    }  # fmt: skip
+
+
+def restore(ck: dict, net, target, opt, memory, demos, rng) -> tuple[dict, list[dict]]:
+    """Load a checkpoint's state into the run's objects; returns (counters, log rows)."""
+    net.load_state_dict(ck["net"])
+    target.load_state_dict(ck["target"])
+    opt.load_state_dict(ck["opt"])
+    memory.load_state_dict(ck["memory"])
+    demos.load_state_dict(ck["demos"])
+    rng.bit_generator.state = ck["rng"]
+    torch.set_rng_state(ck["torch_rng"])
+    return {k: int(ck[k]) for k in ("step", "updates", "episodes")}, list(ck["log"])
+
+
+# --- the algorithm -------------------------------------------------------------------------------
+
+
+def train(args: Args) -> dict:
+    """Train a keyframe policy; returns the final held-out evaluation and baselines.
+
+    Writes ``args.out`` (policy), ``args.out + '.ckpt'`` (resumable state), ``.csv`` log and
+    ``.png`` learning curve. Deterministic for a given seed and thread count.
+
+    Raises:
+        MotionDataError: no usable clips for the split, or (as :class:`ModelFileError`) a
+            checkpoint that ``--resume`` refuses (unsafe file, other format or other settings).
+    """
+    # setup: files, checkpoint (checked before any data is read), data, networks, environments
+    torch.set_num_threads(args.threads)
+    files = RunFiles.beside(args.out)
+    resume = args.resume and files.checkpoint.exists()
+    ck = load_checkpoint(files.checkpoint, args) if resume else None
+    files.policy.parent.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(args.seed)
+    torch.manual_seed(args.seed)
+
+    train_tasks, test_tasks, split = make_tasks(args)
+    if ck is not None and (ck.get("split") != split or ck.get("n_tasks") != len(train_tasks)):
+        raise ModelFileError(
+            str(files.checkpoint), None, f"written for another data split ({ck.get('n_tasks')} "
+            f"training clips, {ck.get('split')}); this run has {len(train_tasks)}, {split}",
+        )  # fmt: skip
+    n = train_tasks[0].n_frames
+    feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
+    costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
+    costs = torch.as_tensor(costs_np.astype(np.float32))
+    base = baselines(test_tasks, args.keyframes)
+
+    net, target, opt = make_networks(args, feats)
+    envs = [KeyframeEnv(train_tasks, args.keyframes) for _ in range(args.n_envs)]
+    memory = ReplayMemory(args.buffer_size, n)
+    demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
+    if ck is not None:
+        counters, log_rows = restore(ck, net, target, opt, memory, demos, rng)
+        seeds = [args.seed + 1000 * (counters["step"] + 1) + i for i in range(len(envs))]
+    else:
+        counters, log_rows = {"step": 0, "updates": 0, "episodes": 0}, []
+        if args.demo_episodes:
+            play_demonstrations(KeyframeEnv(train_tasks, args.keyframes), demos, args, rng)
+        seeds = [args.seed + i for i in range(len(envs))]
+    step, updates, episodes = counters["step"], counters["updates"], counters["episodes"]
+    started = [env.reset(seed=s) for env, s in zip(envs, seeds, strict=True)]
+    obs, infos = [o for o, _ in started], [i for _, i in started]
+    nsteps = [NStep(args.n_step, args.gamma) for _ in envs]
+    elapsed0 = log_rows[-1]["seconds"] if log_rows else 0.0
+    t0 = time.perf_counter()
+    losses, q_mean = [], math.nan
+    eps_steps = args.eps_fraction * args.steps
+    if not log_rows:  # step 0: the untrained network = its prior (greedy, or the greedy rollout)
+        heldout = evaluate(net, test_tasks, args.keyframes)
+        row = log_row({"step": 0, "updates": 0, "episodes": 0}, 0.0, args.eps_start, math.nan,
+                      math.nan, heldout, base, args.keyframes)  # fmt: skip
+        record(files, log_rows, row, args.keyframes)
+
+    bar = tqdm(total=args.steps, initial=step, desc="train", disable=not args.progress)
+    while step < args.steps:
+        # act in every environment: ε-greedy over valid frames, masked argmax otherwise
+        tasks_now = np.array([info["task_index"] for info in infos])
+        masks = np.stack([o["keyframes"].astype(bool) for o in obs])
+        rems = np.array([o["remaining"] for o in obs])
+        prior = prior_values(net, costs_np, tasks_now, masks, rems)
+        greedy = act(net, feats[tasks_now], costs[tasks_now], masks, rems, prior)
+        for i, env in enumerate(envs):
+            epsilon = linear_schedule(args.eps_start, args.eps_end, eps_steps, step)
+            explore = rng.random() < epsilon
+            a = int(rng.choice(np.flatnonzero(~masks[i]))) if explore else int(greedy[i])
+            # step; store the n-step transition (state = task, mask, remaining); reset when done
+            nobs, r, done, trunc, ninfo = env.step(a)
+            nsteps[i].push(
+                memory, tasks_now[i], masks[i], rems[i], a, r,
+                nobs["keyframes"].astype(bool), nobs["remaining"], done,
+            )  # fmt: skip
+            if done or trunc:
+                episodes += 1
+                nobs, ninfo = env.reset()
+            obs[i], infos[i] = nobs, ninfo
+            step += 1
+            bar.update(1)
+            # learn: one gradient step every train_frequency steps; hard target updates
+            if step >= args.learning_starts and step % args.train_frequency == 0 and len(memory):
+                batch, demo_batch = sample_batch(memory, demos, rng, args)
+                loss, qm = td_loss(net, target, feats, costs, costs_np, batch, args)
+                if demo_batch is not None and args.margin_weight > 0:
+                    loss = loss + args.margin_weight * margin_loss(
+                        net, feats, costs, costs_np, demo_batch, args
+                    )
+                opt.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(net.parameters(), args.grad_clip)
+                opt.step()
+                updates += 1
+                losses.append(float(loss.detach()))
+                q_mean = float(qm)
+                if updates % args.target_update == 0:
+                    target.load_state_dict(net.state_dict())
+            # evaluate on the held-out clips, log, checkpoint
+            if step % args.eval_every == 0 or step == args.steps:
+                heldout = evaluate(net, test_tasks, args.keyframes)
+                counters = {"step": step, "updates": updates, "episodes": episodes}
+                row = log_row(
+                    counters, elapsed0 + time.perf_counter() - t0,
+                    linear_schedule(args.eps_start, args.eps_end, eps_steps, step),
+                    float(np.mean(losses)) if losses else math.nan, q_mean, heldout, base,
+                    args.keyframes,
+                )  # fmt: skip
+                losses = []
+                record(files, log_rows, row, args.keyframes)
+                state = training_state(
+                    net, target, opt, memory, demos, counters, log_rows, rng, split,
+                    len(train_tasks),
+                )  # fmt: skip
+                save_checkpoint(files.checkpoint, state, args)
+                bar.set_postfix(
+                    {f"W{w}": f"{heldout[w] / base['optimal'][w]:.3f}" for w in heldout}
+                )
+            if step >= args.steps:
+                break
+    bar.close()
+    final = {w: log_rows[-1][f"dqn_W{w}"] for w in args.keyframes}
+    save_policy(net, files.policy, args, split, final, base)
+    return {"dqn": final, **base, "split": split, "steps": step}

@@ -1,31 +1,52 @@
 """The keyframe-selection problem as a Gymnasium environment (the paper's MDP, section 4.1).
 
-The core is pure over arrays. A *task* is one clip reduced to what the decision needs:
+The core is pure over arrays. A *task* (:class:`sidql.learning.tasks.KeyframeTask`) is one clip
+reduced to what the decision needs:
 
 - ``features`` (N, C) float32: per-frame inputs of the policy (the paper's F and V: bone angles
   [rad] and angular rates [rad/frame]; see :func:`sidql.learning.tasks.clip_features`);
 - ``cost`` (N, N) float64: the segment-cost matrix of issue 3, ``cost[i, j]`` (i < j) = summed
   |Δθ| + |Δφ| [rad] over the frames strictly between keyframes i and j and over the M bones, so
   the paper's error of a sorted keyframe set K is ``Q(K) = sum_w cost[k_w, k_{w+1}] / (N M)``
-  (eq. 18).
+  (eq. 18, :func:`sidql.learning.tasks.keyframe_q`).
 
 State s_i = (F, V, X_i) with X_i the (N,) keyframe mask; an episode starts with X_0 = {0, N-1} and
 each action adds one frame until W keyframes are chosen (W counts both ends). The reward is the
-paper's r_i = R_{i+1} - R_i with R_i = 1 - Q_i / Q_0 (eq. 21-22). Because the normalisation
-1 / (N M) cancels in Q_i / Q_0, rewards are computed from sums of cost entries (O(W) per step).
+paper's r_i = R_{i+1} - R_i with R_i = 1 - Q_i / Q_0 (eq. 21-22), Q from
+:func:`~sidql.learning.tasks.keyframe_q` (O(W) per step).
 
 A clip whose Q_0 is zero (nothing to reconstruct: the first and last keyframes already reproduce it)
 gives R_i = 0 and zero rewards throughout.
+
+Observations are on a unit scale with finite bounds (see :class:`KeyframeEnv`); learners that want
+the raw arrays read ``env.unwrapped.tasks[info["task_index"]]``.
 """
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+
+from sidql.learning.tasks import (
+    KeyframeTask,
+    insertion_gain,
+    keyframe_error_sum,
+    keyframe_q,
+    neighbours,
+    synthetic_tasks,
+)
+
+__all__ = [
+    "ENV_ID", "FEATURE_CLIP", "RESET_OPTIONS", "InvalidActionError", "KeyframeActions",
+    "KeyframeEnv", "as_index",
+    # re-exported from sidql.learning.tasks, the environment's vocabulary
+    "KeyframeTask", "insertion_gain", "keyframe_error_sum", "keyframe_q", "neighbours",
+    "synthetic_tasks",
+]  # fmt: skip
 
 ENV_ID = "sidql/Keyframe-v0"
 
@@ -52,88 +73,50 @@ class KeyframeActions(spaces.Discrete):
         return super().sample(mask=mask, probability=probability)
 
 
-@dataclass(frozen=True)
-class KeyframeTask:
-    """One clip as the environment sees it.
+#: Standardised features are clipped to [-FEATURE_CLIP, FEATURE_CLIP] (the Box's bounds).
+FEATURE_CLIP = 5.0
 
-    Attributes:
-        features: (N, C) float32 per-frame policy inputs (angles [rad], rates [rad/frame]).
-        cost: (N, N) segment costs [rad summed over frames and bones]; only i < j is read.
-        n_bones: M, the number of bones summed in ``cost`` (22 for the CMU protocol);
-            Q = sum / (N M).
-        source: where the clip came from (file and start frame), for reports.
-        subject: subject id of the trial (for subject-wise splits); "" if unknown.
-    """
-
-    features: np.ndarray
-    cost: np.ndarray
-    n_bones: int = 22
-    source: str = ""
-    subject: str = ""
-
-    def __post_init__(self):
-        n = self.features.shape[0]
-        if self.features.ndim != 2 or n < 3:
-            raise ValueError(f"features must be (N >= 3, C); got {self.features.shape}")
-        if self.cost.shape != (n, n):
-            raise ValueError(f"cost must be (N, N) = ({n}, {n}); got {self.cost.shape}")
-        if self.n_bones < 1:
-            raise ValueError(f"n_bones must be positive; got {self.n_bones}")
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.features.shape[0])
+#: The keys ``reset(options=...)`` accepts.
+RESET_OPTIONS = ("task", "keyframes")
 
 
-def keyframe_error_sum(cost: np.ndarray, keyframes: Sequence[int] | np.ndarray) -> float:
-    """Sum of ``cost`` over consecutive keyframes, ``sum_w cost[k_w, k_{w+1}]``.
-
-    Args:
-        cost: (N, N) segment-cost matrix.
-        keyframes: sorted frame indices (any length >= 2).
-    Returns:
-        The unnormalised error [rad]; divide by N M for the paper's Q (eq. 18).
-    """
-    k = np.asarray(keyframes, dtype=np.int64)
-    return float(cost[k[:-1], k[1:]].sum())
-
-
-def keyframe_q(task: KeyframeTask, keyframes: Sequence[int] | np.ndarray) -> float:
-    """The paper's mean angle error Q(S, K) [rad] (eq. 18) of sorted ``keyframes`` on ``task``."""
-    return keyframe_error_sum(task.cost, keyframes) / (task.n_frames * task.n_bones)
-
-
-def neighbours(mask: np.ndarray, frame: int) -> tuple[int, int]:
-    """Nearest keyframes strictly left and right of ``frame`` in the (N,) bool ``mask``.
-
-    The first and last frames must be keyframes and ``frame`` must lie strictly between them.
-    """
-    left = int(np.flatnonzero(mask[:frame])[-1])
-    right = frame + 1 + int(np.flatnonzero(mask[frame + 1 :])[0])
-    return left, right
-
-
-def insertion_gain(cost: np.ndarray, mask: np.ndarray, frame: int) -> float:
-    """Decrease of the error sum when ``frame`` becomes a keyframe: the segment (l, r) that contains
-    it is replaced by (l, frame) and (frame, r). Positive when the reconstruction improves."""
-    left, right = neighbours(mask, frame)
-    return float(cost[left, right] - cost[left, frame] - cost[frame, right])
+def as_index(value, what: str) -> int:
+    """``value`` as a Python int if it is an integer (int, numpy integer, integer array of one
+    element); floats, booleans and anything else raise ``TypeError`` naming ``what``."""
+    if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "iu":
+        value = value.reshape(()).item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{what} must be an integer; got {value!r} ({type(value).__name__})")
+    return operator.index(value)
 
 
 class KeyframeEnv(gym.Env):
     """Choose W keyframes of a clip one at a time (registered as ``sidql/Keyframe-v0``).
 
-    Observation (a ``Dict``):
-        ``features``: (N, C) float32, the clip's F and V (constant during an episode);
-        ``cost``: (N, N) float32, the clip's segment costs (a function of F and V; constant);
+    Observation (a ``Dict``, every entry bounded and on a unit scale):
+        ``features``: (N, C) float32 in [-5, 5], the clip's F and V standardised per channel,
+            ``(features - feature_mean) / feature_std`` with the mean and standard deviation over
+            every frame of the environment's tasks (or the ``feature_stats`` given), clipped to
+            ±:data:`FEATURE_CLIP`;
+        ``cost``: (N, N) float32 in [0, 1], the clip's segment costs divided by their largest entry
+            (all zero if the clip has no error). The problem is scale-free: rewards and Q ratios
+            are unchanged, and ``cost[0, N-1]`` is the reward unit (the reward of adding a inside
+            segment (l, r) is ``(cost[l, r] - cost[l, a] - cost[a, r]) / cost[0, N-1]``);
         ``keyframes``: (N,) int8 mask X of the chosen keyframes;
         ``remaining``: int, keyframes still to choose (W minus the number chosen).
-    Action: ``Discrete(N)``, the index of the next keyframe (``action_space.sample()`` draws a
-    valid one). Frames that are already keyframes are
-    invalid: they are False in ``info["action_mask"]`` and :meth:`action_masks`, and ``step`` raises
-    :class:`InvalidActionError` for them.
+        The raw arrays (radians) are ``env.unwrapped.tasks[info["task_index"]]``.
+    Action: ``Discrete(N)``, the index of the next keyframe, an integer (a float such as 13.9 is
+    refused, not truncated). ``action_space.sample()`` draws a valid one. Frames that are already
+    keyframes are invalid: they are False in ``info["action_mask"]`` and :meth:`action_masks`, and
+    ``step`` raises :class:`InvalidActionError` for them. Through wrappers (``gymnasium.make``)
+    reach the method as ``env.unwrapped.action_masks()`` or
+    ``env.get_wrapper_attr("action_masks")()``; in a vector env use ``infos["action_mask"]`` or
+    ``envs.call("action_masks")``.
     Reward: r_i = R_{i+1} - R_i, R_i = 1 - Q_i / Q_0; ``info`` carries the terms (``R``, ``R_prev``,
     ``q``, ``q_prev``, ``q0``) so that ``reward == R - R_prev``.
+    Info (fixed shapes, so vector envs can stack them): ``action_mask`` (N,) bool,
+    ``keyframe_mask`` (N,) bool, ``task_index`` int, ``q``, ``q_prev``, ``q0``, ``R``, ``R_prev``
+    floats (at reset the ``_prev`` terms equal the current ones).
     Episode: starts from {0, N-1}; terminates when W keyframes are chosen (no truncation).
 
     Args:
@@ -142,8 +125,11 @@ class KeyframeEnv(gym.Env):
             ``gymnasium.make(ENV_ID)`` works without data.
         keyframes: the keyframe counts W an episode may ask for (each 3 <= W <= N); one is drawn
             per episode with ``self.np_random``.
+        feature_stats: (mean, std), each (C,), for the observation's standardisation (e.g. the
+            training environment's, for an evaluation environment); None: from ``tasks``.
 
-    ``reset(options={"task": i, "keyframes": W})`` fixes the clip and/or W of the episode.
+    ``reset(options={"task": i, "keyframes": W})`` fixes the clip and/or W of the episode (integers;
+    any other key is refused with ``ValueError``).
     """
 
     metadata = {"render_modes": []}
@@ -152,27 +138,29 @@ class KeyframeEnv(gym.Env):
         self,
         tasks: Sequence[KeyframeTask] | None = None,
         keyframes: Sequence[int] = (5, 10, 15),
+        feature_stats: tuple[np.ndarray, np.ndarray] | None = None,
     ):
-        if tasks is None:
-            from sidql.learning.tasks import synthetic_tasks
-
-            tasks = synthetic_tasks(8, seed=0)
-        self.tasks = list(tasks)
+        self.tasks = list(synthetic_tasks(8, seed=0) if tasks is None else tasks)
         if not self.tasks:
             raise ValueError("KeyframeEnv needs at least one task")
         n, c = self.tasks[0].features.shape
         for t in self.tasks:
             if t.features.shape != (n, c):
                 raise ValueError(f"all tasks must have features ({n}, {c}); got {t.features.shape}")
-        self.keyframe_counts = tuple(int(w) for w in keyframes)
+        self.keyframe_counts = tuple(as_index(w, "keyframes") for w in keyframes)
         bad = [w for w in self.keyframe_counts if not 3 <= w <= n]
         if not self.keyframe_counts or bad:
             raise ValueError(f"keyframe counts must lie in [3, N={n}]; got {self.keyframe_counts}")
         self.n_frames = n
+        if feature_stats is None:
+            flat = np.concatenate([t.features for t in self.tasks]).astype(np.float64)
+            feature_stats = (flat.mean(0), flat.std(0))
+        mean, std = (np.asarray(x, np.float64).reshape(c) for x in feature_stats)
+        self.feature_mean, self.feature_std = mean, np.maximum(std, 1e-6)
         self.observation_space = spaces.Dict(
             {
-                "features": spaces.Box(-np.inf, np.inf, (n, c), np.float32),
-                "cost": spaces.Box(0.0, np.inf, (n, n), np.float32),
+                "features": spaces.Box(-FEATURE_CLIP, FEATURE_CLIP, (n, c), np.float32),
+                "cost": spaces.Box(0.0, 1.0, (n, n), np.float32),
                 "keyframes": spaces.MultiBinary(n),
                 "remaining": spaces.Discrete(n - 1),
             }
@@ -182,20 +170,28 @@ class KeyframeEnv(gym.Env):
         self._task_index = -1
         self._mask = np.zeros(n, dtype=bool)
         self._budget = 0
-        self._err0 = 0.0
-        self._err = 0.0
+        self._q0 = self._q = self._q_prev = 0.0
+        self._scaled: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- helpers -------------------------------------------------------------------------------
-    def _R(self, err: float) -> float:
-        return 0.0 if self._err0 <= 0.0 else 1.0 - err / self._err0
+    def _R(self, q: float) -> float:
+        return 0.0 if self._q0 <= 0.0 else 1.0 - q / self._q0
 
-    def _q(self, err: float) -> float:
-        return err / (self.n_frames * self._task.n_bones)
+    def scaled(self, task: KeyframeTask) -> tuple[np.ndarray, np.ndarray]:
+        """A task's (features, cost) as observed: standardised and clipped features (N, C), costs
+        over their largest entry (N, N), both float32 (see the class docstring)."""
+        f = (task.features - self.feature_mean) / self.feature_std
+        f = np.clip(f, -FEATURE_CLIP, FEATURE_CLIP).astype(np.float32)
+        cost = np.maximum(task.cost, 0.0)
+        top = float(cost.max())
+        cost = (cost / top if top > 0.0 else cost).astype(np.float32)
+        return f, cost
 
     def _obs(self) -> dict:
+        features, cost = self._scaled
         return {
-            "features": self._task.features.copy(),
-            "cost": np.maximum(self._task.cost, 0.0).astype(np.float32),
+            "features": features.copy(),
+            "cost": cost.copy(),
             "keyframes": self._mask.astype(np.int8),
             "remaining": int(self._budget - self._mask.sum()),
         }
@@ -203,11 +199,13 @@ class KeyframeEnv(gym.Env):
     def _info(self) -> dict:
         return {
             "action_mask": self.action_masks(),
+            "keyframe_mask": self._mask.copy(),
             "task_index": self._task_index,
-            "keyframe_indices": np.flatnonzero(self._mask),
-            "q": self._q(self._err),
-            "q0": self._q(self._err0),
-            "R": self._R(self._err),
+            "q": self._q,
+            "q_prev": self._q_prev,
+            "q0": self._q0,
+            "R": self._R(self._q),
+            "R_prev": self._R(self._q_prev),
         }
 
     def action_masks(self) -> np.ndarray:
@@ -217,23 +215,32 @@ class KeyframeEnv(gym.Env):
     # -- Gymnasium API -------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = options or {}
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS), key=str)
+        if unknown:
+            raise ValueError(
+                f"unknown reset option(s) {', '.join(map(repr, unknown))}; "
+                f"known: {', '.join(RESET_OPTIONS)}"
+            )
         i = options.get("task")
         if i is None:
             i = int(self.np_random.integers(len(self.tasks)))
-        if not 0 <= int(i) < len(self.tasks):
+        i = as_index(i, "options['task']")
+        if not 0 <= i < len(self.tasks):
             raise ValueError(f"task index {i} out of range [0, {len(self.tasks)})")
         w = options.get("keyframes")
         if w is None:
             w = self.keyframe_counts[int(self.np_random.integers(len(self.keyframe_counts)))]
-        if not 3 <= int(w) <= self.n_frames:
+        w = as_index(w, "options['keyframes']")
+        if not 3 <= w <= self.n_frames:
             raise ValueError(f"keyframes must lie in [3, {self.n_frames}]; got {w}")
-        self._task_index = int(i)
-        self._task = self.tasks[self._task_index]
-        self._budget = int(w)
+        self._task_index = i
+        self._task = self.tasks[i]
+        self._scaled = self.scaled(self._task)
+        self._budget = w
         self._mask = np.zeros(self.n_frames, dtype=bool)
         self._mask[[0, -1]] = True
-        self._err0 = self._err = float(self._task.cost[0, self.n_frames - 1])
+        self._q0 = self._q = self._q_prev = keyframe_q(self._task, [0, self.n_frames - 1])
         return self._obs(), self._info()
 
     def step(self, action):
@@ -242,23 +249,19 @@ class KeyframeEnv(gym.Env):
         if self._mask.sum() >= self._budget:
             raise InvalidActionError("the episode has ended (W keyframes chosen); call reset()")
         try:
-            a = int(action)
-        except (TypeError, ValueError):
-            raise InvalidActionError(f"action must be a frame index; got {action!r}") from None
+            a = as_index(action, "action (a frame index)")
+        except TypeError as e:
+            raise InvalidActionError(str(e)) from None
         if not 0 <= a < self.n_frames:
             raise InvalidActionError(f"action {a} outside the clip's frames [0, {self.n_frames})")
         if self._mask[a]:
             chosen = ", ".join(map(str, np.flatnonzero(self._mask)))
             raise InvalidActionError(f"frame {a} is already a keyframe (chosen: {chosen})")
-        err_prev = self._err
         self._mask[a] = True
-        self._err = keyframe_error_sum(self._task.cost, np.flatnonzero(self._mask))
-        R_prev, R = self._R(err_prev), self._R(self._err)
-        reward = R - R_prev
+        self._q_prev, self._q = self._q, keyframe_q(self._task, np.flatnonzero(self._mask))
+        reward = self._R(self._q) - self._R(self._q_prev)
         terminated = bool(self._mask.sum() >= self._budget)
-        info = self._info()
-        info.update(R_prev=R_prev, q_prev=self._q(err_prev))
-        return self._obs(), float(reward), terminated, False, info
+        return self._obs(), float(reward), terminated, False, self._info()
 
 
 gym.register(id=ENV_ID, entry_point="sidql.learning.env:KeyframeEnv")

@@ -1,8 +1,10 @@
-"""The trained keyframe policy: load it, decide keyframes, and the ``dqn`` selection method.
+"""The trained keyframe policy: load it, decide keyframes, and the ``dqn`` selection function.
 
-Importing this module imports torch; ``sidql.keyframes.methods`` names it in ``LAZY_METHODS`` so that only
-``--methods dqn`` pays for that. The shipped policy is ``sidql/data/policy.pt``; the environment
-variable ``SIDQL_POLICY`` points the ``dqn`` method at another file.
+Importing this module imports torch; ``sidql.keyframes.methods`` names :func:`dqn` in
+``LAZY_METHODS`` (``"sidql.learning.policy:dqn"``) so that only ``--methods dqn`` pays for that;
+this module does not import the registry. The shipped policy is ``sidql/data/policy.pt``; the
+environment variable ``SIDQL_POLICY`` points the ``dqn`` method at another file. Policy files are
+loaded with ``torch.load(weights_only=True)`` and a format check (:mod:`sidql.learning.files`).
 """
 
 from __future__ import annotations
@@ -14,13 +16,65 @@ from pathlib import Path
 import numba
 import numpy as np
 import torch
+from torch import nn
 
-from sidql.keyframes.methods import register
-from sidql.learning.qnet import KeyframeQNet, masked_q
+from sidql.keyframes.segment_costs import segment_cost_matrix
+from sidql.keyframes.spherical import chart
+from sidql.learning.files import POLICY_FORMAT, ModelFileError, load_payload
+from sidql.learning.qnet import N_SCALARS, KeyframeQNet, masked_q
 from sidql.learning.rollout import greedy_sequences, rollout_values_batch, rollout_values_seq
+from sidql.learning.tasks import clip_features
 
 #: The policy shipped with the repository.
 DEFAULT_POLICY = Path(__file__).resolve().parents[1] / "data" / "policy.pt"
+
+#: The modules of :class:`KeyframeQNet` the decision kernel knows: the encoder (run in torch) and
+#: the head's linear layers (mirrored in :func:`_decide_clip`). A network with any other module
+#: set, or with these of another type or shape, is refused by :func:`head_weights`.
+ENCODER_MODULES = ("inp", "convs", "ctx")
+HEAD_MODULES = ("proj", "glob", "scal", "adv_hidden", "adv_out", "value_hidden", "value_out")
+
+
+def head_weights(net: KeyframeQNet) -> tuple:
+    """The head's weights as float64 arrays, read from its NAMED modules, for :func:`_decide_clip`.
+
+    Checks that the network is the one the kernel mirrors: exactly the modules
+    :data:`ENCODER_MODULES` + :data:`HEAD_MODULES`, the head's layers ``nn.Linear`` of the shapes
+    the kernel's arithmetic assumes (K = H = ``config["hidden"]``).
+
+    Returns:
+        (scal W (K, 11), scal b (K,), adv_hidden W (H, K), b (H,), adv_out w (H,), b float,
+        value_hidden W (H, K), b (H,), value_out w (H,), b float).
+    Raises:
+        TypeError: a layer was added, removed, renamed or changed (the kernel would silently
+            compute something else).
+    """
+    h = int(net.config["hidden"])
+    children = {name for name, _ in net.named_children()}
+    if children != set(ENCODER_MODULES + HEAD_MODULES):
+        raise TypeError(
+            "the compiled decision kernel mirrors KeyframeQNet's modules "
+            f"{sorted(ENCODER_MODULES + HEAD_MODULES)}; this network has {sorted(children)}"
+        )
+    shapes = {
+        "proj": (4 * h, h), "glob": (h, h), "scal": (h, N_SCALARS), "adv_hidden": (h, h),
+        "adv_out": (1, h), "value_hidden": (h, h), "value_out": (1, h),
+    }  # fmt: skip
+    for name, shape in shapes.items():
+        m = getattr(net, name)
+        if type(m) is not nn.Linear or tuple(m.weight.shape) != shape or m.bias is None:
+            raise TypeError(
+                f"the compiled decision kernel needs net.{name} = Linear(in={shape[1]}, "
+                f"out={shape[0]}); got {m}"
+            )
+    f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
+    return (
+        f(net.scal.weight), f(net.scal.bias),
+        f(net.adv_hidden.weight), f(net.adv_hidden.bias),
+        f(net.adv_out.weight)[0], float(net.adv_out.bias.detach()[0]),
+        f(net.value_hidden.weight), f(net.value_hidden.bias),
+        f(net.value_out.weight)[0], float(net.value_out.bias.detach()[0]),
+    )  # fmt: skip
 
 
 class Policy:
@@ -53,23 +107,13 @@ class Policy:
             enc = self.net.encode(torch.as_tensor(feats))
             proj = self.net.proj(enc).numpy().astype(np.float64)  # (B, N, 4K)
             glob = self.net.glob(enc.mean(1)).numpy().astype(np.float64)  # (B, K)
-        w = self._weights()
+        w = head_weights(self.net)  # read afresh: the network may have changed (training)
         out = np.empty((len(feats), W), np.int64)
         for i in range(len(feats)):
             out[i] = _decide_clip(
                 proj[i], glob[i], cost[i].astype(np.float64), W, self.uses_prior, *w
             )
         return out
-
-    def _weights(self):
-        """The head's weights as float64 arrays (read afresh: the network may have changed)."""
-        net = self.net
-        f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
-        return (
-            f(net.scal.weight), f(net.scal.bias), f(net.mlp[1].weight), f(net.mlp[1].bias),
-            f(net.mlp[3].weight)[0], float(net.mlp[3].bias.detach()[0]), f(net.value[0].weight),
-            f(net.value[0].bias), f(net.value[2].weight)[0], float(net.value[2].bias.detach()[0]),
-        )  # fmt: skip
 
     def _check(self, features, costs, W):
         feats = np.ascontiguousarray(features, dtype=np.float32)
@@ -116,10 +160,6 @@ class Policy:
 
     def select(self, clip, W: int) -> np.ndarray:
         """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart, features, costs, :meth:`decide`)."""
-        from sidql.keyframes.segment_costs import segment_cost_matrix
-        from sidql.keyframes.spherical import chart
-        from sidql.learning.tasks import clip_features
-
         series = chart(clip)
         cost = segment_cost_matrix(series, "hermite")
         return self.decide(clip_features(series)[None], cost[None], W)[0]
@@ -281,29 +321,40 @@ def _decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv
 
 
 def load_policy(path: str | os.PathLike | None = None) -> Policy:
-    """Load a policy file written by :func:`sidql.learning.dqn.save_policy` (default: ``$SIDQL_POLICY`` or
-    the shipped one). Raises FileNotFoundError with the path when it is missing."""
+    """Load a policy file written by :func:`sidql.learning.dqn.save_policy` (default:
+    ``$SIDQL_POLICY`` or the shipped one), tensors and plain values only.
+
+    Raises:
+        FileNotFoundError: no file there (the message says how to train one).
+        ModelFileError: the file is refused (holds other objects, another format or version, or
+            weights that do not fit the network it declares); one line naming the file.
+    """
     path = Path(path or os.environ.get("SIDQL_POLICY") or DEFAULT_POLICY)
-    return _load(str(path.resolve()), path.stat().st_mtime_ns if path.exists() else 0)
+    if not path.exists():
+        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`")
+    return _load(str(path.resolve()), path.stat().st_mtime_ns)
 
 
 @lru_cache(maxsize=4)
 def _load(path: str, _mtime: int) -> Policy:
-    if not Path(path).exists():
-        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`")
-    payload = torch.load(path, map_location="cpu", weights_only=False)
-    if payload.get("format") != "sidql-dqn-policy/1":
-        raise ValueError(f"{path} is not a sidql DQN policy")
-    cfg = payload["config"]
-    net = KeyframeQNet(
-        cfg["n_features"], cfg["hidden"], cfg["dilations"], prior=cfg.get("prior", "greedy")
-    )
-    net.load_state_dict(payload["state_dict"])
-    meta = {k: v for k, v in payload.items() if k not in ("state_dict",)}
-    return Policy(net, payload["keyframes"], meta)
+    payload = load_payload(path, POLICY_FORMAT)
+    try:
+        cfg = payload["config"]
+        net = KeyframeQNet(
+            int(cfg["n_features"]), int(cfg["hidden"]), tuple(cfg["dilations"]),
+            prior=cfg.get("prior", "greedy"),
+        )  # fmt: skip
+        net.load_state_dict(payload["state_dict"])
+        keyframes = tuple(int(w) for w in payload["keyframes"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as e:
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ModelFileError(path, None, f"not a usable policy: {first}") from None
+    meta = {k: v for k, v in payload.items() if k != "state_dict"}
+    return Policy(net, keyframes, meta)
 
 
-@register("dqn")
 def dqn(clip, W: int, *, seed: int = 0) -> np.ndarray:
-    """SIDQL: the trained Deep Q-Network's greedy (masked argmax) keyframes; deterministic."""
+    """SIDQL: the trained Deep Q-Network's greedy (masked argmax) keyframes; deterministic.
+
+    The ``dqn`` selection method (``sidql.keyframes.methods`` finds it by name, lazily)."""
     return load_policy().select(clip, W)

@@ -82,13 +82,18 @@ class KeyframeQNet(nn.Module):
         self.proj = nn.Linear(hidden, 4 * k)  # self, left keyframe, right keyframe, segment mean
         self.glob = nn.Linear(hidden, k)
         self.scal = nn.Linear(N_SCALARS, k)
-        self.mlp = nn.Sequential(nn.ReLU(), nn.Linear(k, hidden), nn.ReLU(), nn.Linear(hidden, 1))
-        self.value = nn.Sequential(nn.Linear(k, hidden), nn.ReLU(), nn.Linear(hidden, 1))
-        nn.init.zeros_(self.mlp[-1].weight)
-        nn.init.zeros_(self.mlp[-1].bias)
+        # advantage MLP relu(z) -> adv_hidden -> relu -> adv_out, value MLP on the mean of relu(z)
+        # over free frames: value_hidden -> relu -> value_out. Named one by one: the compiled
+        # decision kernel (sidql.learning.policy) reads these modules by name.
+        self.adv_hidden = nn.Linear(k, hidden)
+        self.adv_out = nn.Linear(hidden, 1)
+        self.value_hidden = nn.Linear(k, hidden)
+        self.value_out = nn.Linear(hidden, 1)
+        nn.init.zeros_(self.adv_out.weight)
+        nn.init.zeros_(self.adv_out.bias)
         if prior == "rollout":  # start exactly at the prior: Q = g1 + greedy-completion value
-            nn.init.zeros_(self.value[-1].weight)
-            nn.init.zeros_(self.value[-1].bias)
+            nn.init.zeros_(self.value_out.weight)
+            nn.init.zeros_(self.value_out.bias)
 
     def set_normalisation(self, mean: torch.Tensor, std: torch.Tensor) -> None:
         """Standardise inputs with per-channel ``mean``, ``std`` (C,) from the training clips."""
@@ -142,13 +147,14 @@ class KeyframeQNet(nn.Module):
             gather(p_self, idx) + gather(p_left, left) + gather(p_right, right) + seg_mean
             + self.glob(enc.mean(1, keepdim=True)) + self.scal(scal)
         )  # fmt: skip
-        adv = self.mlp(z)[..., 0]  # (B, N)
+        adv = self.adv_out(torch.relu(self.adv_hidden(torch.relu(z))))[..., 0]  # (B, N)
         # dueling: a state value (from the mean of z over the free frames) plus advantages centred
         # on their mean over the free frames; errors common to all actions leave the argmax alone
         free = (~mask).to(enc.dtype)
         cnt = free.sum(1, keepdim=True).clamp(min=1.0)
         z_mean = (torch.relu(z) * free[..., None]).sum(1) / cnt
-        logit = self.value(z_mean) + adv - (adv * free).sum(1, keepdim=True) / cnt
+        value = self.value_out(torch.relu(self.value_hidden(z_mean)))  # (B, 1)
+        logit = value + adv - (adv * free).sum(1, keepdim=True) / cnt
         # the future can remove at most the error left after a: predict the fraction it removes
         e_after = current_error(cost, mask, right) - g1
         more = (remaining > 1).to(enc.dtype)[:, None]

@@ -1,15 +1,20 @@
-"""Where the keyframe environment's tasks come from: clips reduced to (features, cost matrix).
+"""Keyframe tasks: one clip reduced to what a keyframe decision needs, and where tasks come from.
 
+- :class:`KeyframeTask`: (features (N, C), segment-cost matrix (N, N), M) of one clip, and the
+  paper's error of a keyframe set on it, :func:`keyframe_q` (eq. 18, tested equal to
+  :func:`sidql.keyframes.metrics.q_error` on real clips);
 - :func:`synthetic_tasks`: a small deterministic problem without data (smooth random signals whose
   cost is the error of *linear* interpolation between keyframes), used by ``gymnasium.make`` without
-  arguments and by CI's tiny training run.
+  arguments and by CI's tiny training run;
 - :func:`clip_features` / :func:`clip_task`: a 60-frame motion clip -> the paper's state
   inputs F, V (bone angles and rates of the spherical chart) and the Hermite segment-cost matrix
-  of issue 3.
+  of issue 3;
 - :func:`load_tasks`: every trial under a CMU directory, cut into 60-frame clips (optionally with a
-  stride smaller than 60 for more, overlapping training clips), cached per trial as ``.npz``.
+  stride smaller than 60 for more, overlapping training clips), cached per trial as ``.npz`` in
+  :func:`default_cache_dir` (``$SIDQL_CACHE`` or ``~/.cache/sidql/tasks``) unless told otherwise,
+  so a second load of the same files costs only the reading of the cache.
 
-Pure numpy: the motion files are read by ``sim.motion.ingest`` (imported lazily, no MuJoCo needed here).
+The environment (:mod:`sidql.learning.env`) builds on this module, never the other way round.
 """
 
 from __future__ import annotations
@@ -17,15 +22,90 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from sidql.learning.env import KeyframeTask
+from sidql.keyframes.segment_costs import segment_cost_matrix
+from sidql.keyframes.spherical import chart
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+from sim.motion.dataset import find_trials
+from sim.motion.ingest import load_motion
 
 #: Bump when features or costs change: cached task files carry it in their name.
 CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class KeyframeTask:
+    """One clip as the environment sees it.
+
+    Attributes:
+        features: (N, C) float32 per-frame policy inputs (angles [rad], rates [rad/frame]).
+        cost: (N, N) segment costs [rad summed over frames and bones]; only i < j is read.
+        n_bones: M, the number of bones summed in ``cost`` (22 for the CMU protocol);
+            Q = sum / (N M).
+        source: where the clip came from (file and start frame), for reports.
+        subject: subject id of the trial (for subject-wise splits); "" if unknown.
+    """
+
+    features: np.ndarray
+    cost: np.ndarray
+    n_bones: int = 22
+    source: str = ""
+    subject: str = ""
+
+    def __post_init__(self):
+        n = self.features.shape[0]
+        if self.features.ndim != 2 or n < 3:
+            raise ValueError(f"features must be (N >= 3, C); got {self.features.shape}")
+        if self.cost.shape != (n, n):
+            raise ValueError(f"cost must be (N, N) = ({n}, {n}); got {self.cost.shape}")
+        if self.n_bones < 1:
+            raise ValueError(f"n_bones must be positive; got {self.n_bones}")
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.features.shape[0])
+
+
+def keyframe_error_sum(cost: np.ndarray, keyframes: Sequence[int] | np.ndarray) -> float:
+    """Sum of ``cost`` over consecutive keyframes, ``sum_w cost[k_w, k_{w+1}]``.
+
+    Args:
+        cost: (N, N) segment-cost matrix.
+        keyframes: sorted frame indices (any length >= 2).
+    Returns:
+        The unnormalised error [rad]; divide by N M for the paper's Q (eq. 18).
+    """
+    k = np.asarray(keyframes, dtype=np.int64)
+    return float(cost[k[:-1], k[1:]].sum())
+
+
+def keyframe_q(task: KeyframeTask, keyframes: Sequence[int] | np.ndarray) -> float:
+    """The paper's mean angle error Q(S, K) [rad] (eq. 18) of sorted ``keyframes`` on ``task``."""
+    return keyframe_error_sum(task.cost, keyframes) / (task.n_frames * task.n_bones)
+
+
+def neighbours(mask: np.ndarray, frame: int) -> tuple[int, int]:
+    """Nearest keyframes strictly left and right of ``frame`` in the (N,) bool ``mask``.
+
+    The first and last frames must be keyframes and ``frame`` must lie strictly between them.
+    """
+    left = int(np.flatnonzero(mask[:frame])[-1])
+    right = frame + 1 + int(np.flatnonzero(mask[frame + 1 :])[0])
+    return left, right
+
+
+def insertion_gain(cost: np.ndarray, mask: np.ndarray, frame: int) -> float:
+    """Decrease of the error sum when ``frame`` becomes a keyframe: the segment (l, r) that contains
+    it is replaced by (l, frame) and (frame, r). Positive when the reconstruction improves."""
+    left, right = neighbours(mask, frame)
+    return float(cost[left, right] - cost[left, frame] - cost[frame, right])
 
 
 def linear_cost_matrix(x: np.ndarray) -> np.ndarray:
@@ -107,9 +187,6 @@ def clip_features(series) -> np.ndarray:
 def clip_task(clip, *, subject: str = "") -> KeyframeTask:
     """A motion clip (:class:`sim.motion.clip.Clip`, N frames) -> its :class:`KeyframeTask`
     (features from :func:`clip_features`, Hermite costs of :mod:`sidql.keyframes.segment_costs`)."""
-    from sidql.keyframes.segment_costs import segment_cost_matrix
-    from sidql.keyframes.spherical import chart
-
     series = chart(clip)
     return KeyframeTask(
         features=clip_features(series),
@@ -149,17 +226,20 @@ def trial_tasks(
     trial, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None
 ) -> TrialTasks:
     """Cut one trial (``sim.motion.dataset.Trial``) into ``length``-frame clips starting every ``stride``
-    frames from frame 0 and reduce each to features and costs; cached in ``cache_dir`` if given.
+    frames from frame 0 and reduce each to features and costs.
+
+    Cached as one ``.npz`` per trial (keyed by the file's path, size, modification time, the
+    arguments and :data:`CACHE_VERSION`) in ``cache_dir``; None: :func:`default_cache_dir`;
+    False: no cache.
 
     Raises:
         MotionDataError: the trial cannot be read, or is shorter than one clip.
     """
-    from sim.errors import MotionDataError
-    from sim.motion.clip import write_atomic
-
     amc = Path(trial.amc)
     path = None
-    if cache_dir is not None:
+    if cache_dir is None:
+        cache_dir = default_cache_dir()
+    if cache_dir is not False:
         path = _cache_path(Path(cache_dir), amc, length, stride, fps)
         if path.exists():
             with np.load(path) as z:
@@ -167,8 +247,6 @@ def trial_tasks(
                     trial.subject, str(amc), z["features"], z["costs"], z["starts"],
                     int(z["n_bones"]),
                 )  # fmt: skip
-    from sim.motion.ingest import load_motion
-
     motion = load_motion(trial.asf, trial.amc, fps=fps)
     if motion.n_frames < length:
         raise MotionDataError(str(amc), None, f"{motion.n_frames} frames < one {length}-frame clip")
@@ -183,41 +261,59 @@ def trial_tasks(
         tasks[0].n_bones,
     )
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(
-            path,
-            lambda f: np.savez(
-                f, features=out.features, costs=out.costs, starts=starts, n_bones=out.n_bones
-            ),
-        )
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(
+                path,
+                lambda f: np.savez(
+                    f, features=out.features, costs=out.costs, starts=starts, n_bones=out.n_bones
+                ),
+            )
+        except OSError as e:  # a cache that cannot be written only costs time
+            print(f"warning: {path}: task cache not written: {e.strerror or e}", file=sys.stderr)
     return out
+
+
+class TaskSet(list):
+    """The :class:`TrialTasks` of a folder, one per readable trial (a list), and what was skipped.
+
+    Attributes:
+        skipped: (AMC path, problem) of every trial that could not be used.
+    """
+
+    def __init__(self, trials=(), skipped=()):
+        super().__init__(trials)
+        self.skipped: list[tuple[str, str]] = list(skipped)
+
+    def tasks(self) -> list[KeyframeTask]:
+        """Every clip of every trial as a :class:`KeyframeTask`, in trial order."""
+        return [task for trial in self for task in trial.tasks()]
 
 
 def load_tasks(
     data_dir, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None,
     subjects=None, progress: bool = True,
-) -> list[TrialTasks]:  # fmt: skip
-    """Every trial under ``data_dir`` (``sim.motion.dataset.find_trials``) as :class:`TrialTasks`.
+) -> TaskSet:  # fmt: skip
+    """Every trial under ``data_dir`` (``sim.motion.dataset.find_trials``) as :class:`TrialTasks`;
+    ``load_tasks(DIR).tasks()`` is the flat list of clips for :class:`sidql.learning.env.KeyframeEnv`.
 
-    Bad trials are skipped and reported on stderr; ``subjects`` (a set of ids) keeps only those.
+    Bad trials are skipped, reported on stderr and listed in ``.skipped``; ``subjects`` (a set of
+    ids) keeps only those. ``cache_dir`` as in :func:`trial_tasks` (default: a per-user cache, so a
+    repeated load reads one ``.npz`` per trial instead of the motion files).
     """
-    from tqdm import tqdm
-
-    from sim.errors import MotionDataError
-    from sim.motion.dataset import find_trials
-
     trials = [t for t in find_trials(data_dir) if subjects is None or t.subject in subjects]
-    out = []
+    out = TaskSet()
     for trial in tqdm(trials, desc=f"clips (stride {stride})", disable=not progress, leave=False):
         try:
             out.append(
                 trial_tasks(trial, length=length, stride=stride, fps=fps, cache_dir=cache_dir)
             )
         except MotionDataError as e:
+            out.skipped.append((str(trial.amc), str(e)))
             print(f"skipping {trial.amc}: {e}", file=sys.stderr)
     return out
 
 
 def default_cache_dir() -> Path:
-    """``$SIDQL_CACHE`` or ``~/.cache/sidql/tasks``."""
+    """``$SIDQL_CACHE`` or ``~/.cache/sidql/tasks``: where task files are cached by default."""
     return Path(os.environ.get("SIDQL_CACHE", Path.home() / ".cache" / "sidql" / "tasks"))

@@ -1,0 +1,82 @@
+"""Policy and checkpoint files: tensors and plain values only, with a format version.
+
+A file is one ``torch.save`` of a dict whose ``"format"`` entry names its kind and version
+(:data:`POLICY_FORMAT`, :data:`CHECKPOINT_FORMAT`). Loading uses ``torch.load(weights_only=True)``,
+which rebuilds only tensors and plain Python values (dict, list, tuple, str, int, float, bool,
+None) and refuses any other pickled object *before* constructing it, so a crafted file cannot run
+code. Anything refused, unreadable or of another format raises :class:`ModelFileError` (a
+:class:`sim.errors.MotionDataError`: the CLI prints one line and exits 2).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import pickle
+import re
+import warnings
+
+import torch
+
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+
+#: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
+#: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
+#: ``value_out``).
+POLICY_FORMAT = "sidql-dqn-policy/2"
+#: Kind and version of a training checkpoint (OUT.ckpt); replay memories are stored as tensors.
+CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
+
+
+class ModelFileError(MotionDataError):
+    """A policy or checkpoint file that is refused: not a plain tensor file (e.g. a pickle that
+    would construct arbitrary objects), unreadable, or of another format or version."""
+
+
+def save_payload(path: str | os.PathLike, payload: dict) -> None:
+    """Write ``payload`` (a dict with a ``"format"`` entry; tensors and plain values only)
+    atomically to ``path``."""
+    if "format" not in payload:
+        raise ValueError("a payload must name its format")
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    write_atomic(path, lambda f: f.write(buf.getvalue()))
+
+
+def load_payload(path: str | os.PathLike, expected_format: str) -> dict:
+    """Load a file written by :func:`save_payload` with ``torch.load(weights_only=True)``.
+
+    Args:
+        path: the file.
+        expected_format: the only accepted ``"format"`` entry, e.g. :data:`POLICY_FORMAT`.
+    Returns:
+        The payload dict (tensors on the CPU).
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ModelFileError: anything else is wrong (one line naming the file and the problem).
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"no file at {path}")
+    try:
+        with warnings.catch_warnings():  # e.g. "Detected pickle protocol 4": the verdict follows
+            warnings.simplefilter("ignore")
+            payload = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        found = re.search(r"GLOBAL ([\w.]+)", str(e))
+        if found:  # a pickled object of some class or function: exactly what must never load
+            problem = f"holds objects other than tensors and plain values ({found.group(1)})"
+        else:  # an opcode the safe unpickler does not accept, or not a pickle at all
+            why = re.search(r"WeightsUnpickler error:\s*(.+)", str(e))
+            problem = f"not a file of tensors and plain values ({why.group(1) if why else e})"
+        raise ModelFileError(path, None, f"refused: {problem}"[:240]) from None
+    except Exception as e:  # truncated, not a torch file, not a zip, ...
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ModelFileError(
+            path, None, f"unreadable as a {expected_format} file: {first}"
+        ) from None
+    found = payload.get("format") if isinstance(payload, dict) else None
+    if found != expected_format:
+        raise ModelFileError(path, None, f"format {found!r}; expected {expected_format!r}")
+    return payload

@@ -1,0 +1,89 @@
+"""Settings of a DQN training run (:func:`sidql.learning.dqn.train`), light to import: the command
+line builds its options from :class:`Args` without importing torch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+#: Args that may differ between a checkpoint and the run that resumes it (everything else must
+#: match: the network, the replay memories and the data split are built from it).
+RESUME_MAY_CHANGE = ("steps", "resume", "out", "cache_dir", "progress", "threads", "eval_every",
+                     "extra", "data")  # fmt: skip
+
+
+@dataclass
+class Args:
+    """Every knob of a training run, one documented field each (``sidql train`` has one option
+    per field)."""
+
+    data: str | None = None
+    """directory of CMU trials (``sim.motion.dataset.find_trials``); None: synthetic tasks (for tests)"""
+    keyframes: tuple[int, ...] = (5, 10, 15)
+    """keyframe counts W the policy learns (one drawn per episode)"""
+    steps: int = 16_000
+    """environment steps (keyframes chosen) in total"""
+    out: str = "policy.pt"
+    """where the trained policy goes; OUT.ckpt, OUT.csv and OUT.png are written beside it"""
+    resume: bool = False
+    """continue from OUT.ckpt if it exists"""
+    seed: int = 0
+    """seeds numpy, torch, the environments and the subject split"""
+    test_subjects: tuple[str, ...] | None = None
+    """held-out subjects (never trained on); None: every 4th subject in sorted order, offset by seed"""
+    stride: int = 2
+    """training clips start every ``stride`` frames (30 fps) of each training trial"""
+    cache_dir: str | None = None
+    """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
+    synthetic_tasks: int = 64
+    """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
+    # -- DQN -------------------------------------------------------------------------------------
+    buffer_size: int = 10_000
+    """replay memory of the agent's own transitions (paper: 10,000)"""
+    batch_size: int = 128
+    """minibatch (paper: 256)"""
+    learning_rate: float = 1e-4
+    """Adam step size (paper: 0.01; larger rates drift away from the prior quickly)"""
+    gamma: float = 1.0
+    """discount (paper: 0.5, best with the greedy prior; 1 with the rollout prior, whose value is
+    undiscounted)"""
+    n_step: int = 1
+    """n-step returns"""
+    double: bool = True
+    """double DQN: the main network picks the next action, the target network values it"""
+    train_frequency: int = 4
+    """one gradient step every this many environment steps (paper: 100-200)"""
+    target_update: int = 250
+    """copy the main network into the target network every this many gradient steps"""
+    learning_starts: int = 500
+    """environment steps before the first gradient step"""
+    eps_start: float = 0.2
+    """ε of the ε-greedy exploration at the start"""
+    eps_end: float = 0.02
+    """ε at the end of the linear schedule"""
+    eps_fraction: float = 0.4
+    """fraction of ``steps`` over which ε falls linearly"""
+    demo_episodes: int = 3_000
+    """demonstration episodes from the exact optimum seeded into their own replay memory (0: none)"""
+    demo_fraction: float = 0.25
+    """share of every minibatch drawn from the demonstrations"""
+    margin: float = 0.02
+    """DQfD margin [normalised reward] by which optimal frames must beat others on demonstrations"""
+    margin_weight: float = 0.0
+    """weight of the margin loss (0: plain TD learning from demonstrations)"""
+    prior: str = "rollout"
+    """what the learned part starts from: "greedy" (Q ranks like greedy untrained) or "rollout"
+    (Q starts at the exact value of finishing greedily, sidql.learning.rollout; use with gamma 1)"""
+    hidden: int = 32
+    """width of the Q-network"""
+    n_envs: int = 16
+    """episodes played in parallel"""
+    grad_clip: float = 10.0
+    """gradient-norm clip"""
+    eval_every: int = 2_000
+    """evaluate on the held-out clips and checkpoint every this many environment steps"""
+    threads: int = 1
+    """torch threads"""
+    progress: bool = True
+    """tqdm progress bar"""
+    extra: dict = field(default_factory=dict)
+    """free-form notes stored with the policy"""
