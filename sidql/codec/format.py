@@ -1,0 +1,251 @@
+"""The ``.sidq`` container, version 1: bytes <-> :class:`Stream`.
+
+All numbers little-endian. Layout::
+
+    offset  size        field
+    0       4           magic b"SIDQ"
+    4       1           version (1)
+    5       1           reconstruction: 0 hermite, 1 linear, 2 catmull_rom
+    6       2           latency L [frames] the encoder decided with (0: whole trial, offline)
+    8       4           fps, float32 (frames per second of the stream)
+    12      8           skeleton hash: first 8 bytes of SHA-256 of the canonical skeleton text
+                        (:func:`sidql.codec.skeleton.skeleton_hash`)
+    20      1           J, number of points (23); M = J - 1 bones
+    21      J x (1+n)   point names: length byte n, then n ASCII bytes
+    ..      J           parents, int8 (-1 for the root), each parent before its child
+    ..      4 M         bone lengths [m], float32
+    ..      12          root origin [m], 3 x float32 (CMU axes, y up)
+    ..      12          root step [m], 3 x float32
+    ..      4 D         (Hermite only) rate steps, D = 2 M + 3 float32 [rad/s or m/s]
+    ..      ...         keyframe records, back to back, until the trailer
+    end-4   4           CRC-32 (zlib / IEEE 802.3) of every byte before it
+
+A keyframe record (D = 2 M + 3 channels: theta[M], phi[M], root[3], see
+:mod:`sidql.codec.quantise` for the code of each)::
+
+    1 byte     gap: frames since the previous keyframe (0 for the first record, which is frame 0;
+               1..255 afterwards)
+    2 D bytes  pose codes, uint16
+    2 D bytes  (Hermite only) rate codes, int16
+
+The trial has ``1 + sum(gaps)`` frames; its last frame is the last keyframe. Records have a fixed
+size, so a reader checks that the body is a whole number of records.
+
+Any deviation (bad magic, unknown version or reconstruction, short read, a body that is not a
+whole number of records, a bad gap, a checksum mismatch) raises :class:`MotionDataError` with one
+line naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sidql.codec.quantise import Quantiser
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+
+MAGIC = b"SIDQ"
+VERSION = 1
+RECONSTRUCTIONS: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
+MAX_GAP = 255
+
+
+@dataclass(frozen=True)
+class Stream:
+    """A decoded container: everything needed to rebuild the motion.
+
+    Attributes:
+        reconstruction: one of :data:`RECONSTRUCTIONS`.
+        latency: look-ahead [frames] the encoder used (0: offline, whole trial).
+        fps: stream frame rate [1/s].
+        skeleton_hash: 8 bytes identifying the source skeleton.
+        names: (J,) point names; parents: (J,) int64 parent indices (-1 root).
+        lengths: (M,) bone lengths [m].
+        quantiser: the quantisation parameters.
+        keyframes: (W,) frame indices, 0 first, strictly increasing.
+        pose_codes: (W, D) uint16; rate_codes: (W, D) int16 or None.
+    """
+
+    reconstruction: str
+    latency: int
+    fps: float
+    skeleton_hash: bytes
+    names: tuple[str, ...]
+    parents: np.ndarray
+    lengths: np.ndarray
+    quantiser: Quantiser
+    keyframes: np.ndarray
+    pose_codes: np.ndarray
+    rate_codes: np.ndarray | None
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.keyframes[-1]) + 1
+
+
+def record_size(reconstruction: str, n_bones: int) -> int:
+    """Bytes of one keyframe record."""
+    D = 2 * n_bones + 3
+    return 1 + 2 * D * (2 if reconstruction == "hermite" else 1)
+
+
+def header_bytes(stream: Stream) -> bytes:
+    """The header of ``stream`` (everything before the first record)."""
+    J = len(stream.names)
+    out = bytearray()
+    out += MAGIC
+    out += struct.pack(
+        "<BBHf", VERSION, RECONSTRUCTIONS.index(stream.reconstruction), stream.latency, stream.fps
+    )
+    out += bytes(stream.skeleton_hash)
+    out += struct.pack("<B", J)
+    for n in stream.names:
+        b = n.encode("ascii")
+        out += struct.pack("<B", len(b)) + b
+    out += np.asarray(stream.parents, dtype=np.int8).tobytes()
+    out += np.asarray(stream.lengths, dtype="<f4").tobytes()
+    out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
+    out += np.asarray(stream.quantiser.root_step, dtype="<f4").tobytes()
+    if stream.reconstruction == "hermite":
+        out += np.asarray(stream.quantiser.rate_step, dtype="<f4").tobytes()
+    return bytes(out)
+
+
+def record_bytes(stream: Stream, start: int = 0, stop: int | None = None) -> bytes:
+    """Records ``start..stop`` of ``stream`` as bytes (a live sender emits them one by one)."""
+    k = np.asarray(stream.keyframes, dtype=np.int64)
+    stop = len(k) if stop is None else stop
+    gaps = np.diff(k, prepend=k[:1])[start:stop]
+    W = len(gaps)
+    D = stream.pose_codes.shape[1]
+    fields = [("gap", "u1"), ("pose", "<u2", (D,))]
+    if stream.reconstruction == "hermite":
+        fields.append(("rate", "<i2", (D,)))
+    rec = np.zeros(W, dtype=np.dtype(fields))
+    rec["gap"] = gaps
+    rec["pose"] = stream.pose_codes[start:stop]
+    if stream.reconstruction == "hermite":
+        rec["rate"] = stream.rate_codes[start:stop]
+    return rec.tobytes()
+
+
+def to_bytes(stream: Stream) -> bytes:
+    """The whole container: header, records, CRC-32."""
+    gaps = np.diff(stream.keyframes)
+    if stream.keyframes[0] != 0 or len(stream.keyframes) < 2 or gaps.min() < 1:
+        raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
+    if gaps.max() > MAX_GAP:
+        raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
+    body = header_bytes(stream) + record_bytes(stream)
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def write(stream: Stream, path: str | os.PathLike) -> Path:
+    """Write ``stream`` to ``path`` atomically; returns the path."""
+    path = Path(path)
+    data = to_bytes(stream)
+    write_atomic(path, lambda f: f.write(data))
+    return path
+
+
+class _Reader:
+    def __init__(self, data: bytes, where: str):
+        self.data, self.pos, self.where = data, 0, where
+
+    def take(self, n: int, what: str) -> bytes:
+        if self.pos + n > len(self.data):
+            raise MotionDataError(self.where, None, f"truncated stream: {what} missing")
+        out = self.data[self.pos : self.pos + n]
+        self.pos += n
+        return out
+
+
+def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
+    """Parse a container (see the module docstring); MotionDataError on any defect."""
+    data = bytes(data)
+    if len(data) < 4 or data[:4] != MAGIC:
+        raise MotionDataError(where, None, "not a .sidq stream (bad magic)")
+    if len(data) < 8:
+        raise MotionDataError(where, None, "truncated stream: header missing")
+    body, (crc,) = data[:-4], struct.unpack("<I", data[-4:])
+    version = data[4]
+    if version != VERSION:
+        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1)")
+    if zlib.crc32(body) != crc:
+        raise MotionDataError(where, None, "checksum mismatch: the stream is truncated or corrupt")
+    r = _Reader(body, where)
+    r.take(5, "header")
+    kind, latency, fps = struct.unpack("<BHf", r.take(7, "header"))
+    if kind >= len(RECONSTRUCTIONS):
+        raise MotionDataError(where, None, f"unknown reconstruction code {kind}")
+    recon = RECONSTRUCTIONS[kind]
+    if not (np.isfinite(fps) and fps > 0):
+        raise MotionDataError(where, None, f"bad frame rate {fps}")
+    skel = r.take(8, "skeleton hash")
+    (J,) = r.take(1, "point count")
+    if J < 2:
+        raise MotionDataError(where, None, f"bad point count {J}")
+    names = []
+    for _ in range(J):
+        (n,) = r.take(1, "point name")
+        try:
+            names.append(r.take(n, "point name").decode("ascii"))
+        except UnicodeDecodeError:
+            raise MotionDataError(where, None, "point name is not ASCII") from None
+    parents = np.frombuffer(r.take(J, "parents"), dtype=np.int8).astype(np.int64)
+    if parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, J)):
+        raise MotionDataError(where, None, "bad parent list (each parent must precede its child)")
+    M = J - 1
+    D = 2 * M + 3
+
+    def floats(n, what):
+        v = np.frombuffer(r.take(4 * n, what), dtype="<f4").astype(np.float32)
+        if not np.isfinite(v).all():
+            raise MotionDataError(where, None, f"non-finite {what}")
+        return v
+
+    lengths = floats(M, "bone lengths")
+    origin = floats(3, "root origin")
+    step = floats(3, "root step")
+    rate_step = floats(D, "rate steps") if recon == "hermite" else None
+    size = record_size(recon, M)
+    rest = len(body) - r.pos
+    if rest % size or rest // size < 2:
+        raise MotionDataError(
+            where, None, f"body of {rest} bytes is not >= 2 records of {size} bytes"
+        )
+    fields = [("gap", "u1"), ("pose", "<u2", (D,))]
+    if recon == "hermite":
+        fields.append(("rate", "<i2", (D,)))
+    rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
+    gaps = rec["gap"].astype(np.int64)
+    if gaps[0] != 0 or np.any(gaps[1:] == 0):
+        raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
+    return Stream(
+        reconstruction=recon,
+        latency=int(latency),
+        fps=float(fps),
+        skeleton_hash=skel,
+        names=tuple(names),
+        parents=parents,
+        lengths=lengths.astype(np.float64),
+        quantiser=Quantiser(M, origin, step, rate_step),
+        keyframes=np.cumsum(gaps),
+        pose_codes=np.array(rec["pose"]),
+        rate_codes=np.array(rec["rate"]) if recon == "hermite" else None,
+    )
+
+
+def read(path: str | os.PathLike) -> Stream:
+    """Read and parse a ``.sidq`` file; MotionDataError (naming the file) on any defect."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as e:
+        raise MotionDataError(str(path), None, f"cannot read file: {e.strerror}") from None
+    return from_bytes(data, str(path))
