@@ -121,5 +121,7 @@ def decode_file(
         )
     rec = reconstruct_stream(stream)
     motion = fit_motion(skeleton, rec.positions, rec.names)
-    write_amc(out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps")
+    write_amc(
+        out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
+    )
     return out

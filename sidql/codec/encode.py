@@ -30,7 +30,7 @@ from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart
 from sim.acclaim.reader import parse_asf
 from sim.errors import MotionDataError
-from sim.motion.clip import Clip
+from sim.motion.clip import Clip, write_atomic
 from sim.motion.ingest import load_motion
 
 CHOICES: tuple[str, ...] = ("auto",) + sidq.RECONSTRUCTIONS
@@ -88,7 +88,9 @@ def _encode_one(
     H = horizon(latency, recon) if latency else 0
     if H:
         G = min(G, H)
-    C = band_costs(values[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], G, recon)
+    C = band_costs(
+        values[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], G, recon
+    )
 
     def build(keys: np.ndarray) -> sidq.Stream:
         return sidq.Stream(
@@ -218,7 +220,12 @@ def encode_files(
     ``fps``; the stream records the skeleton's hash so the decoder can check the ASF it is given.
     """
     skel = skeleton_hash(parse_asf(asf))
-    clip = load_motion(asf, amc, fps=fps)
+    try:
+        clip = load_motion(asf, amc, fps=fps)
+    except MotionDataError:
+        raise
+    except ValueError as e:  # e.g. an output rate that does not divide the source rate
+        raise MotionDataError(str(amc), None, str(e)) from None
     enc = encode_clip(clip, skel_hash=skel, **kwargs)
-    sidq.write(enc.stream, Path(out))
+    write_atomic(Path(out), lambda f: f.write(enc.data))
     return enc

@@ -10,7 +10,10 @@ All numbers little-endian. Layout::
     8       4           fps, float32 (frames per second of the stream)
     12      8           skeleton hash: first 8 bytes of SHA-256 of the canonical skeleton text
                         (:func:`sidql.codec.skeleton.skeleton_hash`)
-    20      1           J, number of points (23); M = J - 1 bones
+    20      1           J, number of points; M = J - 1 bones. J = 0 stands for the CMU
+                        protocol's 23 points (:data:`sidql.keyframes.spherical.POINTS`, root,
+                        lhipjoint, lfemur, ... rwrist, with their CMU parents) and the next two
+                        fields are then absent
     21      J x (1+n)   point names: length byte n, then n ASCII bytes
     ..      J           parents, int8 (-1 for the root), each parent before its child
     ..      4 M         bone lengths [m], float32
@@ -47,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from sidql.codec.quantise import Quantiser
+from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
 from sim.motion.clip import write_atomic
 
@@ -98,17 +102,21 @@ def record_size(reconstruction: str, n_bones: int) -> int:
 def header_bytes(stream: Stream) -> bytes:
     """The header of ``stream`` (everything before the first record)."""
     J = len(stream.names)
+    standard = tuple(stream.names) == POINTS and np.array_equal(
+        stream.parents, protocol_parent_indices()
+    )
     out = bytearray()
     out += MAGIC
     out += struct.pack(
         "<BBHf", VERSION, RECONSTRUCTIONS.index(stream.reconstruction), stream.latency, stream.fps
     )
     out += bytes(stream.skeleton_hash)
-    out += struct.pack("<B", J)
-    for n in stream.names:
-        b = n.encode("ascii")
-        out += struct.pack("<B", len(b)) + b
-    out += np.asarray(stream.parents, dtype=np.int8).tobytes()
+    out += struct.pack("<B", 0 if standard else J)
+    if not standard:
+        for n in stream.names:
+            b = n.encode("ascii")
+            out += struct.pack("<B", len(b)) + b
+        out += np.asarray(stream.parents, dtype=np.int8).tobytes()
     out += np.asarray(stream.lengths, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_step, dtype="<f4").tobytes()
@@ -189,16 +197,20 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         raise MotionDataError(where, None, f"bad frame rate {fps}")
     skel = r.take(8, "skeleton hash")
     (J,) = r.take(1, "point count")
-    if J < 2:
+    if J == 1:
         raise MotionDataError(where, None, f"bad point count {J}")
-    names = []
-    for _ in range(J):
-        (n,) = r.take(1, "point name")
-        try:
-            names.append(r.take(n, "point name").decode("ascii"))
-        except UnicodeDecodeError:
-            raise MotionDataError(where, None, "point name is not ASCII") from None
-    parents = np.frombuffer(r.take(J, "parents"), dtype=np.int8).astype(np.int64)
+    if J == 0:
+        names, parents = list(POINTS), protocol_parent_indices()
+        J = len(POINTS)
+    else:
+        names = []
+        for _ in range(J):
+            (n,) = r.take(1, "point name")
+            try:
+                names.append(r.take(n, "point name").decode("ascii"))
+            except UnicodeDecodeError:
+                raise MotionDataError(where, None, "point name is not ASCII") from None
+        parents = np.frombuffer(r.take(J, "parents"), dtype=np.int8).astype(np.int64)
     if parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, J)):
         raise MotionDataError(where, None, "bad parent list (each parent must precede its child)")
     M = J - 1

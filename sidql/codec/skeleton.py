@@ -110,6 +110,97 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)
 
 
+def _rot_about(a: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotations by psi (T,) [rad] about the unit axis a (3,)."""
+    K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    c, s = np.cos(psi)[:, None, None], np.sin(psi)[:, None, None]
+    return c * np.eye(3) + s * K + (1.0 - c) * np.outer(a, a)
+
+
+class _Fit:
+    """The per-bone fit of :func:`fit_motion` (state: targets, frames, children)."""
+
+    def __init__(self, skeleton: Skeleton, u: dict, T: int):
+        self.u, self.T = u, T
+        self.C = bone_frames(skeleton)
+        self.children: dict[str, list] = {}
+        for b in skeleton.bones:
+            self.children.setdefault(b.parent, []).append(b)
+
+    @staticmethod
+    def full(b) -> bool:
+        return len(b.dofs) == 3 and len({d for d in b.dofs}) == 3
+
+    def local(self, b, Gp: np.ndarray, psi: np.ndarray | None = None, sweeps: int = 12):
+        """(angles [deg] (T, n) or None, M (T, 3, 3)) of bone b under parent rotation Gp."""
+        T = self.T
+        if not b.dofs:
+            return None, np.broadcast_to(np.eye(3), (T, 3, 3))
+        order = "".join(dof[1].upper() for dof in b.dofs)
+        if b.name not in self.u:
+            return np.zeros((T, len(order))), np.broadcast_to(np.eye(3), (T, 3, 3))
+        Cb = self.C[b.name]
+        a = Cb.T @ b.direction
+        t = np.einsum("ji,tkj,tk->ti", Cb, Gp, self.u[b.name])  # C^T G_parent^T u
+        if self.full(b):
+            M = _swing(a, t)
+            if psi is not None:
+                M = M @ _rot_about(a, psi)
+            return euler_angles(M, order), M
+        ang = _fit_dofs(a, t, order, sweeps)
+        M = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+        for m, ax in enumerate(order):
+            M = axis_rotation(ax, ang[:, m]) @ M
+        return np.degrees(ang), M
+
+    def global_rot(self, b, Gp, M):
+        Cb = self.C[b.name]
+        return Gp @ Cb @ M @ Cb.T
+
+    def limited_residual(self, b, Gp) -> np.ndarray:
+        """(T,) squared direction error of b and its limited-dof descendants (stopping at
+        three-dof bones, which absorb any parent rotation) under parent rotation Gp."""
+        if self.full(b):
+            return np.zeros(self.T)
+        _, M = self.local(b, Gp, sweeps=3)
+        G = self.global_rot(b, Gp, M)
+        res = np.zeros(self.T)
+        if b.name in self.u:
+            res += np.sum((G @ b.direction - self.u[b.name]) ** 2, axis=-1)
+        for c in self.children.get(b.name, []):
+            res += self.limited_residual(c, G)
+        return res
+
+    def twist(self, b, Gp) -> np.ndarray | None:
+        """(T,) twist [rad] of a three-dof bone that best serves its limited-dof children."""
+        kids = [c for c in self.children.get(b.name, []) if not self.full(c)]
+        if not kids or b.name not in self.u:
+            return None
+        best = np.zeros(self.T)
+        best_res = np.full(self.T, np.inf)
+        centre, width, steps = np.zeros(self.T), np.pi, 36
+        for _ in range(3):
+            for psi0 in np.linspace(-width, width, steps, endpoint=width < np.pi):
+                psi = centre + psi0
+                _, M = self.local(b, Gp, psi)
+                G = self.global_rot(b, Gp, M)
+                res = sum(self.limited_residual(c, G) for c in kids)
+                better = res < best_res
+                best = np.where(better, psi, best)
+                best_res = np.where(better, res, best_res)
+            centre, width, steps = best.copy(), 2.0 * width / steps, 9
+        return best
+
+    def fit(self, b, Gp, angles: dict) -> None:
+        psi = self.twist(b, Gp) if self.full(b) else None
+        ang, M = self.local(b, Gp, psi)
+        if ang is not None:
+            angles[b.name] = ang
+        G = self.global_rot(b, Gp, M)
+        for c in self.children.get(b.name, []):
+            self.fit(c, G, angles)
+
+
 def fit_motion(skeleton: Skeleton, positions: np.ndarray, names) -> Motion:
     """AMC angles of ``skeleton`` that put its bones along decoded points (module docstring).
 
@@ -138,43 +229,19 @@ def fit_motion(skeleton: Skeleton, positions: np.ndarray, names) -> Motion:
             raise MotionDataError(
                 skeleton.path or None, None, f"parent {bones[n].parent!r} of {n!r} not decoded"
             )
-    u = {
-        n: _unit(P[:, index[n]] - P[:, index[bones[n].parent]]) for n in names if n != "root"
-    }
-    C = bone_frames(skeleton)
-    kids = [b for b in skeleton.bones if b.parent == "root" and b.name in u]
-    fixed = [b for b in kids if not b.dofs]
-    use = fixed if len(fixed) >= 2 else kids
+    u = {n: _unit(P[:, index[n]] - P[:, index[bones[n].parent]]) for n in names if n != "root"}
+    fit = _Fit(skeleton, u, T)
+    kids = fit.children.get("root", [])
+    fixed = [b for b in kids if not b.dofs and b.name in u]
+    use = fixed if len(fixed) >= 2 else [b for b in kids if b.name in u]
     if len(use) < 2:
         raise MotionDataError(skeleton.path or None, None, "cannot orient the root")
     d = np.stack([b.direction for b in use])
     G_root = _kabsch(d, np.stack([u[b.name] for b in use], axis=1))
-    Co = C["root"]
+    Co = fit.C["root"]
     root_rot = euler_angles(Co.T @ G_root @ Co, skeleton.root_axis_order)
-    G = {"root": G_root}
-    angles = {}
-    for b in skeleton.bones:
-        Gp = G[b.parent]
-        Cb = C[b.name]
-        if not b.dofs:
-            G[b.name] = Gp @ Cb @ Cb.T
-            continue
-        order = "".join(dof[1].upper() for dof in b.dofs)
-        if b.name not in u:
-            angles[b.name] = np.zeros((T, len(b.dofs)))
-            G[b.name] = Gp.copy()
-            continue
-        a = Cb.T @ b.direction
-        t = np.einsum("ji,tjk,tk->ti", Cb, Gp, u[b.name])  # C^T G_parent^T u
-        if len(order) == 3 and len(set(order)) == 3:
-            Mb = _swing(a, t)
-            ang = euler_angles(Mb, order)
-        else:
-            ang = np.degrees(_fit_dofs(a, t, order))
-            Mb = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-            for m, ax in enumerate(order):
-                Mb = axis_rotation(ax, np.radians(ang[:, m])) @ Mb
-        angles[b.name] = ang
-        G[b.name] = Gp @ Cb @ Mb @ Cb.T
+    angles: dict = {}
+    for b in kids:
+        fit.fit(b, G_root, angles)
     root = np.concatenate([P[:, 0], root_rot], axis=1)
     return Motion(path="", root=root, angles=angles, first_frame=1)

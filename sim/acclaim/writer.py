@@ -51,7 +51,7 @@ def amc_text(skeleton: Skeleton, motion: Motion, comment: str = "") -> str:
     if comment:
         out.write(f"# {comment}\n")
     out.write(":FULLY-SPECIFIED\n:DEGREES\n")
-    for frame in zip(*lines):
+    for frame in zip(*lines, strict=True):
         out.write("\n".join(frame))
         out.write("\n")
     return out.getvalue()
