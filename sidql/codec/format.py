@@ -6,33 +6,47 @@ All numbers little-endian. Layout::
     0       4           magic b"SIDQ"
     4       1           version (1)
     5       1           reconstruction: 0 hermite, 1 linear, 2 catmull_rom
-    6       2           latency L [frames] the encoder decided with (0: whole trial, offline)
-    8       4           fps, float32 (frames per second of the stream)
-    12      8           skeleton hash: first 8 bytes of SHA-256 of the canonical skeleton text
+    6       1           coding: 0 fixed-size records (live streaming), 1 packed (LZMA, offline)
+    7       1           b, bits per pose channel (8..16; always 16 with coding 0)
+    8       2           latency L [frames] the encoder decided with (0: whole trial, offline)
+    10      4           fps, float32 (frames per second of the stream)
+    14      8           skeleton hash: first 8 bytes of SHA-256 of the canonical skeleton text
                         (:func:`sidql.codec.skeleton.skeleton_hash`)
-    20      1           J, number of points; M = J - 1 bones. J = 0 stands for the CMU
+    22      1           J, number of points; M = J - 1 bones. J = 0 stands for the CMU
                         protocol's 23 points (:data:`sidql.keyframes.spherical.POINTS`, root,
                         lhipjoint, lfemur, ... rwrist, with their CMU parents) and the next two
                         fields are then absent
-    21      J x (1+n)   point names: length byte n, then n ASCII bytes
+    23      J x (1+n)   point names: length byte n, then n ASCII bytes
     ..      J           parents, int8 (-1 for the root), each parent before its child
     ..      4 M         bone lengths [m], float32
     ..      12          root origin [m], 3 x float32 (CMU axes, y up)
     ..      12          root step [m], 3 x float32
     ..      4 D         (Hermite only) rate steps, D = 2 M + 3 float32 [rad/s or m/s]
-    ..      ...         keyframe records, back to back, until the trailer
+    ..      ...         the keyframes (below)
     end-4   4           CRC-32 (zlib / IEEE 802.3) of every byte before it
 
-A keyframe record (D = 2 M + 3 channels: theta[M], phi[M], root[3], see
-:mod:`sidql.codec.quantise` for the code of each)::
+D = 2 M + 3 channels per keyframe: theta[M], phi[M], root[3]; :mod:`sidql.codec.quantise` gives
+the code of each (b bits, unsigned) and of the rates (int16).
+
+**Coding 0**, fixed-size records back to back until the trailer (a live sender emits each as it
+decides it; a reader checks that the body is a whole number of records)::
 
     1 byte     gap: frames since the previous keyframe (0 for the first record, which is frame 0;
                1..255 afterwards)
     2 D bytes  pose codes, uint16
     2 D bytes  (Hermite only) rate codes, int16
 
-The trial has ``1 + sum(gaps)`` frames; its last frame is the last keyframe. Records have a fixed
-size, so a reader checks that the body is a whole number of records.
+**Coding 1**, ``W`` (uint32, the number of keyframes) then one ``.lzma`` stream ("LZMA alone"
+format, as written by ``xz --format=lzma``; 13-byte header, then LZMA1 data) that inflates to
+exactly ``W (1 + 2 D)`` bytes (``W (1 + 4 D)`` for Hermite), channel by channel::
+
+    W bytes        gaps, uint8 (as in coding 0)
+    D x 2W bytes   for each channel d: the W pose codes' differences along the keyframes,
+                   uint16, modulo 2^16 (the first against 0): code_w = sum of the first w + 1
+                   values modulo 2^16
+    D x 2W bytes   (Hermite only) for each channel: the W rate codes, int16
+
+The trial has ``1 + sum(gaps)`` frames; its last frame is the last keyframe.
 
 Any deviation (bad magic, unknown version or reconstruction, short read, a body that is not a
 whole number of records, a bad gap, a checksum mismatch) raises :class:`MotionDataError` with one
@@ -41,6 +55,7 @@ line naming the file and the problem.
 
 from __future__ import annotations
 
+import lzma
 import os
 import struct
 import zlib
@@ -49,7 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sidql.codec.quantise import Quantiser
+from sidql.codec.quantise import BITS, Quantiser
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
 from sim.motion.clip import write_atomic
@@ -74,6 +89,7 @@ class Stream:
         quantiser: the quantisation parameters.
         keyframes: (W,) frame indices, 0 first, strictly increasing.
         pose_codes: (W, D) uint16; rate_codes: (W, D) int16 or None.
+        coding: 0 fixed records, 1 packed (see the module docstring).
     """
 
     reconstruction: str
@@ -87,6 +103,7 @@ class Stream:
     keyframes: np.ndarray
     pose_codes: np.ndarray
     rate_codes: np.ndarray | None
+    coding: int = 0
 
     @property
     def n_frames(self) -> int:
@@ -108,7 +125,13 @@ def header_bytes(stream: Stream) -> bytes:
     out = bytearray()
     out += MAGIC
     out += struct.pack(
-        "<BBHf", VERSION, RECONSTRUCTIONS.index(stream.reconstruction), stream.latency, stream.fps
+        "<BBBBHf",
+        VERSION,
+        RECONSTRUCTIONS.index(stream.reconstruction),
+        stream.coding,
+        stream.quantiser.bits,
+        stream.latency,
+        stream.fps,
     )
     out += bytes(stream.skeleton_hash)
     out += struct.pack("<B", 0 if standard else J)
@@ -150,8 +173,37 @@ def to_bytes(stream: Stream) -> bytes:
         raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
     if gaps.max() > MAX_GAP:
         raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
-    body = header_bytes(stream) + record_bytes(stream)
+    if stream.coding == 1:
+        body = header_bytes(stream) + packed_bytes(stream)
+    elif stream.quantiser.bits != 16:
+        raise ValueError("coding 0 carries 16-bit codes only")
+    else:
+        body = header_bytes(stream) + record_bytes(stream)
     return body + struct.pack("<I", zlib.crc32(body))
+
+
+_LZMA_FILTERS = [
+    {"id": lzma.FILTER_LZMA1, "preset": 6, "dict_size": 1 << 20, "lc": 0, "lp": 1, "pb": 1}
+]
+
+
+def _planar(stream: Stream) -> bytes:
+    k = np.asarray(stream.keyframes, dtype=np.int64)
+    gaps = np.diff(k, prepend=k[:1]).astype(np.uint8)
+    codes = stream.pose_codes.astype(np.int64)
+    delta = np.mod(np.diff(codes, axis=0, prepend=0), 65536).astype("<u2")
+    parts = [gaps.tobytes(), np.ascontiguousarray(delta.T).tobytes()]
+    if stream.reconstruction == "hermite":
+        parts.append(np.ascontiguousarray(stream.rate_codes.astype("<i2").T).tobytes())
+    return b"".join(parts)
+
+
+def packed_bytes(stream: Stream) -> bytes:
+    """The coding-1 body: keyframe count, then the LZMA-packed planar keyframes."""
+    W = len(stream.keyframes)
+    return struct.pack("<I", W) + lzma.compress(
+        _planar(stream), format=lzma.FORMAT_ALONE, filters=_LZMA_FILTERS
+    )
 
 
 def write(stream: Stream, path: str | os.PathLike) -> Path:
@@ -189,9 +241,11 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         raise MotionDataError(where, None, "checksum mismatch: the stream is truncated or corrupt")
     r = _Reader(body, where)
     r.take(5, "header")
-    kind, latency, fps = struct.unpack("<BHf", r.take(7, "header"))
+    kind, coding, bits, latency, fps = struct.unpack("<BBBHf", r.take(9, "header"))
     if kind >= len(RECONSTRUCTIONS):
         raise MotionDataError(where, None, f"unknown reconstruction code {kind}")
+    if coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
+        raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
     recon = RECONSTRUCTIONS[kind]
     if not (np.isfinite(fps) and fps > 0):
         raise MotionDataError(where, None, f"bad frame rate {fps}")
@@ -227,16 +281,42 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     step = floats(3, "root step")
     rate_step = floats(D, "rate steps") if recon == "hermite" else None
     size = record_size(recon, M)
-    rest = len(body) - r.pos
-    if rest % size or rest // size < 2:
-        raise MotionDataError(
-            where, None, f"body of {rest} bytes is not >= 2 records of {size} bytes"
-        )
-    fields = [("gap", "u1"), ("pose", "<u2", (D,))]
-    if recon == "hermite":
-        fields.append(("rate", "<i2", (D,)))
-    rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
-    gaps = rec["gap"].astype(np.int64)
+    if coding == 0:
+        rest = len(body) - r.pos
+        if rest % size or rest // size < 2:
+            raise MotionDataError(
+                where, None, f"body of {rest} bytes is not >= 2 records of {size} bytes"
+            )
+        fields = [("gap", "u1"), ("pose", "<u2", (D,))]
+        if recon == "hermite":
+            fields.append(("rate", "<i2", (D,)))
+        rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
+        gaps = rec["gap"].astype(np.int64)
+        pose = np.array(rec["pose"])
+        rate = np.array(rec["rate"]) if recon == "hermite" else None
+    else:
+        (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
+        if W < 2:
+            raise MotionDataError(where, None, f"bad keyframe count {W}")
+        want = W * size
+        dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE)
+        try:
+            raw = dec.decompress(body[r.pos :], max_length=want)
+        except lzma.LZMAError as e:
+            raise MotionDataError(where, None, f"corrupt packed keyframes: {e}") from None
+        if len(raw) != want:
+            raise MotionDataError(
+                where, None, f"packed keyframes inflate to {len(raw)} bytes, not {want}"
+            )
+        gaps = np.frombuffer(raw, dtype=np.uint8, count=W).astype(np.int64)
+        delta = np.frombuffer(raw, dtype="<u2", count=W * D, offset=W).reshape(D, W).T
+        pose = np.mod(np.cumsum(delta.astype(np.int64), axis=0), 65536).astype(np.uint16)
+        rate = None
+        if recon == "hermite":
+            rate = np.frombuffer(raw, dtype="<i2", count=W * D, offset=W + 2 * W * D)
+            rate = rate.reshape(D, W).T.copy()
+        if np.any(pose[:, :M] >= (1 << bits)) or np.any(pose[:, 2 * M :] >= (1 << bits)):
+            raise MotionDataError(where, None, f"pose code beyond {bits} bits")
     if gaps[0] != 0 or np.any(gaps[1:] == 0):
         raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
     return Stream(
@@ -247,10 +327,11 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         names=tuple(names),
         parents=parents,
         lengths=lengths.astype(np.float64),
-        quantiser=Quantiser(M, origin, step, rate_step),
+        quantiser=Quantiser(M, origin, step, rate_step, bits),
         keyframes=np.cumsum(gaps),
-        pose_codes=np.array(rec["pose"]),
-        rate_codes=np.array(rec["rate"]) if recon == "hermite" else None,
+        pose_codes=pose,
+        rate_codes=rate,
+        coding=coding,
     )
 
 

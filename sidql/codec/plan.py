@@ -121,11 +121,23 @@ def _dp(C, per_key):
     return cnt[N - 1], dist[N - 1], prev
 
 
-def _backtrack(prev: np.ndarray, last: int) -> np.ndarray:
-    out = [last]
-    while prev[out[-1]] >= 0:
-        out.append(int(prev[out[-1]]))
-    return np.array(out[::-1], dtype=np.int64)
+@numba.njit(cache=True)
+def _backtrack(prev, last):
+    n = 1
+    j = last
+    while prev[j] >= 0:
+        j = prev[j]
+        n += 1
+    out = np.empty(n, dtype=np.int64)
+    j = last
+    for w in range(n - 1, -1, -1):
+        out[w] = j
+        j = prev[j]
+    return out
+
+
+def _count(C: np.ndarray, lam: float) -> int:
+    return int(_dp(C, float(lam))[0])
 
 
 def band_costs(
@@ -189,19 +201,16 @@ def plan_for_budget(C: np.ndarray, max_keys: int, where: str = "") -> Plan:
             f"rate too low: the maximum gap of {G1 - 1} frames needs at least {least} keyframes, "
             f"the budget allows {max_keys}",
         )
-    p = plan(C, _LAM_LO)
-    if len(p.keyframes) <= max_keys:
-        return p
+    if _count(C, _LAM_LO) <= max_keys:
+        return plan(C, _LAM_LO)
     lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
-    best = plan(C, _LAM_HI)
     for _ in range(_STEPS):
         mid = 0.5 * (lo + hi)
-        p = plan(C, float(np.exp(mid)))
-        if len(p.keyframes) <= max_keys:
-            hi, best = mid, p
+        if _count(C, float(np.exp(mid))) <= max_keys:
+            hi = mid
         else:
             lo = mid
-    return best
+    return plan(C, float(np.exp(hi)))
 
 
 def plan_for_quality(
