@@ -283,8 +283,8 @@ def encode_series(
         raise ValueError(f"max_q must be >= 0; got {max_q}")
     if reconstruction not in CHOICES:
         raise ValueError(f"unknown reconstruction {reconstruction!r}; known: {', '.join(CHOICES)}")
-    if latency < 0 or max_gap < 1:
-        raise ValueError("latency must be >= 0 and max_gap >= 1")
+    if not (0 <= latency <= 65535 and max_gap >= 1):
+        raise ValueError("latency must be in 0..65535 and max_gap >= 1")
     if series.n_frames < 2:
         raise MotionDataError(where or None, None, "a trial needs at least 2 frames")
     fps = 1.0 / series.dt
@@ -315,7 +315,9 @@ def _best(results: dict, rate, max_q) -> str:
     """Key of the least Q (rate target) or of the fewest bytes meeting ``max_q``."""
     if rate is not None:
         return min(results, key=lambda r: (results[r].q, len(results[r].data)))
-    ok = [r for r in results if results[r].q <= max_q] or list(results)
+    ok = [r for r in results if results[r].q <= max_q]
+    if not ok:  # nothing meets the target (quantisation alone exceeds it): the least error
+        return min(results, key=lambda r: (results[r].q, len(results[r].data)))
     return min(ok, key=lambda r: (len(results[r].data), results[r].q))
 
 

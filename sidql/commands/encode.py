@@ -60,8 +60,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    if args.latency < 0 or not 1 <= args.max_gap <= 255:
-        args.parser.error("--latency must be >= 0 and --max-gap in 1..255")
+    if not 0 <= args.latency <= 65535 or not 1 <= args.max_gap <= 255:
+        args.parser.error("--latency must be in 0..65535 and --max-gap in 1..255")
     enc = encode_files(
         args.asf,
         args.amc,
