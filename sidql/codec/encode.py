@@ -1,7 +1,7 @@
 """Encoding: a trial -> a :class:`~sidql.codec.format.Stream` at a byte rate or an error target.
 
-Steps: the chart of the protocol points (:func:`sidql.keyframes.spherical.chart`); a 16-bit
-quantiser fitted to the trial (:mod:`sidql.codec.quantise`); the banded segment costs of the
+Steps: the chart of the protocol points (:func:`sidql.keyframes.spherical.chart`); quantisers
+fitted to the trial (:mod:`sidql.codec.quantise`); the banded segment costs of the 16-bit
 quantised keyframe values; keyframes by the whole-trial programme (:mod:`sidql.codec.plan`) or,
 with a latency, by the fixed-lag one (:mod:`sidql.codec.stream`), the multiplier found by
 bisection; the error of every candidate measured by running the decoder itself. ``auto`` tries

@@ -27,9 +27,11 @@ def register(sub) -> None:
         help="encode one CMU trial (ASF + AMC) into a .sidq keyframe stream",
         description="Chart the trial's 22 bones and root at --fps, choose keyframes over the whole "
         "trial by dynamic programming (max gap --max-gap, distortion + lambda x bytes, lambda by "
-        "bisection to meet --rate or --max-q), quantise them to 16 bits and write the .sidq "
-        "container (format: README, section 'Motion codec'). With --latency L the keyframes are "
-        "decided with at most L frames of look-ahead (fixed-lag programme).",
+        "bisection to meet --rate or --max-q), quantise them (offline: 9 to 16 bits per channel, "
+        "differenced and LZMA-packed; with --latency: fixed 16-bit records a live sender emits one "
+        "by one) and write the .sidq container (format: README, section 'Motion codec'). With "
+        "--latency L the keyframes are decided with at most L frames of look-ahead (fixed-lag "
+        "programme), so a decoder outputs every frame within L frames.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
