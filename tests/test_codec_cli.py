@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sidql.codec import format as sidq
 from sidql.codec.decode import decode_to_reconstruction
 from sidql.codec.skeleton import fit_motion, skeleton_hash
 from sidql.commands.main import main
@@ -109,3 +110,15 @@ def test_decode_bad_streams_exit_2_with_one_line(cmu_dir, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "does not match" in err
     assert main(["decode", str(tmp_path / "missing.sidq"), "--out", str(tmp_path / "o.npz")]) == 2
+
+
+def test_live_encoding_from_the_command_line(cmu_dir, tmp_path):
+    """--latency gives a fixed-record (coding 0) stream with gaps within the look-ahead."""
+    asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
+    out = tmp_path / "live.sidq"
+    argv = ["encode", str(asf), str(amc), "--out", str(out), "--rate", "3000", "--latency", "12"]
+    assert main([*argv, "--reconstruction", "linear"]) == 0
+    s = sidq.read(out)
+    assert s.coding == 0 and s.latency == 12 and np.diff(s.keyframes).max() <= 12
+    assert main(["decode", str(out), "--out", str(tmp_path / "live.npz")]) == 0
+    assert load_npz(tmp_path / "live.npz").n_frames == s.n_frames
