@@ -15,7 +15,7 @@ from keyframe_synth import smooth_clip
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decoded_chart, reconstruct_stream
-from sidql.codec.encode import encode_series
+from sidql.codec.encode import _measure, encode_series
 from sidql.codec.plan import band_costs, plan
 from sidql.codec.quantise import PHI_STEP, THETA_STEP, fit_quantiser
 from sidql.codec.stream import frame_delays, horizon, plan_stream
@@ -124,8 +124,6 @@ def test_programme_matches_brute_force():
 def test_programme_distortion_is_the_decoded_error(series, variant):
     """For the separable variants the table's distortion is what the decoder's output measures
     (up to the quantisation error at the keyframes themselves)."""
-    from sidql.codec import encode as enc_mod
-
     enc = encode_series(series, rate=2500.0, reconstruction=variant)
     s = enc.stream
     v, r = _values(series), _rates(series)
@@ -139,7 +137,7 @@ def test_programme_distortion_is_the_decoded_error(series, variant):
     dist = sum(C[a, b - a] for a, b in itertools.pairwise(k))
     at_keys = np.abs(wrap_angle(Xq[k, : 2 * M] - v[k, : 2 * M])).sum()  # quantisation at keyframes
     want = (dist + at_keys) / (series.n_frames * M)
-    assert enc_mod._measure(series, s) == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert _measure(series, s) == pytest.approx(want, rel=1e-9, abs=1e-12)
 
 
 def test_rate_control_meets_the_budget_and_error_falls_with_rate(series):
@@ -221,11 +219,9 @@ def test_streaming_delay_is_bounded_by_the_latency(series, variant, latency):
     s = enc.stream
     assert s.latency == latency
     # replay the fixed-lag plan to get the decision times and check every frame's wait
-    from sidql.codec.quantise import fit_quantiser as fq
-
     v, r = _values(series), _rates(series)
     M = series.n_bones
-    q = fq(v, r if variant == "hermite" else None, M)
+    q = fit_quantiser(v, r if variant == "hermite" else None, M)
     Xq = q.grid_pose(v)
     Rq = q.grid_rates(r) * series.dt if variant == "hermite" else None
     H = horizon(latency, variant)
