@@ -23,6 +23,8 @@ COMMAND_MODULES = (
     "sidql.commands.eval",
     "sidql.commands.extract",
     "sidql.commands.train",
+    "sidql.commands.encode",
+    "sidql.commands.decode",
 )
 
 

@@ -1,0 +1,1 @@
+"""The motion codec: whole trials -> keyframe bytes (``.sidq``) -> decoded motion."""

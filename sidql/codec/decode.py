@@ -1,0 +1,127 @@
+"""Decoding: a :class:`~sidql.codec.format.Stream` -> every frame of the trial at the stream rate.
+
+Deterministic: the same bytes give the same arrays (pure numpy, no randomness, fixed order).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from sidql.codec import format as sidq
+from sidql.codec.skeleton import fit_motion, skeleton_hash
+from sidql.keyframes.reconstruct import Reconstruction, interpolate
+from sidql.keyframes.spherical import POINTS, clip_from_chart, positions_from_chart
+from sim.acclaim.reader import parse_asf
+from sim.acclaim.writer import write_amc
+from sim.errors import MotionDataError
+from sim.motion.clip import Clip, save_npz
+
+
+def decoded_chart(stream: sidq.Stream) -> dict[str, np.ndarray]:
+    """The chart the decoder rebuilds: every frame of the trial.
+
+    Returns:
+        ``{"values": (N, D), "rates": (N, D)}`` with D = 2 M + 3 channels
+        [theta | phi | root position (CMU axes)] in [rad, rad, m] and their rates per second.
+    """
+    k = np.asarray(stream.keyframes, dtype=np.int64)
+    N = int(k[-1]) + 1
+    q = stream.quantiser
+    D = q.n_channels
+    values = np.zeros((N, D))
+    values[k] = q.decode_pose(stream.pose_codes)
+    rates = None
+    if stream.reconstruction == "hermite":
+        rates = np.zeros((N, D))
+        rates[k] = q.decode_rates(stream.rate_codes)
+    x, xd = interpolate(values, rates, k, 1.0 / stream.fps, stream.reconstruction)
+    return {"values": x, "rates": xd}
+
+
+def _split(stream: sidq.Stream, chart: dict):
+    M = stream.quantiser.n_bones
+    x, xd = chart["values"], chart["rates"]
+    return (
+        x[:, :M],
+        x[:, M : 2 * M],
+        xd[:, :M],
+        xd[:, M : 2 * M],
+        x[:, 2 * M :],
+        xd[:, 2 * M :],
+    )
+
+
+def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
+    """The decoded points: positions and velocities (N, J, 3), world axes z up [m, m/s]."""
+    theta, phi, dtheta, dphi, root, root_vel = _split(stream, decoded_chart(stream))
+    P, V = positions_from_chart(
+        root, root_vel, theta, phi, dtheta, dphi, stream.lengths, stream.parents
+    )
+    return Reconstruction(
+        positions=P,
+        velocities=V,
+        names=tuple(stream.names),
+        parents=np.asarray(stream.parents).copy(),
+        theta=theta,
+        phi=phi,
+        keyframes=np.asarray(stream.keyframes).copy(),
+        variant=stream.reconstruction,
+        dt=1.0 / stream.fps,
+    )
+
+
+def decode_to_reconstruction(path: str | os.PathLike) -> Reconstruction:
+    """Read a ``.sidq`` file and rebuild every frame (the hook for ``sidql report``).
+
+    Frame ``n`` of the result is frame ``n`` of ``load_motion(ASF, AMC, fps=stream fps)`` of the
+    encoded trial: positions (N, 23, 3) [m] and velocities [m/s], world axes (z up), in
+    :data:`~sidql.keyframes.spherical.POINTS` order, like any reconstruction of the project.
+
+    Raises:
+        MotionDataError: the file is missing, truncated or corrupt (one line).
+    """
+    return reconstruct_stream(sidq.read(path))
+
+
+def stream_to_clip(stream: sidq.Stream, source: str = "") -> Clip:
+    """The decoded trial as a 23-point :class:`Clip` (the ``sidql ingest`` format)."""
+    if tuple(stream.names) != POINTS:
+        raise MotionDataError(source or None, None, "stream points are not the CMU protocol's")
+    theta, phi, dtheta, dphi, root, root_vel = _split(stream, decoded_chart(stream))
+    return clip_from_chart(
+        theta, phi, dtheta, dphi, root, root_vel, stream.lengths, stream.fps, source=source
+    )
+
+
+def decode_file(
+    path: str | os.PathLike, out: str | os.PathLike, asf: str | os.PathLike | None = None
+) -> Path:
+    """Decode ``path`` to ``out``: ``.npz`` (ingest format) or ``.amc`` (needs the source ``asf``,
+    whose skeleton hash must match the stream's). Written atomically.
+
+    Raises:
+        MotionDataError: bad stream, bad or mismatched skeleton, unknown output suffix.
+    """
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in (".npz", ".amc"):
+        raise MotionDataError(str(out), None, "output must end in .npz or .amc")
+    stream = sidq.read(path)
+    if suffix == ".npz":
+        return save_npz(stream_to_clip(stream, str(path)), out)
+    if asf is None:
+        raise MotionDataError(str(out), None, "an .amc output needs the source skeleton (--asf)")
+    skeleton = parse_asf(asf)
+    if skeleton_hash(skeleton) != stream.skeleton_hash:
+        raise MotionDataError(
+            str(asf), None, f"skeleton does not match the stream's (hash of {path})"
+        )
+    rec = reconstruct_stream(stream)
+    motion = fit_motion(skeleton, rec.positions, rec.names)
+    write_amc(
+        out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
+    )
+    return out

@@ -1,0 +1,344 @@
+"""The ``.sidq`` container, version 1: bytes <-> :class:`Stream`.
+
+All numbers little-endian. Layout::
+
+    offset  size        field
+    0       4           magic b"SIDQ"
+    4       1           version (1)
+    5       1           reconstruction: 0 hermite, 1 linear, 2 catmull_rom
+    6       1           coding: 0 fixed-size records (live streaming), 1 packed (LZMA, offline)
+    7       1           b, bits per pose channel (8..16; always 16 with coding 0)
+    8       2           latency L [frames] the encoder decided with (0: whole trial, offline)
+    10      4           fps, float32 (frames per second of the stream)
+    14      8           skeleton hash: first 8 bytes of SHA-256 of the canonical skeleton text
+                        (:func:`sidql.codec.skeleton.skeleton_hash`)
+    22      1           J, number of points; M = J - 1 bones. J = 0 stands for the CMU
+                        protocol's 23 points (:data:`sidql.keyframes.spherical.POINTS`, root,
+                        lhipjoint, lfemur, ... rwrist, with their CMU parents) and the next two
+                        fields are then absent
+    23      J x (1+n)   point names: length byte n, then n ASCII bytes
+    ..      J           parents, int8 (-1 for the root), each parent before its child
+    ..      4 M         bone lengths [m], float32
+    ..      12          root origin [m], 3 x float32 (CMU axes, y up)
+    ..      12          root step [m], 3 x float32
+    ..      4 D         (Hermite only) rate steps, D = 2 M + 3 float32 [rad/s or m/s]
+    ..      ...         the keyframes (below)
+    end-4   4           CRC-32 (zlib / IEEE 802.3) of every byte before it
+
+D = 2 M + 3 channels per keyframe: theta[M], phi[M], root[3]; :mod:`sidql.codec.quantise` gives
+the code of each (b bits, unsigned) and of the rates (int16).
+
+**Coding 0**, fixed-size records back to back until the trailer (a live sender emits each as it
+decides it; a reader checks that the body is a whole number of records)::
+
+    1 byte     gap: frames since the previous keyframe (0 for the first record, which is frame 0;
+               1..255 afterwards)
+    2 D bytes  pose codes, uint16
+    2 D bytes  (Hermite only) rate codes, int16
+
+**Coding 1**, ``W`` (uint32, the number of keyframes) then one ``.lzma`` stream ("LZMA alone"
+format, as written by ``xz --format=lzma``; 13-byte header, then LZMA1 data) that inflates to
+exactly ``W (1 + 2 D)`` bytes (``W (1 + 4 D)`` for Hermite), channel by channel::
+
+    W bytes        gaps, uint8 (as in coding 0)
+    D x 2W bytes   for each channel d: the W pose codes' differences along the keyframes,
+                   uint16, modulo 2^16 (the first against 0): code_w = sum of the first w + 1
+                   values modulo 2^16
+    D x 2W bytes   (Hermite only) for each channel: the W rate codes, int16
+
+The trial has ``1 + sum(gaps)`` frames; its last frame is the last keyframe.
+
+Any deviation (bad magic, unknown version or reconstruction, short read, a body that is not a
+whole number of records, a bad gap, a checksum mismatch) raises :class:`MotionDataError` with one
+line naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import lzma
+import os
+import struct
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sidql.codec.quantise import BITS, Quantiser
+from sidql.keyframes.spherical import POINTS, protocol_parent_indices
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+
+MAGIC = b"SIDQ"
+VERSION = 1
+RECONSTRUCTIONS: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
+MAX_GAP = 255
+
+
+@dataclass(frozen=True)
+class Stream:
+    """A decoded container: everything needed to rebuild the motion.
+
+    Attributes:
+        reconstruction: one of :data:`RECONSTRUCTIONS`.
+        latency: look-ahead [frames] the encoder used (0: offline, whole trial).
+        fps: stream frame rate [1/s].
+        skeleton_hash: 8 bytes identifying the source skeleton.
+        names: (J,) point names; parents: (J,) int64 parent indices (-1 root).
+        lengths: (M,) bone lengths [m].
+        quantiser: the quantisation parameters.
+        keyframes: (W,) frame indices, 0 first, strictly increasing.
+        pose_codes: (W, D) uint16; rate_codes: (W, D) int16 or None.
+        coding: 0 fixed records, 1 packed (see the module docstring).
+    """
+
+    reconstruction: str
+    latency: int
+    fps: float
+    skeleton_hash: bytes
+    names: tuple[str, ...]
+    parents: np.ndarray
+    lengths: np.ndarray
+    quantiser: Quantiser
+    keyframes: np.ndarray
+    pose_codes: np.ndarray
+    rate_codes: np.ndarray | None
+    coding: int = 0
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.keyframes[-1]) + 1
+
+
+def record_size(reconstruction: str, n_bones: int) -> int:
+    """Bytes of one keyframe record."""
+    D = 2 * n_bones + 3
+    return 1 + 2 * D * (2 if reconstruction == "hermite" else 1)
+
+
+def header_bytes(stream: Stream) -> bytes:
+    """The header of ``stream`` (everything before the first record)."""
+    J = len(stream.names)
+    standard = tuple(stream.names) == POINTS and np.array_equal(
+        stream.parents, protocol_parent_indices()
+    )
+    out = bytearray()
+    out += MAGIC
+    out += struct.pack(
+        "<BBBBHf",
+        VERSION,
+        RECONSTRUCTIONS.index(stream.reconstruction),
+        stream.coding,
+        stream.quantiser.bits,
+        stream.latency,
+        stream.fps,
+    )
+    out += bytes(stream.skeleton_hash)
+    out += struct.pack("<B", 0 if standard else J)
+    if not standard:
+        for n in stream.names:
+            b = n.encode("ascii")
+            out += struct.pack("<B", len(b)) + b
+        out += np.asarray(stream.parents, dtype=np.int8).tobytes()
+    out += np.asarray(stream.lengths, dtype="<f4").tobytes()
+    out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
+    out += np.asarray(stream.quantiser.root_step, dtype="<f4").tobytes()
+    if stream.reconstruction == "hermite":
+        out += np.asarray(stream.quantiser.rate_step, dtype="<f4").tobytes()
+    return bytes(out)
+
+
+def record_bytes(stream: Stream, start: int = 0, stop: int | None = None) -> bytes:
+    """Records ``start..stop`` of ``stream`` as bytes (a live sender emits them one by one)."""
+    k = np.asarray(stream.keyframes, dtype=np.int64)
+    stop = len(k) if stop is None else stop
+    gaps = np.diff(k, prepend=k[:1])[start:stop]
+    W = len(gaps)
+    D = stream.pose_codes.shape[1]
+    fields = [("gap", "u1"), ("pose", "<u2", (D,))]
+    if stream.reconstruction == "hermite":
+        fields.append(("rate", "<i2", (D,)))
+    rec = np.zeros(W, dtype=np.dtype(fields))
+    rec["gap"] = gaps
+    rec["pose"] = stream.pose_codes[start:stop]
+    if stream.reconstruction == "hermite":
+        rec["rate"] = stream.rate_codes[start:stop]
+    return rec.tobytes()
+
+
+def to_bytes(stream: Stream) -> bytes:
+    """The whole container: header, records, CRC-32."""
+    gaps = np.diff(stream.keyframes)
+    if stream.keyframes[0] != 0 or len(stream.keyframes) < 2 or gaps.min() < 1:
+        raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
+    if gaps.max() > MAX_GAP:
+        raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
+    if stream.coding == 1:
+        body = header_bytes(stream) + packed_bytes(stream)
+    elif stream.quantiser.bits != 16:
+        raise ValueError("coding 0 carries 16-bit codes only")
+    else:
+        body = header_bytes(stream) + record_bytes(stream)
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+_LZMA_FILTERS = [
+    {"id": lzma.FILTER_LZMA1, "preset": 6, "dict_size": 1 << 20, "lc": 0, "lp": 1, "pb": 1}
+]
+
+
+def _planar(stream: Stream) -> bytes:
+    k = np.asarray(stream.keyframes, dtype=np.int64)
+    gaps = np.diff(k, prepend=k[:1]).astype(np.uint8)
+    codes = stream.pose_codes.astype(np.int64)
+    delta = np.mod(np.diff(codes, axis=0, prepend=0), 65536).astype("<u2")
+    parts = [gaps.tobytes(), np.ascontiguousarray(delta.T).tobytes()]
+    if stream.reconstruction == "hermite":
+        parts.append(np.ascontiguousarray(stream.rate_codes.astype("<i2").T).tobytes())
+    return b"".join(parts)
+
+
+def packed_bytes(stream: Stream) -> bytes:
+    """The coding-1 body: keyframe count, then the LZMA-packed planar keyframes."""
+    W = len(stream.keyframes)
+    return struct.pack("<I", W) + lzma.compress(
+        _planar(stream), format=lzma.FORMAT_ALONE, filters=_LZMA_FILTERS
+    )
+
+
+def write(stream: Stream, path: str | os.PathLike) -> Path:
+    """Write ``stream`` to ``path`` atomically; returns the path."""
+    path = Path(path)
+    data = to_bytes(stream)
+    write_atomic(path, lambda f: f.write(data))
+    return path
+
+
+class _Reader:
+    def __init__(self, data: bytes, where: str):
+        self.data, self.pos, self.where = data, 0, where
+
+    def take(self, n: int, what: str) -> bytes:
+        if self.pos + n > len(self.data):
+            raise MotionDataError(self.where, None, f"truncated stream: {what} missing")
+        out = self.data[self.pos : self.pos + n]
+        self.pos += n
+        return out
+
+
+def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
+    """Parse a container (see the module docstring); MotionDataError on any defect."""
+    data = bytes(data)
+    if len(data) < 4 or data[:4] != MAGIC:
+        raise MotionDataError(where, None, "not a .sidq stream (bad magic)")
+    if len(data) < 8:
+        raise MotionDataError(where, None, "truncated stream: header missing")
+    body, (crc,) = data[:-4], struct.unpack("<I", data[-4:])
+    version = data[4]
+    if version != VERSION:
+        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1)")
+    if zlib.crc32(body) != crc:
+        raise MotionDataError(where, None, "checksum mismatch: the stream is truncated or corrupt")
+    r = _Reader(body, where)
+    r.take(5, "header")
+    kind, coding, bits, latency, fps = struct.unpack("<BBBHf", r.take(9, "header"))
+    if kind >= len(RECONSTRUCTIONS):
+        raise MotionDataError(where, None, f"unknown reconstruction code {kind}")
+    if coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
+        raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
+    recon = RECONSTRUCTIONS[kind]
+    if not (np.isfinite(fps) and fps > 0):
+        raise MotionDataError(where, None, f"bad frame rate {fps}")
+    skel = r.take(8, "skeleton hash")
+    (J,) = r.take(1, "point count")
+    if J == 1:
+        raise MotionDataError(where, None, f"bad point count {J}")
+    if J == 0:
+        names, parents = list(POINTS), protocol_parent_indices()
+        J = len(POINTS)
+    else:
+        names = []
+        for _ in range(J):
+            (n,) = r.take(1, "point name")
+            try:
+                names.append(r.take(n, "point name").decode("ascii"))
+            except UnicodeDecodeError:
+                raise MotionDataError(where, None, "point name is not ASCII") from None
+        parents = np.frombuffer(r.take(J, "parents"), dtype=np.int8).astype(np.int64)
+    if parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, J)):
+        raise MotionDataError(where, None, "bad parent list (each parent must precede its child)")
+    M = J - 1
+    D = 2 * M + 3
+
+    def floats(n, what):
+        v = np.frombuffer(r.take(4 * n, what), dtype="<f4").astype(np.float32)
+        if not np.isfinite(v).all():
+            raise MotionDataError(where, None, f"non-finite {what}")
+        return v
+
+    lengths = floats(M, "bone lengths")
+    origin = floats(3, "root origin")
+    step = floats(3, "root step")
+    rate_step = floats(D, "rate steps") if recon == "hermite" else None
+    size = record_size(recon, M)
+    if coding == 0:
+        rest = len(body) - r.pos
+        if rest % size or rest // size < 2:
+            raise MotionDataError(
+                where, None, f"body of {rest} bytes is not >= 2 records of {size} bytes"
+            )
+        fields = [("gap", "u1"), ("pose", "<u2", (D,))]
+        if recon == "hermite":
+            fields.append(("rate", "<i2", (D,)))
+        rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
+        gaps = rec["gap"].astype(np.int64)
+        pose = np.array(rec["pose"])
+        rate = np.array(rec["rate"]) if recon == "hermite" else None
+    else:
+        (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
+        if W < 2:
+            raise MotionDataError(where, None, f"bad keyframe count {W}")
+        want = W * size
+        dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE)
+        try:
+            raw = dec.decompress(body[r.pos :], max_length=want)
+        except lzma.LZMAError as e:
+            raise MotionDataError(where, None, f"corrupt packed keyframes: {e}") from None
+        if len(raw) != want:
+            raise MotionDataError(
+                where, None, f"packed keyframes inflate to {len(raw)} bytes, not {want}"
+            )
+        gaps = np.frombuffer(raw, dtype=np.uint8, count=W).astype(np.int64)
+        delta = np.frombuffer(raw, dtype="<u2", count=W * D, offset=W).reshape(D, W).T
+        pose = np.mod(np.cumsum(delta.astype(np.int64), axis=0), 65536).astype(np.uint16)
+        rate = None
+        if recon == "hermite":
+            rate = np.frombuffer(raw, dtype="<i2", count=W * D, offset=W + 2 * W * D)
+            rate = rate.reshape(D, W).T.copy()
+        if np.any(pose[:, :M] >= (1 << bits)) or np.any(pose[:, 2 * M :] >= (1 << bits)):
+            raise MotionDataError(where, None, f"pose code beyond {bits} bits")
+    if gaps[0] != 0 or np.any(gaps[1:] == 0):
+        raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
+    return Stream(
+        reconstruction=recon,
+        latency=int(latency),
+        fps=float(fps),
+        skeleton_hash=skel,
+        names=tuple(names),
+        parents=parents,
+        lengths=lengths.astype(np.float64),
+        quantiser=Quantiser(M, origin, step, rate_step, bits),
+        keyframes=np.cumsum(gaps),
+        pose_codes=pose,
+        rate_codes=rate,
+        coding=coding,
+    )
+
+
+def read(path: str | os.PathLike) -> Stream:
+    """Read and parse a ``.sidq`` file; MotionDataError (naming the file) on any defect."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as e:
+        raise MotionDataError(str(path), None, f"cannot read file: {e.strerror}") from None
+    return from_bytes(data, str(path))

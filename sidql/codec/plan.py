@@ -1,0 +1,238 @@
+"""Keyframes over a whole trial: exact dynamic programme with a maximum gap and a rate multiplier.
+
+With ``C[i, g]`` the distortion of the segment from keyframe ``i`` to keyframe ``i + g``
+(summed ``|wrap(angle error)|`` [rad] over the frames strictly inside, all 2 M angles, computed
+from the *quantised* keyframe values the decoder will see), and ``B`` the bytes of one keyframe
+record, the plan for a multiplier ``lam`` [rad per byte] minimises::
+
+    J(K) = sum over segments C[k_w, k_{w+1} - k_w] + lam * B * |K|
+
+over keyframe sets K containing 0 and N - 1 with gaps 1..G:
+``D[j] = min_{1 <= g <= G} D[j - g] + C[j - g, g] + lam B``: O(N G) per multiplier, O(N G) memory
+(the banded cost table); the table costs O(N G^2 M) once.
+
+Hermite and linear segments depend on their two end keyframes only, so ``C`` is exact. A
+Catmull-Rom segment also depends on the neighbouring keyframes (through its end tangents); its
+table uses a proxy, the Hermite curve whose tangents are the central differences of the
+quantised pose over ``+-g`` frames (the Catmull-Rom tangent if the neighbouring gaps equal this
+one), and the true distortion of the chosen keyframes is measured afterwards.
+
+Rate control: the number of keyframes of the optimum never increases with ``lam``, and its
+distortion never decreases, so bisection on ``log lam`` finds the cheapest plan that meets a byte
+budget, or the sparsest plan whose measured Q stays under a target.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from sim.errors import MotionDataError
+
+MODES = {"hermite": 0, "linear": 1, "catmull_rom": 2}
+DEFAULT_MAX_GAP = 60
+
+_TWO_PI = 2.0 * np.pi
+_INV_TWO_PI = 1.0 / _TWO_PI
+
+
+@numba.njit(cache=True, fastmath=True)
+def _band_costs(X, Xq, Rq, G, mode):
+    """(N, G + 1) segment costs: entry [i, g] for the segment (i, i + g) (inf past the end).
+
+    X: (N, D) true angles [rad]; Xq: (N, D) quantised keyframe angles [rad]; Rq: (N, D)
+    quantised rates times dt [rad/frame] (hermite only); mode 0 hermite, 1 linear,
+    2 Catmull-Rom proxy.
+    """
+    N, D = X.shape
+    C = np.full((N, G + 1), np.inf)
+    ma = np.empty(D)
+    mb = np.empty(D)
+    for i in range(N):
+        C[i, 0] = 0.0
+        for g in range(1, G + 1):
+            j = i + g
+            if j >= N:
+                break
+            if mode == 0:
+                for d in range(D):
+                    ma[d] = Rq[i, d]
+                    mb[d] = Rq[j, d]
+            elif mode == 2:
+                lo_a = max(i - g, 0)
+                hi_a = min(i + g, N - 1)
+                lo_b = max(j - g, 0)
+                hi_b = min(j + g, N - 1)
+                for d in range(D):
+                    ma[d] = (Xq[hi_a, d] - Xq[lo_a, d]) / (hi_a - lo_a)
+                    mb[d] = (Xq[hi_b, d] - Xq[lo_b, d]) / (hi_b - lo_b)
+            total = 0.0
+            for n in range(i + 1, j):
+                s = (n - i) / g
+                if mode == 1:
+                    h01 = s
+                    h10 = 0.0
+                    h11 = 0.0
+                else:
+                    s2 = s * s
+                    s3 = s2 * s
+                    h01 = -2.0 * s3 + 3.0 * s2
+                    h10 = (s3 - 2.0 * s2 + s) * g
+                    h11 = (s3 - s2) * g
+                acc = 0.0
+                for d in range(D):
+                    v = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
+                    v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                    acc += abs(v)
+                total += acc
+            C[i, g] = total
+    return C
+
+
+@numba.njit(cache=True)
+def _dp(C, per_key):
+    """Optimal keyframes of the banded table C for a cost ``per_key`` per keyframe.
+
+    Returns (keyframe count, distortion, (N,) predecessor array)."""
+    N, G1 = C.shape
+    G = G1 - 1
+    D = np.full(N, np.inf)
+    dist = np.zeros(N)
+    cnt = np.zeros(N, dtype=np.int64)
+    prev = np.full(N, -1, dtype=np.int64)
+    D[0] = per_key
+    cnt[0] = 1
+    for j in range(1, N):
+        best = np.inf
+        arg = -1
+        for g in range(1, min(G, j) + 1):
+            i = j - g
+            v = D[i] + C[i, g]
+            if v < best:
+                best = v
+                arg = i
+        D[j] = best + per_key
+        prev[j] = arg
+        dist[j] = dist[arg] + C[arg, j - arg]
+        cnt[j] = cnt[arg] + 1
+    return cnt[N - 1], dist[N - 1], prev
+
+
+@numba.njit(cache=True)
+def _backtrack(prev, last):
+    n = 1
+    j = last
+    while prev[j] >= 0:
+        j = prev[j]
+        n += 1
+    out = np.empty(n, dtype=np.int64)
+    j = last
+    for w in range(n - 1, -1, -1):
+        out[w] = j
+        j = prev[j]
+    return out
+
+
+def _count(C: np.ndarray, lam: float) -> int:
+    return int(_dp(C, float(lam))[0])
+
+
+def band_costs(
+    X: np.ndarray, Xq: np.ndarray, Rq: np.ndarray | None, max_gap: int, reconstruction: str
+) -> np.ndarray:
+    """(N, G + 1) banded segment costs [rad] (see the module docstring).
+
+    Args:
+        X: (N, 2 M) true angles [theta | phi] [rad].
+        Xq: (N, 2 M) the same rounded to the quantisation grid [rad].
+        Rq: (N, 2 M) quantised rates times dt [rad/frame] (hermite), else None.
+        max_gap: G >= 1; reconstruction: "hermite", "linear" or "catmull_rom".
+    """
+    if max_gap < 1:
+        raise ValueError(f"max gap must be >= 1; got {max_gap}")
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    Xq = np.ascontiguousarray(Xq, dtype=np.float64)
+    Rq = X if Rq is None else np.ascontiguousarray(Rq, dtype=np.float64)
+    G = int(min(max_gap, max(X.shape[0] - 1, 1)))
+    return _band_costs(X, Xq, Rq, G, MODES[reconstruction])
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Keyframes chosen by the programme.
+
+    Attributes:
+        keyframes: (W,) indices from 0 to N - 1.
+        distortion: the programme's total segment cost [rad] (exact for hermite/linear).
+        lam: the multiplier [rad per keyframe] that produced them.
+    """
+
+    keyframes: np.ndarray
+    distortion: float
+    lam: float
+
+
+def plan(C: np.ndarray, lam: float) -> Plan:
+    """The optimal keyframes of banded costs ``C`` for ``lam`` [rad per keyframe]."""
+    count, dist, prev = _dp(C, float(lam))
+    k = _backtrack(prev, C.shape[0] - 1)
+    assert len(k) == count
+    return Plan(k, float(dist), float(lam))
+
+
+_LAM_LO, _LAM_HI, _STEPS = 1e-6, 1e7, 48
+
+
+def plan_for_budget(C: np.ndarray, max_keys: int, where: str = "") -> Plan:
+    """The least-distortion Lagrangian plan with at most ``max_keys`` keyframes (bisection).
+
+    Raises:
+        MotionDataError: even the sparsest plan the maximum gap allows needs more keyframes.
+    """
+    N, G1 = C.shape
+    least = int(np.ceil((N - 1) / max(G1 - 1, 1))) + 1 if N > 1 else 1
+    if max_keys < least:
+        raise MotionDataError(
+            where or None,
+            None,
+            f"rate too low: the maximum gap of {G1 - 1} frames needs at least {least} keyframes, "
+            f"the budget allows {max_keys}",
+        )
+    if _count(C, _LAM_LO) <= max_keys:
+        return plan(C, _LAM_LO)
+    lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
+    for _ in range(_STEPS):
+        mid = 0.5 * (lo + hi)
+        if _count(C, float(np.exp(mid))) <= max_keys:
+            hi = mid
+        else:
+            lo = mid
+    return plan(C, float(np.exp(hi)))
+
+
+def plan_for_quality(
+    C: np.ndarray, measure: Callable[[np.ndarray], float], max_q: float
+) -> tuple[Plan, float]:
+    """The sparsest Lagrangian plan whose measured error ``measure(keyframes)`` is <= ``max_q``.
+
+    Returns the plan and its measured error. Every frame a keyframe is the fallback (error 0).
+    """
+    lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
+    best = plan(C, _LAM_LO)
+    best_q = measure(best.keyframes)
+    top = plan(C, _LAM_HI)
+    top_q = measure(top.keyframes)
+    if top_q <= max_q:
+        return top, top_q
+    for _ in range(_STEPS // 2):
+        mid = 0.5 * (lo + hi)
+        p = plan(C, float(np.exp(mid)))
+        q = measure(p.keyframes)
+        if q <= max_q:
+            lo, best, best_q = mid, p, q
+        else:
+            hi = mid
+    return best, best_q

@@ -1,0 +1,67 @@
+"""Write an Acclaim AMC motion (the inverse of :func:`sim.acclaim.reader.parse_amc`).
+
+The file is ``:FULLY-SPECIFIED`` and ``:DEGREES``, frames numbered from ``motion.first_frame``,
+the root's channels in the skeleton's ``root_order`` with translations in the skeleton's length
+unit, then every bone that has dofs, in the skeleton's order, its values in dof order. CMU tools
+(and this project's reader) read it with the ASF it was written for.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from sim.acclaim.reader import ROOT_CHANNELS, Motion, Skeleton
+from sim.errors import MotionDataError
+from sim.motion.clip import write_atomic
+
+
+def amc_text(skeleton: Skeleton, motion: Motion, comment: str = "") -> str:
+    """The AMC text of ``motion`` for ``skeleton`` (see the module docstring).
+
+    Args:
+        motion: root (T, 6) as (tx, ty, tz [m], rx, ry, rz [deg]); angles: bone -> (T, n_dofs)
+            [deg]; bones with dofs missing from ``motion.angles`` are written as zeros.
+    """
+    T = motion.n_frames
+    root = np.asarray(motion.root, dtype=np.float64).copy()
+    if root.shape != (T, 6) or not np.isfinite(root).all():
+        raise MotionDataError(motion.path or None, None, "root must be finite (T, 6)")
+    root[:, :3] /= skeleton.length_to_metres
+    root = root[:, [ROOT_CHANNELS.index(c) for c in skeleton.root_order]]
+    columns = [("root", root)]
+    for b in skeleton.bones:
+        if not b.dofs:
+            continue
+        a = motion.angles.get(b.name)
+        a = np.zeros((T, len(b.dofs))) if a is None else np.asarray(a, dtype=np.float64)
+        if a.shape != (T, len(b.dofs)) or not np.isfinite(a).all():
+            raise MotionDataError(motion.path or None, None, f"bad angles for bone {b.name!r}")
+        columns.append((b.name, a))
+    # one (T, ) column of text lines per bone, then interleave frame by frame
+    lines = [[f"{f}" for f in range(motion.first_frame, motion.first_frame + T)]]
+    for name, values in columns:
+        text = np.char.mod("%.6f", values)
+        joined = [" ".join(row) for row in text.tolist()]
+        lines.append([f"{name} {row}" for row in joined])
+    out = io.StringIO()
+    if comment:
+        out.write(f"# {comment}\n")
+    out.write(":FULLY-SPECIFIED\n:DEGREES\n")
+    for frame in zip(*lines, strict=True):
+        out.write("\n".join(frame))
+        out.write("\n")
+    return out.getvalue()
+
+
+def write_amc(
+    path: str | os.PathLike, skeleton: Skeleton, motion: Motion, comment: str = ""
+) -> Path:
+    """Write ``motion`` as an AMC file for ``skeleton`` at ``path``, atomically."""
+    path = Path(path)
+    data = amc_text(skeleton, motion, comment).encode("ascii")
+    write_atomic(path, lambda f: f.write(data))
+    return path
