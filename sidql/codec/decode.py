@@ -69,7 +69,7 @@ def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
         phi=phi,
         keyframes=np.asarray(stream.keyframes).copy(),
         variant=stream.reconstruction,
-        dt=1.0 / stream.fps,
+        fps=float(stream.fps),
     )
 
 
