@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from acclaim_fk import acclaim_points
@@ -123,3 +125,31 @@ def test_live_encoding_from_the_command_line(cmu_dir, tmp_path):
     assert s.coding == 0 and s.latency == 12 and np.diff(s.keyframes).max() <= 12
     assert main(["decode", str(out), "--out", str(tmp_path / "live.npz")]) == 0
     assert load_npz(tmp_path / "live.npz").n_frames == s.n_frames
+
+
+def test_report_takes_a_decoded_stream_like_a_method(cmu_dir, tmp_path, capsys):
+    """A .sidq among --methods is replayed and checked on its clip's frames: its MPJPE in
+    checks.json is the decoded points' distance from the original clip's, computed here."""
+    asf, amc = cmu_dir / "05" / "05.asf", cmu_dir / "05" / "05_01.amc"
+    stream = tmp_path / "walk.sidq"
+    assert main(["encode", str(asf), str(amc), "--out", str(stream), "--rate", "600"]) == 0
+    out = tmp_path / "rep"
+    argv = ["report", str(asf), str(amc), "--methods", "uniform", str(stream), "--clips", "1"]
+    assert main([*argv, "-W", "6", "--out", str(out), "--no-video"]) == 0
+    doc = json.loads((out / "checks.json").read_text())
+    (clip,) = doc["clips"]
+    runs = {r["method"]: r for r in clip["methods"]}
+    assert set(runs) == {"uniform", "walk.sidq"}
+    rec = decode_to_reconstruction(stream)
+    c = load_motion(asf, amc, fps=30).split(60)[1]
+    pts = c.positions[:, protocol_indices(c)]
+    want = 1e3 * np.linalg.norm(rec.positions[60:120] - pts, axis=-1).mean()
+    assert runs["walk.sidq"]["summary"]["mpjpe_mm"] == pytest.approx(want, rel=1e-4)
+    keys = np.asarray(rec.keyframes)
+    assert runs["walk.sidq"]["indices"] == [int(k) - 60 for k in keys if 60 <= k < 120]
+    capsys.readouterr()
+    other = cmu_dir / "01" / "01.asf"
+    assert main(["report", str(other), str(cmu_dir / "01" / "01_01.amc"), "--methods",
+                 str(stream), "--out", str(tmp_path / "bad"), "--no-video"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another skeleton" in err[0]

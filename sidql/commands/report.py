@@ -27,7 +27,11 @@ def register(sub) -> None:
     p.add_argument("asf", help="the subject's skeleton (.asf)")
     p.add_argument("amc", help="one of its motions (.amc)")
     p.add_argument("--keyframes", "-W", type=int, default=10, help="keyframes per clip (W)")
-    p.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS), help="methods")
+    p.add_argument(
+        "--methods", nargs="+", default=list(DEFAULT_METHODS),
+        help="methods, and/or .sidq files encoded from this trial (sidql encode): a decoded "
+        "stream is checked and rendered like a method",
+    )  # fmt: skip
     p.add_argument("--clips", type=int, nargs="+", default=[0], help="60-frame clip numbers")
     p.add_argument("--seed", type=int, default=0, help="seed of random methods")
     p.add_argument("--out", required=True, help="output folder")
@@ -40,7 +44,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    for name in args.methods:  # unknown names fail before the (slow) ingest
+    streams = [m for m in args.methods if m.endswith(".sidq")]
+    methods = [m for m in args.methods if not m.endswith(".sidq")]
+    for name in methods:  # unknown names fail before the (slow) ingest
         try:
             get(name)
         except KeyError as e:
@@ -49,7 +55,7 @@ def run(args) -> int:
         raise UsageError(f"--keyframes must be in [2, 60]; got {args.keyframes}")
     try:
         page = report_trial(
-            args.asf, args.amc, args.out, W=args.keyframes, methods=args.methods,
+            args.asf, args.amc, args.out, W=args.keyframes, methods=methods, streams=streams,
             clips=args.clips, seed=args.seed, videos=not args.no_video,
             style=RenderStyle(layout=args.layout),
         )  # fmt: skip

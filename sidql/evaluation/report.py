@@ -33,8 +33,12 @@ import numpy as np
 from PIL import Image
 from tqdm import tqdm
 
+from sidql.codec.decode import decode_to_reconstruction
+from sidql.codec.format import read as read_stream
+from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
+from sidql.keyframes.reconstruct import Reconstruction
 from sidql.keyframes.spherical import POINTS
 from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
@@ -94,6 +98,49 @@ class ClipValidation:
     runs: list[MethodRun] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class DecodedStream:
+    """A decoded ``.sidq`` stream, shown in a report like a method.
+
+    Attributes:
+        label: how the page names it (the file name).
+        motion: the whole decoded trial (N, 23, 3) at the stream's fps; frame n is frame n of the
+            trial read at that rate, so a clip's frames are a slice of it.
+    """
+
+    label: str
+    motion: Reconstruction
+
+    def clip_part(self, clip: Clip) -> tuple[np.ndarray, PointMotion]:
+        """(keyframes inside the clip, clip-relative; the decoded frames of ``clip``)."""
+        step = clip.source_fps / clip.fps
+        i0 = int(round(clip.start_frame / step))
+        i1 = i0 + clip.n_frames
+        rec = self.motion
+        if abs(rec.fps - clip.fps) > 1e-9 or i1 > rec.n_frames:
+            raise ValueError(
+                f"{self.label}: the stream has {rec.n_frames} frames at {rec.fps:g} fps; clip "
+                f"frames {i0}..{i1 - 1} at {clip.fps:g} fps are not in it"
+            )
+        keys = np.asarray(rec.keyframes)
+        keys = keys[(keys >= i0) & (keys < i1)] - i0
+        part = PointMotion(
+            tuple(rec.names), np.asarray(rec.parents), rec.positions[i0:i1], clip.fps,
+            rec.velocities[i0:i1],
+        )  # fmt: skip
+        return keys, part
+
+
+def load_stream(path: str | os.PathLike, asf: str | os.PathLike) -> DecodedStream:
+    """Decode a ``.sidq`` file for a report of a trial of the subject ``asf``; a stream encoded
+    from another skeleton is a :class:`MotionDataError`."""
+    if read_stream(path).skeleton_hash != skeleton_hash(subject_model(asf)[0]):
+        raise MotionDataError(
+            str(path), None, f"stream was encoded from another skeleton than {asf}"
+        )
+    return DecodedStream(Path(path).name, decode_to_reconstruction(path))
+
+
 def joint_ranges(model) -> dict[str, tuple[float, float]]:
     """Hinge name -> (lo, hi) [rad] of every limited hinge of a MuJoCo model."""
     out = {}
@@ -113,6 +160,7 @@ def validate_clip(
     contact_height: float = 0.02,
     hops: int = 2,
     floor_z: float = 0.0,
+    streams: tuple[DecodedStream, ...] = (),
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -121,6 +169,7 @@ def validate_clip(
         methods: names registered in :mod:`sidql.keyframes.methods`.
         W: keyframes per clip, both ends included.
         joint_ranges: hinge ranges [rad] for the joint-limit check of motions with joint angles.
+        streams: decoded ``.sidq`` streams of the clip's trial, shown after the methods.
     """
     full = from_clip(clip)
     orig = full.restrict(POINTS)
@@ -137,6 +186,14 @@ def validate_clip(
             checks = replay(rec, full, **kw)
             s = summarise(checks)
             out.runs.append(MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline)))
+    for stream in streams:
+        keys, rec = stream.clip_part(clip)
+        checks = replay(rec, full, **kw)
+        s = summarise(checks)
+        variant = stream.motion.variant
+        out.runs.append(
+            MethodRun(stream.label, variant, keys, rec, checks, s, excess(s, out.baseline))
+        )
     return out
 
 
@@ -796,15 +853,17 @@ def report_clips(
     meta: dict | None = None,
     progress: bool = True,
     clip_numbers=None,
+    streams: tuple[DecodedStream, ...] = (),
 ) -> Path:
-    """Validate every clip in ``clips`` with every method and write the report; returns
-    ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for labels and
-    file names (default 0, 1, ...)."""
+    """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
+    report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
+    labels and file names (default 0, 1, ...)."""
     vals = [
-        validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges)
+        validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges, streams=streams)
         for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
     ]
-    meta = {"keyframes": W, "methods": " ".join(methods), "seed": seed, **(meta or {})}
+    shown = [*methods, *(s.label for s in streams)]
+    meta = {"keyframes": W, "methods": " ".join(shown), "seed": seed, **(meta or {})}
     return write_report(
         vals, out_dir, title=title, meta=meta, videos=videos, style=style, progress=progress,
         clip_numbers=clip_numbers,
@@ -823,9 +882,12 @@ def report_trial(
     videos: bool = True,
     style: RenderStyle = DEFAULT_STYLE,
     progress: bool = True,
+    streams=(),
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
-    ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid."""
+    ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
+    ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods."""
+    decoded = tuple(load_stream(p, asf) for p in streams)
     all_clips = load_clips(asf, amc)
     if not all_clips:
         raise MotionDataError(str(amc), None, "trial is shorter than one 60-frame clip")
@@ -838,5 +900,5 @@ def report_trial(
         joint_ranges=joint_ranges(model), videos=videos, style=style,
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
-        progress=progress, clip_numbers=list(clips),
+        progress=progress, clip_numbers=list(clips), streams=decoded,
     )  # fmt: skip
