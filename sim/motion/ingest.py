@@ -51,7 +51,13 @@ def clip_from_qpos(
 
     Point ``j`` is the site ``<names[j]>_end`` (the root: the root body's origin). Velocities are
     taken at the source rate (central differences of qpos), then mapped through the chain.
+
+    Raises:
+        MotionDataError: (naming ``source``) a non-finite ``qpos`` or any non-finite result; the
+            reader's bounds make this unreachable for parsed files, it guards every other caller.
     """
+    if not np.isfinite(qpos).all():
+        raise MotionDataError(source or None, None, "non-finite joint positions (qpos)")
     step = resample_step(source_fps, fps)
     frames = np.arange(0, qpos.shape[0], step)
     qvel = qvel_from_qpos(model, qpos, source_fps, frames)
@@ -62,6 +68,9 @@ def clip_from_qpos(
     data = mujoco.MjData(model)
     pos, vel, xquat, omega = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
+    for what, a in (("positions", pos), ("velocities", vel), ("rotations", xquat), ("qvel", qvel)):
+        if not np.isfinite(a).all() or not np.isfinite(omega).all():
+            raise MotionDataError(source or None, None, f"non-finite {what} from the motion")
     return Clip(
         names=tuple(names),
         parents=np.asarray(parents, dtype=np.int64),
@@ -102,14 +111,7 @@ def load_motion(
     """
     if skeleton not in SKELETONS:
         raise ValueError(f"unknown skeleton {skeleton!r}; choose from {', '.join(SKELETONS)}")
-    try:
-        subject, model = subject_model(asf)
-    except FileNotFoundError as e:
-        raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
-    except ValueError as e:  # MuJoCo's compiler on a degenerate skeleton
-        if isinstance(e, MotionDataError):
-            raise
-        raise MotionDataError(str(asf), None, f"cannot build a model: {e}") from e
+    subject, model = subject_model(asf)
     motion = parse_amc(amc, subject)
     root_scale = 1.0
     target = subject
