@@ -26,6 +26,7 @@ import json
 import multiprocessing as mp
 import os
 import random
+import shutil
 import sys
 import tempfile
 import time
@@ -74,8 +75,7 @@ def classify(asf: bytes, amc: bytes, full: bool, skeleton: str, folder: Path) ->
         return "foreign", f"{type(e).__name__}: {str(e)[:300]}\n{tb}"
 
 
-def worker(conn) -> None:
-    folder = Path(tempfile.mkdtemp(prefix="fuzz-"))
+def worker(conn, folder: Path) -> None:
     while True:
         job = conn.recv()
         if job is None:
@@ -86,9 +86,12 @@ def worker(conn) -> None:
 
 
 class Worker:
+    """A worker process and its scratch folder (removed when the worker is)."""
+
     def __init__(self):
+        self.folder = Path(tempfile.mkdtemp(prefix="sidql-fuzz-"))
         self.conn, child = mp.Pipe()
-        self.proc = mp.Process(target=worker, args=(child,), daemon=True)
+        self.proc = mp.Process(target=worker, args=(child, self.folder), daemon=True)
         self.proc.start()
         child.close()
         self.job = None
@@ -103,6 +106,17 @@ class Worker:
         self.proc.kill()
         self.proc.join()
         self.conn.close()
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+    def ask(self, job: dict, timeout: float) -> tuple[str, str]:
+        """Run one job and wait for it: (outcome, detail); after a hang, call :meth:`kill`."""
+        self.submit(job, timeout)
+        if not self.conn.poll(timeout):
+            return "hang", f"no answer in {timeout} s"
+        try:
+            return tuple(self.conn.recv()[1:])
+        except EOFError:
+            return "foreign", f"worker died (exit code {self.proc.exitcode})"
 
 
 def run_jobs(jobs, n_workers: int, timeout: float, progress: bool):
@@ -150,10 +164,13 @@ def run_jobs(jobs, n_workers: int, timeout: float, progress: bool):
             w.kill()
 
 
-def shrink(job: dict, outcome: str, timeout: float) -> dict:
-    """Delete chunks of lines of the mutated file(s) while the outcome stays the same."""
+def shrink(job: dict, outcome: str, detail: str, timeout: float) -> dict:
+    """Delete chunks of lines of the mutated file(s) while the outcome (for a foreign error: and
+    its exception type) stays the same."""
+    kind = detail.split(":", 1)[0]
     job = dict(job)
     attempts = 0
+    w = Worker()
     for key in ("amc", "asf"):
         if job["target"] not in (key, "both"):
             continue
@@ -165,14 +182,18 @@ def shrink(job: dict, outcome: str, timeout: float) -> dict:
                 trial = lines[:i] + lines[i + chunk :]
                 attempts += 1
                 candidate = dict(job, **{key: b"".join(trial), "index": -1})
-                ((_, got, _),) = run_jobs([candidate], 1, timeout, progress=False)
-                if got == outcome:
+                got, got_detail = w.ask(candidate, timeout)
+                if got == "hang" or "worker died" in got_detail:
+                    w.kill()
+                    w = Worker()
+                if got == outcome and got_detail.split(":", 1)[0] == kind:
                     lines, changed = trial, True
                 else:
                     i += chunk
             job[key] = b"".join(lines)
             if not changed:
                 chunk //= 2
+    w.kill()
     return job
 
 
@@ -240,7 +261,9 @@ def main(argv=None) -> int:
         folder = repro_dir / str(job["index"])
         save_repro(folder, job, outcome, detail)
         if outcome != "hang":
-            save_repro(folder / "minimal", shrink(job, outcome, args.timeout), outcome, detail)
+            save_repro(
+                folder / "minimal", shrink(job, outcome, detail, args.timeout), outcome, detail
+            )
         failures.append({"index": job["index"], "outcome": outcome, "ops": job["ops"],
                          "detail": detail.splitlines()[0] if detail else "", "repro": str(folder)})  # fmt: skip
 

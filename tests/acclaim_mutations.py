@@ -233,8 +233,14 @@ def non_finite(value) -> list[str]:
 
 
 def line_count(path: Path) -> int:
+    """Lines as the reader counts them (``str.splitlines`` of the decoded text), plus one for a
+    problem found at the end of the file."""
     data = path.read_bytes()
-    return data.count(b"\n") + data.replace(b"\r\n", b"").count(b"\r") + 1
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    return len(text.splitlines()) + 1
 
 
 def read_all(asf: Path, amc: Path, *, full: bool, skeleton: str = "subject") -> list:

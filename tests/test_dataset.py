@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 from pathlib import Path
@@ -247,3 +248,86 @@ def test_workers_exit_when_the_dataset_parent_is_killed(tmp_path, cmu_dir):
                 os.kill(w, signal.SIGKILL)
     assert not list((tmp_path / "out").rglob("*.tmp")), "a worker left a partial file"
     assert not (tmp_path / "out" / "index.json").exists()
+
+
+# ----------------------------------------------- nothing non-finite leaves the ingest (issue 8, 2)
+
+
+def test_cli_ingest_and_dataset_refuse_a_nan_axis_naming_its_line(tmp_path, cmu_dir, capsys):
+    text = (cmu_dir / "02" / "02.asf").read_text()
+    bad = text.replace("axis 0 0 20  XYZ", "axis 0 nan 20  XYZ", 1)
+    assert bad != text
+    src = tmp_path / "src" / "02"
+    src.mkdir(parents=True)
+    (src / "02.asf").write_text(bad)
+    shutil.copy(cmu_dir / "02" / "02_01.amc", src / "02_01.amc")
+    code = main(
+        ["ingest", str(src / "02.asf"), str(src / "02_01.amc"), "--out", str(tmp_path / "x.npz")]
+    )
+    err = capsys.readouterr().err
+    line = next(i for i, ln in enumerate(bad.splitlines(), 1) if "nan" in ln)
+    assert code == 2 and f"02.asf:{line}: non-finite value 'nan' in axis" in err
+    assert not (tmp_path / "x.npz").exists()
+    s = ingest_directory(tmp_path / "src", tmp_path / "out", workers=1, progress=False)
+    assert not s.written and len(s.skipped) == 1 and "non-finite" in s.skipped[0]["error"]
+
+
+def test_the_velocity_stage_refuses_non_finite_qpos_naming_the_source(walk_clip):
+    from sim.model.humanoid import subject_model
+    from sim.motion.ingest import clip_from_qpos
+
+    asf = Path(walk_clip.source).with_name("02.asf")
+    _, model = subject_model(asf)
+    qpos = walk_clip.qpos.copy()
+    qpos[3, 0] = np.nan
+    with pytest.raises(MotionDataError, match=r"walk\.amc: non-finite joint positions"):
+        clip_from_qpos(
+            model,
+            walk_clip.names,
+            walk_clip.parents,
+            qpos,
+            source_fps=30,
+            fps=30,
+            source="walk.amc",
+        )
+    qpos[3, 0] = 1e308  # finite, but its differences overflow
+    with pytest.raises(MotionDataError, match=r"walk\.amc: non-finite"):
+        clip_from_qpos(
+            model,
+            walk_clip.names,
+            walk_clip.parents,
+            qpos,
+            source_fps=30,
+            fps=30,
+            source="walk.amc",
+        )
+
+
+def test_retarget_to_the_humanoid_refuses_zero_length_legs(tmp_path, cmu_dir):
+    from sim.motion.ingest import load_motion
+
+    text = (cmu_dir / "02" / "02.asf").read_text()
+    lines = text.splitlines()
+    for bone in ("lfemur", "ltibia", "rfemur", "rtibia"):
+        i = lines.index(f"     name {bone}")
+        k = next(j for j in range(i, i + 5) if lines[j].strip().startswith("length"))
+        lines[k] = "     length 0"
+    (tmp_path / "02.asf").write_text("\n".join(lines) + "\n")
+    with pytest.raises(MotionDataError, match="legs 0 m long") as err:
+        load_motion(tmp_path / "02.asf", cmu_dir / "02" / "02_01.amc", skeleton="humanoid")
+    assert err.value.line is not None
+
+
+def test_subject_models_follow_a_same_size_rewrite_of_the_asf(tmp_path, cmu_dir):
+    from sim.model.humanoid import subject_model
+
+    text = (cmu_dir / "02" / "02.asf").read_text()
+    path = tmp_path / "02.asf"
+    path.write_text(text)
+    first = subject_model(path)[0].bone("lfemur").length
+    changed = text.replace("length 7.59371", "length 8.59371", 1)
+    assert len(changed) == len(text) and changed != text
+    st = path.stat()
+    path.write_text(changed)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))  # same size and mtime: only content differs
+    assert subject_model(path)[0].bone("lfemur").length > first

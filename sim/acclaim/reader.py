@@ -12,12 +12,14 @@ translations at most :data:`MAX_METRES`, angles at most :data:`MAX_DEGREES` in m
 limits ``lo <= hi``); frame numbers are ASCII digits (at most 12); bone names follow
 :data:`BONE_NAME_GRAMMAR` (an ASCII identifier: a letter or ``_``, then letters, digits, ``_ . -``;
 at most 64 characters), so a name can never break the generated MJCF XML or be mistaken for a
-frame number; names the generated model uses itself (:data:`RESERVED_NAMES`) are refused. Line
-ends LF, CRLF or lone CR; line numbers count them as an editor does.
+frame number; names the generated model uses itself (:data:`RESERVED_NAMES`) are refused.
+Lines are split as ``str.splitlines`` splits them (LF, CRLF, lone CR, ...); error line numbers
+count the same way.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import warnings
@@ -152,8 +154,9 @@ def check_bone_name(name: str) -> str | None:
 
 
 def _read_lines(path: str) -> list[str]:
-    """The file's lines; LF, CRLF and lone CR all end a line (so line numbers match editors)."""
-    return _read_text(path).replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    """The file's lines, split as ``str.splitlines`` does (LF, CRLF, lone CR, and the other
+    Unicode line breaks); error line numbers count the same way."""
+    return _read_text(path).splitlines()
 
 
 def _read_text(path: str | os.PathLike) -> str:
@@ -169,22 +172,30 @@ def _read_text(path: str | os.PathLike) -> str:
         return data.decode("latin-1")
 
 
-def _floats(
-    tokens: list[str], path: str, line: int, what: str, bound: float | None = None
-) -> np.ndarray:
-    """Finite numbers of ``tokens``, each at most ``bound`` in magnitude (when given)."""
+def _float_list(
+    tokens: list[str], path: str, line: int, what: str, bound: float | list | None = None
+) -> list[float]:
+    """Finite numbers of ``tokens``, each at most ``bound`` (one for all, or one per token) in
+    magnitude. Plain Python: this runs once per line on the checked AMC path."""
     try:
-        values = np.array([float(t) for t in tokens], dtype=np.float64)
+        values = [float(t) for t in tokens]
     except ValueError:
         bad = next(t for t in tokens if not _is_float(t))
         raise MotionDataError(path, line, f"non-numeric value {bad!r} in {what}") from None
-    if not np.isfinite(values).all():
-        bad = tokens[int(np.argmin(np.isfinite(values)))]
-        raise MotionDataError(path, line, f"non-finite value {bad!r} in {what}")
-    if bound is not None and (np.abs(values) > bound).any():
-        bad = tokens[int(np.argmax(np.abs(values) > bound))]
-        raise MotionDataError(path, line, f"value {bad} in {what} exceeds {bound:g} in magnitude")
+    bounds = [bound] * len(values) if bound is None or isinstance(bound, (int, float)) else bound
+    for t, v, b in zip(tokens, values, bounds, strict=True):
+        if not math.isfinite(v):
+            raise MotionDataError(path, line, f"non-finite value {t!r} in {what}")
+        if b is not None and abs(v) > b:
+            raise MotionDataError(path, line, f"value {t} in {what} exceeds {b:g} in magnitude")
     return values
+
+
+def _floats(
+    tokens: list[str], path: str, line: int, what: str, bound: float | None = None
+) -> np.ndarray:
+    """:func:`_float_list` as an array."""
+    return np.array(_float_list(tokens, path, line, what, bound), dtype=np.float64)
 
 
 def _is_float(token: str) -> bool:
@@ -547,8 +558,8 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
     if parsed is None:
         parsed = _parse_frames_checked(lines, body_start, layout, path, strict, bounds)
     first, columns, notes = parsed if len(parsed) == 3 else (*parsed, ())
-    if "root" not in columns or not _within(columns, bounds):  # unreachable: both parsers check
-        raise MotionDataError(path, None, "no root line, or a value out of bounds")
+    if "root" not in columns:  # unreachable: both parsers check
+        raise MotionDataError(path, None, "no root line")
     for note in notes:
         warnings.warn(note, MotionDataWarning, stacklevel=2)
     T = len(columns["root"])
@@ -572,9 +583,10 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
 
 def _within(columns: dict, bounds: dict) -> bool:
     """Every value finite and within its channel's bound."""
-    for name, values in columns.items():
-        v = np.asarray(values, dtype=np.float64)
-        if v.size and not (np.abs(v) <= bounds[name]).all():  # False for nan too
+    for name, v in columns.items():  # min/max reduce without temporaries; nan propagates
+        if len(v) and not (
+            (v.max(axis=0) <= bounds[name]).all() and (v.min(axis=0) >= -bounds[name]).all()
+        ):
             return False
     return True
 
@@ -700,15 +712,10 @@ def _parse_frames_checked(lines, start, layout, path, strict, bounds):
             raise MotionDataError(
                 path, ln, f"bone {name!r} needs {layout[name]} values, got {len(tokens) - 1}"
             )
-        values = _floats(tokens[1:], path, ln, f"bone {name!r}")
-        if not (np.abs(values) <= bounds[name]).all():
-            k = int(np.argmax(np.abs(values) > bounds[name]))
-            raise MotionDataError(
-                path,
-                ln,
-                f"bone {name!r}: value {tokens[1 + k]} exceeds {bounds[name][k]:g} in magnitude",
-            )
-        current[name] = values
+        try:  # bounds are checked on the whole arrays at the end (per line would cost ~40 %)
+            current[name] = [float(t) for t in tokens[1:]]
+        except ValueError:
+            _float_list(tokens[1:], path, ln, f"bone {name!r}")  # raises, naming the token
     if not frames:
         raise MotionDataError(path, None, "no frames")
     notes = []
@@ -721,5 +728,17 @@ def _parse_frames_checked(lines, start, layout, path, strict, bounds):
         notes.append(f"{e}; dropped the incomplete final frame")
     if "root" not in expected_names:
         raise MotionDataError(path, frame_lines[0], "frame has no 'root' line")
-    columns = {n: np.array([f[n] for f in frames]) for n in expected_names}
+    columns = {n: np.array([f[n] for f in frames], dtype=np.float64) for n in expected_names}
+    if not _within(columns, bounds):
+        _raise_out_of_bounds(lines, start, layout, path, bounds)
     return first, columns, notes
+
+
+def _raise_out_of_bounds(lines, start, layout, path, bounds):
+    """Raise for the first line holding a non-finite or out-of-bounds value."""
+    for ln, raw in enumerate(lines[start:], start=start + 1):
+        tokens = raw.split()
+        if tokens and tokens[0] in layout and len(tokens) - 1 == layout[tokens[0]]:
+            bound = [float(b) for b in bounds[tokens[0]]]
+            _float_list(tokens[1:], path, ln, f"bone {tokens[0]!r}", bound)
+    raise MotionDataError(path, None, "non-finite or out-of-bounds value")  # unreachable

@@ -60,17 +60,24 @@ def clip_from_qpos(
         raise MotionDataError(source or None, None, "non-finite joint positions (qpos)")
     step = resample_step(source_fps, fps)
     frames = np.arange(0, qpos.shape[0], step)
-    qvel = qvel_from_qpos(model, qpos, source_fps, frames)
     body_ids, site_ids = [], []
     for n in names:
         body_ids.append(model.body(n).id)
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
     data = mujoco.MjData(model)
-    pos, vel, xquat, omega = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
+    with np.errstate(all="ignore"):  # overflow shows up as non-finite values, refused below
+        qvel = qvel_from_qpos(model, qpos, source_fps, frames)
+        if not np.isfinite(qvel).all():
+            raise MotionDataError(source or None, None, "non-finite joint velocities (qvel)")
+        pos, vel, xquat, omega = point_kinematics(
+            model, data, qpos[frames], qvel, body_ids, site_ids
+        )
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
-    for what, a in (("positions", pos), ("velocities", vel), ("rotations", xquat), ("qvel", qvel)):
-        if not np.isfinite(a).all() or not np.isfinite(omega).all():
+    for what, a in (("positions", pos), ("velocities", vel), ("rotations", xquat)):
+        if not np.isfinite(a).all():
             raise MotionDataError(source or None, None, f"non-finite {what} from the motion")
+    if not np.isfinite(omega).all():
+        raise MotionDataError(source or None, None, "non-finite angular velocities")
     return Clip(
         names=tuple(names),
         parents=np.asarray(parents, dtype=np.int64),
