@@ -576,17 +576,21 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
     if not in_deg:
         root[:, 3:] = np.rad2deg(root[:, 3:])
         angles = {k: np.rad2deg(v) for k, v in angles.items()}
-    if not (np.isfinite(root).all() and all(np.isfinite(v).all() for v in angles.values())):
-        raise MotionDataError(path, None, "non-finite value (nan or inf) in the motion")
+    # Finite: every parsed value passed _within (finite, bounded), and rad2deg of a bounded value
+    # is finite; the zeros filled in for unmentioned bones are too.
     return Motion(path=path, root=root, angles=angles, first_frame=first, notes=tuple(notes))
 
 
 def _within(columns: dict, bounds: dict) -> bool:
     """Every value finite and within its channel's bound."""
     for name, v in columns.items():  # min/max reduce without temporaries; nan propagates
-        if len(v) and not (
-            (v.max(axis=0) <= bounds[name]).all() and (v.min(axis=0) >= -bounds[name]).all()
-        ):
+        if not len(v):
+            continue
+        b = bounds[name]
+        if name == "root":  # per channel: translations and angles differ
+            if not ((v.max(axis=0) <= b).all() and (v.min(axis=0) >= -b).all()):
+                return False
+        elif not (v.max() <= b[0] and v.min() >= -b[0]):
             return False
     return True
 
