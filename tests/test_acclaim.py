@@ -450,3 +450,38 @@ def test_lone_cr_line_ends_count_as_lines(tmp_path):
     np.testing.assert_array_equal(
         parse_amc(path, skel).root, parse_amc(write(tmp_path, "lf.amc", AMC), skel).root
     )
+
+
+def test_unicode_or_signed_frame_numbers_mid_file_are_refused_on_their_line(tmp_path):
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    for number in ("٣", "+3", "3_0"):
+        text = amc_with("\n3\n", f"\n{number}\n")
+        amc = write(tmp_path, "t.amc", text)
+        with pytest.raises(MotionDataError) as err:
+            parse_amc(amc, skel)
+        assert err.value.line == line_of(text, number), (number, err.value)
+
+
+def test_too_many_bones_are_refused_at_the_first_extra_bone(tmp_path):
+    from sim.acclaim.reader import MAX_BONES
+
+    blocks = "".join(
+        f"  begin\n     name b{i}\n     direction 0 -1 0\n     length 0.1\n  end\n"
+        for i in range(MAX_BONES + 5)
+    )
+    text = ASF.split(":bonedata")[0] + ":bonedata\n" + blocks + ":hierarchy\n  begin\n  end\n"
+    with pytest.raises(MotionDataError, match=f"more than {MAX_BONES} bones") as err:
+        parse_asf(write(tmp_path, "many.asf", text))
+    # The 'begin' line of the first extra bone (1-based: the 0-based index of its name line).
+    assert err.value.line == text.splitlines().index(f"     name b{MAX_BONES}")
+
+
+def test_huge_tokens_give_a_bounded_message_that_survives_pickling(tmp_path):
+    import pickle
+
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    text = amc_with("hip 11 0 0", "x" * 100_000 + " 11 0 0")
+    with pytest.raises(MotionDataError, match="unknown bone") as err:
+        parse_amc(write(tmp_path, "t.amc", text), skel)
+    assert len(err.value.problem) <= MotionDataError.MAX_PROBLEM
+    assert str(pickle.loads(pickle.dumps(err.value))) == str(err.value)

@@ -296,8 +296,6 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
         raise MotionDataError(path, bone["line"], f"bone block {bone.get('name')!r} has no 'end'")
     if not raw_bones:
         raise MotionDataError(path, sections["bonedata"], "no bones in ':bonedata'")
-    if len(raw_bones) > MAX_BONES:
-        raise MotionDataError(path, raw_bones[MAX_BONES]["line"], f"more than {MAX_BONES} bones")
 
     to_m = INCH / units["length"]
     in_deg = units["angle"] == "deg"
@@ -431,6 +429,8 @@ def _finish_bone(bone: dict, path: str, raw_bones: list[dict]) -> None:
             raise MotionDataError(path, ln, f"bone block has no '{key}'")
     if bone["name"] == "root":
         raise MotionDataError(path, ln, "a bone may not be called 'root'")
+    if len(raw_bones) >= MAX_BONES:  # also bounds the quadratic duplicate check below
+        raise MotionDataError(path, ln, f"more than {MAX_BONES} bones")
     if any(b["name"] == bone["name"] for b in raw_bones):
         raise MotionDataError(path, ln, f"duplicate bone {bone['name']!r}")
     bone.setdefault("axis", np.zeros(3))
@@ -628,8 +628,12 @@ def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
         return None
     T = len(body) // L
     first = int(body[0])
+    number_lines = body[0::L]
+    digits = "".join(number_lines)
+    if not (digits.isascii() and digits.replace(" ", "").replace("\t", "").isdigit()):
+        return None  # signs, underscores, unicode digits: the checked parser decides
     try:
-        numbers = np.array(body[0::L], dtype=np.int64)
+        numbers = np.array(number_lines, dtype=np.int64)
     except (ValueError, OverflowError):
         return None
     if not np.array_equal(numbers, np.arange(first, first + T)):
