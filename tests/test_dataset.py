@@ -140,6 +140,8 @@ def test_output_paths_are_safe_and_unique(tmp_path):
         trial("d/09/09_07.amc", "09", "09_07"),
         trial("e/09/09_07.amc", "09", "09_07"),
         trial("f/s/s_<a\\b>.amc", "s", "s_<a\\b>"),
+        trial("g/index.json_01.amc", "index.json", "index.json_01"),
+        trial("h/" + "x" * 300 + "_01.amc", "x" * 300, "x" * 300 + "_01"),
     ]
     paths = output_paths(trials, tmp_path)
     assert len({str(p).lower() for p in paths}) == len(trials)
@@ -152,6 +154,8 @@ def test_output_paths_are_safe_and_unique(tmp_path):
         )
     assert paths[0] == PurePosixPath("_../_.._01.npz")
     assert paths[7] == PurePosixPath("s/s__a_b_.npz")
+    assert paths[8].parts[0] == "_index.json"  # never the folder that would shadow index.json
+    assert all(len(part) <= 104 for part in paths[9].parts)  # cut, with a hash: fits a file system
     # Colliding trials get different hash suffixes; a trial without a twin keeps its plain name.
     assert {p.parent.name for p in paths[2:7]} == {"09"}
     assert all(re.fullmatch(r"09_0[67]-[0-9a-f]{8}\.npz", p.name) for p in paths[2:7])

@@ -75,11 +75,16 @@ def find_trials(root: str | os.PathLike) -> list[Trial]:
     return sorted(trials, key=lambda t: (t.subject, t.name))
 
 
-def safe_name(name: str) -> str:
+def safe_name(name: str, max_len: int = 100) -> str:
     """``name`` as one harmless path component: characters outside ``[A-Za-z0-9_.-]`` become
-    ``_`` and a leading dot gets a ``_`` before it (so never ``.``, ``..`` or a hidden file)."""
-    name = _UNSAFE.sub("_", name) or "_"
-    return "_" + name if name.startswith(".") else name
+    ``_``, a leading dot gets a ``_`` before it (so never ``.``, ``..`` or a hidden file), and a
+    name longer than ``max_len`` is cut, keeping it distinct with a hash of the whole name."""
+    safe = _UNSAFE.sub("_", name) or "_"
+    safe = "_" + safe if safe.startswith(".") else safe
+    if len(safe) > max_len:
+        digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+        safe = f"{safe[: max_len - 9]}-{digest}"
+    return safe
 
 
 def output_paths(trials: list[Trial], root: str | os.PathLike) -> list[PurePosixPath]:
@@ -95,7 +100,12 @@ def output_paths(trials: list[Trial], root: str | os.PathLike) -> list[PurePosix
         MotionDataError: (before anything is written) if names still coincide after that.
     """
     root = Path(root)
-    base = [PurePosixPath(safe_name(t.subject), safe_name(t.name)) for t in trials]
+    base = []
+    for t in trials:
+        subject = safe_name(t.subject)
+        if subject.lower() == "index.json":  # the one file at the top of OUT
+            subject = "_" + subject
+        base.append(PurePosixPath(subject, safe_name(t.name)))
     count: dict[str, int] = {}
     for b in base:
         count[str(b).lower()] = count.get(str(b).lower(), 0) + 1
