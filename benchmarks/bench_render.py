@@ -18,7 +18,9 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen, before MuJoCo loads (importing sim sets nothing)
+os.environ.setdefault(
+    "MUJOCO_GL", "egl"
+)  # offscreen, before MuJoCo loads (importing sim sets nothing)
 
 from sim.motion.synthetic import synthetic_motion
 from sim.replay.checks import PointMotion, from_clip

@@ -10,9 +10,13 @@ class MotionDataError(ValueError):
     only this type for malformed input, never a bare IndexError/KeyError/ValueError from deep inside.
     """
 
+    MAX_PROBLEM = 1000  # characters; a hostile token (a 100,000-character name) is cut short
+
     def __init__(self, path: str | None, line: int | None, problem: str):
         self.path = None if path is None else str(path)
         self.line = line
+        if len(problem) > self.MAX_PROBLEM:  # cut to at most MAX_PROBLEM: pickling is stable
+            problem = problem[: self.MAX_PROBLEM - 40] + f"... ({len(problem)} characters)"
         self.problem = problem
         where = self.path or "<input>"
         if line is not None:

@@ -233,3 +233,255 @@ def test_binary_garbage_is_a_clear_error(tmp_path):
     path.write_bytes(bytes(range(256)) * 4)
     with pytest.raises(MotionDataError):
         parse_amc(path, parse_asf(write(tmp_path, "t.asf", ASF)))
+
+
+# ------------------------------------------------------------- hostile input (issue 8, part 2)
+# Each case is the tiny ASF/AMC above with one change; the error must be a MotionDataError naming
+# the file and the line of the change.
+
+HOSTILE_ASF = {
+    "limits without dof": (
+        ASF.replace("    dof rx\n", ""),
+        "limits (0 170)",
+        r"0 dofs but 1 limits",
+    ),
+    "nan in axis": (ASF.replace("axis 0 0 0 XYZ", "axis 0 nan 0 XYZ", 1), "nan", r"non-finite"),
+    "inf in axis": (ASF.replace("axis 0 0 0 XYZ", "axis 0 0 -inf XYZ", 1), "inf", r"non-finite"),
+    "nan root orientation": (
+        ASF.replace("orientation 0 0 0", "orientation nan 0 0"),
+        "orientation nan",
+        r"non-finite value 'nan' in root orientation",
+    ),
+    "inf units length": (ASF.replace("length 0.45", "length inf"), "length inf", r"non-finite"),
+    "tiny units length": (
+        ASF.replace("length 0.45", "length 1e-300"),
+        "length 1e-300",
+        r"units length 1e-300 outside",
+    ),
+    "inf bone length": (ASF.replace("length 5\n", "length inf\n", 1), "length inf", r"non-finite"),
+    "overflowing bone length": (
+        ASF.replace("length 5\n", "length 1e308\n", 1),
+        "length 1e308",
+        r"exceeds 10000 m",
+    ),
+    "nan limit": (ASF.replace("(0 170)", "(nan 170.0)"), "(nan 170.0)", r"non-finite"),
+    "inverted limit": (ASF.replace("(0 170)", "(170 0)"), "(170 0)", r"lower above upper"),
+    "junk after limits": (ASF.replace("(0 170)", "(0 170) x"), "(0 170) x", r"cannot read limits"),
+    "huge axis angle": (
+        ASF.replace("axis 0 0 0 XYZ", "axis 0 0 1e300 XYZ", 1),
+        "1e300",
+        r"exceeds 100000",
+    ),
+    "zero direction": (ASF.replace("direction 0 -1 0", "direction 0 0 0", 1), "begin", r"zero"),
+    "quote in bone name": (
+        ASF.replace("name knee", 'name kn"ee').replace("hip knee", 'hip kn"ee'),
+        'name kn"ee',
+        r"is not of the form",
+    ),
+    "angle bracket and ampersand in bone name": (
+        ASF.replace("name knee", "name <a&b>").replace("hip knee", "hip <a&b>"),
+        "name <a&b>",
+        r"is not of the form",
+    ),
+    "unicode bone name": (
+        ASF.replace("name knee", "name kné").replace("hip knee", "hip kné"),
+        "name kné",
+        r"is not of the form",
+    ),
+    "numeric bone name": (
+        ASF.replace("name knee", "name 12").replace("hip knee", "hip 12"),
+        "name 12",
+        r"is not of the form",
+    ),
+    "reserved bone name": (
+        ASF.replace("name knee", "name floor").replace("hip knee", "hip floor"),
+        "name floor",
+        r"reserved",
+    ),
+    "bone missing from the hierarchy": (
+        ASF.replace("    hip knee\n", ""),
+        "id 2",
+        r"bones not in ':hierarchy': knee",
+    ),
+    "cycle": (ASF.replace("root hip\n    hip knee", "knee hip\n    hip knee"), "id 1", r"cycle"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_ASF))
+def test_hostile_asf_is_refused_on_its_line(tmp_path, case):
+    text, needle, pattern = HOSTILE_ASF[case]
+    path = write(tmp_path, "bad.asf", text)
+    with pytest.raises(MotionDataError, match=pattern) as err:
+        parse_asf(path)
+    assert err.value.path == str(path)
+    # Bone-level problems point at the bone's 'begin' (the line before its 'id').
+    expected = line_of(text, needle) - (1 if needle.startswith("id ") else 0)
+    assert err.value.line == expected, (err.value, expected)
+
+
+def test_radian_asf_bounds_apply_in_radians(tmp_path):
+    text = ASF.replace("angle deg", "angle rad").replace("(0 170)", "(0 3000)")
+    with pytest.raises(MotionDataError, match="exceeds 1745"):
+        parse_asf(write(tmp_path, "t.asf", text))
+
+
+def test_limits_on_one_line_and_limits_after_each_dof_count(tmp_path):
+    one_line = ASF.replace("limits (-90 90)\n           (-90 90)\n", "limits (-90 90) (-90 90)\n")
+    skel = parse_asf(write(tmp_path, "t.asf", one_line))
+    np.testing.assert_array_equal(skel.bone("hip").limits, [[-90, 90]] * 3)
+    too_few = ASF.replace("           (-90 90)\n           (-90 90)\n", "")
+    with pytest.raises(MotionDataError, match="3 dofs but 1 limits") as err:
+        parse_asf(write(tmp_path, "few.asf", too_few))
+    assert err.value.line == line_of(too_few, "limits (-90 90)")
+
+
+def test_deep_or_huge_skeletons_are_refused_before_building_a_model(tmp_path):
+    from sim.acclaim.reader import MAX_DEPTH
+
+    n = MAX_DEPTH + 1
+    blocks = "".join(
+        f"  begin\n     name b{i}\n     direction 0 -1 0\n     length 0.1\n  end\n"
+        for i in range(n)
+    )
+    chain = "".join(f"    {'root' if i == 0 else f'b{i - 1}'} b{i}\n" for i in range(n))
+    text = ASF.split(":bonedata")[0] + ":bonedata\n" + blocks + ":hierarchy\n  begin\n" + chain
+    text += "  end\n"
+    path = write(tmp_path, "deep.asf", text)
+    with pytest.raises(MotionDataError, match=f"more than {MAX_DEPTH} bones deep") as err:
+        parse_asf(path)
+    assert err.value.line == line_of(text, f"name b{MAX_DEPTH}") - 1
+
+
+def test_a_chain_at_the_depth_limit_builds_a_mujoco_model(tmp_path):
+    import mujoco
+
+    from sim.acclaim.reader import MAX_DEPTH
+    from sim.model.humanoid import build_mjcf
+
+    n = MAX_DEPTH
+    blocks = "".join(
+        f"  begin\n     name b{i}\n     direction 0 -1 0\n     length 0.1\n     dof rx\n  end\n"
+        for i in range(n)
+    )
+    chain = "".join(f"    {'root' if i == 0 else f'b{i - 1}'} b{i}\n" for i in range(n))
+    text = ASF.split(":bonedata")[0] + ":bonedata\n" + blocks + ":hierarchy\n  begin\n" + chain
+    skel = parse_asf(write(tmp_path, "deep.asf", text + "  end\n"))
+    model = mujoco.MjModel.from_xml_string(build_mjcf(skel))
+    assert model.nbody == n + 2  # world, root, one per bone
+
+
+def test_model_name_is_escaped_and_in_memory_bad_names_are_refused(tmp_path):
+    import dataclasses
+
+    import mujoco
+
+    from sim.model.humanoid import build_mjcf
+
+    skel = parse_asf(write(tmp_path, "t.asf", ASF.replace(":name tiny", ':name a"<b>&c')))
+    model = mujoco.MjModel.from_xml_string(build_mjcf(skel))
+    assert model.nbody == 4
+    bad = dataclasses.replace(skel.bones[1], name='x"y')
+    with pytest.raises(MotionDataError, match="is not of the form"):
+        build_mjcf(dataclasses.replace(skel, bones=(skel.bones[0], bad)))
+
+
+def amc_with(text_before: str, text_after: str) -> str:
+    assert text_before in AMC
+    return AMC.replace(text_before, text_after)
+
+
+HOSTILE_AMC = {
+    "frame number >= 2^63": (amc_with("\n2\n", "\n9223372036854775808\n"), "9223372036854775808"),
+    "frame number of 5000 digits": (amc_with("\n2\n", "\n" + "7" * 5000 + "\n"), "7777"),
+    "unicode digit frame number": (amc_with("\n2\n", "\n²\n"), "²"),
+    "first frame number unicode": (amc_with("\n1\n", "\n١\n"), "١"),
+    "nan angle": (amc_with("knee 21", "knee nan"), "knee nan"),
+    "inf translation": (amc_with("root 0 30 1 0 0 0", "root 0 inf 1 0 0 0"), "root 0 inf"),
+    "1e308 translation": (amc_with("root 0 30 1 0 0 0", "root 0 1e308 1 0 0 0"), "1e308"),
+    "1e300 angle": (amc_with("hip 12 0 0", "hip 12 1e300 0"), "1e300"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_AMC))
+def test_hostile_amc_is_refused_on_its_line(tmp_path, case):
+    text, needle = HOSTILE_AMC[case]
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    amc = write(tmp_path, "t.amc", text)
+    with pytest.raises(MotionDataError) as err:
+        parse_amc(amc, skel)
+    assert err.value.path == str(amc)
+    assert err.value.line == line_of(text, needle), err.value
+
+
+def test_1e308_root_translation_in_every_frame_is_refused_on_the_first_line(tmp_path):
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    text = re.sub(r"root 0 30", "root 1e308 30", AMC)
+    amc = write(tmp_path, "t.amc", text)
+    with pytest.raises(MotionDataError, match="exceeds") as err:
+        parse_amc(amc, skel)
+    assert err.value.line == line_of(text, "root 1e308")
+
+
+def test_frames_without_root_or_with_only_dofless_bones_are_refused(tmp_path):
+    asf = ASF.replace("    dof rx\n    limits (0 170)\n", "")  # knee: no dofs
+    skel = parse_asf(write(tmp_path, "t.asf", asf))
+    no_root = re.sub(r"root [^\n]*\n", "", AMC).replace("knee 20\n", "").replace("knee 21\n", "")
+    no_root = no_root.replace("knee 22\n", "")
+    path = write(tmp_path, "noroot.amc", no_root)
+    with pytest.raises(MotionDataError, match="no 'root' line") as err:
+        parse_amc(path, skel)
+    assert err.value.line == line_of(no_root, "1")
+    only_dofless = ":FULLY-SPECIFIED\n:DEGREES\n1\nknee\n2\nknee\n"
+    path = write(tmp_path, "dofless.amc", only_dofless)
+    with pytest.raises(MotionDataError, match="no 'root' line") as err:
+        parse_amc(path, skel)
+    assert err.value.line == 3
+
+
+def test_lone_cr_line_ends_count_as_lines(tmp_path):
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    text = AMC.replace("knee 22", "knee 2x2")
+    path = tmp_path / "cr.amc"
+    path.write_bytes(text.replace("\n", "\r").encode())
+    with pytest.raises(MotionDataError, match="non-numeric") as err:
+        parse_amc(path, skel)
+    assert err.value.line == line_of(text, "knee 2x2")
+    path.write_bytes(AMC.replace("\n", "\r").encode())
+    np.testing.assert_array_equal(
+        parse_amc(path, skel).root, parse_amc(write(tmp_path, "lf.amc", AMC), skel).root
+    )
+
+
+def test_unicode_or_signed_frame_numbers_mid_file_are_refused_on_their_line(tmp_path):
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    for number in ("٣", "+3", "3_0"):
+        text = amc_with("\n3\n", f"\n{number}\n")
+        amc = write(tmp_path, "t.amc", text)
+        with pytest.raises(MotionDataError) as err:
+            parse_amc(amc, skel)
+        assert err.value.line == line_of(text, number), (number, err.value)
+
+
+def test_too_many_bones_are_refused_at_the_first_extra_bone(tmp_path):
+    from sim.acclaim.reader import MAX_BONES
+
+    blocks = "".join(
+        f"  begin\n     name b{i}\n     direction 0 -1 0\n     length 0.1\n  end\n"
+        for i in range(MAX_BONES + 5)
+    )
+    text = ASF.split(":bonedata")[0] + ":bonedata\n" + blocks + ":hierarchy\n  begin\n  end\n"
+    with pytest.raises(MotionDataError, match=f"more than {MAX_BONES} bones") as err:
+        parse_asf(write(tmp_path, "many.asf", text))
+    # The 'begin' line of the first extra bone (1-based: the 0-based index of its name line).
+    assert err.value.line == text.splitlines().index(f"     name b{MAX_BONES}")
+
+
+def test_huge_tokens_give_a_bounded_message_that_survives_pickling(tmp_path):
+    import pickle
+
+    skel = parse_asf(write(tmp_path, "t.asf", ASF))
+    text = amc_with("hip 11 0 0", "x" * 100_000 + " 11 0 0")
+    with pytest.raises(MotionDataError, match="unknown bone") as err:
+        parse_amc(write(tmp_path, "t.amc", text), skel)
+    assert len(err.value.problem) <= MotionDataError.MAX_PROBLEM
+    assert str(pickle.loads(pickle.dumps(err.value))) == str(err.value)

@@ -24,13 +24,6 @@ PACKAGES = ("sim", "sidql")
 LAZY_ALLOWED = {"torch", "ray", "matplotlib", "imageio"}
 LAZY_ALLOWED_MODULES = {"sidql.learning.dqn", "sidql.learning.policy"}
 
-#: Modules still being reworked by a parallel change (issue 9, learning and hostile-input items);
-#: their function-level imports are not checked yet. Remove entries as those changes land.
-PENDING = {
-    "sim.motion.dataset",
-}
-#: Cycles being broken by that parallel change; any other cycle fails. Remove when it lands.
-PENDING_CYCLES: list[list[str]] = []
 
 
 def project_modules() -> dict[str, Path]:
@@ -141,7 +134,7 @@ def test_sim_never_imports_sidql():
 
 
 def test_no_import_cycles():
-    found = [c for c in cycles(import_graph()) if c not in PENDING_CYCLES]
+    found = cycles(import_graph())
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
 
 
@@ -165,8 +158,6 @@ def function_level_imports():
 def test_imports_inside_functions_are_only_commented_lazy_heavy_dependencies():
     bad = []
     for mod, node, line in function_level_imports():
-        if mod in PENDING:
-            continue
         names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module]
         roots = {(n or "").split(".")[0] for n in names}
         relative = isinstance(node, ast.ImportFrom) and node.level > 0
@@ -176,11 +167,6 @@ def test_imports_inside_functions_are_only_commented_lazy_heavy_dependencies():
         elif "#" not in line:
             bad.append(f"{mod}:{node.lineno}: {ast.unparse(node)} (say why it is lazy)")
     assert not bad, "\n".join(bad)
-
-
-def test_pending_modules_exist():
-    """Stale allow-list entries would hide nothing but mislead: every one names a module."""
-    assert PENDING <= set(MODULES)
 
 
 def run_python(code: str) -> str:

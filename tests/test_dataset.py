@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -115,3 +118,220 @@ def test_atomic_writes_get_ordinary_file_permissions(tmp_path):
         os.umask(mask)
     assert (tmp_path / "a.bin").read_bytes() == b"data"
     assert (tmp_path / "a.bin").stat().st_mode & 0o777 == 0o644
+
+
+# ---------------------------------------------------------------- hostile layouts (issue 8, part 3)
+
+
+def test_output_paths_are_safe_and_unique(tmp_path):
+    from pathlib import PurePosixPath
+
+    from sim.motion.dataset import Trial, output_paths
+
+    def trial(rel, subject, name):
+        return Trial(subject=subject, name=name, asf=Path("x.asf"), amc=tmp_path / rel)
+
+    trials = [
+        trial("x/.._01.amc", "..", ".._01"),
+        trial("x/._01.amc", ".", "._01"),
+        trial("a/09/09_06.amc", "09", "09_06"),
+        trial("b/09/09_06.amc", "09", "09_06"),
+        trial("c/09/09_06.AMC", "09", "09_06"),
+        trial("d/09/09_07.amc", "09", "09_07"),
+        trial("e/09/09_07.amc", "09", "09_07"),
+        trial("f/s/s_<a\\b>.amc", "s", "s_<a\\b>"),
+        trial("g/index.json_01.amc", "index.json", "index.json_01"),
+        trial("h/" + "x" * 300 + "_01.amc", "x" * 300, "x" * 300 + "_01"),
+    ]
+    paths = output_paths(trials, tmp_path)
+    assert len({str(p).lower() for p in paths}) == len(trials)
+    for p in paths:
+        assert len(p.parts) == 2 and not p.is_absolute()
+        assert all(part not in (".", "..") and not part.startswith(".") for part in p.parts)
+        assert all(
+            set(part) <= set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-")
+            for part in p.parts
+        )
+    assert paths[0] == PurePosixPath("_../_.._01.npz")
+    assert paths[7] == PurePosixPath("s/s__a_b_.npz")
+    assert paths[8].parts[0] == "_index.json"  # never the folder that would shadow index.json
+    assert all(len(part) <= 104 for part in paths[9].parts)  # cut, with a hash: fits a file system
+    # Colliding trials get different hash suffixes; a trial without a twin keeps its plain name.
+    assert {p.parent.name for p in paths[2:7]} == {"09"}
+    assert all(re.fullmatch(r"09_0[67]-[0-9a-f]{8}\.npz", p.name) for p in paths[2:7])
+    lone = output_paths([trials[2]], tmp_path)
+    assert lone == [PurePosixPath("09/09_06.npz")]
+
+
+def test_dataset_keeps_dotdot_subjects_inside_out_and_twins_apart(tmp_path, cmu_dir):
+    src, out = tmp_path / "src", tmp_path / "deep" / "out"
+    (src / "x").mkdir(parents=True)
+    shutil.copy(cmu_dir / "02" / "02.asf", src / "x" / "02.asf")  # the folder's only ASF
+    shutil.copy(cmu_dir / "02" / "02_01.amc", src / "x" / ".._01.amc")
+    lines = (cmu_dir / "09" / "09_06.amc").read_text().splitlines()
+    frames_b = 120  # b's copy is shorter, so each output can be matched to its input
+    body_start = next(i for i, ln in enumerate(lines) if ln.strip() == "1")
+    short = lines[: body_start + frames_b * (1 + 29)]
+    for sub, text in (("a", "\n".join(lines)), ("b", "\n".join(short))):
+        (src / sub / "09").mkdir(parents=True)
+        shutil.copy(cmu_dir / "09" / "09.asf", src / sub / "09" / "09.asf")
+        (src / sub / "09" / "09_06.amc").write_text(text + "\n")
+    s = ingest_directory(src, out, workers=1, progress=False)
+    assert not s.skipped, s.skipped
+    written = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.npz"))
+    assert all(w.startswith("deep/out/") for w in written), written
+    index = json.loads((out / "index.json").read_text())
+    files = {t["amc"]: t["file"] for t in index["trials"]}
+    assert len(files) == 3 and len(set(files.values())) == 3
+    assert files[str(src / "x" / ".._01.amc")] == "_../_.._01.npz"
+    frames = {amc: load_npz(out / f).n_frames for amc, f in files.items()}
+    assert frames[str(src / "b" / "09" / "09_06.amc")] == (frames_b + 3) // 4
+    assert frames[str(src / "a" / "09" / "09_06.amc")] > frames[str(src / "b" / "09" / "09_06.amc")]
+
+
+KILL_SCRIPT = """
+import multiprocessing as mp, sys, threading, time
+from sim.motion.dataset import ingest_directory
+
+def report():
+    while len(mp.active_children()) < 2:
+        time.sleep(0.01)
+    print(" ".join(str(p.pid) for p in mp.active_children()), flush=True)
+
+threading.Thread(target=report, daemon=True).start()
+ingest_directory(sys.argv[1], sys.argv[2], workers=2, progress=False)
+print("finished", flush=True)
+"""
+
+
+def _running(pid: int) -> bool:
+    """True while ``pid`` exists and is not a zombie (an exited process nobody reaped yet)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_workers_exit_when_the_dataset_parent_is_killed(tmp_path, cmu_dir):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    src = tmp_path / "src" / "01"
+    src.mkdir(parents=True)
+    shutil.copy(cmu_dir / "01" / "01.asf", src / "01.asf")
+    for k in range(40):  # ~40 x 2,751 frames: seconds of work, so the kill lands mid-batch
+        (src / f"01_{k:02d}.amc").symlink_to(cmu_dir / "01" / "01_01.amc")
+    repo = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(repo), OMP_NUM_THREADS="1")
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILL_SCRIPT, str(tmp_path / "src"), str(tmp_path / "out")],
+        stdout=subprocess.PIPE,
+        env=env,
+        text=True,
+    )
+    try:
+        workers = [int(p) for p in proc.stdout.readline().split()]
+        assert len(workers) == 2, workers
+        assert proc.poll() is None, "the batch finished before the kill; give it more work"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 20
+        while any(_running(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        alive = [w for w in workers if _running(w)]
+        assert not alive, f"workers {alive} outlived their parent"
+    finally:
+        proc.kill()
+        for w in workers if "workers" in locals() else []:
+            if _running(w):
+                os.kill(w, signal.SIGKILL)
+    assert not list((tmp_path / "out").rglob("*.tmp")), "a worker left a partial file"
+    assert not (tmp_path / "out" / "index.json").exists()
+
+
+# ----------------------------------------------- nothing non-finite leaves the ingest (issue 8, 2)
+
+
+def test_cli_ingest_and_dataset_refuse_a_nan_axis_naming_its_line(tmp_path, cmu_dir, capsys):
+    text = (cmu_dir / "02" / "02.asf").read_text()
+    bad = text.replace("axis 0 0 20  XYZ", "axis 0 nan 20  XYZ", 1)
+    assert bad != text
+    src = tmp_path / "src" / "02"
+    src.mkdir(parents=True)
+    (src / "02.asf").write_text(bad)
+    shutil.copy(cmu_dir / "02" / "02_01.amc", src / "02_01.amc")
+    code = main(
+        ["ingest", str(src / "02.asf"), str(src / "02_01.amc"), "--out", str(tmp_path / "x.npz")]
+    )
+    err = capsys.readouterr().err
+    line = next(i for i, ln in enumerate(bad.splitlines(), 1) if "nan" in ln)
+    assert code == 2 and f"02.asf:{line}: non-finite value 'nan' in axis" in err
+    assert not (tmp_path / "x.npz").exists()
+    s = ingest_directory(tmp_path / "src", tmp_path / "out", workers=1, progress=False)
+    assert not s.written and len(s.skipped) == 1 and "non-finite" in s.skipped[0]["error"]
+
+
+def test_the_velocity_stage_refuses_non_finite_qpos_naming_the_source(walk_clip):
+    from sim.model.humanoid import subject_model
+    from sim.motion.ingest import clip_from_qpos
+
+    asf = Path(walk_clip.source).with_name("02.asf")
+    _, model = subject_model(asf)
+    qpos = walk_clip.qpos.copy()
+    qpos[3, 0] = np.nan
+    with pytest.raises(MotionDataError, match=r"walk\.amc: non-finite joint positions"):
+        clip_from_qpos(
+            model,
+            walk_clip.names,
+            walk_clip.parents,
+            qpos,
+            source_fps=30,
+            fps=30,
+            source="walk.amc",
+        )
+    qpos[3, 0] = 1e308  # finite, but its differences overflow
+    with pytest.raises(MotionDataError, match=r"walk\.amc: non-finite"):
+        clip_from_qpos(
+            model,
+            walk_clip.names,
+            walk_clip.parents,
+            qpos,
+            source_fps=30,
+            fps=30,
+            source="walk.amc",
+        )
+
+
+def test_retarget_to_the_humanoid_refuses_zero_length_legs(tmp_path, cmu_dir):
+    from sim.motion.ingest import load_motion
+
+    text = (cmu_dir / "02" / "02.asf").read_text()
+    lines = text.splitlines()
+    for bone in ("lfemur", "ltibia", "rfemur", "rtibia"):
+        i = lines.index(f"     name {bone}")
+        k = next(j for j in range(i, i + 5) if lines[j].strip().startswith("length"))
+        lines[k] = "     length 0"
+    (tmp_path / "02.asf").write_text("\n".join(lines) + "\n")
+    with pytest.raises(MotionDataError, match="legs 0 m long") as err:
+        load_motion(tmp_path / "02.asf", cmu_dir / "02" / "02_01.amc", skeleton="humanoid")
+    assert err.value.line is not None
+
+
+def test_subject_models_follow_a_same_size_rewrite_of_the_asf(tmp_path, cmu_dir):
+    from sim.model.humanoid import subject_model
+
+    text = (cmu_dir / "02" / "02.asf").read_text()
+    path = tmp_path / "02.asf"
+    path.write_text(text)
+    first = subject_model(path)[0].bone("lfemur").length
+    changed = text.replace("length 7.59371", "length 8.59371", 1)
+    assert len(changed) == len(text) and changed != text
+    st = path.stat()
+    path.write_text(changed)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))  # same size and mtime: only content differs
+    assert subject_model(path)[0].bone("lfemur").length > first

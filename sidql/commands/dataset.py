@@ -13,7 +13,9 @@ def register(sub) -> None:
         help="ingest every trial under a folder of CMU files",
         description="Ingest every SS_TT.amc (with SS.asf beside it) under DIR in parallel worker "
         "processes: one .npz per trial under OUT/<subject>/, plus OUT/index.json. Bad files are "
-        "skipped and listed; every good result is kept; every file is written atomically.",
+        "skipped and listed; every good result is kept; every file is written atomically. Output "
+        "names are made safe (never outside OUT) and unique (same-named trials from different "
+        "folders get a hash suffix; index.json maps each file to its input).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("dir", help="folder of CMU files, e.g. ../shared/cmu")

@@ -6,10 +6,20 @@ problem; nothing deeper leaks out.
 
 Length units: Acclaim writes ``:units length L``; CMU's convention is
 ``metres = value * 0.0254 / L`` (values are inches scaled by L = 0.45).
+
+Hostile input: every number must be finite and within generous physical bounds (lengths and root
+translations at most :data:`MAX_METRES`, angles at most :data:`MAX_DEGREES` in magnitude, joint
+limits ``lo <= hi``); frame numbers are ASCII digits (at most 12); bone names follow
+:data:`BONE_NAME_GRAMMAR` (an ASCII identifier: a letter or ``_``, then letters, digits, ``_ . -``;
+at most 64 characters), so a name can never break the generated MJCF XML or be mistaken for a
+frame number; names the generated model uses itself (:data:`RESERVED_NAMES`) are refused.
+Lines are split as ``str.splitlines`` splits them (LF, CRLF, lone CR, ...); error line numbers
+count the same way.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import warnings
@@ -23,6 +33,16 @@ from sim.errors import MotionDataError, MotionDataWarning
 INCH = 0.0254  # [m]
 ROTATION_DOFS = ("rx", "ry", "rz")
 ROOT_CHANNELS = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+MAX_METRES = 1e4  # bound on a bone length or root translation [m]
+MAX_DEGREES = 1e5  # bound on any angle [deg] (real CMU motions reach ~1,500)
+MAX_BONES = 1000
+MAX_DEPTH = 200  # bones on the longest root-to-leaf chain (the MJCF nests one body per bone)
+UNITS_LENGTH_RANGE = (1e-6, 1e6)  # accepted ``:units length`` values
+BONE_NAME_GRAMMAR = r"[A-Za-z_][A-Za-z0-9_.\-]{0,63}"
+RESERVED_NAMES = ("root", "world", "floor")  # the ASF root; MuJoCo's world body; the model's floor
+_BONE_NAME_RE = re.compile(BONE_NAME_GRAMMAR + r"\Z")
+_FRAME_NUMBER_RE = re.compile(r"[0-9]{1,12}\Z")
 
 
 @dataclass(frozen=True)
@@ -38,6 +58,7 @@ class Bone:
         axis_order: rotation order of ``axis``, e.g. ``"XYZ"`` (X applied first).
         dofs: rotational degrees of freedom in AMC value order, e.g. ``("rx", "ry", "rz")``.
         limits: (len(dofs), 2) joint limits [deg].
+        line: the line of the bone's ``begin`` in its file (None if built in memory).
     """
 
     name: str
@@ -48,6 +69,7 @@ class Bone:
     axis_order: str
     dofs: tuple[str, ...]
     limits: np.ndarray
+    line: int | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)
@@ -122,6 +144,21 @@ class Motion:
 # ----------------------------------------------------------------------------------------- ASF
 
 
+def check_bone_name(name: str) -> str | None:
+    """Why ``name`` is not an acceptable bone name, or None when it is (see the module docstring)."""
+    if not _BONE_NAME_RE.match(name):
+        return f"bone name {name!r} is not of the form {BONE_NAME_GRAMMAR}"
+    if name.lower() in RESERVED_NAMES:
+        return f"bone name {name!r} is reserved ({', '.join(RESERVED_NAMES)})"
+    return None
+
+
+def _read_lines(path: str) -> list[str]:
+    """The file's lines, split as ``str.splitlines`` does (LF, CRLF, lone CR, and the other
+    Unicode line breaks); error line numbers count the same way."""
+    return _read_text(path).splitlines()
+
+
 def _read_text(path: str | os.PathLike) -> str:
     try:
         data = Path(path).read_bytes()
@@ -135,12 +172,30 @@ def _read_text(path: str | os.PathLike) -> str:
         return data.decode("latin-1")
 
 
-def _floats(tokens: list[str], path: str, line: int, what: str) -> np.ndarray:
+def _float_list(
+    tokens: list[str], path: str, line: int, what: str, bound: float | list | None = None
+) -> list[float]:
+    """Finite numbers of ``tokens``, each at most ``bound`` (one for all, or one per token) in
+    magnitude. Plain Python: this runs once per line on the checked AMC path."""
     try:
-        return np.array([float(t) for t in tokens], dtype=np.float64)
+        values = [float(t) for t in tokens]
     except ValueError:
         bad = next(t for t in tokens if not _is_float(t))
         raise MotionDataError(path, line, f"non-numeric value {bad!r} in {what}") from None
+    bounds = [bound] * len(values) if bound is None or isinstance(bound, (int, float)) else bound
+    for t, v, b in zip(tokens, values, bounds, strict=True):
+        if not math.isfinite(v):
+            raise MotionDataError(path, line, f"non-finite value {t!r} in {what}")
+        if b is not None and abs(v) > b:
+            raise MotionDataError(path, line, f"value {t} in {what} exceeds {b:g} in magnitude")
+    return values
+
+
+def _floats(
+    tokens: list[str], path: str, line: int, what: str, bound: float | None = None
+) -> np.ndarray:
+    """:func:`_float_list` as an array."""
+    return np.array(_float_list(tokens, path, line, what, bound), dtype=np.float64)
 
 
 def _is_float(token: str) -> bool:
@@ -164,7 +219,7 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
         MotionDataError: missing section, duplicate or unknown bone, bad numbers, hierarchy cycle...
     """
     path = str(path)
-    lines = _read_text(path).splitlines()
+    lines = _read_lines(path)
     sections: dict[str, int] = {}
     units = {"length": 1.0, "angle": "deg"}
     root = {"order": ROOT_CHANNELS, "axis": "XYZ", "orientation": np.zeros(3)}
@@ -195,8 +250,11 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
         if section == "units":
             if len(tokens) >= 2 and tokens[0] == "length":
                 value = _floats(tokens[1:2], path, ln, "units length")[0]
-                if value <= 0:
-                    raise MotionDataError(path, ln, f"units length must be positive, got {value}")
+                lo, hi = UNITS_LENGTH_RANGE
+                if not lo <= value <= hi:
+                    raise MotionDataError(
+                        path, ln, f"units length {tokens[1]} outside [{lo:g}, {hi:g}]"
+                    )
                 units["length"] = value
             elif len(tokens) >= 2 and tokens[0] == "angle":
                 unit = tokens[1].lower()
@@ -219,9 +277,13 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
             elif key == "orientation":
                 if len(tokens) != 4:
                     raise MotionDataError(path, ln, "root orientation needs 3 values")
-                root["orientation"] = _floats(tokens[1:], path, ln, "root orientation")
+                root["orientation"] = _floats(
+                    tokens[1:], path, ln, "root orientation", _angle_bound(units)
+                )
         elif section == "bonedata":
-            pending_limits, bone = _bone_line(tokens, path, ln, bone, raw_bones, pending_limits)
+            pending_limits, bone = _bone_line(
+                tokens, path, ln, bone, raw_bones, pending_limits, _angle_bound(units)
+            )
         elif section == "hierarchy":
             if tokens[0] in ("begin", "end"):
                 continue
@@ -245,9 +307,18 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
     for bname in order:
         b = by_name[bname]
         d = b["direction"]
-        norm = np.linalg.norm(d)
-        if not np.isfinite(norm) or norm < 1e-9:
+        scale = np.abs(d).max()
+        if scale < 1e-300:
             raise MotionDataError(path, b["line"], f"bone {bname!r} has a zero direction")
+        d = d / scale
+        norm = np.linalg.norm(d)
+        length = float(b["length"] * to_m)
+        if not length <= MAX_METRES:
+            raise MotionDataError(
+                path,
+                b["length_line"],
+                f"bone {bname!r} length {length:g} m exceeds {MAX_METRES:g} m",
+            )
         axis = b["axis"] if in_deg else np.rad2deg(b["axis"])
         limits = b["limits"] if in_deg else np.rad2deg(b["limits"])
         bones.append(
@@ -255,11 +326,12 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
                 name=bname,
                 parent=parent_of[bname],
                 direction=d / norm,
-                length=float(b["length"] * to_m),
+                length=length,
                 axis=axis,
                 axis_order=b["axis_order"],
                 dofs=b["dofs"],
                 limits=limits,
+                line=b["line"],
             )
         )
     orientation = root["orientation"] if in_deg else np.rad2deg(root["orientation"])
@@ -282,7 +354,12 @@ def _axis_order(tokens: list[str], path: str, ln: int) -> str:
     return order
 
 
-def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits):
+def _angle_bound(units: dict) -> float:
+    """:data:`MAX_DEGREES` in the file's angle unit."""
+    return MAX_DEGREES if units["angle"] == "deg" else float(np.deg2rad(MAX_DEGREES))
+
+
+def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits, angle_bound):
     """Consume one line of ``:bonedata``; returns (limits still expected, current bone)."""
     key = tokens[0].lower()
     if bone is not None and pending_limits and key.startswith("("):
@@ -302,6 +379,9 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits):
     elif key == "name":
         if len(tokens) != 2:
             raise MotionDataError(path, ln, "bone name must be one word")
+        problem = check_bone_name(tokens[1])
+        if problem:
+            raise MotionDataError(path, ln, problem)
         bone["name"] = tokens[1]
     elif key == "direction":
         if len(tokens) != 4:
@@ -311,12 +391,13 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits):
         if len(tokens) != 2:
             raise MotionDataError(path, ln, "length needs 1 value")
         bone["length"] = _floats(tokens[1:], path, ln, "length")[0]
+        bone["length_line"] = ln
         if not bone["length"] >= 0:
             raise MotionDataError(path, ln, f"negative bone length {tokens[1]}")
     elif key == "axis":
         if len(tokens) != 5:
             raise MotionDataError(path, ln, "axis needs 3 angles and an order, e.g. '0 0 20 XYZ'")
-        bone["axis"] = _floats(tokens[1:4], path, ln, "axis")
+        bone["axis"] = _floats(tokens[1:4], path, ln, "axis", angle_bound)
         bone["axis_order"] = _axis_order(tokens[4:5], path, ln)
     elif key == "dof":
         dofs = tuple(t.lower() for t in tokens[1:])
@@ -329,7 +410,10 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits):
             raise MotionDataError(path, ln, f"repeated dof in {' '.join(dofs)}")
         bone["dofs"] = dofs
     elif key == "limits":
+        if bone["limits_raw"]:
+            raise MotionDataError(path, ln, "a second 'limits' in one bone block")
         bone["limits_raw"].append((ln, " ".join(tokens[1:])))
+        bone["angle_bound"] = angle_bound
         return max(len(bone["dofs"]) - 1, 0), bone
     elif key in ("bodymass", "cofmass"):
         pass
@@ -345,19 +429,27 @@ def _finish_bone(bone: dict, path: str, raw_bones: list[dict]) -> None:
             raise MotionDataError(path, ln, f"bone block has no '{key}'")
     if bone["name"] == "root":
         raise MotionDataError(path, ln, "a bone may not be called 'root'")
+    if len(raw_bones) >= MAX_BONES:  # also bounds the quadratic duplicate check below
+        raise MotionDataError(path, ln, f"more than {MAX_BONES} bones")
     if any(b["name"] == bone["name"] for b in raw_bones):
         raise MotionDataError(path, ln, f"duplicate bone {bone['name']!r}")
     bone.setdefault("axis", np.zeros(3))
     limits = []
     for lln, text in bone["limits_raw"]:
         found = _LIMIT_RE.findall(text)
-        if not found:
+        if not found or _LIMIT_RE.sub("", text).strip():
             raise MotionDataError(path, lln, f"cannot read limits {text!r}; expected '(lo hi)'")
         for lo, hi in found:
-            limits.append(_floats([lo, hi], path, lln, "limits"))
-    if bone["dofs"] and limits and len(limits) != len(bone["dofs"]):
+            pair = _floats([lo, hi], path, lln, "limits", bone["angle_bound"])
+            if pair[0] > pair[1]:
+                raise MotionDataError(path, lln, f"limits ({lo} {hi}): lower above upper")
+            limits.append(pair)
+    if limits and len(limits) != len(bone["dofs"]):
+        lln = bone["limits_raw"][0][0]
         raise MotionDataError(
-            path, ln, f"bone {bone['name']!r} has {len(bone['dofs'])} dofs but {len(limits)} limits"
+            path,
+            lln,
+            f"bone {bone['name']!r} has {len(bone['dofs'])} dofs but {len(limits)} limits",
         )
     if not limits:
         limits = [np.array([-180.0, 180.0])] * len(bone["dofs"])
@@ -385,7 +477,9 @@ def _hierarchy_parents(hierarchy, by_name, path) -> dict[str, str]:
             parent_of[c] = parent
     missing = [n for n in by_name if n not in parent_of]
     if missing:
-        raise MotionDataError(path, None, f"bones not in ':hierarchy': {', '.join(missing)}")
+        raise MotionDataError(
+            path, by_name[missing[0]]["line"], f"bones not in ':hierarchy': {', '.join(missing)}"
+        )
     return parent_of
 
 
@@ -394,15 +488,22 @@ def _topological(parent_of: dict[str, str], by_name: dict, path: str) -> list[st
     children: dict[str, list[str]] = {}
     for b in by_name:  # file order
         children.setdefault(parent_of[b], []).append(b)
-    order, stack = [], list(reversed(children.get("root", [])))
+    order, stack = [], [(b, 1) for b in reversed(children.get("root", []))]
     while stack:
-        b = stack.pop()
+        b, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise MotionDataError(
+                path, by_name[b]["line"], f"bone {b!r} is more than {MAX_DEPTH} bones deep"
+            )
         order.append(b)
-        stack.extend(reversed(children.get(b, [])))
+        stack.extend((c, depth + 1) for c in reversed(children.get(b, [])))
     if len(order) != len(by_name):
-        cyclic = sorted(set(by_name) - set(order))
+        seen = set(order)
+        cyclic = [b for b in by_name if b not in seen]
         raise MotionDataError(
-            path, None, f"hierarchy cycle: bones not reachable from root: {', '.join(cyclic)}"
+            path,
+            by_name[cyclic[0]]["line"],
+            f"hierarchy cycle: bones not reachable from root: {', '.join(sorted(cyclic))}",
         )
     return order
 
@@ -425,7 +526,7 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
             no frames...
     """
     path = str(path)
-    lines = _read_text(path).splitlines()
+    lines = _read_lines(path)
     in_deg = skeleton.angles_in_degrees
     body_start = None
     for i, raw in enumerate(lines):
@@ -445,13 +546,23 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
         raise MotionDataError(path, None, "no frames")
     layout = {b.name: len(b.dofs) for b in skeleton.bones}
     layout["root"] = 6
+    # Bounds in the file's units: |translation| <= MAX_METRES, |angle| <= MAX_DEGREES.
+    bounds = {
+        n: np.full(k, MAX_DEGREES if in_deg else np.deg2rad(MAX_DEGREES)) for n, k in layout.items()
+    }
+    for c in ("tx", "ty", "tz"):
+        bounds["root"][skeleton.root_order.index(c)] = MAX_METRES / skeleton.length_to_metres
     parsed = _parse_frames_fast(lines, body_start, layout)
+    if parsed is not None and not _within(parsed[1], bounds):
+        parsed = None  # the checked parser names the offending line
     if parsed is None:
-        parsed = _parse_frames_checked(lines, body_start, layout, path, strict)
+        parsed = _parse_frames_checked(lines, body_start, layout, path, strict, bounds)
     first, columns, notes = parsed if len(parsed) == 3 else (*parsed, ())
+    if "root" not in columns:  # unreachable: both parsers check
+        raise MotionDataError(path, None, "no root line")
     for note in notes:
         warnings.warn(note, MotionDataWarning, stacklevel=2)
-    T = len(next(iter(columns.values())))
+    T = len(columns["root"])
     root = np.asarray(columns.pop("root"), dtype=np.float64).reshape(T, 6)
     root = root[:, [skeleton.root_order.index(c) for c in ROOT_CHANNELS]]
     root[:, :3] *= skeleton.length_to_metres
@@ -465,9 +576,27 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
     if not in_deg:
         root[:, 3:] = np.rad2deg(root[:, 3:])
         angles = {k: np.rad2deg(v) for k, v in angles.items()}
-    if not (np.isfinite(root).all() and all(np.isfinite(v).all() for v in angles.values())):
-        raise MotionDataError(path, None, "non-finite value (nan or inf) in the motion")
+    # Finite: every parsed value passed _within (finite, bounded), and rad2deg of a bounded value
+    # is finite; the zeros filled in for unmentioned bones are too.
     return Motion(path=path, root=root, angles=angles, first_frame=first, notes=tuple(notes))
+
+
+def _within(columns: dict, bounds: dict) -> bool:
+    """Every value finite and within its channel's bound."""
+    for name, v in columns.items():  # min/max reduce without temporaries; nan propagates
+        if not len(v):
+            continue
+        b = bounds[name]
+        if name == "root":  # per channel: translations and angles differ
+            if not ((v.max(axis=0) <= b).all() and (v.min(axis=0) >= -b).all()):
+                return False
+        elif not (v.max() <= b[0] and v.min() >= -b[0]):
+            return False
+    return True
+
+
+def _is_frame_number(token: str) -> bool:
+    return _FRAME_NUMBER_RE.match(token) is not None
 
 
 def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
@@ -479,7 +608,7 @@ def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
     body = lines[start:]
     while body and not body[-1].strip():
         body.pop()
-    if not body or not body[0].strip().isdigit():
+    if not body or not _is_frame_number(body[0].strip()):
         return None
     frame_layout = []
     for raw in body[1:]:
@@ -493,14 +622,19 @@ def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
         not frame_layout
         or len(body) % L
         or len(set(names)) != len(names)
+        or "root" not in names
         or any(layout.get(n) != k for n, k in frame_layout)
     ):
         return None
     T = len(body) // L
     first = int(body[0])
+    number_lines = body[0::L]
+    digits = "".join(number_lines)
+    if not (digits.isascii() and digits.replace(" ", "").replace("\t", "").isdigit()):
+        return None  # signs, underscores, unicode digits: the checked parser decides
     try:
-        numbers = np.array(body[0::L], dtype=np.int64)
-    except ValueError:
+        numbers = np.array(number_lines, dtype=np.int64)
+    except (ValueError, OverflowError):
         return None
     if not np.array_equal(numbers, np.arange(first, first + T)):
         return None
@@ -525,7 +659,7 @@ def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
     return first, columns
 
 
-def _parse_frames_checked(lines, start, layout, path, strict):
+def _parse_frames_checked(lines, start, layout, path, strict, bounds):
     """Line-by-line parse with precise errors (the slow path)."""
     frames: list[dict[str, list[float]]] = []
     frame_lines: list[int] = []
@@ -556,7 +690,11 @@ def _parse_frames_checked(lines, start, layout, path, strict):
         tokens = raw.split()
         if not tokens:
             continue
-        if tokens[0].isdigit() and len(tokens) == 1:
+        if len(tokens) == 1 and tokens[0].isdigit() and not _is_frame_number(tokens[0]):
+            raise MotionDataError(
+                path, ln, f"frame number {tokens[0][:20]!r} is not 1 to 12 ASCII digits"
+            )
+        if len(tokens) == 1 and _is_frame_number(tokens[0]):
             close(ln)
             number = int(tokens[0])
             if first is None:
@@ -582,7 +720,10 @@ def _parse_frames_checked(lines, start, layout, path, strict):
             raise MotionDataError(
                 path, ln, f"bone {name!r} needs {layout[name]} values, got {len(tokens) - 1}"
             )
-        current[name] = _floats(tokens[1:], path, ln, f"bone {name!r}")
+        try:  # bounds are checked on the whole arrays at the end (per line would cost ~40 %)
+            current[name] = [float(t) for t in tokens[1:]]
+        except ValueError:
+            _float_list(tokens[1:], path, ln, f"bone {name!r}")  # raises, naming the token
     if not frames:
         raise MotionDataError(path, None, "no frames")
     notes = []
@@ -595,5 +736,17 @@ def _parse_frames_checked(lines, start, layout, path, strict):
         notes.append(f"{e}; dropped the incomplete final frame")
     if "root" not in expected_names:
         raise MotionDataError(path, frame_lines[0], "frame has no 'root' line")
-    columns = {n: np.array([f[n] for f in frames]) for n in expected_names}
+    columns = {n: np.array([f[n] for f in frames], dtype=np.float64) for n in expected_names}
+    if not _within(columns, bounds):
+        _raise_out_of_bounds(lines, start, layout, path, bounds)
     return first, columns, notes
+
+
+def _raise_out_of_bounds(lines, start, layout, path, bounds):
+    """Raise for the first line holding a non-finite or out-of-bounds value."""
+    for ln, raw in enumerate(lines[start:], start=start + 1):
+        tokens = raw.split()
+        if tokens and tokens[0] in layout and len(tokens) - 1 == layout[tokens[0]]:
+            bound = [float(b) for b in bounds[tokens[0]]]
+            _float_list(tokens[1:], path, ln, f"bone {tokens[0]!r}", bound)
+    raise MotionDataError(path, None, "non-finite or out-of-bounds value")  # unreachable

@@ -10,18 +10,25 @@ file's axes is the bone's axis frame ``C_b``, so relative to its parent the body
 ``<bone>_end``). Acclaim composes a bone's motion as ``Rz Ry Rx`` for ``dof rx ry rz`` (first dof
 applied first); MuJoCo composes a body's hinges left to right, so hinges are listed in reverse
 dof order. The free joint's orientation carries the y-up to z-up turn of the whole figure.
+
+Names in the XML: bone names must pass :func:`sim.acclaim.reader.check_bone_name` (the reader
+refuses others with the line; :func:`build_mjcf` re-checks skeletons built in memory), so they need
+no escaping; the free-text model name (the ASF's ``:name``) is XML-escaped.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from functools import lru_cache
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import Skeleton, parse_asf
+from sim.acclaim.reader import Skeleton, check_bone_name, parse_asf
+from sim.errors import MotionDataError
 from sim.model import quaternion as quat
 from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
@@ -98,7 +105,18 @@ def build_mjcf(
         XML with bodies named after bones, hinge joints ``<bone>_<dof>`` (radians, ASF limits),
         sites ``<bone>_end`` at bone ends, a floor at z = 0 and cameras ``follow`` and ``side``.
         Each body's one geom carries its segment mass; inertia follows from the geom's shape.
+
+    Raises:
+        MotionDataError: a bone name outside the grammar (or reserved), or a repeated bone name.
     """
+    seen = set()
+    for b in skeleton.bones:
+        problem = check_bone_name(b.name) or (
+            f"duplicate bone {b.name!r}" if b.name in seen else None
+        )
+        if problem:
+            raise MotionDataError(skeleton.path or None, b.line, problem)
+        seen.add(b.name)
     C = bone_frames(skeleton)
     ends = bone_end_offsets(skeleton)
     mass = body_masses(geom_volumes(skeleton), body_mass_kg)
@@ -133,7 +151,7 @@ def build_mjcf(
             body(c, depth + 1, end)
         w(f"{ind}</body>")
 
-    w(f'<mujoco model="{name}">')
+    w(f"<mujoco model={quoteattr(name)}>")
     w('  <compiler angle="radian" autolimits="true"/>')
     w('  <option timestep="0.002" gravity="0 0 -9.81"/>')
     w("  <visual>")
@@ -174,16 +192,31 @@ def build_mjcf(
 
 
 @lru_cache(maxsize=64)
-def _model_for_asf(path: str, version: tuple):
+def _model_for_asf(path: str, digest: str):
     skeleton = parse_asf(path)
-    return skeleton, mujoco.MjModel.from_xml_string(build_mjcf(skeleton))
+    try:
+        return skeleton, mujoco.MjModel.from_xml_string(build_mjcf(skeleton))
+    except ValueError as e:  # MuJoCo's compiler; MotionDataError (also a ValueError) passes
+        if isinstance(e, MotionDataError):
+            raise
+        raise MotionDataError(path, None, f"cannot build a model: {e}") from e
 
 
 def subject_model(asf_path: str | os.PathLike):
-    """(skeleton, MjModel) of a subject's own humanoid, cached per file version."""
+    """(skeleton, MjModel) of a subject's own humanoid, cached per file content.
+
+    The cache key is the file's path and a hash of its bytes (not its mtime, which has coarse
+    resolution on some file systems, so a quick rewrite of the same size could hit a stale entry).
+
+    Raises:
+        MotionDataError: unreadable or malformed ASF, or a skeleton MuJoCo refuses.
+    """
     path = str(Path(asf_path).resolve())
-    st = os.stat(path)
-    return _model_for_asf(path, (st.st_mtime_ns, st.st_size))
+    try:
+        digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError as e:
+        raise MotionDataError(str(asf_path), None, f"cannot read file: {e.strerror or e}") from e
+    return _model_for_asf(path, digest)
 
 
 @lru_cache(maxsize=1)

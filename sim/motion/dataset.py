@@ -2,21 +2,35 @@
 
 Layout: subject folders holding ``SS.asf`` beside ``SS_TT.amc`` (any depth; names compared
 case-insensitively). A trial whose ASF is missing is reported, not silently dropped.
+
+Outputs go to ``OUT/<subject>/<trial>.npz`` with both names made safe (:func:`output_paths`): they
+can never leave ``OUT`` and two inputs never share an output. Worker processes watch their parent
+and exit when it dies (even by SIGKILL), finishing at most the file they are writing.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
+import threading
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
+
+from tqdm import tqdm
 
 from sim.errors import MotionDataError
+from sim.motion.clip import save_npz, write_atomic
+from sim.motion.ingest import load_motion
 
 _TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.amc$", re.IGNORECASE)
+_UNSAFE = re.compile(r"[^A-Za-z0-9_.-]")
+PARENT_POLL_S = 0.2  # how often a worker checks that its parent is alive
+_WRITE_LOCK = threading.Lock()  # held while a worker writes; the parent watchdog waits for it
 
 
 @dataclass(frozen=True)
@@ -66,23 +80,106 @@ def find_trials(root: str | os.PathLike) -> list[Trial]:
     return sorted(trials, key=lambda t: (t.subject, t.name))
 
 
-def _ingest_one(trial: Trial, out_dir: str, skeleton: str, fps: float) -> dict:
-    import warnings
+def safe_name(name: str, max_len: int = 100) -> str:
+    """``name`` as one harmless path component: characters outside ``[A-Za-z0-9_.-]`` become
+    ``_``, a leading dot gets a ``_`` before it (so never ``.``, ``..`` or a hidden file), and a
+    name longer than ``max_len`` is cut, keeping it distinct with a hash of the whole name."""
+    safe = _UNSAFE.sub("_", name) or "_"
+    safe = "_" + safe if safe.startswith(".") else safe
+    if len(safe) > max_len:
+        digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+        safe = f"{safe[: max_len - 9]}-{digest}"
+    return safe
 
-    from sim.motion.clip import save_npz
-    from sim.motion.ingest import load_motion
 
+def output_paths(trials: list[Trial], root: str | os.PathLike) -> list[PurePosixPath]:
+    """Relative output path of each trial: ``<safe subject>/<safe trial>.npz``.
+
+    Safe: both parts pass :func:`safe_name`, so the path stays inside the output folder (a subject
+    called ``..`` writes to ``_../``). Unique: trials whose paths would coincide (compared
+    case-insensitively, for case-insensitive file systems), e.g. ``a/09/09_06.amc`` and
+    ``b/09/09_06.amc``, each get ``-<8 hex digits>`` after the trial name, a hash of the AMC's path
+    relative to ``root``, so every input keeps its own file (the index maps files to inputs).
+
+    Raises:
+        MotionDataError: (before anything is written) if names still coincide after that.
+    """
+    root = Path(root)
+    base = []
+    for t in trials:
+        subject = safe_name(t.subject)
+        if subject.lower() == "index.json":  # the one file at the top of OUT
+            subject = "_" + subject
+        base.append(PurePosixPath(subject, safe_name(t.name)))
+    count: dict[str, int] = {}
+    for b in base:
+        count[str(b).lower()] = count.get(str(b).lower(), 0) + 1
+    out = []
+    for t, b in zip(trials, base, strict=True):
+        if count[str(b).lower()] > 1:
+            try:
+                rel = t.amc.relative_to(root).as_posix()
+            except ValueError:
+                rel = t.amc.as_posix()
+            tag = hashlib.sha1(rel.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+            b = b.with_name(f"{b.name}-{tag}")
+        out.append(b.with_name(b.name + ".npz"))
+    seen: dict[str, Trial] = {}
+    for t, p in zip(trials, out, strict=True):
+        if str(p).lower() in seen:
+            raise MotionDataError(
+                str(t.amc), None, f"output {p} would also hold {seen[str(p).lower()].amc}"
+            )
+        seen[str(p).lower()] = t
+    return out
+
+
+def _watch_parent(parent_pid: int) -> None:
+    """Pool initializer: a daemon thread ends this worker when its parent process goes away.
+
+    A parent killed by SIGKILL cannot tell its workers; without this they would finish the queued
+    work and then wait for more forever. The check is the parent pid changing (the worker was
+    re-parented); the thread takes the write lock first, so no half-written temporary is left.
+    """
+    ppid = os.getppid()  # the parent itself (fork, spawn) or a forkserver that dies with it
+
+    def parent_alive() -> bool:
+        if os.getppid() != ppid:
+            return False
+        if ppid != parent_pid:
+            try:
+                os.kill(parent_pid, 0)
+            except ProcessLookupError:
+                return False
+            except PermissionError:
+                pass
+        return True
+
+    def watch():
+        while parent_alive():
+            time.sleep(PARENT_POLL_S)
+        with _WRITE_LOCK:
+            os._exit(1)
+
+    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
+
+
+def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float) -> dict:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         clip = load_motion(trial.asf, trial.amc, skeleton=skeleton, fps=fps)
-    out = Path(out_dir) / trial.subject / f"{trial.name}.npz"
-    save_npz(clip, out)
+    out = Path(out_dir) / rel
+    if Path(os.path.abspath(out)).parent.parent != Path(os.path.abspath(out_dir)):
+        # output_paths makes this impossible; a second line of defence against leaving out_dir
+        raise MotionDataError(str(trial.amc), None, f"unsafe output path {rel}")
+    with _WRITE_LOCK:
+        save_npz(clip, out)
     return {
         "subject": trial.subject,
         "trial": trial.name,
         "asf": str(trial.asf),
         "amc": str(trial.amc),
-        "file": str(out.relative_to(out_dir)),
+        "file": rel,
         "frames": clip.n_frames,
         "fps": clip.fps,
         "notes": [str(w.message) for w in caught],
@@ -101,26 +198,32 @@ def ingest_directory(
     """Ingest every trial under ``root`` into ``out_dir/<subject>/<trial>.npz`` plus ``index.json``.
 
     Bad files are skipped and listed (with the error naming file, line and problem); every good
-    result is kept. Each output, the index included, is written atomically.
+    result is kept. Each output, the index included, is written atomically. Output names are safe
+    and unique (:func:`output_paths`: same-named trials get a hash suffix); the index's ``file``
+    says which input each one holds. Workers exit if this process dies.
     """
-    from tqdm import tqdm
-
-    from sim.motion.clip import write_atomic
-
     start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     trials = find_trials(root)
+    rels = [str(p) for p in output_paths(trials, root)]
     summary = DatasetSummary()
     workers = workers or min(len(trials), os.cpu_count() or 1) or 1
     bar = tqdm(total=len(trials), desc="ingest", unit="trial", disable=not progress)
     if workers == 1:
-        for t in trials:
-            _collect(summary, t, lambda t=t: _ingest_one(t, str(out_dir), skeleton, fps))
+        for t, rel in zip(trials, rels, strict=True):
+            _collect(
+                summary, t, lambda t=t, rel=rel: _ingest_one(t, str(out_dir), rel, skeleton, fps)
+            )
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(_ingest_one, t, str(out_dir), skeleton, fps): t for t in trials}
+        with ProcessPoolExecutor(
+            max_workers=workers, initializer=_watch_parent, initargs=(os.getpid(),)
+        ) as pool:
+            futures = {
+                pool.submit(_ingest_one, t, str(out_dir), rel, skeleton, fps): t
+                for t, rel in zip(trials, rels, strict=True)
+            }
             for fut in as_completed(futures):
                 _collect(summary, futures[fut], fut.result)
                 bar.update()

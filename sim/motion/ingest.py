@@ -54,17 +54,33 @@ def clip_from_qpos(
     taken at the source rate (central differences of qpos), then mapped through the chain.
     ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
     per trial).
+
+    Raises:
+        MotionDataError: (naming ``source``) a non-finite ``qpos`` or any non-finite result; the
+            reader's bounds make this unreachable for parsed files, it guards every other caller.
     """
+    if not np.isfinite(qpos).all():
+        raise MotionDataError(source or None, None, "non-finite joint positions (qpos)")
     step = resample_step(source_fps, fps)
     frames = np.arange(0, qpos.shape[0], step)
-    qvel = qvel_from_qpos(model, qpos, source_fps, frames)
     body_ids, site_ids = [], []
     for n in names:
         body_ids.append(model.body(n).id)
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
     data = mujoco.MjData(model) if data is None else data
-    pos, vel, xquat, omega = point_kinematics(model, data, qpos[frames], qvel, body_ids, site_ids)
+    with np.errstate(all="ignore"):  # overflow shows up as non-finite values, refused below
+        qvel = qvel_from_qpos(model, qpos, source_fps, frames)
+        if not np.isfinite(qvel).all():
+            raise MotionDataError(source or None, None, "non-finite joint velocities (qvel)")
+        pos, vel, xquat, omega = point_kinematics(
+            model, data, qpos[frames], qvel, body_ids, site_ids
+        )
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
+    for what, a in (("positions", pos), ("velocities", vel), ("rotations", xquat)):
+        if not np.isfinite(a).all():
+            raise MotionDataError(source or None, None, f"non-finite {what} from the motion")
+    if not np.isfinite(omega).all():
+        raise MotionDataError(source or None, None, "non-finite angular velocities")
     return Clip(
         names=tuple(names),
         parents=np.asarray(parents, dtype=np.int64),
@@ -105,14 +121,7 @@ def load_motion(
     """
     if skeleton not in SKELETONS:
         raise ValueError(f"unknown skeleton {skeleton!r}; choose from {', '.join(SKELETONS)}")
-    try:
-        subject, model = subject_model(asf)
-    except FileNotFoundError as e:
-        raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
-    except ValueError as e:  # MuJoCo's compiler on a degenerate skeleton
-        if isinstance(e, MotionDataError):
-            raise
-        raise MotionDataError(str(asf), None, f"cannot build a model: {e}") from e
+    subject, model = subject_model(asf)
     motion = parse_amc(amc, subject)
     root_scale = 1.0
     target = subject

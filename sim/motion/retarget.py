@@ -68,15 +68,30 @@ def motion_to_qpos(
     return qpos
 
 
+MIN_LEG = 1e-3  # [m] shorter legs cannot scale a root translation
+
+
 def leg_length(skeleton: Skeleton) -> float:
-    """Mean femur + tibia length [m] of the two legs (the root-scaling yardstick)."""
+    """Mean femur + tibia length [m] of the two legs (the root-scaling yardstick).
+
+    Raises:
+        MotionDataError: a leg bone is missing, or the legs are shorter than ``MIN_LEG``.
+    """
     try:
         legs = [skeleton.bone(f"{s}femur").length + skeleton.bone(f"{s}tibia").length for s in "lr"]
     except KeyError as e:
         raise MotionDataError(
             skeleton.path, None, f"cannot retarget to the humanoid: {e.args[0]}"
         ) from None
-    return float(np.mean(legs))
+    length = float(np.mean(legs))
+    if not length >= MIN_LEG:
+        femur = skeleton.bone("lfemur")
+        raise MotionDataError(
+            skeleton.path,
+            femur.line,
+            f"cannot retarget to the humanoid: legs {length:g} m long (< {MIN_LEG:g} m)",
+        )
+    return length
 
 
 def local_rotations_from_world(xquat: np.ndarray, parents: np.ndarray) -> np.ndarray:
