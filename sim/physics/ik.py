@@ -1,0 +1,222 @@
+"""Inverse kinematics: joint angles of the subject's humanoid that put its points on given points.
+
+Each frame is a damped least-squares (Levenberg-Marquardt) fit on MuJoCo's Jacobians: with ``e``
+the stacked point errors (3P,) [m] and ``J`` (3P, nv) the Jacobian of the points,
+``dq = (J^T J + lambda I)^-1 J^T e`` is integrated on the configuration manifold
+(``mj_integratePos``: quaternion root, hinges) until the step is below ``tol``. Frames are
+warm-started from the previous frame's solution, so a 60-frame clip needs a few iterations per
+frame; the damping keeps degrees of freedom the points do not determine (e.g. the twist of a bone
+whose child is not among the points, or finger/thumb/toe hinges) where the warm start put them.
+
+Why not mink: the same fit with mink's QP (``mink.solve_ik``) costs several times more per frame
+(one QP set-up per iteration) and its joint-limit constraints would hide exactly the limit
+violations the checks measure; the fit here is unconstrained on purpose.
+
+Points: ``"root"`` is the root body's origin; any other name ``b`` is the site ``b_end`` (the end of
+bone ``b``) of a model built by :func:`sim.model.humanoid.build_mjcf`. Units: metres, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim.model import quaternion as quat
+
+#: Hinges of bones whose CMU channels are junk or unobserved (hands, fingers, thumbs, toes): left
+#: out of the joint-limit check.
+NON_ANATOMICAL = ("lhand", "rhand", "lfingers", "rfingers", "lthumb", "rthumb", "ltoes", "rtoes")
+
+
+@dataclass(frozen=True)
+class Fit:
+    """Result of :meth:`HumanoidIK.fit`.
+
+    Attributes:
+        qpos: (T, nq) fitted configurations (root position [m], quaternion wxyz, hinges [rad]).
+        error: (T,) RMS distance of the model's points to the targets [m].
+        iterations: (T,) iterations used per frame.
+    """
+
+    qpos: np.ndarray
+    error: np.ndarray
+    iterations: np.ndarray
+
+
+class HumanoidIK:
+    """Owns a copy of the model and its data, and fits point sets named ``names`` onto it.
+
+    Args:
+        model: MjModel from :func:`sim.model.humanoid.build_mjcf` (e.g. ``subject_model``'s).
+        names: (P,) point names: ``"root"`` and/or bone names (each needs a site ``<name>_end``).
+        damping: Levenberg-Marquardt damping ``lambda`` [m^2/rad^2].
+    """
+
+    def __init__(self, model, names, *, damping: float = 1e-4):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.names = tuple(names)
+        self.damping = float(damping)
+        self._root_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "root")
+        sites, self._root_slot = [], -1
+        for k, n in enumerate(self.names):
+            if n == "root":
+                self._root_slot = k
+                sites.append(-1)
+                continue
+            s = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{n}_end")
+            if s < 0:
+                raise KeyError(f"the model has no site {n}_end for point {n!r}")
+            sites.append(s)
+        self._sites = np.array(sites)
+        self._site_rows = np.flatnonzero(self._sites >= 0)
+        self._J = np.zeros((3 * len(self.names), model.nv))
+
+    def points(self, qpos: np.ndarray) -> np.ndarray:
+        """(P, 3) the model's points at ``qpos`` (nq,)."""
+        self.data.qpos[:] = qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        return self._points()
+
+    def _points(self) -> np.ndarray:
+        x = np.empty((len(self.names), 3))
+        x[self._site_rows] = self.data.site_xpos[self._sites[self._site_rows]]
+        if self._root_slot >= 0:
+            x[self._root_slot] = self.data.xpos[self._root_body]
+        return x
+
+    def _jacobian(self) -> np.ndarray:
+        m, d, J = self.model, self.data, self._J
+        mujoco.mj_comPos(m, d)
+        for k in self._site_rows:
+            mujoco.mj_jacSite(m, d, J[3 * k : 3 * k + 3], None, int(self._sites[k]))
+        if self._root_slot >= 0:
+            k = self._root_slot
+            mujoco.mj_jacBody(m, d, J[3 * k : 3 * k + 3], None, self._root_body)
+        return J
+
+    def observed_hinges(self, qpos: np.ndarray, *, tol: float = 1e-6) -> tuple[str, ...]:
+        """Hinges whose motion moves at least one of the points at ``qpos`` (nq,): the others
+        (e.g. a forearm's twist when the hand is not a point) are left where the warm start put
+        them by the fit, so their angles say nothing about the motion."""
+        self.data.qpos[:] = qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        moved = np.linalg.norm(self._jacobian(), axis=0) > tol
+        names = hinge_names(self.model)
+        return tuple(n for k, n in enumerate(names) if moved[6 + k])
+
+    def initial_pose(self, targets: np.ndarray) -> np.ndarray:
+        """(nq,) a starting configuration for ``targets`` (P, 3): hinges at zero, the root placed and
+        turned (Kabsch) so that the model's points best match the targets as a rigid body."""
+        q = np.zeros(self.model.nq)
+        q[3] = 1.0
+        x = self.points(q)
+        xc, tc = x.mean(axis=0), targets.mean(axis=0)
+        H = (x - xc).T @ (targets - tc)
+        U, _, Vt = np.linalg.svd(H)
+        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+        R = Vt.T @ D @ U.T
+        q[3:7] = quat.from_matrix(R)
+        q[:3] = tc - R @ xc
+        return q
+
+    def fit_frame(self, target: np.ndarray, q0: np.ndarray, *, max_iter: int, tol: float):
+        """Fit one frame from ``q0``; returns (qpos, rms error [m], iterations)."""
+        m, d = self.model, self.data
+        q = np.array(q0, dtype=np.float64)
+        lam = self.damping * np.eye(m.nv)
+        it = 0
+        for it in range(1, max_iter + 1):  # noqa: B007
+            d.qpos[:] = q
+            mujoco.mj_kinematics(m, d)
+            e = (target - self._points()).ravel()
+            J = self._jacobian()
+            dq = np.linalg.solve(J.T @ J + lam, J.T @ e)
+            mujoco.mj_integratePos(m, q, dq, 1.0)
+            if np.abs(dq).max() < tol:
+                break
+        d.qpos[:] = q
+        mujoco.mj_kinematics(m, d)
+        err = float(np.sqrt(np.mean(np.sum((target - self._points()) ** 2, axis=1))))
+        return q, err, it
+
+    def fit(
+        self,
+        positions: np.ndarray,
+        *,
+        q_init: np.ndarray | None = None,
+        first_iter: int = 100,
+        max_iter: int = 20,
+        tol: float = 1e-6,
+    ) -> Fit:
+        """Fit every frame of ``positions`` (T, P, 3) [m], warm-starting each from the last.
+
+        Args:
+            q_init: (nq,) start of frame 0 (default :meth:`initial_pose`); degrees of freedom the
+                points leave free keep its values.
+            first_iter, max_iter: iteration caps of frame 0 and of the others.
+            tol: stop when the largest step component is below this [rad or m].
+        """
+        p = np.asarray(positions, dtype=np.float64)
+        if p.ndim != 3 or p.shape[1:] != (len(self.names), 3):
+            raise ValueError(f"positions must be (T, {len(self.names)}, 3); got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ValueError("positions must be finite")
+        T = p.shape[0]
+        qpos = np.empty((T, self.model.nq))
+        err, its = np.empty(T), np.empty(T, dtype=int)
+        q = self.initial_pose(p[0]) if q_init is None else np.asarray(q_init, dtype=np.float64)
+        for t in range(T):
+            q, err[t], its[t] = self.fit_frame(
+                p[t], q, max_iter=first_iter if t == 0 else max_iter, tol=tol
+            )
+            qpos[t] = q
+        return Fit(qpos, err, its)
+
+
+def wrap_angles(a: np.ndarray) -> np.ndarray:
+    """Angles [rad] wrapped into [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def anatomical_ranges(model) -> dict[str, tuple[float, float]]:
+    """Hinge name -> (lo, hi) [rad] of every limited hinge except :data:`NON_ANATOMICAL` bones'."""
+    out = {}
+    for j in range(model.njnt):
+        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or not model.jnt_limited[j]:
+            continue
+        name = model.joint(j).name
+        if name.rsplit("_", 1)[0] in NON_ANATOMICAL:
+            continue
+        out[name] = (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1]))
+    return out
+
+
+def hinge_names(model) -> tuple[str, ...]:
+    """(nq - 7,) names of the hinges after the free root, in ``qpos`` order."""
+    names = [""] * (model.nq - 7)
+    for j in range(model.njnt):
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+            names[int(model.jnt_qposadr[j]) - 7] = model.joint(j).name
+    return tuple(names)
+
+
+def limit_excess(qpos: np.ndarray, model, hinges=None) -> np.ndarray:
+    """(T,) worst excess [deg] of a wrapped anatomical hinge angle beyond its range (0 inside).
+
+    ``hinges``: only these hinge names (e.g. :meth:`HumanoidIK.observed_hinges`); default all.
+    """
+    ranges = anatomical_ranges(model)
+    if hinges is not None:
+        ranges = {k: v for k, v in ranges.items() if k in set(hinges)}
+    names = hinge_names(model)
+    q = wrap_angles(np.asarray(qpos)[:, 7:])
+    keep = [k for k, n in enumerate(names) if n in ranges]
+    if not keep:
+        return np.zeros(len(q))
+    lo = np.array([ranges[names[k]][0] for k in keep])
+    hi = np.array([ranges[names[k]][1] for k in keep])
+    v = q[:, keep]
+    return np.degrees((np.maximum(lo - v, 0.0) + np.maximum(v - hi, 0.0)).max(axis=1))
