@@ -106,9 +106,12 @@ class PhysicsJob:
         return replay(motion, reference, floor_z=floor_z, scene=self._scene)
 
     def motion_physics(
-        self, positions: np.ndarray, reference: PointMotion, ground: Ground, q_init
+        self, positions: np.ndarray, reference: PointMotion | None, ground: Ground, q_init
     ) -> MotionPhysics:
-        """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m]."""
+        """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
+
+        ``reference``: the original on this job's points (bone lengths of the collision scene;
+        default the motion itself); ``q_init``: (nq,) IK start of frame 0 or None."""
         feet = tuple(f for f in foot_points(self.names) if f in ground.points)
         fidx = [self.names.index(f) for f in feet]
         pf = positions[:, fidx]
@@ -128,7 +131,7 @@ class PhysicsJob:
         ]
         dyn = self.inv.run(fit.qpos, self.fps, contacts)
         motion = PointMotion(self.names, self.parents, positions, self.fps)
-        checks = self._replay(motion, reference, floor)
+        checks = self._replay(motion, motion if reference is None else reference, floor)
         return MotionPhysics(
             positions, fit, dyn, feet, height, horizontal_speed(pf, self.fps), contact, checks,
             limit_excess(fit.qpos, self.model, self._observed),

@@ -204,7 +204,7 @@ def hinge_names(model) -> tuple[str, ...]:
 
 
 def limit_excess(qpos: np.ndarray, model, hinges=None) -> np.ndarray:
-    """(T,) worst excess [deg] of a wrapped anatomical hinge angle beyond its range (0 inside).
+    """(T,) worst excess [deg] of an anatomical hinge angle beyond its range, on the circle (0 inside).
 
     ``hinges``: only these hinge names (e.g. :meth:`HumanoidIK.observed_hinges`); default all.
     """
@@ -218,5 +218,14 @@ def limit_excess(qpos: np.ndarray, model, hinges=None) -> np.ndarray:
         return np.zeros(len(q))
     lo = np.array([ranges[names[k]][0] for k in keep])
     hi = np.array([ranges[names[k]][1] for k in keep])
-    v = q[:, keep]
-    return np.degrees((np.maximum(lo - v, 0.0) + np.maximum(v - hi, 0.0)).max(axis=1))
+    return np.degrees(circular_excess(q[:, keep], lo, hi).max(axis=1))
+
+
+def circular_excess(a: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Angular distance [rad] of angles ``a`` from the arcs ``[lo, hi]`` on the circle (0 on the
+    arc): an angle is compared modulo 2 pi, so 190 deg against [0, 170] is 20 deg out, not 170."""
+    two_pi = 2 * np.pi
+    span = hi - lo
+    above = np.mod(a - lo, two_pi)  # in [0, 2 pi): how far past lo, going up
+    inside = (above <= span) | (span >= two_pi)
+    return np.where(inside, 0.0, np.minimum(above - span, two_pi - above))
