@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from sim.motion.clip import Clip, write_atomic
+from sim.physics.analysis import PhysicsJob
+from sim.physics.ground import estimate_ground
 from sim.replay.checks import (
     PHYSICAL_KEYS,
     FrameChecks,
@@ -53,6 +55,7 @@ class MethodRun:
     checks: FrameChecks
     summary: dict
     excess: dict
+    physics: dict = field(default_factory=dict)
 
     @property
     def label(self) -> str:
@@ -73,6 +76,7 @@ class ClipValidation:
     baseline_checks: FrameChecks
     baseline: dict
     runs: list[MethodRun] = field(default_factory=list)
+    physics: dict = field(default_factory=dict)
 
 
 def joint_ranges(model) -> dict[str, tuple[float, float]]:
@@ -106,6 +110,8 @@ def validate_clip(
     contact_height: float = 0.02,
     hops: int = 2,
     floor_z: float = 0.0,
+    physics=None,
+    ground=None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -114,22 +120,35 @@ def validate_clip(
         methods: names registered in :mod:`sidql.keyframes.methods`.
         W: keyframes per clip, both ends included.
         joint_ranges: hinge ranges [rad] for the joint-limit check of motions with joint angles.
+        physics: a :class:`sim.physics.analysis.PhysicsJob` on the protocol points: adds
+            :mod:`sim.physics` figures (``physics``) for the original and every run.
+        ground: the trial's :class:`sim.physics.ground.Ground`; its ``floor_z`` replaces
+            ``floor_z`` (default: estimated from the clip when ``physics`` is given).
     """
     from sidql.keyframes.methods import select
     from sidql.keyframes.spherical import POINTS
 
+    if physics is not None and ground is None:
+        ground = estimate_ground(clip.positions, clip.names, clip.fps)
+    if ground is not None:
+        floor_z = ground.floor_z
     kw = dict(floor_z=floor_z, contact_height=contact_height, hops=hops, joint_ranges=joint_ranges)
     full = from_clip(clip)
     orig = full.restrict(POINTS)
     base_checks = replay(orig, full, **kw)
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks))
+    if physics is not None:
+        out.physics = physics.analyse(clip, None, ground)
     for m in methods:
         keys = np.asarray(select(m, clip, W, seed=seed))
         for variant in ["hermite"] + ([OWN_RECONSTRUCTION[m]] if m in OWN_RECONSTRUCTION else []):
             rec = from_reconstruction(reconstruct_with(clip, keys, variant), clip.fps)
             checks = replay(rec, full, **kw)
             s = summarise(checks)
-            out.runs.append(MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline)))
+            run = MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline))
+            if physics is not None:
+                run.physics = physics.analyse(clip, rec.positions, ground)
+            out.runs.append(run)
     return out
 
 
@@ -178,7 +197,11 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
                 "frames": v.clip.n_frames,
                 "fps": v.clip.fps,
                 "keyframes": v.W,
-                "original": {"summary": v.baseline, "per_frame": per_frame(v.baseline_checks)},
+                "original": {
+                    "summary": v.baseline,
+                    "per_frame": per_frame(v.baseline_checks),
+                    **_physics_entry(v.physics),
+                },
                 "methods": [
                     {
                         "method": r.method,
@@ -187,12 +210,23 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
                         "summary": r.summary,
                         "excess": r.excess,
                         "per_frame": per_frame(r.checks),
+                        **_physics_entry(r.physics),
                     }
                     for r in v.runs
                 ],
             }
         )
     return _clean({**meta, "clips": clips})
+
+
+def _physics_entry(physics: dict) -> dict:
+    """``physics`` (the :mod:`sim.physics` figures) and ``physics_per_frame`` of a checks.json row."""
+    if not physics:
+        return {}
+    return {
+        "physics": {k: v for k, v in physics.items() if k != "per_frame"},
+        "physics_per_frame": physics["per_frame"],
+    }
 
 
 def _slug(s: str) -> str:
@@ -395,13 +429,19 @@ def report_clips(
     title: str = "Replay checks",
     meta: dict | None = None,
     progress: bool = True,
+    model=None,
+    ground=None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method and write the report; returns
-    ``out_dir/index.html``."""
+    ``out_dir/index.html``. With ``model`` (the subject's humanoid) every motion also gets the
+    :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip)."""
     from tqdm import tqdm
 
+    job = physics_job(model, clips[0]) if model is not None and clips else None
     vals = [
-        validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges)
+        validate_clip(
+            c, methods, W, seed=seed, joint_ranges=joint_ranges, physics=job, ground=ground
+        )
         for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
     ]
     meta = {"keyframes": W, "methods": " ".join(methods), "seed": seed, **(meta or {})}
@@ -441,5 +481,19 @@ def report_trial(
         joint_ranges=joint_ranges(model), videos=videos, style=style,
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
-        progress=progress,
+        progress=progress, model=model, ground=trial_ground(all_clips),
     )  # fmt: skip
+
+
+def physics_job(model, clip: Clip):
+    """A :class:`sim.physics.analysis.PhysicsJob` for the protocol points of ``clip``'s subject."""
+    from sidql.keyframes.spherical import POINTS
+
+    orig = from_clip(clip).restrict(POINTS)
+    return PhysicsJob(model, orig.names, orig.parents, clip.fps)
+
+
+def trial_ground(clips: list[Clip]):
+    """The trial's :class:`sim.physics.ground.Ground` from all its clips."""
+    pos = np.concatenate([c.positions for c in clips])
+    return estimate_ground(pos, clips[0].names, clips[0].fps)
