@@ -100,15 +100,39 @@ def test_ik_recovers_the_originals_points_and_observed_angles(walk):
     clip, model, _ = walk
     idx = [clip.names.index(n) for n in PROTOCOL]
     pts = clip.positions[:20, idx]
-    ik = HumanoidIK(model, PROTOCOL)
+    ik = HumanoidIK(model, PROTOCOL, limit_weight=0.0)  # exact: the original breaks CMU's limits
     warm = ik.fit(pts, q_init=clip.qpos[0])
     cold = ik.fit(pts)  # from a rigid (Kabsch) placement of the zero pose
     assert warm.error.max() < 1e-5 and cold.error.max() < 1e-4
+    soft = HumanoidIK(model, PROTOCOL).fit(pts, q_init=clip.qpos[0])
+    assert soft.error.max() < 5e-4  # the limit penalty trades little point error
     names = hinge_names(model)
     limbs = [k for k, n in enumerate(names) if n.split("_")[0][1:] in ("femur", "tibia", "humerus")]
     d = np.abs(wrap_angles(warm.qpos[:, 7:] - clip.qpos[:20, 7:]))[:, limbs]
     assert np.degrees(d.max()) < 0.1
     assert np.abs(warm.qpos[:, :3] - clip.qpos[:20, :3]).max() < 1e-6
+
+
+def test_ik_limit_penalty_keeps_a_straightening_knee_on_its_branch(cmu_dir):
+    """Regression: optimal W=10 on 07_01 straightens the left knee around frame 30; without the
+    penalty the fit turned the thigh ~180 deg and bent the knee backwards (60 deg beyond limits)."""
+    from sidql.evaluation.evaluate import make_case
+    from sidql.keyframes.methods import select
+    from sidql.keyframes.reconstruct import reconstruct_series
+    from sim.motion.ingest import load_clips
+
+    asf = cmu_dir / "07" / "07.asf"
+    case = make_case(load_clips(asf, cmu_dir / "07" / "07_01.amc")[0])
+    rec = reconstruct_series(case.series, select("optimal", case.clip, 10), "hermite")
+    model = subject_model(asf)[1]
+    fit = HumanoidIK(model, PROTOCOL).fit(rec.positions[20:45], q_init=case.clip.qpos[20])
+    free = HumanoidIK(model, PROTOCOL, limit_weight=0.0).fit(
+        rec.positions[20:45], q_init=case.clip.qpos[20]
+    )
+    assert fit.error.max() < 3e-3
+    leg = ("lfemur_rz", "lfemur_ry", "lfemur_rx", "ltibia_rx")
+    assert limit_excess(fit.qpos, model, leg).max() < 12.0
+    assert limit_excess(free.qpos, model, leg).max() > 40.0
 
 
 def test_limit_excess_wraps_angles_and_skips_non_anatomical_hinges():
@@ -287,7 +311,7 @@ def test_ground_truth_push_in_flight_is_recovered_and_nothing_else(walk):
     job = PhysicsJob(model, names, parents, fps)
     far = Ground(-5.0, ("ltibia", "lfoot", "rtibia", "rfoot"), np.zeros(4), 0)
     mp = job.motion_physics(pts, None, far, sim["q"][0])
-    assert mp.fit.error.max() < 1e-5
+    assert mp.fit.error.max() < 1e-4  # the PD pose (all zeros) sits at some limits
     assert np.allclose(
         mp.dynamics.residual_force[pushed], push, rtol=0.02, atol=0.02 * np.linalg.norm(push)
     )

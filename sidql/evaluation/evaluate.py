@@ -60,11 +60,13 @@ class Case:
     pos: np.ndarray
     vel: np.ndarray
     index: int
+    asf: str = ""
 
 
-def make_case(clip: Clip, index: int = 0) -> Case:
+def make_case(clip: Clip, index: int = 0, asf: str = "") -> Case:
+    """``asf``: the subject's skeleton file (needed by ``evaluate(..., physics=True)``)."""
     idx = protocol_indices(clip)
-    return Case(clip, chart(clip), clip.positions[:, idx], clip.velocities[:, idx], index)
+    return Case(clip, chart(clip), clip.positions[:, idx], clip.velocities[:, idx], index, asf)
 
 
 def load_cases(
@@ -97,7 +99,7 @@ def load_cases(
     for trial in tqdm(trials, desc="load trials", unit="trial", disable=not progress):
         try:
             clips = load_clips(trial.asf, trial.amc, fps=fps, length=length, skeleton=skeleton)
-            new = [make_case(c, len(cases) + i) for i, c in enumerate(clips)]
+            new = [make_case(c, len(cases) + i, str(trial.asf)) for i, c in enumerate(clips)]
         except MotionDataError as e:
             skipped.append({"amc": str(trial.amc), "problem": str(e)})
             print(f"skipped {trial.amc}: {e}", file=sys.stderr)
@@ -111,8 +113,11 @@ def clip_seed(seed: int, index: int, W: int) -> int:
     return int(np.random.SeedSequence([seed, index, W]).generate_state(1)[0])
 
 
-def score(case: Case, keyframes: np.ndarray, method: str) -> dict:
-    """Every error measure of one clip rebuilt from ``keyframes`` (see the module docstring)."""
+def score(case: Case, keyframes: np.ndarray, method: str, physics=None) -> dict:
+    """Every error measure of one clip rebuilt from ``keyframes`` (see the module docstring).
+
+    ``physics``: ``(job, ground)`` (:class:`sim.physics.analysis.PhysicsJob` on the protocol
+    points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction."""
     s = case.series
     q_h = q_error(s, keyframes, "hermite")
     if method == "pitch":
@@ -121,7 +126,11 @@ def score(case: Case, keyframes: np.ndarray, method: str) -> dict:
     else:
         rec = reconstruct_series(s, keyframes, "hermite")
         q = q_h
+    phys = (
+        physics_figures(physics[0].analyse(case.clip, rec.positions, physics[1])) if physics else {}
+    )
     return {
+        **phys,
         "q": q,
         "q_hermite": q_h,
         "geodesic_deg": geodesic_deg(case.pos, rec.positions, rec.parents),
@@ -131,6 +140,58 @@ def score(case: Case, keyframes: np.ndarray, method: str) -> dict:
     }
 
 
+#: The :mod:`sim.physics` figures ``evaluate(..., physics=True)`` adds to rows (means over clips).
+PHYSICS_KEYS = (
+    "penetration_mm", "float_mm", "skate_mm_s", "contact_precision", "contact_recall",
+    "self_pen_excess_mm", "lost_contacts", "limit_excess_deg", "residual_force_bw",
+    "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
+    "residual_force_bw_excess", "residual_torque_nm_kg_excess", "joint_torque_rms_nm_kg_excess",
+    "ik_error_mm",
+)  # fmt: skip
+
+
+def physics_figures(analysis: dict) -> dict:
+    """The per-clip numbers of a :mod:`sim.physics` analysis (no per-frame arrays)."""
+    return {k: v for k, v in analysis.items() if k != "per_frame"}
+
+
+def physics_setup(cases: Sequence[Case]) -> dict:
+    """Per trial (``clip.source``): ``(job, ground)`` for :func:`score`, the ground from all the
+    trial's clips, one :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
+    from sidql.keyframes.spherical import POINTS
+    from sim.model.humanoid import subject_model
+    from sim.physics.analysis import PhysicsJob
+    from sim.physics.ground import estimate_ground
+    from sim.replay.checks import from_clip
+
+    jobs, out = {}, {}
+    by_trial: dict[str, list[Case]] = {}
+    for c in cases:
+        if not c.asf:
+            raise ValueError("physics needs each case's ASF (load the cases with load_cases)")
+        by_trial.setdefault(c.clip.source, []).append(c)
+    for source, group in by_trial.items():
+        clip = group[0].clip
+        if group[0].asf not in jobs:
+            pts = from_clip(clip).restrict(POINTS)
+            model = subject_model(group[0].asf)[1]
+            jobs[group[0].asf] = PhysicsJob(model, pts.names, pts.parents, clip.fps)
+        pos = np.concatenate([c.clip.positions for c in group])
+        out[source] = (jobs[group[0].asf], estimate_ground(pos, clip.names, clip.fps))
+    return out
+
+
+def _physics_means(rows: Sequence[dict]) -> dict:
+    """Mean over clips of each :data:`PHYSICS_KEYS` figure (NaN-free clips; ``<key>_clips``)."""
+    out = {}
+    for k in PHYSICS_KEYS:
+        v = np.array([r[k] for r in rows if k in r], dtype=float)
+        v = v[np.isfinite(v)]
+        out[k] = float(v.mean()) if v.size else float("nan")
+        out[f"{k}_clips"] = int(v.size)
+    return out
+
+
 def evaluate(
     cases: Sequence[Case],
     method_names: Iterable[str],
@@ -138,6 +199,7 @@ def evaluate(
     *,
     seed: int = 0,
     progress: bool = True,
+    physics: bool = False,
 ) -> dict:
     """Run every method at every W on every case.
 
@@ -145,7 +207,10 @@ def evaluate(
         ``{"results": [row...], "per_clip": [row...]}``; a result row holds method, keyframes,
         clips, mean_q, mean_q_hermite, mean_geodesic_deg, mpjpe_mm, mean_velocity_error,
         mean_li_error_mm, median_decision_ms; a per-clip row holds source, start_frame, method,
-        keyframes, indices, q and the other scores.
+        keyframes, indices, q and the other scores. With ``physics`` every row also carries the
+        :mod:`sim.physics` figures (result rows: means over clips, :data:`PHYSICS_KEYS`), and one
+        result row (and per-clip rows) for method ``original``, the clip itself (all frames
+        kept: ``keyframes`` = clip length, errors 0).
     """
     from tqdm import tqdm
 
@@ -155,6 +220,27 @@ def evaluate(
         methods_mod.get(name)  # fail early, listing the known methods
     per_clip: list[dict] = []
     results: list[dict] = []
+    setup = physics_setup(cases) if physics else {}
+    if physics and cases:
+        rows = []
+        for case in tqdm(cases, desc="physics of originals", unit="clip", disable=not progress):
+            job, ground = setup[case.clip.source]
+            rows.append(
+                {
+                    "source": case.clip.source, "start_frame": case.clip.start_frame,
+                    "method": "original", "keyframes": case.clip.n_frames,
+                    **physics_figures(job.analyse(case.clip, None, ground)),
+                }
+            )  # fmt: skip
+        per_clip.extend(rows)
+        zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
+        results.append(
+            {
+                "method": "original", "keyframes": cases[0].clip.n_frames, "clips": len(rows),
+                **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0, "median_decision_ms": 0.0,
+                **_physics_means(rows),
+            }
+        )  # fmt: skip
     jobs = [(m, W) for m in method_names for W in counts]
     for name, W in tqdm(jobs, desc="evaluate", unit="run", disable=not progress):
         rows = []
@@ -168,7 +254,7 @@ def evaluate(
                 "method": name,
                 "keyframes": W,
                 "indices": k.tolist(),
-                **score(case, k, name),
+                **score(case, k, name, setup.get(case.clip.source)),
                 "decision_ms": ms,
             }
             rows.append(row)
@@ -186,6 +272,7 @@ def evaluate(
                     "mean_velocity_error": float(np.mean([r["velocity_error"] for r in rows])),
                     "mean_li_error_mm": float(np.mean([r["li_error_mm"] for r in rows])),
                     "median_decision_ms": float(np.median([r["decision_ms"] for r in rows])),
+                    **(_physics_means(rows) if physics else {}),
                 }
             )
     return {"results": results, "per_clip": per_clip}
@@ -194,6 +281,7 @@ def evaluate(
 def table3_markdown(results: Sequence[dict]) -> str:
     """Markdown table of mean Q per method (rows) and W (columns), the paper's figure beside ours
     where it has one, then the chart-free errors."""
+    results = [r for r in results if r["method"] != "original"]
     counts = sorted({r["keyframes"] for r in results})
     names = list(dict.fromkeys(r["method"] for r in results))
     by = {(r["method"], r["keyframes"]): r for r in results}
@@ -220,5 +308,32 @@ def table3_markdown(results: Sequence[dict]) -> str:
             f"| {r['mean_q_hermite']:.4f} | {r['mean_geodesic_deg']:.2f} | {r['mpjpe_mm']:.1f} "
             f"| {r['mean_velocity_error']:.3f} | {r['mean_li_error_mm']:.1f} "
             f"| {r['median_decision_ms']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def physics_markdown(results: Sequence[dict]) -> str:
+    """Markdown table of the :mod:`sim.physics` means per method and W (``original`` first)."""
+    rows = [r for r in results if "residual_force_bw" in r]
+    rows.sort(key=lambda r: r["method"] != "original")
+    cols = (
+        ("Q", "mean_q", ".4f"), ("pen. (mm)", "penetration_mm", ".1f"),
+        ("float (mm)", "float_mm", ".1f"), ("skate (mm/s)", "skate_mm_s", ".0f"),
+        ("contact P", "contact_precision", ".2f"), ("contact R", "contact_recall", ".2f"),
+        ("self-pen. excess (mm)", "self_pen_excess_mm", ".2f"),
+        ("lost contacts", "lost_contacts", ".1f"), ("limit excess (deg)", "limit_excess_deg", ".2f"),
+        ("residual F (BW)", "residual_force_bw", ".3f"),
+        ("residual F p95 (BW)", "residual_force_bw_p95", ".2f"),
+        ("residual torque (N m/kg)", "residual_torque_nm_kg", ".3f"),
+        ("joint torque RMS (N m/kg)", "joint_torque_rms_nm_kg", ".3f"),
+    )  # fmt: skip
+    lines = [
+        "| method | W | clips | " + " | ".join(c[0] for c in cols) + " |",
+        "|---|---|---|" + "---|" * len(cols),
+    ]
+    for r in rows:
+        cells = [format(r[k], f) for _, k, f in cols]
+        lines.append(
+            f"| {r['method']} | {r['keyframes']} | {r['clips']} | " + " | ".join(cells) + " |"
         )
     return "\n".join(lines)

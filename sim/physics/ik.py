@@ -8,9 +8,13 @@ warm-started from the previous frame's solution, so a 60-frame clip needs a few 
 frame; the damping keeps degrees of freedom the points do not determine (e.g. the twist of a bone
 whose child is not among the points, or finger/thumb/toe hinges) where the warm start put them.
 
-Why not mink: the same fit with mink's QP (``mink.solve_ik``) costs several times more per frame
-(one QP set-up per iteration) and its joint-limit constraints would hide exactly the limit
-violations the checks measure; the fit here is unconstrained on purpose.
+Joint limits enter as a soft penalty: each anatomical hinge (:func:`anatomical_ranges`) outside its
+ASF range adds a residual ``limit_weight * (distance to the range)`` [m per rad]. Point sets leave
+branches ambiguous (a straight knee can bend either way if the thigh turns 180 deg about itself);
+the penalty picks the branch inside the limits, which the points cannot tell apart, while a
+violation the points force (they cannot be matched inside the range) still shows, at the cost of
+``limit_weight`` metres per radian of point error. Hard limits (mink's QP constraints) would
+instead hide forced violations; mink was also several times slower per frame here.
 
 Points: ``"root"`` is the root body's origin; any other name ``b`` is the site ``b_end`` (the end of
 bone ``b``) of a model built by :func:`sim.model.humanoid.build_mjcf`. Units: metres, radians.
@@ -52,13 +56,21 @@ class HumanoidIK:
         model: MjModel from :func:`sim.model.humanoid.build_mjcf` (e.g. ``subject_model``'s).
         names: (P,) point names: ``"root"`` and/or bone names (each needs a site ``<name>_end``).
         damping: Levenberg-Marquardt damping ``lambda`` [m^2/rad^2].
+        limit_weight: weight [m/rad] of the soft joint-limit penalty (0: none).
     """
 
-    def __init__(self, model, names, *, damping: float = 1e-4):
+    def __init__(self, model, names, *, damping: float = 1e-4, limit_weight: float = 0.01):
         self.model = model
         self.data = mujoco.MjData(model)
         self.names = tuple(names)
         self.damping = float(damping)
+        self.limit_weight = float(limit_weight)
+        ranges = anatomical_ranges(model)
+        jid = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in ranges]
+        self._lim_q = np.array([model.jnt_qposadr[j] for j in jid], dtype=int)
+        self._lim_v = np.array([model.jnt_dofadr[j] for j in jid], dtype=int)
+        self._lim_lo = np.array([r[0] for r in ranges.values()])
+        self._lim_hi = np.array([r[1] for r in ranges.values()])
         self._root_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "root")
         sites, self._root_slot = [], -1
         for k, n in enumerate(self.names):
@@ -127,13 +139,27 @@ class HumanoidIK:
         m, d = self.model, self.data
         q = np.array(q0, dtype=np.float64)
         lam = self.damping * np.eye(m.nv)
-        it = 0
+        it, prev = 0, np.inf
         for it in range(1, max_iter + 1):  # noqa: B007
             d.qpos[:] = q
             mujoco.mj_kinematics(m, d)
             e = (target - self._points()).ravel()
+            cost = float(e @ e)
+            if 0.0 <= prev - cost < 1e-12:  # [m^2]: the points stopped improving
+                break
+            prev = cost
             J = self._jacobian()
-            dq = np.linalg.solve(J.T @ J + lam, J.T @ e)
+            A, g = J.T @ J + lam, J.T @ e
+            if self.limit_weight > 0 and len(self._lim_q):
+                qh = q[self._lim_q]
+                out = np.where(qh < self._lim_lo, self._lim_lo - qh, 0.0) + np.where(
+                    qh > self._lim_hi, self._lim_hi - qh, 0.0
+                )
+                w2 = self.limit_weight**2
+                act = out != 0
+                A[self._lim_v[act], self._lim_v[act]] += w2
+                g[self._lim_v[act]] += w2 * out[act]
+            dq = np.linalg.solve(A, g)
             mujoco.mj_integratePos(m, q, dq, 1.0)
             if np.abs(dq).max() < tol:
                 break
@@ -157,7 +183,8 @@ class HumanoidIK:
             q_init: (nq,) start of frame 0 (default :meth:`initial_pose`); degrees of freedom the
                 points leave free keep its values.
             first_iter, max_iter: iteration caps of frame 0 and of the others.
-            tol: stop when the largest step component is below this [rad or m].
+            tol: stop when the largest step component is below this [rad or m], or when an
+                iteration improves the summed squared point error by less than 1e-12 m^2.
         """
         p = np.asarray(positions, dtype=np.float64)
         if p.ndim != 3 or p.shape[1:] != (len(self.names), 3):
