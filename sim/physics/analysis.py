@@ -105,21 +105,20 @@ class PhysicsJob:
         self._scene.model.geom_pos[0, 2] = floor_z  # geom 0 is the floor plane
         return replay(motion, reference, floor_z=floor_z, scene=self._scene)
 
-    def motion_physics(
-        self, positions: np.ndarray, reference: PointMotion | None, ground: Ground, q_init
-    ) -> MotionPhysics:
-        """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
+    def ground_contacts(self, positions: np.ndarray, ground: Ground):
+        """A motion's own foot contacts.
 
-        ``reference``: the original on this job's points (bone lengths of the collision scene;
-        default the motion itself); ``q_init``: (nq,) IK start of frame 0 or None."""
+        Args:
+            positions: (T, P, 3) [m] in this job's ``names`` order.
+        Returns:
+            feet (F,) foot point names, height (T, F) above stance level [m], contact (T, F) bool,
+            and per frame the ``(body id, point (3,))`` list where ground forces may act (the
+            points in contact, dropped onto the floor plane ``ground.floor_z``).
+        """
         feet = tuple(f for f in foot_points(self.names) if f in ground.points)
-        fidx = [self.names.index(f) for f in feet]
-        pf = positions[:, fidx]
+        pf = np.asarray(positions)[:, [self.names.index(f) for f in feet]]
         height = foot_heights(pf, ground.z, ground.clearance_of(feet))
         contact = label_contacts(height, point_speed(pf, self.fps))
-        fit = self.ik.fit(positions, q_init=q_init)
-        if self._observed is None:  # the same hinges for the original and every reconstruction
-            self._observed = self.ik.observed_hinges(fit.qpos[0])
         floor = ground.floor_z
         contacts = [
             [
@@ -127,8 +126,23 @@ class PhysicsJob:
                 for k, f in enumerate(feet)
                 if contact[t, k]
             ]
-            for t in range(len(positions))
+            for t in range(len(pf))
         ]
+        return feet, height, contact, contacts
+
+    def motion_physics(
+        self, positions: np.ndarray, reference: PointMotion | None, ground: Ground, q_init
+    ) -> MotionPhysics:
+        """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
+
+        ``reference``: the original on this job's points (bone lengths of the collision scene;
+        default the motion itself); ``q_init``: (nq,) IK start of frame 0 or None."""
+        feet, height, contact, contacts = self.ground_contacts(positions, ground)
+        pf = positions[:, [self.names.index(f) for f in feet]]
+        fit = self.ik.fit(positions, q_init=q_init)
+        if self._observed is None:  # the same hinges for the original and every reconstruction
+            self._observed = self.ik.observed_hinges(fit.qpos[0])
+        floor = ground.floor_z
         dyn = self.inv.run(fit.qpos, self.fps, contacts)
         motion = PointMotion(self.names, self.parents, positions, self.fps)
         checks = self._replay(motion, motion if reference is None else reference, floor)
