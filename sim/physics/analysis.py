@@ -53,6 +53,10 @@ EXCESS_KEYS = (
 )  # fmt: skip
 
 
+#: Originals a job keeps (a few hundred kB each): ``sidql eval`` revisits every clip per method and W.
+ORIGINALS_CACHED = 1024
+
+
 @dataclass(frozen=True)
 class MotionPhysics:
     """Everything computed for one motion (T frames, F foot points)."""
@@ -159,9 +163,10 @@ class PhysicsJob:
             ref = PointMotion(
                 self.names, self.parents, np.asarray(clip.positions)[:, idx], self.fps
             )
-            self._originals = {
-                key: self.motion_physics(ref.positions, ref, ground, _q_init(clip, self.model))
-            }
+            if len(self._originals) >= ORIGINALS_CACHED:
+                self._originals.clear()
+            q0 = _q_init(clip, self.model)
+            self._originals[key] = self.motion_physics(ref.positions, ref, ground, q0)
         return self._originals[key]
 
     def analyse(
