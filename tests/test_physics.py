@@ -106,6 +106,8 @@ def test_ik_recovers_the_originals_points_and_observed_angles(walk):
     assert warm.error.max() < 1e-5 and cold.error.max() < 1e-4
     soft = HumanoidIK(model, PROTOCOL).fit(pts, q_init=clip.qpos[0])
     assert soft.error.max() < 5e-4  # the limit penalty trades little point error
+    guessed = HumanoidIK(model, PROTOCOL).fit(pts, guesses=clip.qpos[:20])
+    assert guessed.error.max() < 1e-9 and np.abs(guessed.qpos - clip.qpos[:20]).max() < 1e-9
     names = hinge_names(model)
     limbs = [k for k, n in enumerate(names) if n.split("_")[0][1:] in ("femur", "tibia", "humerus")]
     d = np.abs(wrap_angles(warm.qpos[:, 7:] - clip.qpos[:20, 7:]))[:, limbs]
@@ -379,7 +381,7 @@ def test_analysis_baseline_row_and_a_sunken_copy(walk):
     r = job.analyse(clip, sunk, ground)
     assert r["penetration_max_mm"] > 38 and r["penetration_mm"] > base["penetration_mm"] + 10
     assert r["float_mm"] < 0.2 * base["float_mm"] and r["skate_mm_s"] == base["skate_mm_s"]
-    assert r["ik_error_mm"] < 0.01 and r["limit_excess_deg_excess"] == pytest.approx(0, abs=1e-6)
+    assert r["ik_error_mm"] < 0.01 and r["limit_excess_deg_excess"] == pytest.approx(0, abs=1e-3)
     up = job.analyse(clip, clip.positions[:, idx] + [0.0, 0.0, 0.10], ground)
     assert up["contact_precision_n"] == 0 and up["contact_recall"] == 0.0
     assert up["float_mm"] > 90

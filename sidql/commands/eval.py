@@ -101,7 +101,10 @@ def run(args) -> int:
     print(f"{len(cases)} clips of {args.length} frames from {args.data}; skipped {len(skipped)}")
     print(table3_markdown(out["results"]))
     if args.physics:
+        print("physics, means over clips:")
         print(physics_markdown(out["results"]))
+        print("physics, medians over clips:")
+        print(physics_markdown(out["results"], "median"))
     print(f"wrote {path}")
     if args.rate_plot:
         from sidql.evaluation.rate import rate_distortion, write_plot

@@ -182,12 +182,14 @@ def physics_setup(cases: Sequence[Case]) -> dict:
 
 
 def _physics_means(rows: Sequence[dict]) -> dict:
-    """Mean over clips of each :data:`PHYSICS_KEYS` figure (NaN-free clips; ``<key>_clips``)."""
+    """Mean over clips of each :data:`PHYSICS_KEYS` figure, and its median (``<key>_median``:
+    a few violent clips dominate the dynamics means), over ``<key>_clips`` clips with a value."""
     out = {}
     for k in PHYSICS_KEYS:
         v = np.array([r[k] for r in rows if k in r], dtype=float)
         v = v[np.isfinite(v)]
         out[k] = float(v.mean()) if v.size else float("nan")
+        out[f"{k}_median"] = float(np.median(v)) if v.size else float("nan")
         out[f"{k}_clips"] = int(v.size)
     return out
 
@@ -312,8 +314,9 @@ def table3_markdown(results: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
-def physics_markdown(results: Sequence[dict]) -> str:
-    """Markdown table of the :mod:`sim.physics` means per method and W (``original`` first)."""
+def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
+    """Markdown table of the :mod:`sim.physics` means (``stat="median"``: medians) over clips per
+    method and W (``original`` first)."""
     rows = [r for r in results if "residual_force_bw" in r]
     rows.sort(key=lambda r: r["method"] != "original")
     cols = (
@@ -332,7 +335,10 @@ def physics_markdown(results: Sequence[dict]) -> str:
         "|---|---|---|" + "---|" * len(cols),
     ]
     for r in rows:
-        cells = [format(r[k], f) for _, k, f in cols]
+        cells = [
+            format(r[k] if stat == "mean" or k == "mean_q" else r[f"{k}_median"], f)
+            for _, k, f in cols
+        ]
         lines.append(
             f"| {r['method']} | {r['keyframes']} | {r['clips']} | " + " | ".join(cells) + " |"
         )

@@ -21,8 +21,9 @@ original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or 
 * ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
 * ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
 
-Both the original and the reconstruction go through the same pipeline (IK on the same points from
-the same start, same filter, same contact rules), so their difference is the reconstruction's.
+Both the original and the reconstruction go through the same pipeline (IK on the same points, each
+frame started from the original's pose at that frame; same filter, same contact rules), so their
+difference is the reconstruction's.
 """
 
 from __future__ import annotations
@@ -135,15 +136,19 @@ class PhysicsJob:
         return feet, height, contact, contacts
 
     def motion_physics(
-        self, positions: np.ndarray, reference: PointMotion | None, ground: Ground, q_init
+        self, positions: np.ndarray, reference: PointMotion | None, ground: Ground, start
     ) -> MotionPhysics:
         """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
 
         ``reference``: the original on this job's points (bone lengths of the collision scene;
-        default the motion itself); ``q_init``: (nq,) IK start of frame 0 or None."""
+        default the motion itself); ``start``: IK start, None (cold), (nq,) for frame 0 (then
+        warm starts) or (T, nq) per frame (:meth:`sim.physics.ik.HumanoidIK.fit`'s ``guesses``)."""
         feet, height, contact, contacts = self.ground_contacts(positions, ground)
         pf = positions[:, [self.names.index(f) for f in feet]]
-        fit = self.ik.fit(positions, q_init=q_init)
+        if start is not None and np.ndim(start) == 2:
+            fit = self.ik.fit(positions, guesses=start)
+        else:
+            fit = self.ik.fit(positions, q_init=start)
         if self._observed is None:  # the same hinges for the original and every reconstruction
             self._observed = self.ik.observed_hinges(fit.qpos[0])
         floor = ground.floor_z
@@ -245,9 +250,12 @@ def summarise_dynamics(dyn: Dynamics, anatomical: np.ndarray) -> dict:
 
 
 def _q_init(clip, model) -> np.ndarray | None:
-    """The clip's own first configuration when it lives on ``model`` (same nq), else None."""
+    """The clip's own poses (T, nq) when they live on ``model`` (same nq): each frame of the
+    original and of its reconstructions is fitted starting from the original's pose at that frame
+    (robust to fast turns and glitches that derail warm starts; the points decide the rest);
+    else None (cold start, then warm starts and the soft limit penalty)."""
     q = np.asarray(clip.qpos)
-    return q[0] if q.ndim == 2 and q.shape[1] == model.nq else None
+    return q if q.ndim == 2 and q.shape[1] == model.nq and len(q) == clip.n_frames else None
 
 
 def analyse(

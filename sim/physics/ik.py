@@ -14,7 +14,8 @@ branches ambiguous (a straight knee can bend either way if the thigh turns 180 d
 the penalty picks the branch inside the limits, which the points cannot tell apart, while a
 violation the points force (they cannot be matched inside the range) still shows, at the cost of
 ``limit_weight`` metres per radian of point error. Hard limits (mink's QP constraints) would
-instead hide forced violations; mink was also several times slower per frame here.
+instead hide forced violations; mink (one position task per point, daqp) was also 35-60x slower
+per clip and less exact in ``benchmarks/bench_physics.py``.
 
 Points: ``"root"`` is the root body's origin; any other name ``b`` is the site ``b_end`` (the end of
 bone ``b``) of a model built by :func:`sim.model.humanoid.build_mjcf`. Units: metres, radians.
@@ -32,6 +33,10 @@ from sim.model import quaternion as quat
 #: Hinges of bones whose CMU channels are junk or unobserved (hands, fingers, thumbs, toes): left
 #: out of the joint-limit check.
 NON_ANATOMICAL = ("lhand", "rhand", "lfingers", "rfingers", "lthumb", "rthumb", "ltoes", "rtoes")
+
+
+#: [m] RMS point error above which a frame gets more iterations and a cold start as well.
+HARD_FRAME_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -119,6 +124,10 @@ class HumanoidIK:
         names = hinge_names(self.model)
         return tuple(n for k, n in enumerate(names) if moved[6 + k])
 
+    def _cost(self, target: np.ndarray, q: np.ndarray) -> float:
+        """Summed squared distance [m^2] of the model's points at ``q`` to ``target`` (P, 3)."""
+        return float(np.sum((self.points(q) - target) ** 2))
+
     def initial_pose(self, targets: np.ndarray) -> np.ndarray:
         """(nq,) a starting configuration for ``targets`` (P, 3): hinges at zero, the root placed and
         turned (Kabsch) so that the model's points best match the targets as a rigid body."""
@@ -173,16 +182,25 @@ class HumanoidIK:
         positions: np.ndarray,
         *,
         q_init: np.ndarray | None = None,
+        guesses: np.ndarray | None = None,
         first_iter: int = 100,
         max_iter: int = 20,
         tol: float = 1e-6,
     ) -> Fit:
-        """Fit every frame of ``positions`` (T, P, 3) [m], warm-starting each from the last.
+        """Fit every frame of ``positions`` (T, P, 3) [m].
 
         Args:
-            q_init: (nq,) start of frame 0 (default :meth:`initial_pose`); degrees of freedom the
-                points leave free keep its values.
-            first_iter, max_iter: iteration caps of frame 0 and of the others.
+            q_init: (nq,) start of frame 0 (default :meth:`initial_pose`); later frames start from
+                the previous frame's solution (warm start). Degrees of freedom the points leave
+                free keep the start's values.
+            guesses: (T, nq) candidate starts per frame (e.g. the original clip's own poses when
+                fitting its reconstruction): each frame starts from its guess or from the previous
+                frame's solution, whichever matches the points better; the guesses, not the soft
+                limit penalty (off for this call), pick among configurations the points cannot
+                tell apart.
+            first_iter, max_iter: iteration caps of frame 0 and of the others; a frame still
+                :data:`HARD_FRAME_M` off after ``max_iter`` gets ``first_iter`` more, and a cold
+                start (:meth:`initial_pose`) with ``first_iter``, keeping the best.
             tol: stop when the largest step component is below this [rad or m], or when an
                 iteration improves the summed squared point error by less than 1e-12 m^2.
         """
@@ -192,14 +210,33 @@ class HumanoidIK:
         if not np.all(np.isfinite(p)):
             raise ValueError("positions must be finite")
         T = p.shape[0]
+        if guesses is not None and np.shape(guesses) != (T, self.model.nq):
+            raise ValueError(f"guesses must be {(T, self.model.nq)}; got {np.shape(guesses)}")
         qpos = np.empty((T, self.model.nq))
         err, its = np.empty(T), np.empty(T, dtype=int)
         q = self.initial_pose(p[0]) if q_init is None else np.asarray(q_init, dtype=np.float64)
-        for t in range(T):
-            q, err[t], its[t] = self.fit_frame(
-                p[t], q, max_iter=first_iter if t == 0 else max_iter, tol=tol
-            )
-            qpos[t] = q
+        weight = self.limit_weight
+        if guesses is not None:
+            self.limit_weight = 0.0
+        try:
+            for t in range(T):
+                if guesses is not None:
+                    g = np.asarray(guesses[t], dtype=np.float64)
+                    if t == 0 or self._cost(p[t], g) <= self._cost(p[t], q):
+                        q = g  # else keep the previous frame's solution (warm start)
+                    cap = max_iter
+                else:
+                    cap = first_iter if t == 0 else max_iter
+                q, err[t], its[t] = self.fit_frame(p[t], q, max_iter=cap, tol=tol)
+                if err[t] > HARD_FRAME_M:  # far from every start: go on, and try a cold start
+                    tries = [(q, err[t], its[t])]
+                    for q1 in (q, self.initial_pose(p[t])):
+                        q2, e2, i2 = self.fit_frame(p[t], q1, max_iter=first_iter, tol=tol)
+                        tries.append((q2, e2, its[t] + i2))
+                    q, err[t], its[t] = min(tries, key=lambda x: x[1])
+                qpos[t] = q
+        finally:
+            self.limit_weight = weight
         return Fit(qpos, err, its)
 
 
