@@ -39,7 +39,7 @@ def test_eval_physics_adds_figures_and_an_original_row(cmu_dir):
     assert all(k in per[0] for k in KEYS)
     assert "original" not in table3_markdown(out["results"])
     assert "| original | 60 |" in physics_markdown(out["results"])
-    json.dumps(out)  # JSON-ready
+    json.dumps(out, allow_nan=False)  # standard JSON
 
 
 def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tmp_path):

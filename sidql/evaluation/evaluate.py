@@ -151,8 +151,13 @@ PHYSICS_KEYS = (
 
 
 def physics_figures(analysis: dict) -> dict:
-    """The per-clip numbers of a :mod:`sim.physics` analysis (no per-frame arrays)."""
-    return {k: v for k, v in analysis.items() if k != "per_frame"}
+    """The per-clip numbers of a :mod:`sim.physics` analysis (no per-frame arrays; NaN, a mean
+    over no samples, becomes None so that the JSON is standard)."""
+    return {k: _none_if_nan(v) for k, v in analysis.items() if k != "per_frame"}
+
+
+def _none_if_nan(v):
+    return None if isinstance(v, float) and np.isnan(v) else v
 
 
 def physics_setup(cases: Sequence[Case]) -> dict:
@@ -186,10 +191,10 @@ def _physics_means(rows: Sequence[dict]) -> dict:
     a few violent clips dominate the dynamics means), over ``<key>_clips`` clips with a value."""
     out = {}
     for k in PHYSICS_KEYS:
-        v = np.array([r[k] for r in rows if k in r], dtype=float)
+        v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
         v = v[np.isfinite(v)]
-        out[k] = float(v.mean()) if v.size else float("nan")
-        out[f"{k}_median"] = float(np.median(v)) if v.size else float("nan")
+        out[k] = float(v.mean()) if v.size else None
+        out[f"{k}_median"] = float(np.median(v)) if v.size else None
         out[f"{k}_clips"] = int(v.size)
     return out
 
@@ -335,9 +340,9 @@ def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
         "|---|---|---|" + "---|" * len(cols),
     ]
     for r in rows:
+        vals = [r[k] if stat == "mean" or k == "mean_q" else r[f"{k}_median"] for _, k, f in cols]
         cells = [
-            format(r[k] if stat == "mean" or k == "mean_q" else r[f"{k}_median"], f)
-            for _, k, f in cols
+            "-" if v is None else format(v, f) for v, (_, _, f) in zip(vals, cols, strict=True)
         ]
         lines.append(
             f"| {r['method']} | {r['keyframes']} | {r['clips']} | " + " | ".join(cells) + " |"

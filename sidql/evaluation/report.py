@@ -147,7 +147,7 @@ def validate_clip(
             s = summarise(checks)
             run = MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline))
             if physics is not None:
-                run.physics = physics.analyse(clip, rec.positions, ground)
+                run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)
             out.runs.append(run)
     return out
 

@@ -208,6 +208,7 @@ class PhysicsJob:
         out.update(frames.pop("summary"))
         out["limit_excess_deg"] = float(mp.limit.mean())
         out["limit_excess_max_deg"] = float(mp.limit.max(initial=0.0))
+        out["limit_excess_n"] = int(len(mp.limit))
         out["ik_error_mm"] = 1e3 * float(mp.fit.error.mean())
         if positions is None:
             base = out
