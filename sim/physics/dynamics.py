@@ -58,13 +58,16 @@ def analysis_model(model):
 
 
 def tangent_path(model, qpos: np.ndarray) -> np.ndarray:
-    """(T, nv) cumulative sum of ``mj_differentiatePos`` between consecutive frames (s_0 = 0)."""
+    """(T, nv) cumulative sum of ``mj_differentiatePos`` between consecutive frames (s_0 = 0);
+    hinge steps are wrapped into [-pi, pi) (a hinge 2 pi further on is the same pose)."""
     q = np.asarray(qpos, dtype=np.float64)
     T = len(q)
     s = np.zeros((T, model.nv))
     v = np.empty(model.nv)
+    hinge = model.jnt_type[model.dof_jntid] == mujoco.mjtJoint.mjJNT_HINGE
     for t in range(1, T):
         mujoco.mj_differentiatePos(model, v, 1.0, q[t - 1], q[t])
+        v[hinge] = (v[hinge] + np.pi) % (2 * np.pi) - np.pi
         s[t] = s[t - 1] + v
     return s
 
