@@ -43,7 +43,7 @@ python_env() {
     quiet "$VENV/bin/python" -m pip install -q --upgrade pip
     # The CPU build of torch first: a bare 'torch' requirement would pull a multi-GB CUDA build.
     quiet "$VENV/bin/python" -m pip install -q "torch==2.13.0"
-    quiet "$VENV/bin/python" -m pip install -q -e ".[test,ray]"
+    quiet "$VENV/bin/python" -m pip install -q -e ".[test,ray,bench]"
     echo "$want" >"$STAMP"
 }
 

@@ -72,6 +72,7 @@ def report_step(clip, args) -> int:
         [first], Path(args.out) / "report", W=args.keyframes, methods=methods,
         joint_ranges=joint_ranges(model), title=f"Replay checks: {Path(clip.source).name or 'synthetic'}",
         meta={"source": clip.source or "synthetic motion", "clip": "frames 0-59 at 30 fps"},
+        model=model,
     )  # fmt: skip
     print(summary_table(Path(args.out) / "report" / "checks.json"))
     print(f"report: {page.resolve()}")
@@ -83,16 +84,28 @@ def summary_table(checks_path: Path) -> str:
     doc = json.loads(Path(checks_path).read_text())
     clip = doc["clips"][0]
     rows = [
-        f"W = {clip['keyframes']}, {clip['frames']} frames; floor and skating as excess over the "
-        "original",
-        "| method | reconstruction | keyframes | MPJPE mm | vel. err mm/s | floor +mm | skate +mm/s |",
-        "|---|---|---|---|---|---|---|",
+        f"W = {clip['keyframes']}, {clip['frames']} frames; contacts against the original's, "
+        "residual force in body weights (the original's in the first row)",
+        "| method | reconstruction | keyframes | MPJPE mm | vel. err mm/s | float mm | skate mm/s "
+        "| residual BW |",
+        "|---|---|---|---|---|---|---|---|",
     ]
+
+    def physics(entry, key, fmt):
+        value = entry.get("physics", {}).get(key)
+        return "n/a" if value is None else fmt.format(value)
+
+    o = clip["original"]
+    rows.append(
+        f"| original | - | all | 0.0 | 0 | {physics(o, 'float_mm', '{:.1f}')} | "
+        f"{physics(o, 'skate_mm_s', '{:.0f}')} | {physics(o, 'residual_force_bw', '{:.2f}')} |"
+    )
     for m in clip["methods"]:
-        s, e = m["summary"], m["excess"]
+        s = m["summary"]
         rows.append(
             f"| {m['method']} | {m['reconstruction']} | {' '.join(map(str, m['indices']))} | "
             f"{s['mpjpe_mm']:.1f} | {s['velocity_error_mm_s']:.0f} | "
-            f"{e['floor_depth_max_mm']:+.1f} | {e['skate_mean_mm_s']:+.0f} |"
+            f"{physics(m, 'float_mm', '{:.1f}')} | {physics(m, 'skate_mm_s', '{:.0f}')} | "
+            f"{physics(m, 'residual_force_bw', '{:.2f}')} |"
         )
     return "\n".join(rows)

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from sidql.commands.usage import UsageError
-from sidql.evaluation.evaluate import evaluate, load_cases, table3_markdown
+from sidql.evaluation.evaluate import evaluate, load_cases, physics_markdown, table3_markdown
 from sidql.evaluation.rate import rate_distortion, write_plot
 from sidql.keyframes.methods import get
 from sim.motion.clip import write_atomic
@@ -45,6 +45,13 @@ def register(sub) -> None:
     p.add_argument(
         "--subjects", nargs="+", default=None, help="only these subject ids, e.g. 01 07 18 61"
     )
+    p.add_argument(
+        "--physics",
+        action="store_true",
+        help="also fit the subject's humanoid to every reconstruction and the original and add "
+        "ground-contact, self-penetration, joint-limit and inverse-dynamics figures "
+        "(sim.physics) to every row, plus a row for method 'original'",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -69,7 +76,10 @@ def run(args) -> int:
     if not cases:
         raise UsageError(f"{args.data}: no {args.length}-frame clips (skipped {len(skipped)} bad)")
     try:
-        out = evaluate(cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet)
+        out = evaluate(
+            cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet,
+            physics=args.physics,
+        )  # fmt: skip
     except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
         raise UsageError(str(e)) from None
     out["skipped"] = skipped
@@ -80,12 +90,18 @@ def run(args) -> int:
         "skeleton": args.skeleton,
         "seed": args.seed,
         "clips": len(cases),
+        "physics": bool(args.physics),
     }
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda f: f.write(json.dumps(out, indent=1).encode()))
     print(f"{len(cases)} clips of {args.length} frames from {args.data}; skipped {len(skipped)}")
     print(table3_markdown(out["results"]))
+    if args.physics:
+        print("physics, means over clips:")
+        print(physics_markdown(out["results"]))
+        print("physics, medians over clips:")
+        print(physics_markdown(out["results"], "median"))
     print(f"wrote {path}")
     if args.rate_plot:
         rd = rate_distortion(cases, seed=args.seed, progress=not args.quiet)

@@ -31,11 +31,15 @@ from tqdm import tqdm
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
-from sidql.keyframes.spherical import SphericalSeries, chart, protocol_indices
+from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
 from sim.errors import MotionDataError
+from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials
 from sim.motion.ingest import load_clips
+from sim.physics.analysis import PhysicsJob
+from sim.physics.ground import estimate_ground
+from sim.replay.checks import from_clip
 
 #: The paper's Table 3 (mean Q at W = 5, 10, 15); "SIDQL" is its DQN.
 PAPER_TABLE3: dict[str, dict[int, float]] = {
@@ -63,11 +67,13 @@ class Case:
     pos: np.ndarray
     vel: np.ndarray
     index: int
+    asf: str = ""
 
 
-def make_case(clip: Clip, index: int = 0) -> Case:
+def make_case(clip: Clip, index: int = 0, asf: str = "") -> Case:
+    """``asf``: the subject's skeleton file (needed by ``evaluate(..., physics=True)``)."""
     idx = protocol_indices(clip)
-    return Case(clip, chart(clip), clip.positions[:, idx], clip.velocities[:, idx], index)
+    return Case(clip, chart(clip), clip.positions[:, idx], clip.velocities[:, idx], index, asf)
 
 
 def load_cases(
@@ -95,7 +101,7 @@ def load_cases(
     for trial in tqdm(trials, desc="load trials", unit="trial", disable=not progress):
         try:
             clips = load_clips(trial.asf, trial.amc, fps=fps, length=length, skeleton=skeleton)
-            new = [make_case(c, len(cases) + i) for i, c in enumerate(clips)]
+            new = [make_case(c, len(cases) + i, str(trial.asf)) for i, c in enumerate(clips)]
         except MotionDataError as e:
             skipped.append({"amc": str(trial.amc), "problem": str(e)})
             print(f"skipped {trial.amc}: {e}", file=sys.stderr)
@@ -109,13 +115,20 @@ def clip_seed(seed: int, index: int, W: int) -> int:
     return int(np.random.SeedSequence([seed, index, W]).generate_state(1)[0])
 
 
-def score(case: Case, keyframes: np.ndarray, method: str) -> dict:
+def score(case: Case, keyframes: np.ndarray, method: str, physics=None) -> dict:
     """Every error measure of one clip rebuilt from ``keyframes`` with the reconstruction
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
-    docstring)."""
+    docstring).
+
+    ``physics``: ``(job, ground)`` (:class:`sim.physics.analysis.PhysicsJob` on the protocol
+    points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction."""
     s = case.series
     rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
+    phys = (
+        physics_figures(physics[0].analyse(case.clip, rec.positions, physics[1])) if physics else {}
+    )
     return {
+        **phys,
         "q": q_from_angles(s, rec.theta, rec.phi),
         "q_hermite": q_error(s, keyframes, "hermite"),
         "geodesic_deg": geodesic_deg(case.pos, rec.positions, rec.parents),
@@ -125,6 +138,60 @@ def score(case: Case, keyframes: np.ndarray, method: str) -> dict:
     }
 
 
+#: The :mod:`sim.physics` figures ``evaluate(..., physics=True)`` adds to rows (means over clips).
+PHYSICS_KEYS = (
+    "penetration_mm", "float_mm", "skate_mm_s", "contact_precision", "contact_recall",
+    "self_pen_excess_mm", "lost_contacts", "limit_excess_deg", "residual_force_bw",
+    "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
+    "residual_force_bw_excess", "residual_torque_nm_kg_excess", "joint_torque_rms_nm_kg_excess",
+    "ik_error_mm",
+)  # fmt: skip
+
+
+def physics_figures(analysis: dict) -> dict:
+    """The per-clip numbers of a :mod:`sim.physics` analysis (no per-frame arrays; NaN, a mean
+    over no samples, becomes None so that the JSON is standard)."""
+    return {k: _none_if_nan(v) for k, v in analysis.items() if k != "per_frame"}
+
+
+def _none_if_nan(v):
+    return None if isinstance(v, float) and np.isnan(v) else v
+
+
+def physics_setup(cases: Sequence[Case]) -> dict:
+    """Per trial (``clip.source``): ``(job, ground)`` for :func:`score`, the ground from all the
+    trial's clips, one :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
+
+    jobs, out = {}, {}
+    by_trial: dict[str, list[Case]] = {}
+    for c in cases:
+        if not c.asf:
+            raise ValueError("physics needs each case's ASF (load the cases with load_cases)")
+        by_trial.setdefault(c.clip.source, []).append(c)
+    for source, group in by_trial.items():
+        clip = group[0].clip
+        if group[0].asf not in jobs:
+            pts = from_clip(clip).restrict(POINTS)
+            model = subject_model(group[0].asf)[1]
+            jobs[group[0].asf] = PhysicsJob(model, pts.names, pts.parents, clip.fps)
+        pos = np.concatenate([c.clip.positions for c in group])
+        out[source] = (jobs[group[0].asf], estimate_ground(pos, clip.names, clip.fps))
+    return out
+
+
+def _physics_means(rows: Sequence[dict]) -> dict:
+    """Mean over clips of each :data:`PHYSICS_KEYS` figure, and its median (``<key>_median``:
+    a few violent clips dominate the dynamics means), over ``<key>_clips`` clips with a value."""
+    out = {}
+    for k in PHYSICS_KEYS:
+        v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
+        v = v[np.isfinite(v)]
+        out[k] = float(v.mean()) if v.size else None
+        out[f"{k}_median"] = float(np.median(v)) if v.size else None
+        out[f"{k}_clips"] = int(v.size)
+    return out
+
+
 def evaluate(
     cases: Sequence[Case],
     method_names: Iterable[str],
@@ -132,6 +199,7 @@ def evaluate(
     *,
     seed: int = 0,
     progress: bool = True,
+    physics: bool = False,
 ) -> dict:
     """Run every method at every W on every case.
 
@@ -139,7 +207,10 @@ def evaluate(
         ``{"results": [row...], "per_clip": [row...]}``; a result row holds method, keyframes,
         clips, mean_q, mean_q_hermite, mean_geodesic_deg, mpjpe_mm, mean_velocity_error,
         mean_li_error_mm, median_decision_ms; a per-clip row holds source, start_frame, method,
-        keyframes, indices, q and the other scores.
+        keyframes, indices, q and the other scores. With ``physics`` every row also carries the
+        :mod:`sim.physics` figures (result rows: means over clips, :data:`PHYSICS_KEYS`), and one
+        result row (and per-clip rows) for method ``original``, the clip itself (all frames
+        kept: ``keyframes`` = clip length, errors 0).
     """
     method_names = list(method_names)
     counts = list(keyframe_counts)
@@ -147,6 +218,27 @@ def evaluate(
         methods.get(name)  # fail early, listing the known methods
     per_clip: list[dict] = []
     results: list[dict] = []
+    setup = physics_setup(cases) if physics else {}
+    if physics and cases:
+        rows = []
+        for case in tqdm(cases, desc="physics of originals", unit="clip", disable=not progress):
+            job, ground = setup[case.clip.source]
+            rows.append(
+                {
+                    "source": case.clip.source, "start_frame": case.clip.start_frame,
+                    "method": "original", "keyframes": case.clip.n_frames,
+                    **physics_figures(job.analyse(case.clip, None, ground)),
+                }
+            )  # fmt: skip
+        per_clip.extend(rows)
+        zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
+        results.append(
+            {
+                "method": "original", "keyframes": cases[0].clip.n_frames, "clips": len(rows),
+                **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0, "median_decision_ms": 0.0,
+                **_physics_means(rows),
+            }
+        )  # fmt: skip
     jobs = [(m, W) for m in method_names for W in counts]
     for name, W in tqdm(jobs, desc="evaluate", unit="run", disable=not progress):
         rows = []
@@ -160,7 +252,7 @@ def evaluate(
                 "method": name,
                 "keyframes": W,
                 "indices": k.tolist(),
-                **score(case, k, name),
+                **score(case, k, name, setup.get(case.clip.source)),
                 "decision_ms": ms,
             }
             rows.append(row)
@@ -178,6 +270,7 @@ def evaluate(
                     "mean_velocity_error": float(np.mean([r["velocity_error"] for r in rows])),
                     "mean_li_error_mm": float(np.mean([r["li_error_mm"] for r in rows])),
                     "median_decision_ms": float(np.median([r["decision_ms"] for r in rows])),
+                    **(_physics_means(rows) if physics else {}),
                 }
             )
     return {"results": results, "per_clip": per_clip}
@@ -186,6 +279,7 @@ def evaluate(
 def table3_markdown(results: Sequence[dict]) -> str:
     """Markdown table of mean Q per method (rows) and W (columns), the paper's figure beside ours
     where it has one, then the chart-free errors."""
+    results = [r for r in results if r["method"] != "original"]
     counts = sorted({r["keyframes"] for r in results})
     names = list(dict.fromkeys(r["method"] for r in results))
     by = {(r["method"], r["keyframes"]): r for r in results}
@@ -212,5 +306,36 @@ def table3_markdown(results: Sequence[dict]) -> str:
             f"| {r['mean_q_hermite']:.4f} | {r['mean_geodesic_deg']:.2f} | {r['mpjpe_mm']:.1f} "
             f"| {r['mean_velocity_error']:.3f} | {r['mean_li_error_mm']:.1f} "
             f"| {r['median_decision_ms']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
+    """Markdown table of the :mod:`sim.physics` means (``stat="median"``: medians) over clips per
+    method and W (``original`` first)."""
+    rows = [r for r in results if "residual_force_bw" in r]
+    rows.sort(key=lambda r: r["method"] != "original")
+    cols = (
+        ("Q", "mean_q", ".4f"), ("pen. (mm)", "penetration_mm", ".1f"),
+        ("float (mm)", "float_mm", ".1f"), ("skate (mm/s)", "skate_mm_s", ".0f"),
+        ("contact P", "contact_precision", ".2f"), ("contact R", "contact_recall", ".2f"),
+        ("self-pen. excess (mm)", "self_pen_excess_mm", ".2f"),
+        ("lost contacts", "lost_contacts", ".1f"), ("limit excess (deg)", "limit_excess_deg", ".2f"),
+        ("residual F (BW)", "residual_force_bw", ".3f"),
+        ("residual F p95 (BW)", "residual_force_bw_p95", ".2f"),
+        ("residual torque (N m/kg)", "residual_torque_nm_kg", ".3f"),
+        ("joint torque RMS (N m/kg)", "joint_torque_rms_nm_kg", ".3f"),
+    )  # fmt: skip
+    lines = [
+        "| method | W | clips | " + " | ".join(c[0] for c in cols) + " |",
+        "|---|---|---|" + "---|" * len(cols),
+    ]
+    for r in rows:
+        vals = [r[k] if stat == "mean" or k == "mean_q" else r[f"{k}_median"] for _, k, f in cols]
+        cells = [
+            "-" if v is None else format(v, f) for v, (_, _, f) in zip(vals, cols, strict=True)
+        ]
+        lines.append(
+            f"| {r['method']} | {r['keyframes']} | {r['clips']} | " + " | ".join(cells) + " |"
         )
     return "\n".join(lines)

@@ -44,6 +44,8 @@ from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip, write_atomic
 from sim.motion.ingest import load_clips
+from sim.physics.analysis import PhysicsJob
+from sim.physics.ground import estimate_ground
 from sim.replay.checks import (
     CollisionScene,
     FrameChecks,
@@ -76,6 +78,12 @@ class MethodRun:
     checks: FrameChecks
     summary: dict
     excess: dict
+    physics: dict = field(default_factory=dict)
+
+    @property
+    def figures(self) -> dict:
+        """What the page shows: the replay summary and the :mod:`sim.physics` figures."""
+        return with_physics(self.summary, self.physics)
 
     @property
     def label(self) -> str:
@@ -96,6 +104,12 @@ class ClipValidation:
     baseline_checks: FrameChecks
     baseline: dict
     runs: list[MethodRun] = field(default_factory=list)
+    physics: dict = field(default_factory=dict)
+
+    @property
+    def baseline_figures(self) -> dict:
+        """The original's replay summary and :mod:`sim.physics` figures."""
+        return with_physics(self.baseline, self.physics)
 
 
 @dataclass(frozen=True)
@@ -161,6 +175,8 @@ def validate_clip(
     hops: int = 2,
     floor_z: float = 0.0,
     streams: tuple[DecodedStream, ...] = (),
+    physics=None,
+    ground=None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -170,7 +186,15 @@ def validate_clip(
         W: keyframes per clip, both ends included.
         joint_ranges: hinge ranges [rad] for the joint-limit check of motions with joint angles.
         streams: decoded ``.sidq`` streams of the clip's trial, shown after the methods.
+        physics: a :class:`sim.physics.analysis.PhysicsJob` on the protocol points: adds
+            :mod:`sim.physics` figures (``physics``) for the original and every run.
+        ground: the trial's :class:`sim.physics.ground.Ground`; its ``floor_z`` replaces
+            ``floor_z`` (default: estimated from the clip when ``physics`` is given).
     """
+    if physics is not None and ground is None:
+        ground = estimate_ground(clip.positions, clip.names, clip.fps)
+    if ground is not None:
+        floor_z = ground.floor_z
     full = from_clip(clip)
     orig = full.restrict(POINTS)
     floor = dict(floor_z=floor_z, contact_height=contact_height, hops=hops)
@@ -178,6 +202,8 @@ def validate_clip(
     kw = dict(**floor, joint_ranges=joint_ranges, scene=scene)
     base_checks = replay(orig, full, **kw)
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks))
+    if physics is not None:
+        out.physics = physics.analyse(clip, None, ground)
     for m in methods:
         keys = np.asarray(select(m, clip, W, seed=seed))
         own = reconstruction_of(m)  # every method under Hermite, and under its own if other
@@ -185,15 +211,20 @@ def validate_clip(
             rec = from_reconstruction(reconstructions.rebuild(variant, clip, keys), clip.fps)
             checks = replay(rec, full, **kw)
             s = summarise(checks)
-            out.runs.append(MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline)))
+            run = MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline))
+            if physics is not None:
+                run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)
+            out.runs.append(run)
     for stream in streams:
         keys, rec = stream.clip_part(clip)
         checks = replay(rec, full, **kw)
         s = summarise(checks)
-        variant = stream.motion.variant
-        out.runs.append(
-            MethodRun(stream.label, variant, keys, rec, checks, s, excess(s, out.baseline))
+        run = MethodRun(
+            stream.label, stream.motion.variant, keys, rec, checks, s, excess(s, out.baseline)
         )
+        if physics is not None:
+            run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)
+        out.runs.append(run)
     return out
 
 
@@ -242,7 +273,11 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
                 "frames": v.clip.n_frames,
                 "fps": v.clip.fps,
                 "keyframes": v.W,
-                "original": {"summary": v.baseline, "per_frame": per_frame(v.baseline_checks)},
+                "original": {
+                    "summary": v.baseline,
+                    "per_frame": per_frame(v.baseline_checks),
+                    **_physics_entry(v.physics),
+                },
                 "methods": [
                     {
                         "method": r.method,
@@ -251,12 +286,28 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
                         "summary": r.summary,
                         "excess": r.excess,
                         "per_frame": per_frame(r.checks),
+                        **_physics_entry(r.physics),
                     }
                     for r in v.runs
                 ],
             }
         )
     return _clean({**meta, "clips": clips})
+
+
+def with_physics(summary: dict, physics: dict) -> dict:
+    """``summary`` plus the scalar :mod:`sim.physics` figures (what the page's table reads)."""
+    return {**summary, **{k: v for k, v in physics.items() if k != "per_frame"}}
+
+
+def _physics_entry(physics: dict) -> dict:
+    """``physics`` (the :mod:`sim.physics` figures) and ``physics_per_frame`` of a checks.json row."""
+    if not physics:
+        return {}
+    return {
+        "physics": {k: v for k, v in physics.items() if k != "per_frame"},
+        "physics_per_frame": physics["per_frame"],
+    }
 
 
 def _slug(s: str) -> str:
@@ -404,7 +455,7 @@ def best_rows(m: Metric, values) -> set[int]:
 
 def shown_metrics(v: ClipValidation) -> list[Metric]:
     """The metrics with a value in at least one row of the clip."""
-    rows = [(v.baseline, None)] + [(r.summary, r.excess) for r in v.runs]
+    rows = [(v.baseline_figures, None)] + [(r.figures, r.excess) for r in v.runs]
     return [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]
 
 
@@ -416,10 +467,10 @@ def _table(v: ClipValidation, colours) -> str:
         f"<span class='dir'>{_ARROW[m.better]}</span></th>"
         for m in ms
     )
-    vals = {m.key: [metric_value(m, r.summary, r.excess) for r in v.runs] for m in ms}
+    vals = {m.key: [metric_value(m, r.figures, r.excess) for r in v.runs] for m in ms}
     best = {m.key: best_rows(m, vals[m.key]) for m in ms}
     base = "".join(
-        f"<td>{html.escape(_cell(m.fmt.replace('+', ''), metric_value(m, v.baseline)))}</td>"
+        f"<td>{html.escape(_cell(m.fmt.replace('+', ''), metric_value(m, v.baseline_figures)))}</td>"
         for m in ms
     )
     rows = [f"<tr class='orig'><td>original (baseline)</td><td>-</td>{base}</tr>"]
@@ -488,7 +539,7 @@ def summary_plot(v: ClipValidation, colours) -> bytes | None:
     ms = [m for m in shown_metrics(v) if m.better]
 
     def informative(m):  # some value, and not every method showing the same one
-        vals = [metric_value(m, r.summary, r.excess) for r in v.runs]
+        vals = [metric_value(m, r.figures, r.excess) for r in v.runs]
         shown = [x for x in vals if x is not None]
         return bool(shown) and (len(shown) < 2 or bool(best_rows(m, vals)))
 
@@ -504,7 +555,7 @@ def summary_plot(v: ClipValidation, colours) -> bytes | None:
     )  # fmt: skip
     y = np.arange(n)
     for ax, m in zip(axes.flat, ms, strict=False):
-        vals = [metric_value(m, r.summary, r.excess) for r in v.runs]
+        vals = [metric_value(m, r.figures, r.excess) for r in v.runs]
         best = best_rows(m, vals)
         x = [0.0 if a is None else a for a in vals]
         ax.barh(y, x, color=colours, height=0.7)
@@ -513,7 +564,7 @@ def summary_plot(v: ClipValidation, colours) -> bytes | None:
                 ax.text(0, i, " n/a", va="center", fontsize=7, color="#666")
             elif i in best:
                 ax.text(a, i, " \u2605", va="center", fontsize=8, color="#1a7f37")
-        ref = 0.0 if m.excess else metric_value(m, v.baseline)
+        ref = 0.0 if m.excess else metric_value(m, v.baseline_figures)
         if ref is not None and not (m.key in ("mpjpe_mm", "velocity_error_mm_s") and ref == 0):
             ax.axvline(ref, color="k", ls="--", lw=0.8)
         unit = f" [{m.unit}]" if m.unit else ""
@@ -683,11 +734,35 @@ def _jpeg(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+#: Flags drawn on a reconstruction's foot point against the original's physics contact labels:
+#: floating higher than this above stance [mm] while the original's is in contact, sinking deeper
+#: than this below the ground [mm], skating this much faster [mm/s] while the original's stands.
+FLOAT_MM, SINK_MM, SKATE_MM_S = 30.0, 20.0, 300.0
+
+
 def ground_and_feet(v: ClipValidation, run: MethodRun) -> tuple[float, FootState]:
-    """Ground height [m] and foot states drawn for one method's video: the simple estimates of
-    :mod:`sim.replay.foot_state` (swap here for a calibrated ground and contact labels)."""
-    ground = simple_ground(v.original)
-    return ground, simple_foot_states(v.original, run.motion, ground_z=ground)
+    """Floor height [m] and foot states drawn for one method's video.
+
+    With :mod:`sim.physics` figures (a report with the subject's model): the trial's calibrated
+    floor and the original's contact labels (with hysteresis), the reconstruction flagged by
+    :data:`FLOAT_MM`, :data:`SINK_MM` and :data:`SKATE_MM_S`. Without: the simple estimates of
+    :mod:`sim.replay.foot_state`."""
+    if not (v.physics and run.physics):
+        ground = simple_ground(v.original)
+        return ground, simple_foot_states(v.original, run.motion, ground_z=ground)
+    o, r = v.physics["per_frame"], run.physics["per_frame"]
+    contact = np.asarray(o["contact"], dtype=bool)
+    height = np.asarray(r["foot_height_mm"], dtype=float)
+    speed = np.asarray(r["foot_speed_mm_s"], dtype=float)
+    states = FootState(
+        points=tuple(o["foot_names"]),
+        contact=contact,
+        rec_contact=np.asarray(r["contact"], dtype=bool),
+        floating=contact & (height > FLOAT_MM),
+        sinking=height < -SINK_MM,
+        skating=contact & (speed - np.asarray(o["foot_speed_mm_s"], dtype=float) > SKATE_MM_S),
+    )
+    return float(v.physics["floor_z_m"]), states
 
 
 def _data_uri(mime: str, data: bytes) -> str:
@@ -854,12 +929,25 @@ def report_clips(
     progress: bool = True,
     clip_numbers=None,
     streams: tuple[DecodedStream, ...] = (),
+    model=None,
+    ground=None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
     report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
-    labels and file names (default 0, 1, ...)."""
+    labels and file names (default 0, 1, ...). With ``model`` (the subject's humanoid) every motion
+    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip)."""
+    job = physics_job(model, clips[0]) if model is not None and clips else None
     vals = [
-        validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges, streams=streams)
+        validate_clip(
+            c,
+            methods,
+            W,
+            seed=seed,
+            joint_ranges=joint_ranges,
+            streams=streams,
+            physics=job,
+            ground=ground,
+        )  # fmt: skip
         for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
     ]
     shown = [*methods, *(s.label for s in streams)]
@@ -900,5 +988,18 @@ def report_trial(
         joint_ranges=joint_ranges(model), videos=videos, style=style,
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
-        progress=progress, clip_numbers=list(clips), streams=decoded,
+        progress=progress, clip_numbers=list(clips), streams=decoded, model=model,
+        ground=trial_ground(all_clips),
     )  # fmt: skip
+
+
+def physics_job(model, clip: Clip):
+    """A :class:`sim.physics.analysis.PhysicsJob` for the protocol points of ``clip``'s subject."""
+    orig = from_clip(clip).restrict(POINTS)
+    return PhysicsJob(model, orig.names, orig.parents, clip.fps)
+
+
+def trial_ground(clips: list[Clip]):
+    """The trial's :class:`sim.physics.ground.Ground` from all its clips."""
+    pos = np.concatenate([c.positions for c in clips])
+    return estimate_ground(pos, clips[0].names, clips[0].fps)

@@ -68,6 +68,9 @@ class FrameChecks:
         velocity_error: (T,) mean |v - v_ref| over points [m/s].
         joint_limit: (T,) max violation of a hinge range [rad] (NaN: no joint angles).
         joint_limit_count: (T,) hinges out of range (-1: no joint angles).
+        self_pairs: (T,) per frame ``{(bone_a, bone_b): depth [m]}`` of the penetrating pairs, by
+            bone (end point) name, ``bone_a < bone_b``: what :func:`self_penetration_excess`
+            compares frame by frame.
     """
 
     bone_drift: np.ndarray
@@ -83,6 +86,7 @@ class FrameChecks:
     velocity_error: np.ndarray
     joint_limit: np.ndarray
     joint_limit_count: np.ndarray
+    self_pairs: tuple = ()
 
 
 class CollisionScene:
@@ -115,6 +119,11 @@ class CollisionScene:
         self._geom = np.arange(1, B + 1)  # geom 0 is the floor; then one capsule per bone
         self._bone_of_geom = np.full(self.model.ngeom, -1)
         self._bone_of_geom[self._geom] = np.arange(B)
+
+    def move_floor(self, floor_z: float) -> None:
+        """Put the floor plane at height ``floor_z`` [m] (one scene serves every ground)."""
+        self.model.geom_pos[0, 2] = floor_z  # geom 0 is the floor plane
+        self.settings = (float(floor_z), *self.settings[1:])
 
     @classmethod
     def for_reference(
@@ -227,8 +236,11 @@ def replay(
     floor_depth, floor_bones = np.zeros(T), np.zeros(T, dtype=int)
     self_count, self_depth = np.zeros(T, dtype=int), np.zeros(T)
     contact = np.zeros((T, len(feet)), dtype=bool)
+    bname = bones.bone_names
+    pairs = []
     for t in range(T):
         gap, pen = scene.measure(motion.positions[t])
+        pairs.append({tuple(sorted((bname[a], bname[b]))): float(dd) for a, b, dd in pen})
         below = gap < 0
         floor_bones[t] = int(below.sum())
         floor_depth[t] = float(-gap[below].min()) if below.any() else 0.0
@@ -249,8 +261,45 @@ def replay(
         jl, jn = np.full(T, np.nan), np.full(T, -1)
     return FrameChecks(
         drift, floor_depth, floor_bones, self_count, self_depth, feet, contact, speed, skate,
-        mpjpe, verr, jl, jn,
+        mpjpe, verr, jl, jn, tuple(pairs),
     )  # fmt: skip
+
+
+def self_penetration_excess(
+    checks: FrameChecks, baseline: FrameChecks, *, tol: float = 1e-3
+) -> dict[str, float]:
+    """Self-penetration of a motion beyond the original's, pair by pair and frame by frame.
+
+    For every frame and pair of bones, ``excess = max(0, d_rec - d_orig)`` with ``d`` the pair's
+    penetration depth [m] (0 when apart): overlaps the original has too (the thick capsules of
+    thorax, neck and head touch in every frame) cancel, new or deeper ones count. A pair the
+    original has deeper than ``tol`` that the motion loses by more than ``tol`` (a real contact,
+    e.g. hand on arm, gone) is a *lost contact*, counted separately rather than as an improvement.
+
+    Args:
+        checks, baseline: the motion's and the original's :class:`FrameChecks` (same frames, same
+            point names).
+    Returns:
+        ``self_pen_excess_mm``: mean over frames of the largest pair excess [mm];
+        ``self_pen_excess_n``: frames; ``self_pen_excess_max_mm``; ``self_pen_excess_pairs``:
+        (frame, pair) samples with excess > ``tol``; ``lost_contacts``: (frame, pair) samples lost.
+    """
+    if len(checks.self_pairs) != len(baseline.self_pairs):
+        raise ValueError("self-penetration excess needs both replays' pairs over the same frames")
+    worst, n_exc, lost = [], 0, 0
+    for rec, orig in zip(checks.self_pairs, baseline.self_pairs, strict=True):
+        exc = [max(0.0, d - orig.get(k, 0.0)) for k, d in rec.items()]
+        worst.append(max(exc, default=0.0))
+        n_exc += sum(e > tol for e in exc)
+        lost += sum(d > tol and d - rec.get(k, 0.0) > tol for k, d in orig.items())
+    w = np.array(worst)
+    return {
+        "self_pen_excess_mm": 1e3 * float(w.mean()) if w.size else float("nan"),
+        "self_pen_excess_n": int(w.size),
+        "self_pen_excess_max_mm": 1e3 * float(w.max(initial=0.0)),
+        "self_pen_excess_pairs": int(n_exc),
+        "lost_contacts": int(lost),
+    }
 
 
 def _lengths(m: PointMotion) -> np.ndarray:

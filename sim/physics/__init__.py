@@ -1,0 +1,1 @@
+"""Physics of motions on the humanoid: ground, contacts, inverse kinematics, dynamics."""

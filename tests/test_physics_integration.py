@@ -1,0 +1,61 @@
+"""sim.physics wired into ``sidql eval --physics`` and the report's checks.json."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+KEYS = (
+    "ground_z_m", "penetration_mm", "float_mm", "skate_mm_s", "contact_precision",
+    "contact_recall", "self_pen_excess_mm", "lost_contacts", "limit_excess_deg",
+    "residual_force_bw", "residual_force_bw_p95", "residual_torque_nm_kg",
+    "joint_torque_rms_nm_kg",
+)  # fmt: skip
+
+
+def test_eval_physics_adds_figures_and_an_original_row(cmu_dir):
+    from sidql.evaluation.evaluate import (
+        PHYSICS_KEYS,
+        evaluate,
+        load_cases,
+        physics_markdown,
+        table3_markdown,
+    )
+
+    cases, _ = load_cases(cmu_dir, subjects=["02"], progress=False)
+    cases = cases[:2]
+    out = evaluate(cases, ["uniform"], [5], progress=False, physics=True)
+    rows = {r["method"]: r for r in out["results"]}
+    assert set(rows) == {"original", "uniform"}
+    for r in rows.values():
+        assert all(k in r for k in PHYSICS_KEYS)
+        assert r["clips"] == len(cases)
+    orig, uni = rows["original"], rows["uniform"]
+    assert orig["contact_recall"] == 1.0 and orig["self_pen_excess_mm"] == 0.0
+    assert orig["residual_force_bw_excess"] == 0.0
+    per = [r for r in out["per_clip"] if r["method"] == "uniform"]
+    assert np.isclose(uni["residual_force_bw"], np.mean([r["residual_force_bw"] for r in per]))
+    assert all(k in per[0] for k in KEYS)
+    assert "original" not in table3_markdown(out["results"])
+    assert "| original | 60 |" in physics_markdown(out["results"])
+    json.dumps(out, allow_nan=False)  # standard JSON
+
+
+def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tmp_path):
+    from sidql.evaluation.report import checks_document, physics_job, trial_ground, validate_clip
+    from sim.model.humanoid import subject_model
+    from sim.motion.ingest import load_clips
+
+    asf = cmu_dir / "02" / "02.asf"
+    clips = load_clips(asf, cmu_dir / "02" / "02_01.amc")
+    model = subject_model(asf)[1]
+    ground = trial_ground(clips)
+    v = validate_clip(clips[0], ["uniform"], 5, physics=physics_job(model, clips[0]), ground=ground)
+    doc = json.loads(json.dumps(checks_document([v], {})))
+    c = doc["clips"][0]
+    for row in [c["original"], *c["methods"]]:
+        assert all(k in row["physics"] for k in KEYS)
+        assert len(row["physics_per_frame"]["residual_force_bw"]) == clips[0].n_frames
+        assert row["physics"]["ground_z_m"] == round(ground.z, 6)
+    assert c["original"]["physics"]["contact_recall"] == 1.0
