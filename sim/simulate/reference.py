@@ -1,0 +1,76 @@
+"""Reference motions for the tracking controller: time warps, floor placement, body scaling.
+
+A reference is a ``qpos`` stream (T, nq) at the control rate (``sim.simulate.model.CONTROL_HZ``).
+CMU's floor height varies per trial (the lowest foot point sits anywhere from -20 to +16 cm), so a
+real reference is shifted vertically until a robust low percentile of its lowest foot point
+touches z = 0. (The physics room's ground estimate can replace :func:`floor_offset` unchanged.)
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+FOOT_GEOMS = ("lfoot", "rfoot", "ltoes", "rtoes")
+
+
+def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
+    """(T,) height [m] of the lowest surface point of the foot and toe capsules in each frame."""
+    data = mujoco.MjData(model)
+    ids = [model.geom(n).id for n in FOOT_GEOMS if mujoco.mj_name2id(model, 5, n) >= 0]
+    low = np.empty(len(qpos))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        z = np.inf
+        for g in ids:
+            c = data.geom_xpos[g, 2]
+            r = model.geom_size[g, 0]
+            if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+                half = model.geom_size[g, 1] * abs(data.geom_xmat[g, 8])
+                z = min(z, c - half - r)
+            else:
+                z = min(z, c - r)
+        low[t] = z
+    return low
+
+
+def floor_offset(model, qpos: np.ndarray, percentile: float = 5.0) -> float:
+    """Height [m] of the floor under a motion: the ``percentile`` of its lowest foot points."""
+    return float(np.percentile(lowest_foot_point(model, qpos), percentile))
+
+
+def on_floor(model, qpos: np.ndarray) -> np.ndarray:
+    """A copy of ``qpos`` shifted vertically so that :func:`floor_offset` is 0."""
+    out = qpos.copy()
+    out[:, 2] -= floor_offset(model, qpos)
+    return out
+
+
+def time_warp(model, qpos: np.ndarray, rate: float, speed: float, out_rate: float) -> np.ndarray:
+    """``qpos`` sampled at ``rate`` replayed ``speed`` times faster, resampled at ``out_rate``.
+
+    Positions and hinges are interpolated linearly; the root quaternion by slerp
+    (``mujoco.mju_...`` on the shortest arc). Returns (T', nq) covering the same motion.
+    """
+    if speed <= 0:
+        raise ValueError(f"speed must be positive; got {speed}")
+    T = len(qpos)
+    duration = (T - 1) / rate / speed
+    n = int(np.floor(duration * out_rate + 1e-9)) + 1
+    s = np.arange(n) / out_rate * speed * rate  # source frame index (float)
+    i0 = np.minimum(np.floor(s).astype(int), T - 1)
+    i1 = np.minimum(i0 + 1, T - 1)
+    a = (s - i0)[:, None]
+    out = (1 - a) * qpos[i0] + a * qpos[i1]
+    q0, q1 = qpos[i0, 3:7], qpos[i1, 3:7]
+    sign = np.where((q0 * q1).sum(-1, keepdims=True) < 0, -1.0, 1.0)
+    dot = np.clip(np.abs((q0 * q1).sum(-1, keepdims=True)), -1, 1)
+    theta = np.arccos(dot)
+    small = theta < 1e-6
+    st = np.where(small, 1.0, np.sin(theta))
+    w0 = np.where(small, 1 - a, np.sin((1 - a) * theta) / st)
+    w1 = np.where(small, a, np.sin(a * theta) / st)
+    q = w0 * q0 + w1 * sign * q1
+    out[:, 3:7] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
