@@ -38,6 +38,11 @@ def register(sub) -> None:
         "--subjects", nargs="+", default=None, help="only these subject ids, e.g. 01 07 18 61"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--workers", type=int, default=1, help="processes loading trials")
+    p.add_argument(
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        help="load trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
+    )  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -66,6 +71,8 @@ def run(args) -> int:
         skeleton=args.skeleton,
         progress=not args.quiet,
         subjects=args.subjects,
+        workers=args.workers,
+        ray=args.ray,
     )
     if not cases:
         print(f"sidql eval: no {args.length}-frame clips under {args.data}")

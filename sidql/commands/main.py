@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "sidql.commands.eval",
     "sidql.commands.extract",
     "sidql.commands.train",
+    "sidql.commands.synth",
 )
 
 

@@ -10,10 +10,10 @@ import json
 import os
 import re
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from sim.batch import run_batch
 from sim.errors import MotionDataError
 
 _TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.amc$", re.IGNORECASE)
@@ -97,13 +97,13 @@ def ingest_directory(
     fps: float = 30.0,
     workers: int | None = None,
     progress: bool = True,
+    ray: str | None = None,
 ) -> DatasetSummary:
     """Ingest every trial under ``root`` into ``out_dir/<subject>/<trial>.npz`` plus ``index.json``.
 
     Bad files are skipped and listed (with the error naming file, line and problem); every good
     result is kept. Each output, the index included, is written atomically.
     """
-    from tqdm import tqdm
 
     from sim.motion.clip import write_atomic
 
@@ -112,19 +112,15 @@ def ingest_directory(
     out_dir.mkdir(parents=True, exist_ok=True)
     trials = find_trials(root)
     summary = DatasetSummary()
-    workers = workers or min(len(trials), os.cpu_count() or 1) or 1
-    bar = tqdm(total=len(trials), desc="ingest", unit="trial", disable=not progress)
-    if workers == 1:
-        for t in trials:
-            _collect(summary, t, lambda t=t: _ingest_one(t, str(out_dir), skeleton, fps))
-            bar.update()
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(_ingest_one, t, str(out_dir), skeleton, fps): t for t in trials}
-            for fut in as_completed(futures):
-                _collect(summary, futures[fut], fut.result)
-                bar.update()
-    bar.close()
+    outcomes = run_batch(
+        _ingest_task, [(t, str(out_dir), skeleton, fps) for t in trials],
+        workers=workers, ray=ray, desc="ingest", progress=progress,
+    )  # fmt: skip
+    for t, o in zip(trials, outcomes, strict=True):
+        if o.ok:
+            summary.written.append(o.result)
+        else:  # bad input or a bug: either way only this trial is lost
+            summary.skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
     summary.written.sort(key=lambda r: (r["subject"], r["trial"]))
     summary.skipped.sort(key=lambda r: r["amc"])
     summary.seconds = time.perf_counter() - start
@@ -139,12 +135,23 @@ def ingest_directory(
     return summary
 
 
-def _collect(summary: DatasetSummary, trial: Trial, get) -> None:
+def _ingest_task(args) -> dict:
+    return _ingest_one(*args)
+
+
+def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60):
+    """Every ``length``-frame clip (non-overlapping, from frame 0) of a folder written by
+    ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects)."""
+    from sim.motion.clip import load_npz
+
+    out_dir = Path(out_dir)
     try:
-        summary.written.append(get())
-    except MotionDataError as e:
-        summary.skipped.append({"amc": str(trial.amc), "asf": str(trial.asf), "error": str(e)})
-    except Exception as e:  # a bug must not cost the good results; report it with its type
-        summary.skipped.append(
-            {"amc": str(trial.amc), "asf": str(trial.asf), "error": f"{type(e).__name__}: {e}"}
-        )
+        index = json.loads((out_dir / "index.json").read_text())
+    except (OSError, ValueError) as e:
+        raise MotionDataError(str(out_dir / "index.json"), None, f"not a dataset index: {e}") from e
+    clips, subjects = [], []
+    for entry in index.get("trials", []):
+        for c in load_npz(out_dir / entry["file"]).split(length):
+            clips.append(c)
+            subjects.append(str(entry.get("subject", "")))
+    return clips, subjects

@@ -28,8 +28,8 @@ import mujoco
 import numpy as np
 
 from sim.motion.velocities import qvel_from_qpos
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
 from sim.simulate.reference import FOOT_GEOMS
-from sim.simulate.model import CONTROL_HZ, G, SUBSTEPS, Gains, total_mass
 
 ROOT_TORQUE_LEVER = 0.5  # [m]: the root torque bound is assist_limit * weight * this lever
 
@@ -109,9 +109,7 @@ def inverse_dynamics(model, qpos, qvel, qacc, *, contacts: bool = True) -> np.nd
     return out
 
 
-def contact_feedforward(
-    model, qpos, force, *, contact_height: float = 0.03
-) -> np.ndarray:
+def contact_feedforward(model, qpos, force, *, contact_height: float = 0.03) -> np.ndarray:
     """Move the root wrench of a free-floating inverse dynamics onto the feet that touch the floor.
 
     ``force`` (T, nv) comes from :func:`inverse_dynamics` without contacts: its root rows are the
@@ -163,7 +161,7 @@ def track(
     model,
     ref_qpos: np.ndarray,
     *,
-    gains: Gains = Gains(),
+    gains: Gains | None = None,
     assist_limit: float = 0.5,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
@@ -179,6 +177,7 @@ def track(
     Returns:
         :class:`Tracking` with states at ticks ``0, record_every, 2 record_every, ...``.
     """
+    gains = gains or Gains()
     T = ref_qpos.shape[0]
     data = mujoco.MjData(model)
     ref_qvel, ref_qacc = reference_derivatives(model, ref_qpos)

@@ -57,12 +57,13 @@ def sim_model(
     skeleton: Skeleton,
     *,
     body_mass_kg: float = DEFAULT_BODY_MASS_KG,
-    gains: Gains = Gains(),
+    gains: Gains | None = None,
 ) -> mujoco.MjModel:
     """The actuated humanoid of ``skeleton`` (see the module docstring).
 
     Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``).
     """
+    gains = gains or Gains()
     spec = mujoco.MjSpec.from_string(build_mjcf(skeleton, body_mass_kg=body_mass_kg))
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
