@@ -22,7 +22,7 @@ simulator's own ``qpos`` and ``qvel``, never differences.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -69,6 +69,8 @@ class Tracking:
         assist_wrench: (F, 6) the applied root wrench (free-joint generalised force).
         fell: whether the root dropped below half its reference height (see :func:`track`).
         ticks: control ticks simulated.
+        mean_assistance_all: mean assistance over every tick.
+        penetration: deepest contact penetration [m] seen at the control ticks (>= 0).
     """
 
     qpos: np.ndarray
@@ -78,7 +80,7 @@ class Tracking:
     fell: bool
     ticks: int
     mean_assistance_all: float = 0.0
-    notes: list = field(default_factory=list)
+    penetration: float = 0.0
 
 
 def reference_derivatives(model, qpos: np.ndarray, rate: float = CONTROL_HZ):
@@ -109,13 +111,16 @@ def inverse_dynamics(model, qpos, qvel, qacc, *, contacts: bool = True) -> np.nd
     return out
 
 
-def contact_feedforward(model, qpos, force, *, contact_height: float = 0.03) -> np.ndarray:
+def contact_feedforward(
+    model, qpos, force, *, contact_height: float = 0.03, friction: float = 0.8
+) -> np.ndarray:
     """Move the root wrench of a free-floating inverse dynamics onto the feet that touch the floor.
 
     ``force`` (T, nv) comes from :func:`inverse_dynamics` without contacts: its root rows are the
     whole external wrench the motion needs (body weight included). In each frame the foot and toe
     capsules whose lowest point is within ``contact_height`` of z = 0 take point forces ``F`` at
-    that point: the vertical root force, shared equally (a quasi-static support); the hinges get ``tau - J_hinge^T F`` (the stance legs now carry the body) and the
+    that point: the root force shared equally, upward only and inside the friction cone (a
+    quasi-static support); the hinges get ``tau - J_hinge^T F`` (the stance legs now carry the body) and the
     root keeps the residual the floor cannot give, which is what the assistance has to supply.
 
     Returns:
@@ -141,8 +146,11 @@ def contact_feedforward(model, qpos, force, *, contact_height: float = 0.03) -> 
         if not cols:
             continue
         JT = np.concatenate(cols, axis=1)  # (nv, 3k)
-        F = np.zeros((len(cols), 3))
-        F[:, 2] = max(force[t, 2], 0.0) / len(cols)  # the weight shared by the touching points
+        F = np.tile(force[t, :3] / len(cols), (len(cols), 1))  # shared by the touching points
+        F[:, 2] = np.maximum(F[:, 2], 0.0)  # the floor only pushes
+        h = np.linalg.norm(F[:, :2], axis=1)
+        cap = friction * F[:, 2]
+        F[:, :2] *= np.minimum(1.0, cap / np.maximum(h, 1e-12))[:, None]  # friction cone
         out[t] = force[t] - JT @ F.reshape(-1)
     return out
 
@@ -206,6 +214,7 @@ def track(
     rec_w = np.empty((F, 6))
     all_assist = np.empty(T)
     fell = False
+    deepest = 0.0
     weak_now = 1.0
     for k in range(T):
         t = k * dt
@@ -254,6 +263,8 @@ def track(
             rec_w[i, :3], rec_w[i, 3:] = force, torque
             if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2]:
                 fell = True
+        if data.ncon:
+            deepest = max(deepest, -float(data.contact.dist[: data.ncon].min()))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
     if weak_now != 1.0:
         model.actuator_gainprm[:, 0] = gain0
@@ -267,4 +278,5 @@ def track(
         fell=fell,
         ticks=T,
         mean_assistance_all=float(all_assist.mean()) if T else 0.0,
+        penetration=deepest,
     )

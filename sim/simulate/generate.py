@@ -2,7 +2,8 @@
 
 Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``):
 
-* ``track``: perturbed tracking of a real trial: time warp 0.5-2x, body size 0.85-1.15x (mass
+* ``track``: perturbed tracking of a real trial: time warp 0.5-2x (a third log-uniform over
+  0.5-2x, two thirds uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
   scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
   on the thorax or the pelvis (impulse recorded);
 * ``fall``: a real trial sped up 1-2x, a push of 300-600 N for 0.2 s, and the controller weakened
@@ -26,15 +27,17 @@ from sim.model.humanoid import canonical_skeleton
 from sim.model.kinematics import point_names, point_parents
 from sim.model.mass import DEFAULT_BODY_MASS_KG
 from sim.motion.clip import Clip
-from sim.motion.ingest import load_motion
 from sim.motion.retarget import local_rotations_from_world
 from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import Push, Weakening, track
 from sim.simulate.model import CONTROL_HZ, Gains, scaled_skeleton, sim_model
-from sim.simulate.reference import on_floor, time_warp
+from sim.simulate.reference import on_floor, time_warp, trial_qpos
 
 KINDS = ("track", "fall", "procedural")
+# root assistance bound [body weight]; procedural motion is not physically plausible (its feet
+# slide and its root glides), so it gets the whole body weight and the label says how much it took
+ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "procedural": 1.0}
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,11 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
     """The generation parameters of ``task`` (JSON-ready), drawn from ``rng``."""
     p: dict = {"kind": task.kind, "seed": task.seed}
     if task.kind == "track":
-        p["speed"] = float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
+        # velocity-rich on purpose: a third log-uniform over 0.5-2x, two thirds 1.25-2x
+        slow = rng.random() < 1 / 3
+        p["speed"] = float(
+            np.exp(rng.uniform(np.log(0.5), np.log(2.0))) if slow else rng.uniform(1.25, 2.0)
+        )
         p["scale"] = float(rng.uniform(0.85, 1.15))
         p["gain"] = float(rng.uniform(0.6, 1.5))
         pushes = []
@@ -93,6 +100,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
     else:
         raise ValueError(f"unknown kind {task.kind!r}; choose from {', '.join(KINDS)}")
+    p["assist_limit"] = ASSIST_LIMIT[task.kind]
     for push in p["pushes"]:
         push["impulse"] = [f * push["duration"] for f in push["force"]]
     return p
@@ -117,8 +125,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         ref, _ = synthetic_qpos(model, task.seconds, seed=p["motion_seed"], rate=CONTROL_HZ)
         p["source"] = ""
     else:
-        clip = load_motion(task.asf, task.amc, skeleton="humanoid", fps=CONTROL_HZ)
-        qpos = clip.qpos.copy()
+        qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
         qpos[:, :3] *= p["scale"]
         fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
         if p["speed"] > fit >= 0.5:
@@ -137,7 +144,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         model,
         ref,
         gains=gains,
-        assist_limit=1.0,
+        assist_limit=p["assist_limit"],
         pushes=tuple(Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]),
         weakenings=tuple(Weakening(**w) for w in p["weakenings"]),
         record_every=int(round(CONTROL_HZ / task.fps)),
@@ -174,6 +181,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         "mean_assistance": float(result.assistance.mean()),
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
+        "penetration_mm": 1000 * result.penetration,
     }
     return out, record
 

@@ -6,8 +6,11 @@ module edits its output through ``mujoco.MjSpec``:
 * one position actuator per hinge whose stiffness ``kp`` and damping ``kv`` are the joint's
   reflected inertia at the standing rest pose (the diagonal of the mass matrix: the mass of the
   segments it moves times their squared lever arms) times ``omega**2`` and ``2 zeta omega``, so
-  every joint tracks with the same bandwidth; its force limit is ``strength`` times the mass
-  [kg] of the subtree the joint carries times ``g`` times 1 m of lever (N m);
+  every joint tracks with the same bandwidth; its torque limit (``actuator_forcerange``, applied
+  by the controller to the feed-forward) is ``strength`` times ``g`` times 0.2 m times the mass
+  [kg] on the heavier side of the joint (in stance an ankle holds the whole body) (N m);
+* each hinge's armature (rotor inertia) at least ``kp h^2`` for the step ``h``, so the stiff spine
+  chain stays stable;
 * only body-floor contacts (the capsules of motion capture interpenetrate: hands through thighs);
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
   integrator is ``implicitfast`` so the actuators' damping is integrated implicitly.
@@ -27,17 +30,19 @@ from sim.model.mass import DEFAULT_BODY_MASS_KG
 CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
+LEVER = 0.2  # [m] lever of the torque limits
 
 
 @dataclass(frozen=True)
 class Gains:
     """Tracking gains: hinge bandwidth ``omega`` [rad/s] and damping ratio; root ones likewise;
-    ``strength``: hinge torque limit per kg of carried subtree [N m / kg] over ``G``."""
+    ``strength``: hinge torque limit per kg on the heavier side of the joint, in units of
+    ``G * LEVER`` [N m / kg]."""
 
-    omega: float = 2 * np.pi * 4.0
+    omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
-    strength: float = 3.0
-    root_omega: float = 2 * np.pi * 2.0
+    strength: float = 2.0
+    root_omega: float = 2 * np.pi * 8.0
     root_zeta: float = 1.0
 
     def scaled(self, factor: float) -> Gains:
@@ -74,6 +79,7 @@ def sim_model(
             g.contype, g.conaffinity = 2, 1
     plain = spec.compile()
     inertia, carried = rest_inertia(plain)
+    total = total_mass(plain)
     for j in range(1, plain.njnt):
         a = spec.add_actuator()
         a.name = plain.joint(j).name
@@ -82,9 +88,17 @@ def sim_model(
         kp = gains.omega**2 * inertia[j - 1]
         kv = 2 * gains.zeta * gains.omega * inertia[j - 1]
         a.set_to_position(kp=kp, kv=kv)
-        a.forcelimited = True
-        limit = gains.strength * carried[j - 1] * G
+        # Not clamped inside MuJoCo: a clamped position actuator under the implicit integrator
+        # was measured to blow up (its velocity derivative is kept while the force is capped);
+        # ``actuator_forcerange`` still holds the torque limit, which the controller applies to
+        # its feed-forward.
+        a.forcelimited = False
+        limit = gains.strength * G * LEVER * max(carried[j - 1], total - carried[j - 1])
         a.forcerange = [-limit, limit]
+        # a light segment between two stiff joints (the spine) makes a mode of inertia ~ its own;
+        # armature >= kp h^2 keeps every actuator mode below 1 / h (explicit-spring stability)
+        joint = spec.joint(plain.joint(j).name)
+        joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
     return spec.compile()
 
 

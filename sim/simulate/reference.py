@@ -1,17 +1,41 @@
 """Reference motions for the tracking controller: time warps, floor placement, body scaling.
 
 A reference is a ``qpos`` stream (T, nq) at the control rate (``sim.simulate.model.CONTROL_HZ``).
-CMU's floor height varies per trial (the lowest foot point sits anywhere from -20 to +16 cm), so a
-real reference is shifted vertically until a robust low percentile of its lowest foot point
-touches z = 0. (The physics room's ground estimate can replace :func:`floor_offset` unchanged.)
+CMU's floor height varies per trial (the lowest foot point sits anywhere from -20 to +16 cm), and even drifts within
+one, so a real reference is shifted vertically, frame by frame, by a running low percentile of its
+lowest foot point (:func:`floor_track`). (The physics room's ground estimate can replace it.)
 """
 
 from __future__ import annotations
 
+import os
+
 import mujoco
 import numpy as np
 
+from sim.acclaim.reader import parse_amc, parse_asf
+from sim.errors import MotionDataError
+from sim.model.humanoid import humanoid_model
+from sim.motion.retarget import leg_length, motion_to_qpos
+
 FOOT_GEOMS = ("lfoot", "rfoot", "ltoes", "rtoes")
+
+
+def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
+    """(T, nq) ``qpos`` of a CMU trial on the shared humanoid at the file's rate (120 Hz):
+    angles copied, root translation scaled by the leg-length ratio (as ``load_motion`` with
+    ``skeleton="humanoid"`` does, without computing the clip's kinematics).
+
+    Raises:
+        MotionDataError: malformed or unreadable files.
+    """
+    try:
+        subject = parse_asf(asf)
+    except FileNotFoundError as e:
+        raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
+    motion = parse_amc(amc, subject)
+    target, model = humanoid_model()
+    return motion_to_qpos(subject, motion, model, root_scale=leg_length(target) / leg_length(subject))
 
 
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
@@ -40,10 +64,28 @@ def floor_offset(model, qpos: np.ndarray, percentile: float = 5.0) -> float:
     return float(np.percentile(lowest_foot_point(model, qpos), percentile))
 
 
-def on_floor(model, qpos: np.ndarray) -> np.ndarray:
-    """A copy of ``qpos`` shifted vertically so that :func:`floor_offset` is 0."""
+def floor_track(
+    model, qpos: np.ndarray, rate: float, *, window: float = 1.5, percentile: float = 10.0
+) -> np.ndarray:
+    """(T,) floor height [m] under each frame: the ``percentile`` of the lowest foot point over a
+    ``window``-second window centred on the frame, then averaged over the same window.
+
+    CMU floors drift within a trial (02_01's stance foot rises 5 cm over 3 s), so one offset per
+    trial leaves feet hovering or sunk; a running low percentile follows the stance foot.
+    """
+    low = lowest_foot_point(model, qpos)
+    half = max(1, int(round(window * rate / 2)))
+    pad = np.pad(low, half, mode="edge")
+    wins = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1)
+    floor = np.percentile(wins, percentile, axis=1)
+    pad = np.pad(floor, half, mode="edge")
+    return np.convolve(pad, np.ones(2 * half + 1) / (2 * half + 1), mode="valid")
+
+
+def on_floor(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
+    """A copy of ``qpos`` shifted vertically, frame by frame, onto z = 0 (:func:`floor_track`)."""
     out = qpos.copy()
-    out[:, 2] -= floor_offset(model, qpos)
+    out[:, 2] -= floor_track(model, qpos, rate)
     return out
 
 
