@@ -44,8 +44,10 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for kind in dict.fromkeys(r["subject"] for r in rows):
         rs = [r for r in rows if r["subject"] == kind]
-        print(f"| {kind} | {len(rs)} | {np.mean([r['tracking_mpjpe_mm'] for r in rs]):.0f} | "
-              f"{sum(r['fell'] for r in rs)} | {np.mean([r['mean_assistance'] for r in rs]):.2f} |")
+        print(
+            f"| {kind} | {len(rs)} | {np.mean([r['tracking_mpjpe_mm'] for r in rs]):.0f} | "
+            f"{sum(r['fell'] for r in rs)} | {np.mean([r['mean_assistance'] for r in rs]):.2f} |"
+        )
 
     synth = {k: [load_npz(Path(args.synth) / r["file"]) for r in rows if r["subject"] == k]
              for k in dict.fromkeys(r["subject"] for r in rows)}  # fmt: skip
@@ -59,16 +61,22 @@ def main() -> None:
         (f"synthetic, {k}", v) for k, v in synth.items()
     ]:
         p, w = speeds(clips)
-        print(f"| {name} | {'/'.join(f'{x:.2f}' for x in np.percentile(p, q))} | "
-              f"{'/'.join(f'{x:.2f}' for x in np.percentile(w, q))} |")
+        print(
+            f"| {name} | {'/'.join(f'{x:.2f}' for x in np.percentile(p, q))} | "
+            f"{'/'.join(f'{x:.2f}' for x in np.percentile(w, q))} |"
+        )
     sp, sw = speeds(allc)
-    print(f"\np95 point speed synthetic / real = {np.percentile(sp, 95) / np.percentile(rp, 95):.2f}"
-          f"; joint speed {np.percentile(sw, 95) / np.percentile(rw, 95):.2f}")
+    print(
+        f"\np95 point speed synthetic / real = {np.percentile(sp, 95) / np.percentile(rp, 95):.2f}"
+        f"; joint speed {np.percentile(sw, 95) / np.percentile(rw, 95):.2f}"
+    )
     low = min(float(c.positions[..., 2].min()) for c in allc)
     bone = max(float(np.ptp(np.linalg.norm(c.bone_vectors(), axis=-1), axis=0).max())
                for c in allc)  # fmt: skip
-    print(f"lowest point (bone ends) over synthetic clips: {low * 1000:.1f} mm; "
-          f"max bone-length spread {bone:.1e} m")
+    print(
+        f"lowest point (bone ends) over synthetic clips: {low * 1000:.1f} mm; "
+        f"max bone-length spread {bone:.1e} m"
+    )
 
     if args.plot:
         import matplotlib
@@ -104,10 +112,12 @@ def main() -> None:
             frames = sum(r["frames"] for r in s.written)
         ticks = frames * 4  # 120 Hz control ticks (4 physics steps each) per 30 fps frame
     sim_s = ticks / 120.0
-    print(f"\n1 worker: {len(s.written)} clips, {sim_s:.1f} simulated s in {times[1]:.1f} s wall "
-          f"(incl. ingest and inverse dynamics): {sim_s / times[1]:.1f}x real time, "
-          f"{frames / times[1]:.0f} clip frames/s per core; "
-          f"2 workers: {times[1] / times[2]:.2f}x speed-up")
+    print(
+        f"\n1 worker: {len(s.written)} clips, {sim_s:.1f} simulated s in {times[1]:.1f} s wall "
+        f"(incl. ingest and inverse dynamics): {sim_s / times[1]:.1f}x real time, "
+        f"{frames / times[1]:.0f} clip frames/s per core; "
+        f"2 workers: {times[1] / times[2]:.2f}x speed-up"
+    )
 
 
 if __name__ == "__main__":

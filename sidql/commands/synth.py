@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sim.simulate.generate import KINDS
+from sim.simulate.generate import ALL_KINDS, KINDS
 
 
 def register(sub) -> None:
@@ -23,7 +23,13 @@ def register(sub) -> None:
     p.add_argument("--n", type=int, required=True, help="number of clips")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
-    p.add_argument("--kinds", nargs="+", choices=KINDS, default=list(KINDS), help="clip kinds")
+    p.add_argument(
+        "--kinds",
+        nargs="+",
+        choices=ALL_KINDS,
+        default=list(KINDS),
+        help="clip kinds (follow: unperturbed tracking, the baseline)",
+    )
     p.add_argument("--seconds", type=float, default=4.0, help="clip length [s]")
     p.add_argument("--fps", type=float, default=30.0, help="clip rate (divides 120)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")

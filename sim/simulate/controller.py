@@ -11,7 +11,7 @@ Every control tick (120 Hz, ``sim.simulate.model.SUBSTEPS`` physics steps each):
    angle and velocity; the feed-forward torque is added, clipped to the actuator's force limit.
 3. **Bounded root assistance.** A person has no motor at the pelvis: the root wrench is the help the
    motion needs that its own joints and the floor could not give. It is applied clipped to
-   ``assist_limit`` times the body weight (force) and times body weight x 0.5 m (torque), and its
+   ``assist_limit`` times the body weight (force) and times body weight x 1 m (torque), and its
    force magnitude over the body weight is recorded every tick — the honest label of how much
    help the motion needed.
 
@@ -31,7 +31,7 @@ from sim.motion.velocities import qvel_from_qpos
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
 from sim.simulate.reference import FOOT_GEOMS
 
-ROOT_TORQUE_LEVER = 0.5  # [m]: the root torque bound is assist_limit * weight * this lever
+ROOT_TORQUE_LEVER = 1.0
 
 
 @dataclass(frozen=True)
@@ -156,13 +156,17 @@ def contact_feedforward(
 
 
 def _root_inertia(model, qpos) -> np.ndarray:
-    """(6, 6) the free joint's block of the mass matrix at ``qpos`` (whole-body mass, inertia)."""
+    """(6, 6) the free joint's block of the mass matrix at ``qpos`` (whole-body mass and
+    rotational inertia), without its force-rotation coupling: rotation errors of a jittery
+    mocap pelvis must not turn into assistance force."""
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_forward(model, data)
     M = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, data, M)
-    return M[:6, :6].copy()
+    out = M[:6, :6].copy()
+    out[:3, 3:] = out[3:, :3] = 0.0  # block-diagonal: the force pulls the position only
+    return out
 
 
 def track(

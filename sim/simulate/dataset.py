@@ -21,7 +21,7 @@ from sim.errors import MotionDataError
 from sim.motion.clip import save_npz, write_atomic
 from sim.motion.dataset import DatasetSummary, find_trials
 from sim.motion.ingest import parse_and_check
-from sim.simulate.generate import KINDS, SynthTask, generate, task_dict
+from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_dict
 
 
 def plan_tasks(
@@ -33,13 +33,14 @@ def plan_tasks(
     seconds: float = 4.0,
     fps: float = 30.0,
 ) -> tuple[list[SynthTask], list[dict]]:
-    """``n`` tasks cycling through ``kinds``; real-motion kinds draw a trial under ``root``.
+    """``n`` tasks cycling through ``kinds``; real-motion kinds take the trials under ``root`` in
+    seeded shuffled rounds (every trial once per round).
 
     Trials that fail to parse are skipped and listed (``{"amc", "asf", "error"}``).
     """
-    bad = [k for k in kinds if k not in KINDS]
+    bad = [k for k in kinds if k not in ALL_KINDS]
     if bad:
-        raise ValueError(f"unknown kinds {bad}; choose from {', '.join(KINDS)}")
+        raise ValueError(f"unknown kinds {bad}; choose from {', '.join(ALL_KINDS)}")
     trials, skipped = [], []
     if any(k != "procedural" for k in kinds):
         if root is None:
@@ -53,12 +54,15 @@ def plan_tasks(
         if not trials:
             raise MotionDataError(str(root), None, "no readable CMU trial to track")
     rng = np.random.default_rng(np.random.SeedSequence([seed, 2**20]))
+    order: list = []
     tasks = []
     for i in range(n):
         kind = kinds[i % len(kinds)]
         asf = amc = None
         if kind != "procedural":
-            t = trials[int(rng.integers(len(trials)))]
+            if not order:  # every trial once per round, in a seeded order
+                order = [trials[j] for j in rng.permutation(len(trials))]
+            t = order.pop()
             asf, amc = str(t.asf), str(t.amc)
         tasks.append(SynthTask(kind, seed, i, asf, amc, seconds, fps))
     return tasks, skipped

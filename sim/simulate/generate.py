@@ -8,6 +8,7 @@ Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``)
   on the thorax or the pelvis (impulse recorded);
 * ``fall``: a real trial sped up 1-2x, a push of 300-600 N for 0.2 s, and the controller weakened
   to 5-20 % for 0.8-1.5 s from the push on (then restored: the recovery attempt);
+* ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
 * ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` tracked in simulation.
 
 Positions, point velocities and ``qvel`` of a clip are the simulator's state sampled at the clip
@@ -34,10 +35,11 @@ from sim.simulate.controller import Push, Weakening, track
 from sim.simulate.model import CONTROL_HZ, Gains, scaled_skeleton, sim_model
 from sim.simulate.reference import on_floor, time_warp, trial_qpos
 
-KINDS = ("track", "fall", "procedural")
+KINDS = ("track", "fall", "procedural")  # the default mix
+ALL_KINDS = (*KINDS, "follow")
 # root assistance bound [body weight]; procedural motion is not physically plausible (its feet
 # slide and its root glides), so it gets the whole body weight and the label says how much it took
-ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "procedural": 1.0}
+ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
 
 
 @dataclass(frozen=True)
@@ -95,11 +97,13 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
             {"start": start, "duration": float(rng.uniform(0.8, 1.5)),
              "factor": float(rng.uniform(0.05, 0.2))}
         ]  # fmt: skip
+    elif task.kind == "follow":
+        p.update(speed=1.0, scale=1.0, gain=1.0, pushes=[], weakenings=[])
     elif task.kind == "procedural":
         p.update(speed=1.0, scale=1.0, gain=1.0, pushes=[], weakenings=[])
         p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
     else:
-        raise ValueError(f"unknown kind {task.kind!r}; choose from {', '.join(KINDS)}")
+        raise ValueError(f"unknown kind {task.kind!r}; choose from {', '.join(ALL_KINDS)}")
     p["assist_limit"] = ASSIST_LIMIT[task.kind]
     for push in p["pushes"]:
         push["impulse"] = [f * push["duration"] for f in push["force"]]

@@ -11,7 +11,7 @@ module edits its output through ``mujoco.MjSpec``:
   [kg] on the heavier side of the joint (in stance an ankle holds the whole body) (N m);
 * each hinge's armature (rotor inertia) at least ``kp h^2`` for the step ``h``, so the stiff spine
   chain stays stable;
-* only body-floor contacts (the capsules of motion capture interpenetrate: hands through thighs);
+* a stiffer floor (contact time constant 0.01 s instead of 0.02 s), only body-floor contacts (the capsules of motion capture interpenetrate: hands through thighs);
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
   integrator is ``implicitfast`` so the actuators' damping is integrated implicitly.
 """
@@ -31,6 +31,7 @@ CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
 LEVER = 0.2  # [m] lever of the torque limits
+FLOOR_TIMECONST = 0.01  # [s] floor contact stiffness (MuJoCo's default 0.02 let feet sink ~2x more)
 
 
 @dataclass(frozen=True)
@@ -42,7 +43,7 @@ class Gains:
     omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
     strength: float = 2.0
-    root_omega: float = 2 * np.pi * 8.0
+    root_omega: float = 2 * np.pi * 2.0
     root_zeta: float = 1.0
 
     def scaled(self, factor: float) -> Gains:
@@ -75,6 +76,7 @@ def sim_model(
     for g in spec.geoms:
         if g.name == "floor":
             g.contype, g.conaffinity = 1, 2
+            g.solref = [FLOOR_TIMECONST, 1.0]
         else:
             g.contype, g.conaffinity = 2, 1
     plain = spec.compile()

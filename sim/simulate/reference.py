@@ -35,7 +35,9 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
         raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
     motion = parse_amc(amc, subject)
     target, model = humanoid_model()
-    return motion_to_qpos(subject, motion, model, root_scale=leg_length(target) / leg_length(subject))
+    return motion_to_qpos(
+        subject, motion, model, root_scale=leg_length(target) / leg_length(subject)
+    )
 
 
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
@@ -82,10 +84,18 @@ def floor_track(
     return np.convolve(pad, np.ones(2 * half + 1) / (2 * half + 1), mode="valid")
 
 
-def on_floor(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
-    """A copy of ``qpos`` shifted vertically, frame by frame, onto z = 0 (:func:`floor_track`)."""
+FLOOR_LIFT = 0.01  # [m]
+
+
+def on_floor(model, qpos: np.ndarray, rate: float = 120.0, lift: float = FLOOR_LIFT) -> np.ndarray:
+    """A copy of ``qpos`` shifted vertically, frame by frame, so the floor under it
+    (:func:`floor_track`) is at z = -``lift``.
+
+    The lift (1 cm) keeps a reference whose floor estimate is off by marker noise from driving
+    the stiff legs into the floor or catching a toe: on 7 CMU trials it turned 2 falls into none.
+    """
     out = qpos.copy()
-    out[:, 2] -= floor_track(model, qpos, rate)
+    out[:, 2] -= floor_track(model, qpos, rate) - lift
     return out
 
 
