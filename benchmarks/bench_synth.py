@@ -17,10 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.model.humanoid import canonical_skeleton
 from sim.motion.clip import load_npz
 from sim.motion.dataset import find_trials
 from sim.motion.ingest import load_motion
+from sim.simulate.controller import track
 from sim.simulate.dataset import synthesize
+from sim.simulate.model import sim_model
+from sim.simulate.reference import on_floor, trial_qpos
 
 
 def speeds(clips):
@@ -70,13 +74,13 @@ def main() -> None:
         f"\np95 point speed synthetic / real = {np.percentile(sp, 95) / np.percentile(rp, 95):.2f}"
         f"; joint speed {np.percentile(sw, 95) / np.percentile(rw, 95):.2f}"
     )
-    low = min(float(c.positions[..., 2].min()) for c in allc)
     bone = max(float(np.ptp(np.linalg.norm(c.bone_vectors(), axis=-1), axis=0).max())
                for c in allc)  # fmt: skip
-    print(
-        f"lowest point (bone ends) over synthetic clips: {low * 1000:.1f} mm; "
-        f"max bone-length spread {bone:.1e} m"
-    )
+    print(f"max bone-length spread over synthetic clips: {bone:.1e} m")
+    print("deepest floor penetration per clip [mm] (MuJoCo contact distance), p50/p90/max:")
+    for kind in dict.fromkeys(r["subject"] for r in rows):
+        pen = np.array([r["penetration_mm"] for r in rows if r["subject"] == kind])
+        print(f"  {kind}: {'/'.join(f'{x:.0f}' for x in np.percentile(pen, (50, 90, 100)))}")
 
     if args.plot:
         import matplotlib
@@ -100,6 +104,21 @@ def main() -> None:
         Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(args.plot, dpi=110)
         print(f"wrote {args.plot}")
+
+    # the control loop alone (mj_step + controller), one core: a 4 s walk reference, best of 3
+    model = sim_model(canonical_skeleton())
+    trial = next(t for t in find_trials(args.cmu) if t.name == "02_01")
+    ref = on_floor(model, trial_qpos(trial.asf, trial.amc))[:480]
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        track(model, ref, assist_limit=0.5)
+        best = min(best, time.perf_counter() - t0)
+    print(
+        f"\ncontrol loop alone (02_01, {len(ref) / 120:.1f} s, incl. its inverse dynamics): "
+        f"{best:.3f} s wall = {len(ref) / 120 / best:.1f}x real time on one core, "
+        f"{len(ref) * 4 / best:.0f} physics steps/s"
+    )
 
     # simulation speed: one worker (this process) vs two processes, same tasks
     times = {}
