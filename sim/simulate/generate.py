@@ -6,10 +6,11 @@ Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``)
   0.5-2x, two thirds uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
   scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
   on the thorax or the pelvis (impulse recorded);
-* ``fall``: a real trial sped up 1-2x, a push of 300-600 N for 0.2 s, and the controller weakened
+* ``fall``: a real trial sped up 1-2x, a push of 400-900 N for 0.2 s, and the controller weakened
   to 5-20 % for 0.8-1.5 s from the push on (then restored: the recovery attempt);
 * ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
-* ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` tracked in simulation.
+* ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` (amplitude 35-60 % of each
+  joint's half range) replayed 1-2x faster, tracked in simulation.
 
 Positions, point velocities and ``qvel`` of a clip are the simulator's state sampled at the clip
 rate; point velocities come from the kinematic chain (``point_kinematics`` with the simulator's
@@ -87,7 +88,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["gain"] = 1.0
         d = rng.normal(size=2)
         d /= np.linalg.norm(d)
-        mag = rng.uniform(300, 600)
+        mag = rng.uniform(400, 900)
         start = float(rng.uniform(0.5, 1.5))
         p["pushes"] = [
             {"body": "thorax", "start": start, "duration": 0.2,
@@ -100,7 +101,9 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
     elif task.kind == "follow":
         p.update(speed=1.0, scale=1.0, gain=1.0, pushes=[], weakenings=[])
     elif task.kind == "procedural":
-        p.update(speed=1.0, scale=1.0, gain=1.0, pushes=[], weakenings=[])
+        p.update(scale=1.0, gain=1.0, pushes=[], weakenings=[])
+        p["speed"] = float(rng.uniform(1.0, 2.0))
+        p["energy"] = float(rng.uniform(0.35, 0.6))
         p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
     else:
         raise ValueError(f"unknown kind {task.kind!r}; choose from {', '.join(ALL_KINDS)}")
@@ -126,7 +129,11 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     model = sim_model(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * p["scale"] ** 3, gains=gains)
     n = int(round(task.seconds * CONTROL_HZ))
     if task.kind == "procedural":
-        ref, _ = synthetic_qpos(model, task.seconds, seed=p["motion_seed"], rate=CONTROL_HZ)
+        slow, _ = synthetic_qpos(
+            model, task.seconds * p["speed"] + 0.1, seed=p["motion_seed"], rate=CONTROL_HZ,
+            energy=p["energy"],
+        )  # fmt: skip
+        ref = time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
         p["source"] = ""
     else:
         qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
