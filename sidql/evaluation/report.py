@@ -20,10 +20,12 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from sim.batch import run_batch
 from sim.motion.clip import Clip, write_atomic
 from sim.replay.checks import (
     PHYSICAL_KEYS,
@@ -395,16 +397,25 @@ def report_clips(
     title: str = "Replay checks",
     meta: dict | None = None,
     progress: bool = True,
+    workers: int = 1,
+    ray: str | None = None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method and write the report; returns
-    ``out_dir/index.html``."""
-    from tqdm import tqdm
-
-    vals = [
-        validate_clip(c, methods, W, seed=seed, joint_ranges=joint_ranges)
-        for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
-    ]
+    ``out_dir/index.html``. Clips are validated through ``sim.batch.run_batch`` (``workers``
+    processes or Ray); a clip that fails is listed in the report's ``failed`` field."""
+    validate = partial(
+        validate_clip, methods=list(methods), W=W, seed=seed, joint_ranges=joint_ranges
+    )
+    outcomes = run_batch(
+        validate, clips, workers=workers, ray=ray, desc="replay", progress=progress
+    )
+    vals = [o.result for o in outcomes if o.ok]
+    failed = [f"clip {i}: {o.error}" for i, o in enumerate(outcomes) if not o.ok]
+    if not vals:
+        raise ValueError("every clip failed: " + "; ".join(failed))
     meta = {"keyframes": W, "methods": " ".join(methods), "seed": seed, **(meta or {})}
+    if failed:
+        meta["failed"] = "; ".join(failed)
     return write_report(
         vals, out_dir, title=title, meta=meta, videos=videos, style=style, progress=progress
     )
@@ -422,6 +433,8 @@ def report_trial(
     videos: bool = True,
     style: RenderStyle = DEFAULT_STYLE,
     progress: bool = True,
+    workers: int = 1,
+    ray: str | None = None,
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid."""
@@ -441,5 +454,5 @@ def report_trial(
         joint_ranges=joint_ranges(model), videos=videos, style=style,
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
-        progress=progress,
+        progress=progress, workers=workers, ray=ray,
     )  # fmt: skip

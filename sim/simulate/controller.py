@@ -71,6 +71,8 @@ class Tracking:
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
         penetration: deepest contact penetration [m] seen at the control ticks (>= 0).
+        unstable: MuJoCo flagged a diverging acceleration (it then resets the state, so the
+            recorded motion jumps: such a simulation is not a motion).
     """
 
     qpos: np.ndarray
@@ -81,6 +83,7 @@ class Tracking:
     ticks: int
     mean_assistance_all: float = 0.0
     penetration: float = 0.0
+    unstable: bool = False
 
 
 def reference_derivatives(model, qpos: np.ndarray, rate: float = CONTROL_HZ):
@@ -283,4 +286,5 @@ def track(
         ticks=T,
         mean_assistance_all=float(all_assist.mean()) if T else 0.0,
         penetration=deepest,
+        unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
     )

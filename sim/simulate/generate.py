@@ -43,6 +43,10 @@ ALL_KINDS = (*KINDS, "follow")
 ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
 
 
+class UnstableSimulation(RuntimeError):
+    """MuJoCo reported a diverging simulation; the clip is dropped (and listed), not written."""
+
+
 @dataclass(frozen=True)
 class SynthTask:
     """One clip to generate: its kind, seed, source trial (None for procedural), length, rate."""
@@ -121,6 +125,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
+        UnstableSimulation: the simulation diverged.
     """
     rng = np.random.default_rng(np.random.SeedSequence([task.seed, task.index]))
     p = draw_parameters(task, rng)
@@ -160,6 +165,8 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         weakenings=tuple(Weakening(**w) for w in p["weakenings"]),
         record_every=int(round(CONTROL_HZ / task.fps)),
     )
+    if result.unstable:
+        raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
     names, parents = point_names(skeleton), point_parents(skeleton)
     body_ids = [model.body(nm).id for nm in names]
     site_ids = [-1 if nm == "root" else model.site(f"{nm}_end").id for nm in names]
