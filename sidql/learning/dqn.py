@@ -57,6 +57,9 @@ class Args:
     """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
     synthetic_tasks: int = 64
     """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
+    train_also: str | None = None
+    """a ``sidql synth`` / ``sidql dataset`` folder whose 60-frame clips join the training tasks
+    only (the held-out tasks stay the real held-out subjects')"""
     # -- DQN -------------------------------------------------------------------------------------
     buffer_size: int = 10_000
     """replay memory of the agent's own transitions (paper: 10,000)"""
@@ -211,6 +214,12 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
     test = load_tasks(args.data, stride=60, subjects=set(test_s), **kw)
     train_tasks = [t for trial in train for t in trial.tasks()]
     test_tasks = [t for trial in test for t in trial.tasks()]
+    if args.train_also:
+        from sidql.learning.tasks import clip_task
+        from sim.motion.dataset import load_dataset_clips
+
+        clips, subjects = load_dataset_clips(args.train_also, 60)
+        train_tasks += [clip_task(c, subject=s) for c, s in zip(clips, subjects, strict=True)]
     if not train_tasks or not test_tasks:
         raise ValueError(f"no usable clips under {args.data} for the split {train_s} / {test_s}")
     return train_tasks, test_tasks, {"train": train_s, "test": test_s}
