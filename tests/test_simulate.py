@@ -159,3 +159,25 @@ def test_ray_results_equal_the_process_pool(tmp_path):
         xa, xb = _arrays(tmp_path / "pool" / ra["file"]), _arrays(tmp_path / "ray" / rb["file"])
         for k in xa:
             assert np.array_equal(xa[k], xb[k]), k
+
+
+@pytest.mark.slow
+def test_dataset_on_ray_equals_the_process_pool(tmp_path, cmu_dir):
+    pytest.importorskip("ray")
+    from sim.motion.dataset import ingest_directory
+
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc", "02_02.amc"):
+        (src / name).write_bytes((cmu_dir / "02" / name).read_bytes())
+    (src / "02_99.amc").write_text("not an amc\n")
+    a = ingest_directory(tmp_path / "cmu", tmp_path / "pool", workers=2, progress=False)
+    b = ingest_directory(tmp_path / "cmu", tmp_path / "ray", workers=2, ray="local", progress=False)
+    assert [r["file"] for r in a.written] == [r["file"] for r in b.written] == [
+        "02/02_01.npz", "02/02_02.npz"
+    ]  # fmt: skip
+    assert [r["amc"] for r in a.skipped] == [r["amc"] for r in b.skipped]
+    for r in a.written:
+        xa, xb = _arrays(tmp_path / "pool" / r["file"]), _arrays(tmp_path / "ray" / r["file"])
+        for k in xa:
+            assert np.array_equal(xa[k], xb[k]), k
