@@ -1,19 +1,24 @@
 """A tracking controller for the humanoid in MuJoCo's forward simulation (``mj_step``).
 
-Every control tick (120 Hz, ``sim.simulate.model.SUBSTEPS`` physics steps each):
+Before the run, for the whole reference (a ``qpos`` stream at 120 Hz):
 
-1. **Inverse-dynamics feed-forward.** The desired acceleration is the reference's, plus a PD pull
-   of the root towards its reference pose; ``mujoco.mj_inverse`` at the *current* state (its
-   contacts included, through MuJoCo's soft-contact inverse) gives the generalised force that
-   produces it: hinge torques and a 6-d root wrench.
+1. **Inverse-dynamics feed-forward.** ``mujoco.mj_inverse`` of the reference, free-floating (no
+   contacts), gives hinge torques and the 6-d root wrench the motion needs from outside;
+   :func:`contact_feedforward` moves that root force onto the foot and toe capsules near the floor
+   (shared, upward only, inside a friction cone): stance legs now carry the body, and the root
+   keeps only what the floor cannot give.
+
+Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
+
 2. **Hinge actuators.** Position actuators (``sim.simulate.model``: stiffness and damping scaled by
    each joint's reflected inertia, so by the masses it moves) pull each hinge to its reference
-   angle and velocity; the feed-forward torque is added, clipped to the actuator's force limit.
-3. **Bounded root assistance.** A person has no motor at the pelvis: the root wrench is the help the
-   motion needs that its own joints and the floor could not give. It is applied clipped to
-   ``assist_limit`` times the body weight (force) and times body weight x 1 m (torque), and its
-   force magnitude over the body weight is recorded every tick — the honest label of how much
-   help the motion needed.
+   angle and velocity (the target leads by ``kv / kp`` times the reference velocity); the
+   feed-forward torque is added through ``qfrc_applied``, clipped to the joint's torque limit.
+3. **Bounded root assistance.** A person has no motor at the pelvis: the residual root wrench
+   plus a PD pull of the pelvis towards its reference pose is the help the motion needs that its
+   joints and the floor do not give. It is applied clipped to ``assist_limit`` times the body
+   weight (force) and that times ``ROOT_TORQUE_LEVER`` (torque), and its force over the body
+   weight is recorded every tick: the honest label of how much help the motion needed.
 
 External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (stiffness,
 torque limits and assistance scaled down for a while) perturb the motion. Recorded states are the
@@ -31,7 +36,7 @@ from sim.motion.velocities import qvel_from_qpos
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
 from sim.simulate.reference import FOOT_GEOMS
 
-ROOT_TORQUE_LEVER = 1.0
+ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
 
 
 @dataclass(frozen=True)
@@ -188,6 +193,11 @@ def track(
     ``sim.simulate.model.sim_model`` (its actuators' gains are read, and changed during a
     weakening and restored after). A fall is the root below half its reference height while the
     reference root is above 0.5 m.
+
+    Args:
+        gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
+        assist_limit: root assistance bound [body weight].
+        record_every: ticks between recorded states (4: the 30 fps clip rate).
 
     Returns:
         :class:`Tracking` with states at ticks ``0, record_every, 2 record_every, ...``.

@@ -61,11 +61,6 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     return low
 
 
-def floor_offset(model, qpos: np.ndarray, percentile: float = 5.0) -> float:
-    """Height [m] of the floor under a motion: the ``percentile`` of its lowest foot points."""
-    return float(np.percentile(lowest_foot_point(model, qpos), percentile))
-
-
 def floor_track(
     model, qpos: np.ndarray, rate: float, *, window: float = 1.5, percentile: float = 10.0
 ) -> np.ndarray:
@@ -102,8 +97,8 @@ def on_floor(model, qpos: np.ndarray, rate: float = 120.0, lift: float = FLOOR_L
 def time_warp(model, qpos: np.ndarray, rate: float, speed: float, out_rate: float) -> np.ndarray:
     """``qpos`` sampled at ``rate`` replayed ``speed`` times faster, resampled at ``out_rate``.
 
-    Positions and hinges are interpolated linearly; the root quaternion by slerp
-    (``mujoco.mju_...`` on the shortest arc). Returns (T', nq) covering the same motion.
+    Positions and hinges are interpolated linearly; the root quaternion by slerp on the
+    shortest arc. Returns (T', nq) covering the same motion.
     """
     if speed <= 0:
         raise ValueError(f"speed must be positive; got {speed}")
