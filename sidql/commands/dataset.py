@@ -23,13 +23,18 @@ def register(sub) -> None:
     p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
     p.add_argument("--fps", type=float, default=30.0)
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")
+    p.add_argument(
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        help="run the trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
+    )  # fmt: skip
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     s = ingest_directory(
-        args.dir, args.out, skeleton=args.skeleton, fps=args.fps, workers=args.workers
-    )
+        args.dir, args.out, skeleton=args.skeleton, fps=args.fps, workers=args.workers,
+        ray=args.ray,
+    )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(
         f"ingested {len(s.written)} trials ({frames} frames at {args.fps:g} fps) in "

@@ -53,6 +53,11 @@ def register(sub) -> None:
         "(sim.physics) to every row, plus a row for method 'original'",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--workers", type=int, default=1, help="processes loading trials")
+    p.add_argument(
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        help="load trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
+    )  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -72,6 +77,8 @@ def run(args) -> int:
         skeleton=args.skeleton,
         progress=not args.quiet,
         subjects=args.subjects,
+        workers=args.workers,
+        ray=args.ray,
     )
     if not cases:
         raise UsageError(f"{args.data}: no {args.length}-frame clips (skipped {len(skipped)} bad)")

@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "sidql.commands.train",
     "sidql.commands.encode",
     "sidql.commands.decode",
+    "sidql.commands.synth",
 )
 
 

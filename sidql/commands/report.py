@@ -40,6 +40,11 @@ def register(sub) -> None:
         "--layout", choices=("overlay", "side"), default="overlay",
         help="reconstruction as a ghost over the original, or beside it",
     )  # fmt: skip
+    p.add_argument("--workers", type=int, default=1, help="processes validating clips")
+    p.add_argument(
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        help="validate the clips as Ray tasks: a local runtime, or the cluster at ADDRESS",
+    )  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -57,7 +62,7 @@ def run(args) -> int:
         page = report_trial(
             args.asf, args.amc, args.out, W=args.keyframes, methods=methods, streams=streams,
             clips=args.clips, seed=args.seed, videos=not args.no_video,
-            style=RenderStyle(layout=args.layout),
+            style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
         )  # fmt: skip
     except ValueError as e:  # a clip number out of range (MotionDataError passes through)
         if isinstance(e, MotionDataError):

@@ -35,11 +35,15 @@ def register(sub) -> None:
         "--test-subjects", nargs="+", default=None, help="held-out subject ids (default: by seed)"
     )
     p.add_argument("--cache-dir", default=None, help="cache of per-trial features and costs")
+    p.add_argument(
+        "--train-also", default=None, metavar="DIR",
+        help="a `sidql synth`/`sidql dataset` folder whose clips join the training set only",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.settings.Args)")
     for f in dataclasses.fields(Args):
         if f.name in {"data", "keyframes", "steps", "out", "resume", "seed", "test_subjects",
-                      "cache_dir", "progress", "extra", "synthetic_tasks"}:  # fmt: skip
+                      "cache_dir", "progress", "extra", "synthetic_tasks", "train_also"}:  # fmt: skip
             continue
         flag = "--" + f.name.replace("_", "-")
         default = getattr(d, f.name)

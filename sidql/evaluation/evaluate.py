@@ -24,6 +24,8 @@ import sys
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -32,10 +34,10 @@ from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
-from sim.errors import MotionDataError
+from sim.batch import run_batch
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
-from sim.motion.dataset import find_trials
+from sim.motion.dataset import find_trials, load_dataset_clips
 from sim.motion.ingest import load_clips
 from sim.physics.analysis import PhysicsJob
 from sim.physics.ground import estimate_ground
@@ -84,10 +86,14 @@ def load_cases(
     skeleton: str = "subject",
     progress: bool = True,
     subjects=None,
+    workers: int = 1,
+    ray: str | None = None,
 ) -> tuple[list[Case], list[dict]]:
     """Every ``length``-frame clip of every trial under ``data_dir``.
 
     ``subjects``: keep only these subject ids (e.g. a policy's held-out subjects); None keeps all.
+    A folder with an ``index.json`` (written by ``sidql dataset`` or ``sidql synth``) is read from
+    its ``.npz`` clips. Trials load through ``sim.batch.run_batch`` (``workers``, ``ray``).
 
     Returns:
         The cases, and ``{"amc", "problem"}`` for each trial skipped as bad input (also reported
@@ -95,19 +101,28 @@ def load_cases(
     """
     cases: list[Case] = []
     skipped: list[dict] = []
+    if (Path(data_dir) / "index.json").is_file():
+        clips, subj = load_dataset_clips(data_dir, length)
+        keep = [c for c, s in zip(clips, subj, strict=True) if subjects is None or s in subjects]
+        return [make_case(c, i) for i, c in enumerate(keep)], skipped
     trials = find_trials(data_dir)
     if subjects is not None:
         trials = [t for t in trials if t.subject in set(subjects)]
-    for trial in tqdm(trials, desc="load trials", unit="trial", disable=not progress):
-        try:
-            clips = load_clips(trial.asf, trial.amc, fps=fps, length=length, skeleton=skeleton)
-            new = [make_case(c, len(cases) + i, str(trial.asf)) for i, c in enumerate(clips)]
-        except MotionDataError as e:
-            skipped.append({"amc": str(trial.amc), "problem": str(e)})
-            print(f"skipped {trial.amc}: {e}", file=sys.stderr)
+    load = partial(_trial_clips, fps=fps, length=length, skeleton=skeleton, load=load_clips)
+    outcomes = run_batch(
+        load, trials, workers=workers, ray=ray, desc="load trials", progress=progress
+    )
+    for trial, o in zip(trials, outcomes, strict=True):
+        if not o.ok:
+            skipped.append({"amc": str(trial.amc), "problem": o.error})
+            print(f"skipped {trial.amc}: {o.error}", file=sys.stderr)
             continue
-        cases.extend(new)
+        cases.extend(make_case(c, len(cases) + i, str(trial.asf)) for i, c in enumerate(o.result))
     return cases, skipped
+
+
+def _trial_clips(trial, *, fps, length, skeleton, load):
+    return load(trial.asf, trial.amc, fps=fps, length=length, skeleton=skeleton)
 
 
 def clip_seed(seed: int, index: int, W: int) -> int:

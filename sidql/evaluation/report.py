@@ -27,6 +27,7 @@ import math
 import os
 from contextlib import ExitStack
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
 from sidql.keyframes.reconstruct import Reconstruction
 from sidql.keyframes.spherical import POINTS
+from sim.batch import run_batch
 from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip, write_atomic
@@ -931,30 +933,36 @@ def report_clips(
     streams: tuple[DecodedStream, ...] = (),
     model=None,
     ground=None,
+    workers: int = 1,
+    ray: str | None = None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
     report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
     labels and file names (default 0, 1, ...). With ``model`` (the subject's humanoid) every motion
-    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip)."""
+    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip). Clips are
+    validated through ``sim.batch.run_batch`` (``workers`` processes or Ray); a clip that fails is
+    listed in the report's ``failed`` field."""
+    numbers = list(range(len(clips)) if clip_numbers is None else clip_numbers)
     job = physics_job(model, clips[0]) if model is not None and clips else None
-    vals = [
-        validate_clip(
-            c,
-            methods,
-            W,
-            seed=seed,
-            joint_ranges=joint_ranges,
-            streams=streams,
-            physics=job,
-            ground=ground,
-        )  # fmt: skip
-        for c in tqdm(clips, desc="replay", unit="clip", disable=not progress)
-    ]
+    validate = partial(
+        validate_clip, methods=list(methods), W=W, seed=seed, joint_ranges=joint_ranges,
+        streams=streams, physics=job, ground=ground,
+    )  # fmt: skip
+    outcomes = run_batch(
+        validate, clips, workers=workers, ray=ray, desc="replay", progress=progress
+    )
+    vals = [o.result for o in outcomes if o.ok]
+    kept = [n for n, o in zip(numbers, outcomes, strict=True) if o.ok]
+    failed = [f"clip {n}: {o.error}" for n, o in zip(numbers, outcomes, strict=True) if not o.ok]
+    if not vals:
+        raise ValueError("every clip failed: " + "; ".join(failed))
     shown = [*methods, *(s.label for s in streams)]
     meta = {"keyframes": W, "methods": " ".join(shown), "seed": seed, **(meta or {})}
+    if failed:
+        meta["failed"] = "; ".join(failed)
     return write_report(
         vals, out_dir, title=title, meta=meta, videos=videos, style=style, progress=progress,
-        clip_numbers=clip_numbers,
+        clip_numbers=kept,
     )  # fmt: skip
 
 
@@ -971,6 +979,8 @@ def report_trial(
     style: RenderStyle = DEFAULT_STYLE,
     progress: bool = True,
     streams=(),
+    workers: int = 1,
+    ray: str | None = None,
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
@@ -989,7 +999,7 @@ def report_trial(
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
         progress=progress, clip_numbers=list(clips), streams=decoded, model=model,
-        ground=trial_ground(all_clips),
+        ground=trial_ground(all_clips), workers=workers, ray=ray,
     )  # fmt: skip
 
 

@@ -55,6 +55,7 @@ from sidql.learning.rollout import rollout_values_batch
 from sidql.learning.settings import RESUME_MAY_CHANGE, Args
 from sidql.learning.tasks import (
     KeyframeTask,
+    clip_task,
     insertion_gain,
     keyframe_q,
     load_tasks,
@@ -62,7 +63,7 @@ from sidql.learning.tasks import (
 )
 from sim.errors import MotionDataError
 from sim.motion.clip import write_atomic
-from sim.motion.dataset import find_trials
+from sim.motion.dataset import find_trials, load_dataset_clips
 
 # --- replay memory -------------------------------------------------------------------------------
 
@@ -186,6 +187,9 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
         raise MotionDataError(
             args.data, None, f"no usable 60-frame clips of the training subjects {train_s}"
         )
+    if args.train_also:  # dataset/synth clips join the training tasks only
+        clips, subjects = load_dataset_clips(args.train_also, 60)
+        train_tasks += [clip_task(c, subject=s) for c, s in zip(clips, subjects, strict=True)]
     return train_tasks, test_tasks, {"train": train_s, "test": test_s}
 
 

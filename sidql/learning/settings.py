@@ -36,6 +36,9 @@ class Args:
     """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
     synthetic_tasks: int = 64
     """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
+    train_also: str | None = None
+    """a ``sidql synth`` / ``sidql dataset`` folder whose 60-frame clips join the training tasks
+    only (the held-out tasks stay the real held-out subjects')"""
     # -- DQN -------------------------------------------------------------------------------------
     buffer_size: int = 10_000
     """replay memory of the agent's own transitions (paper: 10,000)"""

@@ -14,23 +14,18 @@ import hashlib
 import json
 import os
 import re
-import threading
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from tqdm import tqdm
-
+from sim.batch import WRITE_LOCK, run_batch
 from sim.errors import MotionDataError
-from sim.motion.clip import save_npz, write_atomic
+from sim.motion.clip import load_npz, save_npz, write_atomic
 from sim.motion.ingest import load_motion
 
 _TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.amc$", re.IGNORECASE)
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]")
-PARENT_POLL_S = 0.2  # how often a worker checks that its parent is alive
-_WRITE_LOCK = threading.Lock()  # held while a worker writes; the parent watchdog waits for it
 
 
 @dataclass(frozen=True)
@@ -134,36 +129,6 @@ def output_paths(trials: list[Trial], root: str | os.PathLike) -> list[PurePosix
     return out
 
 
-def _watch_parent(parent_pid: int) -> None:
-    """Pool initializer: a daemon thread ends this worker when its parent process goes away.
-
-    A parent killed by SIGKILL cannot tell its workers; without this they would finish the queued
-    work and then wait for more forever. The check is the parent pid changing (the worker was
-    re-parented); the thread takes the write lock first, so no half-written temporary is left.
-    """
-    ppid = os.getppid()  # the parent itself (fork, spawn) or a forkserver that dies with it
-
-    def parent_alive() -> bool:
-        if os.getppid() != ppid:
-            return False
-        if ppid != parent_pid:
-            try:
-                os.kill(parent_pid, 0)
-            except ProcessLookupError:
-                return False
-            except PermissionError:
-                pass
-        return True
-
-    def watch():
-        while parent_alive():
-            time.sleep(PARENT_POLL_S)
-        with _WRITE_LOCK:
-            os._exit(1)
-
-    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
-
-
 def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float) -> dict:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -172,7 +137,7 @@ def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float)
     if Path(os.path.abspath(out)).parent.parent != Path(os.path.abspath(out_dir)):
         # output_paths makes this impossible; a second line of defence against leaving out_dir
         raise MotionDataError(str(trial.amc), None, f"unsafe output path {rel}")
-    with _WRITE_LOCK:
+    with WRITE_LOCK:  # a worker whose parent died exits only between writes
         save_npz(clip, out)
     return {
         "subject": trial.subject,
@@ -194,6 +159,7 @@ def ingest_directory(
     fps: float = 30.0,
     workers: int | None = None,
     progress: bool = True,
+    ray: str | None = None,
 ) -> DatasetSummary:
     """Ingest every trial under ``root`` into ``out_dir/<subject>/<trial>.npz`` plus ``index.json``.
 
@@ -208,26 +174,15 @@ def ingest_directory(
     trials = find_trials(root)
     rels = [str(p) for p in output_paths(trials, root)]
     summary = DatasetSummary()
-    workers = workers or min(len(trials), os.cpu_count() or 1) or 1
-    bar = tqdm(total=len(trials), desc="ingest", unit="trial", disable=not progress)
-    if workers == 1:
-        for t, rel in zip(trials, rels, strict=True):
-            _collect(
-                summary, t, lambda t=t, rel=rel: _ingest_one(t, str(out_dir), rel, skeleton, fps)
-            )
-            bar.update()
-    else:
-        with ProcessPoolExecutor(
-            max_workers=workers, initializer=_watch_parent, initargs=(os.getpid(),)
-        ) as pool:
-            futures = {
-                pool.submit(_ingest_one, t, str(out_dir), rel, skeleton, fps): t
-                for t, rel in zip(trials, rels, strict=True)
-            }
-            for fut in as_completed(futures):
-                _collect(summary, futures[fut], fut.result)
-                bar.update()
-    bar.close()
+    items = [(t, str(out_dir), rel, skeleton, fps) for t, rel in zip(trials, rels, strict=True)]
+    outcomes = run_batch(
+        _ingest_task, items, workers=workers, ray=ray, desc="ingest", progress=progress
+    )
+    for t, o in zip(trials, outcomes, strict=True):
+        if o.ok:
+            summary.written.append(o.result)
+        else:  # bad input or a bug: either way only this trial is lost
+            summary.skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
     summary.written.sort(key=lambda r: (r["subject"], r["trial"]))
     summary.skipped.sort(key=lambda r: r["amc"])
     summary.seconds = time.perf_counter() - start
@@ -242,12 +197,22 @@ def ingest_directory(
     return summary
 
 
-def _collect(summary: DatasetSummary, trial: Trial, get) -> None:
+def _ingest_task(args) -> dict:
+    return _ingest_one(*args)
+
+
+def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60):
+    """Every ``length``-frame clip (non-overlapping, from frame 0) of a folder written by
+    ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects)."""
+
+    out_dir = Path(out_dir)
     try:
-        summary.written.append(get())
-    except MotionDataError as e:
-        summary.skipped.append({"amc": str(trial.amc), "asf": str(trial.asf), "error": str(e)})
-    except Exception as e:  # a bug must not cost the good results; report it with its type
-        summary.skipped.append(
-            {"amc": str(trial.amc), "asf": str(trial.asf), "error": f"{type(e).__name__}: {e}"}
-        )
+        index = json.loads((out_dir / "index.json").read_text())
+    except (OSError, ValueError) as e:
+        raise MotionDataError(str(out_dir / "index.json"), None, f"not a dataset index: {e}") from e
+    clips, subjects = [], []
+    for entry in index.get("trials", []):
+        for c in load_npz(out_dir / entry["file"]).split(length):
+            clips.append(c)
+            subjects.append(str(entry.get("subject", "")))
+    return clips, subjects

@@ -1,0 +1,1 @@
+"""Forward simulation of the humanoid: a tracking controller, synthetic motion generation."""

@@ -1,0 +1,300 @@
+"""A tracking controller for the humanoid in MuJoCo's forward simulation (``mj_step``).
+
+Before the run, for the whole reference (a ``qpos`` stream at 120 Hz):
+
+1. **Inverse-dynamics feed-forward.** ``mujoco.mj_inverse`` of the reference, free-floating (no
+   contacts), gives hinge torques and the 6-d root wrench the motion needs from outside;
+   :func:`contact_feedforward` moves that root force onto the foot and toe capsules near the floor
+   (shared, upward only, inside a friction cone): stance legs now carry the body, and the root
+   keeps only what the floor cannot give.
+
+Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
+
+2. **Hinge actuators.** Position actuators (``sim.simulate.model``: stiffness and damping scaled by
+   each joint's reflected inertia, so by the masses it moves) pull each hinge to its reference
+   angle and velocity (the target leads by ``kv / kp`` times the reference velocity); the
+   feed-forward torque is added through ``qfrc_applied``, clipped to the joint's torque limit.
+3. **Bounded root assistance.** A person has no motor at the pelvis: the residual root wrench
+   plus a PD pull of the pelvis towards its reference pose is the help the motion needs that its
+   joints and the floor do not give. It is applied clipped to ``assist_limit`` times the body
+   weight (force) and that times ``ROOT_TORQUE_LEVER`` (torque), and its force over the body
+   weight is recorded every tick: the honest label of how much help the motion needed.
+
+External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (stiffness,
+torque limits and assistance scaled down for a while) perturb the motion. Recorded states are the
+simulator's own ``qpos`` and ``qvel``, never differences.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim.motion.velocities import qvel_from_qpos
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
+from sim.simulate.reference import FOOT_GEOMS
+
+ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
+
+
+@dataclass(frozen=True)
+class Push:
+    """A constant force [N] on ``body`` (world frame) from ``start`` for ``duration`` seconds;
+    its impulse is ``force * duration`` [N s]."""
+
+    body: str
+    start: float
+    duration: float
+    force: tuple[float, float, float]
+
+    @property
+    def impulse(self) -> np.ndarray:
+        return np.asarray(self.force) * self.duration
+
+
+@dataclass(frozen=True)
+class Weakening:
+    """From ``start`` for ``duration`` seconds the controller's stiffness, torque limits and root
+    assistance are multiplied by ``factor`` (0..1)."""
+
+    start: float
+    duration: float
+    factor: float
+
+
+@dataclass
+class Tracking:
+    """What one simulation produced, sampled every ``record_every`` ticks.
+
+    Attributes:
+        qpos: (F, nq) and qvel: (F, nv) the simulator's state.
+        assistance: (F,) root assistance force over body weight, at the recorded ticks.
+        assist_wrench: (F, 6) the applied root wrench (free-joint generalised force).
+        fell: whether the root dropped below half its reference height (see :func:`track`).
+        ticks: control ticks simulated.
+        mean_assistance_all: mean assistance over every tick.
+        penetration: deepest contact penetration [m] seen at the control ticks (>= 0).
+        unstable: MuJoCo flagged a diverging acceleration (it then resets the state, so the
+            recorded motion jumps: such a simulation is not a motion).
+    """
+
+    qpos: np.ndarray
+    qvel: np.ndarray
+    assistance: np.ndarray
+    assist_wrench: np.ndarray
+    fell: bool
+    ticks: int
+    mean_assistance_all: float = 0.0
+    penetration: float = 0.0
+    unstable: bool = False
+
+
+def reference_derivatives(model, qpos: np.ndarray, rate: float = CONTROL_HZ):
+    """(T, nv) velocity and (T, nv) acceleration of a reference ``qpos`` stream at ``rate``.
+
+    The reference is a target, not an output: differencing it is fine (central differences on the
+    configuration manifold for velocities, ``np.gradient`` of those for accelerations).
+    """
+    qvel = qvel_from_qpos(model, qpos, rate)
+    qacc = np.gradient(qvel, 1.0 / rate, axis=0) if len(qpos) > 1 else np.zeros_like(qvel)
+    return qvel, qacc
+
+
+def inverse_dynamics(model, qpos, qvel, qacc, *, contacts: bool = True) -> np.ndarray:
+    """(T, nv) generalised force that produces ``qacc`` at each (``qpos``, ``qvel``):
+    ``mujoco.mj_inverse``, floor contacts of that pose included (MuJoCo's soft-contact inverse).
+    The first 6 columns are the root wrench nothing inside the body can supply."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), model.nv))
+    saved = model.opt.disableflags
+    if not contacts:
+        model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    for t in range(len(qpos)):
+        data.qpos[:], data.qvel[:], data.qacc[:] = qpos[t], qvel[t], qacc[t]
+        mujoco.mj_inverse(model, data)
+        out[t] = data.qfrc_inverse
+    model.opt.disableflags = saved
+    return out
+
+
+def contact_feedforward(
+    model, qpos, force, *, contact_height: float = 0.03, friction: float = 0.8
+) -> np.ndarray:
+    """Move the root wrench of a free-floating inverse dynamics onto the feet that touch the floor.
+
+    ``force`` (T, nv) comes from :func:`inverse_dynamics` without contacts: its root rows are the
+    whole external wrench the motion needs (body weight included). In each frame the foot and toe
+    capsules whose lowest point is within ``contact_height`` of z = 0 take point forces ``F`` at
+    that point: the root force shared equally, upward only and inside the friction cone (a
+    quasi-static support); the hinges get ``tau - J_hinge^T F`` (the stance legs now carry the body) and the
+    root keeps the residual the floor cannot give, which is what the assistance has to supply.
+
+    Returns:
+        (T, nv) feed-forward: root rows = residual wrench, hinge rows = joint torques.
+    """
+    data = mujoco.MjData(model)
+    ids = [model.geom(n).id for n in FOOT_GEOMS]
+    out = force.copy()
+    jacp = np.zeros((3, model.nv))
+    for t in range(len(qpos)):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        cols = []
+        for g in ids:
+            c = data.geom_xpos[g].copy()
+            axis = data.geom_xmat[g].reshape(3, 3)[:, 2] * model.geom_size[g, 1]
+            p = c - axis if axis[2] > 0 else c + axis
+            p[2] -= model.geom_size[g, 0]
+            if p[2] < contact_height:
+                mujoco.mj_jac(model, data, jacp, None, p, model.geom_bodyid[g])
+                cols.append(jacp.T.copy())  # (nv, 3)
+        if not cols:
+            continue
+        JT = np.concatenate(cols, axis=1)  # (nv, 3k)
+        F = np.tile(force[t, :3] / len(cols), (len(cols), 1))  # shared by the touching points
+        F[:, 2] = np.maximum(F[:, 2], 0.0)  # the floor only pushes
+        h = np.linalg.norm(F[:, :2], axis=1)
+        cap = friction * F[:, 2]
+        F[:, :2] *= np.minimum(1.0, cap / np.maximum(h, 1e-12))[:, None]  # friction cone
+        out[t] = force[t] - JT @ F.reshape(-1)
+    return out
+
+
+def _root_inertia(model, qpos) -> np.ndarray:
+    """(6, 6) the free joint's block of the mass matrix at ``qpos`` (whole-body mass and
+    rotational inertia), without its force-rotation coupling: rotation errors of a jittery
+    mocap pelvis must not turn into assistance force."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    M = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, M)
+    out = M[:6, :6].copy()
+    out[:3, 3:] = out[3:, :3] = 0.0  # block-diagonal: the force pulls the position only
+    return out
+
+
+def track(
+    model,
+    ref_qpos: np.ndarray,
+    *,
+    gains: Gains | None = None,
+    assist_limit: float = 0.5,
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
+    record_every: int = 4,
+) -> Tracking:
+    """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
+
+    The simulation starts in the reference's first pose and velocity. ``model`` must come from
+    ``sim.simulate.model.sim_model`` (its actuators' gains are read, and changed during a
+    weakening and restored after). A fall is the root below half its reference height while the
+    reference root is above 0.5 m.
+
+    Args:
+        gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
+        assist_limit: root assistance bound [body weight].
+        record_every: ticks between recorded states (4: the 30 fps clip rate).
+
+    Returns:
+        :class:`Tracking` with states at ticks ``0, record_every, 2 record_every, ...``.
+    """
+    gains = gains or Gains()
+    T = ref_qpos.shape[0]
+    data = mujoco.MjData(model)
+    ref_qvel, ref_qacc = reference_derivatives(model, ref_qpos)
+    data.qpos[:] = ref_qpos[0]
+    data.qvel[:] = ref_qvel[0]
+    mujoco.mj_forward(model, data)
+    weight = total_mass(model) * G
+    kp_r = gains.root_omega**2
+    kd_r = 2 * gains.root_zeta * gains.root_omega
+    lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
+    gain0 = model.actuator_gainprm[:, 0].copy()
+    bias0 = model.actuator_biasprm[:, :3].copy()
+    range0 = model.actuator_forcerange.copy()
+    push_ids = [model.body(p.body).id for p in pushes]
+    dt = 1.0 / CONTROL_HZ
+    rot_err = np.zeros(3)
+    root_acc = np.zeros(6)
+    ref_force = contact_feedforward(
+        model, ref_qpos, inverse_dynamics(model, ref_qpos, ref_qvel, ref_qacc, contacts=False)
+    )
+    root_inertia = _root_inertia(model, ref_qpos[0])
+    F = (T + record_every - 1) // record_every
+    rec_q = np.empty((F, model.nq))
+    rec_v = np.empty((F, model.nv))
+    rec_a = np.empty(F)
+    rec_w = np.empty((F, 6))
+    all_assist = np.empty(T)
+    fell = False
+    deepest = 0.0
+    weak_now = 1.0
+    for k in range(T):
+        t = k * dt
+        factor = 1.0
+        for w in weakenings:
+            if w.start <= t < w.start + w.duration:
+                factor = min(factor, w.factor)
+        if factor != weak_now:
+            model.actuator_gainprm[:, 0] = gain0 * factor
+            model.actuator_biasprm[:, :3] = bias0 * factor
+            model.actuator_forcerange[:] = range0 * factor
+            weak_now = factor
+        q_ref, v_ref = ref_qpos[k], ref_qvel[k]
+        # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
+        mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
+        root_acc[:3] = kp_r * (q_ref[:3] - data.qpos[:3]) + kd_r * (v_ref[:3] - data.qvel[:3])
+        root_acc[3:] = kp_r * rot_err + kd_r * (v_ref[3:6] - data.qvel[3:6])
+        ff = ref_force[k]
+        # 2. hinges: position actuators + clipped feed-forward
+        # the target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied
+        data.ctrl[:] = q_ref[7:] + lead * v_ref[6:]
+        lim = model.actuator_forcerange[:, 1]
+        data.qfrc_applied[6:] = np.clip(factor * ff[6:], -lim, lim)
+        # 3. root: bounded assistance
+        wrench = ff[:6] + root_inertia @ root_acc
+        force, torque = wrench[:3], wrench[3:]
+        fmax = factor * assist_limit * weight
+        tmax = fmax * ROOT_TORQUE_LEVER
+        fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
+        if fn > fmax:
+            force *= fmax / fn
+        if tn > tmax:
+            torque *= tmax / tn
+        data.qfrc_applied[:3] = force
+        data.qfrc_applied[3:6] = torque
+        all_assist[k] = np.linalg.norm(force) / weight
+        data.xfrc_applied[:] = 0.0
+        for p, b in zip(pushes, push_ids, strict=True):
+            if p.start <= t < p.start + p.duration:
+                data.xfrc_applied[b, :3] += p.force
+        if k % record_every == 0:
+            i = k // record_every
+            rec_q[i] = data.qpos
+            rec_v[i] = data.qvel
+            rec_a[i] = all_assist[k]
+            rec_w[i, :3], rec_w[i, 3:] = force, torque
+            if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2]:
+                fell = True
+        if data.ncon:
+            deepest = max(deepest, -float(data.contact.dist[: data.ncon].min()))
+        mujoco.mj_step(model, data, nstep=SUBSTEPS)
+    if weak_now != 1.0:
+        model.actuator_gainprm[:, 0] = gain0
+        model.actuator_biasprm[:, :3] = bias0
+        model.actuator_forcerange[:] = range0
+    return Tracking(
+        qpos=rec_q,
+        qvel=rec_v,
+        assistance=rec_a,
+        assist_wrench=rec_w,
+        fell=fell,
+        ticks=T,
+        mean_assistance_all=float(all_assist.mean()) if T else 0.0,
+        penetration=deepest,
+        unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
+    )

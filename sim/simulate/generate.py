@@ -1,0 +1,209 @@
+"""Synthetic clips from MuJoCo's forward simulation, in the ``sidql dataset`` clip format.
+
+Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``):
+
+* ``track``: perturbed tracking of a real trial: time warp 0.5-2x (a third log-uniform over
+  0.5-2x, two thirds uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
+  scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
+  on the thorax or the pelvis (impulse recorded);
+* ``fall``: a real trial sped up 1-2x, a push of 400-900 N for 0.2 s, and the controller weakened
+  to 5-20 % for 0.8-1.5 s from the push on (then restored: the recovery attempt);
+* ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
+* ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` (amplitude 35-60 % of each
+  joint's half range) replayed 1-2x faster, tracked in simulation.
+
+Positions, point velocities and ``qvel`` of a clip are the simulator's state sampled at the clip
+rate; point velocities come from the kinematic chain (``point_kinematics`` with the simulator's
+``qvel``), never from differences.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import mujoco
+import numpy as np
+
+from sim.errors import MotionDataError
+from sim.model.humanoid import canonical_skeleton
+from sim.model.kinematics import point_names, point_parents
+from sim.model.mass import DEFAULT_BODY_MASS_KG
+from sim.motion.clip import Clip
+from sim.motion.retarget import local_rotations_from_world
+from sim.motion.synthetic import synthetic_qpos
+from sim.motion.velocities import point_kinematics
+from sim.simulate.controller import Push, Weakening, track
+from sim.simulate.model import CONTROL_HZ, Gains, scaled_skeleton, sim_model
+from sim.simulate.reference import on_floor, time_warp, trial_qpos
+
+KINDS = ("track", "fall", "procedural")  # the default mix
+ALL_KINDS = (*KINDS, "follow")
+# root assistance bound [body weight]; procedural motion is not physically plausible (its feet
+# slide and its root glides), so it gets the whole body weight and the label says how much it took
+ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
+
+
+class UnstableSimulation(RuntimeError):
+    """MuJoCo reported a diverging simulation; the clip is dropped (and listed), not written."""
+
+
+@dataclass(frozen=True)
+class SynthTask:
+    """One clip to generate: its kind, seed, source trial (None for procedural), length, rate."""
+
+    kind: str
+    seed: int
+    index: int
+    asf: str | None = None
+    amc: str | None = None
+    seconds: float = 4.0
+    fps: float = 30.0
+
+
+def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
+    """The generation parameters of ``task`` (JSON-ready), drawn from ``rng``."""
+    p: dict = {"kind": task.kind, "seed": task.seed}
+    if task.kind == "track":
+        # velocity-rich on purpose: a third log-uniform over 0.5-2x, two thirds 1.25-2x
+        slow = rng.random() < 1 / 3
+        p["speed"] = float(
+            np.exp(rng.uniform(np.log(0.5), np.log(2.0))) if slow else rng.uniform(1.25, 2.0)
+        )
+        p["scale"] = float(rng.uniform(0.85, 1.15))
+        p["gain"] = float(rng.uniform(0.6, 1.5))
+        pushes = []
+        for _ in range(int(rng.integers(0, 3))):
+            d = rng.normal(size=2)
+            d /= np.linalg.norm(d)
+            mag = rng.uniform(100, 300)
+            pushes.append(
+                {
+                    "body": str(rng.choice(["thorax", "root"])),
+                    "start": float(rng.uniform(0.3, task.seconds - 0.5)),
+                    "duration": float(rng.uniform(0.1, 0.2)),
+                    "force": [float(mag * d[0]), float(mag * d[1]), 0.0],
+                }
+            )
+        p["pushes"] = pushes
+        p["weakenings"] = []
+    elif task.kind == "fall":
+        p["speed"] = float(rng.uniform(1.0, 2.0))
+        p["scale"] = float(rng.uniform(0.9, 1.1))
+        p["gain"] = 1.0
+        d = rng.normal(size=2)
+        d /= np.linalg.norm(d)
+        mag = rng.uniform(400, 900)
+        start = float(rng.uniform(0.5, 1.5))
+        p["pushes"] = [
+            {"body": "thorax", "start": start, "duration": 0.2,
+             "force": [float(mag * d[0]), float(mag * d[1]), 0.0]}
+        ]  # fmt: skip
+        p["weakenings"] = [
+            {"start": start, "duration": float(rng.uniform(0.8, 1.5)),
+             "factor": float(rng.uniform(0.05, 0.2))}
+        ]  # fmt: skip
+    elif task.kind == "follow":
+        p.update(speed=1.0, scale=1.0, gain=1.0, pushes=[], weakenings=[])
+    elif task.kind == "procedural":
+        p.update(scale=1.0, gain=1.0, pushes=[], weakenings=[])
+        p["speed"] = float(rng.uniform(1.0, 2.0))
+        p["energy"] = float(rng.uniform(0.35, 0.6))
+        p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
+    else:
+        raise ValueError(f"unknown kind {task.kind!r}; choose from {', '.join(ALL_KINDS)}")
+    p["assist_limit"] = ASSIST_LIMIT[task.kind]
+    for push in p["pushes"]:
+        push["impulse"] = [f * push["duration"] for f in push["force"]]
+    return p
+
+
+def generate(task: SynthTask) -> tuple[Clip, dict]:
+    """Simulate one clip; returns it and a record of its parameters and tracking measures.
+
+    The record holds ``generation`` (parameters and seed), ``assistance`` (per clip frame: root
+    assistance force over body weight), ``tracking_mpjpe_mm``, ``fell`` and ``mean_assistance``.
+
+    Raises:
+        MotionDataError: the source trial is unreadable or shorter than one clip.
+        UnstableSimulation: the simulation diverged.
+    """
+    rng = np.random.default_rng(np.random.SeedSequence([task.seed, task.index]))
+    p = draw_parameters(task, rng)
+    skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
+    gains = Gains().scaled(p["gain"])
+    model = sim_model(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * p["scale"] ** 3, gains=gains)
+    n = int(round(task.seconds * CONTROL_HZ))
+    if task.kind == "procedural":
+        slow, _ = synthetic_qpos(
+            model, task.seconds * p["speed"] + 0.1, seed=p["motion_seed"], rate=CONTROL_HZ,
+            energy=p["energy"],
+        )  # fmt: skip
+        ref = time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
+        p["source"] = ""
+    else:
+        qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
+        qpos[:, :3] *= p["scale"]
+        fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
+        if p["speed"] > fit >= 0.5:
+            p["speed"] = fit
+        warped = time_warp(model, qpos, CONTROL_HZ, p["speed"], CONTROL_HZ)
+        if len(warped) < n:
+            raise MotionDataError(
+                str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
+                f" time warp: shorter than one {task.seconds:g} s clip"
+            )  # fmt: skip
+        start = int(rng.integers(0, len(warped) - n + 1))
+        ref = on_floor(model, warped[start : start + n])
+        p["source"] = str(task.amc)
+        p["start_tick"] = start
+    result = track(
+        model,
+        ref,
+        gains=gains,
+        assist_limit=p["assist_limit"],
+        pushes=tuple(Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]),
+        weakenings=tuple(Weakening(**w) for w in p["weakenings"]),
+        record_every=int(round(CONTROL_HZ / task.fps)),
+    )
+    if result.unstable:
+        raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
+    names, parents = point_names(skeleton), point_parents(skeleton)
+    body_ids = [model.body(nm).id for nm in names]
+    site_ids = [-1 if nm == "root" else model.site(f"{nm}_end").id for nm in names]
+    data = mujoco.MjData(model)
+    pos, vel, xquat, omega = point_kinematics(
+        model, data, result.qpos, result.qvel, body_ids, site_ids
+    )
+    ref_pos = point_kinematics(
+        model, data, ref[:: int(round(CONTROL_HZ / task.fps))],
+        np.zeros((len(result.qpos), model.nv)), body_ids, site_ids,
+    )[0]  # fmt: skip
+    out = Clip(
+        names=tuple(names),
+        parents=np.asarray(parents, dtype=np.int64),
+        positions=pos,
+        velocities=vel,
+        qpos=result.qpos,
+        qvel=result.qvel,
+        rotations=local_rotations_from_world(xquat, np.asarray(parents)),
+        fps=float(task.fps),
+        source=f"synth:{task.kind}:{p['source']}",
+        start_frame=0,
+        source_fps=CONTROL_HZ,
+        joint_names=tuple(model.joint(j).name for j in range(1, model.njnt)),
+        angular_velocities=omega,
+    )
+    record = {
+        "generation": p,
+        "assistance": result.assistance.tolist(),
+        "mean_assistance": float(result.assistance.mean()),
+        "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
+        "fell": bool(result.fell),
+        "penetration_mm": 1000 * result.penetration,
+    }
+    return out, record
+
+
+def task_dict(task: SynthTask) -> dict:
+    """JSON-ready copy of ``task``."""
+    return asdict(task)

@@ -1,0 +1,31 @@
+"""sim.batch.run_batch: order, isolation of failures, same results in-process and in a pool."""
+
+from __future__ import annotations
+
+import pytest
+
+from sim.batch import run_batch
+from sim.errors import MotionDataError
+
+
+def _work(x: int) -> int:
+    if x == 3:
+        raise MotionDataError("f.amc", 7, "bad frame")
+    if x == 5:
+        raise ZeroDivisionError("boom")
+    return x * x
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_failures_cost_only_their_item_and_order_is_kept(workers):
+    out = run_batch(_work, range(8), workers=workers, progress=False)
+    assert [o.item for o in out] == list(range(8))
+    assert [o.result for o in out if o.ok] == [x * x for x in range(8) if x not in (3, 5)]
+    bad = {o.item: o for o in out if not o.ok}
+    assert set(bad) == {3, 5}
+    assert bad[3].bad_input and "f.amc" in bad[3].error and "bad frame" in bad[3].error
+    assert not bad[5].bad_input and bad[5].error.startswith("ZeroDivisionError")
+
+
+def test_empty_batch():
+    assert run_batch(_work, [], workers=2, progress=False) == []

@@ -1,0 +1,183 @@
+"""Simulated synthetic clips: the controller, the dataset format, determinism, Ray = process pool,
+and the velocity pipeline checked against the simulator's own qvel and analytic velocities."""
+
+from __future__ import annotations
+
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim.model.humanoid import canonical_skeleton, humanoid_model
+from sim.motion.clip import load_npz
+from sim.motion.synthetic import synthetic_qpos
+from sim.motion.velocities import qvel_from_qpos
+from sim.simulate.controller import track
+from sim.simulate.dataset import synthesize
+from sim.simulate.generate import SynthTask, generate
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model
+from sim.simulate.reference import on_floor, time_warp
+
+
+def _arrays(path):
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def test_procedural_clip_is_simulated_state_in_dataset_format():
+    clip, rec = generate(SynthTask("procedural", seed=3, index=0, seconds=1.0))
+    assert clip.n_frames == 30 and clip.fps == 30.0
+    # bone lengths are exact: positions come from the chain of the simulated qpos
+    L = np.linalg.norm(clip.bone_vectors(), axis=-1)
+    assert np.ptp(L, axis=0).max() < 1e-9
+    # point velocities (chain, from the simulator's qvel) agree with differences of positions
+    fd = (clip.positions[2:] - clip.positions[:-2]) * clip.fps / 2
+    err = np.linalg.norm(fd - clip.velocities[1:-1], axis=-1)
+    speed = np.linalg.norm(clip.velocities[1:-1], axis=-1)
+    assert np.median(err) < 0.1 * np.median(speed) + 0.02
+    assert len(rec["assistance"]) == clip.n_frames
+    assert rec["generation"]["seed"] == 3
+
+
+def test_same_seed_same_clip_bit_for_bit(tmp_path):
+    a = synthesize(None, tmp_path / "a", 2, seed=5, kinds=("procedural",), seconds=1.0,
+                   workers=1, progress=False)  # fmt: skip
+    b = synthesize(None, tmp_path / "b", 2, seed=5, kinds=("procedural",), seconds=1.0,
+                   workers=1, progress=False)  # fmt: skip
+    c = synthesize(None, tmp_path / "c", 2, seed=6, kinds=("procedural",), seconds=1.0,
+                   workers=1, progress=False)  # fmt: skip
+    assert len(a.written) == 2 and not a.skipped
+    for ra, rb, rc in zip(a.written, b.written, c.written, strict=True):
+        xa, xb = _arrays(tmp_path / "a" / ra["file"]), _arrays(tmp_path / "b" / rb["file"])
+        assert xa.keys() == xb.keys()
+        for k in xa:
+            assert np.array_equal(xa[k], xb[k]), k
+        xc = _arrays(tmp_path / "c" / rc["file"])
+        assert not np.array_equal(xa["qpos"], xc["qpos"])
+    index = json.loads((tmp_path / "a" / "index.json").read_text())
+    assert index["trials"][0]["generation"]["kind"] == "procedural"
+
+
+def test_dataset_keys_match_ingest(tmp_path, walk_clip):
+    from sim.motion.clip import save_npz
+
+    save_npz(walk_clip, tmp_path / "real.npz")
+    synthesize(None, tmp_path / "s", 1, kinds=("procedural",), seconds=1.0, workers=1,
+               progress=False)  # fmt: skip
+    synth = _arrays(tmp_path / "s" / "procedural" / "procedural_00000.npz")
+    assert set(synth) == set(_arrays(tmp_path / "real.npz"))
+    load_npz(tmp_path / "s" / "procedural" / "procedural_00000.npz")
+
+
+def test_bad_input_is_skipped_and_listed(tmp_path, cmu_dir):
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    (src / "02.asf").write_bytes((cmu_dir / "02" / "02.asf").read_bytes())
+    (src / "02_01.amc").write_bytes((cmu_dir / "02" / "02_01.amc").read_bytes())
+    (src / "02_99.amc").write_text(":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 zero\n")
+    s = synthesize(tmp_path / "cmu", tmp_path / "out", 2, kinds=("track",), seconds=1.0,
+                   workers=1, progress=False)  # fmt: skip
+    assert any("02_99" in r["amc"] for r in s.skipped)
+    assert len(s.written) == 2
+    assert all(r["amc"].endswith("02_01.amc") for r in s.written)
+
+
+def test_tracking_follows_a_walk_with_enough_assistance(cmu_dir):
+    from sim.motion.ingest import load_motion
+
+    clip = load_motion(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc",
+                       skeleton="humanoid", fps=CONTROL_HZ)  # fmt: skip
+    model = sim_model(canonical_skeleton())
+    ref = on_floor(model, clip.qpos[:240])
+    r = track(model, ref, assist_limit=2.0)
+    assert not r.fell
+    assert np.abs(r.qpos[:, :3] - ref[::4, :3]).max() < 0.15  # the root stays within 15 cm
+    r0 = track(model, ref, assist_limit=0.0)  # no help: the same controller cannot walk
+    assert r0.assistance.max() == 0.0
+    assert np.abs(r0.qpos[:, :3] - ref[::4, :3]).max() > np.abs(r.qpos[:, :3] - ref[::4, :3]).max()
+
+
+def test_time_warp_keeps_the_path_and_changes_the_duration():
+    _, model = humanoid_model()
+    q, _ = synthetic_qpos(model, 1.0, seed=1)
+    fast = time_warp(model, q, 120.0, 2.0, 120.0)
+    assert len(fast) == len(q[::2])
+    np.testing.assert_allclose(fast[::1, 7:], q[::2, 7:], atol=1e-12)
+    np.testing.assert_allclose(fast[:, 3:7], q[::2, 3:7], atol=1e-9)
+
+
+# --- item 6: sim/motion/velocities.py against two independent ground truths -------------------
+
+
+def test_qvel_from_qpos_recovers_analytic_velocities_to_second_order():
+    """Procedural hinge velocities are known in closed form; central differences are O(h^2)."""
+    _, model = humanoid_model()
+    errs = []
+    for rate in (120.0, 240.0):
+        q, dq = synthetic_qpos(model, 1.0, seed=2, rate=rate)
+        v = qvel_from_qpos(model, q, rate)
+        errs.append(np.abs(v[1:-1, 6:] - dq[1:-1]).max())
+    assert errs[0] < 0.02
+    assert 3.0 < errs[0] / errs[1] < 5.0  # halving h quarters the error: second order
+
+
+def test_qvel_from_qpos_recovers_the_simulators_qvel():
+    """MuJoCo integrates q[t+1] = q[t] (+) h v[t+1], so the central difference of the simulated
+    qpos equals (v[t] + v[t+1]) / 2 up to rounding (and, for the root's rotation, to O(h^2))."""
+    _, model = humanoid_model()
+    model = sim_model(canonical_skeleton())
+    ref, _ = synthetic_qpos(model, 0.5, seed=4, rate=CONTROL_HZ)
+    data = mujoco.MjData(model)
+    data.qpos[:] = ref[0]
+    qs, vs = [], []
+    for k in range(len(ref)):
+        data.ctrl[:] = ref[k, 7:]
+        for _ in range(SUBSTEPS):
+            qs.append(data.qpos.copy())
+            vs.append(data.qvel.copy())
+            mujoco.mj_step(model, data)
+    qs, vs = np.array(qs), np.array(vs)
+    h = model.opt.timestep
+    v = qvel_from_qpos(model, qs, 1.0 / h)
+    mid = (vs[1:-1] + vs[2:]) / 2
+    np.testing.assert_allclose(v[1:-1, 6:], mid[:, 6:], atol=1e-8)
+    np.testing.assert_allclose(v[1:-1, :6], mid[:, :6], atol=1e-3 * (1 + np.abs(vs).max()))
+
+
+@pytest.mark.slow
+def test_ray_results_equal_the_process_pool(tmp_path):
+    pytest.importorskip("ray")
+    kw = dict(kinds=("procedural",), seconds=0.5, seed=1, progress=False)
+    synthesize(None, tmp_path / "pool", 3, workers=2, **kw)
+    synthesize(None, tmp_path / "ray", 3, workers=2, ray="local", **kw)
+    a = json.loads((tmp_path / "pool" / "index.json").read_text())["trials"]
+    b = json.loads((tmp_path / "ray" / "index.json").read_text())["trials"]
+    assert len(a) == len(b) == 3
+    for ra, rb in zip(a, b, strict=True):
+        assert ra == rb
+        xa, xb = _arrays(tmp_path / "pool" / ra["file"]), _arrays(tmp_path / "ray" / rb["file"])
+        for k in xa:
+            assert np.array_equal(xa[k], xb[k]), k
+
+
+@pytest.mark.slow
+def test_dataset_on_ray_equals_the_process_pool(tmp_path, cmu_dir):
+    pytest.importorskip("ray")
+    from sim.motion.dataset import ingest_directory
+
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc", "02_02.amc"):
+        (src / name).write_bytes((cmu_dir / "02" / name).read_bytes())
+    (src / "02_99.amc").write_text("not an amc\n")
+    a = ingest_directory(tmp_path / "cmu", tmp_path / "pool", workers=2, progress=False)
+    b = ingest_directory(tmp_path / "cmu", tmp_path / "ray", workers=2, ray="local", progress=False)
+    assert [r["file"] for r in a.written] == [r["file"] for r in b.written] == [
+        "02/02_01.npz", "02/02_02.npz"
+    ]  # fmt: skip
+    assert [r["amc"] for r in a.skipped] == [r["amc"] for r in b.skipped]
+    for r in a.written:
+        xa, xb = _arrays(tmp_path / "pool" / r["file"]), _arrays(tmp_path / "ray" / r["file"])
+        for k in xa:
+            assert np.array_equal(xa[k], xb[k]), k
