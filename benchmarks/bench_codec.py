@@ -265,7 +265,7 @@ def write_plot(res, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sim.motion.clip import write_atomic
+    from sim.files import write_atomic
 
     fig, axes = plt.subplots(1, 3, figsize=(18, 5))
     series = [

@@ -25,7 +25,6 @@ LAZY_ALLOWED = {"torch", "ray", "matplotlib", "imageio"}
 LAZY_ALLOWED_MODULES = {"sidql.learning.dqn", "sidql.learning.policy"}
 
 
-
 def project_modules() -> dict[str, Path]:
     """Dotted name -> file for every module of the project's packages (``__init__`` as the
     package name)."""

@@ -106,20 +106,6 @@ def test_clip_start_frames_count_source_frames(walk_clip):
     assert c.start_frame == 40 and c.n_frames == 10
 
 
-def test_atomic_writes_get_ordinary_file_permissions(tmp_path):
-    import os
-
-    from sim.motion.clip import write_atomic
-
-    mask = os.umask(0o022)
-    try:
-        write_atomic(tmp_path / "a.bin", lambda f: f.write(b"data"))
-    finally:
-        os.umask(mask)
-    assert (tmp_path / "a.bin").read_bytes() == b"data"
-    assert (tmp_path / "a.bin").stat().st_mode & 0o777 == 0o644
-
-
 # ---------------------------------------------------------------- hostile layouts (issue 8, part 3)
 
 

@@ -38,7 +38,8 @@ from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart
 from sim.acclaim.reader import parse_asf
 from sim.errors import MotionDataError
-from sim.motion.clip import Clip, write_atomic
+from sim.files import write_atomic
+from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
 
 CHOICES: tuple[str, ...] = ("auto",) + sidq.RECONSTRUCTIONS

@@ -30,7 +30,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import select
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error
 from sidql.keyframes.reconstructions import FLOAT_BYTES, POSE_FLOATS
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 
 #: (method, reconstruction) pairs plotted; keyframes by ``methods.select(method, ...,
 #: reconstruction=...)``, so "optimal" is the optimum of that reconstruction's own Q.

@@ -41,8 +41,9 @@ from sidql.keyframes.methods import reconstruction_of, select
 from sidql.keyframes.reconstruct import Reconstruction
 from sidql.keyframes.spherical import POINTS
 from sim.errors import MotionDataError
+from sim.files import write_atomic
 from sim.model.humanoid import subject_model
-from sim.motion.clip import Clip, write_atomic
+from sim.motion.clip import Clip
 from sim.motion.ingest import load_clips
 from sim.replay.checks import (
     CollisionScene,

@@ -24,7 +24,8 @@ from pathlib import Path, PurePosixPath
 from tqdm import tqdm
 
 from sim.errors import MotionDataError
-from sim.motion.clip import save_npz, write_atomic
+from sim.files import write_atomic
+from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 
 _TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.amc$", re.IGNORECASE)
