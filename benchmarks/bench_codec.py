@@ -48,7 +48,7 @@ from sidql.codec import format as sidq  # noqa: E402
 from sidql.codec.decode import reconstruct_stream  # noqa: E402
 from sidql.codec.encode import encode_series  # noqa: E402
 from sidql.codec.quantise import fit_quantiser  # noqa: E402
-from sidql.evaluation.rate import bytes_per_second  # noqa: E402
+from sidql.evaluation.rate import bytes_per_second, write_rd_figure  # noqa: E402
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error  # noqa: E402
 from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.reconstruct import reconstruct_series  # noqa: E402
@@ -88,6 +88,18 @@ class Acc:
         self.frames += n
         self.bytes += nbytes
         self.seconds += seconds
+
+    def add_stream(self, t, enc):
+        """Add trial ``t``'s encoding ``enc``: its Q, the decoded stream's errors, its size."""
+        rec = reconstruct_stream(sidq.from_bytes(enc.data))
+        self.add(
+            t.n,
+            enc.q,
+            mpjpe_mm(t.pos, rec.positions),
+            velocity_error(t.vel, rec.velocities),
+            len(enc.data),
+            t.n / 30.0,
+        )
 
     def row(self):
         f = max(self.frames, 1)
@@ -140,15 +152,7 @@ def codec(trials, rates, reconstruction, latency=0):
             except MotionDataError:
                 failed += 1
                 continue
-            rec = reconstruct_stream(sidq.from_bytes(enc.data))
-            acc.add(
-                t.n,
-                enc.q,
-                mpjpe_mm(t.pos, rec.positions),
-                velocity_error(t.vel, rec.velocities),
-                len(enc.data),
-                t.n / 30.0,
-            )
+            acc.add_stream(t, enc)
         row = acc.row() if acc.frames else {}
         rows.append({"rate": rate, "trials_failed": failed, **row})
     return rows
@@ -208,12 +212,11 @@ def five_minutes(trials):
         idx.extend(r[1:] if idx else r)
         fwd = not fwd
     idx = np.array(idx[:9000])
-    sign = np.ones(9000)
     return replace(
         s,
         theta=s.theta[idx],
         phi=s.phi[idx],
-        dtheta=s.dtheta[idx] * sign[:, None],
+        dtheta=s.dtheta[idx],
         dphi=s.dphi[idx],
         root_pos=s.root_pos[idx],
         root_vel=s.root_vel[idx],
@@ -258,16 +261,6 @@ def speed(series, rate, repeats=3):
 
 
 def write_plot(res, path):
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sim.files import write_atomic
-
-    fig, axes = plt.subplots(1, 3, figsize=(18, 5))
     series = [
         ("paper: Hermite + rates, optimal W/clip, float32", res["paper"]["optimal"], "C0", "-o"),
         ("paper: Hermite + rates, uniform W/clip, float32", res["paper"]["uniform"], "C2", "-o"),
@@ -275,11 +268,8 @@ def write_plot(res, path):
         ("codec: Hermite + rates (packed)", res["codec"]["hermite"], "C1", "--s"),
         ("raw 30 fps, b bits + lzma", res["raw_lzma"], "k", ":^"),
     ]
-    for ax, key, label in (
-        (axes[0], "mean_q", "mean Q, eq. 18 [rad]"),
-        (axes[1], "mpjpe_mm", "MPJPE [mm]"),
-        (axes[2], "velocity_error", "mean velocity error [m/s]"),
-    ):
+
+    def draw(ax, key):
         for name, rows, color, style in series:
             rows = [r for r in rows if "bytes_per_second" in r]
             ax.plot(
@@ -290,21 +280,13 @@ def write_plot(res, path):
                 ms=4,
                 label=name,
             )
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("bytes per second of motion")
-        ax.set_ylabel(label)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(
+
+    write_rd_figure(
+        path,
         f"Motion codec vs anchors on {res['trials']} whole CMU trials "
-        f"({res['seconds']:.0f} s of motion at 30 fps)"
+        f"({res['seconds']:.0f} s of motion at 30 fps)",
+        draw,
     )
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_atomic(path, lambda f: f.write(buf.getvalue()))
 
 
 def main(argv=None) -> int:
@@ -365,15 +347,7 @@ def main(argv=None) -> int:
         acc = Acc()
         for t in trials:
             enc = encode_series(t.series, max_q=r["mean_q"], reconstruction="auto")
-            rec = reconstruct_stream(sidq.from_bytes(enc.data))
-            acc.add(
-                t.n,
-                enc.q,
-                mpjpe_mm(t.pos, rec.positions),
-                velocity_error(t.vel, rec.velocities),
-                len(enc.data),
-                t.n / 30.0,
-            )
+            acc.add_stream(t, enc)
         eq.append({"bits": r["bits"], "raw": r, "codec": acc.row()})
     res["equal_error"] = eq
     print("\n(c') at equal Q: codec --max-q = raw stream's Q")
