@@ -53,7 +53,12 @@ from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error  # n
 from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.reconstruct import reconstruct_series  # noqa: E402
 from sidql.keyframes.segment_costs import segment_cost_matrix  # noqa: E402
-from sidql.keyframes.spherical import chart, positions_from_chart, protocol_indices  # noqa: E402
+from sidql.keyframes.spherical import (  # noqa: E402
+    chart,
+    positions_from_chart,
+    protocol_indices,
+    split_channels,
+)
 from sim.errors import MotionDataError  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
@@ -175,7 +180,7 @@ def raw_lzma(trials, bits_list):
         for t in trials:
             s = t.series
             M = s.n_bones
-            v = np.concatenate([s.theta, s.phi, s.root_pos], axis=1)
+            v, _ = s.channels()
             q = fit_quantiser(v, None, M)
             codes = q.encode_pose(v).astype(np.int64)
             shift = 16 - bits  # coarser grid: drop the low bits
@@ -184,7 +189,7 @@ def raw_lzma(trials, bits_list):
             dtype = np.uint8 if bits <= 8 else np.uint16
             raw = coarse.astype(dtype).tobytes()
             size = _lzma_size(raw, v.shape[1] * np.dtype(dtype).itemsize) + 200  # + a header
-            theta, phi, root = back[:, :M], back[:, M : 2 * M], back[:, 2 * M :]
+            theta, phi, root = split_channels(back, M)
             z = np.zeros_like(theta)
             P, _ = positions_from_chart(
                 root, np.zeros_like(root), theta, phi, z, z, s.lengths, s.parents

@@ -35,7 +35,7 @@ from sidql.codec.quantise import fit_quantiser
 from sidql.codec.skeleton import skeleton_hash
 from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
 from sidql.keyframes.metrics import q_from_angles
-from sidql.keyframes.spherical import POINTS, SphericalSeries, chart
+from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, split_channels
 from sim.acclaim.reader import parse_asf
 from sim.errors import MotionDataError
 from sim.files import write_atomic
@@ -63,16 +63,9 @@ class Encoded:
     candidates: dict
 
 
-def _series_arrays(series: SphericalSeries):
-    values = np.concatenate([series.theta, series.phi, series.root_pos], axis=1)
-    rates = np.concatenate([series.dtheta, series.dphi, series.root_vel], axis=1)
-    return values, rates
-
-
 def _measure(series: SphericalSeries, stream: sidq.Stream) -> float:
-    M = series.n_bones
-    x = decoded_chart(stream)["values"]
-    return q_from_angles(series, x[:, :M], x[:, M : 2 * M])
+    theta, phi, _ = split_channels(decoded_chart(stream)["values"], series.n_bones)
+    return q_from_angles(series, theta, phi)
 
 
 #: bits per pose channel tried for packed (offline) streams; live streams use 16.
@@ -98,7 +91,7 @@ def _encode_one(
     """Encodings of one reconstruction, one per bit depth tried."""
     M = series.n_bones
     N = series.n_frames
-    values, rates = _series_arrays(series)
+    values, rates = series.channels()
     q16 = fit_quantiser(values, rates if recon == "hermite" else None, M)
     Xq = q16.grid_pose(values)
     Rq = q16.grid_rates(rates) * series.dt if recon == "hermite" else None

@@ -29,6 +29,7 @@ from sidql.keyframes.spherical import (
     SphericalSeries,
     chart,
     positions_from_chart,
+    split_channels,
 )
 from sim.motion.clip import Clip
 from sim.motion.points import PointMotion
@@ -170,11 +171,10 @@ def reconstruct_series(
     _check_variant(variant)
     k = validate_keyframes(keyframes, series.n_frames)
     M = series.n_bones
-    values = np.concatenate([series.theta, series.phi, series.root_pos], axis=1)
-    rates = np.concatenate([series.dtheta, series.dphi, series.root_vel], axis=1)
+    values, rates = series.channels()
     x, xd = interpolate(values, rates, k, series.dt, variant)
-    theta, phi, root = x[:, :M], x[:, M : 2 * M], x[:, 2 * M :]
-    dtheta, dphi, root_vel = xd[:, :M], xd[:, M : 2 * M], xd[:, 2 * M :]
+    theta, phi, root = split_channels(x, M)
+    dtheta, dphi, root_vel = split_channels(xd, M)
     P, V = positions_from_chart(
         root, root_vel, theta, phi, dtheta, dphi, series.lengths, series.parents
     )

@@ -131,6 +131,20 @@ class SphericalSeries:
     def n_bones(self) -> int:
         return int(self.theta.shape[1])
 
+    def channels(self) -> tuple[np.ndarray, np.ndarray]:
+        """The chart as flat channels: (N, 2 M + 3) values [theta | phi | root position] in
+        [rad, rad, m] and (N, 2 M + 3) their rates [per s]; :func:`split_channels` undoes it."""
+        values = np.concatenate([self.theta, self.phi, self.root_pos], axis=1)
+        rates = np.concatenate([self.dtheta, self.dphi, self.root_vel], axis=1)
+        return values, rates
+
+
+def split_channels(x: np.ndarray, n_bones: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 2 M + 3) channels in :meth:`SphericalSeries.channels`'s order -> views (theta (N, M),
+    phi (N, M), root (N, 3)); the same for their rates."""
+    M = n_bones
+    return x[:, :M], x[:, M : 2 * M], x[:, 2 * M :]
+
 
 def protocol_parents(names, parents) -> np.ndarray:
     """(23,) parents of :data:`POINTS` as indices into POINTS, from a skeleton's names/parents.
