@@ -197,12 +197,6 @@ def keyframes_for_count(D: np.ndarray, W: int) -> tuple[np.ndarray, float]:
     return np.array(sorted(keys), dtype=np.int64), tau
 
 
-def pitch_keyframes(clip: Clip, W: int) -> np.ndarray:
-    """(W,) keyframes of ``clip`` by inter-frame pitch with the threshold searched for W."""
-    _, local, _ = protocol_rotations(clip)
-    return keyframes_for_count(pitch_distances(local), W)[0]
-
-
 def _segments(keyframes: np.ndarray, N: int):
     n = np.arange(N)
     seg = np.clip(np.searchsorted(keyframes, n, side="right") - 1, 0, len(keyframes) - 2)
