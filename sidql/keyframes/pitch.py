@@ -27,13 +27,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sidql.keyframes.reconstruct import Reconstruction, validate_keyframes
+from sidql.keyframes.reconstruct import Reconstruction, points_reconstruction, validate_keyframes
 from sidql.keyframes.spherical import (
-    POINTS,
-    angles_and_rates,
     protocol_indices,
     protocol_parents,
-    world_to_chart,
 )
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
@@ -252,19 +249,7 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
             + quat.cross(Om[:, p], quat.rotate(world[:, p], rig.origin[j]))
             + quat.cross(Om[:, j], quat.rotate(world[:, j], rig.offset[j]))
         )
-    child = np.arange(1, len(parents))
-    theta, phi, _, _ = angles_and_rates(world_to_chart(P[:, child] - P[:, parents[child]]))
-    return Reconstruction(
-        positions=P,
-        velocities=V,
-        names=POINTS,
-        parents=parents.copy(),
-        theta=theta,
-        phi=phi,
-        keyframes=k,
-        variant="slerp",
-        fps=clip.fps,
-    )
+    return points_reconstruction(P, V, parents, k, "slerp", clip.fps)
 
 
 def pitch_error(true_pos: np.ndarray, rec_pos: np.ndarray) -> float:

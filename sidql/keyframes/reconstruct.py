@@ -27,9 +27,11 @@ import numpy as np
 from sidql.keyframes.spherical import (
     POINTS,
     SphericalSeries,
+    angles_and_rates,
     chart,
     positions_from_chart,
     split_channels,
+    world_to_chart,
 )
 from sim.motion.clip import Clip
 from sim.motion.points import PointMotion
@@ -156,6 +158,34 @@ class Reconstruction(PointMotion):
     def dt(self) -> float:
         """Frame interval [s]."""
         return 1.0 / self.fps
+
+
+def points_reconstruction(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    parents: np.ndarray,
+    keyframes: np.ndarray,
+    variant: str,
+    fps: float,
+) -> Reconstruction:
+    """A reconstruction rebuilt as points rather than in the chart (``slerp``, ``cartesian``):
+    the 23 protocol points' positions (N, 23, 3) [m] and velocities [m/s], world axes (z up),
+    with their (23,) ``parents``; its bones' theta/phi (N, 22) [rad] are measured from the
+    points."""
+    child = np.arange(1, len(parents))
+    bones = positions[:, child] - positions[:, parents[child]]
+    theta, phi, _, _ = angles_and_rates(world_to_chart(bones))
+    return Reconstruction(
+        positions=positions,
+        velocities=velocities,
+        names=POINTS,
+        parents=parents.copy(),
+        theta=theta,
+        phi=phi,
+        keyframes=keyframes,
+        variant=variant,
+        fps=fps,
+    )
 
 
 def reconstruct_series(

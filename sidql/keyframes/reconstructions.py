@@ -30,6 +30,7 @@ from sidql.keyframes.optimal import catmull_rom_optimal, optimal_table
 from sidql.keyframes.reconstruct import (
     Reconstruction,
     interpolate,
+    points_reconstruction,
     reconstruct_series,
     validate_keyframes,
 )
@@ -38,11 +39,9 @@ from sidql.keyframes.spherical import (
     M_BONES,
     POINTS,
     SphericalSeries,
-    angles_and_rates,
     chart,
     protocol_indices,
     protocol_parent_indices,
-    world_to_chart,
 )
 from sim.motion.clip import Clip
 
@@ -161,17 +160,4 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     vel = clip.velocities[:, idx].reshape(N, -1)
     P, V = interpolate(pos, vel, k, clip.dt, "hermite")
     P, V = P.reshape(N, len(POINTS), 3), V.reshape(N, len(POINTS), 3)
-    parents = protocol_parent_indices()
-    child = np.arange(1, len(POINTS))
-    theta, phi, _, _ = angles_and_rates(world_to_chart(P[:, child] - P[:, parents[child]]))
-    return Reconstruction(
-        positions=P,
-        velocities=V,
-        names=POINTS,
-        parents=parents,
-        theta=theta,
-        phi=phi,
-        keyframes=k,
-        variant="cartesian",
-        fps=clip.fps,
-    )
+    return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps)
