@@ -131,7 +131,7 @@ def _encode_one(
         data = sidq.to_bytes(stream)
         return Encoded(stream, data, _measure(series, stream), len(data) / duration, {})
 
-    out, failure = [], None
+    out = []
     if coding == 0:
         quant = q16
         if rate is not None:
@@ -181,10 +181,8 @@ def _encode_one(
                     C, lambda k: build(k, quant), budget, 0, recon, M, where, guess
                 )
                 out.append(finish(keys, quant))
-            except MotionDataError as e:
-                failure = e
-    if not out:
-        raise failure
+            except MotionDataError:
+                pass  # no plan at that depth fits: the first depth's encoding stands
     return out
 
 
