@@ -30,7 +30,13 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decoded_chart
-from sidql.codec.plan import DEFAULT_MAX_GAP, band_costs, plan_for_budget, plan_for_quality
+from sidql.codec.plan import (
+    DEFAULT_MAX_GAP,
+    band_costs,
+    least_keyframes,
+    plan_for_budget,
+    plan_for_quality,
+)
 from sidql.codec.quantise import fit_quantiser
 from sidql.codec.skeleton import skeleton_hash
 from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
@@ -214,7 +220,7 @@ def _keys_for_budget(C, build, budget, H, recon, M, where, guess=0.5) -> np.ndar
         return solve(int((budget - fixed) // per_key))
     fixed += 4 + 13  # keyframe count and the .lzma header
     per_key *= guess  # first guess, corrected below from the measured size
-    least = int(np.ceil((N - 1) / max(C.shape[1] - 1, 1))) + 1
+    least = least_keyframes(C)
     best, tried = None, set()
     target = int((budget - fixed) // per_key)
     for _ in range(_ROUNDS):

@@ -186,14 +186,21 @@ def plan(C: np.ndarray, lam: float) -> Plan:
 _LAM_LO, _LAM_HI, _STEPS = 1e-6, 1e7, 48
 
 
+def least_keyframes(C: np.ndarray) -> int:
+    """The fewest keyframes any plan over the banded cost table ``C`` (N, G + 1) can have: the
+    two ends and enough between them that no gap exceeds G."""
+    N, G1 = C.shape
+    return int(np.ceil((N - 1) / max(G1 - 1, 1))) + 1 if N > 1 else 1
+
+
 def plan_for_budget(C: np.ndarray, max_keys: int, where: str = "") -> Plan:
     """The least-distortion Lagrangian plan with at most ``max_keys`` keyframes (bisection).
 
     Raises:
         MotionDataError: even the sparsest plan the maximum gap allows needs more keyframes.
     """
-    N, G1 = C.shape
-    least = int(np.ceil((N - 1) / max(G1 - 1, 1))) + 1 if N > 1 else 1
+    G1 = C.shape[1]
+    least = least_keyframes(C)
     if max_keys < least:
         raise MotionDataError(
             where or None,
