@@ -34,7 +34,6 @@ import os
 import sys
 import time
 import tracemalloc
-from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -217,15 +216,7 @@ def five_minutes(trials):
         idx.extend(r[1:] if idx else r)
         fwd = not fwd
     idx = np.array(idx[:9000])
-    return replace(
-        s,
-        theta=s.theta[idx],
-        phi=s.phi[idx],
-        dtheta=s.dtheta[idx],
-        dphi=s.dphi[idx],
-        root_pos=s.root_pos[idx],
-        root_vel=s.root_vel[idx],
-    )
+    return s.frames(idx)
 
 
 def speed(series, rate, repeats=3):
@@ -248,15 +239,7 @@ def speed(series, rate, repeats=3):
     # memory: Python-visible peak (numpy arrays) and the band table's size, N and N / 2
     mem = {}
     for n in (series.n_frames // 2, series.n_frames):
-        sub = replace(
-            series,
-            theta=series.theta[:n],
-            phi=series.phi[:n],
-            dtheta=series.dtheta[:n],
-            dphi=series.dphi[:n],
-            root_pos=series.root_pos[:n],
-            root_vel=series.root_vel[:n],
-        )
+        sub = series.frames(slice(0, n))
         tracemalloc.start()
         encode_series(sub, rate=rate, reconstruction="catmull_rom")
         _, peak = tracemalloc.get_traced_memory()

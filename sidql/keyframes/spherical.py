@@ -28,7 +28,7 @@ Pure numpy. Units: metres, seconds, radians.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -130,6 +130,19 @@ class SphericalSeries:
     @property
     def n_bones(self) -> int:
         return int(self.theta.shape[1])
+
+    def frames(self, index) -> SphericalSeries:
+        """The chart at frames ``index`` (a slice or an index array along time); bone lengths,
+        parents and dt kept."""
+        return replace(
+            self,
+            theta=self.theta[index],
+            phi=self.phi[index],
+            dtheta=self.dtheta[index],
+            dphi=self.dphi[index],
+            root_pos=self.root_pos[index],
+            root_vel=self.root_vel[index],
+        )
 
     def channels(self) -> tuple[np.ndarray, np.ndarray]:
         """The chart as flat channels: (N, 2 M + 3) values [theta | phi | root position] in
