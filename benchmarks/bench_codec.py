@@ -34,7 +34,6 @@ import os
 import sys
 import time
 import tracemalloc
-from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -48,12 +47,17 @@ from sidql.codec import format as sidq  # noqa: E402
 from sidql.codec.decode import reconstruct_stream  # noqa: E402
 from sidql.codec.encode import encode_series  # noqa: E402
 from sidql.codec.quantise import fit_quantiser  # noqa: E402
-from sidql.evaluation.rate import bytes_per_second  # noqa: E402
+from sidql.evaluation.rate import bytes_per_second, write_rd_figure  # noqa: E402
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error  # noqa: E402
 from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.reconstruct import reconstruct_series  # noqa: E402
 from sidql.keyframes.segment_costs import segment_cost_matrix  # noqa: E402
-from sidql.keyframes.spherical import chart, positions_from_chart, protocol_indices  # noqa: E402
+from sidql.keyframes.spherical import (  # noqa: E402
+    chart,
+    positions_from_chart,
+    protocol_indices,
+    split_channels,
+)
 from sim.errors import MotionDataError  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
@@ -88,6 +92,18 @@ class Acc:
         self.frames += n
         self.bytes += nbytes
         self.seconds += seconds
+
+    def add_stream(self, t, enc):
+        """Add trial ``t``'s encoding ``enc``: its Q, the decoded stream's errors, its size."""
+        rec = reconstruct_stream(sidq.from_bytes(enc.data))
+        self.add(
+            t.n,
+            enc.q,
+            mpjpe_mm(t.pos, rec.positions),
+            velocity_error(t.vel, rec.velocities),
+            len(enc.data),
+            t.n / 30.0,
+        )
 
     def row(self):
         f = max(self.frames, 1)
@@ -140,15 +156,7 @@ def codec(trials, rates, reconstruction, latency=0):
             except MotionDataError:
                 failed += 1
                 continue
-            rec = reconstruct_stream(sidq.from_bytes(enc.data))
-            acc.add(
-                t.n,
-                enc.q,
-                mpjpe_mm(t.pos, rec.positions),
-                velocity_error(t.vel, rec.velocities),
-                len(enc.data),
-                t.n / 30.0,
-            )
+            acc.add_stream(t, enc)
         row = acc.row() if acc.frames else {}
         rows.append({"rate": rate, "trials_failed": failed, **row})
     return rows
@@ -171,7 +179,7 @@ def raw_lzma(trials, bits_list):
         for t in trials:
             s = t.series
             M = s.n_bones
-            v = np.concatenate([s.theta, s.phi, s.root_pos], axis=1)
+            v, _ = s.channels()
             q = fit_quantiser(v, None, M)
             codes = q.encode_pose(v).astype(np.int64)
             shift = 16 - bits  # coarser grid: drop the low bits
@@ -180,7 +188,7 @@ def raw_lzma(trials, bits_list):
             dtype = np.uint8 if bits <= 8 else np.uint16
             raw = coarse.astype(dtype).tobytes()
             size = _lzma_size(raw, v.shape[1] * np.dtype(dtype).itemsize) + 200  # + a header
-            theta, phi, root = back[:, :M], back[:, M : 2 * M], back[:, 2 * M :]
+            theta, phi, root = split_channels(back, M)
             z = np.zeros_like(theta)
             P, _ = positions_from_chart(
                 root, np.zeros_like(root), theta, phi, z, z, s.lengths, s.parents
@@ -208,16 +216,7 @@ def five_minutes(trials):
         idx.extend(r[1:] if idx else r)
         fwd = not fwd
     idx = np.array(idx[:9000])
-    sign = np.ones(9000)
-    return replace(
-        s,
-        theta=s.theta[idx],
-        phi=s.phi[idx],
-        dtheta=s.dtheta[idx] * sign[:, None],
-        dphi=s.dphi[idx],
-        root_pos=s.root_pos[idx],
-        root_vel=s.root_vel[idx],
-    )
+    return s.frames(idx)
 
 
 def speed(series, rate, repeats=3):
@@ -240,15 +239,7 @@ def speed(series, rate, repeats=3):
     # memory: Python-visible peak (numpy arrays) and the band table's size, N and N / 2
     mem = {}
     for n in (series.n_frames // 2, series.n_frames):
-        sub = replace(
-            series,
-            theta=series.theta[:n],
-            phi=series.phi[:n],
-            dtheta=series.dtheta[:n],
-            dphi=series.dphi[:n],
-            root_pos=series.root_pos[:n],
-            root_vel=series.root_vel[:n],
-        )
+        sub = series.frames(slice(0, n))
         tracemalloc.start()
         encode_series(sub, rate=rate, reconstruction="catmull_rom")
         _, peak = tracemalloc.get_traced_memory()
@@ -258,16 +249,6 @@ def speed(series, rate, repeats=3):
 
 
 def write_plot(res, path):
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from sim.motion.clip import write_atomic
-
-    fig, axes = plt.subplots(1, 3, figsize=(18, 5))
     series = [
         ("paper: Hermite + rates, optimal W/clip, float32", res["paper"]["optimal"], "C0", "-o"),
         ("paper: Hermite + rates, uniform W/clip, float32", res["paper"]["uniform"], "C2", "-o"),
@@ -275,11 +256,8 @@ def write_plot(res, path):
         ("codec: Hermite + rates (packed)", res["codec"]["hermite"], "C1", "--s"),
         ("raw 30 fps, b bits + lzma", res["raw_lzma"], "k", ":^"),
     ]
-    for ax, key, label in (
-        (axes[0], "mean_q", "mean Q, eq. 18 [rad]"),
-        (axes[1], "mpjpe_mm", "MPJPE [mm]"),
-        (axes[2], "velocity_error", "mean velocity error [m/s]"),
-    ):
+
+    def draw(ax, key):
         for name, rows, color, style in series:
             rows = [r for r in rows if "bytes_per_second" in r]
             ax.plot(
@@ -290,21 +268,13 @@ def write_plot(res, path):
                 ms=4,
                 label=name,
             )
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("bytes per second of motion")
-        ax.set_ylabel(label)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(
+
+    write_rd_figure(
+        path,
         f"Motion codec vs anchors on {res['trials']} whole CMU trials "
-        f"({res['seconds']:.0f} s of motion at 30 fps)"
+        f"({res['seconds']:.0f} s of motion at 30 fps)",
+        draw,
     )
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_atomic(path, lambda f: f.write(buf.getvalue()))
 
 
 def main(argv=None) -> int:
@@ -365,15 +335,7 @@ def main(argv=None) -> int:
         acc = Acc()
         for t in trials:
             enc = encode_series(t.series, max_q=r["mean_q"], reconstruction="auto")
-            rec = reconstruct_stream(sidq.from_bytes(enc.data))
-            acc.add(
-                t.n,
-                enc.q,
-                mpjpe_mm(t.pos, rec.positions),
-                velocity_error(t.vel, rec.velocities),
-                len(enc.data),
-                t.n / 30.0,
-            )
+            acc.add_stream(t, enc)
         eq.append({"bits": r["bits"], "raw": r, "codec": acc.row()})
     res["equal_error"] = eq
     print("\n(c') at equal Q: codec --max-q = raw stream's Q")

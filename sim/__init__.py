@@ -16,7 +16,7 @@ _API = {
     "Clip": "sim.motion.clip",
     "load_npz": "sim.motion.clip",
     "save_npz": "sim.motion.clip",
-    "write_atomic": "sim.motion.clip",
+    "write_atomic": "sim.files",
     "load_motion": "sim.motion.ingest",
     "load_clips": "sim.motion.ingest",
     "find_trials": "sim.motion.dataset",

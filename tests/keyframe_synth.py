@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from sidql.keyframes.reconstruct import interpolate
-from sidql.keyframes.spherical import M_BONES, clip_from_chart
+from sidql.keyframes.spherical import M_BONES, clip_from_chart, split_channels
 
 
 def smooth_chart(N: int, fps: float, seed: int, *, M: int = M_BONES):
@@ -46,16 +46,9 @@ def piecewise_clip(keyframes, N: int, fps: float, seed: int, variant: str = "her
     rates[k] = rng.uniform(-1.0, 1.0, (len(k), 2 * M + 3))
     x, xd = interpolate(values, rates, k, 1.0 / fps, variant)
     lengths = rng.uniform(0.05, 0.45, M)
-    return clip_from_chart(
-        x[:, :M],
-        x[:, M : 2 * M],
-        xd[:, :M],
-        xd[:, M : 2 * M],
-        x[:, 2 * M :],
-        xd[:, 2 * M :],
-        lengths,
-        fps=fps,
-    )
+    theta, phi, root = split_channels(x, M)
+    dtheta, dphi, root_vel = split_channels(xd, M)
+    return clip_from_chart(theta, phi, dtheta, dphi, root, root_vel, lengths, fps=fps)
 
 
 def assert_velocities_match_differences(rec, keys) -> None:

@@ -235,6 +235,11 @@ def test_binary_garbage_is_a_clear_error(tmp_path):
         parse_amc(path, parse_asf(write(tmp_path, "t.asf", ASF)))
 
 
+def knee_renamed(name: str) -> str:
+    """The tiny ASF with its bone ``knee`` called ``name`` (in its definition and the hierarchy)."""
+    return ASF.replace("name knee", f"name {name}").replace("hip knee", f"hip {name}")
+
+
 # ------------------------------------------------------------- hostile input (issue 8, part 2)
 # Each case is the tiny ASF/AMC above with one change; the error must be a MotionDataError naming
 # the file and the line of the change.
@@ -274,27 +279,27 @@ HOSTILE_ASF = {
     ),
     "zero direction": (ASF.replace("direction 0 -1 0", "direction 0 0 0", 1), "begin", r"zero"),
     "quote in bone name": (
-        ASF.replace("name knee", 'name kn"ee').replace("hip knee", 'hip kn"ee'),
+        knee_renamed('kn"ee'),
         'name kn"ee',
         r"is not of the form",
     ),
     "angle bracket and ampersand in bone name": (
-        ASF.replace("name knee", "name <a&b>").replace("hip knee", "hip <a&b>"),
+        knee_renamed("<a&b>"),
         "name <a&b>",
         r"is not of the form",
     ),
     "unicode bone name": (
-        ASF.replace("name knee", "name kné").replace("hip knee", "hip kné"),
+        knee_renamed("kné"),
         "name kné",
         r"is not of the form",
     ),
     "numeric bone name": (
-        ASF.replace("name knee", "name 12").replace("hip knee", "hip 12"),
+        knee_renamed("12"),
         "name 12",
         r"is not of the form",
     ),
     "reserved bone name": (
-        ASF.replace("name knee", "name floor").replace("hip knee", "hip floor"),
+        knee_renamed("floor"),
         "name floor",
         r"reserved",
     ),

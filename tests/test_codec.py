@@ -75,15 +75,7 @@ def test_quantiser_error_is_half_a_step_and_phi_follows_the_branch(series, bits)
 @pytest.mark.parametrize("variant", ["hermite", "linear"])
 def test_band_costs_match_the_project_segment_cost_matrix(series, variant):
     """Unquantised, the band table is a band of sidql.keyframes' (N, N) matrix."""
-    sub = replace(
-        series,
-        theta=series.theta[:40],
-        phi=series.phi[:40],
-        dtheta=series.dtheta[:40],
-        dphi=series.dphi[:40],
-        root_pos=series.root_pos[:40],
-        root_vel=series.root_vel[:40],
-    )
+    sub = series.frames(slice(0, 40))
     X, R = stacked(sub)
     full = segment_cost_matrix(sub, variant)
     C = band_costs(X, X, R if variant == "hermite" else None, 7, variant)

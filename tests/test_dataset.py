@@ -106,20 +106,6 @@ def test_clip_start_frames_count_source_frames(walk_clip):
     assert c.start_frame == 40 and c.n_frames == 10
 
 
-def test_atomic_writes_get_ordinary_file_permissions(tmp_path):
-    import os
-
-    from sim.motion.clip import write_atomic
-
-    mask = os.umask(0o022)
-    try:
-        write_atomic(tmp_path / "a.bin", lambda f: f.write(b"data"))
-    finally:
-        os.umask(mask)
-    assert (tmp_path / "a.bin").read_bytes() == b"data"
-    assert (tmp_path / "a.bin").stat().st_mode & 0o777 == 0o644
-
-
 # ---------------------------------------------------------------- hostile layouts (issue 8, part 3)
 
 
@@ -282,29 +268,18 @@ def test_the_velocity_stage_refuses_non_finite_qpos_naming_the_source(walk_clip)
 
     asf = Path(walk_clip.source).with_name("02.asf")
     _, model = subject_model(asf)
+
+    def from_qpos(qpos):
+        names, parents = walk_clip.names, walk_clip.parents
+        return clip_from_qpos(model, names, parents, qpos, source_fps=30, fps=30, source="walk.amc")
+
     qpos = walk_clip.qpos.copy()
     qpos[3, 0] = np.nan
     with pytest.raises(MotionDataError, match=r"walk\.amc: non-finite joint positions"):
-        clip_from_qpos(
-            model,
-            walk_clip.names,
-            walk_clip.parents,
-            qpos,
-            source_fps=30,
-            fps=30,
-            source="walk.amc",
-        )
+        from_qpos(qpos)
     qpos[3, 0] = 1e308  # finite, but its differences overflow
     with pytest.raises(MotionDataError, match=r"walk\.amc: non-finite"):
-        clip_from_qpos(
-            model,
-            walk_clip.names,
-            walk_clip.parents,
-            qpos,
-            source_fps=30,
-            fps=30,
-            source="walk.amc",
-        )
+        from_qpos(qpos)
 
 
 def test_retarget_to_the_humanoid_refuses_zero_length_legs(tmp_path, cmu_dir):

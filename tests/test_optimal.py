@@ -45,18 +45,9 @@ def test_segment_costs_wrap_phi_differences():
 def test_optimum_equals_brute_force_enumeration(variant):
     s = chart(smooth_clip(60, 30.0, seed=13))
     # a short clip keeps the enumeration small: first 13 frames
-    from dataclasses import replace
 
     n = 13
-    small = replace(
-        s,
-        theta=s.theta[:n],
-        phi=s.phi[:n],
-        dtheta=s.dtheta[:n],
-        dphi=s.dphi[:n],
-        root_pos=s.root_pos[:n],
-        root_vel=s.root_vel[:n],
-    )
+    small = s.frames(slice(0, n))
     table = optimal_table(small, variant)
     for W in range(2, 8):
         best = min(
@@ -100,21 +91,12 @@ def test_solve_rejects_bad_sizes(series):
 
 def test_catmull_rom_optimum_equals_brute_force_enumeration():
     """The triple-state programme against enumeration, with Q from full reconstruction."""
-    from dataclasses import replace
 
     from sidql.keyframes.optimal import catmull_rom_optimal
 
     s = chart(smooth_clip(60, 30.0, seed=14))
     n = 12
-    small = replace(
-        s,
-        theta=s.theta[:n],
-        phi=s.phi[:n],
-        dtheta=s.dtheta[:n],
-        dphi=s.dphi[:n],
-        root_pos=s.root_pos[:n],
-        root_vel=s.root_vel[:n],
-    )
+    small = s.frames(slice(0, n))
     table = catmull_rom_optimal(small, 7)
     for W in range(2, 8):
         best = min(

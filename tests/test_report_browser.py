@@ -15,6 +15,7 @@ import select
 import shutil
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -200,9 +201,12 @@ def browser(tmp_path_factory):
     return CHROMIUM
 
 
-def test_page_loads_in_chromium_with_playable_videos(browser, report_dir, tmp_path):
+def run_in_page(report_dir: Path, profile: Path, expression: str, screenshot: bool = False):
+    """Open the report's ``index.html`` in a fresh headless Chromium, await ``expression`` (a
+    script returning a promise) there and return its value, with a base64 PNG screenshot taken
+    afterwards when ``screenshot`` (else None)."""
     url = (report_dir / "index.html").resolve().as_uri()
-    dt = DevTools("about:blank", str(tmp_path / "profile"))
+    dt = DevTools("about:blank", str(profile))
     try:
         page = next(t for t in dt.call("Target.getTargets")["targetInfos"] if t["type"] == "page")
         session = dt.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})[
@@ -211,14 +215,20 @@ def test_page_loads_in_chromium_with_playable_videos(browser, report_dir, tmp_pa
         dt.call("Page.navigate", {"url": url}, session)
         res = dt.call(
             "Runtime.evaluate",
-            {"expression": _PROBE, "awaitPromise": True, "returnByValue": True},
+            {"expression": expression, "awaitPromise": True, "returnByValue": True},
             session,
             timeout=90,
         )
-        state = res["result"]["value"]
-        shot = dt.call("Page.captureScreenshot", {"format": "png"}, session)["data"]
+        shot = None
+        if screenshot:
+            shot = dt.call("Page.captureScreenshot", {"format": "png"}, session)["data"]
+        return res["result"]["value"], shot
     finally:
         dt.close()
+
+
+def test_page_loads_in_chromium_with_playable_videos(browser, report_dir, tmp_path):
+    state, shot = run_in_page(report_dir, tmp_path / "profile", _PROBE, screenshot=True)
     videos = state["videos"]
     assert len(videos) == 2
     for v in videos:
@@ -271,23 +281,7 @@ _SYNC = """
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install chromium)")
 def test_one_control_plays_pauses_and_seeks_all_videos(report_dir, tmp_path):
-    url = (report_dir / "index.html").resolve().as_uri()
-    dt = DevTools("about:blank", str(tmp_path / "profile"))
-    try:
-        page = next(t for t in dt.call("Target.getTargets")["targetInfos"] if t["type"] == "page")
-        session = dt.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})[
-            "sessionId"
-        ]
-        dt.call("Page.navigate", {"url": url}, session)
-        res = dt.call(
-            "Runtime.evaluate",
-            {"expression": _SYNC, "awaitPromise": True, "returnByValue": True},
-            session,
-            timeout=90,
-        )
-        state = res["result"]["value"]
-    finally:
-        dt.close()
+    state, _ = run_in_page(report_dir, tmp_path / "profile", _SYNC)
     fps = state["fps"]
     assert fps == 30
     t = state["playing"]["times"]

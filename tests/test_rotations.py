@@ -8,6 +8,7 @@ from sim.model import quaternion as quat
 from sim.model.rotations import (
     Y_UP_TO_Z_UP,
     axis_rotation,
+    euler_angles_deg,
     euler_matrix,
     y_up_to_z_up,
     z_up_to_y_up,
@@ -21,6 +22,18 @@ def test_euler_matrix_applies_the_first_axis_first_like_scipy_extrinsic(order):
     angles = np.random.default_rng(len(order) + ORDERS.index(order)).uniform(-180, 180, (7, 5, 3))
     expect = Rotation.from_euler(order.lower(), angles.reshape(-1, 3), degrees=True).as_matrix()
     np.testing.assert_allclose(euler_matrix(angles, order), expect.reshape(7, 5, 3, 3), atol=1e-12)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_euler_angles_invert_euler_matrix(order):
+    rng = np.random.default_rng(20 + ORDERS.index(order))
+    angles = rng.uniform(-180, 180, (50, 3))
+    angles[:, 1] = rng.uniform(
+        -89, 89, 50
+    )  # the middle angle's own range: the decomposition is unique
+    np.testing.assert_allclose(
+        euler_angles_deg(euler_matrix(angles, order), order), angles, atol=1e-9
+    )
 
 
 @pytest.mark.parametrize("order", ["X", "Z", "XZ", "YX"])

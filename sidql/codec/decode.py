@@ -13,7 +13,12 @@ import numpy as np
 from sidql.codec import format as sidq
 from sidql.codec.skeleton import fit_motion, skeleton_hash
 from sidql.keyframes.reconstruct import Reconstruction, interpolate
-from sidql.keyframes.spherical import POINTS, clip_from_chart, positions_from_chart
+from sidql.keyframes.spherical import (
+    POINTS,
+    clip_from_chart,
+    positions_from_chart,
+    split_channels,
+)
 from sim.acclaim.reader import parse_asf
 from sim.acclaim.writer import write_amc
 from sim.errors import MotionDataError
@@ -42,16 +47,10 @@ def decoded_chart(stream: sidq.Stream) -> dict[str, np.ndarray]:
 
 
 def _split(stream: sidq.Stream, chart: dict):
-    M = stream.quantiser.n_bones
-    x, xd = chart["values"], chart["rates"]
-    return (
-        x[:, :M],
-        x[:, M : 2 * M],
-        xd[:, :M],
-        xd[:, M : 2 * M],
-        x[:, 2 * M :],
-        xd[:, 2 * M :],
-    )
+    """theta, phi, dtheta, dphi, root, root_vel of a :func:`decoded_chart`."""
+    theta, phi, root = split_channels(chart["values"], stream.quantiser.n_bones)
+    dtheta, dphi, root_vel = split_channels(chart["rates"], stream.quantiser.n_bones)
+    return theta, phi, dtheta, dphi, root, root_vel
 
 
 def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:

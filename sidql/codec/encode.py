@@ -30,15 +30,22 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decoded_chart
-from sidql.codec.plan import DEFAULT_MAX_GAP, band_costs, plan_for_budget, plan_for_quality
+from sidql.codec.plan import (
+    DEFAULT_MAX_GAP,
+    band_costs,
+    least_keyframes,
+    plan_for_budget,
+    plan_for_quality,
+)
 from sidql.codec.quantise import fit_quantiser
 from sidql.codec.skeleton import skeleton_hash
 from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
 from sidql.keyframes.metrics import q_from_angles
-from sidql.keyframes.spherical import POINTS, SphericalSeries, chart
+from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, split_channels
 from sim.acclaim.reader import parse_asf
 from sim.errors import MotionDataError
-from sim.motion.clip import Clip, write_atomic
+from sim.files import write_atomic
+from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
 
 CHOICES: tuple[str, ...] = ("auto",) + sidq.RECONSTRUCTIONS
@@ -62,16 +69,9 @@ class Encoded:
     candidates: dict
 
 
-def _series_arrays(series: SphericalSeries):
-    values = np.concatenate([series.theta, series.phi, series.root_pos], axis=1)
-    rates = np.concatenate([series.dtheta, series.dphi, series.root_vel], axis=1)
-    return values, rates
-
-
 def _measure(series: SphericalSeries, stream: sidq.Stream) -> float:
-    M = series.n_bones
-    x = decoded_chart(stream)["values"]
-    return q_from_angles(series, x[:, :M], x[:, M : 2 * M])
+    theta, phi, _ = split_channels(decoded_chart(stream)["values"], series.n_bones)
+    return q_from_angles(series, theta, phi)
 
 
 #: bits per pose channel tried for packed (offline) streams; live streams use 16.
@@ -97,7 +97,7 @@ def _encode_one(
     """Encodings of one reconstruction, one per bit depth tried."""
     M = series.n_bones
     N = series.n_frames
-    values, rates = _series_arrays(series)
+    values, rates = series.channels()
     q16 = fit_quantiser(values, rates if recon == "hermite" else None, M)
     Xq = q16.grid_pose(values)
     Rq = q16.grid_rates(rates) * series.dt if recon == "hermite" else None
@@ -137,7 +137,7 @@ def _encode_one(
         data = sidq.to_bytes(stream)
         return Encoded(stream, data, _measure(series, stream), len(data) / duration, {})
 
-    out, failure = [], None
+    out = []
     if coding == 0:
         quant = q16
         if rate is not None:
@@ -187,10 +187,8 @@ def _encode_one(
                     C, lambda k: build(k, quant), budget, 0, recon, M, where, guess
                 )
                 out.append(finish(keys, quant))
-            except MotionDataError as e:
-                failure = e
-    if not out:
-        raise failure
+            except MotionDataError:
+                pass  # no plan at that depth fits: the first depth's encoding stands
     return out
 
 
@@ -222,7 +220,7 @@ def _keys_for_budget(C, build, budget, H, recon, M, where, guess=0.5) -> np.ndar
         return solve(int((budget - fixed) // per_key))
     fixed += 4 + 13  # keyframe count and the .lzma header
     per_key *= guess  # first guess, corrected below from the measured size
-    least = int(np.ceil((N - 1) / max(C.shape[1] - 1, 1))) + 1
+    least = least_keyframes(C)
     best, tried = None, set()
     target = int((budget - fixed) // per_key)
     for _ in range(_ROUNDS):

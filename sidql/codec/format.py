@@ -67,7 +67,7 @@ import numpy as np
 from sidql.codec.quantise import BITS, Quantiser
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1

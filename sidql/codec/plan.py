@@ -186,14 +186,21 @@ def plan(C: np.ndarray, lam: float) -> Plan:
 _LAM_LO, _LAM_HI, _STEPS = 1e-6, 1e7, 48
 
 
+def least_keyframes(C: np.ndarray) -> int:
+    """The fewest keyframes any plan over the banded cost table ``C`` (N, G + 1) can have: the
+    two ends and enough between them that no gap exceeds G."""
+    N, G1 = C.shape
+    return int(np.ceil((N - 1) / max(G1 - 1, 1))) + 1 if N > 1 else 1
+
+
 def plan_for_budget(C: np.ndarray, max_keys: int, where: str = "") -> Plan:
     """The least-distortion Lagrangian plan with at most ``max_keys`` keyframes (bisection).
 
     Raises:
         MotionDataError: even the sparsest plan the maximum gap allows needs more keyframes.
     """
-    N, G1 = C.shape
-    least = int(np.ceil((N - 1) / max(G1 - 1, 1))) + 1 if N > 1 else 1
+    G1 = C.shape[1]
+    least = least_keyframes(C)
     if max_keys < least:
         raise MotionDataError(
             where or None,
@@ -220,16 +227,26 @@ def plan_for_quality(
 
     Returns the plan and its measured error. Every frame a keyframe is the fallback (error 0).
     """
+    return sparsest_within(lambda lam: plan(C, lam), measure, max_q, _STEPS // 2)
+
+
+def sparsest_within(
+    make: Callable, measure: Callable[[np.ndarray], float], max_q: float, steps: int
+):
+    """Rate control for quality, for any planner ``make(lam)`` (a plan with ``.keyframes``):
+    the plan of the largest multiplier ``lam`` in [1e-6, 1e7] found by ``steps`` bisection steps
+    on ``log lam`` whose measured error ``measure(keyframes)`` is <= ``max_q``, and that error.
+    The plan at the smallest multiplier (densest) is the fallback."""
     lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
-    best = plan(C, _LAM_LO)
+    best = make(_LAM_LO)
     best_q = measure(best.keyframes)
-    top = plan(C, _LAM_HI)
+    top = make(_LAM_HI)
     top_q = measure(top.keyframes)
     if top_q <= max_q:
         return top, top_q
-    for _ in range(_STEPS // 2):
+    for _ in range(steps):
         mid = 0.5 * (lo + hi)
-        p = plan(C, float(np.exp(mid)))
+        p = make(float(np.exp(mid)))
         q = measure(p.keyframes)
         if q <= max_q:
             lo, best, best_q = mid, p, q

@@ -9,7 +9,7 @@ rest. The root's orientation is the rotation (Kabsch) that best takes the rest d
 root's dof-less children (CMU: the hip joints) to the decoded ones, or of all its protocol
 children when fewer than two have no dofs.
 
-Acclaim's rule (:mod:`sim.model.kinematics`): ``G_bone = G_parent C M C^T``, bone end =
+Acclaim's rule: ``G_bone = G_parent C M C^T``, bone end =
 parent end ``+ length * G_bone direction``, in the file's axes (y up).
 """
 
@@ -22,9 +22,7 @@ import numpy as np
 from sim.acclaim.reader import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model.humanoid import bone_frames
-from sim.model.rotations import Y_UP_TO_Z_UP, axis_rotation
-
-_AX = {"X": 0, "Y": 1, "Z": 2}
+from sim.model.rotations import Y_UP_TO_Z_UP, axis_rotation, euler_angles_deg
 
 
 def skeleton_hash(skeleton: Skeleton) -> bytes:
@@ -41,17 +39,6 @@ def skeleton_hash(skeleton: Skeleton) -> bytes:
             f"{' '.join(f'{v:.4f}' for v in b.axis)} {b.axis_order} {' '.join(b.dofs)}"
         )
     return hashlib.sha256("\n".join(lines).encode()).digest()[:8]
-
-
-def euler_angles(R: np.ndarray, order: str) -> np.ndarray:
-    """(..., 3) Euler angles [deg] with ``euler_matrix(angles, order) == R`` (rotation about
-    ``order[0]`` applied first; three distinct axes), for (..., 3, 3) rotations R."""
-    i, j, k = (_AX[c] for c in order.upper())
-    s = 1.0 if (j - i) % 3 == 1 else -1.0
-    beta = np.arcsin(np.clip(-s * R[..., k, i], -1.0, 1.0))
-    gamma = np.arctan2(s * R[..., j, i], R[..., i, i])
-    alpha = np.arctan2(s * R[..., k, j], R[..., k, k])
-    return np.degrees(np.stack([alpha, beta, gamma], axis=-1))
 
 
 def _swing(a: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -90,7 +77,7 @@ def _fit_dofs(a: np.ndarray, t: np.ndarray, order: str, sweeps: int = 12) -> np.
                 A = axis_rotation(order[m], ang[:, m]) @ A
             p = B @ a
             r = np.einsum("tji,tj->ti", A, t)  # A^T t
-            ang[:, q] = _axis_angle(eye[_AX[order[q]]], p, r)
+            ang[:, q] = _axis_angle(eye["XYZ".index(order[q])], p, r)
     return ang
 
 
@@ -146,7 +133,7 @@ class _Fit:
             M = _swing(a, t)
             if psi is not None:
                 M = M @ _rot_about(a, psi)
-            return euler_angles(M, order), M
+            return euler_angles_deg(M, order), M
         ang = _fit_dofs(a, t, order, sweeps)
         M = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
         for m, ax in enumerate(order):
@@ -239,7 +226,7 @@ def fit_motion(skeleton: Skeleton, positions: np.ndarray, names) -> Motion:
     d = np.stack([b.direction for b in use])
     G_root = _kabsch(d, np.stack([u[b.name] for b in use], axis=1))
     Co = fit.C["root"]
-    root_rot = euler_angles(Co.T @ G_root @ Co, skeleton.root_axis_order)
+    root_rot = euler_angles_deg(Co.T @ G_root @ Co, skeleton.root_axis_order)
     angles: dict = {}
     for b in kids:
         fit.fit(b, G_root, angles)

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from sidql.codec.plan import sparsest_within
+
 
 def horizon(latency: int, reconstruction: str) -> int:
     """Window length H [frames] for a latency of ``latency`` frames (see the module docstring)."""
@@ -127,19 +129,4 @@ def stream_for_budget(C: np.ndarray, H: int, max_keys: int) -> StreamPlan | None
 def stream_for_quality(C: np.ndarray, H: int, measure, max_q: float) -> tuple[StreamPlan, float]:
     """The fixed-lag plan with the largest multiplier (bisection) whose measured error is
     <= ``max_q``; every frame a keyframe is the fallback."""
-    best = plan_stream(C, _LAM_LO, H)
-    best_q = measure(best.keyframes)
-    top = plan_stream(C, _LAM_HI, H)
-    top_q = measure(top.keyframes)
-    if top_q <= max_q:
-        return top, top_q
-    lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
-    for _ in range(_STEPS // 2):
-        mid = 0.5 * (lo + hi)
-        p = plan_stream(C, float(np.exp(mid)), H)
-        q = measure(p.keyframes)
-        if q <= max_q:
-            lo, best, best_q = mid, p, q
-        else:
-            hi = mid
-    return best, best_q
+    return sparsest_within(lambda lam: plan_stream(C, lam, H), measure, max_q, _STEPS // 2)

@@ -10,7 +10,7 @@ from sidql.commands.usage import UsageError
 from sidql.evaluation.evaluate import evaluate, load_cases, physics_markdown, table3_markdown
 from sidql.evaluation.rate import rate_distortion, write_plot
 from sidql.keyframes.methods import get
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 
 
 def register(sub) -> None:

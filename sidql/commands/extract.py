@@ -9,7 +9,7 @@ from pathlib import Path
 from sidql.commands.usage import UsageError
 from sidql.evaluation.evaluate import clip_seed, make_case, score
 from sidql.keyframes.methods import get, select
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 from sim.motion.ingest import load_clips
 
 

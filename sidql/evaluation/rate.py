@@ -30,7 +30,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import select
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error
 from sidql.keyframes.reconstructions import FLOAT_BYTES, POSE_FLOATS
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 
 #: (method, reconstruction) pairs plotted; keyframes by ``methods.select(method, ...,
 #: reconstruction=...)``, so "optimal" is the optimum of that reconstruction's own Q.
@@ -127,20 +127,45 @@ _STYLE = {
 _COLOR = {"optimal": "C0", "greedy": "C1", "uniform": "C2", "random": "C3", "pitch": "C4"}
 
 
-def write_plot(rd: dict, path) -> None:
-    """Write the rate/distortion figure (Q, MPJPE and velocity error against bytes per second)
-    to ``path`` (PNG), atomically."""
+#: The panels of a rate/distortion figure: (key of the error, y-axis label).
+PANELS: tuple[tuple[str, str], ...] = (
+    ("mean_q", "mean Q, eq. 18 [rad]"),
+    ("mpjpe_mm", "MPJPE [mm]"),
+    ("velocity_error", "mean velocity error [m/s]"),
+)
+
+
+def write_rd_figure(path, title: str, draw) -> None:
+    """Write a rate/distortion figure to ``path`` (PNG), atomically: one log-log panel per
+    error of :data:`PANELS` against bytes per second, each drawn by ``draw(ax, key)``, with the
+    first panel's legend and ``title`` above."""
     import matplotlib  # lazy: a heavy optional plotting dependency, only for the figure
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
 
-    fig, axes = plt.subplots(1, 3, figsize=(18, 5))
-    for ax, key, label in (
-        (axes[0], "mean_q", "mean Q, eq. 18 [rad]"),
-        (axes[1], "mpjpe_mm", "MPJPE [mm]"),
-        (axes[2], "velocity_error", "mean velocity error [m/s]"),
-    ):
+    fig, axes = plt.subplots(1, len(PANELS), figsize=(18, 5))
+    for ax, (key, label) in zip(axes, PANELS, strict=True):
+        draw(ax, key)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("bytes per second of motion")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_atomic(path, lambda f: f.write(buf.getvalue()))
+
+
+def write_plot(rd: dict, path) -> None:
+    """Write the rate/distortion figure of :func:`rate_distortion`'s ``rd`` (Q, MPJPE and
+    velocity error of every curve against bytes per second) to ``path`` (PNG), atomically."""
+
+    def draw(ax, key):
         for c in rd["curves"]:
             ax.plot(
                 c["bytes_per_second"],
@@ -153,18 +178,10 @@ def write_plot(rd: dict, path) -> None:
             )
         ax.axvline(rd["raw_bytes_per_second"], color="k", lw=0.8)
         ax.text(rd["raw_bytes_per_second"], ax.get_ylim()[1], " raw 30 fps", va="top", fontsize=8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("bytes per second of motion")
-        ax.set_ylabel(label)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(
+
+    write_rd_figure(
+        path,
         f"Rate/distortion on {rd['clips']} CMU clips (60 frames, 30 fps), W = "
-        f"{rd['curves'][0]['keyframes'][0]}..{rd['curves'][0]['keyframes'][-1]}"
+        f"{rd['curves'][0]['keyframes'][0]}..{rd['curves'][0]['keyframes'][-1]}",
+        draw,
     )
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_atomic(path, lambda f: f.write(buf.getvalue()))

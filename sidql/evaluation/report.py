@@ -43,8 +43,9 @@ from sidql.keyframes.reconstruct import Reconstruction
 from sidql.keyframes.spherical import POINTS
 from sim.batch import run_batch
 from sim.errors import MotionDataError
+from sim.files import write_atomic
 from sim.model.humanoid import subject_model
-from sim.motion.clip import Clip, write_atomic
+from sim.motion.clip import Clip
 from sim.motion.ingest import load_clips
 from sim.physics.analysis import PhysicsJob
 from sim.physics.ground import estimate_ground

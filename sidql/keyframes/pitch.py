@@ -27,13 +27,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sidql.keyframes.reconstruct import Reconstruction, validate_keyframes
+from sidql.keyframes.reconstruct import Reconstruction, points_reconstruction, validate_keyframes
 from sidql.keyframes.spherical import (
-    POINTS,
-    angles_and_rates,
     protocol_indices,
     protocol_parents,
-    world_to_chart,
 )
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
@@ -197,12 +194,6 @@ def keyframes_for_count(D: np.ndarray, W: int) -> tuple[np.ndarray, float]:
     return np.array(sorted(keys), dtype=np.int64), tau
 
 
-def pitch_keyframes(clip: Clip, W: int) -> np.ndarray:
-    """(W,) keyframes of ``clip`` by inter-frame pitch with the threshold searched for W."""
-    _, local, _ = protocol_rotations(clip)
-    return keyframes_for_count(pitch_distances(local), W)[0]
-
-
 def _segments(keyframes: np.ndarray, N: int):
     n = np.arange(N)
     seg = np.clip(np.searchsorted(keyframes, n, side="right") - 1, 0, len(keyframes) - 2)
@@ -258,19 +249,7 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
             + quat.cross(Om[:, p], quat.rotate(world[:, p], rig.origin[j]))
             + quat.cross(Om[:, j], quat.rotate(world[:, j], rig.offset[j]))
         )
-    child = np.arange(1, len(parents))
-    theta, phi, _, _ = angles_and_rates(world_to_chart(P[:, child] - P[:, parents[child]]))
-    return Reconstruction(
-        positions=P,
-        velocities=V,
-        names=POINTS,
-        parents=parents.copy(),
-        theta=theta,
-        phi=phi,
-        keyframes=k,
-        variant="slerp",
-        fps=clip.fps,
-    )
+    return points_reconstruction(P, V, parents, k, "slerp", clip.fps)
 
 
 def pitch_error(true_pos: np.ndarray, rec_pos: np.ndarray) -> float:

@@ -27,8 +27,11 @@ import numpy as np
 from sidql.keyframes.spherical import (
     POINTS,
     SphericalSeries,
+    angles_and_rates,
     chart,
     positions_from_chart,
+    split_channels,
+    world_to_chart,
 )
 from sim.motion.clip import Clip
 from sim.motion.points import PointMotion
@@ -157,6 +160,34 @@ class Reconstruction(PointMotion):
         return 1.0 / self.fps
 
 
+def points_reconstruction(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    parents: np.ndarray,
+    keyframes: np.ndarray,
+    variant: str,
+    fps: float,
+) -> Reconstruction:
+    """A reconstruction rebuilt as points rather than in the chart (``slerp``, ``cartesian``):
+    the 23 protocol points' positions (N, 23, 3) [m] and velocities [m/s], world axes (z up),
+    with their (23,) ``parents``; its bones' theta/phi (N, 22) [rad] are measured from the
+    points."""
+    child = np.arange(1, len(parents))
+    bones = positions[:, child] - positions[:, parents[child]]
+    theta, phi, _, _ = angles_and_rates(world_to_chart(bones))
+    return Reconstruction(
+        positions=positions,
+        velocities=velocities,
+        names=POINTS,
+        parents=parents.copy(),
+        theta=theta,
+        phi=phi,
+        keyframes=keyframes,
+        variant=variant,
+        fps=fps,
+    )
+
+
 def reconstruct_series(
     series: SphericalSeries, keyframes, variant: str = "hermite"
 ) -> Reconstruction:
@@ -170,11 +201,10 @@ def reconstruct_series(
     _check_variant(variant)
     k = validate_keyframes(keyframes, series.n_frames)
     M = series.n_bones
-    values = np.concatenate([series.theta, series.phi, series.root_pos], axis=1)
-    rates = np.concatenate([series.dtheta, series.dphi, series.root_vel], axis=1)
+    values, rates = series.channels()
     x, xd = interpolate(values, rates, k, series.dt, variant)
-    theta, phi, root = x[:, :M], x[:, M : 2 * M], x[:, 2 * M :]
-    dtheta, dphi, root_vel = xd[:, :M], xd[:, M : 2 * M], xd[:, 2 * M :]
+    theta, phi, root = split_channels(x, M)
+    dtheta, dphi, root_vel = split_channels(xd, M)
     P, V = positions_from_chart(
         root, root_vel, theta, phi, dtheta, dphi, series.lengths, series.parents
     )

@@ -27,17 +27,21 @@ import numpy as np
 
 from sidql.keyframes import pitch
 from sidql.keyframes.optimal import catmull_rom_optimal, optimal_table
-from sidql.keyframes.reconstruct import Reconstruction, reconstruct_series, validate_keyframes
+from sidql.keyframes.reconstruct import (
+    Reconstruction,
+    interpolate,
+    points_reconstruction,
+    reconstruct_series,
+    validate_keyframes,
+)
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import (
     M_BONES,
     POINTS,
     SphericalSeries,
-    angles_and_rates,
     chart,
     protocol_indices,
     protocol_parent_indices,
-    world_to_chart,
 )
 from sim.motion.clip import Clip
 
@@ -152,28 +156,8 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     idx = protocol_indices(clip)
     N = clip.n_frames
     k = validate_keyframes(keyframes, N)
-    pos, vel = clip.positions[:, idx], clip.velocities[:, idx]
-    n = np.arange(N)
-    seg = np.clip(np.searchsorted(k, n, side="right") - 1, 0, len(k) - 2)
-    a, b = k[seg], k[seg + 1]
-    h = ((b - a) * clip.dt)[:, None, None]
-    s = ((n - a) / (b - a))[:, None, None]
-    s2, s3 = s * s, s * s * s
-    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-    P = h00 * pos[a] + h10 * h * vel[a] + h01 * pos[b] + h11 * h * vel[b]
-    d00, d10, d01, d11 = 6 * s2 - 6 * s, 3 * s2 - 4 * s + 1, -6 * s2 + 6 * s, 3 * s2 - 2 * s
-    V = (d00 * pos[a] + d01 * pos[b]) / h + d10 * vel[a] + d11 * vel[b]
-    parents = protocol_parent_indices()
-    child = np.arange(1, len(POINTS))
-    theta, phi, _, _ = angles_and_rates(world_to_chart(P[:, child] - P[:, parents[child]]))
-    return Reconstruction(
-        positions=P,
-        velocities=V,
-        names=POINTS,
-        parents=parents,
-        theta=theta,
-        phi=phi,
-        keyframes=k,
-        variant="cartesian",
-        fps=clip.fps,
-    )
+    pos = clip.positions[:, idx].reshape(N, -1)
+    vel = clip.velocities[:, idx].reshape(N, -1)
+    P, V = interpolate(pos, vel, k, clip.dt, "hermite")
+    P, V = P.reshape(N, len(POINTS), 3), V.reshape(N, len(POINTS), 3)
+    return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps)

@@ -28,7 +28,7 @@ Pure numpy. Units: metres, seconds, radians.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -130,6 +130,33 @@ class SphericalSeries:
     @property
     def n_bones(self) -> int:
         return int(self.theta.shape[1])
+
+    def frames(self, index) -> SphericalSeries:
+        """The chart at frames ``index`` (a slice or an index array along time); bone lengths,
+        parents and dt kept."""
+        return replace(
+            self,
+            theta=self.theta[index],
+            phi=self.phi[index],
+            dtheta=self.dtheta[index],
+            dphi=self.dphi[index],
+            root_pos=self.root_pos[index],
+            root_vel=self.root_vel[index],
+        )
+
+    def channels(self) -> tuple[np.ndarray, np.ndarray]:
+        """The chart as flat channels: (N, 2 M + 3) values [theta | phi | root position] in
+        [rad, rad, m] and (N, 2 M + 3) their rates [per s]; :func:`split_channels` undoes it."""
+        values = np.concatenate([self.theta, self.phi, self.root_pos], axis=1)
+        rates = np.concatenate([self.dtheta, self.dphi, self.root_vel], axis=1)
+        return values, rates
+
+
+def split_channels(x: np.ndarray, n_bones: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 2 M + 3) channels in :meth:`SphericalSeries.channels`'s order -> views (theta (N, M),
+    phi (N, M), root (N, 3)); the same for their rates."""
+    M = n_bones
+    return x[:, :M], x[:, M : 2 * M], x[:, 2 * M :]
 
 
 def protocol_parents(names, parents) -> np.ndarray:

@@ -62,7 +62,7 @@ from sidql.learning.tasks import (
     synthetic_tasks,
 )
 from sim.errors import MotionDataError
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 from sim.motion.dataset import find_trials, load_dataset_clips
 
 # --- replay memory -------------------------------------------------------------------------------

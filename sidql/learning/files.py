@@ -19,7 +19,7 @@ import warnings
 import torch
 
 from sim.errors import MotionDataError
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,

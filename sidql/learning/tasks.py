@@ -32,7 +32,7 @@ from tqdm import tqdm
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
 from sim.errors import MotionDataError
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 from sim.motion.dataset import find_trials
 from sim.motion.ingest import load_motion
 

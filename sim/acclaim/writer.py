@@ -16,7 +16,7 @@ import numpy as np
 
 from sim.acclaim.reader import ROOT_CHANNELS, Motion, Skeleton
 from sim.errors import MotionDataError
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 
 
 def amc_text(skeleton: Skeleton, motion: Motion, comment: str = "") -> str:

@@ -29,10 +29,10 @@ import numpy as np
 
 from sim.acclaim.reader import Skeleton, check_bone_name, parse_asf
 from sim.errors import MotionDataError
+from sim.files import write_atomic
 from sim.model import quaternion as quat
 from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
-from sim.motion.clip import write_atomic
 
 MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 CANONICAL_ASF = Path(__file__).resolve().parents[1] / "data" / "canonical.asf"

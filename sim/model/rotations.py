@@ -38,6 +38,18 @@ def euler_matrix(angles_deg: np.ndarray, order: str) -> np.ndarray:
     return R
 
 
+def euler_angles_deg(R: np.ndarray, order: str) -> np.ndarray:
+    """(..., 3) Euler angles [deg] with ``euler_matrix(angles, order) == R`` (rotation about
+    ``order[0]`` applied first; three distinct axes), for (..., 3, 3) rotations R. The middle
+    angle is in [-90, 90] deg."""
+    i, j, k = (_AXIS[c] for c in order.upper())
+    s = 1.0 if (j - i) % 3 == 1 else -1.0
+    beta = np.arcsin(np.clip(-s * R[..., k, i], -1.0, 1.0))
+    gamma = np.arctan2(s * R[..., j, i], R[..., i, i])
+    alpha = np.arctan2(s * R[..., k, j], R[..., k, k])
+    return np.degrees(np.stack([alpha, beta, gamma], axis=-1))
+
+
 #: (3, 3) the one axis change: Acclaim's CMU axes (and the spherical chart's) are y up, the
 #: project's world frame is z up. ``v_z_up = Y_UP_TO_Z_UP @ v_y_up``: (x, y, z) -> (x, -z, y), a
 #: +90 degree rotation about x.

@@ -10,13 +10,13 @@ bone vector of point ``j`` is ``positions[:, j] - positions[:, parents[j]]``.
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from sim.errors import MotionDataError
+from sim.files import write_atomic
 
 
 @dataclass(frozen=True)
@@ -165,31 +165,3 @@ def load_npz(path: str | os.PathLike) -> Clip:
             )
     except (OSError, KeyError, ValueError) as e:
         raise MotionDataError(str(path), None, f"not a clip file: {e}") from e
-
-
-def write_atomic(path: str | os.PathLike, write) -> None:
-    """Call ``write(fileobj)`` on a temporary file beside ``path``, then rename it into place.
-
-    A crash never leaves a half-written ``path`` behind.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask

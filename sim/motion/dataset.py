@@ -21,7 +21,8 @@ from pathlib import Path, PurePosixPath
 
 from sim.batch import WRITE_LOCK, run_batch
 from sim.errors import MotionDataError
-from sim.motion.clip import load_npz, save_npz, write_atomic
+from sim.files import write_atomic
+from sim.motion.clip import load_npz, save_npz
 from sim.motion.ingest import load_motion
 
 _TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.amc$", re.IGNORECASE)

@@ -31,7 +31,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
-from sim.motion.clip import write_atomic
+from sim.files import write_atomic
 from sim.motion.points import PointMotion
 from sim.replay.capsules import bone_poses, bones_of, scene_xml
 from sim.replay.foot_state import FootState

@@ -19,7 +19,8 @@ import numpy as np
 from sim.acclaim.reader import parse_amc, parse_asf
 from sim.batch import run_batch
 from sim.errors import MotionDataError
-from sim.motion.clip import save_npz, write_atomic
+from sim.files import write_atomic
+from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
 from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_dict
 
