@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sidql.evaluation.report import validate_clip
 from sim.replay.capsules import adjacent_pairs, bone_poses, bones_of
 from sim.replay.checks import (
     CollisionScene,
@@ -256,3 +257,15 @@ def test_one_scene_per_clip_gives_the_figures_of_a_fresh_scene_per_replay():
         replay(orig, full, scene=scene, hops=1)
     with pytest.raises(ValueError, match="other bones or floor settings"):
         replay(full, full, scene=scene)
+
+
+def test_the_cartesian_baseline_stretches_bones_that_the_chart_keeps(walk_clip):
+    """The ``xyz`` method (uniform keyframes, points interpolated in xyz) is the one the bone-drift
+    check exists for: under its own reconstruction bones change length by millimetres, under the
+    spherical Hermite (same keyframes) they do not."""
+    v = validate_clip(walk_clip.slice(0, 60), ["xyz"], 5)
+    runs = {r.label: r for r in v.runs}
+    assert set(runs) == {"xyz", "xyz+cartesian"}
+    assert runs["xyz"].summary["bone_drift_max_mm"] < 1e-6
+    assert runs["xyz+cartesian"].summary["bone_drift_max_mm"] > 5.0
+    np.testing.assert_array_equal(runs["xyz"].keyframes, [0, 15, 30, 44, 59])

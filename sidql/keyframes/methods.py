@@ -152,6 +152,14 @@ def uniform_choice(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
     return uniform_indices(clip.n_frames, W)
 
 
+@register("xyz", reconstruction="cartesian")
+def xyz_uniform(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """The Cartesian baseline many keyframe systems use: W evenly spaced frames, every point
+    interpolated in xyz between them (cubic Hermite with the keyframes' point velocities), so bone
+    lengths are not kept - the motion the bone-length and IK checks exist for."""
+    return uniform_indices(clip.n_frames, W)
+
+
 def greedy_from_costs(C: np.ndarray, W: int) -> np.ndarray:
     """Greedy keyframes from a segment-cost matrix: start from both ends, then W - 2 times add
     the frame that lowers Q the most (ties: the lowest index).
