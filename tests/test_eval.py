@@ -182,3 +182,13 @@ def test_load_cases_keeps_only_the_named_subjects(cmu_dir):
     cases, skipped = load_cases(cmu_dir, subjects=["02", "35"], progress=False)
     sources = {c.clip.source.replace("\\", "/").split("/")[-2] for c in cases}
     assert sources == {"02", "35"} and not skipped
+
+
+def test_case_indices_count_clips_across_trials_with_several_clips(cmu_dir):
+    """The index seeds the random method: one per clip, in order (a regression once skipped
+    numbers inside trials of several clips, which changed Table 3's random row)."""
+    from sidql.evaluation.evaluate import load_cases
+
+    cases, _ = load_cases(cmu_dir, subjects=["05"], progress=False)
+    assert len(cases) > len({c.clip.source for c in cases})
+    assert [c.index for c in cases] == list(range(len(cases)))

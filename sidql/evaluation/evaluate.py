@@ -117,7 +117,8 @@ def load_cases(
             skipped.append({"amc": str(trial.amc), "problem": o.error})
             print(f"skipped {trial.amc}: {o.error}", file=sys.stderr)
             continue
-        cases.extend(make_case(c, len(cases) + i, str(trial.asf)) for i, c in enumerate(o.result))
+        first = len(cases)  # case index = position in the whole run (seeds depend on it)
+        cases += [make_case(c, first + i, str(trial.asf)) for i, c in enumerate(o.result)]
     return cases, skipped
 
 
