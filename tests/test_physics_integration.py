@@ -59,3 +59,12 @@ def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tm
         assert len(row["physics_per_frame"]["residual_force_bw"]) == clips[0].n_frames
         assert row["physics"]["ground_z_m"] == round(ground.z, 6)
     assert c["original"]["physics"]["contact_recall"] == 1.0
+    # the page shows the physics figures and leaves out the older checks they supersede
+    from sidql.evaluation.report import METRICS, shown_metrics
+
+    shown = {m.key for m in shown_metrics(v)}
+    assert {"residual_force_bw", "penetration_mm", "skate_mm_s", "mpjpe_mm"} <= shown
+    superseded = {m.key for m in METRICS if m.superseded_by}
+    assert superseded and not superseded & shown
+    plain = validate_clip(clips[0], ["uniform"], 5)  # no physics: the older checks stay
+    assert superseded & {m.key for m in shown_metrics(plain)}

@@ -269,3 +269,8 @@ def test_the_cartesian_baseline_stretches_bones_that_the_chart_keeps(walk_clip):
     assert runs["xyz"].summary["bone_drift_max_mm"] < 1e-6
     assert runs["xyz+cartesian"].summary["bone_drift_max_mm"] > 5.0
     np.testing.assert_array_equal(runs["xyz"].keyframes, [0, 15, 30, 44, 59])
+
+
+def test_a_hermite_row_another_method_already_shows_is_not_repeated(walk_clip):
+    v = validate_clip(walk_clip.slice(0, 60), ["uniform", "xyz", "pitch"], 5)
+    assert [r.label for r in v.runs] == ["uniform", "xyz+cartesian", "pitch", "pitch+slerp"]

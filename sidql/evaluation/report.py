@@ -210,7 +210,11 @@ def validate_clip(
     for m in methods:
         keys = np.asarray(select(m, clip, W, seed=seed))
         own = reconstruction_of(m)  # every method under Hermite, and under its own if other
-        for variant in ["hermite"] + ([own] if own != "hermite" else []):
+        shown = any(
+            r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
+        )
+        hermite = [] if own != "hermite" and shown else ["hermite"]  # e.g. xyz's = uniform's
+        for variant in hermite + ([own] if own != "hermite" else []):
             rec = from_reconstruction(reconstructions.rebuild(variant, clip, keys), clip.fps)
             checks = replay(rec, full, **kw)
             s = summarise(checks)
@@ -331,6 +335,10 @@ class Metric:
         per_frame: key of the :func:`per_frame` array plotted per frame, if any.
         resolution: differences below this are ties when choosing the best (e.g. bone drift of
             1e-13 mm is rounding, not a better method); 0: compare as shown.
+        group: which table of the clip shows it (:data:`GROUPS`).
+        superseded_by: a :mod:`sim.physics` key that measures the same thing better (calibrated
+            ground, contact labels, per-pair excess); where rows carry it, this metric is left
+            out of the page (it stays in ``checks.json``).
     """
 
     key: str
@@ -342,6 +350,8 @@ class Metric:
     excess: bool = False
     per_frame: str | None = None
     resolution: float = 0.0
+    group: str = "accuracy"
+    superseded_by: str | None = None
 
 
 #: Every figure the page knows, in column order. Keys absent from a run show ``n/a``; keys absent
@@ -357,49 +367,62 @@ METRICS: tuple[Metric, ...] = (
            resolution=0.01),
     Metric("floor_depth_max_mm", "floor depth", "mm", "zero",
            "deepest capsule below the floor z = 0; methods: excess over the original", "{:+.1f}",
-           excess=True, per_frame="floor_depth_mm"),
+           excess=True, per_frame="floor_depth_mm", superseded_by="penetration_mm"),
     Metric("floor_frames", "floor frames", "", "zero",
            "frames with a capsule > 1 mm below the floor; methods: excess over the original",
-           "{:+d}", excess=True),
+           "{:+d}", excess=True, superseded_by="penetration_mm"),
     Metric("self_pen_frames", "self-pen. frames", "", "zero",
            "frames where non-adjacent bones overlap; methods: excess over the original", "{:+d}",
-           excess=True),
+           excess=True, superseded_by="self_pen_excess_mm"),
     Metric("self_pen_depth_max_mm", "self-pen. depth", "mm", "zero",
            "deepest overlap of non-adjacent bones; methods: excess over the original", "{:+.1f}",
-           excess=True, per_frame="self_pen_depth_mm"),
+           excess=True, per_frame="self_pen_depth_mm", superseded_by="self_pen_excess_mm"),
     Metric("skate_mean_mm_s", "skate", "mm/s", "zero",
            "mean horizontal foot speed while a foot touches the floor; methods: excess over the "
-           "original", "{:+.0f}", excess=True, per_frame="skate_speed_mm_s"),
+           "original", "{:+.0f}", excess=True, per_frame="skate_speed_mm_s", superseded_by="skate_mm_s"),
     Metric("joint_limit_max_deg", "joint limit", "deg", "zero",
            "largest hinge angle past its ASF limit (needs joint angles); methods: excess",
-           "{:+.1f}", excess=True),
+           "{:+.1f}", excess=True, superseded_by="limit_excess_deg"),
     # physics (issue 10): filled by sim.physics where it runs
-    Metric("ground_z_m", "ground", "m", "", "estimated ground height of the trial", "{:.3f}"),
     Metric("penetration_mm", "penetration", "mm", "lower",
-           "mean depth of foot points below the ground", "{:.1f}"),
+           "mean depth of foot points below the ground", "{:.1f}", group="contacts"),
     Metric("float_mm", "float", "mm", "lower",
-           "mean height of a foot point while the original's is in contact", "{:.1f}"),
+           "mean height of a foot point while the original's is in contact", "{:.1f}", group="contacts"),
     Metric("skate_mm_s", "skate (contact)", "mm/s", "lower",
-           "mean horizontal foot speed while the original's foot is in contact", "{:.0f}"),
+           "mean horizontal foot speed while the original's foot is in contact", "{:.0f}", group="contacts"),
     Metric("contact_precision", "contact precision", "", "higher",
-           "share of the reconstruction's contacts that the original also has", "{:.2f}"),
+           "share of the reconstruction's contacts that the original also has", "{:.2f}", group="contacts"),
     Metric("contact_recall", "contact recall", "", "higher",
-           "share of the original's contacts that the reconstruction keeps", "{:.2f}"),
+           "share of the original's contacts that the reconstruction keeps", "{:.2f}", group="contacts"),
     Metric("self_pen_excess_mm", "self-pen. excess", "mm", "lower",
-           "mean per-pair overlap beyond the original's in the same frame", "{:.1f}"),
+           "mean per-pair overlap beyond the original's in the same frame", "{:.1f}", group="contacts"),
     Metric("lost_contacts", "lost contacts", "", "lower",
-           "touching bone pairs of the original that the reconstruction separates", "{:d}"),
+           "touching bone pairs of the original that the reconstruction separates", "{:d}", group="contacts"),
     Metric("limit_excess_deg", "limit excess", "deg", "lower",
-           "anatomical joint angles past their limits, beyond the original", "{:.1f}"),
+           "worst anatomical hinge angle of the fitted humanoid past its ASF limit", "{:.1f}",
+           group="contacts"),
     Metric("residual_force_bw", "residual force", "BW", "lower",
-           "mean external force no ground contact can supply, in body weights", "{:.2f}"),
+           "mean external force no ground contact can supply, in body weights", "{:.2f}", group="dynamics"),
     Metric("residual_force_bw_p95", "residual force p95", "BW", "lower",
-           "95th percentile of the residual force, in body weights", "{:.2f}"),
+           "95th percentile of the residual force, in body weights", "{:.2f}", group="dynamics"),
     Metric("residual_torque_nm_kg", "residual torque", "N m/kg", "lower",
-           "mean residual torque per kg of body mass", "{:.2f}"),
+           "mean residual torque per kg of body mass", "{:.2f}", group="dynamics"),
     Metric("joint_torque_rms_nm_kg", "joint torque RMS", "N m/kg", "lower",
-           "RMS joint torque per kg from inverse dynamics", "{:.2f}"),
+           "RMS joint torque per kg from inverse dynamics", "{:.2f}", group="dynamics"),
 )  # fmt: skip
+
+#: The clip's tables, in order: (group, heading).
+GROUPS = (
+    ("accuracy", "Accuracy and geometry"),
+    (
+        "contacts",
+        "Contacts, penetration and joint limits (sim.physics; against the original's contacts)",
+    ),
+    (
+        "dynamics",
+        "Dynamics: forces the motion needs (sim.physics; inverse dynamics on the fitted humanoid)",
+    ),
+)
 
 _BETTER = {"lower": "lower is better", "higher": "higher is better",
            "zero": "closest to 0 (the original) is best", "": "not ranked"}  # fmt: skip
@@ -457,13 +480,31 @@ def best_rows(m: Metric, values) -> set[int]:
 
 
 def shown_metrics(v: ClipValidation) -> list[Metric]:
-    """The metrics with a value in at least one row of the clip."""
+    """The metrics with a value in at least one row of the clip, less those a present
+    :mod:`sim.physics` metric supersedes."""
     rows = [(v.baseline_figures, None)] + [(r.figures, r.excess) for r in v.runs]
-    return [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]
+    present = [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]
+    keys = {m.key for m in present}
+    return [m for m in present if m.superseded_by not in keys]
 
 
-def _table(v: ClipValidation, colours) -> str:
-    ms = shown_metrics(v)
+def _tables(v: ClipValidation, colours) -> str:
+    """One table per metric group (:data:`GROUPS`) that has a shown metric."""
+    shown = shown_metrics(v)
+    out = []
+    for group, heading in GROUPS:
+        ms = [m for m in shown if m.group == group]
+        if ms:
+            out.append(f"<h3>{html.escape(heading)}</h3>" + _table(v, colours, ms))
+    return "".join(out) + (
+        "<p class='note'>Green cell: the best method in that column (none marked when all methods "
+        "show the same). Original row: its own figures; method rows: MPJPE, velocity error and bone "
+        "drift against the original, columns marked \u21950 the excess over the original (0 = as "
+        "the original).</p>"
+    )
+
+
+def _table(v: ClipValidation, colours, ms: list[Metric]) -> str:
     head = "".join(
         f"<th title='{html.escape(m.description)} ({_BETTER[m.better]})'>{html.escape(m.label)}"
         f"{'<br><small>' + html.escape(m.unit) + '</small>' if m.unit else ''}"
@@ -490,11 +531,7 @@ def _table(v: ClipValidation, colours) -> str:
         )
     return (
         f"<table class='metrics'><tr><th>method</th><th>keyframes (frame numbers from 0)</th>{head}"
-        f"</tr>{''.join(rows)}</table><p class='note'>Green cell: the best method in that column "
-        "(none marked when all methods show the same). Original row: its own figures; method rows: "
-        "MPJPE, velocity error and bone drift against the original, columns marked \u21950 the "
-        "excess over the original (0 = as the original). Joint limits need joint angles: "
-        "reconstructions are point sets (n/a).</p>"
+        f"</tr>{''.join(rows)}</table>"
     )
 
 
@@ -821,7 +858,13 @@ def write_report(
                 f"<h2>Clip {number}: {html.escape(Path(v.clip.source).name or 'synthetic')} from "
                 f"source frame {start}, {T} frames (0-{T - 1}) at {v.clip.fps:g} fps, W = {v.W}</h2>"
             )
-            parts.append(_table(v, colours))
+            if v.physics:
+                parts.append(
+                    f"<p class='note'>Ground of the trial (sim.physics): z = "
+                    f"{v.physics['ground_z_m']:.3f} m; the drawn and replayed floor is at "
+                    f"{v.physics['floor_z_m']:.3f} m (the sole capsules' radius lower).</p>"
+                )
+            parts.append(_tables(v, colours))
             parts.append(legend_html(shown_metrics(v)))
             bars = summary_plot(v, colours)
             if bars is not None:
