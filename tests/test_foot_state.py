@@ -1,13 +1,16 @@
-"""Foot states drawn by the renderer: contact from height and speed, and the reconstruction's
-float, sink and skate flags, against motions built so the answer is known frame by frame."""
+"""Foot states drawn by the renderer (sim.physics.contacts.foot_states): the original's contact from
+height above its stance level and speed, and the reconstruction's float, sink and skate flags,
+against motions built so the answer is known frame by frame."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from sim.replay.checks import PointMotion
-from sim.replay.foot_state import FootState, foot_points, simple_foot_states, simple_ground
+from sim.motion.points import PointMotion
+from sim.physics.contacts import foot_states
+from sim.physics.ground import estimate_ground
+from sim.replay.foot_state import FootState
 
 NAMES = ("root", "ltibia", "lfoot", "rtibia", "rfoot")
 PARENTS = np.array([-1, 0, 1, 0, 3])
@@ -30,38 +33,41 @@ def motion(p):
     return PointMotion(NAMES, PARENTS, p, FPS)
 
 
-def test_foot_points_and_ground():
-    assert foot_points(("root", "ltibia", "lfoot", "ltoes", "tibia", "lhand")) == (
-        "ltibia", "lfoot", "ltoes",
-    )  # fmt: skip
-    assert simple_ground(motion(standing(0.07))) == pytest.approx(0.07)  # ball one radius up
+def ground_of(p):
+    return estimate_ground(p, NAMES, FPS)
+
+
+def test_the_ground_is_where_the_balls_stand():
+    g = ground_of(standing(0.07))
+    assert g.z == pytest.approx(0.095) and g.points == ("ltibia", "lfoot", "rtibia", "rfoot")
+    np.testing.assert_allclose(g.clearance_of(["ltibia", "lfoot"]), [0.055, 0.0], atol=1e-12)
 
 
 def test_standing_still_is_contact_without_flags():
-    orig = motion(standing(0.05))
-    s = simple_foot_states(orig, orig, ground_z=0.05)
+    p = standing(0.05)
+    s = foot_states(motion(p), motion(p), ground_of(p))
     assert isinstance(s, FootState) and s.points == ("ltibia", "lfoot", "rtibia", "rfoot")
     assert s.contact.all() and s.rec_contact.all()
     assert not (s.floating.any() or s.sinking.any() or s.skating.any())
 
 
-def test_lifted_foot_is_not_in_contact():
+def test_lifted_foot_leaves_contact_and_comes_back():
     p = standing()
-    p[10:20, 1:3, 2] += 0.15  # left foot up for ten frames
-    s = simple_foot_states(motion(p), ground_z=0.0)
-    lifted = np.zeros(T, bool)
-    lifted[10:20] = True
-    np.testing.assert_array_equal(s.contact[:, 1], ~lifted)
+    ground = ground_of(p)
+    p[10:20, 1:3, 2] += 0.15  # left foot up for ten frames (speeds spike at the two edges)
+    s = foot_states(motion(p), None, ground)
+    assert not s.contact[10:20, :2].any() and s.contact[:9, :2].all() and s.contact[22:, :2].all()
     assert s.contact[:, 2:].all()  # the right foot stays down
+    assert not (s.floating.any() or s.sinking.any() or s.skating.any())
 
 
 def test_float_sink_and_skate_flags_where_built():
-    orig = motion(standing())
+    orig = standing()
     r = standing()
     r[5:10, 2, 2] += 0.06  # left ball floats 6 cm
-    r[20:25, 4, 2] -= 0.05  # right ball sinks 5 cm below its rest height
+    r[20:25, 4, 2] -= 0.05  # right ball sinks 5 cm below its stance level
     r[30:, 3, 0] += np.arange(T - 30) * 1.0 / FPS  # right ankle slides at 1 m/s
-    s = simple_foot_states(orig, motion(r), ground_z=0.0)
+    s = foot_states(motion(orig), motion(r), ground_of(orig))
     f = {n: i for i, n in enumerate(s.points)}
     assert set(np.flatnonzero(s.floating[:, f["lfoot"]])) == set(range(5, 10))
     assert set(np.flatnonzero(s.sinking[:, f["rfoot"]])) == set(range(20, 25))
@@ -71,3 +77,4 @@ def test_float_sink_and_skate_flags_where_built():
     others[5:10, f["lfoot"]] = False
     assert not (s.floating & others).any()
     assert s.sinking.sum() == 5 and s.skating[:, [f["ltibia"], f["lfoot"], f["rfoot"]]].sum() == 0
+    assert not s.rec_contact[31:, f["rtibia"]].any()  # a sliding ankle is not standing

@@ -48,7 +48,8 @@ from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_clips
 from sim.physics.analysis import PhysicsJob
-from sim.physics.ground import estimate_ground
+from sim.physics.contacts import foot_states
+from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import (
     CollisionScene,
     FrameChecks,
@@ -59,7 +60,7 @@ from sim.replay.checks import (
     replay,
     summarise,
 )
-from sim.replay.foot_state import FootState, simple_foot_states, simple_ground
+from sim.replay.foot_state import FootState
 from sim.replay.render import (
     DEFAULT_STYLE,
     RenderStyle,
@@ -108,6 +109,7 @@ class ClipValidation:
     baseline: dict
     runs: list[MethodRun] = field(default_factory=list)
     physics: dict = field(default_factory=dict)
+    ground: Ground | None = None  # the trial's, when the replay used one
 
     @property
     def baseline_figures(self) -> dict:
@@ -204,7 +206,7 @@ def validate_clip(
     scene = CollisionScene.for_reference(orig, **floor)  # one MuJoCo scene per clip, reused
     kw = dict(**floor, joint_ranges=joint_ranges, scene=scene)
     base_checks = replay(orig, full, **kw)
-    out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks))
+    out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks), ground=ground)
     if physics is not None:
         out.physics = physics.analyse(clip, None, ground)
     for m in methods:
@@ -774,35 +776,12 @@ def _jpeg(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-#: Flags drawn on a reconstruction's foot point against the original's physics contact labels:
-#: floating higher than this above stance [mm] while the original's is in contact, sinking deeper
-#: than this below the ground [mm], skating this much faster [mm/s] while the original's stands.
-FLOAT_MM, SINK_MM, SKATE_MM_S = 30.0, 20.0, 300.0
-
-
 def ground_and_feet(v: ClipValidation, run: MethodRun) -> tuple[float, FootState]:
-    """Floor height [m] and foot states drawn for one method's video.
-
-    With :mod:`sim.physics` figures (a report with the subject's model): the trial's calibrated
-    floor and the original's contact labels (with hysteresis), the reconstruction flagged by
-    :data:`FLOAT_MM`, :data:`SINK_MM` and :data:`SKATE_MM_S`. Without: the simple estimates of
-    :mod:`sim.replay.foot_state`."""
-    if not (v.physics and run.physics):
-        ground = simple_ground(v.original)
-        return ground, simple_foot_states(v.original, run.motion, ground_z=ground)
-    o, r = v.physics["per_frame"], run.physics["per_frame"]
-    contact = np.asarray(o["contact"], dtype=bool)
-    height = np.asarray(r["foot_height_mm"], dtype=float)
-    speed = np.asarray(r["foot_speed_mm_s"], dtype=float)
-    states = FootState(
-        points=tuple(o["foot_names"]),
-        contact=contact,
-        rec_contact=np.asarray(r["contact"], dtype=bool),
-        floating=contact & (height > FLOAT_MM),
-        sinking=height < -SINK_MM,
-        skating=contact & (speed - np.asarray(o["foot_speed_mm_s"], dtype=float) > SKATE_MM_S),
-    )
-    return float(v.physics["floor_z_m"]), states
+    """Floor height [m] and foot states drawn for one method's video: the trial's ground
+    (:mod:`sim.physics.ground`, from the clip when the report had no trial ground) and the
+    contact labels and flags of :func:`sim.physics.contacts.foot_states`."""
+    ground = v.ground or estimate_ground(v.clip.positions, v.clip.names, v.clip.fps)
+    return ground.floor_z, foot_states(v.original, run.motion, ground)
 
 
 def _data_uri(mime: str, data: bytes) -> str:

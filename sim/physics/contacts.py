@@ -22,6 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.motion.points import PointMotion
+from sim.physics.ground import Ground, horizontal_speed
+from sim.replay.foot_state import FootState
+
 H_ON, H_OFF = 0.03, 0.05  # [m] enter contact below H_ON, leave above H_OFF
 V_ON, V_OFF = 0.3, 0.5  # [m/s] enter contact below V_ON, leave above V_OFF
 
@@ -118,3 +122,43 @@ def contact_metrics(
         "contact_recall": tp / ref.sum() if ref.any() else float("nan"),
         "contact_recall_n": int(ref.sum()),
     }
+
+
+#: Flags of a reconstruction's foot point against the original's contacts, for drawing: floating
+#: higher than this above its stance level [m] while the original's is in contact, sinking deeper
+#: than this below it [m], skating this much faster horizontally [m/s] while the original's stands.
+FLOAT_HEIGHT, SINK_DEPTH, SKATE_SPEED = 0.03, 0.02, 0.3
+
+
+def foot_states(
+    original: PointMotion, reconstruction: PointMotion | None, ground: Ground
+) -> FootState:
+    """What the renderer draws at the foot points of ``ground`` that both motions have.
+
+    The original's contacts are :func:`label_contacts` of its heights above the stance levels
+    and speeds; the reconstruction's own contacts by the same rule, and its flags by
+    :data:`FLOAT_HEIGHT`, :data:`SINK_DEPTH` and :data:`SKATE_SPEED` (``None``: no flags).
+    """
+    names = [n for n in ground.points if n in original.names]
+    if reconstruction is not None:
+        names = [n for n in names if n in reconstruction.names]
+    clearance = ground.clearance_of(names)
+
+    def measure(m: PointMotion):
+        p = m.positions[:, [m.names.index(n) for n in names]]
+        h = foot_heights(p, ground.z, clearance)
+        return h, label_contacts(h, point_speed(p, m.fps)), horizontal_speed(p, m.fps)
+
+    _, contact, s_o = measure(original)
+    if reconstruction is None:
+        no = np.zeros_like(contact)
+        return FootState(tuple(names), contact, contact.copy(), no, no.copy(), no.copy())
+    h_r, rec_contact, s_r = measure(reconstruction)
+    return FootState(
+        points=tuple(names),
+        contact=contact,
+        rec_contact=rec_contact,
+        floating=contact & (h_r > FLOAT_HEIGHT),
+        sinking=h_r < -SINK_DEPTH,
+        skating=contact & (s_r - s_o > SKATE_SPEED),
+    )
