@@ -1,5 +1,6 @@
 """The keyframe problem on top of ``sim``: the spherical chart, reconstructions, Q, selection
-methods, the exact optimum, the learning environment and DQN, evaluation and the report.
+methods, the exact optimum, the learning environment and DQN, evaluation and the report, and the
+motion codec.
 
 The flat API below is what a notebook needs, e.g.::
 
@@ -39,6 +40,10 @@ _API = {
     "validate_clip": "sidql.evaluation.report",
     "report_clips": "sidql.evaluation.report",
     "report_trial": "sidql.evaluation.report",
+    "encode_clip": "sidql.codec.encode",
+    "encode_files": "sidql.codec.encode",
+    "decode_to_reconstruction": "sidql.codec.decode",
+    "decode_file": "sidql.codec.decode",
 }
 #: names bound under another name in their module
 _RENAMED = {

@@ -1,5 +1,6 @@
 """Everything MuJoCo and motion data: Acclaim I/O, humanoid model, retargeting, velocities,
-replay checks and rendering. Never imports ``sidql``.
+replay checks and rendering, physics (ground, contacts, IK, dynamics), forward simulation and the
+batch executor. Never imports ``sidql``.
 
 The flat API below is what a notebook needs; each name is loaded from its module on first use
 (PEP 562), so ``import sim`` has no side effects and stays light, and ``import sim.motion.clip``
@@ -30,6 +31,10 @@ _API = {
     "summarise": "sim.replay.checks",
     "render_frames": "sim.replay.render",
     "write_video": "sim.replay.render",
+    "estimate_ground": "sim.physics.ground",
+    "PhysicsJob": "sim.physics.analysis",
+    "synthesize": "sim.simulate.dataset",
+    "run_batch": "sim.batch",
 }
 
 __all__ = sorted(_API)
