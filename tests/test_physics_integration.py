@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 KEYS = (
     "ground_z_m", "penetration_mm", "float_mm", "skate_mm_s", "contact_precision",
@@ -68,3 +69,33 @@ def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tm
     assert superseded and not superseded & shown
     plain = validate_clip(clips[0], ["uniform"], 5)  # no physics: the older checks stay
     assert superseded & {m.key for m in shown_metrics(plain)}
+
+
+def test_a_physics_job_sent_to_another_process_measures_the_same(cmu_dir):
+    """Pool and Ray workers get the job pickled: it is rebuilt from its constructor's arguments
+    (fresh, writable MuJoCo buffers) and gives the same figures."""
+    import pickle
+
+    from sidql.evaluation.report import physics_job, trial_ground
+    from sim.model.humanoid import subject_model
+    from sim.motion.ingest import load_clips
+
+    asf = cmu_dir / "05" / "05.asf"
+    clips = load_clips(asf, cmu_dir / "05" / "05_01.amc")
+    job = physics_job(subject_model(asf)[1], clips[0])
+    ground = trial_ground(clips)
+    a = job.analyse(clips[1], None, ground)
+    b = pickle.loads(pickle.dumps(job)).analyse(clips[1], None, ground)
+    assert a["residual_force_bw"] == b["residual_force_bw"] and a["float_mm"] == b["float_mm"]
+
+
+@pytest.mark.slow
+def test_report_on_ray_equals_the_report_in_process(cmu_dir, tmp_path):
+    from sidql.evaluation.report import report_trial
+
+    asf, amc = cmu_dir / "05" / "05.asf", cmu_dir / "05" / "05_01.amc"
+    kw = dict(W=6, methods=["uniform"], clips=(0, 1), videos=False, progress=False)
+    report_trial(asf, amc, tmp_path / "local", **kw)
+    report_trial(asf, amc, tmp_path / "ray", ray="local", workers=2, **kw)
+    a, b = (json.loads((tmp_path / d / "checks.json").read_text()) for d in ("local", "ray"))
+    assert a["clips"] == b["clips"]

@@ -85,6 +85,7 @@ class PhysicsJob:
     """
 
     def __init__(self, model, names, parents, fps: float, *, mu: float = MU, window: int = 9):
+        self._args = (model, tuple(names), np.asarray(parents), float(fps), mu, window)
         self.names = tuple(names)
         self.parents = np.asarray(parents)
         self.fps = float(fps)
@@ -103,6 +104,13 @@ class PhysicsJob:
             for n in self.names
             if n != "root"
         }
+
+    def __reduce__(self):
+        # Sent to another process (a pool or Ray worker) as its constructor's arguments: the job's
+        # MuJoCo data and scratch buffers are rebuilt there, writable (Ray hands arrays back
+        # read-only), and the cache of originals starts empty.
+        model, names, parents, fps, mu, window = self._args
+        return (_rebuild_job, (model, names, parents, fps, mu, window))
 
     def _replay(self, motion: PointMotion, reference: PointMotion, floor_z: float) -> FrameChecks:
         if self._scene is None:
@@ -272,3 +280,7 @@ def analyse(
     """One-shot :meth:`PhysicsJob.analyse` (pass ``job`` to reuse MuJoCo state across calls)."""
     job = job or PhysicsJob(model, names, parents, clip.fps)
     return job.analyse(clip, positions, ground)
+
+
+def _rebuild_job(model, names, parents, fps, mu, window) -> PhysicsJob:
+    return PhysicsJob(model, names, parents, fps, mu=mu, window=window)
