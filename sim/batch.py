@@ -45,13 +45,23 @@ class Outcome:
         return self.error is None
 
 
+ERROR_CHARS = 300  # a failure is listed in one line of a summary: longer messages are cut
+
+
+def one_line(e: BaseException) -> str:
+    """``"Type: message"`` of an exception on one line of at most :data:`ERROR_CHARS` characters
+    (a library's message can hold whole arrays)."""
+    text = " ".join(f"{type(e).__name__}: {e}".split())
+    return text if len(text) <= ERROR_CHARS else text[: ERROR_CHARS - 3] + "..."
+
+
 def _call(fn: Callable, item) -> Outcome:
     try:
         return Outcome(item, result=fn(item))
     except MotionDataError as e:
         return Outcome(item, error=str(e), bad_input=True)
     except Exception as e:  # a bug in one task must not cost the others; report it with its type
-        return Outcome(item, error=f"{type(e).__name__}: {e}")
+        return Outcome(item, error=one_line(e))
 
 
 def _watch_parent(parent_pid: int) -> None:
@@ -146,7 +156,7 @@ def _run_ray(fn, items, out, bar, workers, address) -> None:
                 try:
                     out[i] = ray.get(ref)
                 except Exception as e:  # the worker died (not an error inside fn)
-                    out[i] = Outcome(items[i], error=f"{type(e).__name__}: {e}")
+                    out[i] = Outcome(items[i], error=one_line(e))
                 bar.update()
     finally:
         if started:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from sim.batch import run_batch
+from sim.batch import ERROR_CHARS, run_batch
 from sim.errors import MotionDataError
 
 
@@ -29,3 +29,13 @@ def test_failures_cost_only_their_item_and_order_is_kept(workers):
 
 def test_empty_batch():
     assert run_batch(_work, [], workers=2, progress=False) == []
+
+
+def _noisy(x: int) -> int:
+    raise TypeError("bad arguments:\n" + "0., " * 500)
+
+
+def test_a_failure_is_listed_on_one_short_line():
+    (o,) = run_batch(_noisy, [1], workers=1, progress=False)
+    assert "\n" not in o.error and len(o.error) <= ERROR_CHARS
+    assert o.error.startswith("TypeError: bad arguments: 0., 0.,") and o.error.endswith("...")
