@@ -19,8 +19,9 @@ module edits its output through ``mujoco.MjSpec``:
   reference acceleration ``-k d r`` balances ``(1 - d) / d`` times the contact's unconstrained
   acceleration ``a0`` (``k = 1 / (d_max tc)^2``), so ``r = (1 - d) a0 (d_max tc)^2 / d^2``: for a
   body resting under its weight (``a0 = g``) 0.012 mm, but a foot pushed down by the legs has an
-  ``a0`` of hundreds of m/s^2 (light segment, body weight through it): measured, the standing
-  humanoid sinks ~0.3 mm and a walking stance foot 0.3-0.8 mm (median), landings 2-8 mm;
+  ``a0`` of hundreds of m/s^2 (light segment, body weight through it): measured, the humanoid
+  holding a pose under its weight sinks 0.4 mm on two feet, 0.7 mm on one, and a walking stance
+  foot 0.4-0.8 mm (median), landings 5-15 mm;
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
   integrator is ``implicitfast`` so the actuators' damping is integrated implicitly.
 """
