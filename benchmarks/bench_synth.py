@@ -4,7 +4,9 @@ Usage: ``python benchmarks/bench_synth.py --cmu ../shared/cmu --synth DIR [--plo
 where DIR was written by ``sidql synth``. Prints: per kind, tracking MPJPE, falls and mean
 assistance; point-speed and joint-angular-speed p50/p95/p99 of synthetic vs real clips (and their
 ratio); the lowest body point; simulated frames per second per core (ratio to real time); and the
-1 -> 2 worker speed-up of ``synthesize`` measured in this run.
+1 -> 2 worker speed-up of ``synthesize`` measured in this run. Also the floor contacts (deepest
+per clip and the steady stance figure) and the physics room's audit of every clip
+(``sim.simulate.audit``): residual force where no help was recorded vs where it was.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ from sim.model.humanoid import canonical_skeleton
 from sim.motion.clip import load_npz
 from sim.motion.dataset import find_trials
 from sim.motion.ingest import load_motion
+from sim.simulate.audit import assistance_audit
 from sim.simulate.controller import track
 from sim.simulate.dataset import synthesize
+from sim.simulate.generate import simulated_clip
 from sim.simulate.model import sim_model
 from sim.simulate.reference import on_floor, trial_qpos
 
@@ -77,10 +81,56 @@ def main() -> None:
     bone = max(float(np.ptp(np.linalg.norm(c.bone_vectors(), axis=-1), axis=0).max())
                for c in allc)  # fmt: skip
     print(f"max bone-length spread over synthetic clips: {bone:.1e} m")
-    print("deepest floor penetration per clip [mm] (MuJoCo contact distance), p50/p90/max:")
+    print(
+        "floor penetration [mm] (MuJoCo contact distance): deepest per clip p50/p90/max; "
+        "per frame in contact (30 fps) p50/p90/p99"
+    )
     for kind in dict.fromkeys(r["subject"] for r in rows):
-        pen = np.array([r["penetration_mm"] for r in rows if r["subject"] == kind])
-        print(f"  {kind}: {'/'.join(f'{x:.0f}' for x in np.percentile(pen, (50, 90, 100)))}")
+        rs = [r for r in rows if r["subject"] == kind]
+        pen = np.array([r["penetration_mm"] for r in rs])
+        per = np.concatenate([np.asarray(r.get("contact_penetration_mm", [])) for r in rs])
+        per = per[per > 0]
+        steady = "/".join(f"{x:.1f}" for x in np.percentile(per, (50, 90, 99))) if per.size else "-"
+        print(
+            f"  {kind}: deepest {'/'.join(f'{x:.0f}' for x in np.percentile(pen, (50, 90, 100)))}"
+            f"; per frame {steady}"
+        )
+
+    # the physics room's residual against the recorded help (assistance + pushes), per frame
+    print(
+        "\n| clips | n | corr (median) | residual, no help [BW] (frames) | residual / help, "
+        "helped [BW] | residual - help p95 [BW] (median) | residual lying [BW] (frames) |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    audits = {}
+    for r in rows:
+        audits[r["file"]] = assistance_audit(load_npz(Path(args.synth) / r["file"]), r)
+    groups = [(k, [r for r in rows if r["subject"] == k]) for k in dict.fromkeys(
+        r["subject"] for r in rows)]  # fmt: skip
+    groups.insert(1, ("track, MPJPE < 50 mm", [r for r in rows if r["subject"] == "track"
+                                              and r["tracking_mpjpe_mm"] < 50]))  # fmt: skip
+    for name, rs in groups:
+        if not rs:
+            continue
+        a = [audits[r["file"]] for r in rs]
+        res = np.concatenate([x["residual"] for x in a])
+        hlp = np.concatenate([x["help"] for x in a])
+        quiet = np.concatenate([x["quiet"] for x in a])
+        up = np.concatenate([~x["lying"] for x in a]) & ~quiet
+        inner = np.concatenate([np.arange(len(x["residual"])) for x in a])
+        n = np.concatenate([np.full(len(x["residual"]), len(x["residual"])) for x in a])
+        inner = (inner >= 4) & (inner < n - 4)
+        helped, lying = up & inner, np.concatenate([x["lying"] for x in a]) & inner
+        corr = (
+            np.nanmedian([x["corr"] for x in a])
+            if any(np.isfinite(x["corr"]) for x in a)
+            else np.nan
+        )
+        qtxt = f"{res[quiet].mean():.3f} ({quiet.sum()})" if quiet.any() else "- (0)"
+        htxt = f"{res[helped].mean():.3f} / {hlp[helped].mean():.3f}" if helped.any() else "-"
+        ltxt = f"{res[lying].mean():.2f} ({lying.sum()})" if lying.any() else "- (0)"
+        exc = np.median([x["excess_bw_p95"] for x in a])
+        print(f"| {name} | {len(rs)} | {corr:.2f} | {qtxt} | {htxt} | {exc:.2f} | {ltxt} |")
 
     if args.plot:
         import matplotlib
@@ -104,6 +154,31 @@ def main() -> None:
         Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(args.plot, dpi=110)
         print(f"wrote {args.plot}")
+
+    # no help at all: every trial's first 1.5 s tracked with the assistance off (frames while the
+    # root stays within 10 cm of its reference height), audited the same way
+    model = sim_model(canonical_skeleton())
+    skeleton = canonical_skeleton()
+    quiet, worst = [], []
+    for t in find_trials(args.cmu):
+        ref = on_floor(model, trial_qpos(t.asf, t.amc))[:180]
+        if len(ref) < 60:
+            continue
+        r = track(model, ref, assist_limit=0.0)
+        clip = simulated_clip(model, skeleton, r.qpos, r.qvel, 30.0, t.name)
+        a = assistance_audit(clip, {"generation": {"scale": 1.0}, "assistance": r.assistance})
+        upright = np.abs(r.qpos[:, 2] - ref[::4, 2]) < 0.1
+        res = a["residual"][a["quiet"] & upright]
+        quiet.append(res)
+        worst.append((float(res.mean()) if res.size else np.nan, t.name))
+    pooled = np.concatenate(quiet)
+    worst = sorted(w for w in worst if np.isfinite(w[0]))[-3:]
+    print(
+        f"\nno help (assistance off, first 1.5 s of {len(quiet)} trials, upright frames): "
+        f"residual {pooled.mean():.3f} BW mean, p50/p90/p99 "
+        f"{'/'.join(f'{x:.3f}' for x in np.percentile(pooled, (50, 90, 99)))} ({pooled.size} "
+        f"frames); worst trials (mean): {', '.join(f'{n} {m:.2f}' for m, n in worst)}"
+    )
 
     # the control loop alone (mj_step + controller), one core: a 4 s walk reference, best of 3
     model = sim_model(canonical_skeleton())

@@ -181,3 +181,68 @@ def test_dataset_on_ray_equals_the_process_pool(tmp_path, cmu_dir):
         xa, xb = _arrays(tmp_path / "pool" / r["file"]), _arrays(tmp_path / "ray" / r["file"])
         for k in xa:
             assert np.array_equal(xa[k], xb[k]), k
+
+
+def _walk_reference(cmu_dir, model, ticks):
+    from sim.simulate.reference import trial_qpos
+
+    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+    return on_floor(model, q)[:ticks]
+
+
+def test_floor_contact_parameters_are_the_floors_and_feet_stay_within_softness(cmu_dir):
+    from sim.simulate.model import FLOOR_SOLIMP, FLOOR_TIMECONST
+
+    model = sim_model(canonical_skeleton())
+    r = track(model, _walk_reference(cmu_dir, model, 240), assist_limit=0.5)
+    # the floor's solref is used as is, not averaged with the body geoms' (MuJoCo's mixing)
+    data = mujoco.MjData(model)
+    data.qpos[:] = r.qpos[int(np.argmax(r.contact_penetration > 0))]
+    mujoco.mj_forward(model, data)
+    assert data.ncon > 0
+    assert np.allclose(data.contact.solref[: data.ncon], [FLOOR_TIMECONST, 1.0])
+    assert np.allclose(data.contact.solimp[: data.ncon], FLOOR_SOLIMP)
+    # a walking stance foot settles within a millimetre or two; landings stay under 1 cm
+    touching = r.contact_penetration > 0
+    assert touching.mean() > 0.8
+    assert np.median(r.contact_penetration[touching]) < 2e-3
+    assert r.penetration < 0.01
+
+
+def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu_dir):
+    """The physics room (``sim.physics``) audits simulated motion: with no help recorded its
+    residual force is small; with the body walking in the air, held up by the recorded root
+    assistance, its residual is that assistance frame by frame."""
+    from sim.simulate.audit import assistance_audit, floor_ground
+    from sim.simulate.generate import simulated_clip
+
+    skeleton = canonical_skeleton()
+    model = sim_model(skeleton)
+    ref = _walk_reference(cmu_dir, model, 180)  # 1.5 s: the unassisted walk has not fallen yet
+    plain = {"generation": {"scale": 1.0, "pushes": []}}
+
+    r0 = track(model, ref, assist_limit=0.0)
+    assert not r0.fell and r0.assistance.max() == 0.0
+    walk = simulated_clip(model, skeleton, r0.qpos, r0.qvel, 30.0, "walk")
+    a0 = assistance_audit(walk, {**plain, "assistance": r0.assistance.tolist()})
+    assert a0["quiet_n"] >= 30 and a0["assisted_n"] == 0
+    # measured 0.02 BW mean; the residual of a walk the feet cannot carry is ~0.2-1 BW
+    assert a0["residual_quiet_bw"] < 0.05
+    assert np.percentile(a0["residual"][a0["quiet"]], 90) < 0.12
+
+    # the same walk 20 cm above the floor, held by up to 1.5 body weights of assistance
+    lifted = ref.copy()
+    lifted[:, 2] += 0.2
+    r1 = track(model, lifted, assist_limit=1.5)
+    air = simulated_clip(model, skeleton, r1.qpos, r1.qvel, 30.0, "air")
+    assert air.positions[:, :, 2].min() > 0.05  # nothing touches the floor
+    a1 = assistance_audit(
+        air, {**plain, "assistance": r1.assistance.tolist()}, ground=floor_ground(walk)
+    )
+    inner = slice(4, -4)  # half a filter window from the ends
+    res, help_ = a1["residual"][inner], a1["help"][inner]
+    assert help_.min() > 0.5 and np.ptp(help_) > 0.05  # the help varies with the legs' swing
+    # tolerance: both sides are smoothed by the same 9-frame filter, but the residual comes from
+    # second differences of 30 fps positions and the help from 120 Hz samples: a few % of BW
+    assert np.abs(res - help_).mean() < 0.03
+    assert np.abs(res - help_).max() < 0.1

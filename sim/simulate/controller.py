@@ -70,12 +70,16 @@ class Tracking:
 
     Attributes:
         qpos: (F, nq) and qvel: (F, nv) the simulator's state.
-        assistance: (F,) root assistance force over body weight, at the recorded ticks.
-        assist_wrench: (F, 6) the applied root wrench (free-joint generalised force).
+        assistance: (F,) root assistance force over body weight around each recorded tick: the
+            norm of the mean force over the ``record_every`` ticks centred on it.
+        assist_wrench: (F, 6) the applied root wrench (free-joint generalised force), the same
+            mean.
         fell: whether the root dropped below half its reference height (see :func:`track`).
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
         penetration: deepest contact penetration [m] seen at the control ticks (>= 0).
+        contact_penetration: (F,) deepest contact penetration [m] at the recorded ticks, 0
+            where nothing touches the floor (the steady figure: its median over contact frames).
         unstable: MuJoCo flagged a diverging acceleration (it then resets the state, so the
             recorded motion jumps: such a simulation is not a motion).
     """
@@ -89,6 +93,7 @@ class Tracking:
     mean_assistance_all: float = 0.0
     penetration: float = 0.0
     unstable: bool = False
+    contact_penetration: np.ndarray | None = None
 
 
 def reference_derivatives(model, qpos: np.ndarray, rate: float = CONTROL_HZ):
@@ -229,7 +234,9 @@ def track(
     rec_v = np.empty((F, model.nv))
     rec_a = np.empty(F)
     rec_w = np.empty((F, 6))
+    rec_p = np.zeros(F)
     all_assist = np.empty(T)
+    all_wrench = np.empty((T, 6))
     fell = False
     deepest = 0.0
     weak_now = 1.0
@@ -268,6 +275,7 @@ def track(
         data.qfrc_applied[:3] = force
         data.qfrc_applied[3:6] = torque
         all_assist[k] = np.linalg.norm(force) / weight
+        all_wrench[k, :3], all_wrench[k, 3:] = force, torque
         data.xfrc_applied[:] = 0.0
         for p, b in zip(pushes, push_ids, strict=True):
             if p.start <= t < p.start + p.duration:
@@ -276,13 +284,22 @@ def track(
             i = k // record_every
             rec_q[i] = data.qpos
             rec_v[i] = data.qvel
-            rec_a[i] = all_assist[k]
-            rec_w[i, :3], rec_w[i, 3:] = force, torque
             if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2]:
                 fell = True
         if data.ncon:
-            deepest = max(deepest, -float(data.contact.dist[: data.ncon].min()))
+            depth = max(0.0, -float(data.contact.dist[: data.ncon].min()))
+            deepest = max(deepest, depth)
+            if k % record_every == 0:
+                rec_p[k // record_every] = depth
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
+    # per recorded state, the mean wrench over the ticks centred on it (the impulse delivered
+    # around that frame over its duration): a sample of every 4th tick would alias the 120 Hz
+    # variations of the feed-forward
+    half = record_every // 2
+    for i in range(F):
+        lo, hi = max(0, i * record_every - half), min(T, i * record_every - half + record_every)
+        rec_w[i] = all_wrench[lo:hi].mean(axis=0)
+        rec_a[i] = np.linalg.norm(rec_w[i, :3]) / weight
     if weak_now != 1.0:
         model.actuator_gainprm[:, 0] = gain0
         model.actuator_biasprm[:, :3] = bias0
@@ -296,5 +313,6 @@ def track(
         ticks=T,
         mean_assistance_all=float(all_assist.mean()) if T else 0.0,
         penetration=deepest,
+        contact_penetration=rec_p,
         unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
     )

@@ -167,32 +167,14 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     )
     if result.unstable:
         raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
-    names, parents = point_names(skeleton), point_parents(skeleton)
-    body_ids = [model.body(nm).id for nm in names]
-    site_ids = [-1 if nm == "root" else model.site(f"{nm}_end").id for nm in names]
-    data = mujoco.MjData(model)
-    pos, vel, xquat, omega = point_kinematics(
-        model, data, result.qpos, result.qvel, body_ids, site_ids
+    out = simulated_clip(
+        model, skeleton, result.qpos, result.qvel, task.fps, f"synth:{task.kind}:{p['source']}"
     )
-    ref_pos = point_kinematics(
-        model, data, ref[:: int(round(CONTROL_HZ / task.fps))],
-        np.zeros((len(result.qpos), model.nv)), body_ids, site_ids,
-    )[0]  # fmt: skip
-    out = Clip(
-        names=tuple(names),
-        parents=np.asarray(parents, dtype=np.int64),
-        positions=pos,
-        velocities=vel,
-        qpos=result.qpos,
-        qvel=result.qvel,
-        rotations=local_rotations_from_world(xquat, np.asarray(parents)),
-        fps=float(task.fps),
-        source=f"synth:{task.kind}:{p['source']}",
-        start_frame=0,
-        source_fps=CONTROL_HZ,
-        joint_names=tuple(model.joint(j).name for j in range(1, model.njnt)),
-        angular_velocities=omega,
-    )
+    pos = out.positions
+    ref_pos = simulated_clip(
+        model, skeleton, ref[:: int(round(CONTROL_HZ / task.fps))],
+        np.zeros((len(result.qpos), model.nv)), task.fps, "",
+    ).positions  # fmt: skip
     record = {
         "generation": p,
         "assistance": result.assistance.tolist(),
@@ -200,8 +182,35 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
         "penetration_mm": 1000 * result.penetration,
+        "contact_penetration_mm": (1000 * result.contact_penetration).tolist(),
     }
     return out, record
+
+
+def simulated_clip(model, skeleton, qpos, qvel, fps: float, source: str) -> Clip:
+    """The clip of simulated states ``qpos`` (F, nq) and ``qvel`` (F, nv) sampled at ``fps``:
+    points and their velocities from the kinematic chain (``point_kinematics``), never
+    differences."""
+    names, parents = point_names(skeleton), point_parents(skeleton)
+    body_ids = [model.body(nm).id for nm in names]
+    site_ids = [-1 if nm == "root" else model.site(f"{nm}_end").id for nm in names]
+    data = mujoco.MjData(model)
+    pos, vel, xquat, omega = point_kinematics(model, data, qpos, qvel, body_ids, site_ids)
+    return Clip(
+        names=tuple(names),
+        parents=np.asarray(parents, dtype=np.int64),
+        positions=pos,
+        velocities=vel,
+        qpos=np.asarray(qpos),
+        qvel=np.asarray(qvel),
+        rotations=local_rotations_from_world(xquat, np.asarray(parents)),
+        fps=float(fps),
+        source=source,
+        start_frame=0,
+        source_fps=CONTROL_HZ,
+        joint_names=tuple(model.joint(j).name for j in range(1, model.njnt)),
+        angular_velocities=omega,
+    )
 
 
 def task_dict(task: SynthTask) -> dict:
