@@ -6,8 +6,10 @@ Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``)
   0.5-2x, two thirds uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
   scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
   on the thorax or the pelvis (impulse recorded);
-* ``fall``: a real trial sped up 1-2x, a push of 400-900 N for 0.2 s, and the controller weakened
-  to 5-20 % for 0.8-1.5 s from the push on (then restored: the recovery attempt);
+* ``fall``: falls and recoveries: a real trial sped up 1-2x, a push for 0.2 s and the controller
+  weakened from the push on, then restored (the recovery attempt); one severity s ~ U(0, 1) sets
+  the push (250-900 N), the weakening (to 60-5 % of its stiffness) and its length (0.3-1.5 s), so
+  mild draws stumble and recover and severe ones fall (``fell`` in the clip's record);
 * ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
 * ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` (amplitude 35-60 % of each
   joint's half range) replayed 1-2x faster, tracked in simulation.
@@ -92,15 +94,19 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["gain"] = 1.0
         d = rng.normal(size=2)
         d /= np.linalg.norm(d)
-        mag = rng.uniform(400, 900)
+        # One severity in [0, 1] sets push, weakening and its length together: mild draws stumble
+        # and recover once the controller is restored, severe ones end on the floor.
+        severity = float(rng.uniform(0.0, 1.0))
+        mag = 250.0 + 650.0 * severity
         start = float(rng.uniform(0.5, 1.5))
+        p["severity"] = severity
         p["pushes"] = [
             {"body": "thorax", "start": start, "duration": 0.2,
              "force": [float(mag * d[0]), float(mag * d[1]), 0.0]}
         ]  # fmt: skip
         p["weakenings"] = [
-            {"start": start, "duration": float(rng.uniform(0.8, 1.5)),
-             "factor": float(rng.uniform(0.05, 0.2))}
+            {"start": start, "duration": 0.3 + 1.2 * severity,
+             "factor": 0.6 - 0.55 * severity}
         ]  # fmt: skip
     elif task.kind == "follow":
         p.update(speed=1.0, scale=1.0, gain=1.0, pushes=[], weakenings=[])
