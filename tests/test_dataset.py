@@ -310,3 +310,21 @@ def test_subject_models_follow_a_same_size_rewrite_of_the_asf(tmp_path, cmu_dir)
     path.write_text(changed)
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))  # same size and mtime: only content differs
     assert subject_model(path)[0].bone("lfemur").length > first
+
+
+def test_bad_dataset_folders_are_motion_data_errors(walk_clip, tmp_path):
+    from sim.motion.dataset import load_dataset_clips
+
+    path = save_npz(walk_clip, tmp_path / "02" / "c.npz")
+    cut = tmp_path / "02" / "cut.npz"
+    cut.write_bytes(path.read_bytes()[:1000])  # a truncated copy: zipfile's BadZipFile
+    with pytest.raises(MotionDataError, match="cut.npz: not a clip file"):
+        load_npz(cut)
+    index = tmp_path / "index.json"
+    for text in ('{"trials": [{"subject": "a"}]}', '{"trials": 5}', "[1]", '{"trials": [3]}'):
+        index.write_text(text)
+        with pytest.raises(MotionDataError, match="index.json"):
+            load_dataset_clips(tmp_path)
+    index.write_text(json.dumps({"trials": [{"subject": "02", "file": "02/c.npz"}]}))
+    clips, subjects = load_dataset_clips(tmp_path)
+    assert len(clips) == walk_clip.n_frames // 60 and subjects == ["02"] * len(clips)

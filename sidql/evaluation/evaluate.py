@@ -35,6 +35,7 @@ from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angl
 from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
 from sim.batch import run_batch
+from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials, load_dataset_clips
@@ -102,9 +103,12 @@ def load_cases(
     cases: list[Case] = []
     skipped: list[dict] = []
     if (Path(data_dir) / "index.json").is_file():
-        clips, subj = load_dataset_clips(data_dir, length)
-        keep = [c for c, s in zip(clips, subj, strict=True) if subjects is None or s in subjects]
-        return [make_case(c, i) for i, c in enumerate(keep)], skipped
+        clips, subj, asfs = load_dataset_clips(data_dir, length, skeletons=True)
+        keep = [
+            (c, a) for c, s, a in zip(clips, subj, asfs, strict=True)
+            if subjects is None or s in subjects
+        ]  # fmt: skip
+        return [make_case(c, i, a) for i, (c, a) in enumerate(keep)], skipped
     trials = find_trials(data_dir)
     if subjects is not None:
         trials = [t for t in trials if t.subject in set(subjects)]
@@ -118,7 +122,8 @@ def load_cases(
             print(f"skipped {trial.amc}: {o.error}", file=sys.stderr)
             continue
         first = len(cases)  # case index = position in the whole run (seeds depend on it)
-        cases += [make_case(c, first + i, str(trial.asf)) for i, c in enumerate(o.result)]
+        asf = str(trial.asf) if skeleton == "subject" else ""  # physics fits the subject's model
+        cases += [make_case(c, first + i, asf) for i, c in enumerate(o.result)]
     return cases, skipped
 
 
@@ -182,7 +187,10 @@ def physics_setup(cases: Sequence[Case]) -> dict:
     by_trial: dict[str, list[Case]] = {}
     for c in cases:
         if not c.asf:
-            raise ValueError("physics needs each case's ASF (load the cases with load_cases)")
+            raise MotionDataError(
+                c.clip.source, None, "physics needs the clip on its subject's own skeleton (ASF); "
+                "e.g. a folder of CMU files, or 'sidql dataset --skeleton subject' output",
+            )  # fmt: skip
         by_trial.setdefault(c.clip.source, []).append(c)
     for source, group in by_trial.items():
         clip = group[0].clip

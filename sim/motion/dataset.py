@@ -202,18 +202,29 @@ def _ingest_task(args) -> dict:
     return _ingest_one(*args)
 
 
-def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60):
+def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60, *, skeletons: bool = False):
     """Every ``length``-frame clip (non-overlapping, from frame 0) of a folder written by
-    ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects)."""
+    ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects), and with
+    ``skeletons`` a third list: each clip's subject ASF when the clips are on the subject's own
+    skeleton (a ``sidql dataset --skeleton subject`` folder), else ``""``."""
 
     out_dir = Path(out_dir)
+    path = out_dir / "index.json"
     try:
-        index = json.loads((out_dir / "index.json").read_text())
+        index = json.loads(path.read_text())
     except (OSError, ValueError) as e:
-        raise MotionDataError(str(out_dir / "index.json"), None, f"not a dataset index: {e}") from e
-    clips, subjects = [], []
-    for entry in index.get("trials", []):
+        raise MotionDataError(str(path), None, f"not a dataset index: {e}") from e
+    trials = index.get("trials", []) if isinstance(index, dict) else None
+    if not isinstance(trials, list):
+        raise MotionDataError(str(path), None, "not a dataset index: no list of 'trials'")
+    own = index.get("skeleton") == "subject"
+    clips, subjects, asfs = [], [], []
+    for i, entry in enumerate(trials):
+        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
+            raise MotionDataError(str(path), None, f"trials[{i}] has no 'file' name")
         for c in load_npz(out_dir / entry["file"]).split(length):
             clips.append(c)
             subjects.append(str(entry.get("subject", "")))
-    return clips, subjects
+            asf = entry.get("asf")
+            asfs.append(str(asf) if own and isinstance(asf, str) else "")
+    return (clips, subjects, asfs) if skeletons else (clips, subjects)
