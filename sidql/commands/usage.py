@@ -34,3 +34,18 @@ def one_line_warning(message, category, filename, lineno, file=None, line=None) 
     if not issubclass(category, MotionDataWarning):
         text = f"{filename}:{lineno}: {text}"
     print(f"warning: {text}", file=sys.stderr if file is None else file)
+
+
+def positive(kind):
+    """An argparse ``type``: ``kind(text)`` that must be > 0 (else a one-line usage error)."""
+
+    def parse(text):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not v > 0:
+            raise argparse.ArgumentTypeError(f"must be positive: {text!r}")
+        return v
+
+    return parse

@@ -171,9 +171,9 @@ def ingest_directory(
     """
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     trials = find_trials(root)
     rels = [str(p) for p in output_paths(trials, root)]
+    out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     summary = DatasetSummary()
     items = [(t, str(out_dir), rel, skeleton, fps) for t, rel in zip(trials, rels, strict=True)]
     outcomes = run_batch(
