@@ -207,7 +207,24 @@ def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60, *, skeleton
     ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects), and with
     ``skeletons`` a third list: each clip's subject ASF when the clips are on the subject's own
     skeleton (a ``sidql dataset --skeleton subject`` folder), else ``""``."""
+    index, entries = _read_dataset(out_dir, length)
+    own = index.get("skeleton") == "subject"
+    clips, subjects, asfs = [], [], []
+    for c, entry in entries:
+        clips.append(c)
+        subjects.append(str(entry.get("subject", "")))
+        asf = entry.get("asf")
+        asfs.append(str(asf) if own and isinstance(asf, str) else "")
+    return (clips, subjects, asfs) if skeletons else (clips, subjects)
 
+
+def dataset_entries(out_dir: str | os.PathLike, length: int = 60) -> list[tuple]:
+    """``(clip, index entry)`` for every ``length``-frame clip of a dataset/synth folder (see
+    :func:`load_dataset_clips`)."""
+    return _read_dataset(out_dir, length)[1]
+
+
+def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
     out_dir = Path(out_dir)
     path = out_dir / "index.json"
     try:
@@ -217,14 +234,23 @@ def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60, *, skeleton
     trials = index.get("trials", []) if isinstance(index, dict) else None
     if not isinstance(trials, list):
         raise MotionDataError(str(path), None, "not a dataset index: no list of 'trials'")
-    own = index.get("skeleton") == "subject"
-    clips, subjects, asfs = [], [], []
+    out = []
     for i, entry in enumerate(trials):
         if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
             raise MotionDataError(str(path), None, f"trials[{i}] has no 'file' name")
-        for c in load_npz(out_dir / entry["file"]).split(length):
-            clips.append(c)
-            subjects.append(str(entry.get("subject", "")))
-            asf = entry.get("asf")
-            asfs.append(str(asf) if own and isinstance(asf, str) else "")
-    return (clips, subjects, asfs) if skeletons else (clips, subjects)
+        out += [(c, entry) for c in load_npz(out_dir / entry["file"]).split(length)]
+    return index, out
+
+
+def origin_subject(entry: dict) -> str | None:
+    """The CMU subject whose recorded motion an index entry was made from: the subject of its
+    ``amc`` (as :func:`find_trials` names it; a synthetic clip's source trial), else its
+    ``subject``; None for motion made from no recording (procedural)."""
+    amc = entry.get("amc")
+    if isinstance(amc, str) and amc:
+        amc = PurePosixPath(amc)
+        m = _TRIAL_RE.match(amc.name)
+        return m.group("subject") if m else amc.parent.name
+    if entry.get("task") is not None:  # synthetic without a source trial
+        return None
+    return str(entry.get("subject", "")) or None
