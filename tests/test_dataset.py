@@ -328,3 +328,27 @@ def test_bad_dataset_folders_are_motion_data_errors(walk_clip, tmp_path):
     index.write_text(json.dumps({"trials": [{"subject": "02", "file": "02/c.npz"}]}))
     clips, subjects = load_dataset_clips(tmp_path)
     assert len(clips) == walk_clip.n_frames // 60 and subjects == ["02"] * len(clips)
+
+
+def test_on_ray_the_driver_writes_the_outputs(cmu_dir, tmp_path, monkeypatch):
+    """Ray tasks may run on another machine, where OUT is another disk (sim.batch: 'the driver
+    writes the outputs'); the dataset's workers wrote their .npz where they ran. Simulated here:
+    every task sees OUT as another folder."""
+    import sim.motion.dataset as dataset
+    from sim.batch import run_batch
+
+    elsewhere = tmp_path / "node"
+
+    def on_another_node(fn, items, **kw):
+        moved = [(t, str(elsewhere), *rest) for t, _, *rest in items]
+        return run_batch(fn, moved, workers=1, progress=False)
+
+    monkeypatch.setattr(dataset, "run_batch", on_another_node)
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc"):
+        (src / name).symlink_to(cmu_dir / "02" / name)
+    s = dataset.ingest_directory(tmp_path / "cmu", tmp_path / "out", ray="local", progress=False)
+    assert [r["file"] for r in s.written] == ["02/02_01.npz"] and not s.skipped
+    assert load_npz(tmp_path / "out" / "02" / "02_01.npz").n_frames == s.written[0]["frames"]
+    assert not elsewhere.exists()

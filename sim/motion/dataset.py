@@ -130,7 +130,11 @@ def output_paths(trials: list[Trial], root: str | os.PathLike) -> list[PurePosix
     return out
 
 
-def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float) -> dict:
+def _ingest_one(
+    trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float, write: bool = True
+):
+    """The trial's index record; it writes the ``.npz`` itself (``write``) or returns
+    ``(record, clip)`` for the caller to write (a Ray worker may sit on another machine)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         clip = load_motion(trial.asf, trial.amc, skeleton=skeleton, fps=fps)
@@ -138,9 +142,10 @@ def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float)
     if Path(os.path.abspath(out)).parent.parent != Path(os.path.abspath(out_dir)):
         # output_paths makes this impossible; a second line of defence against leaving out_dir
         raise MotionDataError(str(trial.amc), None, f"unsafe output path {rel}")
-    with WRITE_LOCK:  # a worker whose parent died exits only between writes
-        save_npz(clip, out)
-    return {
+    if write:
+        with WRITE_LOCK:  # a worker whose parent died exits only between writes
+            save_npz(clip, out)
+    record = {
         "subject": trial.subject,
         "trial": trial.name,
         "asf": str(trial.asf),
@@ -150,6 +155,7 @@ def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float)
         "fps": clip.fps,
         "notes": [str(w.message) for w in caught],
     }
+    return record if write else (record, clip)
 
 
 def ingest_directory(
@@ -175,12 +181,19 @@ def ingest_directory(
     rels = [str(p) for p in output_paths(trials, root)]
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     summary = DatasetSummary()
-    items = [(t, str(out_dir), rel, skeleton, fps) for t, rel in zip(trials, rels, strict=True)]
+    here = ray is None  # Ray workers may run on other machines: their clips come back to be written
+    items = [
+        (t, str(out_dir), rel, skeleton, fps, here) for t, rel in zip(trials, rels, strict=True)
+    ]
     outcomes = run_batch(
         _ingest_task, items, workers=workers, ray=ray, desc="ingest", progress=progress
     )
     for t, o in zip(trials, outcomes, strict=True):
-        if o.ok:
+        if o.ok and not here:
+            record, clip = o.result
+            save_npz(clip, out_dir / record["file"])
+            summary.written.append(record)
+        elif o.ok:
             summary.written.append(o.result)
         else:  # bad input or a bug: either way only this trial is lost
             summary.skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
