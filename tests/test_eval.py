@@ -192,3 +192,20 @@ def test_case_indices_count_clips_across_trials_with_several_clips(cmu_dir):
     cases, _ = load_cases(cmu_dir, subjects=["05"], progress=False)
     assert len(cases) > len({c.clip.source for c in cases})
     assert [c.index for c in cases] == list(range(len(cases)))
+
+
+def test_a_dataset_folder_at_another_rate_is_refused_not_mislabelled(walk_clip, tmp_path):
+    """load_cases read a dataset folder's clips at their own rate whatever --fps said, and
+    results.json recorded the --fps value as the protocol's."""
+    from sidql.evaluation.evaluate import load_cases
+    from sim.errors import MotionDataError
+    from sim.motion.clip import save_npz
+
+    save_npz(walk_clip, tmp_path / "02" / "c.npz")
+    (tmp_path / "index.json").write_text(
+        json.dumps({"trials": [{"subject": "02", "file": "02/c.npz"}]})
+    )
+    cases, _ = load_cases(tmp_path, fps=walk_clip.fps, progress=False)
+    assert len(cases) == walk_clip.n_frames // 60
+    with pytest.raises(MotionDataError, match="index.json: clips at 30 fps, not 60"):
+        load_cases(tmp_path, fps=60.0, progress=False)

@@ -104,6 +104,12 @@ def load_cases(
     skipped: list[dict] = []
     if (Path(data_dir) / "index.json").is_file():
         clips, subj, asfs = load_dataset_clips(data_dir, length, skeletons=True)
+        rates = sorted({c.fps for c in clips} - {float(fps)})
+        if rates:  # the clips are what they are: a different rate would be mislabelled
+            raise MotionDataError(
+                str(Path(data_dir) / "index.json"), None,
+                f"clips at {', '.join(f'{r:g}' for r in rates)} fps, not {fps:g} (pass --fps)",
+            )  # fmt: skip
         keep = [
             (c, a) for c, s, a in zip(clips, subj, asfs, strict=True)
             if subjects is None or s in subjects
