@@ -126,3 +126,19 @@ def test_bad_counts_rates_and_out_paths_exit_2_and_leave_nothing(trial, tmp_path
     amc_out = out / "b" / "w.amc"
     assert cli.main(["decode", str(out / "a" / "w.sidq"), "--out", str(amc_out), "--asf", asf]) == 0
     assert amc_out.is_file()
+
+
+def test_a_rate_that_does_not_divide_120_exits_2_with_one_line(trial, tmp_path, capsys):
+    """ingest/extract --fps 7 were ValueError tracebacks; dataset/eval listed every trial as bad."""
+    asf, amc = trial
+    for argv in (
+        ["ingest", asf, amc, "--out", str(tmp_path / "x.npz"), "--fps", "7"],
+        ["extract", asf, amc, "--keyframes", "5", "--fps", "7"],
+        ["dataset", str(tmp_path), "--out", str(tmp_path / "o"), "--fps", "7"],
+        ["eval", "--data", str(tmp_path), "--out", str(tmp_path / "r.json"), "--fps", "7"],
+    ):
+        with pytest.raises(SystemExit) as e:
+            cli.main(argv)
+        assert e.value.code == 2
+        assert "must divide 120" in one_error_line(capsys, argv[0])
+    assert cli.main(["ingest", asf, amc, "--out", str(tmp_path / "y.npz"), "--fps", "40"]) == 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import positive
+from sidql.commands.usage import cmu_rate, positive
 from sim.motion.dataset import ingest_directory
 
 
@@ -22,7 +22,7 @@ def register(sub) -> None:
     p.add_argument("dir", help="folder of CMU files, e.g. ../shared/cmu")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
-    p.add_argument("--fps", type=positive(float), default=30.0)
+    p.add_argument("--fps", type=cmu_rate, default=30.0)
     p.add_argument(
         "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
     )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import UsageError, positive
+from sidql.commands.usage import UsageError, cmu_rate, positive
 from sim.simulate.dataset import synthesize
 from sim.simulate.generate import ALL_KINDS, KINDS
 
@@ -33,7 +33,7 @@ def register(sub) -> None:
         help="clip kinds (follow: unperturbed tracking, the baseline)",
     )
     p.add_argument("--seconds", type=positive(float), default=4.0, help="clip length [s]")
-    p.add_argument("--fps", type=positive(float), default=30.0, help="clip rate (divides 120)")
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
     p.add_argument(
         "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
     )

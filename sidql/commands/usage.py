@@ -49,3 +49,12 @@ def positive(kind):
         return v
 
     return parse
+
+
+def cmu_rate(text):
+    """An argparse ``type``: an output frame rate that divides CMU's 120 fps (30 takes every 4th
+    frame)."""
+    v = positive(float)(text)
+    if abs(120.0 / v - round(120.0 / v)) > 1e-9:
+        raise argparse.ArgumentTypeError(f"must divide 120 (CMU's rate): {text!r}")
+    return v
