@@ -352,3 +352,21 @@ def test_on_ray_the_driver_writes_the_outputs(cmu_dir, tmp_path, monkeypatch):
     assert [r["file"] for r in s.written] == ["02/02_01.npz"] and not s.skipped
     assert load_npz(tmp_path / "out" / "02" / "02_01.npz").n_frames == s.written[0]["frames"]
     assert not elsewhere.exists()
+
+
+def test_index_names_inputs_that_resolve_from_any_working_folder(cmu_dir, tmp_path, monkeypatch):
+    """'sidql dataset ../shared/cmu --out D' recorded ASF paths relative to the folder it ran in;
+    'sidql eval --data D --physics' from anywhere else could not read the skeletons."""
+    from sidql.evaluation.evaluate import load_cases, physics_setup
+
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc"):
+        (src / name).symlink_to(cmu_dir / "02" / name)
+    monkeypatch.chdir(tmp_path)
+    ingest_directory("cmu", "out", workers=1, progress=False)
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    cases, _ = load_cases(tmp_path / "out", progress=False)
+    assert cases and all(Path(c.asf).is_file() for c in cases)
+    assert len(physics_setup(cases)) == 1

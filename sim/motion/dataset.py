@@ -148,8 +148,8 @@ def _ingest_one(
     record = {
         "subject": trial.subject,
         "trial": trial.name,
-        "asf": str(trial.asf),
-        "amc": str(trial.amc),
+        "asf": os.path.abspath(trial.asf),  # the index is read from other working folders
+        "amc": os.path.abspath(trial.amc),
         "file": rel,
         "frames": clip.n_frames,
         "fps": clip.fps,
