@@ -64,7 +64,7 @@ def plan_tasks(
             if not order:  # every trial once per round, in a seeded order
                 order = [trials[j] for j in rng.permutation(len(trials))]
             t = order.pop()
-            asf, amc = str(t.asf), str(t.amc)
+            asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
         tasks.append(SynthTask(kind, seed, i, asf, amc, seconds, fps))
     return tasks, skipped
 
