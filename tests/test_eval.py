@@ -209,3 +209,21 @@ def test_a_dataset_folder_at_another_rate_is_refused_not_mislabelled(walk_clip, 
     assert len(cases) == walk_clip.n_frames // 60
     with pytest.raises(MotionDataError, match="index.json: clips at 30 fps, not 60"):
         load_cases(tmp_path, fps=60.0, progress=False)
+
+
+def test_a_trial_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_path):
+    """A well-formed trial whose skeleton names its bones otherwise (no 'lhumerus') made the
+    driver's make_case raise, and the whole evaluation exited 2, every good trial lost."""
+    from sidql.evaluation.evaluate import load_cases
+
+    for s, trial in (("02", "02_01"), ("07", "07_01")):
+        (tmp_path / s).mkdir()
+        for name in (f"{s}.asf", f"{trial}.amc"):
+            text = (cmu_dir / s / name).read_text()
+            (tmp_path / s / name).write_text(
+                text.replace("lhumerus", "lupperarm") if s == "02" else text
+            )
+    cases, skipped = load_cases(tmp_path, progress=False)
+    assert [c.clip.source for c in cases] == [str(tmp_path / "07" / "07_01.amc")]
+    assert cases[0].index == 0
+    assert len(skipped) == 1 and "lacks protocol point(s) lhumerus" in skipped[0]["problem"]

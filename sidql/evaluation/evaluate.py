@@ -123,13 +123,17 @@ def load_cases(
         load, trials, workers=workers, ray=ray, desc="load trials", progress=progress
     )
     for trial, o in zip(trials, outcomes, strict=True):
-        if not o.ok:
-            skipped.append({"amc": str(trial.amc), "problem": o.error})
-            print(f"skipped {trial.amc}: {o.error}", file=sys.stderr)
-            continue
-        first = len(cases)  # case index = position in the whole run (seeds depend on it)
-        asf = str(trial.asf) if skeleton == "subject" else ""  # physics fits the subject's model
-        cases += [make_case(c, first + i, asf) for i, c in enumerate(o.result)]
+        error = o.error
+        if o.ok:
+            first = len(cases)  # case index = position in the whole run (seeds depend on it)
+            asf = str(trial.asf) if skeleton == "subject" else ""  # physics: the subject's model
+            try:  # e.g. a skeleton without the protocol's bones: this trial only is bad
+                cases += [make_case(c, first + i, asf) for i, c in enumerate(o.result)]
+            except MotionDataError as e:
+                error = str(e)
+        if error is not None:
+            skipped.append({"amc": str(trial.amc), "problem": error})
+            print(f"skipped {trial.amc}: {error}", file=sys.stderr)
     return cases, skipped
 
 
