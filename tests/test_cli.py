@@ -142,3 +142,16 @@ def test_a_rate_that_does_not_divide_120_exits_2_with_one_line(trial, tmp_path, 
         assert e.value.code == 2
         assert "must divide 120" in one_error_line(capsys, argv[0])
     assert cli.main(["ingest", asf, amc, "--out", str(tmp_path / "y.npz"), "--fps", "40"]) == 0
+
+
+def test_report_on_a_skeleton_without_the_protocol_bones_exits_2(cmu_dir, tmp_path, capsys):
+    """A well-formed trial naming a bone otherwise was a KeyError traceback (restrict(POINTS))."""
+    for name in ("02.asf", "02_01.amc"):
+        text = (cmu_dir / "02" / name).read_text().replace("lhumerus", "lupperarm")
+        (tmp_path / name).write_text(text)
+    out = tmp_path / "rep"
+    argv = ["report", str(tmp_path / "02.asf"), str(tmp_path / "02_01.amc"), "--no-video"]
+    assert cli.main([*argv, "--methods", "uniform", "--out", str(out)]) == 2
+    line = one_error_line(capsys, "report")
+    assert "02_01.amc" in line and "lacks protocol point(s) lhumerus" in line
+    assert not out.exists()

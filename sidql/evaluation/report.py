@@ -40,7 +40,7 @@ from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
 from sidql.keyframes.reconstruct import Reconstruction
-from sidql.keyframes.spherical import POINTS
+from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
 from sim.errors import MotionDataError
 from sim.files import write_atomic
@@ -1022,6 +1022,7 @@ def report_trial(
     all_clips = motion.split(60)
     if not all_clips:
         raise MotionDataError(str(amc), None, "trial is shorter than one 60-frame clip")
+    protocol_indices(all_clips[0])  # a skeleton without the protocol's bones: one clean error
     bad = [c for c in clips if not 0 <= c < len(all_clips)]
     if bad:
         raise ValueError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")
