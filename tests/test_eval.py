@@ -227,3 +227,22 @@ def test_a_trial_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_pa
     assert [c.clip.source for c in cases] == [str(tmp_path / "07" / "07_01.amc")]
     assert cases[0].index == 0
     assert len(skipped) == 1 and "lacks protocol point(s) lhumerus" in skipped[0]["problem"]
+
+
+def test_a_dataset_clip_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_path):
+    from sidql.evaluation.evaluate import load_cases
+    from sim.motion.dataset import ingest_directory
+
+    src = tmp_path / "cmu"
+    for s, trial in (("02", "02_01"), ("07", "07_01")):
+        (src / s).mkdir(parents=True)
+        for name in (f"{s}.asf", f"{trial}.amc"):
+            text = (cmu_dir / s / name).read_text()
+            (src / s / name).write_text(
+                text.replace("lhumerus", "lupperarm") if s == "02" else text
+            )
+    ingest_directory(src, tmp_path / "ds", workers=1, progress=False)
+    cases, skipped = load_cases(tmp_path / "ds", progress=False)
+    assert [c.clip.source for c in cases] == [str(src / "07" / "07_01.amc")]
+    assert cases[0].index == 0
+    assert len(skipped) == 1 and "lacks protocol point(s) lhumerus" in skipped[0]["problem"]

@@ -114,7 +114,16 @@ def load_cases(
             (c, a) for c, s, a in zip(clips, subj, asfs, strict=True)
             if subjects is None or s in subjects
         ]  # fmt: skip
-        return [make_case(c, i, a) for i, (c, a) in enumerate(keep)], skipped
+        bad: dict[str, str] = {}
+        for c, a in keep:  # a clip without the protocol's bones is skipped, its file listed once
+            try:
+                cases.append(make_case(c, len(cases), a))
+            except MotionDataError as e:
+                bad.setdefault(c.source, str(e))
+        for source, problem in bad.items():
+            skipped.append({"amc": source, "problem": problem})
+            print(f"skipped {source}: {problem}", file=sys.stderr)
+        return cases, skipped
     trials = find_trials(data_dir)
     if subjects is not None:
         trials = [t for t in trials if t.subject in set(subjects)]
