@@ -128,7 +128,11 @@ def run_batch(
             ) as pool:
                 futures = {pool.submit(_call, fn, item): i for i, item in enumerate(items)}
                 for fut in as_completed(futures):
-                    out[futures[fut]] = fut.result()
+                    i = futures[fut]
+                    try:
+                        out[i] = fut.result()
+                    except Exception as e:  # the worker died (not an error inside fn): the
+                        out[i] = Outcome(items[i], error=one_line(e))  # pool fails what is left
                     bar.update()
     bar.close()
     return out  # type: ignore[return-value]

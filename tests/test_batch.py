@@ -39,3 +39,18 @@ def test_a_failure_is_listed_on_one_short_line():
     (o,) = run_batch(_noisy, [1], workers=1, progress=False)
     assert "\n" not in o.error and len(o.error) <= ERROR_CHARS
     assert o.error.startswith("TypeError: bad arguments: 0., 0.,") and o.error.endswith("...")
+
+
+def _dies(x: int) -> int:
+    if x == 2:
+        import os
+
+        os._exit(3)  # a worker killed outright (a segfault in MuJoCo, the OOM killer)
+    return x
+
+
+def test_a_dead_pool_worker_is_a_failed_item_not_a_crash_of_the_batch():
+    out = run_batch(_dies, range(4), workers=2, progress=False)
+    assert [o.item for o in out] == list(range(4))
+    assert not out[2].ok and "BrokenProcessPool" in out[2].error
+    assert all(o.result == o.item for o in out if o.ok)

@@ -89,3 +89,69 @@ def test_a_folder_without_clips_exits_2_with_one_line(tmp_path, capsys):
         == 2
     )
     assert "no 60-frame clips" in one_error_line(capsys, "eval")
+
+
+def test_bad_counts_rates_and_out_paths_exit_2_and_leave_nothing(trial, tmp_path, capsys):
+    """--workers -1 (a ProcessPoolExecutor ValueError), synth --fps 0 (ZeroDivisionError),
+    synth --seconds 0 (every task an IndexError), an output path that is a folder (OSError) were
+    tracebacks or exit 1; input checks ran after the output folder was made."""
+    asf, amc = trial
+    out = tmp_path / "out"
+    for argv, command in (
+        (["dataset", str(tmp_path), "--out", str(out), "--workers", "-1"], "dataset"),
+        (["eval", "--data", str(tmp_path), "--workers", "0", "--out", str(out)], "eval"),
+        (["synth", "--n", "1", "--out", str(out), "--fps", "0"], "synth"),
+        (
+            ["synth", "--n", "1", "--out", str(out), "--seconds", "0", "--kinds", "procedural"],
+            "synth",
+        ),
+        (
+            ["synth", "--n", "1", "--out", str(out), "--seconds", "0.01", "--kinds", "procedural"],
+            "synth",
+        ),
+        (["synth", "--n", "1", "--out", str(out), "--from", str(tmp_path / "no")], "synth"),
+        (["dataset", str(tmp_path / "no"), "--out", str(out)], "dataset"),
+        (["encode", asf, amc, "--out", str(tmp_path), "--max-q", "0.05"], "encode"),
+    ):
+        try:
+            code = cli.main(argv)
+        except SystemExit as e:  # argparse's own errors
+            code = e.code
+        assert code == 2, argv
+        one_error_line(capsys, command)
+        assert not out.exists(), argv
+    assert (
+        cli.main(["encode", asf, amc, "--out", str(out / "a" / "w.sidq"), "--max-q", "0.05"]) == 0
+    )
+    amc_out = out / "b" / "w.amc"
+    assert cli.main(["decode", str(out / "a" / "w.sidq"), "--out", str(amc_out), "--asf", asf]) == 0
+    assert amc_out.is_file()
+
+
+def test_a_rate_that_does_not_divide_120_exits_2_with_one_line(trial, tmp_path, capsys):
+    """ingest/extract --fps 7 were ValueError tracebacks; dataset/eval listed every trial as bad."""
+    asf, amc = trial
+    for argv in (
+        ["ingest", asf, amc, "--out", str(tmp_path / "x.npz"), "--fps", "7"],
+        ["extract", asf, amc, "--keyframes", "5", "--fps", "7"],
+        ["dataset", str(tmp_path), "--out", str(tmp_path / "o"), "--fps", "7"],
+        ["eval", "--data", str(tmp_path), "--out", str(tmp_path / "r.json"), "--fps", "7"],
+    ):
+        with pytest.raises(SystemExit) as e:
+            cli.main(argv)
+        assert e.value.code == 2
+        assert "must divide 120" in one_error_line(capsys, argv[0])
+    assert cli.main(["ingest", asf, amc, "--out", str(tmp_path / "y.npz"), "--fps", "40"]) == 0
+
+
+def test_report_on_a_skeleton_without_the_protocol_bones_exits_2(cmu_dir, tmp_path, capsys):
+    """A well-formed trial naming a bone otherwise was a KeyError traceback (restrict(POINTS))."""
+    for name in ("02.asf", "02_01.amc"):
+        text = (cmu_dir / "02" / name).read_text().replace("lhumerus", "lupperarm")
+        (tmp_path / name).write_text(text)
+    out = tmp_path / "rep"
+    argv = ["report", str(tmp_path / "02.asf"), str(tmp_path / "02_01.amc"), "--no-video"]
+    assert cli.main([*argv, "--methods", "uniform", "--out", str(out)]) == 2
+    line = one_error_line(capsys, "report")
+    assert "02_01.amc" in line and "lacks protocol point(s) lhumerus" in line
+    assert not out.exists()

@@ -153,3 +153,19 @@ def test_report_takes_a_decoded_stream_like_a_method(cmu_dir, tmp_path, capsys):
                  str(stream), "--out", str(tmp_path / "bad"), "--no-video"]) == 2  # fmt: skip
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "another skeleton" in err[0]
+
+
+def test_report_refuses_a_stream_of_another_trial_of_the_subject(cmu_dir, tmp_path, capsys):
+    """The skeleton hash matches every trial of a subject: a stream of 02_02 shown as a method
+    on 02_01 compared another motion frame by frame (MPJPE ~270 mm) without a word."""
+    asf = cmu_dir / "02" / "02.asf"
+    stream = tmp_path / "other.sidq"
+    argv = ["encode", str(asf), str(cmu_dir / "02" / "02_02.amc"), "--out", str(stream)]
+    assert main([*argv, "--max-q", "0.05"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "rep"
+    argv = ["report", str(asf), str(cmu_dir / "02" / "02_01.amc"), "--methods", str(stream)]
+    assert main([*argv, "--out", str(out), "--no-video"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "other.sidq" in err[0] and "02_01.amc has 86" in err[0]
+    assert not out.exists()

@@ -310,3 +310,63 @@ def test_subject_models_follow_a_same_size_rewrite_of_the_asf(tmp_path, cmu_dir)
     path.write_text(changed)
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))  # same size and mtime: only content differs
     assert subject_model(path)[0].bone("lfemur").length > first
+
+
+def test_bad_dataset_folders_are_motion_data_errors(walk_clip, tmp_path):
+    from sim.motion.dataset import load_dataset_clips
+
+    path = save_npz(walk_clip, tmp_path / "02" / "c.npz")
+    cut = tmp_path / "02" / "cut.npz"
+    cut.write_bytes(path.read_bytes()[:1000])  # a truncated copy: zipfile's BadZipFile
+    with pytest.raises(MotionDataError, match="cut.npz: not a clip file"):
+        load_npz(cut)
+    index = tmp_path / "index.json"
+    for text in ('{"trials": [{"subject": "a"}]}', '{"trials": 5}', "[1]", '{"trials": [3]}'):
+        index.write_text(text)
+        with pytest.raises(MotionDataError, match="index.json"):
+            load_dataset_clips(tmp_path)
+    index.write_text(json.dumps({"trials": [{"subject": "02", "file": "02/c.npz"}]}))
+    clips, subjects = load_dataset_clips(tmp_path)
+    assert len(clips) == walk_clip.n_frames // 60 and subjects == ["02"] * len(clips)
+
+
+def test_on_ray_the_driver_writes_the_outputs(cmu_dir, tmp_path, monkeypatch):
+    """Ray tasks may run on another machine, where OUT is another disk (sim.batch: 'the driver
+    writes the outputs'); the dataset's workers wrote their .npz where they ran. Simulated here:
+    every task sees OUT as another folder."""
+    import sim.motion.dataset as dataset
+    from sim.batch import run_batch
+
+    elsewhere = tmp_path / "node"
+
+    def on_another_node(fn, items, **kw):
+        moved = [(t, str(elsewhere), *rest) for t, _, *rest in items]
+        return run_batch(fn, moved, workers=1, progress=False)
+
+    monkeypatch.setattr(dataset, "run_batch", on_another_node)
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc"):
+        (src / name).symlink_to(cmu_dir / "02" / name)
+    s = dataset.ingest_directory(tmp_path / "cmu", tmp_path / "out", ray="local", progress=False)
+    assert [r["file"] for r in s.written] == ["02/02_01.npz"] and not s.skipped
+    assert load_npz(tmp_path / "out" / "02" / "02_01.npz").n_frames == s.written[0]["frames"]
+    assert not elsewhere.exists()
+
+
+def test_index_names_inputs_that_resolve_from_any_working_folder(cmu_dir, tmp_path, monkeypatch):
+    """'sidql dataset ../shared/cmu --out D' recorded ASF paths relative to the folder it ran in;
+    'sidql eval --data D --physics' from anywhere else could not read the skeletons."""
+    from sidql.evaluation.evaluate import load_cases, physics_setup
+
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc"):
+        (src / name).symlink_to(cmu_dir / "02" / name)
+    monkeypatch.chdir(tmp_path)
+    ingest_directory("cmu", "out", workers=1, progress=False)
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    cases, _ = load_cases(tmp_path / "out", progress=False)
+    assert cases and all(Path(c.asf).is_file() for c in cases)
+    assert len(physics_setup(cases)) == 1

@@ -457,3 +457,36 @@ def test_import_of_the_method_registry_does_not_import_the_policy_or_torch():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
+
+
+def test_train_also_never_trains_on_clips_made_from_held_out_subjects(tmp_path, cmu_dir, capsys):
+    """The README's 'sidql synth --from ../shared/cmu' then 'train --train-also' tracked the
+    held-out subjects' trials too, and their clips joined training (subject = the kind)."""
+    import json
+
+    from sim.motion.clip import save_npz
+    from sim.motion.ingest import load_motion
+
+    data = tmp_path / "data"
+    for s, trial in (("02", "02_01"), ("07", "07_01")):
+        (data / s).mkdir(parents=True)
+        for name in (f"{s}.asf", f"{trial}.amc"):
+            (data / s / name).symlink_to(cmu_dir / s / name)
+    extra = tmp_path / "extra"
+    clip = load_motion(data / "07" / "07.asf", data / "07" / "07_01.amc").slice(0, 60)
+    entries = []
+    for i, (subject, amc, task) in enumerate((
+        ("track", str(data / "07" / "07_01.amc"), {"kind": "track"}),  # synth of held-out 07
+        ("track", str(data / "02" / "02_01.amc"), {"kind": "track"}),  # synth of training 02
+        ("procedural", None, {"kind": "procedural"}),
+        ("07", str(data / "07" / "07_01.amc"), None),  # a 'sidql dataset' trial of 07
+    )):  # fmt: skip
+        save_npz(clip, extra / f"c{i}.npz")
+        entries.append({"subject": subject, "amc": amc, "file": f"c{i}.npz", "task": task})
+    (extra / "index.json").write_text(json.dumps({"trials": entries}))
+    args = Args(data=str(data), test_subjects=("07",), cache_dir=str(tmp_path / "c"),
+                progress=False, train_also=str(extra))  # fmt: skip
+    train_tasks, _, split = make_tasks(args)
+    assert split["test"] == ["07"]
+    assert sorted(t.subject for t in train_tasks if t.subject != "02") == ["procedural", "track"]
+    assert "left out 2 of 4 clips" in capsys.readouterr().err

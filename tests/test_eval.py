@@ -192,3 +192,57 @@ def test_case_indices_count_clips_across_trials_with_several_clips(cmu_dir):
     cases, _ = load_cases(cmu_dir, subjects=["05"], progress=False)
     assert len(cases) > len({c.clip.source for c in cases})
     assert [c.index for c in cases] == list(range(len(cases)))
+
+
+def test_a_dataset_folder_at_another_rate_is_refused_not_mislabelled(walk_clip, tmp_path):
+    """load_cases read a dataset folder's clips at their own rate whatever --fps said, and
+    results.json recorded the --fps value as the protocol's."""
+    from sidql.evaluation.evaluate import load_cases
+    from sim.errors import MotionDataError
+    from sim.motion.clip import save_npz
+
+    save_npz(walk_clip, tmp_path / "02" / "c.npz")
+    (tmp_path / "index.json").write_text(
+        json.dumps({"trials": [{"subject": "02", "file": "02/c.npz"}]})
+    )
+    cases, _ = load_cases(tmp_path, fps=walk_clip.fps, progress=False)
+    assert len(cases) == walk_clip.n_frames // 60
+    with pytest.raises(MotionDataError, match="index.json: clips at 30 fps, not 60"):
+        load_cases(tmp_path, fps=60.0, progress=False)
+
+
+def test_a_trial_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_path):
+    """A well-formed trial whose skeleton names its bones otherwise (no 'lhumerus') made the
+    driver's make_case raise, and the whole evaluation exited 2, every good trial lost."""
+    from sidql.evaluation.evaluate import load_cases
+
+    for s, trial in (("02", "02_01"), ("07", "07_01")):
+        (tmp_path / s).mkdir()
+        for name in (f"{s}.asf", f"{trial}.amc"):
+            text = (cmu_dir / s / name).read_text()
+            (tmp_path / s / name).write_text(
+                text.replace("lhumerus", "lupperarm") if s == "02" else text
+            )
+    cases, skipped = load_cases(tmp_path, progress=False)
+    assert [c.clip.source for c in cases] == [str(tmp_path / "07" / "07_01.amc")]
+    assert cases[0].index == 0
+    assert len(skipped) == 1 and "lacks protocol point(s) lhumerus" in skipped[0]["problem"]
+
+
+def test_a_dataset_clip_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_path):
+    from sidql.evaluation.evaluate import load_cases
+    from sim.motion.dataset import ingest_directory
+
+    src = tmp_path / "cmu"
+    for s, trial in (("02", "02_01"), ("07", "07_01")):
+        (src / s).mkdir(parents=True)
+        for name in (f"{s}.asf", f"{trial}.amc"):
+            text = (cmu_dir / s / name).read_text()
+            (src / s / name).write_text(
+                text.replace("lhumerus", "lupperarm") if s == "02" else text
+            )
+    ingest_directory(src, tmp_path / "ds", workers=1, progress=False)
+    cases, skipped = load_cases(tmp_path / "ds", progress=False)
+    assert [c.clip.source for c in cases] == [str(src / "07" / "07_01.amc")]
+    assert cases[0].index == 0
+    assert len(skipped) == 1 and "lacks protocol point(s) lhumerus" in skipped[0]["problem"]

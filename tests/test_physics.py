@@ -390,3 +390,25 @@ def test_analysis_baseline_row_and_a_sunken_copy(walk):
     assert up["contact_precision_n"] == 0 and up["contact_recall"] == 0.0
     assert up["float_mm"] > 90
     assert up["residual_force_bw"] > base["residual_force_bw"]  # floating: nothing holds it up
+
+
+def test_cached_original_is_keyed_by_the_points_and_the_whole_ground(walk):
+    # Synthetic clips of one trial share source, start frame and length; a cache keyed on those
+    # (and the ground's z alone) gave the second clip the first one's original physics.
+    import dataclasses
+
+    clip, model, _ = walk
+    a = clip.slice(0, 30)
+    b = dataclasses.replace(a, positions=a.positions + [0.0, 0.0, 0.05])
+    idx = [a.names.index(n) for n in PROTOCOL]
+    parents = [-1 if p < 0 else PROTOCOL.index(a.names[p]) for p in a.parents[idx]]
+    ground = estimate_ground(a.positions, a.names, a.fps)
+    job = PhysicsJob(model, PROTOCOL, parents, a.fps)
+
+    def height(job, clip, g):  # mean foot height above stance level [mm]
+        return float(np.mean(job.analyse(clip, None, g)["per_frame"]["foot_height_mm"]))
+
+    ha = height(job, a, ground)
+    assert height(job, b, ground) == pytest.approx(ha + 50, abs=1e-6)
+    other = Ground(ground.z, ground.points, ground.clearance + 0.03, ground.frames)
+    assert height(job, a, other) == pytest.approx(ha - 30, abs=1e-6)

@@ -99,3 +99,40 @@ def test_report_on_ray_equals_the_report_in_process(cmu_dir, tmp_path):
     report_trial(asf, amc, tmp_path / "ray", ray="local", workers=2, **kw)
     a, b = (json.loads((tmp_path / d / "checks.json").read_text()) for d in ("local", "ray"))
     assert a["clips"] == b["clips"]
+
+
+def test_eval_physics_on_a_dataset_folder_and_clean_refusals(cmu_dir, tmp_path, capsys):
+    """A 'sidql dataset' folder of subject-skeleton trials gets the same physics as the CMU files
+    (it crashed with a ValueError); clips not on their subject's skeleton exit 2 with one line
+    (the humanoid's points were fitted with the subject's model)."""
+    import shutil
+
+    from sidql.commands.main import main
+
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for f in ("02.asf", "02_01.amc"):
+        shutil.copy(cmu_dir / "02" / f, src / f)
+    argv = ["--keyframes", "5", "--methods", "uniform", "--physics", "--quiet"]
+    assert (
+        main(["eval", "--data", str(tmp_path / "cmu"), *argv, "--out", str(tmp_path / "a.json")])
+        == 0
+    )
+    assert (
+        main(["dataset", str(tmp_path / "cmu"), "--out", str(tmp_path / "ds"), "--workers", "1"])
+        == 0
+    )
+    assert (
+        main(["eval", "--data", str(tmp_path / "ds"), *argv, "--out", str(tmp_path / "b.json")])
+        == 0
+    )
+    a, b = (json.loads((tmp_path / f).read_text())["results"] for f in ("a.json", "b.json"))
+    assert [r["method"] for r in b] == ["original", "uniform"]
+    assert b[1]["residual_force_bw"] == pytest.approx(a[1]["residual_force_bw"])
+    capsys.readouterr()
+    out = tmp_path / "c.json"
+    humanoid = ["eval", "--data", str(tmp_path / "cmu"), "--skeleton", "humanoid", *argv]
+    assert main([*humanoid, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "02_01.amc" in err[0] and "own skeleton" in err[0]
+    assert not out.exists()

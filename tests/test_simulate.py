@@ -246,3 +246,21 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     # second differences of 30 fps positions and the help from 120 Hz samples: a few % of BW
     assert np.abs(res - help_).mean() < 0.03
     assert np.abs(res - help_).max() < 0.1
+
+
+def test_tasks_name_their_trials_by_absolute_paths(cmu_dir, tmp_path, monkeypatch):
+    """Tasks travel to Ray workers, which run in other folders (or machines): a --from given
+    relative to the driver's folder named files no worker could find."""
+    import os
+
+    from sim.simulate.dataset import plan_tasks
+
+    src = tmp_path / "cmu" / "02"
+    src.mkdir(parents=True)
+    for name in ("02.asf", "02_01.amc"):
+        (src / name).symlink_to(cmu_dir / "02" / name)
+    monkeypatch.chdir(tmp_path)
+    tasks, skipped = plan_tasks("cmu", 2, kinds=("track",))
+    assert not skipped and len(tasks) == 2
+    for t in tasks:
+        assert os.path.isabs(t.asf) and os.path.isabs(t.amc) and os.path.isfile(t.amc)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from sidql.commands.usage import cmu_rate, positive
 from sim.motion.dataset import ingest_directory
 
 
@@ -21,8 +22,10 @@ def register(sub) -> None:
     p.add_argument("dir", help="folder of CMU files, e.g. ../shared/cmu")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
-    p.add_argument("--fps", type=float, default=30.0)
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")
+    p.add_argument("--fps", type=cmu_rate, default=30.0)
+    p.add_argument(
+        "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
+    )
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="run the trials as Ray tasks: a local runtime, or the cluster at ADDRESS",

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from sidql.commands.usage import UsageError
+from sidql.commands.usage import UsageError, cmu_rate, positive
 from sidql.evaluation.evaluate import evaluate, load_cases, physics_markdown, table3_markdown
 from sidql.evaluation.rate import rate_distortion, write_plot
 from sidql.keyframes.methods import get
@@ -32,8 +32,8 @@ def register(sub) -> None:
         help="methods to run (registered in sidql.keyframes.methods; e.g. dqn once trained)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the random method")
-    p.add_argument("--fps", type=float, default=30.0, help="clip frame rate (divides 120)")
-    p.add_argument("--length", type=int, default=60, help="frames per clip")
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
+    p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
     p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
     p.add_argument("--out", default="results.json", help="JSON of results and per-clip rows")
     p.add_argument(
@@ -53,7 +53,7 @@ def register(sub) -> None:
         "(sim.physics) to every row, plus a row for method 'original'",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--workers", type=int, default=1, help="processes loading trials")
+    p.add_argument("--workers", type=positive(int), default=1, help="processes loading trials")
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="load trials as Ray tasks: a local runtime, or the cluster at ADDRESS",

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from sidql.commands.usage import UsageError
+from sidql.commands.usage import UsageError, cmu_rate, positive
 from sidql.evaluation.evaluate import clip_seed, make_case, score
 from sidql.keyframes.methods import get, select
 from sim.files import write_atomic
@@ -29,8 +29,8 @@ def register(sub) -> None:
         "--method", default="optimal", help="a method registered in sidql.keyframes.methods"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of randomised methods")
-    p.add_argument("--fps", type=float, default=30.0, help="clip frame rate (divides 120)")
-    p.add_argument("--length", type=int, default=60, help="frames per clip")
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
+    p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
     p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
     p.add_argument("--out", default=None, help="write the keyframes here as JSON")
     p.set_defaults(func=run)

@@ -6,6 +6,7 @@ import argparse
 
 import numpy as np
 
+from sidql.commands.usage import cmu_rate
 from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 
@@ -26,7 +27,7 @@ def register(sub) -> None:
         default="subject",
         help="the subject's own generated model, or the shared models/cmu_humanoid.xml",
     )
-    p.add_argument("--fps", type=float, default=30.0, help="output frame rate (divides 120)")
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
     p.add_argument("--source-fps", type=float, default=120.0, help="frame rate of the AMC file")
     p.add_argument("--out", required=True, help="output .npz")
     p.set_defaults(func=run)

@@ -53,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
         except (MotionDataError, UsageError) as e:
             print(f"sidql {args.command}: error: {e}", file=sys.stderr)
             return 2
+        except OSError as e:  # an output path that cannot be written (a folder, no permission)
+            print(f"sidql {args.command}: error: {e}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":

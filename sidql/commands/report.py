@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import UsageError
+from sidql.commands.usage import UsageError, positive
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
 from sim.errors import MotionDataError
@@ -40,7 +40,7 @@ def register(sub) -> None:
         "--layout", choices=("overlay", "side"), default="overlay",
         help="reconstruction as a ghost over the original, or beside it",
     )  # fmt: skip
-    p.add_argument("--workers", type=int, default=1, help="processes validating clips")
+    p.add_argument("--workers", type=positive(int), default=1, help="processes validating clips")
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="validate the clips as Ray tasks: a local runtime, or the cluster at ADDRESS",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import UsageError
+from sidql.commands.usage import UsageError, cmu_rate, positive
 from sim.simulate.dataset import synthesize
 from sim.simulate.generate import ALL_KINDS, KINDS
 
@@ -22,7 +22,7 @@ def register(sub) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--from", dest="src", default=None, help="folder of CMU files to track")
-    p.add_argument("--n", type=int, required=True, help="number of clips")
+    p.add_argument("--n", type=positive(int), required=True, help="number of clips")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
     p.add_argument(
@@ -32,9 +32,11 @@ def register(sub) -> None:
         default=list(KINDS),
         help="clip kinds (follow: unperturbed tracking, the baseline)",
     )
-    p.add_argument("--seconds", type=float, default=4.0, help="clip length [s]")
-    p.add_argument("--fps", type=float, default=30.0, help="clip rate (divides 120)")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")
+    p.add_argument("--seconds", type=positive(float), default=4.0, help="clip length [s]")
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
+    p.add_argument(
+        "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
+    )
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="run the tasks on Ray: a local runtime, or the cluster at ADDRESS",
@@ -44,8 +46,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    if args.n < 1 or 120 % args.fps:
-        raise UsageError("--n must be >= 1 and --fps must divide 120")
+    if 120 % args.fps or args.seconds * args.fps < 2:
+        raise UsageError("--fps must divide 120 and a clip (--seconds x --fps) hold 2 frames")
     s = synthesize(
         args.src, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
         seconds=args.seconds, fps=args.fps, workers=args.workers, ray=args.ray,

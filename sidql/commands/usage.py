@@ -34,3 +34,27 @@ def one_line_warning(message, category, filename, lineno, file=None, line=None) 
     if not issubclass(category, MotionDataWarning):
         text = f"{filename}:{lineno}: {text}"
     print(f"warning: {text}", file=sys.stderr if file is None else file)
+
+
+def positive(kind):
+    """An argparse ``type``: ``kind(text)`` that must be > 0 (else a one-line usage error)."""
+
+    def parse(text):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not v > 0:
+            raise argparse.ArgumentTypeError(f"must be positive: {text!r}")
+        return v
+
+    return parse
+
+
+def cmu_rate(text):
+    """An argparse ``type``: an output frame rate that divides CMU's 120 fps (30 takes every 4th
+    frame)."""
+    v = positive(float)(text)
+    if abs(120.0 / v - round(120.0 / v)) > 1e-9:
+        raise argparse.ArgumentTypeError(f"must divide 120 (CMU's rate): {text!r}")
+    return v

@@ -35,6 +35,7 @@ from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angl
 from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
 from sim.batch import run_batch
+from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials, load_dataset_clips
@@ -102,9 +103,27 @@ def load_cases(
     cases: list[Case] = []
     skipped: list[dict] = []
     if (Path(data_dir) / "index.json").is_file():
-        clips, subj = load_dataset_clips(data_dir, length)
-        keep = [c for c, s in zip(clips, subj, strict=True) if subjects is None or s in subjects]
-        return [make_case(c, i) for i, c in enumerate(keep)], skipped
+        clips, subj, asfs = load_dataset_clips(data_dir, length, skeletons=True)
+        rates = sorted({c.fps for c in clips} - {float(fps)})
+        if rates:  # the clips are what they are: a different rate would be mislabelled
+            raise MotionDataError(
+                str(Path(data_dir) / "index.json"), None,
+                f"clips at {', '.join(f'{r:g}' for r in rates)} fps, not {fps:g} (pass --fps)",
+            )  # fmt: skip
+        keep = [
+            (c, a) for c, s, a in zip(clips, subj, asfs, strict=True)
+            if subjects is None or s in subjects
+        ]  # fmt: skip
+        bad: dict[str, str] = {}
+        for c, a in keep:  # a clip without the protocol's bones is skipped, its file listed once
+            try:
+                cases.append(make_case(c, len(cases), a))
+            except MotionDataError as e:
+                bad.setdefault(c.source, str(e))
+        for source, problem in bad.items():
+            skipped.append({"amc": source, "problem": problem})
+            print(f"skipped {source}: {problem}", file=sys.stderr)
+        return cases, skipped
     trials = find_trials(data_dir)
     if subjects is not None:
         trials = [t for t in trials if t.subject in set(subjects)]
@@ -113,12 +132,17 @@ def load_cases(
         load, trials, workers=workers, ray=ray, desc="load trials", progress=progress
     )
     for trial, o in zip(trials, outcomes, strict=True):
-        if not o.ok:
-            skipped.append({"amc": str(trial.amc), "problem": o.error})
-            print(f"skipped {trial.amc}: {o.error}", file=sys.stderr)
-            continue
-        first = len(cases)  # case index = position in the whole run (seeds depend on it)
-        cases += [make_case(c, first + i, str(trial.asf)) for i, c in enumerate(o.result)]
+        error = o.error
+        if o.ok:
+            first = len(cases)  # case index = position in the whole run (seeds depend on it)
+            asf = str(trial.asf) if skeleton == "subject" else ""  # physics: the subject's model
+            try:  # e.g. a skeleton without the protocol's bones: this trial only is bad
+                cases += [make_case(c, first + i, asf) for i, c in enumerate(o.result)]
+            except MotionDataError as e:
+                error = str(e)
+        if error is not None:
+            skipped.append({"amc": str(trial.amc), "problem": error})
+            print(f"skipped {trial.amc}: {error}", file=sys.stderr)
     return cases, skipped
 
 
@@ -182,7 +206,10 @@ def physics_setup(cases: Sequence[Case]) -> dict:
     by_trial: dict[str, list[Case]] = {}
     for c in cases:
         if not c.asf:
-            raise ValueError("physics needs each case's ASF (load the cases with load_cases)")
+            raise MotionDataError(
+                c.clip.source, None, "physics needs the clip on its subject's own skeleton (ASF); "
+                "e.g. a folder of CMU files, or 'sidql dataset --skeleton subject' output",
+            )  # fmt: skip
         by_trial.setdefault(c.clip.source, []).append(c)
     for source, group in by_trial.items():
         clip = group[0].clip

@@ -40,13 +40,13 @@ from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
 from sidql.keyframes.reconstruct import Reconstruction
-from sidql.keyframes.spherical import POINTS
+from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
 from sim.errors import MotionDataError
 from sim.files import write_atomic
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
-from sim.motion.ingest import load_clips
+from sim.motion.ingest import load_motion
 from sim.physics.analysis import PhysicsJob
 from sim.physics.contacts import foot_states
 from sim.physics.ground import Ground, estimate_ground
@@ -1009,9 +1009,20 @@ def report_trial(
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
     ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods."""
     decoded = tuple(load_stream(p, asf) for p in streams)
-    all_clips = load_clips(asf, amc)
+    motion = load_motion(asf, amc, fps=30.0)
+    for path, d in zip(streams, decoded, strict=True):
+        # the skeleton check passes any trial of the subject: the stream must span this trial
+        rec = d.motion
+        if abs(rec.fps - motion.fps) > 1e-9 or rec.n_frames != motion.n_frames:
+            raise MotionDataError(
+                str(path), None, f"stream has {rec.n_frames} frames at {rec.fps:g} fps; "
+                f"{Path(amc).name} has {motion.n_frames} at {motion.fps:g} fps (encoded from "
+                "another trial or rate?)",
+            )  # fmt: skip
+    all_clips = motion.split(60)
     if not all_clips:
         raise MotionDataError(str(amc), None, "trial is shorter than one 60-frame clip")
+    protocol_indices(all_clips[0])  # a skeleton without the protocol's bones: one clean error
     bad = [c for c in clips if not 0 <= c < len(all_clips)]
     if bad:
         raise ValueError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")

@@ -30,6 +30,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -63,7 +64,7 @@ from sidql.learning.tasks import (
 )
 from sim.errors import MotionDataError
 from sim.files import write_atomic
-from sim.motion.dataset import find_trials, load_dataset_clips
+from sim.motion.dataset import dataset_entries, find_trials, origin_subject
 
 # --- replay memory -------------------------------------------------------------------------------
 
@@ -187,9 +188,16 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
         raise MotionDataError(
             args.data, None, f"no usable 60-frame clips of the training subjects {train_s}"
         )
-    if args.train_also:  # dataset/synth clips join the training tasks only
-        clips, subjects = load_dataset_clips(args.train_also, 60)
-        train_tasks += [clip_task(c, subject=s) for c, s in zip(clips, subjects, strict=True)]
+    if args.train_also:  # dataset/synth clips join the training tasks only, and never clips made
+        # from a held-out subject's recordings (a synth folder tracks every trial it was given)
+        entries = dataset_entries(args.train_also, 60)
+        kept = [(c, e) for c, e in entries if origin_subject(e) not in set(test_s)]
+        if len(kept) < len(entries):
+            print(
+                f"--train-also: left out {len(entries) - len(kept)} of {len(entries)} clips made "
+                f"from held-out subjects' trials ({', '.join(test_s)})", file=sys.stderr,
+            )  # fmt: skip
+        train_tasks += [clip_task(c, subject=str(e.get("subject", ""))) for c, e in kept]
     return train_tasks, test_tasks, {"train": train_s, "test": test_s}
 
 

@@ -10,6 +10,7 @@ bone vector of point ``j`` is ``positions[:, j] - positions[:, parents[j]]``.
 from __future__ import annotations
 
 import os
+import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -163,5 +164,5 @@ def load_npz(path: str | os.PathLike) -> Clip:
                 angular_velocities=z["angular_velocities"] if "angular_velocities" in z else None,
                 **{k: z[k] for k in _ARRAY_KEYS},
             )
-    except (OSError, KeyError, ValueError) as e:
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as e:  # truncated: zip
         raise MotionDataError(str(path), None, f"not a clip file: {e}") from e

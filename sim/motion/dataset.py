@@ -130,7 +130,11 @@ def output_paths(trials: list[Trial], root: str | os.PathLike) -> list[PurePosix
     return out
 
 
-def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float) -> dict:
+def _ingest_one(
+    trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float, write: bool = True
+):
+    """The trial's index record; it writes the ``.npz`` itself (``write``) or returns
+    ``(record, clip)`` for the caller to write (a Ray worker may sit on another machine)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         clip = load_motion(trial.asf, trial.amc, skeleton=skeleton, fps=fps)
@@ -138,18 +142,20 @@ def _ingest_one(trial: Trial, out_dir: str, rel: str, skeleton: str, fps: float)
     if Path(os.path.abspath(out)).parent.parent != Path(os.path.abspath(out_dir)):
         # output_paths makes this impossible; a second line of defence against leaving out_dir
         raise MotionDataError(str(trial.amc), None, f"unsafe output path {rel}")
-    with WRITE_LOCK:  # a worker whose parent died exits only between writes
-        save_npz(clip, out)
-    return {
+    if write:
+        with WRITE_LOCK:  # a worker whose parent died exits only between writes
+            save_npz(clip, out)
+    record = {
         "subject": trial.subject,
         "trial": trial.name,
-        "asf": str(trial.asf),
-        "amc": str(trial.amc),
+        "asf": os.path.abspath(trial.asf),  # the index is read from other working folders
+        "amc": os.path.abspath(trial.amc),
         "file": rel,
         "frames": clip.n_frames,
         "fps": clip.fps,
         "notes": [str(w.message) for w in caught],
     }
+    return record if write else (record, clip)
 
 
 def ingest_directory(
@@ -171,16 +177,23 @@ def ingest_directory(
     """
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     trials = find_trials(root)
     rels = [str(p) for p in output_paths(trials, root)]
+    out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     summary = DatasetSummary()
-    items = [(t, str(out_dir), rel, skeleton, fps) for t, rel in zip(trials, rels, strict=True)]
+    here = ray is None  # Ray workers may run on other machines: their clips come back to be written
+    items = [
+        (t, str(out_dir), rel, skeleton, fps, here) for t, rel in zip(trials, rels, strict=True)
+    ]
     outcomes = run_batch(
         _ingest_task, items, workers=workers, ray=ray, desc="ingest", progress=progress
     )
     for t, o in zip(trials, outcomes, strict=True):
-        if o.ok:
+        if o.ok and not here:
+            record, clip = o.result
+            save_npz(clip, out_dir / record["file"])
+            summary.written.append(record)
+        elif o.ok:
             summary.written.append(o.result)
         else:  # bad input or a bug: either way only this trial is lost
             summary.skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
@@ -202,18 +215,55 @@ def _ingest_task(args) -> dict:
     return _ingest_one(*args)
 
 
-def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60):
+def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60, *, skeletons: bool = False):
     """Every ``length``-frame clip (non-overlapping, from frame 0) of a folder written by
-    ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects)."""
+    ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects), and with
+    ``skeletons`` a third list: each clip's subject ASF when the clips are on the subject's own
+    skeleton (a ``sidql dataset --skeleton subject`` folder), else ``""``."""
+    index, entries = _read_dataset(out_dir, length)
+    own = index.get("skeleton") == "subject"
+    clips, subjects, asfs = [], [], []
+    for c, entry in entries:
+        clips.append(c)
+        subjects.append(str(entry.get("subject", "")))
+        asf = entry.get("asf")
+        asfs.append(str(asf) if own and isinstance(asf, str) else "")
+    return (clips, subjects, asfs) if skeletons else (clips, subjects)
 
+
+def dataset_entries(out_dir: str | os.PathLike, length: int = 60) -> list[tuple]:
+    """``(clip, index entry)`` for every ``length``-frame clip of a dataset/synth folder (see
+    :func:`load_dataset_clips`)."""
+    return _read_dataset(out_dir, length)[1]
+
+
+def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
     out_dir = Path(out_dir)
+    path = out_dir / "index.json"
     try:
-        index = json.loads((out_dir / "index.json").read_text())
+        index = json.loads(path.read_text())
     except (OSError, ValueError) as e:
-        raise MotionDataError(str(out_dir / "index.json"), None, f"not a dataset index: {e}") from e
-    clips, subjects = [], []
-    for entry in index.get("trials", []):
-        for c in load_npz(out_dir / entry["file"]).split(length):
-            clips.append(c)
-            subjects.append(str(entry.get("subject", "")))
-    return clips, subjects
+        raise MotionDataError(str(path), None, f"not a dataset index: {e}") from e
+    trials = index.get("trials", []) if isinstance(index, dict) else None
+    if not isinstance(trials, list):
+        raise MotionDataError(str(path), None, "not a dataset index: no list of 'trials'")
+    out = []
+    for i, entry in enumerate(trials):
+        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
+            raise MotionDataError(str(path), None, f"trials[{i}] has no 'file' name")
+        out += [(c, entry) for c in load_npz(out_dir / entry["file"]).split(length)]
+    return index, out
+
+
+def origin_subject(entry: dict) -> str | None:
+    """The CMU subject whose recorded motion an index entry was made from: the subject of its
+    ``amc`` (as :func:`find_trials` names it; a synthetic clip's source trial), else its
+    ``subject``; None for motion made from no recording (procedural)."""
+    amc = entry.get("amc")
+    if isinstance(amc, str) and amc:
+        amc = PurePosixPath(amc)
+        m = _TRIAL_RE.match(amc.name)
+        return m.group("subject") if m else amc.parent.name
+    if entry.get("task") is not None:  # synthetic without a source trial
+        return None
+    return str(entry.get("subject", "")) or None

@@ -28,6 +28,7 @@ difference is the reconstruction's.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import mujoco
@@ -169,13 +170,19 @@ class PhysicsJob:
         )  # fmt: skip
 
     def original(self, clip, ground: Ground) -> MotionPhysics:
-        """The original clip's physics on this job's points (cached per clip and ground)."""
-        key = (clip.source, clip.start_frame, clip.n_frames, ground.z)
+        """The original clip's physics on this job's points (cached per clip and ground).
+
+        The cache key holds the points themselves (a digest) and the whole ground: clips can share
+        source, start and length yet differ (synthetic clips of one trial all start at frame 0)."""
+        idx = [clip.names.index(n) for n in self.names]
+        pos = np.ascontiguousarray(np.asarray(clip.positions, dtype=np.float64)[:, idx])
+        key = (
+            clip.source, clip.start_frame, pos.shape, hashlib.sha1(pos.tobytes()).hexdigest(),
+            float(ground.z), tuple(ground.points),
+            np.asarray(ground.clearance, dtype=np.float64).tobytes(),
+        )  # fmt: skip
         if key not in self._originals:
-            idx = [clip.names.index(n) for n in self.names]
-            ref = PointMotion(
-                self.names, self.parents, np.asarray(clip.positions)[:, idx], self.fps
-            )
+            ref = PointMotion(self.names, self.parents, pos, self.fps)
             if len(self._originals) >= ORIGINALS_CACHED:
                 self._originals.clear()
             q0 = _q_init(clip, self.model)

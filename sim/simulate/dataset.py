@@ -64,7 +64,7 @@ def plan_tasks(
             if not order:  # every trial once per round, in a seeded order
                 order = [trials[j] for j in rng.permutation(len(trials))]
             t = order.pop()
-            asf, amc = str(t.asf), str(t.amc)
+            asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
         tasks.append(SynthTask(kind, seed, i, asf, amc, seconds, fps))
     return tasks, skipped
 
@@ -85,8 +85,8 @@ def synthesize(
     """Generate ``n`` clips into ``out_dir`` (see the module docstring)."""
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     tasks, skipped = plan_tasks(root, n, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
+    out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     summary = DatasetSummary(skipped=skipped)
     for task, o in zip(
         tasks, run_batch(generate, tasks, workers=workers, ray=ray, desc="synth", progress=progress),
