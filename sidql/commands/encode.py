@@ -6,19 +6,7 @@ import argparse
 
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
-
-
-def _positive(kind):
-    def parse(text):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"must be positive: {text!r}")
-        return v
-
-    return parse
+from sidql.commands.usage import positive
 
 
 def register(sub) -> None:
@@ -39,10 +27,10 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="output .sidq file")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument(
-        "--rate", type=_positive(float), help="byte budget [bytes per second], whole file"
+        "--rate", type=positive(float), help="byte budget [bytes per second], whole file"
     )
     target.add_argument(
-        "--max-q", type=_positive(float), help="largest mean angle error Q (eq. 18) [rad]"
+        "--max-q", type=positive(float), help="largest mean angle error Q (eq. 18) [rad]"
     )
     p.add_argument(
         "--reconstruction",
@@ -57,7 +45,7 @@ def register(sub) -> None:
         help="look-ahead in frames for live streaming (0: offline, the whole trial)",
     )
     p.add_argument("--max-gap", type=int, default=DEFAULT_MAX_GAP, help="largest keyframe gap G")
-    p.add_argument("--fps", type=_positive(float), default=30.0, help="stream rate (divides 120)")
+    p.add_argument("--fps", type=positive(float), default=30.0, help="stream rate (divides 120)")
     p.set_defaults(func=run, parser=p)
 
 
