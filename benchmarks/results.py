@@ -1,0 +1,56 @@
+"""Results tables written by the benchmark that measures them.
+
+Every figure the docs show lives in ``docs/results/<name>.md``, written here by the benchmark that
+measured it, with the command that reproduces it and the date; the docs pages link to (or include)
+these files and never retype a figure, so no two pages can disagree.
+
+Usage inside a benchmark::
+
+    from results import write_results
+    write_results("ingest", "Ingest throughput", table_markdown, command="python benchmarks/bench_ingest.py")
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sim.files import write_atomic  # noqa: E402
+
+RESULTS_DIR = Path(__file__).resolve().parents[1] / "docs" / "results"
+
+
+def machine() -> str:
+    """One line naming the machine a figure was measured on (cores, load)."""
+    try:
+        load = os.getloadavg()[0]
+        load_text = f", load average {load:.1f} at the end"
+    except OSError:
+        load_text = ""
+    return f"{platform.machine()}, {os.cpu_count()} cores{load_text}"
+
+
+def write_results(name: str, title: str, markdown: str, command: str, notes: str = "") -> Path:
+    """Write ``docs/results/<name>.md`` atomically: a title, the command, the date, the table.
+
+    ``markdown`` is the body (tables, short prose); ``command`` is what a reader runs to regenerate
+    the file. Returns the path written.
+    """
+    RESULTS_DIR.mkdir(parents=True, exist_ok=True)
+    date = _dt.date.today().isoformat()
+    text = (
+        f"# {title}\n\n"
+        f"<!-- written by {command}; do not edit by hand -->\n"
+        f"Measured {date} on {machine()} by:\n\n```bash\n{command}\n```\n\n"
+        f"{markdown.rstrip()}\n"
+    )
+    if notes:
+        text += f"\n{notes.rstrip()}\n"
+    path = RESULTS_DIR / f"{name}.md"
+    write_atomic(path, lambda f: f.write(text.encode()))
+    return path
