@@ -67,7 +67,7 @@ import numpy as np
 from sidql.codec.quantise import BITS, Quantiser
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
-from sim.files import write_atomic
+from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1
@@ -214,6 +214,31 @@ def write(stream: Stream, path: str | os.PathLike) -> Path:
     return path
 
 
+#: Stated limit on a stream's length: frames (1 + the sum of its gaps), hence also keyframes,
+#: checked before the keyframes are unpacked (2^16 frames: 9 minutes at 120 fps), for the
+#: protocol's 23 points; a skeleton of J points may have ``MAX_FRAMES * 23 // J`` frames, so that
+#: decoding any accepted stream stays within a few hundred MB.
+MAX_FRAMES = 1 << 16
+
+
+def _frame_limit(J: int) -> int:
+    return MAX_FRAMES * len(POINTS) // max(J, len(POINTS))
+
+
+def _check_gaps(gaps: np.ndarray, fps: float, J: int, where: str) -> None:
+    """Refuse a gap list that is malformed or makes the stream longer than its limit
+    (:data:`MAX_FRAMES`, fewer for skeletons of more than 23 points)."""
+    if gaps[0] != 0 or not gaps[1:].all():
+        raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
+    frames = 1 + int(gaps.sum(dtype=np.int64))
+    limit = _frame_limit(J)
+    if frames > limit:
+        raise MotionDataError(
+            where, None, f"{frames:,} frames exceed the limit of {limit:,} "
+            f"({limit / fps:.4g} s at {fps:g} fps, {J} points)",
+        )  # fmt: skip
+
+
 class _Reader:
     def __init__(self, data: bytes, where: str):
         self.data, self.pos, self.where = data, 0, where
@@ -291,17 +316,21 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         if recon == "hermite":
             fields.append(("rate", "<i2", (D,)))
         rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
+        _check_gaps(rec["gap"], fps, J, where)
         gaps = rec["gap"].astype(np.int64)
         pose = np.array(rec["pose"])
         rate = np.array(rec["rate"]) if recon == "hermite" else None
     else:
         (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
-        if W < 2:
-            raise MotionDataError(where, None, f"bad keyframe count {W}")
+        if not 2 <= W <= _frame_limit(J):  # checked before anything of size W is allocated
+            raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {_frame_limit(J):,})")
         want = W * size
         dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE)
-        try:
-            raw = dec.decompress(body[r.pos :], max_length=want)
+        try:  # incremental, capped: the gaps first, checked, then the codes they vouch for
+            raw = dec.decompress(body[r.pos :], max_length=W)
+            if len(raw) == W:
+                _check_gaps(np.frombuffer(raw, dtype=np.uint8), fps, J, where)
+                raw += dec.decompress(b"", max_length=want - W)
         except lzma.LZMAError as e:
             raise MotionDataError(where, None, f"corrupt packed keyframes: {e}") from None
         if len(raw) != want:
@@ -310,7 +339,7 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
             )
         gaps = np.frombuffer(raw, dtype=np.uint8, count=W).astype(np.int64)
         delta = np.frombuffer(raw, dtype="<u2", count=W * D, offset=W).reshape(D, W).T
-        pose = np.mod(np.cumsum(delta.astype(np.int64), axis=0), 65536).astype(np.uint16)
+        pose = np.cumsum(delta, axis=0, dtype=np.uint16)  # wraps: modulo 2^16
         rate = None
         if recon == "hermite":
             rate = np.frombuffer(raw, dtype="<i2", count=W * D, offset=W + 2 * W * D)
@@ -337,8 +366,5 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
 
 def read(path: str | os.PathLike) -> Stream:
     """Read and parse a ``.sidq`` file; MotionDataError (naming the file) on any defect."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError as e:
-        raise MotionDataError(str(path), None, f"cannot read file: {e.strerror}") from None
+    data = read_regular(path, MAX_SIDQ_BYTES)  # regular files only, of bounded size
     return from_bytes(data, str(path))

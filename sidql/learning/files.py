@@ -19,7 +19,7 @@ import warnings
 import torch
 
 from sim.errors import MotionDataError
-from sim.files import write_atomic
+from sim.files import MAX_CHECKPOINT_BYTES, open_regular, write_atomic
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
@@ -44,12 +44,15 @@ def save_payload(path: str | os.PathLike, payload: dict) -> None:
     write_atomic(path, lambda f: f.write(buf.getvalue()))
 
 
-def load_payload(path: str | os.PathLike, expected_format: str) -> dict:
+def load_payload(
+    path: str | os.PathLike, expected_format: str, max_bytes: int = MAX_CHECKPOINT_BYTES
+) -> dict:
     """Load a file written by :func:`save_payload` with ``torch.load(weights_only=True)``.
 
     Args:
         path: the file.
         expected_format: the only accepted ``"format"`` entry, e.g. :data:`POLICY_FORMAT`.
+        max_bytes: size limit of the file (a regular file only: :func:`sim.files.open_regular`).
     Returns:
         The payload dict (tensors on the CPU).
     Raises:
@@ -60,9 +63,11 @@ def load_payload(path: str | os.PathLike, expected_format: str) -> dict:
     if not os.path.exists(path):
         raise FileNotFoundError(f"no file at {path}")
     try:
-        with warnings.catch_warnings():  # e.g. "Detected pickle protocol 4": the verdict follows
-            warnings.simplefilter("ignore")
-            payload = torch.load(path, map_location="cpu", weights_only=True)
+        with open_regular(path, max_bytes) as f, warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # e.g. "Detected pickle protocol 4": verdict follows
+            payload = torch.load(f, map_location="cpu", weights_only=True)
+    except MotionDataError:  # not a regular file, too large
+        raise
     except pickle.UnpicklingError as e:
         found = re.search(r"GLOBAL ([\w.]+)", str(e))
         if found:  # a pickled object of some class or function: exactly what must never load

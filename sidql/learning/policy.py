@@ -21,9 +21,10 @@ from torch import nn
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
 from sidql.learning.files import POLICY_FORMAT, ModelFileError, load_payload
-from sidql.learning.qnet import N_SCALARS, KeyframeQNet, masked_q
+from sidql.learning.qnet import N_SCALARS, PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import greedy_sequences, rollout_values_batch, rollout_values_seq
 from sidql.learning.tasks import clip_features
+from sim.files import MAX_POLICY_BYTES
 
 #: The policy shipped with the repository.
 DEFAULT_POLICY = Path(__file__).resolve().parents[1] / "data" / "policy.pt"
@@ -335,15 +336,59 @@ def load_policy(path: str | os.PathLike | None = None) -> Policy:
     return _load(str(path.resolve()), path.stat().st_mtime_ns)
 
 
+#: Stated limits of a policy file's network config: width, input channels, temporal layers and
+#: their dilation (the shipped policy: hidden 32, 14 features, dilations 1 2 4 8).
+MAX_HIDDEN = 1024
+MAX_FEATURES = 1024
+MAX_LAYERS = 16
+MAX_DILATION = 4096
+
+
+def check_config(cfg, state_dict) -> tuple:
+    """``(n_features, hidden, dilations, prior)`` of a policy file's ``config``, after checking
+    it against :data:`MAX_HIDDEN` etc. and every stored tensor's shape against the network it
+    declares (built on torch's ``meta`` device, which allocates no memory).
+
+    Raises:
+        ValueError: a value out of its limits or of the wrong type, or weights that do not fit.
+    """
+    if not isinstance(cfg, dict) or not isinstance(state_dict, dict):
+        raise ValueError("config and state_dict must be dicts")
+    c, h, dil, prior = (
+        cfg.get("n_features"),
+        cfg.get("hidden"),
+        cfg.get("dilations"),
+        cfg.get("prior", "greedy"),
+    )
+    for name, v, hi in (("n_features", c, MAX_FEATURES), ("hidden", h, MAX_HIDDEN)):
+        if type(v) is not int or not 1 <= v <= hi:
+            raise ValueError(f"config {name} {str(v)[:40]!r} is not an integer in [1, {hi}]")
+    if not isinstance(dil, list | tuple) or len(dil) > MAX_LAYERS:
+        raise ValueError(f"config dilations: a list of at most {MAX_LAYERS} integers expected")
+    if any(type(d) is not int or not 1 <= d <= MAX_DILATION for d in dil):
+        raise ValueError(f"config dilations: each an integer in [1, {MAX_DILATION}]")
+    if prior not in PRIORS:
+        raise ValueError(f"config prior {str(prior)[:40]!r}; expected one of {', '.join(PRIORS)}")
+    with torch.device("meta"):
+        shapes = {k: tuple(v.shape) for k, v in KeyframeQNet(c, h, dil, prior).state_dict().items()}
+    for k, shape in shapes.items():
+        v = state_dict.get(k)
+        if not isinstance(v, torch.Tensor) or tuple(v.shape) != shape:
+            found = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
+            raise ValueError(f"weight {k}: {found}, the declared network needs {shape}")
+    extra = sorted(set(state_dict) - set(shapes), key=str)
+    if extra:
+        raise ValueError(f"weights the declared network lacks: {str(extra[0])[:60]}")
+    return c, h, tuple(dil), prior
+
+
 @lru_cache(maxsize=4)
 def _load(path: str, _mtime: int) -> Policy:
-    payload = load_payload(path, POLICY_FORMAT)
+    payload = load_payload(path, POLICY_FORMAT, MAX_POLICY_BYTES)
     try:
         cfg = payload["config"]
-        net = KeyframeQNet(
-            int(cfg["n_features"]), int(cfg["hidden"]), tuple(cfg["dilations"]),
-            prior=cfg.get("prior", "greedy"),
-        )  # fmt: skip
+        args = check_config(cfg, payload["state_dict"])  # before allocating any weight
+        net = KeyframeQNet(*args[:3], prior=args[3])
         net.load_state_dict(payload["state_dict"])
         keyframes = tuple(int(w) for w in payload["keyframes"])
     except (KeyError, TypeError, ValueError, RuntimeError) as e:

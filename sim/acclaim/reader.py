@@ -24,11 +24,11 @@ import os
 import re
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from sim.errors import MotionDataError, MotionDataWarning
+from sim.files import MAX_AMC_BYTES, MAX_ASF_BYTES, read_regular
 
 INCH = 0.0254  # [m]
 ROTATION_DOFS = ("rx", "ry", "rz")
@@ -153,17 +153,14 @@ def check_bone_name(name: str) -> str | None:
     return None
 
 
-def _read_lines(path: str) -> list[str]:
+def _read_lines(path: str, max_bytes: int = MAX_AMC_BYTES) -> list[str]:
     """The file's lines, split as ``str.splitlines`` does (LF, CRLF, lone CR, and the other
     Unicode line breaks); error line numbers count the same way."""
-    return _read_text(path).splitlines()
+    return _read_text(path, max_bytes).splitlines()
 
 
-def _read_text(path: str | os.PathLike) -> str:
-    try:
-        data = Path(path).read_bytes()
-    except OSError as e:
-        raise MotionDataError(str(path), None, f"cannot read file: {e.strerror or e}") from e
+def _read_text(path: str | os.PathLike, max_bytes: int = MAX_AMC_BYTES) -> str:
+    data = read_regular(path, max_bytes)  # regular files only, of bounded size
     if not data.strip():
         raise MotionDataError(str(path), None, "empty file")
     try:
@@ -219,7 +216,7 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
         MotionDataError: missing section, duplicate or unknown bone, bad numbers, hierarchy cycle...
     """
     path = str(path)
-    lines = _read_lines(path)
+    lines = _read_lines(path, MAX_ASF_BYTES)
     sections: dict[str, int] = {}
     units = {"length": 1.0, "angle": "deg"}
     root = {"order": ROOT_CHANNELS, "axis": "XYZ", "orientation": np.zeros(3)}
