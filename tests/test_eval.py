@@ -1,7 +1,7 @@
 """Evaluation, the CLI commands and the rate/distortion sweep."""
 
 import json
-import os
+import shutil
 
 import numpy as np
 import pytest
@@ -104,11 +104,11 @@ def test_rate_distortion_optima_beat_uniform_and_bytes_add_up(tmp_path):
 
 @pytest.fixture
 def tiny_data(cmu_dir, tmp_path):
-    """One real trial (symlinked, never copied) and one broken AMC beside it."""
+    """One real trial (copied: links leaving the folder are skipped) and one broken AMC beside it."""
     good = tmp_path / "data" / "02"
     good.mkdir(parents=True)
-    os.symlink(cmu_dir / "02" / "02.asf", good / "02.asf")
-    os.symlink(cmu_dir / "02" / "02_02.amc", good / "02_02.amc")
+    shutil.copy(cmu_dir / "02" / "02.asf", good / "02.asf")
+    shutil.copy(cmu_dir / "02" / "02_02.amc", good / "02_02.amc")
     (good / "02_99.amc").write_text(":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 nonsense\n")
     return tmp_path / "data"
 

@@ -124,7 +124,11 @@ def load_cases(
             skipped.append({"amc": source, "problem": problem})
             print(f"skipped {source}: {problem}", file=sys.stderr)
         return cases, skipped
-    trials = find_trials(data_dir)
+    outside: list[dict] = []  # symbolic links leaving data_dir: listed, never read
+    trials = find_trials(data_dir, outside)
+    for o in outside:
+        skipped.append({"amc": o["amc"], "problem": o["error"]})
+        print(f"skipped {o['amc']}: {o['error']}", file=sys.stderr)
     if subjects is not None:
         trials = [t for t in trials if t.subject in set(subjects)]
     load = partial(_trial_clips, fps=fps, length=length, skeleton=skeleton, load=load_clips)

@@ -166,7 +166,7 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
         tasks = synthetic_tasks(args.synthetic_tasks, seed=args.seed)
         n_test = max(1, len(tasks) // 4)
         return tasks[n_test:], tasks[:n_test], {"train": "synthetic", "test": "synthetic"}
-    found = sorted({t.subject for t in find_trials(args.data)})
+    found = sorted({t.subject for t in find_trials(args.data, [])})  # names only
     missing = sorted(set(args.test_subjects or ()) - set(found))
     if missing:
         raise MotionDataError(

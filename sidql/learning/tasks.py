@@ -301,8 +301,14 @@ def load_tasks(
     ids) keeps only those. ``cache_dir`` as in :func:`trial_tasks` (default: a per-user cache, so a
     repeated load reads one ``.npz`` per trial instead of the motion files).
     """
-    trials = [t for t in find_trials(data_dir) if subjects is None or t.subject in subjects]
+    outside: list[dict] = []  # symbolic links leaving data_dir: listed, never read
+    trials = [
+        t for t in find_trials(data_dir, outside) if subjects is None or t.subject in subjects
+    ]
     out = TaskSet()
+    for o in outside:
+        out.skipped.append((o["amc"], o["error"]))
+        print(f"skipping {o['amc']}: {o['error']}", file=sys.stderr)
     for trial in tqdm(trials, desc=f"clips (stride {stride})", disable=not progress, leave=False):
         try:
             out.append(

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 from sim.batch import WRITE_LOCK, run_batch
-from sim.errors import MotionDataError
-from sim.files import write_atomic
+from sim.errors import MotionDataError, MotionDataWarning
+from sim.files import MAX_ASF_BYTES, MAX_INDEX_BYTES, inside, read_regular, write_atomic
 from sim.motion.clip import load_npz, save_npz
 from sim.motion.ingest import load_motion
 
@@ -52,12 +52,16 @@ class DatasetSummary:
         return not self.skipped
 
 
-def find_trials(root: str | os.PathLike) -> list[Trial]:
+def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Trial]:
     """All trials under ``root``, sorted by subject then trial.
 
     An AMC ``SS_TT.amc`` pairs with ``SS.asf`` in its own folder (or, failing that, the only ASF
     there). AMCs with no skeleton are returned with ``asf`` pointing at the expected path, so the
     ingest reports them as bad input instead of dropping them.
+
+    Nothing outside ``root`` is read: a trial whose AMC or ASF is a symbolic link (or lies under
+    one) resolving outside ``root`` is left out and listed, as ``{"amc", "asf", "error"}``, in
+    ``skipped`` (or, when no list is given, reported as a :class:`MotionDataWarning`).
     """
     root = Path(root)
     if not root.is_dir():
@@ -72,6 +76,14 @@ def find_trials(root: str | os.PathLike) -> list[Trial]:
             asf = next(iter(asfs.values()))
         if asf is None:
             asf = amc.parent / f"{subject}.asf"
+        leaving = [p for p in (amc, asf) if p.exists() and not inside(p, root)]
+        if leaving:
+            problem = f"{leaving[0]}: a symbolic link to a file outside {root}; skipped"
+            if skipped is None:
+                warnings.warn(problem, MotionDataWarning, stacklevel=2)
+            else:
+                skipped.append({"amc": str(amc), "asf": str(asf), "error": problem})
+            continue
         trials.append(Trial(subject=subject, name=amc.stem, asf=asf, amc=amc))
     return sorted(trials, key=lambda t: (t.subject, t.name))
 
@@ -148,8 +160,8 @@ def _ingest_one(
     record = {
         "subject": trial.subject,
         "trial": trial.name,
-        "asf": os.path.abspath(trial.asf),  # the index is read from other working folders
-        "amc": os.path.abspath(trial.amc),
+        "asf": str(trial.asf),  # made relative by ingest_directory (_relative)
+        "amc": str(trial.amc),
         "file": rel,
         "frames": clip.n_frames,
         "fps": clip.fps,
@@ -177,10 +189,11 @@ def ingest_directory(
     """
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    trials = find_trials(root)
+    outside: list[dict] = []  # symbolic links leaving root: listed, never read
+    trials = find_trials(root, outside)
     rels = [str(p) for p in output_paths(trials, root)]
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
-    summary = DatasetSummary()
+    summary = DatasetSummary(skipped=outside)
     here = ray is None  # Ray workers may run on other machines: their clips come back to be written
     items = [
         (t, str(out_dir), rel, skeleton, fps, here) for t, rel in zip(trials, rels, strict=True)
@@ -188,13 +201,14 @@ def ingest_directory(
     outcomes = run_batch(
         _ingest_task, items, workers=workers, ray=ray, desc="ingest", progress=progress
     )
+    skeletons: dict[str, str] = {}  # ASF path -> its copy in out_dir
     for t, o in zip(trials, outcomes, strict=True):
         if o.ok and not here:
             record, clip = o.result
             save_npz(clip, out_dir / record["file"])
-            summary.written.append(record)
+            summary.written.append(_relative(record, t, root, out_dir, skeletons))
         elif o.ok:
-            summary.written.append(o.result)
+            summary.written.append(_relative(o.result, t, root, out_dir, skeletons))
         else:  # bad input or a bug: either way only this trial is lost
             summary.skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
     summary.written.sort(key=lambda r: (r["subject"], r["trial"]))
@@ -211,6 +225,26 @@ def ingest_directory(
     return summary
 
 
+def _relative(record: dict, trial: Trial, root, out_dir: Path, skeletons: dict) -> dict:
+    """``record`` with paths an index may hold: ``amc`` relative to the input ``root`` (recorded
+    once as the index's ``source``; information only, never read back) and ``asf`` a copy of the
+    subject's skeleton inside ``out_dir`` (``<subject>/skeleton-<8 hex of its bytes>.asf``), so
+    a dataset folder is self-contained and its readers never leave it."""
+    key = os.path.realpath(trial.asf)
+    if key not in skeletons:
+        data = read_regular(trial.asf, MAX_ASF_BYTES)  # parsed by the worker: a small regular file
+        rel = PurePosixPath(record["file"]).parent / (
+            f"skeleton-{hashlib.sha1(data).hexdigest()[:8]}.asf"
+        )
+        write_atomic(out_dir / rel, lambda f: f.write(data))
+        skeletons[key] = str(rel)
+    try:
+        amc = Path(trial.amc).relative_to(root).as_posix()
+    except ValueError:  # unreachable: find_trials only finds files under root
+        amc = Path(trial.amc).name
+    return {**record, "asf": skeletons[key], "amc": amc}
+
+
 def _ingest_task(args) -> dict:
     return _ingest_one(*args)
 
@@ -223,11 +257,14 @@ def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60, *, skeleton
     index, entries = _read_dataset(out_dir, length)
     own = index.get("skeleton") == "subject"
     clips, subjects, asfs = [], [], []
-    for c, entry in entries:
+    out_dir = Path(out_dir)
+    for i, (c, entry) in enumerate(entries):
         clips.append(c)
         subjects.append(str(entry.get("subject", "")))
         asf = entry.get("asf")
-        asfs.append(str(asf) if own and isinstance(asf, str) else "")
+        if own and isinstance(asf, str):  # a copy inside the folder (ingest_directory)
+            asf = str(confined(out_dir, asf, f"clip {i} asf", out_dir / "index.json"))
+        asfs.append(asf if own and isinstance(asf, str) else "")
     return (clips, subjects, asfs) if skeletons else (clips, subjects)
 
 
@@ -240,10 +277,12 @@ def dataset_entries(out_dir: str | os.PathLike, length: int = 60) -> list[tuple]
 def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
     out_dir = Path(out_dir)
     path = out_dir / "index.json"
+    data = read_regular(path, MAX_INDEX_BYTES)  # a regular file of bounded size
     try:
-        index = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise MotionDataError(str(path), None, f"not a dataset index: {e}") from e
+        index = json.loads(data)
+    except (ValueError, RecursionError) as e:  # RecursionError: nested too deeply
+        problem = str(e)[:120] if isinstance(e, ValueError) else "nested too deeply"
+        raise MotionDataError(str(path), None, f"not a dataset index: {problem}") from None
     trials = index.get("trials", []) if isinstance(index, dict) else None
     if not isinstance(trials, list):
         raise MotionDataError(str(path), None, "not a dataset index: no list of 'trials'")
@@ -251,8 +290,28 @@ def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
     for i, entry in enumerate(trials):
         if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
             raise MotionDataError(str(path), None, f"trials[{i}] has no 'file' name")
-        out += [(c, entry) for c in load_npz(out_dir / entry["file"]).split(length)]
+        file = confined(out_dir, entry["file"], f"trials[{i}].file", path)
+        out += [(c, entry) for c in load_npz(file).split(length)]
     return index, out
+
+
+def confined(folder: Path, name: str, what: str, index: Path) -> Path:
+    """``folder / name`` for an index entry ``name`` that is a relative path staying inside
+    ``folder`` once every symbolic link is resolved.
+
+    Raises:
+        MotionDataError: an absolute name, or one leaving ``folder`` (``..``, a link); the
+            message quotes at most a short printable excerpt of the name.
+    """
+    path = folder / name
+    if not name or PurePosixPath(name).is_absolute() or Path(name).is_absolute():
+        problem = "is absolute"
+    elif not inside(path, folder):
+        problem = "leaves the dataset folder"
+    else:
+        return path
+    shown = "".join(ch if ch.isprintable() else "?" for ch in name[:60])
+    raise MotionDataError(str(index), None, f"{what} {shown!r} {problem}; refused")
 
 
 def origin_subject(entry: dict) -> str | None:

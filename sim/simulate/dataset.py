@@ -46,7 +46,7 @@ def plan_tasks(
     if any(k != "procedural" for k in kinds):
         if root is None:
             raise MotionDataError("--from", None, "kinds track/fall need a folder of CMU files")
-        for t in find_trials(root):
+        for t in find_trials(root, skipped):  # links leaving root: listed, never read
             try:
                 parse_amc(t.amc, parse_asf(t.asf))  # malformed files are skipped up front
                 trials.append(t)
