@@ -12,15 +12,16 @@ in the files' own frame) and some capture floors are tilted or drift. The estima
    one-leg balance) is not planted;
 4. the floor ``z = z0 + sx (x - x0) + sy (y - y0)`` by iteratively reweighted least squares
    (Tukey biweight, scale from the median absolute residual) over the planted samples, planted
-   samples re-selected against each new plane; horizontal when the planted feet do not span
-   ``min_span`` in two directions;
+   samples re-selected against each new plane; tilted only along directions in which the planted
+   feet spread ``min_span`` (a straight walk fixes the slope along its path);
 5. each foot point's *clearance*: its median height above the plane over the frames its foot is
    planted and it is still (the ankle stands ~5-8 cm above the sole markers in stance).
 
-How far the planted feet sit from the plane: ``spread`` (90th percentile of the absolute
-residual), ``drift`` (range of the median residual over quarters of the take) and ``tilt`` (how far
-the plane departs from horizontal across the planted area). The floor *fits* when spread and drift
-are within ``FLAT_TOLERANCE``; where it does not, heights above it (float, penetration) are not to
+How far the planted feet sit from the plane: ``spread`` (robust standard deviation of the
+residuals), ``drift`` (range of the median residual over quarters of the take), ``tilt`` (how far
+the plane departs from horizontal across the planted area) and ``below`` (how far the soles go
+below it on average). A slope steeper than ``MAX_SLOPE`` is not believed (few footprints):
+the floor stays horizontal. The floor *fits* when spread, drift and below are within ``FLAT_TOLERANCE``; where it does not, heights above it (float, penetration) are not to
 be trusted and the report and ``eval`` flag the trial with :attr:`Ground.deviation`.
 Heights "above ground" of a point are ``z - plane(x, y) - clearance``.
 
@@ -39,6 +40,8 @@ __all__ = ["FOOT_POINTS", "SOLE_POINTS", "SOLE_RADIUS", "Ground", "estimate_grou
 
 #: [m] the floor fits when the planted feet's residual spread and drift stay within this.
 FLAT_TOLERANCE = 0.01
+#: [m/m] steepest floor fitted (about 3 degrees): a steeper fit comes from too few footprints.
+MAX_SLOPE = 0.05
 
 
 @dataclass(frozen=True)
@@ -52,10 +55,12 @@ class Ground:
         frames: planted (frame, sole point) samples the fit used.
         slope: (2,) the plane's dz/dx and dz/dy (0, 0: horizontal).
         origin: (2,) the horizontal point [m] where the plane has height ``z``.
-        spread: 90th percentile of the planted samples' |residual| to the plane [m].
+        spread: robust standard deviation (1.4826 MAD) of the planted samples' residuals [m].
         drift: range of the median planted residual over the take's quarters [m].
         tilt: largest |plane - z| over the planted samples [m]: how far a horizontal floor at
             ``z`` would be off.
+        below: mean depth of the sole points below the floor over every frame [m]: large when the
+            feet stand on a lower floor than the one found.
     """
 
     z: float
@@ -67,6 +72,7 @@ class Ground:
     spread: float = 0.0
     drift: float = 0.0
     tilt: float = 0.0
+    below: float = 0.0
 
     @property
     def floor_z(self) -> float:
@@ -75,14 +81,17 @@ class Ground:
 
     @property
     def deviation(self) -> float:
-        """How far the planted feet depart from the fitted floor [m]: max(spread, drift)."""
-        return float(max(self.spread, self.drift))
+        """How far the feet depart from the fitted floor [m]: max(spread, drift, below); NaN
+        when no foot was planted long enough to fit one."""
+        if self.frames == 0 or np.isnan(self.spread):
+            return float("nan")
+        return float(max(self.spread, self.drift, self.below))
 
     @property
     def fits(self) -> bool:
         """Whether :attr:`deviation` is within :data:`FLAT_TOLERANCE`: float and penetration
         measured against this floor are meaningful."""
-        return self.deviation <= FLAT_TOLERANCE
+        return bool(self.deviation <= FLAT_TOLERANCE)  # NaN: False
 
     def clearance_of(self, names) -> np.ndarray:
         """(len(names),) clearances [m] of the foot points ``names`` (each must be in ``points``)."""
@@ -106,14 +115,19 @@ class Ground:
     def summary(self) -> dict[str, float | bool]:
         """JSON-ready floor figures: ``floor_z_m``, ``floor_slope`` (dz/dx, dz/dy),
         ``floor_spread_mm``, ``floor_drift_mm``, ``floor_tilt_mm``, ``floor_deviation_mm``,
-        ``floor_fits``, ``floor_samples``."""
+        ``floor_fits``, ``floor_samples`` (NaN figures as None)."""
+
+        def mm(x: float):
+            return None if np.isnan(x) else 1e3 * float(x)
+
         return {
             "floor_z_m": self.floor_z,
             "floor_slope": [float(self.slope[0]), float(self.slope[1])],
-            "floor_spread_mm": 1e3 * self.spread,
-            "floor_drift_mm": 1e3 * self.drift,
-            "floor_tilt_mm": 1e3 * self.tilt,
-            "floor_deviation_mm": 1e3 * self.deviation,
+            "floor_spread_mm": mm(self.spread),
+            "floor_drift_mm": mm(self.drift),
+            "floor_tilt_mm": mm(self.tilt),
+            "floor_below_mm": mm(self.below),
+            "floor_deviation_mm": mm(self.deviation),
             "floor_fits": bool(self.fits),
             "floor_samples": int(self.frames),
         }
@@ -145,14 +159,28 @@ def _long_runs(mask: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def _fit_plane(xy, z, group, n_groups: int, tilted: bool, iters: int = 20):
+def _fit_plane(xy, z, group, n_groups: int, min_span: float, iters=20, max_slope=MAX_SLOPE):
     """Tukey-biweight IRLS fit of ``z ~ c[group] + s . (xy - origin)``: one plane, an offset per
-    foot point (the ball stands higher than the toe tip). Returns (c (G,), s (2,), origin (2,),
-    residuals)."""
+    foot point (the ball stands higher than the toe tip). The plane tilts only along horizontal
+    directions in which the samples spread at least ``min_span`` (standard deviation [m]): a
+    straight walk fixes the slope along its path, not across it; a slope steeper than
+    ``max_slope`` falls back to a horizontal plane. Returns (c (G,), s (2,),
+    origin (2,), residuals (N,))."""
     origin = np.median(xy, axis=0)
     G = n_groups
     onehot = np.eye(G)[group]
-    A = np.column_stack([onehot, xy - origin]) if tilted else onehot
+    d = xy - origin
+    if len(z) > 2:
+        var, vec = np.linalg.eigh(np.cov(d.T))
+        axes = vec[:, np.sqrt(np.clip(var, 0, None)) >= min_span]  # (2, k), k = 0, 1, 2
+    else:
+        axes = np.zeros((2, 0))
+    k = axes.shape[1]
+    A = np.column_stack([onehot, d @ axes])
+    if k and max_slope < np.inf:  # a steeper fit is noise over a few footprints: stay level
+        c, s, o, r = _fit_plane(xy, z, group, n_groups, np.inf, iters)
+        coef_t = _fit_plane(xy, z, group, n_groups, min_span, iters, np.inf)
+        return coef_t if np.abs(coef_t[1]).max() <= max_slope else (c, s, o, r)
     w = np.ones(len(z))
     coef = np.zeros(A.shape[1])
     for _ in range(iters):
@@ -164,7 +192,7 @@ def _fit_plane(xy, z, group, n_groups: int, tilted: bool, iters: int = 20):
         w = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
         if w.sum() < A.shape[1] + 1:
             break
-    s = np.array([coef[G], coef[G + 1]]) if tilted else np.zeros(2)
+    s = axes @ coef[G : G + k] if k else np.zeros(2)
     return coef[:G], s, origin, z - A @ coef
 
 
@@ -191,8 +219,8 @@ def estimate_ground(
         slow_speed: a point slower than this (3-D) [m/s] ...
         run_s: ... for at least this long [s] is still.
         band: a still sole point within this of the floor [m] is planted.
-        min_span: the planted feet must spread at least this far (standard deviation [m]) in
-            two horizontal directions for the plane to tilt.
+        min_span: the plane tilts along a horizontal direction only where the planted feet
+            spread at least this far (standard deviation [m]).
         min_frames: below this many planted samples, the floor is the low percentile of all sole
             heights, horizontal.
 
@@ -227,18 +255,17 @@ def estimate_ground(
         if planted.sum() < min_frames:
             break
         xy, z = pf[planted][:, :2], pf[planted][:, 2]
-        sd = np.sqrt(np.clip(np.linalg.eigvalsh(np.cov(xy.T)), 0, None)) if len(xy) > 2 else [0]
-        c, s, origin, r = _fit_plane(
-            xy, z, col[planted], len(feet), tilted=bool(min(sd) >= min_span)
-        )
+        c, s, origin, r = _fit_plane(xy, z, col[planted], len(feet), min_span)
         has = np.isin(np.arange(len(feet)), col[planted])
         z_floor = float(c[has & sole].min())
         clear = np.where(has, c - z_floor, 0.0)
         ground = Ground(z_floor, feet, clear, int(planted.sum()), (s[0], s[1]), tuple(origin))
-    if planted.sum() < min_frames:
-        return Ground(z0, feet, np.zeros(len(feet)), 0)
+    if planted.sum() < min_frames:  # no foot ever planted: a floor nobody can vouch for
+        return Ground(z0, feet, np.zeros(len(feet)), 0, spread=np.nan)
     resid = pf[..., 2] - ground.level(pf[..., :2])  # (T, F) above the floor, clearance not taken
-    spread = float(np.percentile(np.abs(r), 90))
+    spread = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    sole_h = (resid - ground.clearance)[:, sole]
+    below = float(np.maximum(-sole_h, 0.0).mean())
     t_of = np.broadcast_to(np.arange(T)[:, None], planted.shape)[planted]
     quarters = [r[(t_of >= q * T / 4) & (t_of < (q + 1) * T / 4)] for q in range(4)]
     medians = [float(np.median(x)) for x in quarters if len(x) >= min_frames]
@@ -253,5 +280,5 @@ def estimate_ground(
         clearance[k] = float(np.median(resid[use, k])) if use.sum() >= min_frames else 0.0
     return Ground(
         ground.z, feet, clearance, int(planted.sum()), ground.slope, ground.origin,
-        spread, drift, tilt,
+        spread, drift, tilt, below,
     )  # fmt: skip
