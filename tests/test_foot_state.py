@@ -77,4 +77,6 @@ def test_float_sink_and_skate_flags_where_built():
     others[5:10, f["lfoot"]] = False
     assert not (s.floating & others).any()
     assert s.sinking.sum() == 5 and s.skating[:, [f["ltibia"], f["lfoot"], f["rfoot"]]].sum() == 0
-    assert not s.rec_contact[31:, f["rtibia"]].any()  # a sliding ankle is not standing
+    # the ankle slides at 1 m/s while the ball of its foot stands: the rolling allowance keeps it
+    # in contact (below V_ROLL), and the skate flag above still marks it
+    assert s.rec_contact[31:, f["rtibia"]].all()

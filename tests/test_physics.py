@@ -410,5 +410,5 @@ def test_cached_original_is_keyed_by_the_points_and_the_whole_ground(walk):
 
     ha = height(job, a, ground)
     assert height(job, b, ground) == pytest.approx(ha + 50, abs=1e-6)
-    other = Ground(ground.z, ground.points, ground.clearance + 0.03, ground.frames)
+    other = dataclasses.replace(ground, clearance=ground.clearance + 0.03)
     assert height(job, a, other) == pytest.approx(ha - 30, abs=1e-6)

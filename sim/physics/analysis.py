@@ -5,7 +5,10 @@ the inverse-dynamics model and data, the capsule collision scene), made once and
 original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or the one-shot
 :func:`analyse`) returns, for the original (``positions=None``) or a reconstruction's points:
 
-* ``ground_z_m``: the trial's ground (:mod:`sim.physics.ground`);
+* ``ground_z_m`` and the floor's fit (``floor_deviation_mm``, ``floor_fits``, ... of
+  :meth:`sim.physics.ground.Ground.summary`): the trial's floor (:mod:`sim.physics.ground`);
+  where it does not fit, float and penetration are measured against a floor the feet do not
+  follow;
 * ``penetration_mm``, ``float_mm``, ``skate_mm_s``, ``contact_precision``, ``contact_recall``
   against the original's contacts (:mod:`sim.physics.contacts`), each with ``*_n`` samples;
 * ``self_pen_excess_mm``, ``lost_contacts``: self-penetration beyond the original's, pair by pair
@@ -36,6 +39,7 @@ import numpy as np
 
 from sim.physics.contacts import contact_metrics, foot_heights, label_contacts, point_speed
 from sim.physics.dynamics import MU, Dynamics, InverseDynamics
+from sim.physics.feet import SOLE_RADIUS
 from sim.physics.ground import Ground, estimate_ground, foot_points, horizontal_speed
 from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
 from sim.replay.capsules import bones_of
@@ -131,12 +135,12 @@ class PhysicsJob:
         """
         feet = tuple(f for f in foot_points(self.names) if f in ground.points)
         pf = np.asarray(positions)[:, [self.names.index(f) for f in feet]]
-        height = foot_heights(pf, ground.z, ground.clearance_of(feet))
-        contact = label_contacts(height, point_speed(pf, self.fps))
-        floor = ground.floor_z
+        height = foot_heights(pf, ground, feet)
+        contact = label_contacts(height, point_speed(pf, self.fps), points=feet)
+        floor = ground.level(pf[..., :2]) - SOLE_RADIUS  # (T, F) the plane under each point
         contacts = [
             [
-                (self._site_body[f], np.array([pf[t, k, 0], pf[t, k, 1], floor]))
+                (self._site_body[f], np.array([pf[t, k, 0], pf[t, k, 1], floor[t, k]]))
                 for k, f in enumerate(feet)
                 if contact[t, k]
             ]
@@ -178,7 +182,7 @@ class PhysicsJob:
         pos = np.ascontiguousarray(np.asarray(clip.positions, dtype=np.float64)[:, idx])
         key = (
             clip.source, clip.start_frame, pos.shape, hashlib.sha1(pos.tobytes()).hexdigest(),
-            float(ground.z), tuple(ground.points),
+            float(ground.z), tuple(ground.points), tuple(ground.slope), tuple(ground.origin),
             np.asarray(ground.clearance, dtype=np.float64).tobytes(),
         )  # fmt: skip
         if key not in self._originals:
@@ -216,7 +220,7 @@ class PhysicsJob:
                 raise ValueError(f"positions must be {orig.positions.shape}; got {p.shape}")
             ref = PointMotion(self.names, self.parents, orig.positions, self.fps)
             mp = self.motion_physics(p, ref, ground, _q_init(clip, self.model))
-        out = {"ground_z_m": ground.z, "floor_z_m": ground.floor_z}
+        out = {"ground_z_m": ground.z, **ground.summary()}
         out.update(contact_metrics(orig.contact, mp.height, mp.hspeed, mp.contact))
         out.update(self_penetration_excess(mp.checks, orig.checks))
         frames = summarise_dynamics(mp.dynamics, self._anatomical)

@@ -1,10 +1,12 @@
 """Foot contacts of the original and PhysDiff-style contact metrics of a reconstruction.
 
-Labels: a foot point (ankle ~ heel, ball, toes; :data:`sim.physics.ground.FOOT_POINTS`) is in
-contact when its height above its stance level (``z - ground_z - clearance``, see
-:mod:`sim.physics.ground`) and its speed are both low, with hysteresis so that marker noise does
-not flicker the label: it *enters* contact below ``h_on`` and ``v_on`` and *leaves* above ``h_off``
-or ``v_off``.
+Labels: a foot point (heel, ball, toes; :data:`sim.physics.feet.FOOT_POINTS`) is in contact when
+its height above its stance level on the trial's floor (:meth:`sim.physics.ground.Ground.heights`)
+is low and it is slow, with hysteresis so that marker noise does not flicker the label: it
+*enters* contact below ``h_on`` and ``v_on`` and *leaves* above ``h_off`` or ``v_off``
+(thresholds in :mod:`sim.physics.feet`). A foot rolling heel to toe moves its lifting points at
+0.5-2 m/s while they are still 1-2 cm up: while another point of the same foot is low and slow
+(the pivot), a low point counts as in contact up to ``v_roll``.
 
 Metrics of a motion against the original's contacts (Yuan et al., PhysDiff, ICCV 2023, adapted to
 per-point contacts), each a mean with its sample count:
@@ -23,11 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from sim.motion.points import PointMotion
+from sim.physics.feet import H_OFF, H_ON, V_OFF, V_ON, V_ROLL, side
 from sim.physics.ground import Ground, horizontal_speed
 from sim.replay.foot_state import FootState
-
-H_ON, H_OFF = 0.03, 0.05  # [m] enter contact below H_ON, leave above H_OFF
-V_ON, V_OFF = 0.3, 0.5  # [m/s] enter contact below V_ON, leave above V_OFF
 
 
 def point_speed(positions: np.ndarray, fps: float) -> np.ndarray:
@@ -46,34 +46,68 @@ def label_contacts(
     h_off: float = H_OFF,
     v_on: float = V_ON,
     v_off: float = V_OFF,
+    v_roll: float = V_ROLL,
+    points=None,
 ) -> np.ndarray:
     """(T, F) contact labels with hysteresis.
 
     Args:
         height: (T, F) height of each foot point above its stance level [m].
         speed: (T, F) its speed [m/s].
+        points: (F,) foot point names (:data:`sim.physics.feet.FOOT_POINTS`): points of one foot
+            roll together. None: every point on its own (no rolling allowance).
     Returns:
         bool (T, F): a point enters contact when ``height < h_on`` and ``speed < v_on``, stays in
-        contact until ``height > h_off`` or ``speed > v_off``.
+        contact until ``height > h_off`` or ``speed > v_off``; while another point of its foot
+        is low and slow (``height < h_on``, ``speed < v_on``), ``v_roll`` replaces ``v_on`` and
+        ``v_off``.
     """
     height, speed = np.asarray(height), np.asarray(speed)
     if height.shape != speed.shape or height.ndim != 2:
         raise ValueError(f"height and speed must both be (T, F); got {height.shape}, {speed.shape}")
     if not (h_on <= h_off and v_on <= v_off):
         raise ValueError("hysteresis needs h_on <= h_off and v_on <= v_off")
+    F = height.shape[1]
+    if points is None:
+        same = np.eye(F, dtype=bool)
+    else:
+        if len(points) != F:
+            raise ValueError(f"points must name the {F} columns; got {len(points)}")
+        same = np.array([[side(a) == side(b) for b in points] for a in points])
+    np.fill_diagonal(same, False)
+    pivot_now = (height < h_on) & (speed < v_on)  # (T, F)
+    rolling = (pivot_now.astype(int) @ same.T.astype(int)) > 0  # another point of the foot pivots
+    v_in = np.where(rolling, max(v_on, v_roll), v_on)
+    v_out = np.where(rolling, max(v_off, v_roll), v_off)
+    enter_all = (height < h_on) & (speed < v_in)
+    leave_all = (height > h_off) | (speed > v_out)
     out = np.zeros(height.shape, dtype=bool)
-    state = np.zeros(height.shape[1], dtype=bool)
+    state = np.zeros(F, dtype=bool)
     for t in range(height.shape[0]):
-        enter = (height[t] < h_on) & (speed[t] < v_on)
-        leave = (height[t] > h_off) | (speed[t] > v_off)
-        state = np.where(state, ~leave, enter)
+        state = np.where(state, ~leave_all[t], enter_all[t])
         out[t] = state
     return out
 
 
-def foot_heights(positions: np.ndarray, ground_z: float, clearance: np.ndarray) -> np.ndarray:
-    """(T, F) height [m] of foot points ``positions`` (T, F, 3) above their stance levels."""
-    return np.asarray(positions)[..., 2] - ground_z - np.asarray(clearance)
+def foot_heights(positions: np.ndarray, ground: Ground, names) -> np.ndarray:
+    """(T, F) height [m] of foot points ``positions`` (T, F, 3) named ``names`` above their stance
+    levels on ``ground`` (:meth:`sim.physics.ground.Ground.heights`)."""
+    return ground.heights(positions, names)
+
+
+def trial_contacts(positions: np.ndarray, names, fps: float, ground: Ground):
+    """The contact labels of a whole trial, labelled once (the hysteresis' memory runs through).
+
+    Args:
+        positions: (T, J, 3) the trial's points [m]; names: (J,); fps [1/s].
+    Returns:
+        feet (F,) the foot points of ``ground`` present, contact (T, F) bool.
+    """
+    names = tuple(names)
+    feet = tuple(n for n in ground.points if n in names)
+    pf = np.asarray(positions, dtype=np.float64)[:, [names.index(n) for n in feet]]
+    h = ground.heights(pf, feet)
+    return feet, label_contacts(h, point_speed(pf, fps), points=feet)
 
 
 def _mean(x: np.ndarray) -> tuple[float, int]:
@@ -142,12 +176,12 @@ def foot_states(
     names = [n for n in ground.points if n in original.names]
     if reconstruction is not None:
         names = [n for n in names if n in reconstruction.names]
-    clearance = ground.clearance_of(names)
 
     def measure(m: PointMotion):
         p = m.positions[:, [m.names.index(n) for n in names]]
-        h = foot_heights(p, ground.z, clearance)
-        return h, label_contacts(h, point_speed(p, m.fps)), horizontal_speed(p, m.fps)
+        h = ground.heights(p, names)
+        c = label_contacts(h, point_speed(p, m.fps), points=names)
+        return h, c, horizontal_speed(p, m.fps)
 
     _, contact, s_o = measure(original)
     if reconstruction is None:

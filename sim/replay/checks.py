@@ -24,9 +24,11 @@ import mujoco
 import numpy as np
 
 from sim.motion.points import PointMotion, finite_velocity
+from sim.physics.feet import SOLE_POINTS
 from sim.replay.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
 
-FEET = ("lfoot", "rfoot", "ltoes", "rtoes")
+#: The replay's foot capsules: the bones ending at the sole points (:mod:`sim.physics.feet`).
+FEET = SOLE_POINTS
 
 
 def from_clip(clip) -> PointMotion:
