@@ -215,9 +215,13 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     assistance, its residual is that assistance frame by frame."""
     from sim.simulate.audit import assistance_audit, floor_ground
     from sim.simulate.generate import simulated_clip
+    from sim.simulate.model import Gains
 
     skeleton = canonical_skeleton()
-    model = sim_model(skeleton)
+    # 4x human strength: at human strength the legs hanging in the air saturate their torque
+    # limits and swing at frequencies that 30 fps second differences do not resolve (measured
+    # 0.10 BW mean residual-help gap, 0.015 at 4x): this test is about the audit, not the body
+    model = sim_model(skeleton, gains=Gains(strength=4.0))
     ref = _walk_reference(cmu_dir, model, 180)  # 1.5 s: the unassisted walk has not fallen yet
     plain = {"generation": {"scale": 1.0, "pushes": []}}
 
@@ -230,10 +234,11 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     assert a0["residual_quiet_bw"] < 0.05
     assert np.percentile(a0["residual"][a0["quiet"]], 90) < 0.12
 
-    # the same walk 20 cm above the floor, held by up to 1.5 body weights of assistance
+    # the same walk 20 cm above the floor, held by up to 3 body weights of assistance (a hand
+    # that acts in flight too: the synthesis never allows it, the audit must still see it)
     lifted = ref.copy()
     lifted[:, 2] += 0.2
-    r1 = track(model, lifted, assist_limit=1.5)
+    r1 = track(model, lifted, assist_limit=3.0, assist_in_flight=True)
     air = simulated_clip(model, skeleton, r1.qpos, r1.qvel, 30.0, "air")
     assert air.positions[:, :, 2].min() > 0.05  # nothing touches the floor
     a1 = assistance_audit(
