@@ -15,7 +15,7 @@ from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import qvel_from_qpos
 from sim.simulate.controller import track
 from sim.simulate.dataset import synthesize
-from sim.simulate.generate import SynthTask, generate
+from sim.simulate.generate import LABELS, PHYSICAL_BUDGET, SynthTask, generate
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model
 from sim.simulate.reference import on_floor, time_warp
 
@@ -65,9 +65,31 @@ def test_dataset_keys_match_ingest(tmp_path, walk_clip):
     save_npz(walk_clip, tmp_path / "real.npz")
     synthesize(None, tmp_path / "s", 1, kinds=("procedural",), seconds=1.0, workers=1,
                progress=False)  # fmt: skip
-    synth = _arrays(tmp_path / "s" / "procedural" / "procedural_00000.npz")
-    assert set(synth) == set(_arrays(tmp_path / "real.npz"))
-    load_npz(tmp_path / "s" / "procedural" / "procedural_00000.npz")
+    path = tmp_path / "s" / "procedural" / "procedural_00000.npz"
+    synth = _arrays(path)
+    assert set(synth) == set(_arrays(tmp_path / "real.npz")) | set(LABELS)
+    clip = load_npz(path)
+    # the learning labels: per frame, shapes as documented, consistent with the index
+    from sim.motion.clip import load_extra
+
+    labels = load_extra(path, "sim_")
+    F, U = clip.n_frames, len(clip.joint_names)
+    assert labels["sim_actions"].shape == labels["sim_joint_torque"].shape == (F, U)
+    assert labels["sim_assist_wrench"].shape == (F, 6)
+    assert labels["sim_foot_force"].shape == (F, 2, 3)
+    assert labels["sim_foot_contact"].dtype == bool
+    assert np.array_equal(
+        labels["sim_foot_contact"], np.linalg.norm(labels["sim_foot_force"], axis=-1) > 0
+    )
+    rec = json.loads((tmp_path / "s" / "index.json").read_text())["trials"][0]
+    assert "labels" not in rec
+    weight = 9.81 * 75.0
+    np.testing.assert_allclose(
+        np.linalg.norm(labels["sim_assist_wrench"][:, :3], axis=1) / weight,
+        rec["assistance"],
+        rtol=1e-3,
+    )  # the index's per-frame figure is the stored wrench's force over the body weight
+    assert rec["physical"] == (np.mean(rec["assistance"]) <= PHYSICAL_BUDGET)
 
 
 def test_bad_input_is_skipped_and_listed(tmp_path, cmu_dir):

@@ -123,3 +123,23 @@ def test_no_assistance_without_floor_contact(model, walk_ref):
     assert a == pytest.approx(-9.81 / 2, rel=0.02)
     held = track(model, lifted, assist_limit=3.0, assist_in_flight=True)
     assert held.assistance.mean() > 0.5
+
+
+def test_foot_forces_and_assistance_carry_the_body_weight(model, cmu_dir):
+    """Momentum balance over a 2 s walk: the mean vertical floor force on the feet plus the
+    vertical assistance equals the body weight (the body's vertical momentum returns near its
+    start); contact labels are where the force is."""
+    from sim.simulate.model import total_mass
+    from sim.simulate.reference import on_floor, trial_qpos
+
+    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+    r = track(model, on_floor(model, q)[:240], assist_limit=0.5)
+    weight = total_mass(model) * 9.81
+    assert not r.fell
+    support = (r.foot_force[:, :, 2].sum(axis=1) + r.assist_wrench[:, 2]) / weight
+    momentum = total_mass(model) * (r.qvel[-1, 2] - r.qvel[0, 2]) / (len(r.qpos) * 4 / 120)
+    # sampled at every 4th tick's first step: landings make the sample mean noisy (measured 5 %)
+    assert support.mean() - momentum / weight == pytest.approx(1.0, abs=0.08)
+    assert np.all(r.foot_force[:, :, 2] >= 0)  # the floor only pushes
+    both_off = (r.foot_force[:, :, 2] == 0).all(axis=1)
+    assert both_off.mean() < 0.3  # a walk has a foot down most of the time

@@ -82,6 +82,11 @@ class Tracking:
             set at each recorded tick.
         joint_torque: (F, nu) the torque [N m] each actuator applied at the recorded tick's
             first physics step (``data.actuator_force``, within the joint's limit).
+        foot_force: (F, 2, 3) the floor's contact force [N, world frame] on the left and right
+            foot (foot and toe geoms) at that step (``mj_contactForce``); a foot is in contact
+            where its force is non-zero.
+        fall_frame: the recorded frame where the fall was detected, -1 if none; from that tick
+            on the assistance is off, so the body stays down unless its own joints lift it.
         fell: whether the root dropped below half its reference height (see :func:`track`).
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
@@ -104,6 +109,8 @@ class Tracking:
     contact_penetration: np.ndarray | None = None
     actions: np.ndarray | None = None
     joint_torque: np.ndarray | None = None
+    foot_force: np.ndarray | None = None
+    fall_frame: int = -1
 
 
 class ActuatorEdits:
@@ -233,6 +240,26 @@ def _root_inertia(model, qpos, data) -> np.ndarray:
     return out
 
 
+def _foot_forces(model, data, floor: int, side: np.ndarray, out: np.ndarray) -> None:
+    """Write into ``out`` (2, 3) the floor's contact force [N, world frame] on the left (row 0)
+    and right (row 1) foot: ``side`` (ngeom,) is 0/1 for a foot geom of that side, -1 else."""
+    out[:] = 0.0
+    f6 = np.zeros(6)
+    for c in range(data.ncon):
+        con = data.contact[c]
+        g1, g2 = con.geom
+        if g1 == floor:
+            s, sign = side[g2], 1.0  # the force acts from geom1 on geom2
+        elif g2 == floor:
+            s, sign = side[g1], -1.0
+        else:
+            continue
+        if s < 0:
+            continue
+        mujoco.mj_contactForce(model, data, c, f6)
+        out[s] += sign * (con.frame.reshape(3, 3).T @ f6[:3])
+
+
 def _floor_contact(data, floor: int) -> bool:
     """Whether any contact of ``data``'s last step involves geom ``floor``."""
     n = data.ncon
@@ -291,6 +318,9 @@ def track(
     kp = model.actuator_gainprm[:, 0].copy()
     lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
     floor = model.geom("floor").id
+    side = np.full(model.ngeom, -1)
+    for name in FOOT_GEOMS:
+        side[model.geom(name).id] = 0 if name.startswith("l") else 1
     push_ids = [model.body(p.body).id for p in pushes]
     dt = 1.0 / CONTROL_HZ
     rot_err = np.zeros(3)
@@ -303,6 +333,8 @@ def track(
     rec_p = np.zeros(F)
     rec_u = np.empty((F, model.nu))
     rec_tau = np.empty((F, model.nu))
+    rec_f = np.zeros((F, 2, 3))
+    fall_frame = -1
     all_assist = np.empty(T)
     all_wrench = np.empty((T, 6))
     fell = False
@@ -326,7 +358,8 @@ def track(
             # and by ff / kp so that the feed-forward is added (both scale with a weakening)
             data.ctrl[:] = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
             # 3. root: bounded assistance, only while the body touches the floor
-            if assist_limit > 0 and (assist_in_flight or _floor_contact(data, floor)):
+            helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
+            if helped and (assist_in_flight or _floor_contact(data, floor)):
                 wrench = ff[:6] + root_inertia @ root_acc
                 force, torque = wrench[:3], wrench[3:]
                 fmax = factor * assist_limit * weight
@@ -352,8 +385,8 @@ def track(
                 rec_q[i] = data.qpos
                 rec_v[i] = data.qvel
                 rec_u[i] = data.ctrl
-                if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2]:
-                    fell = True
+                if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2] and not fell:
+                    fell, fall_frame = True, i
             if data.ncon:
                 depth = max(0.0, -float(data.contact.dist[: data.ncon].min()))
                 deepest = max(deepest, depth)
@@ -362,6 +395,7 @@ def track(
             mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
             if on_record:
                 rec_tau[i] = data.actuator_force
+                _foot_forces(model, data, floor, side, rec_f[i])
             if SUBSTEPS > 1:
                 mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
     # per recorded state, the mean wrench over the ticks centred on it (the impulse delivered
@@ -385,4 +419,6 @@ def track(
         unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
         actions=rec_u,
         joint_torque=rec_tau,
+        foot_force=rec_f,
+        fall_frame=fall_frame,
     )

@@ -96,9 +96,10 @@ def synthesize(
             summary.skipped.append({"task": task_dict(task), "amc": task.amc, "error": o.error})
             continue
         clip, record = o.result
+        labels = record.pop("labels", None)  # per-frame arrays: the clip file, not the index
         name = f"{task.kind}_{task.index:05d}"
         path = out_dir / task.kind / f"{name}.npz"
-        save_npz(clip, path)
+        save_npz(clip, path, extra=labels)
         summary.written.append(
             {
                 "subject": task.kind,
