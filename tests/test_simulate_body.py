@@ -143,3 +143,32 @@ def test_foot_forces_and_assistance_carry_the_body_weight(model, cmu_dir):
     assert np.all(r.foot_force[:, :, 2] >= 0)  # the floor only pushes
     both_off = (r.foot_force[:, :, 2] == 0).all(axis=1)
     assert both_off.mean() < 0.3  # a walk has a foot down most of the time
+
+
+def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
+    """The same plan with and without the filter: the kept clips are exactly the plan's clips
+    within the budget, in plan order, bit for bit, and the rejected count is the others tried."""
+    import json
+
+    from sim.simulate.dataset import synthesize
+
+    kw = dict(kinds=("procedural",), seconds=0.5, seed=2, workers=1, progress=False)
+    full = synthesize(None, tmp_path / "all", 6, **kw)
+    means = [r["mean_assistance"] for r in full.written]
+    budget = float(np.median(means))
+    inside = [r for r in full.written if r["mean_assistance"] <= budget]
+    assert 0 < len(inside) < len(means)
+    keep = min(2, len(inside))
+    kept = synthesize(None, tmp_path / "kept", keep, max_assistance=budget, **kw)
+    assert [r["trial"] for r in kept.written] == [r["trial"] for r in inside[:keep]]
+    assert all(r["mean_assistance"] <= budget for r in kept.written)
+    last = int(kept.written[-1]["trial"].split("_")[-1])
+    assert kept.rejected == {"procedural": sum(m > budget for m in means[: last + 1])}
+    index = json.loads((tmp_path / "kept" / "index.json").read_text())
+    assert index["synthetic"]["rejected"] == kept.rejected
+    for r in kept.written:
+        with (
+            np.load(tmp_path / "kept" / r["file"]) as a,
+            np.load(tmp_path / "all" / r["file"]) as b,
+        ):
+            assert all(np.array_equal(a[k], b[k]) for k in a.files)
