@@ -172,3 +172,39 @@ def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
             np.load(tmp_path / "all" / r["file"]) as b,
         ):
             assert all(np.array_equal(a[k], b[k]) for k in a.files)
+
+
+def test_hdf5_export_round_trip(tmp_path):
+    import json
+
+    from sim.errors import MotionDataError
+    from sim.motion.clip import load_extra, load_npz
+    from sim.simulate.dataset import synthesize
+    from sim.simulate.export import export_hdf5, load_hdf5
+
+    synthesize(None, tmp_path / "d", 3, kinds=("procedural",), seconds=0.5, seed=1, workers=1,
+               progress=False)  # fmt: skip
+    n = export_hdf5(tmp_path / "d", tmp_path / "d.h5")
+    trials = json.loads((tmp_path / "d" / "index.json").read_text())["trials"]
+    episodes = load_hdf5(tmp_path / "d.h5")
+    assert n == len(episodes) == len(trials) == 3
+    for ep, r in zip(episodes, trials, strict=True):
+        clip = load_npz(tmp_path / "d" / r["file"])
+        labels = load_extra(tmp_path / "d" / r["file"], "sim_")
+        F = clip.n_frames
+        assert ep["file"] == r["file"] and ep["total_steps"] == F - 1
+        assert ep["physical"] == r["physical"] and ep["fall_frame"] == r["fall_frame"]
+        for k in ("qpos", "qvel", "positions", "velocities"):
+            assert np.array_equal(ep["observations"][k], getattr(clip, k))
+        assert np.array_equal(ep["actions"], labels["sim_actions"][: F - 1])
+        for k in ("joint_torque", "assist_wrench", "foot_contact", "foot_force"):
+            assert np.array_equal(ep["infos"][k], labels[f"sim_{k}"])
+        assert (
+            ep["rewards"].shape == ep["terminations"].shape == ep["truncations"].shape == (F - 1,)
+        )
+        assert ep["truncations"][-1] != ep["fell"]
+    physical = sum(r["physical"] for r in trials)
+    assert export_hdf5(tmp_path / "d", tmp_path / "p.h5", physical_only=True) == physical
+    (tmp_path / "bad.h5").write_bytes(b"not hdf5")
+    with pytest.raises(MotionDataError, match="bad.h5"):
+        load_hdf5(tmp_path / "bad.h5")

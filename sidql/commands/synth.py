@@ -6,6 +6,7 @@ import argparse
 
 from sidql.commands.usage import UsageError, cmu_rate, positive
 from sim.simulate.dataset import synthesize
+from sim.simulate.export import export_hdf5
 from sim.simulate.generate import ALL_KINDS, KINDS
 
 
@@ -46,6 +47,11 @@ def register(sub) -> None:
         help="keep only clips whose mean root assistance is at most BW body weights (0.05: the "
         "physical clips); others are dropped and more simulated (up to 20x --n tasks)",
     )  # fmt: skip
+    p.add_argument(
+        "--export-hdf5", default=None, metavar="FILE",
+        help="also write the clips as one offline-RL HDF5 file (Minari-style episodes: "
+        "observations, actions, infos; layout in docs/synthetic.md)",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -68,6 +74,9 @@ def run(args) -> int:
         print(f"rejected (mean assistance > {args.max_assistance:g} BW): {counts}")
         if len(s.written) < args.n:
             print(f"only {len(s.written)} of {args.n} clips within the budget")
+    if args.export_hdf5 and s.written:
+        n = export_hdf5(args.out, args.export_hdf5)
+        print(f"exported {n} episodes -> {args.export_hdf5}")
     if s.skipped:
         print(f"skipped {len(s.skipped)} bad input(s)/task(s):")
         for r in s.skipped:
