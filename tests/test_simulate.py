@@ -16,7 +16,7 @@ from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import qvel_from_qpos
 from sim.simulate.controller import track
 from sim.simulate.dataset import synthesize
-from sim.simulate.generate import SynthTask, generate
+from sim.simulate.generate import LABELS, PHYSICAL_BUDGET, SynthTask, generate
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model
 from sim.simulate.reference import on_floor, time_warp
 
@@ -66,9 +66,31 @@ def test_dataset_keys_match_ingest(tmp_path, walk_clip):
     save_npz(walk_clip, tmp_path / "real.npz")
     synthesize(None, tmp_path / "s", 1, kinds=("procedural",), seconds=1.0, workers=1,
                progress=False)  # fmt: skip
-    synth = _arrays(tmp_path / "s" / "procedural" / "procedural_00000.npz")
-    assert set(synth) == set(_arrays(tmp_path / "real.npz"))
-    load_npz(tmp_path / "s" / "procedural" / "procedural_00000.npz")
+    path = tmp_path / "s" / "procedural" / "procedural_00000.npz"
+    synth = _arrays(path)
+    assert set(synth) == set(_arrays(tmp_path / "real.npz")) | set(LABELS)
+    clip = load_npz(path)
+    # the learning labels: per frame, shapes as documented, consistent with the index
+    from sim.motion.clip import load_extra
+
+    labels = load_extra(path, "sim_")
+    F, U = clip.n_frames, len(clip.joint_names)
+    assert labels["sim_actions"].shape == labels["sim_joint_torque"].shape == (F, U)
+    assert labels["sim_assist_wrench"].shape == (F, 6)
+    assert labels["sim_foot_force"].shape == (F, 2, 3)
+    assert labels["sim_foot_contact"].dtype == bool
+    assert np.array_equal(
+        labels["sim_foot_contact"], np.linalg.norm(labels["sim_foot_force"], axis=-1) > 0
+    )
+    rec = json.loads((tmp_path / "s" / "index.json").read_text())["trials"][0]
+    assert "labels" not in rec
+    weight = 9.81 * 75.0
+    np.testing.assert_allclose(
+        np.linalg.norm(labels["sim_assist_wrench"][:, :3], axis=1) / weight,
+        rec["assistance"],
+        rtol=1e-3,
+    )  # the index's per-frame figure is the stored wrench's force over the body weight
+    assert rec["physical"] == (np.mean(rec["assistance"]) <= PHYSICAL_BUDGET)
 
 
 def test_bad_input_is_skipped_and_listed(tmp_path, cmu_dir):
@@ -216,9 +238,13 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     assistance, its residual is that assistance frame by frame."""
     from sim.simulate.audit import assistance_audit, floor_ground
     from sim.simulate.generate import simulated_clip
+    from sim.simulate.model import Gains
 
     skeleton = canonical_skeleton()
-    model = sim_model(skeleton)
+    # 4x human strength: at human strength the legs hanging in the air saturate their torque
+    # limits and swing at frequencies that 30 fps second differences do not resolve (measured
+    # 0.10 BW mean residual-help gap, 0.015 at 4x): this test is about the audit, not the body
+    model = sim_model(skeleton, gains=Gains(strength=4.0))
     ref = _walk_reference(cmu_dir, model, 180)  # 1.5 s: the unassisted walk has not fallen yet
     plain = {"generation": {"scale": 1.0, "pushes": []}}
 
@@ -231,10 +257,11 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     assert a0["residual_quiet_bw"] < 0.05
     assert np.percentile(a0["residual"][a0["quiet"]], 90) < 0.12
 
-    # the same walk 20 cm above the floor, held by up to 1.5 body weights of assistance
+    # the same walk 20 cm above the floor, held by up to 3 body weights of assistance (a hand
+    # that acts in flight too: the synthesis never allows it, the audit must still see it)
     lifted = ref.copy()
     lifted[:, 2] += 0.2
-    r1 = track(model, lifted, assist_limit=1.5)
+    r1 = track(model, lifted, assist_limit=3.0, assist_in_flight=True)
     air = simulated_clip(model, skeleton, r1.qpos, r1.qvel, 30.0, "air")
     assert air.positions[:, :, 2].min() > 0.05  # nothing touches the floor
     a1 = assistance_audit(

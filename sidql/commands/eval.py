@@ -7,7 +7,13 @@ import json
 from pathlib import Path
 
 from sidql.commands.usage import UsageError, cmu_rate, positive
-from sidql.evaluation.evaluate import evaluate, load_cases, physics_markdown, table3_markdown
+from sidql.evaluation.evaluate import (
+    evaluate,
+    load_cases,
+    physics_markdown,
+    simulate_markdown,
+    table3_markdown,
+)
 from sidql.evaluation.rate import rate_distortion, write_plot
 from sidql.keyframes.methods import get
 from sim.files import write_atomic
@@ -52,6 +58,17 @@ def register(sub) -> None:
         "ground-contact, self-penetration, joint-limit and inverse-dynamics figures "
         "(sim.physics) to every row, plus a row for method 'original'",
     )
+    p.add_argument(
+        "--simulate",
+        action="store_true",
+        help="with --physics: also track the original's and every reconstruction's fit in "
+        "MuJoCo's forward simulation with the human-strength controller and no assistance; "
+        "adds tracking errors, falls and torque per method (sim.simulate.validate)",
+    )
+    p.add_argument(
+        "--max-clips", type=positive(int), default=None, metavar="N",
+        help="evaluate only the first N clips (e.g. to bound a --simulate run)",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--workers", type=positive(int), default=1, help="processes loading trials")
     p.add_argument(
@@ -80,12 +97,16 @@ def run(args) -> int:
         workers=args.workers,
         ray=args.ray,
     )
+    if args.simulate and not args.physics:
+        raise UsageError("--simulate needs --physics (it tracks the physics' IK fit)")
+    if args.max_clips is not None:
+        cases = cases[: args.max_clips]
     if not cases:
         raise UsageError(f"{args.data}: no {args.length}-frame clips (skipped {len(skipped)} bad)")
     try:
         out = evaluate(
             cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet,
-            physics=args.physics,
+            physics=args.physics, simulate=args.simulate,
         )  # fmt: skip
     except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
         raise UsageError(str(e)) from None
@@ -98,6 +119,8 @@ def run(args) -> int:
         "seed": args.seed,
         "clips": len(cases),
         "physics": bool(args.physics),
+        "simulate": bool(args.simulate),
+        "max_clips": args.max_clips,
     }
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -109,6 +132,9 @@ def run(args) -> int:
         print(physics_markdown(out["results"]))
         print("physics, medians over clips:")
         print(physics_markdown(out["results"], "median"))
+    if args.simulate:
+        print("forward simulation (human-strength body, no assistance), means over clips:")
+        print(simulate_markdown(out["results"]))
     print(f"wrote {path}")
     if args.rate_plot:
         rd = rate_distortion(cases, seed=args.seed, progress=not args.quiet)

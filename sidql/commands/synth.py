@@ -6,6 +6,7 @@ import argparse
 
 from sidql.commands.usage import UsageError, cmu_rate, positive
 from sim.simulate.dataset import synthesize
+from sim.simulate.export import export_hdf5
 from sim.simulate.generate import ALL_KINDS, KINDS
 
 
@@ -41,6 +42,16 @@ def register(sub) -> None:
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="run the tasks on Ray: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
+    p.add_argument(
+        "--max-assistance", type=float, default=None, metavar="BW",
+        help="keep only clips whose mean root assistance is at most BW body weights (0.05: the "
+        "physical clips); others are dropped and more simulated (up to 20x --n tasks)",
+    )  # fmt: skip
+    p.add_argument(
+        "--export-hdf5", default=None, metavar="FILE",
+        help="also write the clips as one offline-RL HDF5 file (Minari-style episodes: "
+        "observations, actions, infos; layout in docs/synthetic.md)",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -48,14 +59,24 @@ def register(sub) -> None:
 def run(args) -> int:
     if 120 % args.fps or args.seconds * args.fps < 2:
         raise UsageError("--fps must divide 120 and a clip (--seconds x --fps) hold 2 frames")
+    if args.max_assistance is not None and not args.max_assistance >= 0:
+        raise UsageError(f"--max-assistance must be >= 0 body weights; got {args.max_assistance}")
     s = synthesize(
         args.src, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
         seconds=args.seconds, fps=args.fps, workers=args.workers, ray=args.ray,
-        progress=not args.quiet,
+        progress=not args.quiet, max_assistance=args.max_assistance,
     )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "
           f"{args.out}/index.json")  # fmt: skip
+    if args.max_assistance is not None:
+        counts = ", ".join(f"{k} {v}" for k, v in sorted(s.rejected.items())) or "none"
+        print(f"rejected (mean assistance > {args.max_assistance:g} BW): {counts}")
+        if len(s.written) < args.n:
+            print(f"only {len(s.written)} of {args.n} clips within the budget")
+    if args.export_hdf5 and s.written:
+        n = export_hdf5(args.out, args.export_hdf5)
+        print(f"exported {n} episodes -> {args.export_hdf5}")
     if s.skipped:
         print(f"skipped {len(s.skipped)} bad input(s)/task(s):")
         for r in s.skipped:

@@ -43,6 +43,8 @@ from sim.motion.ingest import load_clips
 from sim.physics.analysis import PhysicsJob
 from sim.physics.ground import estimate_ground
 from sim.replay.checks import from_clip
+from sim.simulate.model import sim_model
+from sim.simulate.validate import SIMULATE_KEYS, ForwardValidation
 
 #: The paper's Table 3 (mean Q at W = 5, 10, 15); "SIDQL" is its DQN.
 PAPER_TABLE3: dict[str, dict[int, float]] = {
@@ -159,18 +161,24 @@ def clip_seed(seed: int, index: int, W: int) -> int:
     return int(np.random.SeedSequence([seed, index, W]).generate_state(1)[0])
 
 
-def score(case: Case, keyframes: np.ndarray, method: str, physics=None) -> dict:
+def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate=None) -> dict:
     """Every error measure of one clip rebuilt from ``keyframes`` with the reconstruction
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
     docstring).
 
     ``physics``: ``(job, ground)`` (:class:`sim.physics.analysis.PhysicsJob` on the protocol
-    points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction."""
+    points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction;
+    ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its
+    forward simulation's figures (the IK fit tracked without assistance)."""
     s = case.series
     rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
-    phys = (
-        physics_figures(physics[0].analyse(case.clip, rec.positions, physics[1])) if physics else {}
-    )
+    phys = {}
+    if physics:
+        analysis = physics[0].analyse(case.clip, rec.positions, physics[1])
+        phys = physics_figures(analysis)
+        if simulate is not None:
+            original = physics[0].analyse(case.clip, None, physics[1])["per_frame"]["qpos"]
+            phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original))
     return {
         **phys,
         "q": q_from_angles(s, rec.theta, rec.phi),
@@ -200,6 +208,33 @@ def physics_figures(analysis: dict) -> dict:
 
 def _none_if_nan(v):
     return None if isinstance(v, float) and np.isnan(v) else v
+
+
+def simulate_setup(cases: Sequence[Case]) -> dict:
+    """Per trial (``clip.source``): the :class:`sim.simulate.validate.ForwardValidation` of its
+    subject (one torque-limited simulated body per skeleton) for :func:`score`."""
+    bodies, out = {}, {}
+    for c in cases:
+        if c.asf not in bodies:
+            skeleton = subject_model(c.asf)[0]
+            bodies[c.asf] = ForwardValidation(sim_model(skeleton), _protocol_names(c.clip))
+        out[c.clip.source] = bodies[c.asf]
+    return out
+
+
+def _protocol_names(clip: Clip) -> tuple[str, ...]:
+    return from_clip(clip).restrict(POINTS).names
+
+
+def _simulate_means(rows: Sequence[dict]) -> dict:
+    """Mean over clips of each :data:`sim.simulate.validate.SIMULATE_KEYS` figure (the fall
+    time: over the clips that fell, None if none did)."""
+    out = {}
+    for k in SIMULATE_KEYS:
+        v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
+        v = v[np.isfinite(v)]
+        out[k] = float(v.mean()) if v.size else None
+    return out
 
 
 def physics_setup(cases: Sequence[Case]) -> dict:
@@ -247,6 +282,7 @@ def evaluate(
     seed: int = 0,
     progress: bool = True,
     physics: bool = False,
+    simulate: bool = False,
 ) -> dict:
     """Run every method at every W on every case.
 
@@ -257,8 +293,12 @@ def evaluate(
         keyframes, indices, q and the other scores. With ``physics`` every row also carries the
         :mod:`sim.physics` figures (result rows: means over clips, :data:`PHYSICS_KEYS`), and one
         result row (and per-clip rows) for method ``original``, the clip itself (all frames
-        kept: ``keyframes`` = clip length, errors 0).
+        kept: ``keyframes`` = clip length, errors 0). With ``simulate`` (needs ``physics``)
+        every row also carries the forward-simulation figures of
+        :mod:`sim.simulate.validate` (result rows: means over clips).
     """
+    if simulate and not physics:
+        raise ValueError("simulate needs physics (the IK fit it tracks)")
     method_names = list(method_names)
     counts = list(keyframe_counts)
     for name in method_names:
@@ -266,15 +306,20 @@ def evaluate(
     per_clip: list[dict] = []
     results: list[dict] = []
     setup = physics_setup(cases) if physics else {}
+    bodies = simulate_setup(cases) if simulate else {}
     if physics and cases:
         rows = []
         for case in tqdm(cases, desc="physics of originals", unit="clip", disable=not progress):
             job, ground = setup[case.clip.source]
+            analysis = job.analyse(case.clip, None, ground)
+            sim = {}
+            if simulate:
+                sim = bodies[case.clip.source].run(analysis["per_frame"]["qpos"], case.clip.fps)
             rows.append(
                 {
                     "source": case.clip.source, "start_frame": case.clip.start_frame,
                     "method": "original", "keyframes": case.clip.n_frames,
-                    **physics_figures(job.analyse(case.clip, None, ground)),
+                    **physics_figures(analysis), **sim,
                 }
             )  # fmt: skip
         per_clip.extend(rows)
@@ -283,7 +328,7 @@ def evaluate(
             {
                 "method": "original", "keyframes": cases[0].clip.n_frames, "clips": len(rows),
                 **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0, "median_decision_ms": 0.0,
-                **_physics_means(rows),
+                **_physics_means(rows), **(_simulate_means(rows) if simulate else {}),
             }
         )  # fmt: skip
     jobs = [(m, W) for m in method_names for W in counts]
@@ -299,7 +344,7 @@ def evaluate(
                 "method": name,
                 "keyframes": W,
                 "indices": k.tolist(),
-                **score(case, k, name, setup.get(case.clip.source)),
+                **score(case, k, name, setup.get(case.clip.source), bodies.get(case.clip.source)),
                 "decision_ms": ms,
             }
             rows.append(row)
@@ -318,6 +363,7 @@ def evaluate(
                     "mean_li_error_mm": float(np.mean([r["li_error_mm"] for r in rows])),
                     "median_decision_ms": float(np.median([r["decision_ms"] for r in rows])),
                     **(_physics_means(rows) if physics else {}),
+                    **(_simulate_means(rows) if simulate else {}),
                 }
             )
     return {"results": results, "per_clip": per_clip}
@@ -384,5 +430,25 @@ def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
         ]
         lines.append(
             f"| {r['method']} | {r['keyframes']} | {r['clips']} | " + " | ".join(cells) + " |"
+        )
+    return "\n".join(lines)
+
+
+def simulate_markdown(results: Sequence[dict]) -> str:
+    """Markdown table of the forward-simulation means per method and W (``original`` first): the
+    torque-limited body tracking each motion's IK fit with no assistance."""
+    rows = [r for r in results if r.get("sim_error_mm") is not None]
+    rows.sort(key=lambda r: r["method"] != "original")
+    lines = [
+        "| method | W | clips | error vs tracked (mm) | error vs original (mm) | fell (share) "
+        "| fall time (s) | joint torque RMS (N m/kg) | torque at limit (share) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        fall = "-" if r["sim_fall_s"] is None else f"{r['sim_fall_s']:.2f}"
+        lines.append(
+            f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['sim_error_mm']:.1f} "
+            f"| {r['sim_error_original_mm']:.1f} | {r['sim_fell']:.2f} | {fall} "
+            f"| {r['sim_torque_rms_nm_kg']:.3f} | {r['sim_torque_saturated']:.3f} |"
         )
     return "\n".join(lines)

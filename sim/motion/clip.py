@@ -127,11 +127,13 @@ class Clip:
 _ARRAY_KEYS = ("parents", "positions", "velocities", "qpos", "qvel", "rotations")
 
 
-def save_npz(clip: Clip, path: str | os.PathLike) -> Path:
+def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> Path:
     """Write ``clip`` to ``path`` atomically (temporary file in the same folder, then rename).
 
     Keys: names, parents, positions, velocities, qpos, qvel, rotations, fps, source, start_frame,
-    source_fps, joint_names, and angular_velocities when known.
+    source_fps, joint_names, and angular_velocities when known; plus the arrays of ``extra``
+    under their own names (per-frame labels of simulated clips: :func:`load_npz` ignores them,
+    :func:`load_extra` reads them).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -146,8 +148,24 @@ def save_npz(clip: Clip, path: str | os.PathLike) -> Path:
         start_frame=np.int64(clip.start_frame),
         source_fps=np.float64(clip.source_fps),
     )
+    clash = set(extra or {}) & (set(payload) | {"angular_velocities"})
+    if clash:
+        raise ValueError(f"extra arrays {sorted(clash)} would overwrite clip keys")
+    payload.update(extra or {})
     write_atomic(path, lambda f: np.savez_compressed(f, **payload))
     return path
+
+
+def load_extra(path: str | os.PathLike, prefix: str = "") -> dict[str, np.ndarray]:
+    """The arrays of a clip file written through ``save_npz(..., extra=...)`` whose names start
+    with ``prefix`` (every non-clip key when empty)."""
+    clip_keys = {*_ARRAY_KEYS, "names", "joint_names", "fps", "source", "start_frame",
+                 "source_fps", "angular_velocities"}  # fmt: skip
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files if k not in clip_keys and k.startswith(prefix)}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise MotionDataError(str(path), None, f"not a clip file: {e}") from e
 
 
 def load_npz(path: str | os.PathLike) -> Clip:

@@ -46,6 +46,7 @@ class DatasetSummary:
     written: list[dict] = field(default_factory=list)
     skipped: list[dict] = field(default_factory=list)
     seconds: float = 0.0
+    rejected: dict[str, int] = field(default_factory=dict)  # synth --max-assistance: per kind
 
     @property
     def ok(self) -> bool:

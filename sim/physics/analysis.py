@@ -207,7 +207,8 @@ class PhysicsJob:
             JSON-ready numbers plus ``per_frame``: ``foot_names`` (F,), ``contact`` (T, F) 0/1,
             ``foot_height_mm`` (T, F), ``foot_speed_mm_s`` (T, F) horizontal,
             ``residual_force_bw`` (T,), ``residual_torque_nm_kg`` (T,),
-            ``joint_torque_rms_nm_kg`` (T,), ``limit_excess_deg`` (T,), ``ik_error_mm`` (T,).
+            ``joint_torque_rms_nm_kg`` (T,), ``limit_excess_deg`` (T,), ``ik_error_mm`` (T,),
+            ``qpos`` (T, nq) the IK fit.
         """
         if ground is None:
             ground = estimate_ground(clip.positions, clip.names, clip.fps)
@@ -243,6 +244,7 @@ class PhysicsJob:
             **frames,
             "limit_excess_deg": mp.limit,
             "ik_error_mm": 1e3 * mp.fit.error,
+            "qpos": mp.fit.qpos,  # (T, nq) the fitted configurations (forward simulation's input)
         }
         return out
 

@@ -10,19 +10,23 @@ Before the run, for the whole reference (a ``qpos`` stream at 120 Hz):
 
 Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
 
-2. **Hinge actuators.** Position actuators (``sim.simulate.model``: stiffness and damping scaled by
-   each joint's reflected inertia, so by the masses it moves) pull each hinge to its reference
-   angle and velocity (the target leads by ``kv / kp`` times the reference velocity); the
-   feed-forward torque is added through ``qfrc_applied``, clipped to the joint's torque limit.
-3. **Bounded root assistance.** A person has no motor at the pelvis: the residual root wrench
-   plus a PD pull of the pelvis towards its reference pose is the help the motion needs that its
-   joints and the floor do not give. It is applied clipped to ``assist_limit`` times the body
-   weight (force) and that times ``ROOT_TORQUE_LEVER`` (torque), and its force over the body
-   weight is recorded every tick: the honest label of how much help the motion needed.
+2. **Hinge actuators.** Position actuators (``sim.simulate.model``: human joint stiffness and
+   damping) pull each hinge to its reference angle and velocity (the target leads by ``kv / kp``
+   times the reference velocity) and carry the feed-forward torque too (the target is moved by
+   ``ff / kp``), so MuJoCo clamps the whole joint torque to the joint's human limit
+   (``forcelimited``): no torque outside the actuators acts on a hinge.
+3. **Bounded root assistance, only on the floor.** A person has no motor at the pelvis: the
+   residual root wrench plus a PD pull of the pelvis towards its reference pose is the help the
+   motion needs that its joints and the floor do not give. It acts only while some body geom
+   touches the floor (MuJoCo's contacts of the last step; in flight the body is on its own),
+   clipped to ``assist_limit`` times the body weight (force) and that times
+   ``ROOT_TORQUE_LEVER`` (torque); its 6-d wrench is recorded every tick: the honest label of
+   how much help the motion needed.
 
 External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (stiffness,
 torque limits and assistance scaled down for a while) perturb the motion. Recorded states are the
-simulator's own ``qpos`` and ``qvel``, never differences.
+simulator's own ``qpos`` and ``qvel``, never differences. A weakening edits the model's actuator
+parameters: :class:`ActuatorEdits` owns those edits and restores them however ``track`` ends.
 """
 
 from __future__ import annotations
@@ -72,8 +76,17 @@ class Tracking:
         qpos: (F, nq) and qvel: (F, nv) the simulator's state.
         assistance: (F,) root assistance force over body weight around each recorded tick: the
             norm of the mean force over the ``record_every`` ticks centred on it.
-        assist_wrench: (F, 6) the applied root wrench (free-joint generalised force), the same
-            mean.
+        assist_wrench: (F, 6) the applied root wrench (free-joint generalised force: force [N]
+            in the world frame, torque [N m] in the root's frame), the same mean.
+        actions: (F, nu) the actuator controls (target angles [rad], feed-forward included)
+            set at each recorded tick.
+        joint_torque: (F, nu) the torque [N m] each actuator applied at the recorded tick's
+            first physics step (``data.actuator_force``, within the joint's limit).
+        foot_force: (F, 2, 3) the floor's contact force [N, world frame] on the left and right
+            foot (foot and toe geoms) at that step (``mj_contactForce``); a foot is in contact
+            where its force is non-zero.
+        fall_frame: the recorded frame where the fall was detected, -1 if none; from that tick
+            on the assistance is off, so the body stays down unless its own joints lift it.
         fell: whether the root dropped below half its reference height (see :func:`track`).
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
@@ -94,6 +107,51 @@ class Tracking:
     penetration: float = 0.0
     unstable: bool = False
     contact_penetration: np.ndarray | None = None
+    actions: np.ndarray | None = None
+    joint_torque: np.ndarray | None = None
+    foot_force: np.ndarray | None = None
+    fall_frame: int = -1
+
+
+class ActuatorEdits:
+    """The owner of the temporary changes ``track`` makes to a model: actuator gains, biases and
+    force limits (a weakening scales them) and the disabled-feature flags (inverse dynamics
+    without contacts). A context manager: on exit, however reached, the model holds exactly the
+    values it had on entry.
+    """
+
+    def __init__(self, model):
+        self.model = model
+
+    def __enter__(self) -> ActuatorEdits:
+        m = self.model
+        self._gain = m.actuator_gainprm[:, 0].copy()
+        self._bias = m.actuator_biasprm[:, :3].copy()
+        self._range = m.actuator_forcerange.copy()
+        self._flags = int(m.opt.disableflags)
+        self.factor = 1.0
+        return self
+
+    def scale(self, factor: float) -> None:
+        """Actuator stiffness, damping and torque limits at ``factor`` times their values on
+        entry."""
+        if factor != self.factor:
+            m = self.model
+            m.actuator_gainprm[:, 0] = self._gain * factor
+            m.actuator_biasprm[:, :3] = self._bias * factor
+            m.actuator_forcerange[:] = self._range * factor
+            self.factor = factor
+
+    def without_contacts(self) -> None:
+        """Disable contacts (until exit)."""
+        self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+
+    def __exit__(self, *exc) -> None:
+        m = self.model
+        m.actuator_gainprm[:, 0] = self._gain
+        m.actuator_biasprm[:, :3] = self._bias
+        m.actuator_forcerange[:] = self._range
+        m.opt.disableflags = self._flags
 
 
 def reference_derivatives(model, qpos: np.ndarray, rate: float = CONTROL_HZ):
@@ -107,25 +165,25 @@ def reference_derivatives(model, qpos: np.ndarray, rate: float = CONTROL_HZ):
     return qvel, qacc
 
 
-def inverse_dynamics(model, qpos, qvel, qacc, *, contacts: bool = True) -> np.ndarray:
+def inverse_dynamics(model, qpos, qvel, qacc, *, contacts: bool = True, data=None) -> np.ndarray:
     """(T, nv) generalised force that produces ``qacc`` at each (``qpos``, ``qvel``):
     ``mujoco.mj_inverse``, floor contacts of that pose included (MuJoCo's soft-contact inverse).
-    The first 6 columns are the root wrench nothing inside the body can supply."""
-    data = mujoco.MjData(model)
+    The first 6 columns are the root wrench nothing inside the body can supply. ``data``: an
+    ``MjData`` of ``model`` to work in (its state is overwritten), a new one if None."""
+    data = data if data is not None else mujoco.MjData(model)
     out = np.empty((len(qpos), model.nv))
-    saved = model.opt.disableflags
-    if not contacts:
-        model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-    for t in range(len(qpos)):
-        data.qpos[:], data.qvel[:], data.qacc[:] = qpos[t], qvel[t], qacc[t]
-        mujoco.mj_inverse(model, data)
-        out[t] = data.qfrc_inverse
-    model.opt.disableflags = saved
+    with ActuatorEdits(model) as edits:
+        if not contacts:
+            edits.without_contacts()
+        for t in range(len(qpos)):
+            data.qpos[:], data.qvel[:], data.qacc[:] = qpos[t], qvel[t], qacc[t]
+            mujoco.mj_inverse(model, data)
+            out[t] = data.qfrc_inverse
     return out
 
 
 def contact_feedforward(
-    model, qpos, force, *, contact_height: float = 0.03, friction: float = 0.8
+    model, qpos, force, *, contact_height: float = 0.03, friction: float = 0.8, data=None
 ) -> np.ndarray:
     """Move the root wrench of a free-floating inverse dynamics onto the feet that touch the floor.
 
@@ -138,8 +196,9 @@ def contact_feedforward(
 
     Returns:
         (T, nv) feed-forward: root rows = residual wrench, hinge rows = joint torques.
+    ``data``: an ``MjData`` of ``model`` to work in (its state is overwritten), a new one if None.
     """
-    data = mujoco.MjData(model)
+    data = data if data is not None else mujoco.MjData(model)
     ids = [model.geom(n).id for n in FOOT_GEOMS]
     out = force.copy()
     jacp = np.zeros((3, model.nv))
@@ -168,11 +227,10 @@ def contact_feedforward(
     return out
 
 
-def _root_inertia(model, qpos) -> np.ndarray:
+def _root_inertia(model, qpos, data) -> np.ndarray:
     """(6, 6) the free joint's block of the mass matrix at ``qpos`` (whole-body mass and
     rotational inertia), without its force-rotation coupling: rotation errors of a jittery
-    mocap pelvis must not turn into assistance force."""
-    data = mujoco.MjData(model)
+    mocap pelvis must not turn into assistance force. ``data`` is overwritten."""
     data.qpos[:] = qpos
     mujoco.mj_forward(model, data)
     M = np.zeros((model.nv, model.nv))
@@ -182,12 +240,42 @@ def _root_inertia(model, qpos) -> np.ndarray:
     return out
 
 
+def _foot_forces(model, data, floor: int, side: np.ndarray, out: np.ndarray) -> None:
+    """Write into ``out`` (2, 3) the floor's contact force [N, world frame] on the left (row 0)
+    and right (row 1) foot: ``side`` (ngeom,) is 0/1 for a foot geom of that side, -1 else."""
+    out[:] = 0.0
+    f6 = np.zeros(6)
+    for c in range(data.ncon):
+        con = data.contact[c]
+        g1, g2 = con.geom
+        if g1 == floor:
+            s, sign = side[g2], 1.0  # the force acts from geom1 on geom2
+        elif g2 == floor:
+            s, sign = side[g1], -1.0
+        else:
+            continue
+        if s < 0:
+            continue
+        mujoco.mj_contactForce(model, data, c, f6)
+        out[s] += sign * (con.frame.reshape(3, 3).T @ f6[:3])
+
+
+def _floor_contact(data, floor: int) -> bool:
+    """Whether any contact of ``data``'s last step involves geom ``floor``."""
+    n = data.ncon
+    if not n:
+        return False
+    g = data.contact.geom[:n]
+    return bool(np.any(g == floor))
+
+
 def track(
     model,
     ref_qpos: np.ndarray,
     *,
     gains: Gains | None = None,
     assist_limit: float = 0.5,
+    assist_in_flight: bool = False,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
     record_every: int = 4,
@@ -195,13 +283,15 @@ def track(
     """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
 
     The simulation starts in the reference's first pose and velocity. ``model`` must come from
-    ``sim.simulate.model.sim_model`` (its actuators' gains are read, and changed during a
-    weakening and restored after). A fall is the root below half its reference height while the
-    reference root is above 0.5 m.
+    ``sim.simulate.model.sim_model`` (its actuators' gains are read; a weakening changes them and
+    they are restored on return, or on an exception). A fall is the root below half its
+    reference height while the reference root is above 0.5 m.
 
     Args:
         gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
-        assist_limit: root assistance bound [body weight].
+        assist_limit: root assistance bound [body weight]; 0: none.
+        assist_in_flight: let the assistance act when nothing touches the floor too (a hand
+            holding the body up: only for tests of the audit that must see such a hand).
         record_every: ticks between recorded states (4: the 30 fps clip rate).
 
     Returns:
@@ -209,89 +299,105 @@ def track(
     """
     gains = gains or Gains()
     T = ref_qpos.shape[0]
-    data = mujoco.MjData(model)
+    data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
     ref_qvel, ref_qacc = reference_derivatives(model, ref_qpos)
+    ref_force = contact_feedforward(
+        model,
+        ref_qpos,
+        inverse_dynamics(model, ref_qpos, ref_qvel, ref_qacc, contacts=False, data=data),
+        data=data,
+    )
+    root_inertia = _root_inertia(model, ref_qpos[0], data)
+    mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
     data.qvel[:] = ref_qvel[0]
     mujoco.mj_forward(model, data)
     weight = total_mass(model) * G
     kp_r = gains.root_omega**2
     kd_r = 2 * gains.root_zeta * gains.root_omega
+    kp = model.actuator_gainprm[:, 0].copy()
     lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
-    gain0 = model.actuator_gainprm[:, 0].copy()
-    bias0 = model.actuator_biasprm[:, :3].copy()
-    range0 = model.actuator_forcerange.copy()
+    floor = model.geom("floor").id
+    side = np.full(model.ngeom, -1)
+    for name in FOOT_GEOMS:
+        side[model.geom(name).id] = 0 if name.startswith("l") else 1
     push_ids = [model.body(p.body).id for p in pushes]
     dt = 1.0 / CONTROL_HZ
     rot_err = np.zeros(3)
     root_acc = np.zeros(6)
-    ref_force = contact_feedforward(
-        model, ref_qpos, inverse_dynamics(model, ref_qpos, ref_qvel, ref_qacc, contacts=False)
-    )
-    root_inertia = _root_inertia(model, ref_qpos[0])
     F = (T + record_every - 1) // record_every
     rec_q = np.empty((F, model.nq))
     rec_v = np.empty((F, model.nv))
     rec_a = np.empty(F)
     rec_w = np.empty((F, 6))
     rec_p = np.zeros(F)
+    rec_u = np.empty((F, model.nu))
+    rec_tau = np.empty((F, model.nu))
+    rec_f = np.zeros((F, 2, 3))
+    fall_frame = -1
     all_assist = np.empty(T)
     all_wrench = np.empty((T, 6))
     fell = False
     deepest = 0.0
-    weak_now = 1.0
-    for k in range(T):
-        t = k * dt
-        factor = 1.0
-        for w in weakenings:
-            if w.start <= t < w.start + w.duration:
-                factor = min(factor, w.factor)
-        if factor != weak_now:
-            model.actuator_gainprm[:, 0] = gain0 * factor
-            model.actuator_biasprm[:, :3] = bias0 * factor
-            model.actuator_forcerange[:] = range0 * factor
-            weak_now = factor
-        q_ref, v_ref = ref_qpos[k], ref_qvel[k]
-        # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
-        mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
-        root_acc[:3] = kp_r * (q_ref[:3] - data.qpos[:3]) + kd_r * (v_ref[:3] - data.qvel[:3])
-        root_acc[3:] = kp_r * rot_err + kd_r * (v_ref[3:6] - data.qvel[3:6])
-        ff = ref_force[k]
-        # 2. hinges: position actuators + clipped feed-forward
-        # the target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied
-        data.ctrl[:] = q_ref[7:] + lead * v_ref[6:]
-        lim = model.actuator_forcerange[:, 1]
-        data.qfrc_applied[6:] = np.clip(factor * ff[6:], -lim, lim)
-        # 3. root: bounded assistance
-        wrench = ff[:6] + root_inertia @ root_acc
-        force, torque = wrench[:3], wrench[3:]
-        fmax = factor * assist_limit * weight
-        tmax = fmax * ROOT_TORQUE_LEVER
-        fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
-        if fn > fmax:
-            force *= fmax / fn
-        if tn > tmax:
-            torque *= tmax / tn
-        data.qfrc_applied[:3] = force
-        data.qfrc_applied[3:6] = torque
-        all_assist[k] = np.linalg.norm(force) / weight
-        all_wrench[k, :3], all_wrench[k, 3:] = force, torque
-        data.xfrc_applied[:] = 0.0
-        for p, b in zip(pushes, push_ids, strict=True):
-            if p.start <= t < p.start + p.duration:
-                data.xfrc_applied[b, :3] += p.force
-        if k % record_every == 0:
-            i = k // record_every
-            rec_q[i] = data.qpos
-            rec_v[i] = data.qvel
-            if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2]:
-                fell = True
-        if data.ncon:
-            depth = max(0.0, -float(data.contact.dist[: data.ncon].min()))
-            deepest = max(deepest, depth)
-            if k % record_every == 0:
-                rec_p[k // record_every] = depth
-        mujoco.mj_step(model, data, nstep=SUBSTEPS)
+    with ActuatorEdits(model) as edits:
+        for k in range(T):
+            t = k * dt
+            factor = 1.0
+            for w in weakenings:
+                if w.start <= t < w.start + w.duration:
+                    factor = min(factor, w.factor)
+            edits.scale(factor)
+            q_ref, v_ref = ref_qpos[k], ref_qvel[k]
+            # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
+            mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
+            root_acc[:3] = kp_r * (q_ref[:3] - data.qpos[:3]) + kd_r * (v_ref[:3] - data.qvel[:3])
+            root_acc[3:] = kp_r * rot_err + kd_r * (v_ref[3:6] - data.qvel[3:6])
+            ff = ref_force[k]
+            # 2. hinges: the actuator carries PD and feed-forward, MuJoCo clamps their sum; the
+            # target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied,
+            # and by ff / kp so that the feed-forward is added (both scale with a weakening)
+            data.ctrl[:] = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
+            # 3. root: bounded assistance, only while the body touches the floor
+            helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
+            if helped and (assist_in_flight or _floor_contact(data, floor)):
+                wrench = ff[:6] + root_inertia @ root_acc
+                force, torque = wrench[:3], wrench[3:]
+                fmax = factor * assist_limit * weight
+                tmax = fmax * ROOT_TORQUE_LEVER
+                fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
+                if fn > fmax:
+                    force *= fmax / fn
+                if tn > tmax:
+                    torque *= tmax / tn
+            else:
+                force, torque = np.zeros(3), np.zeros(3)
+            data.qfrc_applied[:3] = force
+            data.qfrc_applied[3:6] = torque
+            all_assist[k] = np.linalg.norm(force) / weight
+            all_wrench[k, :3], all_wrench[k, 3:] = force, torque
+            data.xfrc_applied[:] = 0.0
+            for p, b in zip(pushes, push_ids, strict=True):
+                if p.start <= t < p.start + p.duration:
+                    data.xfrc_applied[b, :3] += p.force
+            i, on_record = divmod(k, record_every)
+            on_record = on_record == 0
+            if on_record:
+                rec_q[i] = data.qpos
+                rec_v[i] = data.qvel
+                rec_u[i] = data.ctrl
+                if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2] and not fell:
+                    fell, fall_frame = True, i
+            if data.ncon:
+                depth = max(0.0, -float(data.contact.dist[: data.ncon].min()))
+                deepest = max(deepest, depth)
+                if on_record:
+                    rec_p[i] = depth
+            mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
+            if on_record:
+                rec_tau[i] = data.actuator_force
+                _foot_forces(model, data, floor, side, rec_f[i])
+            if SUBSTEPS > 1:
+                mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
     # per recorded state, the mean wrench over the ticks centred on it (the impulse delivered
     # around that frame over its duration): a sample of every 4th tick would alias the 120 Hz
     # variations of the feed-forward
@@ -300,10 +406,6 @@ def track(
         lo, hi = max(0, i * record_every - half), min(T, i * record_every - half + record_every)
         rec_w[i] = all_wrench[lo:hi].mean(axis=0)
         rec_a[i] = np.linalg.norm(rec_w[i, :3]) / weight
-    if weak_now != 1.0:
-        model.actuator_gainprm[:, 0] = gain0
-        model.actuator_biasprm[:, :3] = bias0
-        model.actuator_forcerange[:] = range0
     return Tracking(
         qpos=rec_q,
         qvel=rec_v,
@@ -315,4 +417,8 @@ def track(
         penetration=deepest,
         contact_penetration=rec_p,
         unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
+        actions=rec_u,
+        joint_torque=rec_tau,
+        foot_force=rec_f,
+        fall_frame=fall_frame,
     )

@@ -81,46 +81,78 @@ def synthesize(
     workers: int | None = None,
     ray: str | None = None,
     progress: bool = True,
+    max_assistance: float | None = None,
+    max_tries: int = 20,
 ) -> DatasetSummary:
-    """Generate ``n`` clips into ``out_dir`` (see the module docstring)."""
+    """Generate ``n`` clips into ``out_dir`` (see the module docstring).
+
+    ``max_assistance`` [body weight]: keep only clips whose mean root assistance is at most this
+    (physical clips: ``sim.simulate.generate.PHYSICAL_BUDGET``); the others are dropped and more
+    tasks of the same plan (the next indices) are simulated until ``n`` clips are kept or
+    ``max_tries * n`` tasks were tried. ``summary.rejected`` counts the dropped clips per kind
+    (also in ``index.json``).
+    """
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    tasks, skipped = plan_tasks(root, n, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
+    planned, skipped = plan_tasks(root, n, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     summary = DatasetSummary(skipped=skipped)
-    for task, o in zip(
-        tasks, run_batch(generate, tasks, workers=workers, ray=ray, desc="synth", progress=progress),
-        strict=True,
-    ):  # fmt: skip
-        if not o.ok:
-            summary.skipped.append({"task": task_dict(task), "amc": task.amc, "error": o.error})
-            continue
-        clip, record = o.result
-        name = f"{task.kind}_{task.index:05d}"
-        path = out_dir / task.kind / f"{name}.npz"
-        save_npz(clip, path)
-        summary.written.append(
-            {
-                "subject": task.kind,
-                "trial": name,
-                "asf": task.asf,
-                "amc": task.amc,
-                "file": str(path.relative_to(out_dir)),
-                "frames": clip.n_frames,
-                "fps": clip.fps,
-                "notes": [],
-                "task": task_dict(task),
-                **record,
-            }
-        )
+    rejected: dict[str, int] = {}
+    tried = 0
+    while True:
+        tasks = planned[tried:]
+        tried = len(planned)
+        for task, o in zip(
+            tasks,
+            run_batch(generate, tasks, workers=workers, ray=ray, desc="synth", progress=progress),
+            strict=True,
+        ):  # fmt: skip
+            if len(summary.written) >= n:
+                continue  # enough kept: the rest of this round is not written
+            if not o.ok:
+                summary.skipped.append({"task": task_dict(task), "amc": task.amc, "error": o.error})
+                continue
+            clip, record = o.result
+            if max_assistance is not None and record["mean_assistance"] > max_assistance:
+                rejected[task.kind] = rejected.get(task.kind, 0) + 1
+                continue
+            labels = record.pop("labels", None)  # per-frame arrays: the clip file, not the index
+            name = f"{task.kind}_{task.index:05d}"
+            path = out_dir / task.kind / f"{name}.npz"
+            save_npz(clip, path, extra=labels)
+            summary.written.append(
+                {
+                    "subject": task.kind,
+                    "trial": name,
+                    "asf": task.asf,
+                    "amc": task.amc,
+                    "file": str(path.relative_to(out_dir)),
+                    "frames": clip.n_frames,
+                    "fps": clip.fps,
+                    "notes": [],
+                    "task": task_dict(task),
+                    **record,
+                }
+            )
+        missing = n - len(summary.written)
+        if max_assistance is None or missing <= 0 or tried >= max_tries * n:
+            break
+        # the next tasks of the same plan, as many as the acceptance so far suggests (+1)
+        kept = max(len(summary.written), 1)
+        more = min(max_tries * n, tried + int(np.ceil(missing * tried / kept)) + 1)
+        planned, _ = plan_tasks(root, more, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
     summary.seconds = time.perf_counter() - start
+    summary.rejected = rejected
     index = {
         "source": None if root is None else str(Path(root).resolve()),
         "skeleton": "humanoid",
         "fps": fps,
-        "synthetic": {"n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds},
+        "synthetic": {
+            "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds,
+            "max_assistance": max_assistance, "tasks_tried": tried, "rejected": rejected,
+        },
         "trials": summary.written,
         "skipped": summary.skipped,
-    }
+    }  # fmt: skip
     write_atomic(out_dir / "index.json", lambda f: f.write(json.dumps(index, indent=1).encode()))
     return summary

@@ -39,6 +39,17 @@ from sim.simulate.model import CONTROL_HZ, Gains, scaled_skeleton, sim_model
 from sim.simulate.reference import on_floor, time_warp, trial_qpos
 
 KINDS = ("track", "fall", "procedural")  # the default mix
+# a clip is "physical" when its mean root assistance is within this share of its body weight
+PHYSICAL_BUDGET = 0.05
+# per-frame learning labels stored in each clip file (``save_npz``'s ``extra``), with shapes:
+# F frames, U = nu actuators (one per hinge, the order of the clip's ``joint_names``)
+LABELS = {
+    "sim_actions": "(F, U) actuator controls: target angles [rad], feed-forward included",
+    "sim_joint_torque": "(F, U) applied hinge torques [N m] (within the human limits)",
+    "sim_assist_wrench": "(F, 6) root assistance: force [N] world frame, torque [N m] root frame",
+    "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor",
+    "sim_foot_force": "(F, 2, 3) floor contact force [N, world frame] on the left, right foot",
+}
 ALL_KINDS = (*KINDS, "follow")
 # root assistance bound [body weight]; procedural motion is not physically plausible (its feet
 # slide and its root glides), so it gets the whole body weight and the label says how much it took
@@ -127,7 +138,9 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     """Simulate one clip; returns it and a record of its parameters and tracking measures.
 
     The record holds ``generation`` (parameters and seed), ``assistance`` (per clip frame: root
-    assistance force over body weight), ``tracking_mpjpe_mm``, ``fell`` and ``mean_assistance``.
+    assistance force over body weight), ``tracking_mpjpe_mm``, ``fell`` (and ``fall_frame``),
+    ``mean_assistance``, ``physical`` (mean assistance within :data:`PHYSICAL_BUDGET`) and
+    ``labels``: the per-frame arrays of :data:`LABELS`, for the clip file, not the index.
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
@@ -187,8 +200,17 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         "mean_assistance": float(result.assistance.mean()),
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
+        "fall_frame": int(result.fall_frame),
+        "physical": bool(result.assistance.mean() <= PHYSICAL_BUDGET),
         "penetration_mm": 1000 * result.penetration,
         "contact_penetration_mm": (1000 * result.contact_penetration).tolist(),
+        "labels": {
+            "sim_actions": result.actions,
+            "sim_joint_torque": result.joint_torque,
+            "sim_assist_wrench": result.assist_wrench,
+            "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
+            "sim_foot_force": result.foot_force,
+        },
     }
     return out, record
 

@@ -6,9 +6,13 @@ module edits its output through ``mujoco.MjSpec``:
 * one position actuator per hinge whose stiffness ``kp`` and damping ``kv`` are the joint's
   reflected inertia at the standing rest pose (the diagonal of the mass matrix: the mass of the
   segments it moves times their squared lever arms) times ``omega**2`` and ``2 zeta omega``, so
-  every joint tracks with the same bandwidth; its torque limit (``actuator_forcerange``, applied
-  by the controller to the feed-forward) is ``strength`` times ``g`` times 0.2 m times the mass
-  [kg] on the heavier side of the joint (in stance an ankle holds the whole body) (N m);
+  every joint tracks with the same bandwidth, except that ``kp`` is capped at the joint's torque
+  limit over ``MIN_DEFLECTION`` (a joint reaches its peak torque only a quarter radian off
+  target: a human joint's stiffness, not a servo's), ``kv`` following the same cap;
+* each actuator's whole output (PD and feed-forward: the controller passes the feed-forward
+  through ``ctrl``) is clamped by MuJoCo to the joint's torque limit (``forcelimited``): the
+  peak isometric torque of an adult man per joint (:data:`HUMAN_PEAK_TORQUE`), scaled by the
+  body mass over 75 kg and by ``Gains.strength``;
 * each hinge's armature (rotor inertia) at least ``kp h^2`` for the step ``h``, so the stiff spine
   chain stays stable;
 * a stiff floor: contact time constant 0.005 s (MuJoCo's default 0.02 s; the floor is stiffer
@@ -40,7 +44,50 @@ from sim.model.mass import DEFAULT_BODY_MASS_KG
 CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
-LEVER = 0.2  # [m] lever of the torque limits
+MIN_DEFLECTION = 0.25  # [rad] the smallest angle error that asks for a joint's peak torque
+REFERENCE_MASS_KG = 75.0  # [kg] body mass of the peak torques below
+
+# Peak isometric joint torque [N m] of an adult man (about 75 kg), per joint and ASF axis (rx:
+# flexion/extension, rz: ab/adduction or lateral bending, ry: axial rotation), the stronger of the
+# two directions, rounded. Hip, knee, ankle, shoulder, elbow and wrist: Harbo, Brincks &
+# Andersen 2012 (Eur J Appl Physiol 112:267, isometric strength of 178 healthy adults) and
+# Anderson, Madigan & Nussbaum 2007 (J Biomech 40:3105, hip/knee/ankle torque); trunk and neck:
+# the ranges reported for isometric trunk extension (200-300 N m) and neck extension (30-60 N m).
+# Secondary axes (hip rotation, ankle inversion, spine torsion) and the hand are round figures
+# of the same order as reported values; toes, fingers and thumb get a few N m. The three spine
+# joints and the two neck joints are in series, so each carries the whole trunk (neck) torque.
+HUMAN_PEAK_TORQUE: dict[str, dict[str, float]] = {
+    "femur": {"rx": 250.0, "rz": 150.0, "ry": 80.0},
+    "tibia": {"rx": 250.0},
+    "foot": {"rx": 200.0, "rz": 50.0},
+    "toes": {"rx": 30.0},
+    "lowerback": {"rx": 250.0, "rz": 180.0, "ry": 100.0},
+    "upperback": {"rx": 250.0, "rz": 180.0, "ry": 100.0},
+    "thorax": {"rx": 200.0, "rz": 150.0, "ry": 80.0},
+    "lowerneck": {"rx": 50.0, "rz": 40.0, "ry": 20.0},
+    "upperneck": {"rx": 50.0, "rz": 40.0, "ry": 20.0},
+    "head": {"rx": 30.0, "rz": 25.0, "ry": 15.0},
+    "clavicle": {"rz": 100.0, "ry": 100.0},
+    "humerus": {"rx": 90.0, "rz": 80.0, "ry": 50.0},
+    "radius": {"rx": 75.0},
+    "wrist": {"ry": 10.0},
+    "hand": {"rx": 15.0, "rz": 15.0},
+    "fingers": {"rx": 5.0},
+    "thumb": {"rx": 5.0, "rz": 5.0},
+}
+
+
+def human_torque_limit(joint: str, body_mass_kg: float = REFERENCE_MASS_KG) -> float:
+    """Peak torque [N m] of hinge ``joint`` (a name such as ``"lfemur_rx"``): the
+    :data:`HUMAN_PEAK_TORQUE` figure scaled by ``body_mass_kg / 75`` (strength grows with muscle
+    cross-section times lever, so with size cubed, so with mass). Raises ``KeyError`` for a joint
+    the table does not know."""
+    bone, axis = joint.rsplit("_", 1)
+    if bone[:1] in "lr" and bone[1:] in HUMAN_PEAK_TORQUE:
+        bone = bone[1:]
+    return HUMAN_PEAK_TORQUE[bone][axis] * body_mass_kg / REFERENCE_MASS_KG
+
+
 # [s] floor contact time constant: at 0.01 (mixed with the body's 0.02 into 0.015) walking feet
 # sank 3-5 mm (median per step) and 19-26 mm at landings; 0.005 (>= 2 physics steps, MuJoCo's
 # stability bound) gives 0.3-0.8 mm and 5-8 mm
@@ -52,12 +99,11 @@ FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's default impedance
 @dataclass(frozen=True)
 class Gains:
     """Tracking gains: hinge bandwidth ``omega`` [rad/s] and damping ratio; root ones likewise;
-    ``strength``: hinge torque limit per kg on the heavier side of the joint, in units of
-    ``G * LEVER`` [N m / kg]."""
+    ``strength``: multiplier of the human peak joint torques (:data:`HUMAN_PEAK_TORQUE`)."""
 
     omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
-    strength: float = 2.0
+    strength: float = 1.0
     root_omega: float = 2 * np.pi * 2.0
     root_zeta: float = 1.0
 
@@ -97,26 +143,24 @@ def sim_model(
         else:
             g.contype, g.conaffinity = 2, 1
     plain = spec.compile()
-    inertia, carried = rest_inertia(plain)
-    total = total_mass(plain)
+    inertia, _ = rest_inertia(plain)
     for j in range(1, plain.njnt):
+        name = plain.joint(j).name
         a = spec.add_actuator()
-        a.name = plain.joint(j).name
-        a.target = plain.joint(j).name
+        a.name = name
+        a.target = name
         a.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        limit = gains.strength * human_torque_limit(name, body_mass_kg)
         kp = gains.omega**2 * inertia[j - 1]
-        kv = 2 * gains.zeta * gains.omega * inertia[j - 1]
+        cap = min(1.0, limit / MIN_DEFLECTION / kp)  # human stiffness; damping ratio kept
+        kp *= cap
+        kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(cap)
         a.set_to_position(kp=kp, kv=kv)
-        # Not clamped inside MuJoCo: a clamped position actuator under the implicit integrator
-        # was measured to blow up (its velocity derivative is kept while the force is capped);
-        # ``actuator_forcerange`` still holds the torque limit, which the controller applies to
-        # its feed-forward.
-        a.forcelimited = False
-        limit = gains.strength * G * LEVER * max(carried[j - 1], total - carried[j - 1])
+        a.forcelimited = True
         a.forcerange = [-limit, limit]
         # a light segment between two stiff joints (the spine) makes a mode of inertia ~ its own;
         # armature >= kp h^2 keeps every actuator mode below 1 / h (explicit-spring stability)
-        joint = spec.joint(plain.joint(j).name)
+        joint = spec.joint(name)
         joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
     return spec.compile()
 

@@ -1,0 +1,210 @@
+"""The simulated body's strength and the controller's honesty: every joint's applied torque stays
+within its human limit when driven against it, assistance needs the floor, and ``track`` leaves
+the model as it found it."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim.model.humanoid import canonical_skeleton
+from sim.simulate.controller import ActuatorEdits, Weakening, track
+from sim.simulate.model import (
+    HUMAN_PEAK_TORQUE,
+    MIN_DEFLECTION,
+    SUBSTEPS,
+    human_torque_limit,
+    sim_model,
+)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return sim_model(canonical_skeleton())
+
+
+@pytest.fixture(scope="module")
+def walk_ref(cmu_dir, model):
+    from sim.simulate.reference import on_floor, trial_qpos
+
+    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+    return on_floor(model, q)[:120]
+
+
+def test_limits_are_the_human_table_scaled_by_mass():
+    heavy = sim_model(canonical_skeleton(), body_mass_kg=150.0)
+    plain = sim_model(canonical_skeleton())
+    for i in range(plain.nu):
+        name = plain.actuator(i).name
+        bone, axis = name.rsplit("_", 1)
+        bone = bone[1:] if bone[1:] in HUMAN_PEAK_TORQUE else bone
+        assert plain.actuator_forcerange[i, 1] == pytest.approx(HUMAN_PEAK_TORQUE[bone][axis])
+        assert heavy.actuator_forcerange[i, 1] == pytest.approx(2 * human_torque_limit(name))
+        assert plain.actuator_forcelimited[i]
+        # human stiffness: the peak torque needs at least MIN_DEFLECTION of angle error
+        assert (
+            plain.actuator_gainprm[i, 0] <= plain.actuator_forcerange[i, 1] / MIN_DEFLECTION + 1e-9
+        )
+    assert (
+        human_torque_limit("lfemur_rx")
+        > human_torque_limit("lradius_rx")
+        > human_torque_limit("lfingers_rx")
+    )
+
+
+def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(model):
+    """Each control asks for several times the joint's peak torque (a target 3 rad off plus a
+    huge feed-forward, both signs); the torque MuJoCo applies (``actuator_force`` and the
+    actuator part of ``qfrc_actuator``) reaches the limit and never exceeds it."""
+    data = mujoco.MjData(model)
+    lim = model.actuator_forcerange[:, 1]
+    kp = model.actuator_gainprm[:, 0]
+    dof = model.jnt_dofadr[model.actuator_trnid[:, 0]]
+    reached = np.zeros(model.nu)
+    for sign in (1.0, -1.0):
+        mujoco.mj_resetData(model, data)
+        data.qpos[2] = 2.0  # in the air: no floor contact
+        for _ in range(60):
+            data.ctrl[:] = data.qpos[7:] + sign * (3.0 + 10 * lim / kp)
+            mujoco.mj_step(model, data)
+            f = data.actuator_force
+            assert np.all(np.abs(f) <= lim * (1 + 1e-12))
+            assert np.all(np.abs(data.qfrc_actuator[dof]) <= lim * (1 + 1e-9))
+            reached = np.maximum(reached, np.abs(f) / lim)
+    assert reached.min() > 0.999  # every joint was pushed to its limit
+
+
+def test_tracking_torques_stay_within_limits_and_weakening_is_restored(model, walk_ref):
+    before = (model.actuator_gainprm.copy(), model.actuator_biasprm.copy(),
+              model.actuator_forcerange.copy(), int(model.opt.disableflags))  # fmt: skip
+    r = track(model, walk_ref, assist_limit=0.5, weakenings=(Weakening(0.2, 10.0, 0.5),))
+    lim = model.actuator_forcerange[:, 1]
+    # weakened to half from 0.2 s on (recorded frame 6 = tick 24 = 0.2 s)
+    assert np.all(np.abs(r.joint_torque[:6]) <= lim * (1 + 1e-12))
+    assert np.all(np.abs(r.joint_torque[7:]) <= 0.5 * lim * (1 + 1e-12))
+    assert np.abs(r.joint_torque[:6]).max() > 0.5 * lim.max()  # the limits are not idle
+    after = (model.actuator_gainprm, model.actuator_biasprm, model.actuator_forcerange,
+             int(model.opt.disableflags))  # fmt: skip
+    for a, b in zip(before[:3], after[:3], strict=True):
+        assert np.array_equal(a, b)
+    assert before[3] == after[3]
+
+
+def test_model_edits_are_restored_when_tracking_raises(model):
+    gain = model.actuator_gainprm.copy()
+    flags = int(model.opt.disableflags)
+    with pytest.raises(RuntimeError), ActuatorEdits(model) as edits:
+        edits.scale(0.1)
+        edits.without_contacts()
+        assert model.actuator_gainprm[0, 0] == pytest.approx(0.1 * gain[0, 0])
+        raise RuntimeError("interrupted")
+    assert np.array_equal(model.actuator_gainprm, gain)
+    assert int(model.opt.disableflags) == flags
+
+
+def test_no_assistance_without_floor_contact(model, walk_ref):
+    """The walk lifted 50 cm for 0.3 s: nothing touches the floor, so no assistance acts and the centre of
+    mass falls freely (its height a parabola of curvature -g: internal torques cannot change
+    it); with ``assist_in_flight`` the same controller holds the body up."""
+    lifted = walk_ref[:36].copy()
+    lifted[:, 2] += 0.5
+    r = track(model, lifted, assist_limit=3.0)
+    assert r.assistance.max() == 0.0 and np.abs(r.assist_wrench).max() == 0.0
+    data = mujoco.MjData(model)
+    t = np.arange(len(r.qpos)) * SUBSTEPS / 120.0
+    com = []
+    for q in r.qpos:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        com.append(data.subtree_com[0, 2])
+    a = np.polyfit(t, com, 2)[0]
+    assert a == pytest.approx(-9.81 / 2, rel=0.02)
+    held = track(model, lifted, assist_limit=3.0, assist_in_flight=True)
+    assert held.assistance.mean() > 0.5
+
+
+def test_foot_forces_and_assistance_carry_the_body_weight(model, cmu_dir):
+    """Momentum balance over a 2 s walk: the mean vertical floor force on the feet plus the
+    vertical assistance equals the body weight (the body's vertical momentum returns near its
+    start); contact labels are where the force is."""
+    from sim.simulate.model import total_mass
+    from sim.simulate.reference import on_floor, trial_qpos
+
+    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+    r = track(model, on_floor(model, q)[:240], assist_limit=0.5)
+    weight = total_mass(model) * 9.81
+    assert not r.fell
+    support = (r.foot_force[:, :, 2].sum(axis=1) + r.assist_wrench[:, 2]) / weight
+    momentum = total_mass(model) * (r.qvel[-1, 2] - r.qvel[0, 2]) / (len(r.qpos) * 4 / 120)
+    # sampled at every 4th tick's first step: landings make the sample mean noisy (measured 5 %)
+    assert support.mean() - momentum / weight == pytest.approx(1.0, abs=0.08)
+    assert np.all(r.foot_force[:, :, 2] >= 0)  # the floor only pushes
+    both_off = (r.foot_force[:, :, 2] == 0).all(axis=1)
+    assert both_off.mean() < 0.3  # a walk has a foot down most of the time
+
+
+def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
+    """The same plan with and without the filter: the kept clips are exactly the plan's clips
+    within the budget, in plan order, bit for bit, and the rejected count is the others tried."""
+    import json
+
+    from sim.simulate.dataset import synthesize
+
+    kw = dict(kinds=("procedural",), seconds=0.5, seed=2, workers=1, progress=False)
+    full = synthesize(None, tmp_path / "all", 6, **kw)
+    means = [r["mean_assistance"] for r in full.written]
+    budget = float(np.median(means))
+    inside = [r for r in full.written if r["mean_assistance"] <= budget]
+    assert 0 < len(inside) < len(means)
+    keep = min(2, len(inside))
+    kept = synthesize(None, tmp_path / "kept", keep, max_assistance=budget, **kw)
+    assert [r["trial"] for r in kept.written] == [r["trial"] for r in inside[:keep]]
+    assert all(r["mean_assistance"] <= budget for r in kept.written)
+    last = int(kept.written[-1]["trial"].split("_")[-1])
+    assert kept.rejected == {"procedural": sum(m > budget for m in means[: last + 1])}
+    index = json.loads((tmp_path / "kept" / "index.json").read_text())
+    assert index["synthetic"]["rejected"] == kept.rejected
+    for r in kept.written:
+        with (
+            np.load(tmp_path / "kept" / r["file"]) as a,
+            np.load(tmp_path / "all" / r["file"]) as b,
+        ):
+            assert all(np.array_equal(a[k], b[k]) for k in a.files)
+
+
+def test_hdf5_export_round_trip(tmp_path):
+    import json
+
+    from sim.errors import MotionDataError
+    from sim.motion.clip import load_extra, load_npz
+    from sim.simulate.dataset import synthesize
+    from sim.simulate.export import export_hdf5, load_hdf5
+
+    synthesize(None, tmp_path / "d", 3, kinds=("procedural",), seconds=0.5, seed=1, workers=1,
+               progress=False)  # fmt: skip
+    n = export_hdf5(tmp_path / "d", tmp_path / "d.h5")
+    trials = json.loads((tmp_path / "d" / "index.json").read_text())["trials"]
+    episodes = load_hdf5(tmp_path / "d.h5")
+    assert n == len(episodes) == len(trials) == 3
+    for ep, r in zip(episodes, trials, strict=True):
+        clip = load_npz(tmp_path / "d" / r["file"])
+        labels = load_extra(tmp_path / "d" / r["file"], "sim_")
+        F = clip.n_frames
+        assert ep["file"] == r["file"] and ep["total_steps"] == F - 1
+        assert ep["physical"] == r["physical"] and ep["fall_frame"] == r["fall_frame"]
+        for k in ("qpos", "qvel", "positions", "velocities"):
+            assert np.array_equal(ep["observations"][k], getattr(clip, k))
+        assert np.array_equal(ep["actions"], labels["sim_actions"][: F - 1])
+        for k in ("joint_torque", "assist_wrench", "foot_contact", "foot_force"):
+            assert np.array_equal(ep["infos"][k], labels[f"sim_{k}"])
+        assert (
+            ep["rewards"].shape == ep["terminations"].shape == ep["truncations"].shape == (F - 1,)
+        )
+        assert ep["truncations"][-1] != ep["fell"]
+    physical = sum(r["physical"] for r in trials)
+    assert export_hdf5(tmp_path / "d", tmp_path / "p.h5", physical_only=True) == physical
+    (tmp_path / "bad.h5").write_bytes(b"not hdf5")
+    with pytest.raises(MotionDataError, match="bad.h5"):
+        load_hdf5(tmp_path / "bad.h5")
