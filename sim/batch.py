@@ -14,6 +14,7 @@ caller (the driver) writes the outputs.
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -62,6 +63,17 @@ def _call(fn: Callable, item) -> Outcome:
         return Outcome(item, error=str(e), bad_input=True)
     except Exception as e:  # a bug in one task must not cost the others; report it with its type
         return Outcome(item, error=one_line(e))
+
+
+def _init_worker(parent_pid: int) -> None:
+    """Pool initializer: one compute thread per worker (the pool's processes already fill the
+    cores; a library's own thread pool in each would oversubscribe them), then :func:`_watch_parent`."""
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"  # read by torch / BLAS when this worker first imports them
+    torch = sys.modules.get("torch")  # already imported by the parent (fork): set it; never import
+    if torch is not None:
+        torch.set_num_threads(1)
+    _watch_parent(parent_pid)
 
 
 def _watch_parent(parent_pid: int) -> None:
@@ -124,7 +136,7 @@ def run_batch(
                 bar.update()
         else:
             with ProcessPoolExecutor(
-                max_workers=workers, initializer=_watch_parent, initargs=(os.getpid(),)
+                max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),)
             ) as pool:
                 futures = {pool.submit(_call, fn, item): i for i, item in enumerate(items)}
                 for fut in as_completed(futures):

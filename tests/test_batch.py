@@ -54,3 +54,28 @@ def test_a_dead_pool_worker_is_a_failed_item_not_a_crash_of_the_batch():
     assert [o.item for o in out] == list(range(4))
     assert not out[2].ok and "BrokenProcessPool" in out[2].error
     assert all(o.result == o.item for o in out if o.ok)
+
+
+def _threads(_: int) -> tuple:
+    import os
+    import sys
+
+    torch = sys.modules.get("torch")
+    return os.environ.get("OMP_NUM_THREADS"), torch.get_num_threads() if torch else None
+
+
+def test_a_pool_worker_computes_on_one_thread():
+    """The pool's processes fill the cores: each worker's libraries get one thread (no
+    oversubscription), also torch when the parent had imported it before the pool started."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        out = run_batch(_threads, range(2), workers=2, progress=False)
+    finally:
+        torch.set_num_threads(before)
+    for o in out:
+        assert o.ok, o.error
+        omp, torch_threads = o.result
+        assert omp == "1" and torch_threads in (1, None)

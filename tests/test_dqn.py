@@ -491,3 +491,36 @@ def test_train_also_never_trains_on_clips_made_from_held_out_subjects(tmp_path, 
     assert split["test"] == ["07"]
     assert sorted(t.subject for t in train_tasks if t.subject != "02") == ["procedural", "track"]
     assert "left out 2 of 4 clips" in capsys.readouterr().err
+
+
+def test_compiled_decisions_equal_the_torch_network_on_real_clips(cmu_dir):
+    """The shipped policy decided in compiled code (encoder and head, no torch) takes exactly the
+    torch network's decisions on real clips, and its encoder's projections match torch's."""
+    from sidql.keyframes.segment_costs import segment_cost_matrix
+    from sidql.keyframes.spherical import chart
+    from sidql.learning.policy import _encode_clip
+    from sidql.learning.tasks import clip_features
+    from sim.motion.ingest import load_clips
+
+    policy = load_policy()
+    clips = []
+    for trial in ("02/02_01", "16/16_24", "35/35_01"):
+        subject = trial.split("/")[0]
+        amc = cmu_dir / f"{trial}.amc"
+        if amc.exists():
+            clips += load_clips(cmu_dir / subject / f"{subject}.asf", amc)[:3]
+    assert len(clips) >= 3
+    series = [chart(c) for c in clips]
+    feats = np.stack([clip_features(s) for s in series]).astype(np.float32)
+    costs = np.stack([segment_cost_matrix(s, "hermite") for s in series])
+    for w in (3, 5, 15):
+        np.testing.assert_array_equal(policy.decide(feats, costs, w),
+                                      policy.decide_torch(feats, costs, w))  # fmt: skip
+    enc_w, _ = policy._weights()
+    with torch.no_grad():
+        enc = policy.net.encode(torch.as_tensor(feats))
+        proj, glob = policy.net.proj(enc).numpy(), policy.net.glob(enc.mean(1)).numpy()
+    for i in range(len(feats)):
+        p, g = _encode_clip(feats[i], *enc_w)
+        np.testing.assert_allclose(p, proj[i], rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(g, glob[i], rtol=1e-4, atol=1e-5)

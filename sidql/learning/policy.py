@@ -29,9 +29,10 @@ from sim.files import MAX_POLICY_BYTES
 #: The policy shipped with the repository.
 DEFAULT_POLICY = Path(__file__).resolve().parents[1] / "data" / "policy.pt"
 
-#: The modules of :class:`KeyframeQNet` the decision kernel knows: the encoder (run in torch) and
-#: the head's linear layers (mirrored in :func:`_decide_clip`). A network with any other module
-#: set, or with these of another type or shape, is refused by :func:`head_weights`.
+#: The modules of :class:`KeyframeQNet` the decision kernels know: the encoder's layers (mirrored
+#: in :func:`_encode_clip`) and the head's linear layers (mirrored in :func:`_decide_clip`). A
+#: network with any other module set, or with these of another type or shape, is refused by
+#: :func:`encoder_weights` / :func:`head_weights`.
 ENCODER_MODULES = ("inp", "convs", "ctx")
 HEAD_MODULES = ("proj", "glob", "scal", "adv_hidden", "adv_out", "value_hidden", "value_out")
 
@@ -78,6 +79,138 @@ def head_weights(net: KeyframeQNet) -> tuple:
     )  # fmt: skip
 
 
+def encoder_weights(net: KeyframeQNet) -> tuple:
+    """The encoder's weights as float64 arrays laid out for :func:`_encode_clip`.
+
+    Checks that the encoder is the one the kernel mirrors: ``inp`` a kernel-1 ``Conv1d`` from
+    C + 1 to H channels, every ``convs`` entry a kernel-3 ``Conv1d`` H -> H with padding equal to
+    its dilation, ``ctx``, ``proj`` and ``glob`` ``nn.Linear`` with bias.
+
+    Returns:
+        (mean (C,), std (C,), inp W (C+1, H), b (H,), convs W (L, 3, H, H) as [layer, tap, in,
+        out], b (L, H), dilations (L,) int64, ctx W (H, H) in x out, b (H,), proj W (H, 4K),
+        b (4K,), glob W (H, K), b (K,)).
+    Raises:
+        TypeError: a layer of another type or shape (the kernel would silently compute
+            something else).
+    """
+    h = int(net.config["hidden"])
+    c = int(net.config["n_features"])
+    f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
+    inp = net.inp
+    if type(inp) is not nn.Conv1d or tuple(inp.weight.shape) != (h, c + 1, 1) or inp.bias is None:
+        raise TypeError(f"the compiled decision kernel needs net.inp = Conv1d({c + 1}, {h}, 1); "
+                        f"got {inp}")  # fmt: skip
+    for conv in net.convs:
+        d = conv.dilation[0] if type(conv) is nn.Conv1d else None
+        if (type(conv) is not nn.Conv1d or tuple(conv.weight.shape) != (h, h, 3)
+                or conv.padding != (d,) or conv.stride != (1,) or conv.bias is None):  # fmt: skip
+            raise TypeError(f"the compiled decision kernel needs Conv1d({h}, {h}, 3, padding=d, "
+                            f"dilation=d) in net.convs; got {conv}")  # fmt: skip
+    for name, shape in {"ctx": (h, h), "proj": (4 * h, h), "glob": (h, h)}.items():
+        m = getattr(net, name)
+        if type(m) is not nn.Linear or tuple(m.weight.shape) != shape or m.bias is None:
+            raise TypeError(f"the compiled decision kernel needs net.{name} = "
+                            f"Linear(in={shape[1]}, out={shape[0]}); got {m}")  # fmt: skip
+    n_conv = len(net.convs)
+    conv_w = np.zeros((n_conv, 3, h, h))
+    conv_b = np.zeros((n_conv, h))
+    dil = np.zeros(n_conv, np.int64)
+    for i, conv in enumerate(net.convs):
+        conv_w[i] = f(conv.weight).transpose(2, 1, 0)  # (out, in, tap) -> (tap, in, out)
+        conv_b[i] = f(conv.bias)
+        dil[i] = conv.dilation[0]
+    return (
+        f(net.feature_mean), f(net.feature_std),
+        np.ascontiguousarray(f(inp.weight)[:, :, 0].T), f(inp.bias),
+        conv_w, conv_b, dil,
+        np.ascontiguousarray(f(net.ctx.weight).T), f(net.ctx.bias),
+        np.ascontiguousarray(f(net.proj.weight).T), f(net.proj.bias),
+        np.ascontiguousarray(f(net.glob.weight).T), f(net.glob.bias),
+    )  # fmt: skip
+
+
+def _weight_key(net: KeyframeQNet) -> tuple:
+    """Identity and in-place version of every tensor of ``net``: changes whenever a weight is
+    replaced or written (optimiser steps and ``load_state_dict`` write in place, bumping it)."""
+    return tuple((id(t), t._version) for t in (*net.parameters(), *net.buffers())) + tuple(
+        id(m) for m in net.children()
+    )
+
+
+@numba.njit(cache=True, fastmath=True)
+def _encode_clip(feats, mean, std, w_in, b_in, conv_w, conv_b, dil, w_ctx, b_ctx, w_proj,
+                 b_proj, w_glob, b_glob):  # fmt: skip
+    """:meth:`KeyframeQNet.encode` of one clip followed by the head's ``proj`` and ``glob``
+    layers, in float64.
+
+    Args:
+        feats: (N, C) float32 per-frame features; the weights as :func:`encoder_weights` lays them.
+    Returns:
+        proj (N, 4K): the head's per-frame projections; glob (K,): its clip-wide term.
+    """
+    n, c = feats.shape
+    h = b_in.shape[0]
+    x = np.empty((n, h))
+    xin = np.empty(c + 1)
+    for t in range(n):
+        for i in range(c):
+            xin[i] = (feats[t, i] - mean[i]) / std[i]
+        xin[c] = -1.0 + 2.0 * t / (n - 1) if n > 1 else -1.0
+        for o in range(h):
+            x[t, o] = b_in[o]
+        for i in range(c + 1):
+            v = xin[i]
+            for o in range(h):
+                x[t, o] += w_in[i, o] * v
+        for o in range(h):
+            x[t, o] = max(x[t, o], 0.0)
+    y = np.empty((n, h))
+    for layer in range(conv_b.shape[0]):
+        d = dil[layer]
+        for t in range(n):
+            for o in range(h):
+                y[t, o] = conv_b[layer, o]
+            for tap in range(3):
+                s = t + (tap - 1) * d
+                if s < 0 or s >= n:
+                    continue
+                for i in range(h):
+                    v = x[s, i]
+                    for o in range(h):
+                        y[t, o] += conv_w[layer, tap, i, o] * v
+        for t in range(n):
+            for o in range(h):
+                x[t, o] += max(y[t, o], 0.0)
+    m = np.zeros(h)
+    for t in range(n):
+        for i in range(h):
+            m[i] += x[t, i]
+    m /= n
+    ctx = b_ctx.copy()
+    for i in range(h):
+        for o in range(h):
+            ctx[o] += w_ctx[i, o] * m[i]
+    for o in range(h):
+        ctx[o] = max(ctx[o], 0.0)
+    # enc = x + ctx; its clip mean is m + ctx
+    k4 = b_proj.shape[0]
+    proj = np.empty((n, k4))
+    for t in range(n):
+        for o in range(k4):
+            proj[t, o] = b_proj[o]
+        for i in range(h):
+            v = x[t, i] + ctx[i]
+            for o in range(k4):
+                proj[t, o] += w_proj[i, o] * v
+    glob = b_glob.copy()
+    for i in range(h):
+        v = m[i] + ctx[i]
+        for o in range(glob.shape[0]):
+            glob[o] += w_glob[i, o] * v
+    return proj, glob
+
+
 class Policy:
     """A trained Q-network and what it was trained for.
 
@@ -92,9 +225,10 @@ class Policy:
         self.uses_prior = net.config.get("prior", "greedy") == "rollout"
 
     def decide(self, features: np.ndarray, costs: np.ndarray, W: int) -> np.ndarray:
-        """Greedy (masked argmax) decisions for a batch of clips: one batched torch pass of the
-        encoder, then the head's W - 2 steps per clip in a compiled kernel (:func:`_decide_clip`,
-        the same arithmetic as :meth:`KeyframeQNet.head` in float32).
+        """Greedy (masked argmax) decisions for a batch of clips, all in compiled code: per clip
+        the encoder (:func:`_encode_clip`) and the head's W - 2 steps (:func:`_decide_clip`),
+        the arithmetic of :meth:`KeyframeQNet.encode` and :meth:`KeyframeQNet.head` in float64.
+        No torch call, so no torch threads: a decision costs one core however busy the machine.
 
         Args:
             features: (B, N, C) float32 per-frame features (:func:`sidql.learning.tasks.clip_features`).
@@ -104,17 +238,25 @@ class Policy:
             (B, W) int64 sorted keyframe indices.
         """
         feats, cost = self._check(features, costs, W)
-        with torch.no_grad():
-            enc = self.net.encode(torch.as_tensor(feats))
-            proj = self.net.proj(enc).numpy().astype(np.float64)  # (B, N, 4K)
-            glob = self.net.glob(enc.mean(1)).numpy().astype(np.float64)  # (B, K)
-        w = head_weights(self.net)  # read afresh: the network may have changed (training)
+        enc_w, head_w = self._weights()
         out = np.empty((len(feats), W), np.int64)
         for i in range(len(feats)):
+            proj, glob = _encode_clip(feats[i], *enc_w)
             out[i] = _decide_clip(
-                proj[i], glob[i], cost[i].astype(np.float64), W, self.uses_prior, *w
+                proj, glob, cost[i].astype(np.float64), W, self.uses_prior, *head_w
             )
         return out
+
+    def _weights(self) -> tuple:
+        """(encoder, head) weights for the kernels, read again whenever a tensor of the network
+        was replaced or written (training changes the network between decisions)."""
+        key = _weight_key(self.net)
+        if getattr(self, "_weights_key", None) != key:
+            self._cached_weights = (encoder_weights(self.net), head_weights(self.net))
+            # the key holds ids: keep the objects alive so that no new tensor can reuse one
+            self._weights_key, self._keyed = key, (*self.net.parameters(), *self.net.buffers(),
+                                                   *self.net.children())  # fmt: skip
+        return self._cached_weights
 
     def _check(self, features, costs, W):
         feats = np.ascontiguousarray(features, dtype=np.float32)
