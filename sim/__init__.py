@@ -12,7 +12,12 @@ themselves.
 from importlib import import_module
 
 _API = {
+    "SidqlError": "sim.errors",
+    "BadFileError": "sim.errors",
     "MotionDataError": "sim.errors",
+    "ModelFileError": "sim.errors",
+    "UnmetTargetError": "sim.errors",
+    "UnknownNameError": "sim.errors",
     "MotionDataWarning": "sim.errors",
     "Clip": "sim.motion.clip",
     "load_npz": "sim.motion.clip",

@@ -24,7 +24,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from sim.errors import MotionDataError
+from sim.errors import SidqlError
 
 PARENT_POLL_S = 0.2  # how often a pool worker checks that its parent is alive
 #: Held by a task while it writes a file; a worker whose parent died waits for it before exiting,
@@ -59,7 +59,7 @@ def one_line(e: BaseException) -> str:
 def _call(fn: Callable, item) -> Outcome:
     try:
         return Outcome(item, result=fn(item))
-    except MotionDataError as e:
+    except SidqlError as e:  # bad input (a file, a name, a target): listed, the others go on
         return Outcome(item, error=str(e), bad_input=True)
     except Exception as e:  # a bug in one task must not cost the others; report it with its type
         return Outcome(item, error=one_line(e))

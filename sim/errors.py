@@ -1,13 +1,32 @@
-"""The project's one error hierarchy for bad input."""
+"""The project's one error hierarchy: every error raised on purpose derives from :class:`SidqlError`.
+
+* :class:`BadFileError`: a file that cannot be used; names the file, the line (when known) and
+  the problem. Its kinds: :class:`MotionDataError` (ASF/AMC files, clips, ``.sidq`` streams,
+  dataset indexes) and :class:`ModelFileError` (policy and checkpoint files).
+* :class:`UnmetTargetError`: a request that cannot be met by any answer (e.g. a byte rate too low
+  for the trial).
+* :class:`UnknownNameError`: an unknown name of a method, reconstruction, kind, ...; the message
+  lists the valid ones.
+
+The command line prints any :class:`SidqlError` as one line and exits 2; a batch job lists the
+item it failed on and keeps every good result. Errors that are not ``SidqlError`` are bugs (or
+misuse of a function, e.g. an array of the wrong shape: ``ValueError``).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 
-class MotionDataError(ValueError):
-    """Bad motion data: names the file, the line (when known) and the problem.
 
-    Subclasses ``ValueError`` so generic callers can still catch it, but code in this project raises
-    only this type for malformed input, never a bare IndexError/KeyError/ValueError from deep inside.
+class SidqlError(Exception):
+    """Base of every error the project raises for bad input or an impossible request."""
+
+
+class BadFileError(SidqlError, ValueError):
+    """A file that cannot be used: names the file, the line (when known) and the problem.
+
+    A ``ValueError`` too, so generic callers can still catch it; code in this project raises one
+    of its kinds for malformed input, never a bare IndexError/KeyError/ValueError from deep inside.
     """
 
     MAX_PROBLEM = 1000  # characters; a hostile token (a 100,000-character name) is cut short
@@ -26,6 +45,43 @@ class MotionDataError(ValueError):
     def __reduce__(self):
         # Worker processes send errors back pickled; rebuild from the three fields.
         return (type(self), (self.path, self.line, self.problem))
+
+
+class MotionDataError(BadFileError):
+    """Bad motion data: an ASF/AMC file, a clip, a ``.sidq`` stream or a dataset index."""
+
+
+class ModelFileError(BadFileError):
+    """A policy or checkpoint file that is refused: not a plain tensor file (e.g. a pickle that
+    would construct arbitrary objects), unreadable, of another format or version, or of other
+    settings."""
+
+
+class UnmetTargetError(SidqlError, ValueError):
+    """A target no answer meets, e.g. a byte rate too low for the trial's fewest keyframes."""
+
+
+class UnknownNameError(SidqlError, KeyError, ValueError):
+    """An unknown name (of a method, reconstruction, clip kind, point, ...); the message lists the
+    valid ones: ``unknown method 'x'; known: random, uniform, ...``.
+
+    A ``KeyError`` and a ``ValueError`` too, so the caller of a plain lookup catches it as either.
+
+    Attributes:
+        what: what was looked up ("method", "reconstruction", ...); name: the name given;
+        known: the valid names, in their order.
+    """
+
+    def __init__(self, what: str, name, known: Iterable[str]):
+        self.what, self.name, self.known = what, name, tuple(str(k) for k in known)
+        shown = repr(name) if len(repr(name)) <= 200 else repr(name)[:200] + "..."
+        super().__init__(f"unknown {what} {shown}; known: {', '.join(self.known) or 'none'}")
+
+    def __str__(self) -> str:  # KeyError would print the message quoted
+        return str(self.args[0])
+
+    def __reduce__(self):
+        return (type(self), (self.what, self.name, self.known))
 
 
 class MotionDataWarning(UserWarning):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from sim.batch import ERROR_CHARS, run_batch
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnknownNameError
 
 
 def _work(x: int) -> int:
@@ -13,6 +13,8 @@ def _work(x: int) -> int:
         raise MotionDataError("f.amc", 7, "bad frame")
     if x == 5:
         raise ZeroDivisionError("boom")
+    if x == 6:
+        raise UnknownNameError("kind", "jump", ("track", "fall"))
     return x * x
 
 
@@ -20,9 +22,10 @@ def _work(x: int) -> int:
 def test_failures_cost_only_their_item_and_order_is_kept(workers):
     out = run_batch(_work, range(8), workers=workers, progress=False)
     assert [o.item for o in out] == list(range(8))
-    assert [o.result for o in out if o.ok] == [x * x for x in range(8) if x not in (3, 5)]
+    assert [o.result for o in out if o.ok] == [x * x for x in range(8) if x not in (3, 5, 6)]
     bad = {o.item: o for o in out if not o.ok}
-    assert set(bad) == {3, 5}
+    assert set(bad) == {3, 5, 6}
+    assert bad[6].bad_input and bad[6].error == "unknown kind 'jump'; known: track, fall"
     assert bad[3].bad_input and "f.amc" in bad[3].error and "bad frame" in bad[3].error
     assert not bad[5].bad_input and bad[5].error.startswith("ZeroDivisionError")
 

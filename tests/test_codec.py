@@ -21,7 +21,7 @@ from sidql.codec.quantise import PHI_STEP, THETA_STEP, fit_quantiser
 from sidql.codec.stream import frame_delays, horizon, plan_stream
 from sidql.keyframes.segment_costs import segment_cost_matrix, stacked
 from sidql.keyframes.spherical import chart, wrap_angle
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnmetTargetError
 
 
 @pytest.fixture(scope="module")
@@ -158,7 +158,7 @@ def test_auto_picks_the_least_error(series):
 
 
 def test_rate_below_the_max_gap_floor_is_a_clean_error(series):
-    with pytest.raises(MotionDataError, match="rate too low"):
+    with pytest.raises(UnmetTargetError, match="rate too low"):
         encode_series(series, rate=10.0, reconstruction="linear", max_gap=10)
 
 

@@ -26,11 +26,11 @@ from sidql.learning.dqn import (
     train,
 )
 from sidql.learning.env import KeyframeEnv
-from sidql.learning.files import CHECKPOINT_FORMAT, POLICY_FORMAT, ModelFileError
+from sidql.learning.files import CHECKPOINT_FORMAT, POLICY_FORMAT
 from sidql.learning.policy import DEFAULT_POLICY, Policy, load_policy
 from sidql.learning.qnet import KeyframeQNet, current_error, gain_features
 from sidql.learning.tasks import insertion_gain, keyframe_error_sum, synthetic_tasks
-from sim.errors import MotionDataError
+from sim.errors import ModelFileError, MotionDataError
 
 torch.set_num_threads(1)
 

@@ -43,7 +43,7 @@ from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
 from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, split_channels
 from sim.acclaim.reader import parse_asf
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError
 from sim.files import write_atomic
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
@@ -174,7 +174,7 @@ def _encode_one(
         quant = quantiser(bits)
         try:
             p = plan_for_budget(C, int((budget - fixed) // per_key), where)
-        except MotionDataError:
+        except UnmetTargetError:
             continue
         estimates[bits] = (_measure(series, build(p.keyframes, quant)), per_key, quant)
     if estimates:
@@ -187,9 +187,14 @@ def _encode_one(
                     C, lambda k: build(k, quant), budget, 0, recon, M, where, guess
                 )
                 out.append(finish(keys, quant))
-            except MotionDataError:
+            except UnmetTargetError:
                 pass  # no plan at that depth fits: the first depth's encoding stands
     return out
+
+
+def _where(where: str, problem: str) -> str:
+    """``problem`` prefixed with the trial it is about (when known)."""
+    return f"{where}: {problem}" if where else problem
 
 
 def _payload(enc: Encoded) -> int:
@@ -208,7 +213,7 @@ def _keys_for_budget(C, build, budget, H, recon, M, where, guess=0.5) -> np.ndar
         if H:
             p = stream_for_budget(C, H, max_keys)
             if p is None:
-                raise MotionDataError(where or None, None, f"rate too low for latency {H}")
+                raise UnmetTargetError(_where(where, f"rate too low for latency {H}"))
             return p.keyframes
         return plan_for_budget(C, max_keys, where).keyframes
 
@@ -240,10 +245,10 @@ def _keys_for_budget(C, build, budget, H, recon, M, where, guess=0.5) -> np.ndar
             break  # within two keyframes (or 1 %) of the budget
         target = nxt if size <= budget else min(nxt, len(keys) - 1)
     if best is None:
-        raise MotionDataError(
-            where or None,
-            None,
-            f"rate too low: the sparsest plan needs {size} bytes, budget {budget:.0f}",
+        raise UnmetTargetError(
+            _where(
+                where, f"rate too low: the sparsest plan needs {size} bytes, budget {budget:.0f}"
+            )
         )
     return best
 
@@ -271,7 +276,8 @@ def encode_series(
         skel_hash: 8 bytes naming the source skeleton.
 
     Raises:
-        MotionDataError: the rate cannot be met; ValueError: bad arguments.
+        UnmetTargetError: the rate cannot be met; UnknownNameError: an unknown reconstruction;
+        ValueError: bad arguments.
     """
     if (rate is None) == (max_q is None):
         raise ValueError("give exactly one of rate and max_q")
@@ -280,7 +286,7 @@ def encode_series(
     if max_q is not None and not max_q >= 0:
         raise ValueError(f"max_q must be >= 0; got {max_q}")
     if reconstruction not in CHOICES:
-        raise ValueError(f"unknown reconstruction {reconstruction!r}; known: {', '.join(CHOICES)}")
+        raise UnknownNameError("reconstruction", reconstruction, CHOICES)
     if not (0 <= latency <= 65535 and max_gap >= 1):
         raise ValueError("latency must be in 0..65535 and max_gap >= 1")
     if series.n_frames < 2:
@@ -301,7 +307,7 @@ def encode_series(
         try:
             for e in _encode_one(series, r, **common):
                 results[f"{r}/{e.stream.quantiser.bits}"] = e
-        except MotionDataError as e:
+        except UnmetTargetError as e:  # this reconstruction cannot meet the rate; others may
             errors.append(e)
     if not results:
         raise errors[0]

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sim.errors import MotionDataError
+from sim.errors import UnmetTargetError
 
 MODES = {"hermite": 0, "linear": 1, "catmull_rom": 2}
 DEFAULT_MAX_GAP = 60
@@ -197,17 +197,16 @@ def plan_for_budget(C: np.ndarray, max_keys: int, where: str = "") -> Plan:
     """The least-distortion Lagrangian plan with at most ``max_keys`` keyframes (bisection).
 
     Raises:
-        MotionDataError: even the sparsest plan the maximum gap allows needs more keyframes.
+        UnmetTargetError: even the sparsest plan the maximum gap allows needs more keyframes.
     """
     G1 = C.shape[1]
     least = least_keyframes(C)
     if max_keys < least:
-        raise MotionDataError(
-            where or None,
-            None,
+        problem = (
             f"rate too low: the maximum gap of {G1 - 1} frames needs at least {least} keyframes, "
-            f"the budget allows {max_keys}",
+            f"the budget allows {max_keys}"
         )
+        raise UnmetTargetError(f"{where}: {problem}" if where else problem)
     if _count(C, _LAM_LO) <= max_keys:
         return plan(C, _LAM_LO)
     lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)

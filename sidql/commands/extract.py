@@ -37,10 +37,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    try:
-        get(args.method)  # unknown names fail before the (slow) ingest
-    except KeyError as e:
-        raise UsageError(e.args[0]) from None
+    get(args.method)  # an unknown name fails before the (slow) ingest
     if not 2 <= args.keyframes <= args.length:
         raise UsageError(f"--keyframes must be in [2, {args.length}]; got {args.keyframes}")
     clips = load_clips(args.asf, args.amc, fps=args.fps, length=args.length, skeleton=args.skeleton)

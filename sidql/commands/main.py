@@ -12,8 +12,8 @@ import os
 import sys
 import warnings
 
-from sidql.commands.usage import ArgumentParser, UsageError, one_line_warning
-from sim.errors import MotionDataError
+from sidql.commands.usage import ArgumentParser, one_line_warning
+from sim.errors import SidqlError
 
 COMMAND_MODULES = (
     "sidql.commands.ingest",
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         try:
             return int(args.func(args) or 0)
-        except (MotionDataError, UsageError) as e:
+        except SidqlError as e:  # bad input, a bad file, an unmet target, an unknown name
             print(f"sidql {args.command}: error: {e}", file=sys.stderr)
             return 2
         except OSError as e:  # an output path that cannot be written (a folder, no permission)

@@ -7,7 +7,7 @@ import argparse
 from sidql.commands.usage import UsageError, positive
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
-from sim.errors import MotionDataError
+from sim.errors import SidqlError
 from sim.replay.render import RenderStyle
 
 DEFAULT_METHODS = ("random", "uniform", "greedy", "optimal", "pitch")
@@ -52,10 +52,7 @@ def run(args) -> int:
     streams = [m for m in args.methods if m.endswith(".sidq")]
     methods = [m for m in args.methods if not m.endswith(".sidq")]
     for name in methods:  # unknown names fail before the (slow) ingest
-        try:
-            get(name)
-        except KeyError as e:
-            raise UsageError(e.args[0]) from None
+        get(name)
     if not 2 <= args.keyframes <= 60:
         raise UsageError(f"--keyframes must be in [2, 60]; got {args.keyframes}")
     try:
@@ -64,8 +61,8 @@ def run(args) -> int:
             clips=args.clips, seed=args.seed, videos=not args.no_video,
             style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
         )  # fmt: skip
-    except ValueError as e:  # a clip number out of range (MotionDataError passes through)
-        if isinstance(e, MotionDataError):
+    except ValueError as e:  # a clip number out of range (a SidqlError passes through)
+        if isinstance(e, SidqlError):
             raise
         raise UsageError(str(e)) from None
     print(f"report: {page}")

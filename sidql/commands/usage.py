@@ -1,7 +1,7 @@
 """What every command shares for bad input: one exception, one-line errors and warnings.
 
-Every bad input exits 2 with one line on stderr: ``sidql COMMAND: error: PROBLEM``, where PROBLEM
-names the file and line when there is one (:class:`sim.errors.MotionDataError`). Warnings print as
+Every bad input exits 2 with one line on stderr: ``sidql COMMAND: error: PROBLEM``, for any
+:class:`sim.errors.SidqlError` (PROBLEM names the file and line when there is one). Warnings print as
 one line ``warning: FILE:LINE: MESSAGE`` (no Python source line).
 """
 
@@ -10,11 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from sim.errors import MotionDataWarning
+from sim.errors import MotionDataWarning, SidqlError
 
 
-class UsageError(Exception):
-    """A bad command-line value (e.g. W out of range, an unknown method); exits 2 with one line."""
+class UsageError(SidqlError):
+    """A bad command-line value (e.g. W out of range); exits 2 with one line."""
 
 
 class ArgumentParser(argparse.ArgumentParser):

@@ -33,6 +33,7 @@ from sidql.keyframes.metrics import q_error
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
 from sidql.keyframes.segment_costs import greedy_keyframes
 from sidql.keyframes.spherical import chart
+from sim.errors import UnknownNameError
 from sim.motion.clip import Clip
 
 MethodFn = Callable[..., np.ndarray]
@@ -86,7 +87,7 @@ def get(name: str) -> MethodFn:
     try:
         return METHODS[name]
     except KeyError:
-        raise KeyError(f"unknown method {name!r}; known: {', '.join(available())}") from None
+        raise UnknownNameError("method", name, available()) from None
 
 
 def select(

@@ -43,6 +43,7 @@ from sidql.keyframes.spherical import (
     protocol_indices,
     protocol_parent_indices,
 )
+from sim.errors import UnknownNameError
 from sim.motion.clip import Clip
 
 FLOAT_BYTES = 4
@@ -92,7 +93,7 @@ def get(name: str) -> Variant:
     try:
         return VARIANTS[name]
     except KeyError:
-        raise ValueError(f"unknown reconstruction {name!r}; known: {', '.join(VARIANTS)}") from None
+        raise UnknownNameError("reconstruction", name, VARIANTS) from None
 
 
 def rebuild(name: str, clip: Clip, keyframes, series: SphericalSeries | None = None):

@@ -46,7 +46,6 @@ from sidql.learning.env import KeyframeEnv
 from sidql.learning.files import (
     CHECKPOINT_FORMAT,
     POLICY_FORMAT,
-    ModelFileError,
     load_payload,
     save_payload,
 )
@@ -62,7 +61,7 @@ from sidql.learning.tasks import (
     load_tasks,
     synthetic_tasks,
 )
-from sim.errors import MotionDataError
+from sim.errors import ModelFileError, MotionDataError
 from sim.files import write_atomic
 from sim.motion.dataset import dataset_entries, find_trials, origin_subject
 
@@ -523,8 +522,9 @@ def train(args: Args) -> dict:
     ``.png`` learning curve. Deterministic for a given seed and thread count.
 
     Raises:
-        MotionDataError: no usable clips for the split, or (as :class:`ModelFileError`) a
-            checkpoint that ``--resume`` refuses (unsafe file, other format or other settings).
+        MotionDataError: no usable clips for the split.
+        ModelFileError: a checkpoint that ``--resume`` refuses (unsafe file, other format or
+            other settings).
     """
     # setup: files, checkpoint (checked before any data is read), data, networks, environments
     torch.set_num_threads(args.threads)

@@ -4,8 +4,8 @@ A file is one ``torch.save`` of a dict whose ``"format"`` entry names its kind a
 (:data:`POLICY_FORMAT`, :data:`CHECKPOINT_FORMAT`). Loading uses ``torch.load(weights_only=True)``,
 which rebuilds only tensors and plain Python values (dict, list, tuple, str, int, float, bool,
 None) and refuses any other pickled object *before* constructing it, so a crafted file cannot run
-code. Anything refused, unreadable or of another format raises :class:`ModelFileError` (a
-:class:`sim.errors.MotionDataError`: the CLI prints one line and exits 2).
+code. Anything refused, unreadable or of another format raises
+:class:`sim.errors.ModelFileError` (the CLI prints one line and exits 2).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import warnings
 
 import torch
 
-from sim.errors import MotionDataError
+from sim.errors import ModelFileError, MotionDataError
 from sim.files import MAX_CHECKPOINT_BYTES, open_regular, write_atomic
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
@@ -27,11 +27,6 @@ from sim.files import MAX_CHECKPOINT_BYTES, open_regular, write_atomic
 POLICY_FORMAT = "sidql-dqn-policy/2"
 #: Kind and version of a training checkpoint (OUT.ckpt); replay memories are stored as tensors.
 CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
-
-
-class ModelFileError(MotionDataError):
-    """A policy or checkpoint file that is refused: not a plain tensor file (e.g. a pickle that
-    would construct arbitrary objects), unreadable, or of another format or version."""
 
 
 def save_payload(path: str | os.PathLike, payload: dict) -> None:
@@ -66,8 +61,8 @@ def load_payload(
         with open_regular(path, max_bytes) as f, warnings.catch_warnings():
             warnings.simplefilter("ignore")  # e.g. "Detected pickle protocol 4": verdict follows
             payload = torch.load(f, map_location="cpu", weights_only=True)
-    except MotionDataError:  # not a regular file, too large
-        raise
+    except MotionDataError as e:  # not a regular file, too large: a refused model file
+        raise ModelFileError(e.path, e.line, e.problem) from None
     except pickle.UnpicklingError as e:
         found = re.search(r"GLOBAL ([\w.]+)", str(e))
         if found:  # a pickled object of some class or function: exactly what must never load

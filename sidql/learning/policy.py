@@ -20,10 +20,11 @@ from torch import nn
 
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
-from sidql.learning.files import POLICY_FORMAT, ModelFileError, load_payload
+from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import N_SCALARS, PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import greedy_sequences, rollout_values_batch, rollout_values_seq
 from sidql.learning.tasks import clip_features
+from sim.errors import ModelFileError
 from sim.files import MAX_POLICY_BYTES
 
 #: The policy shipped with the repository.

@@ -43,6 +43,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from sim.errors import UnknownNameError
+
 #: What the learned part starts from: "greedy" (an untrained network ranks like greedy) or
 #: "rollout" (it ranks by the exact value of finishing greedily, :mod:`sidql.learning.rollout`).
 PRIORS = ("greedy", "rollout")
@@ -65,7 +67,7 @@ class KeyframeQNet(nn.Module):
     ):
         super().__init__()
         if prior not in PRIORS:
-            raise ValueError(f"unknown prior {prior!r}; choose from {', '.join(PRIORS)}")
+            raise UnknownNameError("prior", prior, PRIORS)
         self.config = {
             "n_features": n_features, "hidden": hidden, "dilations": tuple(dilations),
             "prior": prior,

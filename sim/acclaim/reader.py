@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.errors import MotionDataError, MotionDataWarning
+from sim.errors import MotionDataError, MotionDataWarning, UnknownNameError
 from sim.files import MAX_AMC_BYTES, MAX_ASF_BYTES, read_regular
 
 INCH = 0.0254  # [m]
@@ -109,7 +109,7 @@ class Skeleton:
         try:
             return self.bones[self._index[name]]
         except KeyError:
-            raise KeyError(f"unknown bone {name!r}; known: {', '.join(self.bone_names)}") from None
+            raise UnknownNameError("bone", name, self.bone_names) from None
 
     def has_bone(self, name: str) -> bool:
         return name in self._index

@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+from sim.errors import UnknownNameError
+
 DEFAULT_BODY_MASS_KG = 75.0
 
 # de Leva (1996), Table 4: segment mass [% of body mass]; limb segments are per side.
@@ -49,7 +51,7 @@ CMU_SEGMENT: dict[str, str] = {
 def segment_fractions(sex: str = "male") -> dict[str, float]:
     """Mass fraction of every segment, one per side for limbs (``l_thigh``, ...); sums to 1."""
     if sex not in SEGMENT_MASS_PERCENT:
-        raise ValueError(f"unknown sex {sex!r}; known: {', '.join(SEGMENT_MASS_PERCENT)}")
+        raise UnknownNameError("sex", sex, SEGMENT_MASS_PERCENT)
     out = {}
     for seg, pct in SEGMENT_MASS_PERCENT[sex].items():
         if seg in ("head", "upper_trunk", "middle_trunk", "lower_trunk"):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnknownNameError
 from sim.files import write_atomic
 
 
@@ -90,7 +90,7 @@ class Clip:
         try:
             return self.names.index(name)
         except ValueError:
-            raise KeyError(f"unknown point {name!r}; known: {', '.join(self.names)}") from None
+            raise UnknownNameError("point", name, self.names) from None
 
     def bone_vectors(self) -> np.ndarray:
         """(T, J, 3) child minus parent position [m]; the root's row is zero."""

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from sim.acclaim.reader import parse_amc
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnknownNameError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
@@ -120,7 +120,7 @@ def load_motion(
         MotionDataError: malformed files (naming file, line and problem).
     """
     if skeleton not in SKELETONS:
-        raise ValueError(f"unknown skeleton {skeleton!r}; choose from {', '.join(SKELETONS)}")
+        raise UnknownNameError("skeleton", skeleton, SKELETONS)
     subject, model = subject_model(asf)
     motion = parse_amc(amc, subject)
     root_scale = 1.0

@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim.errors import UnknownNameError
+
 
 def finite_velocity(positions: np.ndarray, fps: float) -> np.ndarray:
     """(T, ..., 3) central-difference velocity [m/s] of ``positions`` (T, ..., 3) [m] (one-sided at
@@ -75,7 +77,7 @@ class PointMotion:
         idx = []
         for n in names:
             if n not in self.names:
-                raise KeyError(f"unknown point {n!r}; known: {', '.join(self.names)}")
+                raise UnknownNameError("point", n, self.names)
             idx.append(self.names.index(n))
         where = {j: k for k, j in enumerate(idx)}
         parents = []

@@ -31,6 +31,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
+from sim.errors import UnknownNameError
 from sim.files import write_atomic
 from sim.motion.points import PointMotion
 from sim.replay.capsules import bone_poses, bones_of, scene_xml
@@ -82,7 +83,7 @@ class RenderStyle:
 
     def __post_init__(self):
         if self.layout not in ("overlay", "side"):
-            raise ValueError(f"unknown layout {self.layout!r}; known: overlay, side")
+            raise UnknownNameError("layout", self.layout, ("overlay", "side"))
 
 
 DEFAULT_STYLE = RenderStyle()

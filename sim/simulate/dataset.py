@@ -18,7 +18,7 @@ import numpy as np
 
 from sim.acclaim.reader import parse_amc, parse_asf
 from sim.batch import run_batch
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnknownNameError
 from sim.files import write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
@@ -39,9 +39,9 @@ def plan_tasks(
 
     Trials that fail to parse are skipped and listed (``{"amc", "asf", "error"}``).
     """
-    bad = [k for k in kinds if k not in ALL_KINDS]
-    if bad:
-        raise ValueError(f"unknown kinds {bad}; choose from {', '.join(ALL_KINDS)}")
+    for k in kinds:
+        if k not in ALL_KINDS:
+            raise UnknownNameError("kind", k, ALL_KINDS)
     trials, skipped = [], []
     if any(k != "procedural" for k in kinds):
         if root is None:

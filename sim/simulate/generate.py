@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnknownNameError
 from sim.model.humanoid import canonical_skeleton
 from sim.model.kinematics import point_names, point_parents
 from sim.model.mass import DEFAULT_BODY_MASS_KG
@@ -127,7 +127,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["energy"] = float(rng.uniform(0.35, 0.6))
         p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
     else:
-        raise ValueError(f"unknown kind {task.kind!r}; choose from {', '.join(ALL_KINDS)}")
+        raise UnknownNameError("kind", task.kind, ALL_KINDS)
     p["assist_limit"] = ASSIST_LIMIT[task.kind]
     for push in p["pushes"]:
         push["impulse"] = [f * push["duration"] for f in push["force"]]
