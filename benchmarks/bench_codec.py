@@ -50,7 +50,7 @@ from sidql.codec.quantise import fit_quantiser  # noqa: E402
 from sidql.evaluation.rate import bytes_per_second, write_rd_figure  # noqa: E402
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error  # noqa: E402
 from sidql.keyframes.optimal import solve  # noqa: E402
-from sidql.keyframes.reconstruct import reconstruct_series  # noqa: E402
+from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.segment_costs import segment_cost_matrix  # noqa: E402
 from sidql.keyframes.spherical import (  # noqa: E402
     chart,

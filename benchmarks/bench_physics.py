@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 from sidql.evaluation.evaluate import make_case  # noqa: E402
 from sidql.evaluation.report import physics_job, trial_ground  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
-from sidql.keyframes.reconstruct import reconstruct_series  # noqa: E402
+from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.motion.ingest import load_clips  # noqa: E402

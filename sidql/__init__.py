@@ -28,7 +28,9 @@ _API = {
     "register": "sidql.keyframes.methods",
     "reconstruction_of": "sidql.keyframes.methods",
     "reconstruct": "sidql.keyframes.reconstructions",
-    "Reconstruction": "sidql.keyframes.reconstruct",
+    "Reconstruction": "sidql.keyframes.reconstructions",
+    "RECONSTRUCTIONS": "sidql.keyframes.reconstructions",
+    "CURVES": "sidql.keyframes.curves",
     "q_error": "sidql.keyframes.metrics",
     "mpjpe_mm": "sidql.keyframes.metrics",
     "segment_cost_matrix": "sidql.keyframes.segment_costs",
@@ -45,18 +47,11 @@ _API = {
     "decode_to_reconstruction": "sidql.codec.decode",
     "decode_file": "sidql.codec.decode",
 }
-#: names bound under another name in their module
-_RENAMED = {
-    "RECONSTRUCTIONS": ("sidql.keyframes.reconstructions", "VARIANTS"),
-}
 
-__all__ = sorted(set(_API) | set(_RENAMED))
+__all__ = sorted(_API)
 
 
 def __getattr__(name: str):
-    if name in _RENAMED:
-        module, attr = _RENAMED[name]
-        return getattr(import_module(module), attr)
     if name in _API:
         return getattr(import_module(_API[name]), name)
     raise AttributeError(f"module 'sidql' has no attribute {name!r}")

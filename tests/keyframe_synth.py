@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sidql.keyframes.reconstruct import interpolate
+from sidql.keyframes.curves import interpolate
 from sidql.keyframes.spherical import M_BONES, clip_from_chart, split_channels
 
 
@@ -30,9 +30,9 @@ def smooth_clip(N: int = 60, fps: float = 30.0, seed: int = 0):
     return clip_from_chart(*smooth_chart(N, fps, seed), fps=fps)
 
 
-def piecewise_clip(keyframes, N: int, fps: float, seed: int, variant: str = "hermite"):
+def piecewise_clip(keyframes, N: int, fps: float, seed: int, curve: str = "hermite"):
     """A clip whose angles and root position are, between the given keyframes, exactly the
-    curves of ``variant`` (cubic Hermite or linear) through random keyframe values and rates."""
+    curve ``curve`` (cubic Hermite or linear) through random keyframe values and rates."""
     rng = np.random.default_rng(seed)
     M = M_BONES
     values = np.zeros((N, 2 * M + 3))
@@ -44,7 +44,7 @@ def piecewise_clip(keyframes, N: int, fps: float, seed: int, variant: str = "her
     )
     values[k, 2 * M :] = rng.normal(size=(len(k), 3))
     rates[k] = rng.uniform(-1.0, 1.0, (len(k), 2 * M + 3))
-    x, xd = interpolate(values, rates, k, 1.0 / fps, variant)
+    x, xd = interpolate(values, rates, k, 1.0 / fps, curve)
     lengths = rng.uniform(0.05, 0.45, M)
     theta, phi, root = split_channels(x, M)
     dtheta, dphi, root_vel = split_channels(xd, M)

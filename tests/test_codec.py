@@ -19,6 +19,7 @@ from sidql.codec.encode import _measure, encode_series
 from sidql.codec.plan import band_costs, plan
 from sidql.codec.quantise import PHI_STEP, THETA_STEP, fit_quantiser
 from sidql.codec.stream import frame_delays, horizon, plan_stream
+from sidql.keyframes.curves import CURVES
 from sidql.keyframes.segment_costs import segment_cost_matrix, stacked
 from sidql.keyframes.spherical import chart, wrap_angle
 from sim.errors import MotionDataError, UnmetTargetError
@@ -72,13 +73,13 @@ def test_quantiser_error_is_half_a_step_and_phi_follows_the_branch(series, bits)
     ).max() <= (q.rate_step.max() / 2 + 1e-9)
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear"])
-def test_band_costs_match_the_project_segment_cost_matrix(series, variant):
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear"])
+def test_band_costs_match_the_project_segment_cost_matrix(series, reconstruction):
     """Unquantised, the band table is a band of sidql.keyframes' (N, N) matrix."""
     sub = series.frames(slice(0, 40))
     X, R = stacked(sub)
-    full = segment_cost_matrix(sub, variant)
-    C = band_costs(X, X, R if variant == "hermite" else None, 7, variant)
+    full = segment_cost_matrix(sub, reconstruction)
+    C = band_costs(X, X, R if reconstruction == "hermite" else None, 7, reconstruction)
     for i in range(40):
         for g in range(1, 8):
             if i + g < 40:
@@ -112,18 +113,18 @@ def test_programme_matches_brute_force():
         assert p.distortion == pytest.approx(best - lam * len(arg))
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear"])
-def test_programme_distortion_is_the_decoded_error(series, variant):
-    """For the separable variants the table's distortion is what the decoder's output measures
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear"])
+def test_programme_distortion_is_the_decoded_error(series, reconstruction):
+    """For the separable reconstructions the table's distortion is what the decoder's output measures
     (up to the quantisation error at the keyframes themselves)."""
-    enc = encode_series(series, rate=2500.0, reconstruction=variant)
+    enc = encode_series(series, rate=2500.0, reconstruction=reconstruction)
     s = enc.stream
     v, r = _values(series), _rates(series)
     M = series.n_bones
     Xq = s.quantiser.grid_pose(v)
-    Rq = s.quantiser.grid_rates(r) * series.dt if variant == "hermite" else None
+    Rq = s.quantiser.grid_rates(r) * series.dt if reconstruction == "hermite" else None
     C = band_costs(
-        v[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], 60, variant
+        v[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], 60, reconstruction
     )
     k = s.keyframes
     dist = sum(C[a, b - a] for a, b in itertools.pairwise(k))
@@ -152,9 +153,16 @@ def test_max_q_is_met_with_fewer_bytes_for_a_looser_target(series):
 
 def test_auto_picks_the_least_error(series):
     enc = encode_series(series, rate=1500.0, reconstruction="auto")
-    assert {k.split("/")[0] for k in enc.candidates} == set(sidq.RECONSTRUCTIONS)
+    assert {k.split("/")[0] for k in enc.candidates} == set(CURVES)
     assert enc.q == min(q for q, _ in enc.candidates.values())
     assert f"{enc.stream.reconstruction}/{enc.stream.quantiser.bits}" in enc.candidates
+
+
+def test_a_stream_names_its_curve_by_its_index_in_the_one_curve_list(series):
+    assert CURVES[:3] == ("hermite", "linear", "catmull_rom")  # codes of version-1 files
+    for code, curve in enumerate(CURVES):
+        data = encode_series(series, rate=2500.0, reconstruction=curve).data
+        assert data[5] == code and sidq.from_bytes(data).reconstruction == curve
 
 
 def test_rate_below_the_max_gap_floor_is_a_clean_error(series):
@@ -204,33 +212,33 @@ def test_fuzzed_streams_fail_cleanly(encoded, live, data):
     assert rec.positions.shape[0] == s.n_frames and np.isfinite(rec.positions).all()
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear", "catmull_rom"])
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear", "catmull_rom"])
 @pytest.mark.parametrize("latency", [4, 9, 20])
-def test_streaming_delay_is_bounded_by_the_latency(series, variant, latency):
-    enc = encode_series(series, rate=4000.0, reconstruction=variant, latency=latency)
+def test_streaming_delay_is_bounded_by_the_latency(series, reconstruction, latency):
+    enc = encode_series(series, rate=4000.0, reconstruction=reconstruction, latency=latency)
     s = enc.stream
     assert s.latency == latency
     # replay the fixed-lag plan to get the decision times and check every frame's wait
     v, r = _values(series), _rates(series)
     M = series.n_bones
-    q = fit_quantiser(v, r if variant == "hermite" else None, M)
+    q = fit_quantiser(v, r if reconstruction == "hermite" else None, M)
     Xq = q.grid_pose(v)
-    Rq = q.grid_rates(r) * series.dt if variant == "hermite" else None
-    H = horizon(latency, variant)
+    Rq = q.grid_rates(r) * series.dt if reconstruction == "hermite" else None
+    H = horizon(latency, reconstruction)
     C = band_costs(
-        v[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], min(60, H), variant
+        v[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], min(60, H), reconstruction
     )
     p = plan_stream(C, 1.0, H)
-    d = frame_delays(p.keyframes, p.decided_at, variant)
+    d = frame_delays(p.keyframes, p.decided_at, reconstruction)
     assert d.max() < latency and d.min() >= 0
     assert np.diff(s.keyframes).max() <= H
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear", "catmull_rom"])
-def test_decoder_is_causal(series, variant):
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear", "catmull_rom"])
+def test_decoder_is_causal(series, reconstruction):
     """Frames up to a keyframe (Catmull-Rom: up to the one before it) decode identically from the
     records received so far: a live decoder can emit them without the rest of the stream."""
-    s = encode_series(series, rate=1500.0, reconstruction=variant).stream
+    s = encode_series(series, rate=1500.0, reconstruction=reconstruction).stream
     full = decoded_chart(s)["values"]
     for w in (2, 4, len(s.keyframes) // 2):
         part = replace(
@@ -240,5 +248,5 @@ def test_decoder_is_causal(series, variant):
             rate_codes=None if s.rate_codes is None else s.rate_codes[: w + 1],
         )
         got = decoded_chart(part)["values"]
-        upto = s.keyframes[w - 1 if variant == "catmull_rom" else w]
+        upto = s.keyframes[w - 1 if reconstruction == "catmull_rom" else w]
         assert np.array_equal(got[: upto + 1], full[: upto + 1])

@@ -17,7 +17,7 @@ from sidql.evaluation.rate import (
     write_plot,
 )
 from sidql.keyframes.metrics import q_error
-from sidql.keyframes.reconstructions import VARIANTS
+from sidql.keyframes.reconstructions import RECONSTRUCTIONS
 
 
 @pytest.fixture(scope="module")
@@ -94,9 +94,11 @@ def test_rate_distortion_optima_beat_uniform_and_bytes_add_up(tmp_path):
         opt, uni = curves[("optimal", scheme)], curves[("uniform", scheme)]
         assert all(o <= u + 1e-12 for o, u in zip(opt["mean_q"], uni["mean_q"], strict=True))
     assert curves[("optimal", "hermite")]["bytes_per_second"][0] == pytest.approx(
-        2 * VARIANTS["hermite"].payload_bytes * 30 / 24
+        2 * RECONSTRUCTIONS["hermite"].payload_bytes * 30 / 24
     )
-    assert VARIANTS["hermite"].payload_bytes - 1 == 2 * (VARIANTS["linear"].payload_bytes - 1)
+    assert RECONSTRUCTIONS["hermite"].payload_bytes - 1 == 2 * (
+        RECONSTRUCTIONS["linear"].payload_bytes - 1
+    )
     assert bytes_per_second("linear", 60) == pytest.approx(raw_bytes_per_second() + 30)
     write_plot(rd, tmp_path / "rd.png")
     assert (tmp_path / "rd.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -87,7 +87,9 @@ def test_lazy_greedy_equals_greedy_over_the_full_cost_matrix():
 
     for seed in range(3):
         s = chart(smooth_clip(40, 30.0, seed=60 + seed))
-        for variant in ("hermite", "linear"):
-            C = segment_cost_matrix(s, variant)
+        for reconstruction in ("hermite", "linear"):
+            C = segment_cost_matrix(s, reconstruction)
             for W in (2, 4, 9, 40):
-                assert np.array_equal(greedy_keyframes(s, W, variant), greedy_from_costs(C, W))
+                assert np.array_equal(
+                    greedy_keyframes(s, W, reconstruction), greedy_from_costs(C, W)
+                )

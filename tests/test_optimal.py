@@ -18,14 +18,16 @@ def series():
     return chart(smooth_clip(60, 30.0, seed=11))
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear"])
-def test_segment_costs_sum_to_q_of_full_reconstruction(series, variant):
-    C = segment_cost_matrix(series, variant)
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear"])
+def test_segment_costs_sum_to_q_of_full_reconstruction(series, reconstruction):
+    C = segment_cost_matrix(series, reconstruction)
     N, M = series.n_frames, series.n_bones
     rng = np.random.default_rng(0)
     for W in (2, 3, 7, 20, 60):
         k = np.sort(np.concatenate([[0, N - 1], rng.choice(np.arange(1, N - 1), W - 2, False)]))
-        assert C[k[:-1], k[1:]].sum() / (N * M) == pytest.approx(q_error(series, k, variant), 1e-12)
+        assert C[k[:-1], k[1:]].sum() / (N * M) == pytest.approx(
+            q_error(series, k, reconstruction), 1e-12
+        )
     assert np.all(np.diag(C, 1) == 0) and np.all(np.tril(C) == 0) and np.all(C >= 0)
 
 
@@ -41,23 +43,23 @@ def test_segment_costs_wrap_phi_differences():
     assert segment_cost_matrix(shifted)[0, -1] > 0
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear"])
-def test_optimum_equals_brute_force_enumeration(variant):
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear"])
+def test_optimum_equals_brute_force_enumeration(reconstruction):
     s = chart(smooth_clip(60, 30.0, seed=13))
     # a short clip keeps the enumeration small: first 13 frames
 
     n = 13
     small = s.frames(slice(0, n))
-    table = optimal_table(small, variant)
+    table = optimal_table(small, reconstruction)
     for W in range(2, 8):
         best = min(
-            q_error(small, np.array((0, *inner, n - 1)), variant)
+            q_error(small, np.array((0, *inner, n - 1)), reconstruction)
             for inner in itertools.combinations(range(1, n - 1), W - 2)
         )
         k = table.keyframes(W)
         assert len(k) == W and k[0] == 0 and k[-1] == n - 1
         assert table.q(W) == pytest.approx(best, rel=1e-12)
-        assert q_error(small, k, variant) == pytest.approx(best, rel=1e-12)
+        assert q_error(small, k, reconstruction) == pytest.approx(best, rel=1e-12)
 
 
 @pytest.mark.parametrize("source", ["synthetic", "real walk"])

@@ -120,7 +120,7 @@ def test_ik_limit_penalty_keeps_a_straightening_knee_on_its_branch(cmu_dir):
     penalty the fit turned the thigh ~180 deg and bent the knee backwards (60 deg beyond limits)."""
     from sidql.evaluation.evaluate import make_case
     from sidql.keyframes.methods import select
-    from sidql.keyframes.reconstruct import reconstruct_series
+    from sidql.keyframes.reconstructions import reconstruct_series
     from sim.motion.ingest import load_clips
 
     asf = cmu_dir / "07" / "07.asf"

@@ -5,7 +5,7 @@ import pytest
 from keyframe_synth import assert_velocities_match_differences, smooth_clip
 from scipy.spatial.transform import Rotation
 
-from sidql.keyframes import pitch
+from sidql.keyframes import pitch, reconstructions
 from sidql.keyframes.metrics import bone_vectors
 from sidql.keyframes.spherical import POINTS
 from sim.model import quaternion as quat
@@ -103,7 +103,7 @@ def slerp_motion(keys, N, fps, seed):
 def test_pitch_reconstruction_is_exact_on_slerp_motion():
     keys = np.array([0, 9, 25, 59])
     clip = slerp_motion(keys, 60, 30.0, seed=33)
-    rec = pitch.reconstruct(clip, keys)
+    rec = reconstructions.rebuild("slerp", clip, keys)
     assert np.allclose(rec.positions, clip.positions, atol=1e-9)
     assert pitch.pitch_error(clip.positions, rec.positions) == pytest.approx(0.0, abs=1e-9)
 
@@ -112,8 +112,8 @@ def test_pitch_reconstruction_keeps_lengths_keyframes_and_velocity_is_the_deriva
     N = 301
     clip = smooth_clip(N, 300.0, seed=34)
     keys = np.array([0, 80, 200, 300])
-    rec = pitch.reconstruct(clip, keys)
-    assert rec.names == POINTS and rec.variant == "slerp"
+    rec = reconstructions.rebuild("slerp", clip, keys)
+    assert rec.names == POINTS and rec.reconstruction == "slerp"
     assert np.allclose(rec.positions[keys], clip.positions[keys], atol=1e-12)
     L = np.linalg.norm(bone_vectors(rec.positions, rec.parents), axis=-1)
     L0 = np.linalg.norm(bone_vectors(clip.positions, rec.parents), axis=-1)

@@ -1,4 +1,4 @@
-"""The registry of reconstructions: every variant's contract, one Q, and the cartesian variant."""
+"""The registry of reconstructions: every reconstruction's contract, one Q, and the cartesian one."""
 
 from dataclasses import replace
 from itertools import combinations
@@ -19,12 +19,12 @@ def clip():
     return smooth_clip(24, 30.0, seed=7)
 
 
-@pytest.mark.parametrize("name", list(reconstructions.VARIANTS))
-def test_every_variant_reproduces_its_keyframes_with_finite_velocities(clip, name):
+@pytest.mark.parametrize("name", list(reconstructions.RECONSTRUCTIONS))
+def test_every_reconstruction_reproduces_its_keyframes_with_finite_velocities(clip, name):
     keys = np.array([0, 5, 11, 23])
     rec = reconstructions.rebuild(name, clip, keys)
     idx = protocol_indices(clip)
-    assert rec.names == POINTS and rec.variant == name
+    assert rec.names == POINTS and rec.reconstruction == name
     assert rec.positions.shape == rec.velocities.shape == (24, len(POINTS), 3)
     assert np.allclose(rec.positions[keys], clip.positions[keys][:, idx], atol=1e-9)
     assert np.isfinite(rec.velocities).all()
@@ -34,20 +34,20 @@ def test_every_variant_reproduces_its_keyframes_with_finite_velocities(clip, nam
 def test_methods_declare_registered_reconstructions():
     assert methods.reconstruction_of("pitch") == "slerp"
     for name in methods.available():
-        assert methods.reconstruction_of(name) in reconstructions.VARIANTS
+        assert methods.reconstruction_of(name) in reconstructions.RECONSTRUCTIONS
     with pytest.raises(ValueError, match="unknown reconstruction"):
         reconstructions.get("nope")
 
 
-def test_payloads_count_floats_of_what_each_variant_sends():
-    P = {n: v.payload_bytes - 1 for n, v in reconstructions.VARIANTS.items()}
+def test_payloads_count_floats_of_what_each_reconstruction_sends():
+    P = {n: v.payload_bytes - 1 for n, v in reconstructions.RECONSTRUCTIONS.items()}
     pose = 4 * (2 * 22 + 3)
     assert P["linear"] == P["catmull_rom"] == pose and P["hermite"] == 2 * pose
     assert P["slerp"] == 4 * (23 * 4 + 3) and P["cartesian"] == 4 * 23 * 3 * 2
 
 
 @pytest.mark.parametrize(
-    "name", [n for n, v in reconstructions.VARIANTS.items() if v.cost_matrix is not None]
+    "name", [n for n, v in reconstructions.RECONSTRUCTIONS.items() if v.cost_matrix is not None]
 )
 def test_cost_kernel_and_optimum_are_q_error(clip, name):
     """One Q: the segment-cost matrix, the optimum table's q and its rebuilt angles all equal

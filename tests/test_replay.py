@@ -207,7 +207,7 @@ def test_excess_is_the_difference_to_the_baseline():
 
 def test_synthetic_clip_against_itself_and_hermite_keeps_bone_lengths():
     from sidql.keyframes.methods import select
-    from sidql.keyframes.reconstruct import reconstruct
+    from sidql.keyframes.reconstructions import reconstruct
     from sim.motion.synthetic import synthetic_motion
 
     clip = synthetic_motion(2.0, seed=3)
@@ -224,7 +224,7 @@ def test_synthetic_clip_against_itself_and_hermite_keeps_bone_lengths():
 
 def test_real_walk_hermite_reconstruction_keeps_bone_lengths(walk_clip):
     from sidql.keyframes.methods import select
-    from sidql.keyframes.reconstruct import reconstruct
+    from sidql.keyframes.reconstructions import reconstruct
 
     clip = walk_clip.slice(0, 60)
     rec = reconstruct(clip, select("optimal", clip, 5))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from keyframe_synth import smooth_chart, smooth_clip
 
-from sidql.keyframes.reconstruct import reconstruct
+from sidql.keyframes.reconstructions import reconstruct
 from sidql.keyframes.spherical import (
     BONES,
     POINTS,

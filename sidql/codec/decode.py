@@ -12,7 +12,8 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.skeleton import fit_motion, skeleton_hash
-from sidql.keyframes.reconstruct import Reconstruction, interpolate
+from sidql.keyframes.curves import interpolate
+from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import (
     POINTS,
     clip_from_chart,
@@ -67,7 +68,7 @@ def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
         theta=theta,
         phi=phi,
         keyframes=np.asarray(stream.keyframes).copy(),
-        variant=stream.reconstruction,
+        reconstruction=stream.reconstruction,
         fps=float(stream.fps),
     )
 

@@ -40,6 +40,7 @@ from sidql.codec.plan import (
 from sidql.codec.quantise import fit_quantiser
 from sidql.codec.skeleton import skeleton_hash
 from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
+from sidql.keyframes.curves import CURVES
 from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, split_channels
 from sim.acclaim.reader import parse_asf
@@ -48,7 +49,7 @@ from sim.files import write_atomic
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
 
-CHOICES: tuple[str, ...] = ("auto",) + sidq.RECONSTRUCTIONS
+CHOICES: tuple[str, ...] = ("auto",) + CURVES
 
 
 @dataclass(frozen=True)
@@ -292,7 +293,7 @@ def encode_series(
     if series.n_frames < 2:
         raise MotionDataError(where or None, None, "a trial needs at least 2 frames")
     fps = 1.0 / series.dt
-    names = sidq.RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
+    names = CURVES if reconstruction == "auto" else (reconstruction,)
     results, errors = {}, []
     common = dict(
         rate=rate,

@@ -5,7 +5,7 @@ All numbers little-endian. Layout::
     offset  size        field
     0       4           magic b"SIDQ"
     4       1           version (1)
-    5       1           reconstruction: 0 hermite, 1 linear, 2 catmull_rom
+    5       1           reconstruction: 0 hermite, 1 linear, 2 catmull_rom (index in curves.CURVES)
     6       1           coding: 0 fixed-size records (live streaming), 1 packed (LZMA, offline)
     7       1           b, bits per pose channel (8..16; always 16 with coding 0)
     8       2           latency L [frames] the encoder decided with (0: whole trial, offline)
@@ -65,13 +65,13 @@ from pathlib import Path
 import numpy as np
 
 from sidql.codec.quantise import BITS, Quantiser
+from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
 from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1
-RECONSTRUCTIONS: tuple[str, ...] = ("hermite", "linear", "catmull_rom")
 MAX_GAP = 255
 
 
@@ -80,7 +80,7 @@ class Stream:
     """A decoded container: everything needed to rebuild the motion.
 
     Attributes:
-        reconstruction: one of :data:`RECONSTRUCTIONS`.
+        reconstruction: one of :data:`CURVES`.
         latency: look-ahead [frames] the encoder used (0: offline, whole trial).
         fps: stream frame rate [1/s].
         skeleton_hash: 8 bytes identifying the source skeleton.
@@ -127,7 +127,7 @@ def header_bytes(stream: Stream) -> bytes:
     out += struct.pack(
         "<BBBBHf",
         VERSION,
-        RECONSTRUCTIONS.index(stream.reconstruction),
+        CURVES.index(stream.reconstruction),
         stream.coding,
         stream.quantiser.bits,
         stream.latency,
@@ -267,11 +267,11 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     r = _Reader(body, where)
     r.take(5, "header")
     kind, coding, bits, latency, fps = struct.unpack("<BBBHf", r.take(9, "header"))
-    if kind >= len(RECONSTRUCTIONS):
+    if kind >= len(CURVES):
         raise MotionDataError(where, None, f"unknown reconstruction code {kind}")
     if coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
         raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
-    recon = RECONSTRUCTIONS[kind]
+    recon = CURVES[kind]
     if not (np.isfinite(fps) and fps > 0):
         raise MotionDataError(where, None, f"bad frame rate {fps}")
     skel = r.take(8, "skeleton hash")

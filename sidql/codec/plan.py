@@ -30,9 +30,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from sidql.keyframes.curves import CURVES
 from sim.errors import UnmetTargetError
 
-MODES = {"hermite": 0, "linear": 1, "catmull_rom": 2}
+#: Kernel mode of each curve: its index in CURVES (0 hermite, 1 linear, 2 catmull_rom).
+MODES = {curve: i for i, curve in enumerate(CURVES)}
 DEFAULT_MAX_GAP = 60
 
 _TWO_PI = 2.0 * np.pi

@@ -39,7 +39,7 @@ from sidql.codec.format import read as read_stream
 from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
-from sidql.keyframes.reconstruct import Reconstruction
+from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
 from sim.errors import MotionDataError
@@ -216,11 +216,11 @@ def validate_clip(
             r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
         )
         hermite = [] if own != "hermite" and shown else ["hermite"]  # e.g. xyz's = uniform's
-        for variant in hermite + ([own] if own != "hermite" else []):
-            rec = from_reconstruction(reconstructions.rebuild(variant, clip, keys), clip.fps)
+        for name in hermite + ([own] if own != "hermite" else []):
+            rec = from_reconstruction(reconstructions.rebuild(name, clip, keys), clip.fps)
             checks = replay(rec, full, **kw)
             s = summarise(checks)
-            run = MethodRun(m, variant, keys, rec, checks, s, excess(s, out.baseline))
+            run = MethodRun(m, name, keys, rec, checks, s, excess(s, out.baseline))
             if physics is not None:
                 run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)
             out.runs.append(run)
@@ -229,7 +229,13 @@ def validate_clip(
         checks = replay(rec, full, **kw)
         s = summarise(checks)
         run = MethodRun(
-            stream.label, stream.motion.variant, keys, rec, checks, s, excess(s, out.baseline)
+            stream.label,
+            stream.motion.reconstruction,
+            keys,
+            rec,
+            checks,
+            s,
+            excess(s, out.baseline),
         )
         if physics is not None:
             run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sidql.keyframes.reconstruct import interpolate, validate_keyframes
+from sidql.keyframes.curves import interpolate, validate_keyframes
 from sidql.keyframes.spherical import SphericalSeries, wrap_angle
 
 
@@ -27,13 +27,14 @@ def q_from_angles(series: SphericalSeries, theta: np.ndarray, phi: np.ndarray) -
     return float(e.sum() / (series.n_frames * series.n_bones))
 
 
-def q_error(series: SphericalSeries, keyframes, variant: str = "hermite") -> float:
+def q_error(series: SphericalSeries, keyframes, reconstruction: str = "hermite") -> float:
     """The paper's mean angle error Q(S, K) (eq. 18) of reconstructing ``series`` from keyframes.
 
     Args:
         series: the true chart (N frames, M = 22 bones).
         keyframes: (W,) strictly increasing indices from 0 to N-1 (both ends included).
-        variant: "hermite" (paper), "linear" or "catmull_rom" (see :mod:`sidql.keyframes.reconstruct`).
+        reconstruction: a spherical one: "hermite" (paper), "linear" or "catmull_rom" (its curve,
+            :data:`sidql.keyframes.curves.CURVES`).
 
     Returns:
         Q [rad], averaged over the N frames (keyframes included, at zero error) and M bones.
@@ -42,7 +43,7 @@ def q_error(series: SphericalSeries, keyframes, variant: str = "hermite") -> flo
     M = series.n_bones
     values = np.concatenate([series.theta, series.phi], axis=1)
     rates = np.concatenate([series.dtheta, series.dphi], axis=1)
-    rec, _ = interpolate(values, rates, k, series.dt, variant)
+    rec, _ = interpolate(values, rates, k, series.dt, reconstruction)
     return q_from_angles(series, rec[:, :M], rec[:, M:])
 
 

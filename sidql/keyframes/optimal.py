@@ -99,15 +99,17 @@ def solve(C: np.ndarray, n_bones: int, w_max: int | None = None) -> OptimalTable
 
 
 def optimal_table(
-    series: SphericalSeries, variant: str = "hermite", w_max: int | None = None
+    series: SphericalSeries, reconstruction: str = "hermite", w_max: int | None = None
 ) -> OptimalTable:
-    """Exact optima of Q (eq. 18) for ``series`` under a separable variant, all W at once."""
-    return solve(segment_cost_matrix(series, variant), series.n_bones, w_max)
+    """Exact optima of Q (eq. 18) for ``series`` under a separable reconstruction, all W at once."""
+    return solve(segment_cost_matrix(series, reconstruction), series.n_bones, w_max)
 
 
-def optimal_keyframes(series: SphericalSeries, W: int, variant: str = "hermite") -> np.ndarray:
-    """(W,) keyframes minimising Q exactly (eq. 19) under a separable variant."""
-    return optimal_table(series, variant, w_max=W).keyframes(W)
+def optimal_keyframes(
+    series: SphericalSeries, W: int, reconstruction: str = "hermite"
+) -> np.ndarray:
+    """(W,) keyframes minimising Q exactly (eq. 19) under a separable reconstruction."""
+    return optimal_table(series, reconstruction, w_max=W).keyframes(W)
 
 
 @numba.njit(cache=True)
@@ -185,7 +187,7 @@ class CatmullRomTable:
 
 
 def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
-    """Exact minima of Q under the Catmull-Rom variant for every W from 2 to ``w_max``.
+    """Exact minima of Q under the Catmull-Rom reconstruction for every W from 2 to ``w_max``.
 
     A segment's curve depends on four keyframes (its ends and their neighbours), so the programme
     runs over triples of consecutive keyframes: O(N^5 M) for the costs, O(w_max N^4) for the DP.

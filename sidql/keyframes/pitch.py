@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sidql.keyframes.reconstruct import Reconstruction, points_reconstruction, validate_keyframes
+from sidql.keyframes.curves import validate_keyframes
 from sidql.keyframes.spherical import (
     protocol_indices,
     protocol_parents,
@@ -201,17 +201,20 @@ def _segments(keyframes: np.ndarray, N: int):
     return seg, a, b, (n - a) / (b - a)
 
 
-def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction:
-    """Li et al. 2015 reconstruction of ``clip``'s 23 protocol points from its keyframes.
+def slerp_points(
+    clip: Clip, keyframes, rig: Rig | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Li et al. 2015 reconstruction of ``clip``'s 23 protocol points from its keyframes (the
+    ``slerp`` reconstruction of :mod:`sidql.keyframes.reconstructions`).
 
     Local rotations are slerped between keyframes (shorter arc), the root position interpolated
     linearly, and points rebuilt by forward kinematics with offsets fitted to the clip (or the
     given ``rig``, from :func:`fit_rig`, to save refitting).
 
     Returns:
-        A :class:`~sidql.keyframes.reconstruct.Reconstruction` (variant "slerp"): positions and velocities
-        (N, 23, 3) world z-up [m, m/s] (velocities are the exact derivatives of the interpolants;
-        at an inner keyframe the mean of both sides), theta/phi (N, 22) of the rebuilt bones.
+        Positions and velocities (N, 23, 3) world z-up [m, m/s] (velocities are the exact
+        derivatives of the interpolants; at an inner keyframe the mean of both sides), and the
+        (23,) parent indices.
     """
     pos, local, parents = protocol_rotations(clip)
     N = clip.n_frames
@@ -249,7 +252,7 @@ def reconstruct(clip: Clip, keyframes, rig: Rig | None = None) -> Reconstruction
             + quat.cross(Om[:, p], quat.rotate(world[:, p], rig.origin[j]))
             + quat.cross(Om[:, j], quat.rotate(world[:, j], rig.offset[j]))
         )
-    return points_reconstruction(P, V, parents, k, "slerp", clip.fps)
+    return P, V, parents
 
 
 def pitch_error(true_pos: np.ndarray, rec_pos: np.ndarray) -> float:

@@ -1,6 +1,6 @@
 """The segment-cost matrix: the error of eq. 18 split over the segments between keyframes.
 
-For the "hermite" and "linear" variants the curve between keyframes ``i < j`` depends on those two
+For the "hermite" and "linear" reconstructions the curve between keyframes ``i < j`` depends on those two
 frames only, so the error of eq. 18 separates::
 
     Q(K) = sum_w C[k_w, k_{w+1}] / (N * M)
@@ -12,7 +12,7 @@ frames only, so the error of eq. 18 separates::
 ``j = i + 1`` are 0. The kernels are compiled with numba (cached on disk); one (N, N) matrix costs
 O(N^3 M / 6) operations.
 
-The "catmull_rom" variant does not separate this way (a segment's curve depends on four
+The "catmull_rom" reconstruction does not separate this way (a segment's curve depends on four
 keyframes); see :func:`sidql.keyframes.optimal.catmull_rom_optimal`.
 """
 
@@ -22,8 +22,10 @@ import numba
 import numpy as np
 
 from sidql.keyframes.spherical import SphericalSeries
+from sim.errors import UnknownNameError
 
-SEPARABLE_VARIANTS: tuple[str, ...] = ("hermite", "linear")
+#: The reconstructions (curves of :mod:`sidql.keyframes.curves`) whose Q separates over segments.
+SEPARABLE: tuple[str, ...] = ("hermite", "linear")
 
 
 _TWO_PI = 2.0 * np.pi
@@ -125,15 +127,18 @@ def _greedy(X, R, W, linear):
     return np.flatnonzero(key)
 
 
-def greedy_keyframes(series: SphericalSeries, W: int, variant: str = "hermite") -> np.ndarray:
-    """(W,) greedy keyframes under a separable variant: from both ends, W - 2 times add the frame
-    that lowers Q the most (ties: the lowest index). Computes only the segment costs it needs."""
-    if variant not in SEPARABLE_VARIANTS:
-        raise ValueError(f"greedy needs a separable variant: {', '.join(SEPARABLE_VARIANTS)}")
+def greedy_keyframes(
+    series: SphericalSeries, W: int, reconstruction: str = "hermite"
+) -> np.ndarray:
+    """(W,) greedy keyframes under a separable reconstruction: from both ends, W - 2 times add the
+    frame that lowers Q the most (ties: the lowest index). Computes only the segment costs it
+    needs."""
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
     if not 2 <= W <= series.n_frames:
         raise ValueError(f"W must be in [2, {series.n_frames}]; got {W}")
     X, R = stacked(series)
-    return _greedy(X, R, W, variant == "linear").astype(np.int64)
+    return _greedy(X, R, W, reconstruction == "linear").astype(np.int64)
 
 
 def stacked(series: SphericalSeries) -> tuple[np.ndarray, np.ndarray]:
@@ -143,23 +148,21 @@ def stacked(series: SphericalSeries) -> tuple[np.ndarray, np.ndarray]:
     return X, R
 
 
-def segment_cost_matrix(series: SphericalSeries, variant: str = "hermite") -> np.ndarray:
+def segment_cost_matrix(series: SphericalSeries, reconstruction: str = "hermite") -> np.ndarray:
     """The (N, N) segment-cost matrix C [rad] of ``series`` (see the module docstring).
 
     Args:
         series: a chart with N frames and M bones.
-        variant: "hermite" (cubic Hermite with transmitted rates) or "linear".
+        reconstruction: "hermite" (cubic Hermite with transmitted rates) or "linear"
+            (:data:`SEPARABLE`; catmull_rom: :func:`sidql.keyframes.optimal.catmull_rom_optimal`).
 
     Returns:
         (N, N) float64; ``Q(K) = sum_w C[k_w, k_{w+1}] / (N * M)``.
     """
-    if variant not in SEPARABLE_VARIANTS:
-        raise ValueError(
-            f"variant {variant!r} has no (N, N) segment-cost matrix; separable variants: "
-            f"{', '.join(SEPARABLE_VARIANTS)} (catmull_rom: see sidql.keyframes.optimal.catmull_rom_optimal)"
-        )
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
     X, R = stacked(series)
-    return _cost_matrix(X, R, variant == "linear")
+    return _cost_matrix(X, R, reconstruction == "linear")
 
 
 @numba.njit(cache=True, fastmath=True)

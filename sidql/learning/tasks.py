@@ -190,7 +190,7 @@ def clip_task(clip, *, subject: str = "") -> KeyframeTask:
     series = chart(clip)
     return KeyframeTask(
         features=clip_features(series),
-        cost=np.asarray(segment_cost_matrix(series, variant="hermite"), dtype=np.float64),
+        cost=np.asarray(segment_cost_matrix(series, "hermite"), dtype=np.float64),
         n_bones=int(series.theta.shape[1]),
         source=f"{clip.source}@{clip.start_frame}",
         subject=subject,

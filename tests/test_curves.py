@@ -1,13 +1,16 @@
-"""Reconstruction: exact on representable motion, constant bone lengths, exact keyframes,
-velocities that are the derivatives of the positions."""
+"""The curves between keyframes and the spherical reconstructions: exact on representable
+motion, constant bone lengths, exact keyframes, velocities that are the derivatives of the
+positions."""
 
 import numpy as np
 import pytest
 from keyframe_synth import assert_velocities_match_differences, piecewise_clip, smooth_clip
 
+from sidql.keyframes.curves import CURVES, interpolate, keyframe_rates
 from sidql.keyframes.metrics import bone_vectors, q_error
-from sidql.keyframes.reconstruct import SPHERICAL_CURVES, interpolate, keyframe_rates, reconstruct
+from sidql.keyframes.reconstructions import RECONSTRUCTIONS, reconstruct, reconstruct_series
 from sidql.keyframes.spherical import POINTS, chart
+from sim.errors import UnknownNameError
 
 KEYS = np.array([0, 7, 19, 20, 33, 59])
 
@@ -17,16 +20,16 @@ def truth(clip):
     return clip.positions[:, idx], clip.velocities[:, idx]
 
 
-@pytest.mark.parametrize("variant", ["hermite", "linear"])
-def test_motion_of_the_variants_own_curves_is_rebuilt_exactly(variant):
-    clip = piecewise_clip(KEYS, 60, 30.0, seed=4, variant=variant)
-    rec = reconstruct(clip, KEYS, variant)
+@pytest.mark.parametrize("curve", ["hermite", "linear"])
+def test_motion_of_the_curves_own_curves_is_rebuilt_exactly(curve):
+    clip = piecewise_clip(KEYS, 60, 30.0, seed=4, curve=curve)
+    rec = reconstruct(clip, KEYS, curve)
     pos, vel = truth(clip)
     assert np.allclose(rec.positions, pos, atol=1e-9)
     s = chart(clip)
     assert np.allclose(rec.theta, s.theta, atol=1e-9) and np.allclose(rec.phi, s.phi, atol=1e-9)
-    assert q_error(s, KEYS, variant) == pytest.approx(0.0, abs=1e-10)
-    if variant == "hermite":  # linear velocities are one-sided at keyframes
+    assert q_error(s, KEYS, curve) == pytest.approx(0.0, abs=1e-10)
+    if curve == "hermite":  # linear velocities are one-sided at keyframes
         assert np.allclose(rec.velocities, vel, atol=1e-8)
 
 
@@ -56,10 +59,10 @@ def test_catmull_rom_rates_are_central_differences_over_neighbour_keyframes():
     assert np.allclose(m[0], (x[KEYS[1]] - x[0]) / (KEYS[1] * 0.1))
 
 
-@pytest.mark.parametrize("variant", SPHERICAL_CURVES)
-def test_bone_lengths_are_constant_and_keyframes_exact(variant):
+@pytest.mark.parametrize("curve", CURVES)
+def test_bone_lengths_are_constant_and_keyframes_exact(curve):
     clip = smooth_clip(60, 30.0, seed=7)
-    rec = reconstruct(clip, np.array([0, 11, 40, 59]), variant)
+    rec = reconstruct(clip, np.array([0, 11, 40, 59]), curve)
     lengths = np.linalg.norm(bone_vectors(rec.positions, rec.parents), axis=-1)
     assert np.abs(lengths - chart(clip).lengths).max() < 1e-9
     keys = rec.keyframes
@@ -67,14 +70,14 @@ def test_bone_lengths_are_constant_and_keyframes_exact(variant):
     assert rec.names == POINTS and rec.positions.shape == (60, 23, 3)
 
 
-@pytest.mark.parametrize("variant", SPHERICAL_CURVES)
-def test_velocities_are_the_derivative_of_positions(variant):
+@pytest.mark.parametrize("curve", CURVES)
+def test_velocities_are_the_derivative_of_positions(curve):
     """At 600 fps, central differences of the rebuilt positions match the reported velocities
     away from keyframes (where linear and Catmull-Rom have kinks)."""
     N = 601
     clip = smooth_clip(N, 600.0, seed=8)
     keys = np.array([0, 150, 420, 600])
-    rec = reconstruct(clip, keys, variant)
+    rec = reconstruct(clip, keys, curve)
     assert_velocities_match_differences(rec, keys)
 
 
@@ -86,13 +89,26 @@ def test_all_frames_as_keyframes_reproduce_the_clip_and_q_is_zero():
     assert q_error(chart(clip), np.arange(30)) == 0.0
 
 
-def test_bad_keyframes_and_variants_are_rejected():
+def test_bad_keyframes_and_curves_are_rejected():
     clip = smooth_clip(10)
     for bad in ([1, 9], [0, 5, 5, 9], [0, 8], [0], [0.0, 9.0]):
         with pytest.raises(ValueError):
             reconstruct(clip, bad)
-    with pytest.raises(ValueError, match="known"):
+    with pytest.raises(UnknownNameError, match="unknown reconstruction 'spline'; known: hermite"):
         reconstruct(clip, [0, 9], "spline")
+    with pytest.raises(UnknownNameError, match="unknown curve 'spline'; known: hermite, linear"):
+        interpolate(np.zeros((10, 2)), None, [0, 9], 0.1, "spline")
+
+
+def test_every_curve_is_a_spherical_reconstruction_of_its_name():
+    clip = smooth_clip(30)
+    keys = [0, 11, 29]
+    for curve in CURVES:
+        assert curve in RECONSTRUCTIONS
+        rec = reconstruct(clip, keys, curve)
+        direct = reconstruct_series(chart(clip), keys, curve)
+        assert rec.reconstruction == direct.reconstruction == curve
+        assert np.array_equal(rec.positions, direct.positions)
 
 
 def test_interpolate_hermite_reproduces_cubics_on_any_grid():
