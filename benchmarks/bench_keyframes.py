@@ -31,7 +31,8 @@ sys.path.insert(0, str(REPO))
 from sidql.keyframes.methods import naive_greedy  # noqa: E402
 from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.segment_costs import greedy_keyframes, segment_cost_matrix  # noqa: E402
-from sidql.keyframes.spherical import chart, wrap_angle  # noqa: E402
+from sidql.keyframes.spherical import chart  # noqa: E402
+from sim.model.angles import wrap_angle  # noqa: E402
 
 
 def load(data: Path, n_clips: int):

@@ -21,8 +21,9 @@ from sidql.codec.quantise import PHI_STEP, THETA_STEP, fit_quantiser
 from sidql.codec.stream import frame_delays, horizon, plan_stream
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.segment_costs import segment_cost_matrix, stacked
-from sidql.keyframes.spherical import chart, wrap_angle
+from sidql.keyframes.spherical import chart
 from sim.errors import MotionDataError, UnmetTargetError
+from sim.model.angles import wrap_angle
 
 
 @pytest.fixture(scope="module")
@@ -226,7 +227,11 @@ def test_streaming_delay_is_bounded_by_the_latency(series, reconstruction, laten
     Rq = q.grid_rates(r) * series.dt if reconstruction == "hermite" else None
     H = horizon(latency, reconstruction)
     C = band_costs(
-        v[:, : 2 * M], Xq[:, : 2 * M], None if Rq is None else Rq[:, : 2 * M], min(60, H), reconstruction
+        v[:, : 2 * M],
+        Xq[:, : 2 * M],
+        None if Rq is None else Rq[:, : 2 * M],
+        min(60, H),
+        reconstruction,
     )
     p = plan_stream(C, 1.0, H)
     d = frame_delays(p.keyframes, p.decided_at, reconstruction)

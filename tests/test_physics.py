@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 
 from sim.model import quaternion as quat
+from sim.model.angles import wrap_angle
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.rotations import Y_UP_TO_Z_UP
 from sim.physics.analysis import PhysicsJob
 from sim.physics.contacts import contact_metrics, label_contacts
 from sim.physics.dynamics import InverseDynamics, derivatives, pyramid, residual_wrench
 from sim.physics.ground import Ground, estimate_ground
-from sim.physics.ik import HumanoidIK, anatomical_ranges, hinge_names, limit_excess, wrap_angles
+from sim.physics.ik import HumanoidIK, anatomical_ranges, hinge_names, limit_excess
 from sim.replay.checks import FrameChecks, self_penetration_excess
 
 PROTOCOL = (
@@ -110,7 +111,7 @@ def test_ik_recovers_the_originals_points_and_observed_angles(walk):
     assert guessed.error.max() < 1e-9 and np.abs(guessed.qpos - clip.qpos[:20]).max() < 1e-9
     names = hinge_names(model)
     limbs = [k for k, n in enumerate(names) if n.split("_")[0][1:] in ("femur", "tibia", "humerus")]
-    d = np.abs(wrap_angles(warm.qpos[:, 7:] - clip.qpos[:20, 7:]))[:, limbs]
+    d = np.abs(wrap_angle(warm.qpos[:, 7:] - clip.qpos[:20, 7:]))[:, limbs]
     assert np.degrees(d.max()) < 0.1
     assert np.abs(warm.qpos[:, :3] - clip.qpos[:20, :3]).max() < 1e-6
 

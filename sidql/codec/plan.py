@@ -32,13 +32,11 @@ import numpy as np
 
 from sidql.keyframes.curves import CURVES
 from sim.errors import UnmetTargetError
+from sim.model.angles import wrap_angle
 
 #: Kernel mode of each curve: its index in CURVES (0 hermite, 1 linear, 2 catmull_rom).
 MODES = {curve: i for i, curve in enumerate(CURVES)}
 DEFAULT_MAX_GAP = 60
-
-_TWO_PI = 2.0 * np.pi
-_INV_TWO_PI = 1.0 / _TWO_PI
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -87,7 +85,7 @@ def _band_costs(X, Xq, Rq, G, mode):
                 acc = 0.0
                 for d in range(D):
                     v = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
-                    v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                    v = wrap_angle(v)
                     acc += abs(v)
                 total += acc
             C[i, g] = total

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from sidql.keyframes.curves import interpolate, validate_keyframes
-from sidql.keyframes.spherical import SphericalSeries, wrap_angle
+from sidql.keyframes.spherical import SphericalSeries
+from sim.model.angles import wrap_angle
 
 
 def q_from_angles(series: SphericalSeries, theta: np.ndarray, phi: np.ndarray) -> float:
@@ -18,7 +19,7 @@ def q_from_angles(series: SphericalSeries, theta: np.ndarray, phi: np.ndarray) -
     Args:
         series: the true chart (N frames, M bones).
         theta, phi: (N, M) reconstructed angles [rad] (phi in any branch: differences are wrapped
-            to (-pi, pi]).
+            to [-pi, pi), :func:`sim.model.angles.wrap_angle`).
 
     Returns:
         ``(1 / (N M)) sum_{n, m} |wrap(theta~ - theta)| + |wrap(phi~ - phi)|`` [rad].

@@ -23,21 +23,18 @@ import numpy as np
 
 from sidql.keyframes.spherical import SphericalSeries
 from sim.errors import UnknownNameError
+from sim.model.angles import wrap_angle
 
 #: The reconstructions (curves of :mod:`sidql.keyframes.curves`) whose Q separates over segments.
 SEPARABLE: tuple[str, ...] = ("hermite", "linear")
-
-
-_TWO_PI = 2.0 * np.pi
-_INV_TWO_PI = 1.0 / _TWO_PI
 
 
 @numba.njit(cache=True, fastmath=True)
 def _cost_matrix(X, R, linear):
     """X: (N, D) angles [rad]; R: (N, D) rates times dt [rad/frame]; linear: bool.
 
-    The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01), and the
-    wrapping is branch-free (``v - 2 pi floor(v / 2 pi + 1/2)``) so the inner loop vectorises.
+    The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01); the wrap
+    (:func:`sim.model.angles.wrap_angle`) is branch-free, so the inner loop vectorises.
     """
     N, D = X.shape
     C = np.zeros((N, N))
@@ -53,7 +50,7 @@ def _cost_matrix(X, R, linear):
                 acc = 0.0
                 for d in range(D):
                     v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
-                    v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                    v = wrap_angle(v)
                     acc += abs(v)
                 total += acc
             C[i, j] = total
@@ -82,7 +79,7 @@ def _segment_cost(X, R, i, j, linear):
         acc = 0.0
         for d in range(D):
             v = (X[i, d] - X[n, d]) + h01 * (X[j, d] - X[i, d]) + h10 * R[i, d] + h11 * R[j, d]
-            v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+            v = wrap_angle(v)
             acc += abs(v)
         total += acc
     return total
@@ -210,7 +207,7 @@ def _catmull_rom_costs(X):
                     for f in range(y + 1, z):
                         for d in range(D):
                             v = A[f, d] + ha[f] * ma[d] + hb[f] * mb[d]
-                            v = v - _TWO_PI * np.floor(v * _INV_TWO_PI + 0.5)
+                            v = wrap_angle(v)
                             total += abs(v)
                     Q[x + 1, y, z, n] = total
     return Q

@@ -20,7 +20,7 @@ The chart's poles are the horizontal directions ``+-z_cmu`` (``-+y_w``).
 ``atan2(0, 0) = 0`` gives ``phi = 0`` on the pole itself. Positions rebuilt from the chart stay
 exact at keyframes (``sin(theta)`` multiplies every ``phi`` term), but a huge ``phi_dot`` at a
 keyframe near a pole makes the interpolating cubic in ``phi`` spin, so reconstruction near the
-poles is poor; the error measure stays bounded because angle differences are wrapped to (-pi, pi].
+poles is poor; the error measure stays bounded because angle differences are wrapped to [-pi, pi).
 
 Pure numpy. Units: metres, seconds, radians.
 """
@@ -35,6 +35,7 @@ import numpy as np
 
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
+from sim.model.angles import wrap_angle
 from sim.model.rotations import y_up_to_z_up, z_up_to_y_up
 from sim.motion.clip import Clip
 
@@ -78,11 +79,6 @@ SIN_EPS = 1e-6
 #: :data:`sim.model.rotations.Y_UP_TO_Z_UP`.
 world_to_chart = z_up_to_y_up
 chart_to_world = y_up_to_z_up
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Angles [rad] wrapped to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=float), 2.0 * np.pi)
 
 
 @dataclass(frozen=True)
@@ -265,7 +261,7 @@ def _chart_kernel(P, V, parents, sin_eps):
             if n > 0:  # unwrap like numpy: steps of pi or more are taken modulo 2 pi
                 d = raw - prev
                 if abs(d) >= np.pi:
-                    dm = (d + np.pi) % (2.0 * np.pi) - np.pi
+                    dm = wrap_angle(d)
                     if dm == -np.pi and d > 0:
                         dm = np.pi
                     d = dm

@@ -49,6 +49,8 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import savgol_filter
 
+from sim.model.angles import wrap_angle
+
 MU = 0.8  # friction coefficient of the ground (shoe sole on a floor)
 PYRAMID_EDGES = 4
 TORQUE_SCALE_M = 1.0  # [m] weight of torque rows against force rows in the fit
@@ -78,7 +80,7 @@ def tangent_path(model, qpos: np.ndarray) -> np.ndarray:
     hinge = model.jnt_type[model.dof_jntid] == mujoco.mjtJoint.mjJNT_HINGE
     for t in range(1, T):
         mujoco.mj_differentiatePos(model, v, 1.0, q[t - 1], q[t])
-        v[hinge] = (v[hinge] + np.pi) % (2 * np.pi) - np.pi
+        v[hinge] = wrap_angle(v[hinge])
         s[t] = s[t - 1] + v
     return s
 

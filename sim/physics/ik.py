@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 
 from sim.model import quaternion as quat
+from sim.model.angles import wrap_angle
 
 #: Hinges of bones whose CMU channels are junk or unobserved (hands, fingers, thumbs, toes): left
 #: out of the joint-limit check.
@@ -240,11 +241,6 @@ class HumanoidIK:
         return Fit(qpos, err, its)
 
 
-def wrap_angles(a: np.ndarray) -> np.ndarray:
-    """Angles [rad] wrapped into [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
 def anatomical_ranges(model) -> dict[str, tuple[float, float]]:
     """Hinge name -> (lo, hi) [rad] of every limited hinge except :data:`NON_ANATOMICAL` bones'."""
     out = {}
@@ -276,7 +272,7 @@ def limit_excess(qpos: np.ndarray, model, hinges=None) -> np.ndarray:
     if hinges is not None:
         ranges = {k: v for k, v in ranges.items() if k in set(hinges)}
     names = hinge_names(model)
-    q = wrap_angles(np.asarray(qpos)[:, 7:])
+    q = wrap_angle(np.asarray(qpos, dtype=np.float64)[:, 7:])
     keep = [k for k, n in enumerate(names) if n in ranges]
     if not keep:
         return np.zeros(len(q))
