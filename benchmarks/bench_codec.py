@@ -61,6 +61,7 @@ from sidql.keyframes.spherical import (  # noqa: E402
 from sim.errors import MotionDataError  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 
 COUNTS = (2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
 LATENCIES = (2, 4, 8, 15, 30, 60, 10000)
@@ -279,7 +280,7 @@ def write_plot(res, path):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "cmu")
+    ap.add_argument("--data", type=Path, default=default_data_dir())
     ap.add_argument("--plot", type=Path, default=REPO / "docs" / "codec_rate_distortion.png")
     ap.add_argument("--json", type=Path, default=None, help="also write all numbers here")
     ap.add_argument("--latency-rate", type=float, default=942.5, help="B/s of the latency table")

@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from sim.motion.ingest import load_motion  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 from sim.physics.contacts import contact_metrics, trial_contacts  # noqa: E402
 from sim.physics.ground import FLAT_TOLERANCE, estimate_ground, horizontal_speed  # noqa: E402
 
@@ -59,7 +60,7 @@ def trials(data: Path):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "cmu")
+    ap.add_argument("--data", type=Path, default=default_data_dir())
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--write", action="store_true", help="write docs/results/contacts.md")
     a = ap.parse_args(argv)

@@ -23,6 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from sim.paths import default_data_dir  # noqa: E402
+
 
 def per_clip_ms(fn, n_clips: int, repeat: int = 5) -> float:
     """Best of ``repeat`` timings of ``fn()`` (which handles ``n_clips`` clips), per clip [ms]."""
@@ -36,7 +38,7 @@ def per_clip_ms(fn, n_clips: int, repeat: int = 5) -> float:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared/cmu"))
+    parser.add_argument("--data", default=str(default_data_dir() or ""))
     parser.add_argument("--keyframes", type=int, nargs="+", default=[5, 15])
     parser.add_argument("--policy", default=None, help="policy file (default: the shipped one)")
     args = parser.parse_args()

@@ -23,6 +23,7 @@ import numpy as np  # noqa: E402
 import sim.acclaim.reader as acclaim  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 
 
 def run(trials, repeats: int = 3) -> tuple[float, dict]:
@@ -41,7 +42,7 @@ _source_frames: dict = {}  # AMC path -> number of 120 Hz frames
 
 
 def main() -> None:
-    root = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).parents[2] / "shared" / "cmu")
+    root = Path(sys.argv[1] if len(sys.argv) > 1 else default_data_dir())
     trials = find_trials(root)
     warnings.simplefilter("ignore", acclaim.MotionDataWarning)
     for t in trials:  # build (and cache) every subject's model outside the timing

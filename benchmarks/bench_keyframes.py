@@ -33,6 +33,7 @@ from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.segment_costs import greedy_keyframes, segment_cost_matrix  # noqa: E402
 from sidql.keyframes.spherical import chart  # noqa: E402
 from sim.model.angles import wrap_angle  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 
 
 def load(data: Path, n_clips: int):
@@ -86,7 +87,7 @@ def numpy_cost_matrix(series) -> np.ndarray:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--data", type=Path, default=REPO.parent / "shared" / "cmu")
+    p.add_argument("--data", type=Path, default=default_data_dir())
     p.add_argument("--clips", type=int, default=20)
     p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args()

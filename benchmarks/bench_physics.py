@@ -46,6 +46,7 @@ from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.motion.ingest import load_clips  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 from sim.physics.dynamics import InverseDynamics  # noqa: E402
 from sim.physics.ik import Fit, HumanoidIK  # noqa: E402
 
@@ -168,7 +169,7 @@ def part2(data: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "cmu")
+    ap.add_argument("--data", type=Path, default=default_data_dir())
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--eval", action="store_true", help="also time sidql eval with/without physics")
     args = ap.parse_args()

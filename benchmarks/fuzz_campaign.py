@@ -42,6 +42,7 @@ from acclaim_mutations import Breach, check_outcome, mutate, seed_amc  # noqa: E
 from tqdm import tqdm  # noqa: E402
 
 from sim.motion.dataset import find_trials  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 
 BAD = ("foreign", "non-finite", "bad-error", "bad-name", "hang")
 
@@ -217,7 +218,7 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=2, help="worker processes")
     p.add_argument("--full-every", type=int, default=4, help="run the full ingest every k-th input")
     p.add_argument(
-        "--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "cmu"),
+        "--data", default=default_data_dir(),
         help="folder of CMU files (the seeds)",
     )  # fmt: skip
     p.add_argument("--out", default="fuzz_campaign.json", help="JSON summary (repros beside it)")

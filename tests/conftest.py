@@ -1,4 +1,5 @@
-"""Shared fixtures: the real CMU files beside the repository (../shared/cmu)."""
+"""Shared fixtures: the real CMU files (the data folder setting of :mod:`sim.paths`: $SIDQL_DATA,
+else ../shared/cmu beside the checkout)."""
 
 from __future__ import annotations
 
@@ -7,17 +8,19 @@ from pathlib import Path
 
 import pytest
 
+from sim.paths import DATA_ENV, default_data_dir  # standard library only: MuJoCo not yet imported
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 REPO = Path(__file__).resolve().parent.parent
-CMU = Path(os.environ.get("SIDQL_CMU", REPO.parent / "shared" / "cmu"))
+CMU = default_data_dir()
 
 
 @pytest.fixture(scope="session")
 def cmu_dir() -> Path:
     """The real CMU data folder; tests that need it skip (saying why) when it is absent."""
-    if not (CMU / "MANIFEST.tsv").exists():
-        pytest.skip(f"real CMU data not found at {CMU} (set SIDQL_CMU)")
+    if CMU is None or not (CMU / "MANIFEST.tsv").exists():
+        pytest.skip(f"real CMU data not found at {CMU or '../shared/cmu'} (set {DATA_ENV})")
     return CMU
 
 

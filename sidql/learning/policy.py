@@ -26,9 +26,10 @@ from sidql.learning.rollout import greedy_sequences, rollout_values_batch, rollo
 from sidql.learning.tasks import clip_features
 from sim.errors import ModelFileError
 from sim.files import MAX_POLICY_BYTES
+from sim.paths import package_file
 
-#: The policy shipped with the repository.
-DEFAULT_POLICY = Path(__file__).resolve().parents[1] / "data" / "policy.pt"
+#: The policy shipped inside the package.
+DEFAULT_POLICY = package_file("sidql", "data/policy.pt")
 
 #: The modules of :class:`KeyframeQNet` the decision kernels know: the encoder's layers (mirrored
 #: in :func:`_encode_clip`) and the head's linear layers (mirrored in :func:`_decide_clip`). A

@@ -33,10 +33,12 @@ from sim.files import write_atomic
 from sim.model import quaternion as quat
 from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
+from sim.paths import package_file
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
-CANONICAL_ASF = Path(__file__).resolve().parents[1] / "data" / "canonical.asf"
-HUMANOID_XML = MODELS_DIR / "cmu_humanoid.xml"
+#: The canonical CMU skeleton (the mean of CMU's) and the shared humanoid generated from it,
+#: shipped inside the package (``models/cmu_humanoid.xml`` in a checkout links to the latter).
+CANONICAL_ASF = package_file("sim", "data/canonical.asf")
+HUMANOID_XML = package_file("sim", "data/cmu_humanoid.xml")
 
 # Capsule radii [m] for CMU's bone names; other bones get one from their length.
 _RADIUS = {
@@ -221,18 +223,18 @@ def subject_model(asf_path: str | os.PathLike):
 
 @lru_cache(maxsize=1)
 def canonical_skeleton() -> Skeleton:
-    """The canonical CMU skeleton behind ``models/cmu_humanoid.xml``."""
+    """The canonical CMU skeleton behind the shared humanoid (:data:`CANONICAL_ASF`)."""
     return parse_asf(CANONICAL_ASF)
 
 
 @lru_cache(maxsize=1)
 def humanoid_model():
-    """(skeleton, MjModel) of the shared humanoid ``models/cmu_humanoid.xml``."""
+    """(skeleton, MjModel) of the shared humanoid (:data:`HUMANOID_XML`)."""
     return canonical_skeleton(), mujoco.MjModel.from_xml_path(str(HUMANOID_XML))
 
 
 def write_humanoid_xml(path: str | os.PathLike = HUMANOID_XML) -> Path:
-    """Regenerate ``models/cmu_humanoid.xml`` from the canonical skeleton."""
+    """Regenerate the shared humanoid (:data:`HUMANOID_XML`) from the canonical skeleton."""
     text = build_mjcf(canonical_skeleton(), model_name="cmu_humanoid")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
