@@ -16,6 +16,9 @@ and never imports torch (only ``sidql.learning.dqn`` / ``policy`` do, when train
 
 from importlib import import_module
 
+#: The version of the ``sidql`` distribution (pyproject.toml reads it from here).
+__version__ = "0.1.0"
+
 _API = {
     "load_clips": "sim.motion.ingest",
     "load_motion": "sim.motion.ingest",

@@ -12,6 +12,7 @@ import os
 import sys
 import warnings
 
+from sidql import __version__
 from sidql.commands.usage import ArgumentParser, one_line_warning
 from sim.errors import SidqlError
 
@@ -34,6 +35,7 @@ def build_parser() -> ArgumentParser:
         prog="sidql",
         description="MuJoCo testbed for motion-capture keyframe extraction and reconstruction.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
