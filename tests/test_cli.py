@@ -37,7 +37,7 @@ def test_bad_w_exits_2_with_one_line(trial, tmp_path, capsys):
 
 def test_unknown_method_exits_2_with_one_unquoted_line(trial, tmp_path, capsys):
     asf, amc = trial
-    assert cli.main(["extract", asf, amc, "--keyframes", "6", "--method", "nope"]) == 2
+    assert cli.main(["extract", asf, amc, "--keyframes", "6", "--methods", "nope"]) == 2
     line = one_error_line(capsys, "extract")
     assert "unknown method 'nope'; known:" in line and not line.endswith('"')
     assert cli.main(["report", asf, amc, "--methods", "nope", "--out", str(tmp_path)]) == 2
@@ -98,7 +98,7 @@ def test_bad_counts_rates_and_out_paths_exit_2_and_leave_nothing(trial, tmp_path
     asf, amc = trial
     out = tmp_path / "out"
     for argv, command in (
-        (["dataset", str(tmp_path), "--out", str(out), "--workers", "-1"], "dataset"),
+        (["dataset", "--data", str(tmp_path), "--out", str(out), "--workers", "-1"], "dataset"),
         (["eval", "--data", str(tmp_path), "--workers", "0", "--out", str(out)], "eval"),
         (["synth", "--n", "1", "--out", str(out), "--fps", "0"], "synth"),
         (
@@ -109,8 +109,8 @@ def test_bad_counts_rates_and_out_paths_exit_2_and_leave_nothing(trial, tmp_path
             ["synth", "--n", "1", "--out", str(out), "--seconds", "0.01", "--kinds", "procedural"],
             "synth",
         ),
-        (["synth", "--n", "1", "--out", str(out), "--from", str(tmp_path / "no")], "synth"),
-        (["dataset", str(tmp_path / "no"), "--out", str(out)], "dataset"),
+        (["synth", "--n", "1", "--out", str(out), "--data", str(tmp_path / "no")], "synth"),
+        (["dataset", "--data", str(tmp_path / "no"), "--out", str(out)], "dataset"),
         (["encode", asf, amc, "--out", str(tmp_path), "--max-q", "0.05"], "encode"),
     ):
         try:
@@ -134,7 +134,7 @@ def test_a_rate_that_does_not_divide_120_exits_2_with_one_line(trial, tmp_path, 
     for argv in (
         ["ingest", asf, amc, "--out", str(tmp_path / "x.npz"), "--fps", "7"],
         ["extract", asf, amc, "--keyframes", "5", "--fps", "7"],
-        ["dataset", str(tmp_path), "--out", str(tmp_path / "o"), "--fps", "7"],
+        ["dataset", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--fps", "7"],
         ["eval", "--data", str(tmp_path), "--out", str(tmp_path / "r.json"), "--fps", "7"],
     ):
         with pytest.raises(SystemExit) as e:

@@ -56,7 +56,9 @@ def test_batch_skips_bad_files_and_keeps_good_results(mixed_dir, tmp_path):
 
 
 def test_cli_dataset_reports_the_skipped_files(mixed_dir, tmp_path, capsys):
-    code = main(["dataset", str(mixed_dir), "--out", str(tmp_path / "o"), "--workers", "1"])
+    code = main(
+        ["dataset", "--data", str(mixed_dir), "--out", str(tmp_path / "o"), "--workers", "1"]
+    )
     text = capsys.readouterr().out
     assert code == 0
     assert "ingested 2 trials" in text and "skipped 2 bad trial(s)" in text

@@ -340,7 +340,7 @@ def test_a_malicious_policy_through_the_cli_is_one_line_and_exit_2(tmp_path, cmu
     marker, path = tmp_path / "pwned", tmp_path / "evil.pt"
     plant(path, marker, "torch")
     out = cli("extract", str(cmu_dir / "02" / "02.asf"), str(cmu_dir / "02" / "02_02.amc"),
-              "--keyframes", "5", "--method", "dqn", env={"SIDQL_POLICY": str(path)})  # fmt: skip
+              "--keyframes", "5", "--methods", "dqn", env={"SIDQL_POLICY": str(path)})  # fmt: skip
     assert out.returncode == 2, out.stderr
     assert out.stderr.count("\n") == 1 and "evil.pt: refused" in out.stderr
     assert not marker.exists()

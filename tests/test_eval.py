@@ -156,7 +156,7 @@ def test_extract_command_prints_and_writes_keyframes(cmu_dir, tmp_path, capsys):
             str(cmu_dir / "02" / "02_01.amc"),
             "--keyframes",
             "6",
-            "--method",
+            "--methods",
             "greedy",
             "--out",
             str(out),
@@ -170,7 +170,7 @@ def test_extract_command_prints_and_writes_keyframes(cmu_dir, tmp_path, capsys):
 
 def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path, capsys):
     asf, amc = str(cmu_dir / "02" / "02.asf"), str(cmu_dir / "02" / "02_01.amc")
-    assert cli.main(["extract", asf, amc, "--keyframes", "6", "--method", "nope"]) == 2
+    assert cli.main(["extract", asf, amc, "--keyframes", "6", "--methods", "nope"]) == 2
     assert "known:" in capsys.readouterr().err
     rc = cli.main(
         ["eval", "--data", str(cmu_dir), "--methods", "nope", "--out", str(tmp_path / "r")]

@@ -119,7 +119,17 @@ def test_eval_physics_on_a_dataset_folder_and_clean_refusals(cmu_dir, tmp_path, 
         == 0
     )
     assert (
-        main(["dataset", str(tmp_path / "cmu"), "--out", str(tmp_path / "ds"), "--workers", "1"])
+        main(
+            [
+                "dataset",
+                "--data",
+                str(tmp_path / "cmu"),
+                "--out",
+                str(tmp_path / "ds"),
+                "--workers",
+                "1",
+            ]
+        )
         == 0
     )
     assert (

@@ -1,10 +1,16 @@
-"""``sidql dataset DIR --out DIR``: ingest a whole folder tree of CMU files in parallel."""
+"""``sidql dataset --data DIR --out DIR``: ingest a whole folder tree of CMU files in parallel."""
 
 from __future__ import annotations
 
-import argparse
-
-from sidql.commands.usage import cmu_rate, positive
+from sidql.commands.usage import (
+    HelpFormatter,
+    add_data,
+    add_quiet,
+    add_skeleton,
+    cmu_rate,
+    data_folder,
+    positive,
+)
 from sim.motion.dataset import ingest_directory
 
 
@@ -12,31 +18,36 @@ def register(sub) -> None:
     p = sub.add_parser(
         "dataset",
         help="ingest every trial under a folder of CMU files",
-        description="Ingest every SS_TT.amc (with SS.asf beside it) under DIR in parallel worker "
+        description="Ingest every SS_TT.amc (with SS.asf beside it) under --data in parallel worker "
         "processes: one .npz per trial under OUT/<subject>/, plus OUT/index.json. Bad files are "
         "skipped and listed; every good result is kept; every file is written atomically. Output "
         "names are made safe (never outside OUT) and unique (same-named trials from different "
         "folders get a hash suffix; index.json maps each file to its input).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
-    p.add_argument("dir", help="folder of CMU files, e.g. ../shared/cmu")
+    add_data(p, old_positional=True)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
-    p.add_argument("--fps", type=cmu_rate, default=30.0)
+    add_skeleton(p)
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
     p.add_argument(
-        "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
+        "--workers",
+        type=positive(int),
+        default=None,
+        metavar="N",
+        help="worker processes (default: cores)",
     )
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="run the trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     s = ingest_directory(
-        args.dir, args.out, skeleton=args.skeleton, fps=args.fps, workers=args.workers,
-        ray=args.ray,
+        data_folder(args), args.out, skeleton=args.skeleton, fps=args.fps, workers=args.workers,
+        ray=args.ray, progress=not args.quiet,
     )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(

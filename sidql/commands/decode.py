@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import argparse
-
 from sidql.codec.decode import decode_file
+from sidql.commands.usage import HelpFormatter
 
 
 def register(sub) -> None:
@@ -16,7 +15,7 @@ def register(sub) -> None:
         "velocities, fps, ...). .amc: angles of the source skeleton (give its ASF with --asf; "
         "its hash must match the stream's) fitted to the decoded points, one AMC frame per "
         "stream frame.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("stream", help="input .sidq file")
     p.add_argument("--out", required=True, help="output .npz or .amc")

@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 from sidql.commands.ingest import describe
+from sidql.commands.usage import (
+    HelpFormatter,
+    add_data,
+    add_keyframes,
+    add_methods,
+    add_quiet,
+    data_folder,
+)
 from sidql.evaluation.report import joint_ranges, report_clips
 from sidql.keyframes.methods import available
 from sim.model.humanoid import humanoid_model, subject_model
@@ -14,7 +21,6 @@ from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 from sim.motion.synthetic import synthetic_motion
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "cmu"
 DEFAULT_TRIAL = ("02", "02_01")
 
 
@@ -22,36 +28,36 @@ def register(sub) -> None:
     p = sub.add_parser(
         "demo",
         help="run the main job on the embedded default",
-        description="Ingest a real CMU trial (from ../shared/cmu when present, else a motion "
-        "generated on the humanoid) and print its summary; then choose keyframes of its first "
+        description="Ingest a real CMU trial (02_01 from the data folder when present, else a "
+        "motion generated on the humanoid) and print its summary; then choose keyframes of its first "
         "60-frame clip with every method, reconstruct, replay in MuJoCo, render and write the "
         "HTML report (OUT/report/index.html).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
-    p.add_argument("--data", default=str(DEFAULT_DATA), help="folder of CMU files")
+    add_data(p, "folder of CMU trials holding 02/02.asf and 02/02_01.amc")
     p.add_argument("--out", default="out/demo", help="output folder")
-    p.add_argument("--keyframes", "-W", type=int, default=10, help="keyframes of the report's clip")
-    p.add_argument(
-        "--methods",
-        nargs="+",
-        default=None,
-        help="keyframe methods (default: every registered one)",
-    )
+    add_keyframes(p, "keyframes of the report's clip", default=10)
+    add_methods(p, None, "keyframe methods (default: every registered one)")
     p.add_argument("--no-report", action="store_true", help="stop after ingesting")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
-def default_clip(data: str | Path):
-    """The demo's motion: CMU trial 02_01 (walk) if present, else synthetic motion."""
+def default_clip(data: str | Path | None):
+    """The demo's motion: CMU trial 02_01 (walk) if present under ``data``, else synthetic
+    motion."""
     subject, trial = DEFAULT_TRIAL
-    asf, amc = Path(data) / subject / f"{subject}.asf", Path(data) / subject / f"{trial}.amc"
-    if asf.exists() and amc.exists():
-        return load_motion(asf, amc)
-    print(f"no CMU data at {data}: using synthetic motion generated on the humanoid")
+    if data is not None:
+        asf, amc = Path(data) / subject / f"{subject}.asf", Path(data) / subject / f"{trial}.amc"
+        if asf.exists() and amc.exists():
+            return load_motion(asf, amc)
+    print(f"no CMU trial {trial} in {data or 'no data folder'}: using synthetic motion "
+          "generated on the humanoid")  # fmt: skip
     return synthetic_motion(8.0, seed=0)
 
 
 def run(args) -> int:
+    args.data = data_folder(args, required=False)
     clip = default_clip(args.data)
     print(describe(clip))
     path = save_npz(clip, Path(args.out) / "motion.npz")
@@ -64,7 +70,7 @@ def run(args) -> int:
 def report_step(clip, args) -> int:
     """Keyframes by every method on the first 60-frame clip, reconstruction, replay, report."""
     subject, _ = DEFAULT_TRIAL
-    asf = Path(args.data) / subject / f"{subject}.asf"
+    asf = Path(args.data or ".") / subject / f"{subject}.asf"
     model = subject_model(asf)[1] if clip.source and asf.exists() else humanoid_model()[1]
     methods = args.methods or available()
     first = clip.slice(0, min(60, clip.n_frames))
@@ -72,7 +78,7 @@ def report_step(clip, args) -> int:
         [first], Path(args.out) / "report", W=args.keyframes, methods=methods,
         joint_ranges=joint_ranges(model), title=f"Replay checks: {Path(clip.source).name or 'synthetic'}",
         meta={"source": clip.source or "synthetic motion", "clip": "frames 0-59 at 30 fps"},
-        model=model,
+        model=model, progress=not args.quiet,
     )  # fmt: skip
     print(summary_table(Path(args.out) / "report" / "checks.json"))
     print(f"report: {page.resolve()}")

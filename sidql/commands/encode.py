@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
-
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
-from sidql.commands.usage import positive
+from sidql.commands.usage import HelpFormatter, positive
 
 
 def register(sub) -> None:
@@ -20,7 +18,7 @@ def register(sub) -> None:
         "by one) and write the .sidq container (format: README, section 'Motion codec'). With "
         "--latency L the keyframes are decided with at most L frames of look-ahead (fixed-lag "
         "programme), so a decoder outputs every frame within L frames.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
     p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")

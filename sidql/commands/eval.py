@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
-from sidql.commands.usage import UsageError, cmu_rate, positive
+from sidql.commands.usage import (
+    HelpFormatter,
+    UsageError,
+    add_data,
+    add_keyframes,
+    add_methods,
+    add_quiet,
+    add_skeleton,
+    cmu_rate,
+    data_folder,
+    positive,
+)
 from sidql.evaluation.evaluate import (
     evaluate,
     load_cases,
@@ -27,20 +37,18 @@ def register(sub) -> None:
         "keyframes per clip with each method, rebuild the clip (spherical Hermite; pitch: slerp) "
         "and report the paper's Q (eq. 18) beside its Table 3, plus geodesic, MPJPE, velocity and "
         "Li et al. errors and decision times. Optionally write the rate/distortion plot.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
-    p.add_argument("--data", required=True, help="folder of CMU trials, e.g. ../shared/cmu")
-    p.add_argument("--keyframes", type=int, nargs="+", default=[5, 10, 15], help="values of W")
-    p.add_argument(
-        "--methods",
-        nargs="+",
-        default=["random", "uniform", "greedy", "optimal", "pitch"],
-        help="methods to run (registered in sidql.keyframes.methods; e.g. dqn once trained)",
-    )
+    add_data(p)
+    add_keyframes(p, "values of W (keyframes per clip)", default=[5, 10, 15], many=True)
+    add_methods(
+        p, ["random", "uniform", "greedy", "optimal", "pitch"],
+        "methods to run (registered in sidql.keyframes.methods; e.g. dqn once trained)",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of the random method")
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
     p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
-    p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
+    add_skeleton(p)
     p.add_argument("--out", default="results.json", help="JSON of results and per-clip rows")
     p.add_argument(
         "--rate-plot",
@@ -69,7 +77,7 @@ def register(sub) -> None:
         "--max-clips", type=positive(int), default=None, metavar="N",
         help="evaluate only the first N clips (e.g. to bound a --simulate run)",
     )  # fmt: skip
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet(p)
     p.add_argument("--workers", type=positive(int), default=1, help="processes loading trials")
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
@@ -84,6 +92,7 @@ def run(args) -> int:
     for W in args.keyframes:
         if not 2 <= W <= args.length:
             raise UsageError(f"--keyframes values must be in [2, {args.length}]; got {W}")
+    args.data = data_folder(args)
     cases, skipped = load_cases(
         args.data,
         fps=args.fps,

@@ -1,12 +1,20 @@
-"""``sidql extract ASF AMC``: keyframes of every 60-frame clip of one trial."""
+"""``sidql extract ASF AMC -W W ... --methods NAME ...``: keyframes of every 60-frame clip of one
+trial."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
-from sidql.commands.usage import UsageError, cmu_rate, positive
+from sidql.commands.usage import (
+    HelpFormatter,
+    UsageError,
+    add_keyframes,
+    add_methods,
+    add_skeleton,
+    cmu_rate,
+    positive,
+)
 from sidql.evaluation.evaluate import clip_seed, make_case, score
 from sidql.keyframes.methods import get, select
 from sim.files import write_atomic
@@ -18,45 +26,51 @@ def register(sub) -> None:
         "extract",
         help="choose keyframes for every 60-frame clip of one CMU trial",
         description="Ingest one trial at 30 fps, cut it into 60-frame clips and choose W keyframes "
-        "per clip (first and last frame included) with the chosen method; print them with the "
-        "paper's Q (eq. 18) of the Hermite reconstruction, and optionally write JSON.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        "per clip (first and last frame included) with each method and each W; print them with "
+        "the paper's Q (eq. 18) of the Hermite reconstruction, and optionally write JSON.",
+        formatter_class=HelpFormatter,
     )
     p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
     p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
-    p.add_argument("--keyframes", type=int, required=True, help="keyframes W per clip")
-    p.add_argument(
-        "--method", default="optimal", help="a method registered in sidql.keyframes.methods"
-    )
+    add_keyframes(p, "keyframes W per clip (several: each in turn)", many=True)
+    add_methods(p, ["optimal"], old_option="--method")
     p.add_argument("--seed", type=int, default=0, help="seed of randomised methods")
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
     p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
-    p.add_argument("--skeleton", choices=("subject", "humanoid"), default="subject")
+    add_skeleton(p)
     p.add_argument("--out", default=None, help="write the keyframes here as JSON")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    get(args.method)  # an unknown name fails before the (slow) ingest
-    if not 2 <= args.keyframes <= args.length:
-        raise UsageError(f"--keyframes must be in [2, {args.length}]; got {args.keyframes}")
+    for name in args.methods:  # an unknown name fails before the (slow) ingest
+        get(name)
+    for W in args.keyframes:
+        if not 2 <= W <= args.length:
+            raise UsageError(f"--keyframes must be in [2, {args.length}]; got {W}")
     clips = load_clips(args.asf, args.amc, fps=args.fps, length=args.length, skeleton=args.skeleton)
     rows = []
     for i, clip in enumerate(clips):
-        k = select(args.method, clip, args.keyframes, seed=clip_seed(args.seed, i, args.keyframes))
-        s = score(make_case(clip, i), k, args.method)
-        rows.append(
-            {
-                "source": clip.source,
-                "start_frame": clip.start_frame,
-                "method": args.method,
-                "keyframes": args.keyframes,
-                "indices": k.tolist(),
-                "q": s["q"],
-                "mpjpe_mm": s["mpjpe_mm"],
-            }
-        )
-        print(f"frame {clip.start_frame:6d}  Q {s['q']:.4f}  keyframes {' '.join(map(str, k))}")
+        case = make_case(clip, i)
+        for method in args.methods:
+            for W in args.keyframes:
+                k = select(method, clip, W, seed=clip_seed(args.seed, i, W))
+                s = score(case, k, method)
+                rows.append(
+                    {
+                        "source": clip.source,
+                        "start_frame": clip.start_frame,
+                        "method": method,
+                        "keyframes": W,
+                        "indices": k.tolist(),
+                        "q": s["q"],
+                        "mpjpe_mm": s["mpjpe_mm"],
+                    }
+                )
+                print(
+                    f"frame {clip.start_frame:6d}  {method:>8s}  W {W:2d}  Q {s['q']:.4f}  "
+                    f"keyframes {' '.join(map(str, k))}"
+                )
     if not rows:
         print(f"no {args.length}-frame clips in {args.amc}")
     if args.out:

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
-from sidql.commands.usage import cmu_rate
+from sidql.commands.usage import HelpFormatter, add_skeleton, cmu_rate
 from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 
@@ -17,16 +15,11 @@ def register(sub) -> None:
         help="ingest one CMU trial (ASF + AMC) into an .npz clip",
         description="Parse an ASF skeleton and AMC motion, retarget onto a MuJoCo humanoid, and "
         "write positions (T, J, 3) [m, z up], true velocities [m/s], qpos, qvel at the output rate.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
     p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
-    p.add_argument(
-        "--skeleton",
-        choices=("subject", "humanoid"),
-        default="subject",
-        help="the subject's own generated model, or the shared models/cmu_humanoid.xml",
-    )
+    add_skeleton(p)
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
     p.add_argument("--source-fps", type=float, default=120.0, help="frame rate of the AMC file")
     p.add_argument("--out", required=True, help="output .npz")

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-import argparse
-
-from sidql.commands.usage import UsageError, positive
+from sidql.commands.usage import (
+    HelpFormatter,
+    UsageError,
+    add_keyframes,
+    add_methods,
+    add_quiet,
+    positive,
+)
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
 from sim.errors import SidqlError
@@ -22,14 +27,14 @@ def register(sub) -> None:
         "own slerp), replay original and reconstructions kinematically in MuJoCo, measure bone-length "
         "drift, floor and self-penetration, foot skating, joint limits, MPJPE and velocity error, "
         "and write DIR/index.html, DIR/checks.json, one mp4 and PNGs per method.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("asf", help="the subject's skeleton (.asf)")
     p.add_argument("amc", help="one of its motions (.amc)")
-    p.add_argument("--keyframes", "-W", type=int, default=10, help="keyframes per clip (W)")
-    p.add_argument(
-        "--methods", nargs="+", default=list(DEFAULT_METHODS),
-        help="methods, and/or .sidq files encoded from this trial (sidql encode): a decoded "
+    add_keyframes(p, "keyframes W per clip", default=10)
+    add_methods(
+        p, list(DEFAULT_METHODS),
+        "methods, and/or .sidq files encoded from this trial (sidql encode): a decoded "
         "stream is checked and rendered like a method",
     )  # fmt: skip
     p.add_argument("--clips", type=int, nargs="+", default=[0], help="60-frame clip numbers")
@@ -45,6 +50,7 @@ def register(sub) -> None:
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
         help="validate the clips as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -60,6 +66,7 @@ def run(args) -> int:
             args.asf, args.amc, args.out, W=args.keyframes, methods=methods, streams=streams,
             clips=args.clips, seed=args.seed, videos=not args.no_video,
             style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
+            progress=not args.quiet,
         )  # fmt: skip
     except ValueError as e:  # a clip number out of range (a SidqlError passes through)
         if isinstance(e, SidqlError):

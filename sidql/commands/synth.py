@@ -1,10 +1,16 @@
-"""``sidql synth --from DIR --n N --out DIR``: simulated, velocity-rich clips in the dataset format."""
+"""``sidql synth --data DIR --n N --out DIR``: simulated, velocity-rich clips in the dataset format."""
 
 from __future__ import annotations
 
-import argparse
-
-from sidql.commands.usage import UsageError, cmu_rate, positive
+from sidql.commands.usage import (
+    HelpFormatter,
+    UsageError,
+    add_data,
+    add_quiet,
+    cmu_rate,
+    data_folder,
+    positive,
+)
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import export_hdf5
 from sim.simulate.generate import ALL_KINDS, KINDS
@@ -14,15 +20,15 @@ def register(sub) -> None:
     p = sub.add_parser(
         "synth",
         help="simulate synthetic clips (tracking, pushes, falls, procedural) in the dataset format",
-        description="Track real trials under --from with a controller in MuJoCo's forward "
+        description="Track real trials under --data with a controller in MuJoCo's forward "
         "simulation (time warps, body scaling, gain changes, pushes), make the figure fall and "
         "recover, or track procedural motion; write OUT/<kind>/<kind>_NNNNN.npz in the `sidql "
         "dataset` format plus OUT/index.json recording every clip's parameters, seed, per-frame "
         "root assistance and tracking error. Positions and velocities are the simulator's state. "
         "The same --seed gives the same clips bit for bit. Bad input is skipped and listed.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
-    p.add_argument("--from", dest="src", default=None, help="folder of CMU files to track")
+    add_data(p, "folder of CMU trials to track (kinds other than procedural)", old_option="--from")
     p.add_argument("--n", type=positive(int), required=True, help="number of clips")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
@@ -52,7 +58,7 @@ def register(sub) -> None:
         help="also write the clips as one offline-RL HDF5 file (Minari-style episodes: "
         "observations, actions, infos; layout in docs/synthetic.md)",
     )  # fmt: skip
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -61,8 +67,9 @@ def run(args) -> int:
         raise UsageError("--fps must divide 120 and a clip (--seconds x --fps) hold 2 frames")
     if args.max_assistance is not None and not args.max_assistance >= 0:
         raise UsageError(f"--max-assistance must be >= 0 body weights; got {args.max_assistance}")
+    data = data_folder(args, required=any(k != "procedural" for k in args.kinds))
     s = synthesize(
-        args.src, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
+        data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
         seconds=args.seconds, fps=args.fps, workers=args.workers, ray=args.ray,
         progress=not args.quiet, max_assistance=args.max_assistance,
     )  # fmt: skip

@@ -5,12 +5,20 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from sidql.commands.usage import UsageError
-from sidql.learning.settings import Args
+from sidql.commands.usage import (
+    HelpFormatter,
+    UsageError,
+    add_data,
+    add_keyframes,
+    add_quiet,
+    data_folder,
+)
+from sidql.learning.settings import Args, field_docs
 
 
 def register(sub) -> None:
     d = Args()
+    docs = {k: v.replace("%", "%%") for k, v in field_docs().items()}  # help is %-formatted
     p = sub.add_parser(
         "train",
         help="train the DQN keyframe policy (held-out subjects, CSV log, learning curve)",
@@ -23,24 +31,21 @@ def register(sub) -> None:
         "--cache-dir, --eval-every, --threads, --data and --quiet may change). Policy and "
         "checkpoint files are read as tensors and plain values only (torch weights_only=True); "
         "anything else is refused with exit status 2.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
-    p.add_argument("--data", required=True, help="folder of CMU trials, e.g. ../shared/cmu")
-    p.add_argument("--keyframes", type=int, nargs="+", default=list(d.keyframes), help="W values")
-    p.add_argument("--steps", type=int, default=d.steps, help="environment steps in total")
-    p.add_argument("--out", default=d.out, help="policy file to write")
-    p.add_argument("--resume", action="store_true", help="continue from OUT.ckpt if present")
-    p.add_argument("--seed", type=int, default=d.seed, help="seed (also picks the held-out split)")
+    add_data(p)
+    add_keyframes(p, docs["keyframes"], default=list(d.keyframes), many=True)
+    p.add_argument("--steps", type=int, default=d.steps, help=docs["steps"])
+    p.add_argument("--out", default=d.out, help=docs["out"])
+    p.add_argument("--resume", action="store_true", help=docs["resume"])
+    p.add_argument("--seed", type=int, default=d.seed, help=docs["seed"])
     p.add_argument(
-        "--test-subjects", nargs="+", default=None, help="held-out subject ids (default: by seed)"
+        "--test-subjects", nargs="+", default=None, metavar="SS", help=docs["test_subjects"]
     )
-    p.add_argument("--cache-dir", default=None, help="cache of per-trial features and costs")
-    p.add_argument(
-        "--train-also", default=None, metavar="DIR",
-        help="a `sidql synth`/`sidql dataset` folder whose clips join the training set only",
-    )  # fmt: skip
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    tuned = p.add_argument_group("DQN hyper-parameters (see sidql.learning.settings.Args)")
+    p.add_argument("--cache-dir", default=None, metavar="DIR", help=docs["cache_dir"])
+    p.add_argument("--train-also", default=None, metavar="DIR", help=docs["train_also"])
+    add_quiet(p)
+    tuned = p.add_argument_group("DQN hyper-parameters (sidql.learning.settings.Args)")
     for f in dataclasses.fields(Args):
         if f.name in {"data", "keyframes", "steps", "out", "resume", "seed", "test_subjects",
                       "cache_dir", "progress", "extra", "synthetic_tasks", "train_also"}:  # fmt: skip
@@ -48,9 +53,9 @@ def register(sub) -> None:
         flag = "--" + f.name.replace("_", "-")
         default = getattr(d, f.name)
         if isinstance(default, bool):
-            tuned.add_argument(flag, type=_bool, default=default, metavar="BOOL")
+            tuned.add_argument(flag, type=_bool, default=default, metavar="BOOL", help=docs[f.name])
         else:
-            tuned.add_argument(flag, type=type(default), default=default)
+            tuned.add_argument(flag, type=type(default), default=default, help=docs[f.name])
     p.set_defaults(func=run)
 
 
@@ -71,6 +76,7 @@ def run(args) -> int:
     values = {
         f.name: getattr(args, f.name) for f in dataclasses.fields(Args) if hasattr(args, f.name)
     }
+    values["data"] = str(data_folder(args))
     values["keyframes"] = tuple(args.keyframes)
     values["test_subjects"] = tuple(args.test_subjects) if args.test_subjects else None
     values["progress"] = not args.quiet

@@ -1,4 +1,11 @@
-"""What every command shares for bad input: one exception, one-line errors and warnings.
+"""What every command shares: one vocabulary of options, one-line errors and warnings.
+
+Options: every command declares the options it shares with others through the helpers below, so
+one idea has one spelling everywhere: ``--data DIR`` (the folder of CMU trials, :func:`add_data`),
+``-W/--keyframes`` (:func:`add_keyframes`), ``--methods`` (:func:`add_methods`), ``--quiet``
+(:func:`add_quiet`). Old spellings (``dataset DIR``, ``synth --from``, ``extract --method``) still
+work and warn (:class:`OldSpelling`). ``--help`` shows a default only where there is one
+(:class:`HelpFormatter`).
 
 Every bad input exits 2 with one line on stderr: ``sidql COMMAND: error: PROBLEM``, for any
 :class:`sim.errors.SidqlError` (PROBLEM names the file and line when there is one). Warnings print as
@@ -9,8 +16,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
+from pathlib import Path
 
 from sim.errors import MotionDataWarning, SidqlError
+from sim.paths import DATA_ENV, data_dir
 
 
 class UsageError(SidqlError):
@@ -24,14 +34,19 @@ class ArgumentParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+class UsageWarning(UserWarning):
+    """A command line that works but should be spelled otherwise (an old option name)."""
+
+
 def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` replacement: ``warning: FILE:LINE: MESSAGE`` on one line.
 
     A :class:`~sim.errors.MotionDataWarning` already starts with the data file and line it is
-    about; any other warning gets the Python file and line that raised it.
+    about, and a :class:`UsageWarning` is about the command line; any other warning gets the
+    Python file and line that raised it.
     """
     text = str(message).replace("\n", " ")
-    if not issubclass(category, MotionDataWarning):
+    if not issubclass(category, (MotionDataWarning, UsageWarning)):
         text = f"{filename}:{lineno}: {text}"
     print(f"warning: {text}", file=sys.stderr if file is None else file)
 
@@ -58,3 +73,134 @@ def cmu_rate(text):
     if abs(120.0 / v - round(120.0 / v)) > 1e-9:
         raise argparse.ArgumentTypeError(f"must divide 120 (CMU's rate): {text!r}")
     return v
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """``--help`` with ``(default: X)`` where there is a default to show (a list as ``a b c``, as
+    it is typed), and not on required options, not ``None`` (the help says what happens then),
+    not a flag's ``False``."""
+
+    def _get_help_string(self, action):
+        help, d = action.help or "", action.default
+        if (
+            action.required
+            or d is None
+            or d is False
+            or d is argparse.SUPPRESS
+            or "%(default)" in help
+            or not action.option_strings
+        ):
+            return help
+        shown = " ".join(map(str, d)) if isinstance(d, list | tuple) else str(d)
+        return f"{help} (default: {shown.replace('%', '%%')})".lstrip()
+
+
+class OldSpelling(argparse.Action):
+    """An old spelling of an option, still accepted: it warns (one line naming the new spelling)
+    and stores its value where the new option does. Hidden from ``--help``.
+
+    ``new``: the new spelling, e.g. ``"--data DIR"``; ``as_list``: store ``[value]`` (a single
+    ``--method X`` for ``--methods X ...``).
+    """
+
+    def __init__(self, option_strings, dest, *, new: str, as_list: bool = False, **kwargs):
+        kwargs["help"] = argparse.SUPPRESS
+        super().__init__(option_strings, dest, **kwargs)
+        self.new, self.as_list = new, as_list
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values is None:  # an optional positional that was not given
+            return
+        old = option_string or (self.metavar or self.dest.upper())
+        warnings.warn(
+            UsageWarning(f"{parser.prog} {old}: an old spelling, use {self.new}"), stacklevel=2
+        )
+        setattr(namespace, self.dest, [values] if self.as_list else values)
+
+
+def add_data(
+    parser: argparse.ArgumentParser,
+    help: str = "folder of CMU trials (SS/SS.asf, SS/SS_TT.amc)",
+    *,
+    old_option: str | None = None,
+    old_positional: bool = False,
+) -> None:
+    """``--data DIR``, the folder of CMU trials (read it with :func:`data_folder`); optionally the
+    old spellings ``--from DIR`` (``old_option="--from"``) or a positional ``DIR``."""
+    parser.add_argument(
+        "--data",
+        metavar="DIR",
+        default=None,
+        help=f"{help}; default: ${DATA_ENV}, else ../shared/cmu beside the checkout if present",
+    )
+    if old_option:
+        parser.add_argument(old_option, dest="data", metavar="DIR", action=OldSpelling,
+                            new="--data DIR")  # fmt: skip
+    if old_positional:
+        parser.add_argument("data", nargs="?", metavar="DIR", action=OldSpelling, new="--data DIR")
+
+
+def data_folder(args: argparse.Namespace, *, required: bool = True) -> Path | None:
+    """The folder of CMU trials of a command: ``--data``, else :func:`sim.paths.default_data_dir`.
+
+    Raises:
+        UsageError: none is given nor found and ``required``.
+    """
+    folder = data_dir(args.data)
+    if folder is None and required:
+        raise UsageError(
+            f"no folder of CMU trials: pass --data DIR or set {DATA_ENV} (../shared/cmu beside "
+            "the checkout is used when present)"
+        )
+    return folder
+
+
+def add_keyframes(
+    parser: argparse.ArgumentParser,
+    help: str = "keyframes W per clip (both end frames included)",
+    *,
+    default=None,
+    many: bool = False,
+) -> None:
+    """``-W/--keyframes W``; several values (``many``) where a command sweeps W. Required when
+    there is no ``default``."""
+    parser.add_argument(
+        "-W",
+        "--keyframes",
+        type=int,
+        nargs="+" if many else None,
+        default=default,
+        required=default is None,
+        metavar="W",
+        help=help,
+    )
+
+
+def add_methods(
+    parser: argparse.ArgumentParser,
+    default,
+    help: str = "keyframe methods (registered in sidql.keyframes.methods)",
+    *,
+    old_option: str | None = None,
+) -> None:
+    """``--methods NAME [NAME ...]``; optionally an old single-valued spelling (``--method``)."""
+    parser.add_argument("--methods", nargs="+", default=default, metavar="NAME", help=help)
+    if old_option:
+        parser.add_argument(old_option, dest="methods", metavar="NAME", action=OldSpelling,
+                            new="--methods NAME [NAME ...]", as_list=True)  # fmt: skip
+
+
+def add_skeleton(parser: argparse.ArgumentParser) -> None:
+    """``--skeleton subject|humanoid``: the model a trial is retargeted onto."""
+    parser.add_argument(
+        "--skeleton",
+        choices=("subject", "humanoid"),
+        default="subject",
+        help="the subject's own humanoid generated from its ASF, or the shared one "
+        "(sim/data/cmu_humanoid.xml)",
+    )
+
+
+def add_quiet(parser: argparse.ArgumentParser) -> None:
+    """``-q/--quiet``: no progress bars."""
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")

@@ -3,7 +3,10 @@ line builds its options from :class:`Args` without importing torch."""
 
 from __future__ import annotations
 
+import ast
+import inspect
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 #: Args that may differ between a checkpoint and the run that resumes it (everything else must
 #: match: the network, the replay memories and the data split are built from it).
@@ -90,3 +93,21 @@ class Args:
     """tqdm progress bar"""
     extra: dict = field(default_factory=dict)
     """free-form notes stored with the policy"""
+
+
+@lru_cache(maxsize=1)
+def field_docs() -> dict[str, str]:
+    """Field name -> the docstring written under it in :class:`Args`, on one line (reST markup
+    removed): the help of ``sidql train``'s options."""
+    out = {}
+    body = ast.parse(inspect.getsource(Args)).body[0].body
+    for field_node, doc in zip(body, body[1:], strict=False):
+        if (
+            isinstance(field_node, ast.AnnAssign)
+            and isinstance(field_node.target, ast.Name)
+            and isinstance(doc, ast.Expr)
+            and isinstance(doc.value, ast.Constant)
+            and isinstance(doc.value.value, str)
+        ):
+            out[field_node.target.id] = " ".join(doc.value.value.replace("``", "").split())
+    return out

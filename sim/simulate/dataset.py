@@ -45,7 +45,9 @@ def plan_tasks(
     trials, skipped = [], []
     if any(k != "procedural" for k in kinds):
         if root is None:
-            raise MotionDataError("--from", None, "kinds track/fall need a folder of CMU files")
+            raise MotionDataError(
+                None, None, "kinds other than procedural need a folder of CMU trials"
+            )
         for t in find_trials(root, skipped):  # links leaving root: listed, never read
             try:
                 parse_amc(t.amc, parse_asf(t.asf))  # malformed files are skipped up front
