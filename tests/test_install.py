@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -70,8 +71,6 @@ def installed(tmp_path_factory) -> dict:
 
 
 def test_the_wheel_holds_the_packages_and_their_files(installed):
-    import zipfile
-
     names = set(zipfile.ZipFile(installed["wheel"]).namelist())
     for f in ("sim/data/cmu_humanoid.xml", "sim/data/canonical.asf", "sidql/data/policy.pt",
               "sim/paths.py", "sidql/commands/main.py"):  # fmt: skip

@@ -13,6 +13,8 @@ TWO_PI = 2.0 * np.pi
 _INV_TWO_PI = 1.0 / TWO_PI
 
 
+# inline="always": compiled into each kernel with the kernel's own flags (fastmath). Numba's disk
+# cache of a kernel does not notice a change here: clear the __pycache__ *.nbi/*.nbc after one.
 @numba.njit(cache=True, inline="always")
 def wrap_angle(a):
     """Angles [rad] wrapped into [-pi, pi): ``a - 2 pi floor(a / 2 pi + 1/2)``.
