@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -254,6 +255,26 @@ def _ray_connect(ray, address: str, workers: int | None) -> None:
         raise RayConnectionError(
             f"cannot join the Ray cluster at {address}: {text[:200]}{hint}"
         ) from None
+
+
+@contextmanager
+def ray_session(address: str | None, workers: int | None = None):
+    """Within the block, batches on Ray share one connection (``address`` as :func:`run_batch`'s
+    ``ray``; None: nothing is started): a command that runs several batches starts or joins
+    Ray once, and leaves it on exit."""
+    if address is None:
+        yield
+        return
+    import ray
+
+    if ray.is_initialized():
+        yield
+        return
+    _ray_connect(ray, address, workers)
+    try:
+        yield
+    finally:
+        ray.shutdown()
 
 
 def _run_ray(fn, items: Iterator, workers, address, in_flight):
