@@ -223,9 +223,10 @@ def test_floor_contact_parameters_are_the_floors_and_feet_stay_within_softness(c
     data = mujoco.MjData(model)
     data.qpos[:] = r.qpos[int(np.argmax(r.contact_penetration > 0))]
     mujoco.mj_forward(model, data)
-    assert data.ncon > 0
-    assert np.allclose(data.contact.solref[: data.ncon], [FLOOR_TIMECONST, 1.0])
-    assert np.allclose(data.contact.solimp[: data.ncon], FLOOR_SOLIMP)
+    floor = (data.contact.geom[: data.ncon] == model.geom("floor").id).any(axis=1)
+    assert floor.any()
+    assert np.allclose(data.contact.solref[: data.ncon][floor], [FLOOR_TIMECONST, 1.0])
+    assert np.allclose(data.contact.solimp[: data.ncon][floor], FLOOR_SOLIMP)
     # a walking stance foot settles within a millimetre or two; landings stay under 1 cm
     touching = r.contact_penetration > 0
     assert touching.mean() > 0.8
@@ -254,8 +255,9 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     walk = simulated_clip(model, skeleton, r0.qpos, r0.qvel, 30.0, "walk")
     a0 = assistance_audit(walk, {**plain, "assistance": r0.assistance.tolist()})
     assert a0["quiet_n"] >= 30 and a0["assisted_n"] == 0
-    # measured 0.02 BW mean; the residual of a walk the feet cannot carry is ~0.2-1 BW
-    assert a0["residual_quiet_bw"] < 0.05
+    # measured 0.02 BW mean without self-collision, 0.05 with it (a foot brushes the other shin
+    # once and the unassisted gait differs); a walk the feet cannot carry leaves ~0.2-1 BW
+    assert a0["residual_quiet_bw"] < 0.08
     assert np.percentile(a0["residual"][a0["quiet"]], 90) < 0.12
 
     # the same walk 20 cm above the floor, held by up to 3 body weights of assistance (a hand

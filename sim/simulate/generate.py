@@ -149,7 +149,8 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     The record holds ``generation`` (parameters and seed), ``tracking_mpjpe_mm``, ``fell`` (and
     ``fall_frame``), ``mean_assistance`` (root assistance force [body weight], mean over frames),
     ``mean_assist_torque`` (its torque [body weight x 1 m]), ``physical`` (:func:`is_physical`),
-    ``penetration_mm`` (deepest floor contact) and ``labels``: the per-frame arrays of
+    ``penetration_mm`` (deepest floor contact), ``self_penetration_mm`` (deepest contact between
+    two body geoms) and ``labels``: the per-frame arrays of
     :data:`LABELS`, for the clip file, not the index.
 
     Raises:
@@ -219,6 +220,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         "fall_frame": int(result.fall_frame),
         "physical": is_physical(float(result.assistance.mean()), float(torque.mean())),
         "penetration_mm": 1000 * result.penetration,
+        "self_penetration_mm": 1000 * result.self_penetration,
         "labels": {
             "sim_actions": result.actions,
             "sim_joint_torque": result.joint_torque,
