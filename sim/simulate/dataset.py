@@ -7,8 +7,9 @@ clip, its task, ``generation`` parameters and seed and its scalar figures (mean 
 ``physical``, tracking error, fall); per-frame arrays live in the clip file only, so the index
 stays small however many clips there are.
 
-Results are stored as they arrive: workers (processes or Ray tasks) return clips by value, this
-process writes each clip file atomically at once and appends one line to ``OUT/journal.jsonl``
+Results are stored as they arrive: workers (processes or Ray tasks) return each clip file's
+bytes (compressed where they were simulated) by value, this process writes each one atomically
+at once and appends one line to ``OUT/journal.jsonl``
 (the run's parameters first, then one line per finished task: kept, rejected or skipped), and
 holds only a bounded window of tasks in flight (``sim.batch.iter_batch``). A run that stops
 (a crash, a lost driver) keeps every clip written so far; ``resume=True`` continues it, skipping
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.acclaim.reader import parse_amc, parse_asf
-from sim.batch import iter_batch
+from sim.batch import iter_batch, ray_session, run_batch
 from sim.errors import MotionDataError
 from sim.files import write_atomic
 from sim.motion.clip import save_npz
@@ -36,9 +38,12 @@ from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_di
 JOURNAL = "journal.jsonl"
 
 
-def readable_trials(root, kinds: tuple[str, ...]) -> tuple[list, list[dict]]:
+def readable_trials(
+    root, kinds: tuple[str, ...], *, workers: int | None = 1, ray: str | None = None
+) -> tuple[list, list[dict]]:
     """The trials under ``root`` that parse (malformed ones are skipped and listed as
-    ``{"amc", "asf", "error"}``); none needed when every kind is procedural."""
+    ``{"amc", "asf", "error"}``), parsed by ``workers`` processes or Ray; none needed when
+    every kind is procedural."""
     bad = [k for k in kinds if k not in ALL_KINDS]
     if bad:
         raise ValueError(f"unknown kinds {bad}; choose from {', '.join(ALL_KINDS)}")
@@ -46,15 +51,33 @@ def readable_trials(root, kinds: tuple[str, ...]) -> tuple[list, list[dict]]:
     if any(k != "procedural" for k in kinds):
         if root is None:
             raise MotionDataError("--from", None, "kinds track/fall need a folder of CMU files")
-        for t in find_trials(root, skipped):  # links leaving root: listed, never read
-            try:
-                parse_amc(t.amc, parse_asf(t.asf))  # malformed files are skipped up front
+        found = find_trials(root, skipped)  # links leaving root: listed, never read
+        outcomes = run_batch(_parse, found, workers=workers, ray=ray, desc="read trials",
+                             progress=False)  # fmt: skip
+        for t, o in zip(found, outcomes, strict=True):
+            if o.ok:
                 trials.append(t)
-            except MotionDataError as e:
-                skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": str(e)})
+            else:  # malformed files are skipped up front, not task by task
+                skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
         if not trials:
             raise MotionDataError(str(root), None, "no readable CMU trial to track")
     return trials, skipped
+
+
+def _parse(trial) -> None:
+    parse_amc(trial.amc, parse_asf(trial.asf))
+
+
+def simulate_file(task: SynthTask) -> tuple[bytes, dict]:
+    """One task in a worker: its clip file's bytes (``save_npz`` with the labels, compressed
+    here rather than in the process that writes it) and its index record (frames, fps and the
+    ``generate`` record without the per-frame labels)."""
+    clip, record = generate(task)
+    labels = record.pop("labels")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = save_npz(clip, Path(tmp) / "clip.npz", extra=labels)
+        data = path.read_bytes()
+    return data, {"frames": clip.n_frames, "fps": clip.fps, **record}
 
 
 def iter_tasks(
@@ -127,9 +150,16 @@ def synthesize(
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``ValueError``); its finished tasks are not simulated again.
     """
+    with ray_session(ray, workers):  # Ray started or joined once for both batches
+        return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progress,
+                           max_assistance, max_tries, resume)  # fmt: skip
+
+
+def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progress,
+                max_assistance, max_tries, resume) -> DatasetSummary:  # fmt: skip
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    trials, skipped_inputs = readable_trials(root, kinds)
+    trials, skipped_inputs = readable_trials(root, kinds, workers=workers, ray=ray)
     params = {
         "source": None if root is None else str(Path(root).resolve()),
         "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds, "fps": fps,
@@ -158,23 +188,23 @@ def synthesize(
             journal.write(json.dumps({"params": params}) + "\n")
             journal.flush()
         for _, o in iter_batch(
-            generate, pending_tasks(), workers=workers, ray=ray, desc="synth", progress=progress,
-            total=n if max_assistance is None else None,
+            simulate_file, pending_tasks(), workers=workers, ray=ray, desc="synth",
+            progress=progress, total=n if max_assistance is None else None,
         ):  # fmt: skip
             task: SynthTask = o.item
             if not o.ok:
                 entry = {"skipped": {"task": task_dict(task), "amc": task.amc, "error": o.error}}
             else:
-                clip, record = o.result
+                data, record = o.result
                 level = max(record["mean_assistance"], record["mean_assist_torque"])
                 if max_assistance is not None and level > max_assistance:
                     entry = {"rejected": task.kind}
                 else:
-                    labels = record.pop("labels")  # per-frame arrays: the clip file only
                     name = f"{task.kind}_{task.index:05d}"
                     path = out_dir / task.kind / f"{name}.npz"
-                    save_npz(clip, path, extra=labels)  # atomic: whole or absent
-                    entry = {"kept": _index_entry(task, name, path, out_dir, clip, record)}
+                    path.parent.mkdir(exist_ok=True)
+                    write_atomic(path, lambda f, data=data: f.write(data))  # whole or absent
+                    entry = {"kept": _index_entry(task, name, path, out_dir, record)}
                     kept.add(task.index)
             done[task.index] = entry
             journal.write(json.dumps({"index": task.index, **entry}) + "\n")
@@ -182,15 +212,16 @@ def synthesize(
     return _finish(out_dir, done, n, params, summary, start)
 
 
-def _index_entry(task, name, path, out_dir, clip, record) -> dict:
+def _index_entry(task, name, path, out_dir, record) -> dict:
+    record = dict(record)
     return {
         "subject": task.kind,
         "trial": name,
         "asf": task.asf,
         "amc": task.amc,
         "file": str(path.relative_to(out_dir)),
-        "frames": clip.n_frames,
-        "fps": clip.fps,
+        "frames": record.pop("frames"),
+        "fps": record.pop("fps"),
         "notes": [],
         "task": task_dict(task),
         **record,
