@@ -52,6 +52,7 @@ from sim.simulate.generate import PHYSICAL_BUDGET  # noqa: E402
 from sim.simulate.model import G, sim_model  # noqa: E402
 from sim.simulate.reference import on_floor, trial_qpos  # noqa: E402
 
+REPO = Path(__file__).resolve().parents[1]
 Q = (50, 95, 99)
 SPEED_TARGET = 20.0  # simulated seconds per wall second on one core
 SCALING_TARGET = 1.7  # 2 workers over 1
@@ -260,8 +261,8 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=90, help="clips to synthesize for the figures")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="workers for the figures' clips")
-    ap.add_argument("--speed-clips", type=int, default=8, help="clips per worker-count timing")
-    ap.add_argument("--plot", default="docs/synth_speeds.png")
+    ap.add_argument("--speed-clips", type=int, default=16, help="clips per worker-count timing")
+    ap.add_argument("--plot", default=str(REPO / "docs" / "synth_speeds.png"))
     ap.add_argument("--audit", action="store_true", help="also the physics room's audit")
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
