@@ -265,7 +265,7 @@ def ray_session(address: str | None, workers: int | None = None):
     if address is None:
         yield
         return
-    import ray
+    import ray  # lazy: an optional extra, and slow to import
 
     if ray.is_initialized():
         yield
