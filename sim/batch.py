@@ -3,6 +3,9 @@
 ``run_batch(fn, items, workers=K, ray=None | "local" | ADDRESS)`` calls ``fn(item)`` for every item
 and returns one :class:`Outcome` per item, in input order: its result, or the error it raised
 (``"Type: message"``) — a failed task costs only its own item. A tqdm bar counts finished tasks.
+``iter_batch`` (same arguments) yields each outcome as its task finishes, keeping a bounded
+window of tasks in flight, so a caller that stores results as they arrive holds a bounded amount
+of memory however long the batch.
 
 Ray (``pip install sidql[ray]``) is imported lazily, only when asked for: ``ray="local"`` starts a
 local runtime with ``workers`` CPUs; any other string is a cluster address (``ray://host:10001`` or
@@ -17,8 +20,10 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -117,6 +122,9 @@ def run_batch(
 ) -> list[Outcome]:
     """``fn(item)`` for every item (see the module docstring); outcomes in input order.
 
+    Holds every result until the last task ends: for batches whose results are small or few. A
+    batch whose results are large (clips) uses :func:`iter_batch` and stores each as it arrives.
+
     Args:
         fn: a picklable (module-level) function.
         workers: worker processes (default: CPU cores; 1 runs in this process); for Ray: the
@@ -125,55 +133,186 @@ def run_batch(
     """
     items = list(items)
     out: list[Outcome | None] = [None] * len(items)
-    bar = tqdm(total=len(items), desc=desc, unit="task", disable=not progress)
-    if ray is not None:
-        _run_ray(fn, items, out, bar, workers, ray)
-    else:
-        workers = workers or min(len(items), os.cpu_count() or 1) or 1
-        if workers == 1:
-            for i, item in enumerate(items):
-                out[i] = _call(fn, item)
-                bar.update()
-        else:
-            with ProcessPoolExecutor(
-                max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),)
-            ) as pool:
-                futures = {pool.submit(_call, fn, item): i for i, item in enumerate(items)}
-                for fut in as_completed(futures):
-                    i = futures[fut]
-                    try:
-                        out[i] = fut.result()
-                    except Exception as e:  # the worker died (not an error inside fn): the
-                        out[i] = Outcome(items[i], error=one_line(e))  # pool fails what is left
-                    bar.update()
-    bar.close()
+    for i, outcome in iter_batch(
+        fn, items, workers=workers, ray=ray, desc=desc, progress=progress, total=len(items)
+    ):
+        out[i] = outcome
     return out  # type: ignore[return-value]
 
 
-def _run_ray(fn, items, out, bar, workers, address) -> None:
+def iter_batch(
+    fn: Callable,
+    items: Iterable,
+    *,
+    workers: int | None = None,
+    ray: str | None = None,
+    desc: str = "tasks",
+    progress: bool = True,
+    total: int | None = None,
+    in_flight: int | None = None,
+) -> Iterator[tuple[int, Outcome]]:
+    """``(position, Outcome)`` of ``fn(item)`` for every item, as the tasks finish.
+
+    ``items`` is read lazily (it may be a generator, even an endless one: stop iterating and the
+    tasks still running are cancelled) and at most ``in_flight`` tasks are submitted and not yet
+    yielded (default: twice the workers or the cluster's CPUs), so the memory this process holds
+    is bounded by the window, not by the batch: the caller stores each result as it arrives.
+    Waiting is on the window only, so a batch of n tasks costs O(n * window), never O(n^2).
+
+    Args:
+        total: number of items, for the progress bar (None: unknown).
+        others: as :func:`run_batch`.
+    """
+    bar = tqdm(total=total, desc=desc, unit="task", disable=not progress)
+    try:
+        if ray is not None:
+            source = _run_ray(fn, iter(items), workers, ray, in_flight)
+        else:
+            workers = workers or os.cpu_count() or 1
+            if workers == 1:
+                source = ((i, _call(fn, item)) for i, item in enumerate(items))
+            else:
+                source = _run_pool(fn, iter(items), workers, in_flight or 2 * workers)
+        for i, outcome in source:
+            bar.update()
+            yield i, outcome
+    finally:
+        bar.close()
+
+
+def _new_pool(workers: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(
+        max_workers=workers, initializer=_init_worker, initargs=(os.getpid(),)
+    )
+
+
+def _run_pool(fn, items: Iterator, workers: int, in_flight: int):
+    """Tasks in a process pool, a window of ``in_flight`` at a time. A worker that dies outright
+    (a segfault, the OOM killer) breaks the pool: the tasks then in flight are failed items, and
+    a fresh pool takes the rest."""
+    pool = None
+    pending: dict = {}  # future -> (position, item, its pool)
+    position = 0
+    try:
+        while True:
+            if pool is None:
+                pool = _new_pool(workers)
+            while len(pending) < in_flight:  # keep the window full, reading items lazily
+                item = next(items, _END)
+                if item is _END:
+                    break
+                try:
+                    fut = pool.submit(_call, fn, item)
+                except BrokenProcessPool:  # broke since the last wait: a fresh pool takes it
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    pool = _new_pool(workers)
+                    fut = pool.submit(_call, fn, item)
+                pending[fut] = (position, item, pool)
+                position += 1
+            if not pending:
+                return
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                i, item, its_pool = pending.pop(fut)
+                try:
+                    outcome = fut.result()
+                except Exception as e:  # the worker died (not an error inside fn)
+                    outcome = Outcome(item, error=one_line(e))
+                    if isinstance(e, BrokenProcessPool) and its_pool is pool:
+                        pool.shutdown(wait=True, cancel_futures=True)
+                        pool = None  # the rest of the window fails with it; a new pool follows
+                yield i, outcome
+    finally:  # also when the caller stops early: queued tasks are cancelled, running ones end
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+_END = object()
+
+
+class RayConnectionError(ConnectionError):
+    """This process could not join the Ray cluster named by its address (the message says how)."""
+
+
+def _ray_connect(ray, address: str, workers: int | None) -> None:
+    """Start a local runtime (``address == "local"``) or join the cluster at ``address``."""
+    if address == "local":
+        ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False,
+                 log_to_driver=False)  # fmt: skip
+        return
+    try:
+        ray.init(address=address, log_to_driver=False)
+    except Exception as e:  # Ray raises ConnectionError, RuntimeError or its own kinds
+        text = " ".join(str(e).split())
+        hint = ""
+        if "auth" in text.lower() or "token" in text.lower() or not os.environ.get("RAY_AUTH_MODE"):
+            hint = (
+                "; a cluster started by 'ray start --head' (Ray >= 2.59) requires token "
+                "authentication: export RAY_AUTH_MODE=token and the cluster's token "
+                "(RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token) here and on every "
+                "node; see docs/synthetic.md, 'A Ray cluster'"
+            )
+        raise RayConnectionError(
+            f"cannot join the Ray cluster at {address}: {text[:200]}{hint}"
+        ) from None
+
+
+@contextmanager
+def ray_session(address: str | None, workers: int | None = None):
+    """Within the block, batches on Ray share one connection (``address`` as :func:`run_batch`'s
+    ``ray``; None: nothing is started): a command that runs several batches starts or joins
+    Ray once, and leaves it on exit."""
+    if address is None:
+        yield
+        return
+    import ray  # lazy: an optional extra, and slow to import
+
+    if ray.is_initialized():
+        yield
+        return
+    _ray_connect(ray, address, workers)
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+def _run_ray(fn, items: Iterator, workers, address, in_flight):
     import ray  # lazy: an optional extra, and slow to import
 
     started = False
     if not ray.is_initialized():
-        if address == "local":
-            ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False,
-                     log_to_driver=False)  # fmt: skip
-        else:
-            ray.init(address=address, log_to_driver=False)
+        _ray_connect(ray, address, workers)
         started = True
+    pending: list = []  # the window of running tasks' object refs
+    where: dict = {}  # object ref -> (position, item)
     try:
+        if in_flight is None:
+            in_flight = max(4, 2 * int(ray.cluster_resources().get("CPU", 1)))
         remote = ray.remote(_call)
-        fn_ref = ray.put(fn)
-        pending = {remote.remote(fn_ref, item): i for i, item in enumerate(items)}
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
+        fn_ref = ray.put(fn)  # shipped once, not with every task
+        position = 0
+        while True:
+            while len(pending) < in_flight:
+                item = next(items, _END)
+                if item is _END:
+                    break
+                ref = remote.remote(fn_ref, item)
+                pending.append(ref)
+                where[ref] = (position, item)
+                position += 1
+            if not pending:
+                return
+            done, pending = ray.wait(pending, num_returns=1)
             for ref in done:
-                i = pending.pop(ref)
+                i, item = where.pop(ref)
                 try:
-                    out[i] = ray.get(ref)
+                    outcome = ray.get(ref)
                 except Exception as e:  # the worker died (not an error inside fn)
-                    out[i] = Outcome(items[i], error=one_line(e))
-                bar.update()
+                    outcome = Outcome(item, error=one_line(e))
+                yield i, outcome
     finally:
+        for ref in pending:  # the caller stopped early: the rest is not needed
+            ray.cancel(ref)
         if started:
             ray.shutdown()

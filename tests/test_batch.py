@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import operator
+
 import pytest
 
 from sim.batch import ERROR_CHARS, run_batch
@@ -82,3 +84,64 @@ def test_a_pool_worker_computes_on_one_thread():
         assert o.ok, o.error
         omp, torch_threads = o.result
         assert omp == "1" and torch_threads in (1, None)
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def _lazy(n: int, pulled: list):
+    for i in range(n):
+        pulled.append(i)
+        yield i
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_items_are_read_lazily_with_a_bounded_window_in_flight(workers):
+    """iter_batch yields results as tasks finish and never holds more than its window of
+    submitted-but-unyielded tasks, so a caller storing each result holds bounded memory; an
+    endless item stream is fine, and stopping early stops the reading."""
+    from sim.batch import iter_batch
+
+    pulled: list = []
+    seen = {}
+    for i, o in iter_batch(_square, _lazy(40, pulled), workers=workers, in_flight=3,
+                           progress=False):  # fmt: skip
+        seen[i] = o.result
+        assert len(pulled) - len(seen) <= 3
+    assert seen == {i: i * i for i in range(40)}
+    pulled.clear()
+    for k, _ in enumerate(iter_batch(_square, _lazy(10**9, pulled), workers=workers,
+                                     in_flight=3, progress=False)):  # fmt: skip
+        if k == 4:
+            break
+    assert len(pulled) <= 5 + 3
+
+
+def test_on_ray_items_are_read_lazily_with_a_bounded_window_in_flight():
+    pytest.importorskip("ray")
+    from sim.batch import iter_batch
+
+    pulled: list = []
+    seen = {}
+    for i, o in iter_batch(operator.neg, _lazy(12, pulled), workers=2, ray="local", in_flight=2,
+                           progress=False):  # fmt: skip
+        seen[i] = o.result
+        assert len(pulled) - len(seen) <= 2
+    assert seen == {i: -i for i in range(12)}
+
+
+def _dies_slowly(x: int) -> int:
+    import time
+
+    time.sleep(0.05)  # long enough for the pool to notice the death before the batch ends
+    return _dies(x)
+
+
+def test_after_a_dead_worker_a_fresh_pool_takes_the_rest():
+    """A worker killed outright fails the tasks of its pool then in flight; the items after them
+    run in a fresh pool."""
+    out = run_batch(_dies_slowly, range(24), workers=2, progress=False)
+    assert not out[2].ok
+    assert all(o.ok and o.result == o.item for o in out[-8:])
+    assert sum(not o.ok for o in out) <= 12

@@ -154,14 +154,14 @@ def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
 
     kw = dict(kinds=("procedural",), seconds=0.5, seed=2, workers=1, progress=False)
     full = synthesize(None, tmp_path / "all", 6, **kw)
-    means = [r["mean_assistance"] for r in full.written]
+    means = [max(r["mean_assistance"], r["mean_assist_torque"]) for r in full.written]
     budget = float(np.median(means))
-    inside = [r for r in full.written if r["mean_assistance"] <= budget]
+    inside = [r for r, m in zip(full.written, means, strict=True) if m <= budget]
     assert 0 < len(inside) < len(means)
     keep = min(2, len(inside))
     kept = synthesize(None, tmp_path / "kept", keep, max_assistance=budget, **kw)
     assert [r["trial"] for r in kept.written] == [r["trial"] for r in inside[:keep]]
-    assert all(r["mean_assistance"] <= budget for r in kept.written)
+    assert all(max(r["mean_assistance"], r["mean_assist_torque"]) <= budget for r in kept.written)
     last = int(kept.written[-1]["trial"].split("_")[-1])
     assert kept.rejected == {"procedural": sum(m > budget for m in means[: last + 1])}
     index = json.loads((tmp_path / "kept" / "index.json").read_text())
@@ -208,3 +208,59 @@ def test_hdf5_export_round_trip(tmp_path):
     (tmp_path / "bad.h5").write_bytes(b"not hdf5")
     with pytest.raises(MotionDataError, match="bad.h5"):
         load_hdf5(tmp_path / "bad.h5")
+
+
+def test_non_adjacent_bodies_collide_and_near_ones_do_not(model):
+    """Legs driven to cross stop at each other: the shins' and thighs' overlap in the simulation
+    stays at the contact softness, while the pose they were driven to overlaps by several cm;
+    in the rest pose nothing touches (pairs meeting at a joint are excluded)."""
+    from sim.simulate.model import self_collision_exclusions
+
+    data = mujoco.MjData(model)
+    data.qpos[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]
+    data.qpos[2] = 2.0
+    mujoco.mj_forward(model, data)
+    assert data.ncon == 0  # the upright rest pose, in the air: no self-contact
+    names = {n for pair in self_collision_exclusions(model) for n in pair}
+    assert ("ltibia", "rtibia") not in self_collision_exclusions(model) and "ltibia" in names
+    legs = {model.geom(n).id for n in ("lfemur", "rfemur", "ltibia", "rtibia")}
+
+    def leg_overlap(d) -> float:
+        depth = [-d.contact.dist[c] for c in range(d.ncon) if set(d.contact.geom[c]) <= legs]
+        return max(depth, default=0.0)
+
+    crossed = data.qpos.copy()
+    for side, sign in (("l", 1.0), ("r", -1.0)):  # both thighs adducted across the midline
+        j = model.joint(f"{side}femur_rz")
+        crossed[model.jnt_qposadr[j.id]] = np.clip(sign * -0.8, *model.jnt_range[j.id])
+    target = mujoco.MjData(model)
+    target.qpos[:] = crossed
+    mujoco.mj_forward(model, target)
+    assert leg_overlap(target) > 0.05  # the pose asked for puts a leg through the other
+    model.opt.gravity[2] = 0.0
+    try:
+        deepest = 0.0
+        for _ in range(240):  # 0.5 s of the position servos pulling the legs across
+            data.ctrl[:] = crossed[7:]
+            mujoco.mj_step(model, data)
+            deepest = max(deepest, leg_overlap(data))
+    finally:
+        model.opt.gravity[2] = -9.81
+    assert 0.0 < deepest < 0.5 * leg_overlap(target)  # they met and stopped at each other
+
+
+def test_a_fallen_body_stays_down_without_help(model, walk_ref, cmu_dir):
+    """Pushed hard with the joints weakened, the walker falls; from the fall on there is no
+    assistance and the joints hold the pose of the fall: the root stays near the floor."""
+    from sim.simulate.controller import Push
+    from sim.simulate.reference import on_floor, trial_qpos
+
+    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+    ref = on_floor(model, q)[:336]
+    r = track(model, ref, assist_limit=0.5, pushes=(Push("thorax", 0.5, 0.2, (700.0, 0, 0)),),
+              weakenings=(Weakening(0.5, 0.8, 0.1),))  # fmt: skip
+    assert r.fell and r.fall_frame > 0
+    after = r.fall_frame + 15  # half a second after the fall was detected
+    assert after < len(r.qpos) - 15
+    assert r.qpos[after:, 2].max() < 0.35  # standing, the root is at ~0.9 m
+    assert np.abs(r.assist_wrench[r.fall_frame + 1 :]).max() == 0.0

@@ -26,6 +26,7 @@ from sidql.evaluation.evaluate import (
 )
 from sidql.evaluation.rate import rate_distortion, write_plot
 from sidql.keyframes.methods import get
+from sim.batch import ray_session
 from sim.files import write_atomic
 
 
@@ -78,15 +79,24 @@ def register(sub) -> None:
         help="evaluate only the first N clips (e.g. to bound a --simulate run)",
     )  # fmt: skip
     add_quiet(p)
-    p.add_argument("--workers", type=positive(int), default=1, help="processes loading trials")
+    p.add_argument(
+        "--workers", type=positive(int), default=1,
+        help="processes loading trials and evaluating clips (methods, physics, simulation)",
+    )  # fmt: skip
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
-        help="load trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
+        help="load trials and evaluate clips as Ray tasks: a local runtime, or the cluster at "
+        "ADDRESS",
     )  # fmt: skip
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    with ray_session(args.ray, args.workers):  # Ray started or joined once for both batches
+        return _run(args)
+
+
+def _run(args) -> int:
     for name in args.methods:  # unknown names fail before the (slow) ingest
         get(name)
     for W in args.keyframes:
@@ -112,7 +122,7 @@ def run(args) -> int:
     try:
         out = evaluate(
             cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet,
-            physics=args.physics, simulate=args.simulate,
+            physics=args.physics, simulate=args.simulate, workers=args.workers, ray=args.ray,
         )  # fmt: skip
     except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
         raise UsageError(str(e)) from None

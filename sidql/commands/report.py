@@ -45,6 +45,12 @@ def register(sub) -> None:
         "--layout", choices=("overlay", "side"), default="overlay",
         help="reconstruction as a ghost over the original, or beside it",
     )  # fmt: skip
+    p.add_argument(
+        "--simulate", action="store_true",
+        help="also track the original and every reconstruction in MuJoCo's forward simulation "
+        "with the subject's human-strength body and no assistance: tracking error, falls and "
+        "torque per method (could a body perform this motion?)",
+    )  # fmt: skip
     p.add_argument("--workers", type=positive(int), default=1, help="processes validating clips")
     p.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
@@ -66,7 +72,7 @@ def run(args) -> int:
             args.asf, args.amc, args.out, W=args.keyframes, methods=methods, streams=streams,
             clips=args.clips, seed=args.seed, videos=not args.no_video,
             style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
-            progress=not args.quiet,
+            progress=not args.quiet, simulate=args.simulate,
         )  # fmt: skip
     except ValueError as e:  # a clip number out of range (a SidqlError passes through)
         if isinstance(e, SidqlError):

@@ -11,6 +11,7 @@ from sidql.commands.usage import (
     data_folder,
     positive,
 )
+from sim.errors import SidqlError
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import export_hdf5
 from sim.simulate.generate import ALL_KINDS, KINDS
@@ -50,8 +51,14 @@ def register(sub) -> None:
     )  # fmt: skip
     p.add_argument(
         "--max-assistance", type=float, default=None, metavar="BW",
-        help="keep only clips whose mean root assistance is at most BW body weights (0.05: the "
-        "physical clips); others are dropped and more simulated (up to 20x --n tasks)",
+        help="keep only clips whose mean root assistance is at most BW body weights, force and "
+        "torque (x 1 m) (0.05: the physical clips); others are dropped and more simulated (up "
+        "to 20x --n tasks)",
+    )  # fmt: skip
+    p.add_argument(
+        "--resume", action="store_true",
+        help="continue the run whose journal (OUT/journal.jsonl) is in --out: clips are stored "
+        "as they arrive, so a stopped run keeps them and is not simulated again",
     )  # fmt: skip
     p.add_argument(
         "--export-hdf5", default=None, metavar="FILE",
@@ -68,11 +75,16 @@ def run(args) -> int:
     if args.max_assistance is not None and not args.max_assistance >= 0:
         raise UsageError(f"--max-assistance must be >= 0 body weights; got {args.max_assistance}")
     data = data_folder(args, required=any(k != "procedural" for k in args.kinds))
-    s = synthesize(
-        data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
-        seconds=args.seconds, fps=args.fps, workers=args.workers, ray=args.ray,
-        progress=not args.quiet, max_assistance=args.max_assistance,
-    )  # fmt: skip
+    try:
+        s = synthesize(
+            data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
+            seconds=args.seconds, fps=args.fps, workers=args.workers, ray=args.ray,
+            progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
+        )  # fmt: skip
+    except ValueError as e:  # --resume of a run with other parameters
+        if isinstance(e, SidqlError):
+            raise
+        raise UsageError(str(e)) from None
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "
           f"{args.out}/index.json")  # fmt: skip

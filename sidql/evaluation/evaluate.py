@@ -28,13 +28,12 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
-from sim.batch import run_batch
+from sim.batch import iter_batch, run_batch
 from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
@@ -161,7 +160,9 @@ def clip_seed(seed: int, index: int, W: int) -> int:
     return int(np.random.SeedSequence([seed, index, W]).generate_state(1)[0])
 
 
-def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate=None) -> dict:
+def score(
+    case: Case, keyframes: np.ndarray, method: str, physics=None, simulate=None, original_qpos=None
+) -> dict:
     """Every error measure of one clip rebuilt from ``keyframes`` with the reconstruction
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
     docstring).
@@ -169,7 +170,8 @@ def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate
     ``physics``: ``(job, ground)`` (:class:`sim.physics.analysis.PhysicsJob` on the protocol
     points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction;
     ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its
-    forward simulation's figures (the IK fit tracked without assistance)."""
+    forward simulation's figures (the IK fit tracked without assistance; ``original_qpos``: the
+    original's fit, computed here when None)."""
     s = case.series
     rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
     phys = {}
@@ -177,8 +179,9 @@ def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate
         analysis = physics[0].analyse(case.clip, rec.positions, physics[1])
         phys = physics_figures(analysis)
         if simulate is not None:
-            original = physics[0].analyse(case.clip, None, physics[1])["per_frame"]["qpos"]
-            phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original))
+            if original_qpos is None:
+                original_qpos = physics[0].analyse(case.clip, None, physics[1])["per_frame"]["qpos"]
+            phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original_qpos))
     return {
         **phys,
         "q": q_from_angles(s, rec.theta, rec.phi),
@@ -283,8 +286,17 @@ def evaluate(
     progress: bool = True,
     physics: bool = False,
     simulate: bool = False,
+    workers: int = 1,
+    ray: str | None = None,
+    chunk: int = 4,
 ) -> dict:
     """Run every method at every W on every case.
+
+    The per-clip work (each method's choice and reconstruction, the physics of the original and
+    of every reconstruction, the forward simulations) runs through ``sim.batch.iter_batch``:
+    in this process (``workers=1``), ``workers`` processes or Ray (``ray``), in tasks of up to
+    ``chunk`` clips of one trial that carry their trial's physics set-up; the rows come back in
+    the same order whatever the executor (decision times are measured where the method ran).
 
     Returns:
         ``{"results": [row...], "per_clip": [row...]}``; a result row holds method, keyframes,
@@ -303,25 +315,26 @@ def evaluate(
     counts = list(keyframe_counts)
     for name in method_names:
         methods.get(name)  # fail early, listing the known methods
-    per_clip: list[dict] = []
-    results: list[dict] = []
+        if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file
+            methods.select(name, cases[0].clip, counts[0], seed=0)
     setup = physics_setup(cases) if physics else {}
     bodies = simulate_setup(cases) if simulate else {}
+    items = []
+    for group in _trial_chunks(cases, chunk):
+        source = cases[group[0]].clip.source
+        items.append(([(i, cases[i]) for i in group], setup.get(source), bodies.get(source)))
+    task = partial(_evaluate_chunk, method_names=tuple(method_names), counts=tuple(counts),
+                   seed=seed)  # fmt: skip
+    by_case: dict[int, list[dict]] = {}
+    for _, o in iter_batch(task, items, workers=workers, ray=ray, desc="evaluate",
+                           progress=progress, total=len(items)):  # fmt: skip
+        if not o.ok:
+            raise RuntimeError(f"evaluating {o.item[0][0][1].clip.source}: {o.error}")
+        by_case.update(o.result)
+    per_clip: list[dict] = []
+    results: list[dict] = []
     if physics and cases:
-        rows = []
-        for case in tqdm(cases, desc="physics of originals", unit="clip", disable=not progress):
-            job, ground = setup[case.clip.source]
-            analysis = job.analyse(case.clip, None, ground)
-            sim = {}
-            if simulate:
-                sim = bodies[case.clip.source].run(analysis["per_frame"]["qpos"], case.clip.fps)
-            rows.append(
-                {
-                    "source": case.clip.source, "start_frame": case.clip.start_frame,
-                    "method": "original", "keyframes": case.clip.n_frames,
-                    **physics_figures(analysis), **sim,
-                }
-            )  # fmt: skip
+        rows = [by_case[i][0] for i in range(len(cases))]
         per_clip.extend(rows)
         zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
         results.append(
@@ -331,23 +344,9 @@ def evaluate(
                 **_physics_means(rows), **(_simulate_means(rows) if simulate else {}),
             }
         )  # fmt: skip
-    jobs = [(m, W) for m in method_names for W in counts]
-    for name, W in tqdm(jobs, desc="evaluate", unit="run", disable=not progress):
-        rows = []
-        for case in cases:
-            t0 = time.perf_counter()
-            k = methods.select(name, case.clip, W, seed=clip_seed(seed, case.index, W))
-            ms = 1000.0 * (time.perf_counter() - t0)
-            row = {
-                "source": case.clip.source,
-                "start_frame": case.clip.start_frame,
-                "method": name,
-                "keyframes": W,
-                "indices": k.tolist(),
-                **score(case, k, name, setup.get(case.clip.source), bodies.get(case.clip.source)),
-                "decision_ms": ms,
-            }
-            rows.append(row)
+    first = 1 if physics else 0
+    for j, (name, W) in enumerate((m, W) for m in method_names for W in counts):
+        rows = [by_case[i][first + j] for i in range(len(cases))]
         per_clip.extend(rows)
         if rows:
             results.append(
@@ -367,6 +366,58 @@ def evaluate(
                 }
             )
     return {"results": results, "per_clip": per_clip}
+
+
+def _trial_chunks(cases: Sequence[Case], size: int) -> list[list[int]]:
+    """Positions of consecutive cases of one trial, at most ``size`` per chunk (the tasks of
+    :func:`evaluate`)."""
+    out: list[list[int]] = []
+    for i, c in enumerate(cases):
+        if out and cases[out[-1][0]].clip.source == c.clip.source and len(out[-1]) < size:
+            out[-1].append(i)
+        else:
+            out.append([i])
+    return out
+
+
+def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list[dict]]]:
+    """One task of :func:`evaluate`: per case of ``item = ([(position, case)...], physics set-up
+    or None, simulated body or None)``, its position and rows: the original's (with physics),
+    then each method at each W."""
+    cases, phys, body = item
+    out = []
+    for position, case in cases:
+        rows, original_qpos = [], None
+        if phys is not None:
+            job, ground = phys
+            analysis = job.analyse(case.clip, None, ground)
+            original_qpos = analysis["per_frame"]["qpos"]
+            sim = body.run(original_qpos, case.clip.fps) if body is not None else {}
+            rows.append(
+                {
+                    "source": case.clip.source, "start_frame": case.clip.start_frame,
+                    "method": "original", "keyframes": case.clip.n_frames,
+                    **physics_figures(analysis), **sim,
+                }
+            )  # fmt: skip
+        for name in method_names:
+            for W in counts:
+                t0 = time.perf_counter()
+                k = methods.select(name, case.clip, W, seed=clip_seed(seed, case.index, W))
+                ms = 1000.0 * (time.perf_counter() - t0)
+                rows.append(
+                    {
+                        "source": case.clip.source,
+                        "start_frame": case.clip.start_frame,
+                        "method": name,
+                        "keyframes": W,
+                        "indices": k.tolist(),
+                        **score(case, k, name, phys, body, original_qpos),
+                        "decision_ms": ms,
+                    }
+                )
+        out.append((position, rows))
+    return out
 
 
 def table3_markdown(results: Sequence[dict]) -> str:

@@ -69,6 +69,8 @@ from sim.replay.render import (
     render_frames,
     write_video,
 )
+from sim.simulate.model import sim_model
+from sim.simulate.validate import ForwardValidation
 
 
 @dataclass
@@ -182,6 +184,7 @@ def validate_clip(
     streams: tuple[DecodedStream, ...] = (),
     physics=None,
     ground=None,
+    simulate=None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -195,6 +198,9 @@ def validate_clip(
             :mod:`sim.physics` figures (``physics``) for the original and every run.
         ground: the trial's :class:`sim.physics.ground.Ground`; its ``floor_z`` replaces
             ``floor_z`` (default: estimated from the clip when ``physics`` is given).
+        simulate: a :class:`sim.simulate.validate.ForwardValidation` of the subject (with
+            ``physics``): the human-strength body tracks the IK fit of the original and of every
+            run in ``mj_step`` without assistance; its figures join ``physics``.
     """
     if physics is not None and ground is None:
         ground = estimate_ground(clip.positions, clip.names, clip.fps)
@@ -209,6 +215,16 @@ def validate_clip(
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks), ground=ground)
     if physics is not None:
         out.physics = physics.analyse(clip, None, ground)
+    original_qpos = out.physics["per_frame"]["qpos"] if out.physics else None
+
+    def analyse(positions) -> dict:  # the sim.physics figures, and the forward simulation's
+        figures = physics.analyse(clip, positions, ground)
+        if simulate is not None:
+            figures.update(simulate.run(figures["per_frame"]["qpos"], clip.fps, original_qpos))
+        return figures
+
+    if simulate is not None and physics is not None:
+        out.physics.update(simulate.run(original_qpos, clip.fps))
     for m in methods:
         keys = np.asarray(select(m, clip, W, seed=seed))
         own = reconstruction_of(m)  # every method under Hermite, and under its own if other
@@ -222,7 +238,7 @@ def validate_clip(
             s = summarise(checks)
             run = MethodRun(m, name, keys, rec, checks, s, excess(s, out.baseline))
             if physics is not None:
-                run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)
+                run.physics = analyse(rec.restrict(orig.names).positions)
             out.runs.append(run)
     for stream in streams:
         keys, rec = stream.clip_part(clip)
@@ -238,7 +254,7 @@ def validate_clip(
             excess(s, out.baseline),
         )
         if physics is not None:
-            run.physics = physics.analyse(clip, rec.restrict(orig.names).positions, ground)
+            run.physics = analyse(rec.restrict(orig.names).positions)
         out.runs.append(run)
     return out
 
@@ -417,6 +433,23 @@ METRICS: tuple[Metric, ...] = (
            "mean residual torque per kg of body mass", "{:.2f}", group="dynamics"),
     Metric("joint_torque_rms_nm_kg", "joint torque RMS", "N m/kg", "lower",
            "RMS joint torque per kg from inverse dynamics", "{:.2f}", group="dynamics"),
+    # forward simulation (report --simulate): filled by sim.simulate.validate
+    Metric("sim_error_mm", "sim. error", "mm", "lower",
+           "mean distance of the simulated body's points from the motion it tracked", "{:.0f}",
+           group="simulation"),
+    Metric("sim_error_original_mm", "sim. error vs original", "mm", "lower",
+           "mean distance of the simulated body's points from the original motion", "{:.0f}",
+           group="simulation"),
+    Metric("sim_fell", "fell", "", "lower",
+           "1 if the simulated body fell (root below half its reference height)", "{:d}",
+           group="simulation"),
+    Metric("sim_fall_s", "fall time", "s", "higher",
+           "when the simulated body fell (n/a: it did not)", "{:.2f}", group="simulation"),
+    Metric("sim_torque_rms_nm_kg", "sim. joint torque RMS", "N m/kg", "lower",
+           "RMS joint torque the simulated body applied, per kg", "{:.2f}", group="simulation"),
+    Metric("sim_torque_saturated", "torque at limit", "", "lower",
+           "share of joint-torque samples at the joint's human limit", "{:.3f}",
+           group="simulation"),
 )  # fmt: skip
 
 #: The clip's tables, in order: (group, heading).
@@ -429,6 +462,11 @@ GROUPS = (
     (
         "dynamics",
         "Dynamics: forces the motion needs (sim.physics; inverse dynamics on the fitted humanoid)",
+    ),
+    (
+        "simulation",
+        "Forward simulation: could a body perform it? The human-strength body tracks each fitted "
+        "motion in mj_step with no assistance (sim.simulate)",
     ),
 )
 
@@ -964,18 +1002,20 @@ def report_clips(
     ground=None,
     workers: int = 1,
     ray: str | None = None,
+    simulate=None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
     report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
     labels and file names (default 0, 1, ...). With ``model`` (the subject's humanoid) every motion
-    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip). Clips are
+    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip), and with
+    ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`) the forward simulation's. Clips are
     validated through ``sim.batch.run_batch`` (``workers`` processes or Ray); a clip that fails is
     listed in the report's ``failed`` field."""
     numbers = list(range(len(clips)) if clip_numbers is None else clip_numbers)
     job = physics_job(model, clips[0]) if model is not None and clips else None
     validate = partial(
         validate_clip, methods=list(methods), W=W, seed=seed, joint_ranges=joint_ranges,
-        streams=streams, physics=job, ground=ground,
+        streams=streams, physics=job, ground=ground, simulate=simulate if job else None,
     )  # fmt: skip
     outcomes = run_batch(
         validate, clips, workers=workers, ray=ray, desc="replay", progress=progress
@@ -1010,10 +1050,13 @@ def report_trial(
     streams=(),
     workers: int = 1,
     ray: str | None = None,
+    simulate: bool = False,
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
-    ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods."""
+    ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods.
+    ``simulate``: also track every motion in forward simulation (the subject's torque-limited
+    body, no assistance: :mod:`sim.simulate.validate`)."""
     decoded = tuple(load_stream(p, asf) for p in streams)
     motion = load_motion(asf, amc, fps=30.0)
     for path, d in zip(streams, decoded, strict=True):
@@ -1032,14 +1075,18 @@ def report_trial(
     bad = [c for c in clips if not 0 <= c < len(all_clips)]
     if bad:
         raise ValueError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")
-    _, model = subject_model(asf)
+    skeleton, model = subject_model(asf)
+    forward = None
+    if simulate:
+        names = from_clip(all_clips[0]).restrict(POINTS).names
+        forward = ForwardValidation(sim_model(skeleton), names)
     return report_clips(
         [all_clips[c] for c in clips], out_dir, W=W, methods=methods, seed=seed,
         joint_ranges=joint_ranges(model), videos=videos, style=style,
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
         progress=progress, clip_numbers=list(clips), streams=decoded, model=model,
-        ground=trial_ground(all_clips), workers=workers, ray=ray,
+        ground=trial_ground(all_clips), workers=workers, ray=ray, simulate=forward,
     )  # fmt: skip
 
 

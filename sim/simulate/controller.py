@@ -23,6 +23,11 @@ Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
    ``ROOT_TORQUE_LEVER`` (torque); its 6-d wrench is recorded every tick: the honest label of
    how much help the motion needed.
 
+4. **A fall stays down.** Once the root drops below half its reference height, the assistance
+   stops for good and the joints hold the pose of the fall at :data:`FALLEN_TONE` of their
+   stiffness and strength, without feed-forward: the body settles on the floor (a get-up is
+   not generated).
+
 External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (stiffness,
 torque limits and assistance scaled down for a while) perturb the motion. Recorded states are the
 simulator's own ``qpos`` and ``qvel``, never differences. A weakening edits the model's actuator
@@ -41,6 +46,7 @@ from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
 from sim.simulate.reference import FOOT_GEOMS
 
 ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
+FALLEN_TONE = 0.3  # share of stiffness and strength with which a fallen body holds its pose
 
 
 @dataclass(frozen=True)
@@ -86,12 +92,16 @@ class Tracking:
             foot (foot and toe geoms) at that step (``mj_contactForce``); a foot is in contact
             where its force is non-zero.
         fall_frame: the recorded frame where the fall was detected, -1 if none; from that tick
-            on the assistance is off, so the body stays down unless its own joints lift it.
+            on the assistance is off and the joints hold the pose of the fall at
+            :data:`FALLEN_TONE` of their stiffness and strength (no tracking, no feed-forward):
+            the body stays down (no get-up is generated).
         fell: whether the root dropped below half its reference height (see :func:`track`).
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
-        penetration: deepest contact penetration [m] seen at the control ticks (>= 0).
-        contact_penetration: (F,) deepest contact penetration [m] at the recorded ticks, 0
+        penetration: deepest floor contact penetration [m] seen at the control ticks (>= 0).
+        self_penetration: deepest contact penetration [m] between two body geoms seen at the
+            control ticks (self-collision keeps it small).
+        contact_penetration: (F,) deepest floor contact penetration [m] at the recorded ticks, 0
             where nothing touches the floor (the steady figure: its median over contact frames).
         unstable: MuJoCo flagged a diverging acceleration (it then resets the state, so the
             recorded motion jumps: such a simulation is not a motion).
@@ -111,6 +121,7 @@ class Tracking:
     joint_torque: np.ndarray | None = None
     foot_force: np.ndarray | None = None
     fall_frame: int = -1
+    self_penetration: float = 0.0
 
 
 class ActuatorEdits:
@@ -338,7 +349,8 @@ def track(
     all_assist = np.empty(T)
     all_wrench = np.empty((T, 6))
     fell = False
-    deepest = 0.0
+    fallen_pose = None
+    deepest = deepest_self = 0.0
     with ActuatorEdits(model) as edits:
         for k in range(T):
             t = k * dt
@@ -346,6 +358,8 @@ def track(
             for w in weakenings:
                 if w.start <= t < w.start + w.duration:
                     factor = min(factor, w.factor)
+            if fell:  # down: the joints hold the pose of the fall with a lying body's tone
+                factor = min(factor, FALLEN_TONE)
             edits.scale(factor)
             q_ref, v_ref = ref_qpos[k], ref_qvel[k]
             # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
@@ -356,7 +370,10 @@ def track(
             # 2. hinges: the actuator carries PD and feed-forward, MuJoCo clamps their sum; the
             # target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied,
             # and by ff / kp so that the feed-forward is added (both scale with a weakening)
-            data.ctrl[:] = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
+            if fell:  # no more tracking of a standing motion, no feed-forward: it stays down
+                data.ctrl[:] = fallen_pose
+            else:
+                data.ctrl[:] = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
             # 3. root: bounded assistance, only while the body touches the floor
             helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
             if helped and (assist_in_flight or _floor_contact(data, floor)):
@@ -387,11 +404,17 @@ def track(
                 rec_u[i] = data.ctrl
                 if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2] and not fell:
                     fell, fall_frame = True, i
-            if data.ncon:
-                depth = max(0.0, -float(data.contact.dist[: data.ncon].min()))
-                deepest = max(deepest, depth)
+                    fallen_pose = data.qpos[7:].copy()
+            n = data.ncon
+            if n:
+                on_floor = (data.contact.geom[:n] == floor).any(axis=1)
+                depth = -data.contact.dist[:n]
+                floor_depth = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
+                self_depth = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
+                deepest = max(deepest, floor_depth)
+                deepest_self = max(deepest_self, self_depth)
                 if on_record:
-                    rec_p[i] = depth
+                    rec_p[i] = floor_depth
             mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
             if on_record:
                 rec_tau[i] = data.actuator_force
@@ -415,6 +438,7 @@ def track(
         ticks=T,
         mean_assistance_all=float(all_assist.mean()) if T else 0.0,
         penetration=deepest,
+        self_penetration=deepest_self,
         contact_penetration=rec_p,
         unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
         actions=rec_u,

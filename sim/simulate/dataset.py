@@ -1,28 +1,111 @@
 """``synthesize``: a folder of simulated clips in the ``sidql dataset`` format.
 
-Layout: ``OUT/<kind>/<kind>_<NNNNN>.npz`` (``sim.motion.clip.save_npz``) plus ``OUT/index.json``
-whose ``trials`` entries hold the dataset fields (subject = the kind, trial, file, frames, fps,
-notes) and, per clip, its task, ``generation`` parameters and seed, per-frame ``assistance``,
-``tracking_mpjpe_mm`` and ``fell``. Workers return clips by value; this process writes every file
-atomically, so a failed task leaves nothing behind and is listed under ``skipped``.
+Layout: ``OUT/<kind>/<kind>_<NNNNN>.npz`` (``sim.motion.clip.save_npz``, with the per-frame
+learning labels of ``sim.simulate.generate.LABELS``) plus ``OUT/index.json`` whose ``trials``
+entries hold the dataset fields (subject = the kind, trial, file, frames, fps, notes) and, per
+clip, its task, ``generation`` parameters and seed and its scalar figures (mean assistance,
+``physical``, tracking error, fall); per-frame arrays live in the clip file only, so the index
+stays small however many clips there are.
+
+Results are stored as they arrive: workers (processes or Ray tasks) return each clip file's
+bytes (compressed where they were simulated) by value, this process writes each one atomically
+at once and appends one line to ``OUT/journal.jsonl``
+(the run's parameters first, then one line per finished task: kept, rejected or skipped), and
+holds only a bounded window of tasks in flight (``sim.batch.iter_batch``). A run that stops
+(a crash, a lost driver) keeps every clip written so far; ``resume=True`` continues it, skipping
+the tasks its journal lists. ``index.json`` is written last, from the journal.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from sim.acclaim.reader import parse_amc, parse_asf
-from sim.batch import run_batch
+from sim.batch import iter_batch, ray_session, run_batch
 from sim.errors import MotionDataError, UnknownNameError
 from sim.files import write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
 from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_dict
+
+JOURNAL = "journal.jsonl"
+
+
+def readable_trials(
+    root, kinds: tuple[str, ...], *, workers: int | None = 1, ray: str | None = None
+) -> tuple[list, list[dict]]:
+    """The trials under ``root`` that parse (malformed ones are skipped and listed as
+    ``{"amc", "asf", "error"}``), parsed by ``workers`` processes or Ray; none needed when
+    every kind is procedural."""
+    for k in kinds:
+        if k not in ALL_KINDS:
+            raise UnknownNameError("kind", k, ALL_KINDS)
+    trials, skipped = [], []
+    if any(k != "procedural" for k in kinds):
+        if root is None:
+            raise MotionDataError(
+                None, None, "kinds other than procedural need a folder of CMU trials"
+            )
+        found = find_trials(root, skipped)  # links leaving root: listed, never read
+        outcomes = run_batch(_parse, found, workers=workers, ray=ray, desc="read trials",
+                             progress=False)  # fmt: skip
+        for t, o in zip(found, outcomes, strict=True):
+            if o.ok:
+                trials.append(t)
+            else:  # malformed files are skipped up front, not task by task
+                skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": o.error})
+        if not trials:
+            raise MotionDataError(str(root), None, "no readable CMU trial to track")
+    return trials, skipped
+
+
+def _parse(trial) -> None:
+    parse_amc(trial.amc, parse_asf(trial.asf))
+
+
+def simulate_file(task: SynthTask) -> tuple[bytes, dict]:
+    """One task in a worker: its clip file's bytes (``save_npz`` with the labels, compressed
+    here rather than in the process that writes it) and its index record (frames, fps and the
+    ``generate`` record without the per-frame labels)."""
+    clip, record = generate(task)
+    labels = record.pop("labels")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = save_npz(clip, Path(tmp) / "clip.npz", extra=labels)
+        data = path.read_bytes()
+    return data, {"frames": clip.n_frames, "fps": clip.fps, **record}
+
+
+def iter_tasks(
+    trials: list,
+    *,
+    seed: int = 0,
+    kinds: tuple[str, ...] = KINDS,
+    seconds: float = 4.0,
+    fps: float = 30.0,
+) -> Iterator[SynthTask]:
+    """The plan: an endless stream of tasks cycling through ``kinds``; real-motion kinds take
+    ``trials`` in seeded shuffled rounds (every trial once per round). Every prefix is the same
+    whatever length is read, so a longer run extends a shorter one."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 2**20]))
+    order: list = []
+    i = 0
+    while True:
+        kind = kinds[i % len(kinds)]
+        asf = amc = None
+        if kind != "procedural":
+            if not order:  # every trial once per round, in a seeded order
+                order = [trials[j] for j in rng.permutation(len(trials))]
+            t = order.pop()
+            asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
+        yield SynthTask(kind, seed, i, asf, amc, seconds, fps)
+        i += 1
 
 
 def plan_tasks(
@@ -34,41 +117,10 @@ def plan_tasks(
     seconds: float = 4.0,
     fps: float = 30.0,
 ) -> tuple[list[SynthTask], list[dict]]:
-    """``n`` tasks cycling through ``kinds``; real-motion kinds take the trials under ``root`` in
-    seeded shuffled rounds (every trial once per round).
-
-    Trials that fail to parse are skipped and listed (``{"amc", "asf", "error"}``).
-    """
-    for k in kinds:
-        if k not in ALL_KINDS:
-            raise UnknownNameError("kind", k, ALL_KINDS)
-    trials, skipped = [], []
-    if any(k != "procedural" for k in kinds):
-        if root is None:
-            raise MotionDataError(
-                None, None, "kinds other than procedural need a folder of CMU trials"
-            )
-        for t in find_trials(root, skipped):  # links leaving root: listed, never read
-            try:
-                parse_amc(t.amc, parse_asf(t.asf))  # malformed files are skipped up front
-                trials.append(t)
-            except MotionDataError as e:
-                skipped.append({"amc": str(t.amc), "asf": str(t.asf), "error": str(e)})
-        if not trials:
-            raise MotionDataError(str(root), None, "no readable CMU trial to track")
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 2**20]))
-    order: list = []
-    tasks = []
-    for i in range(n):
-        kind = kinds[i % len(kinds)]
-        asf = amc = None
-        if kind != "procedural":
-            if not order:  # every trial once per round, in a seeded order
-                order = [trials[j] for j in rng.permutation(len(trials))]
-            t = order.pop()
-            asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
-        tasks.append(SynthTask(kind, seed, i, asf, amc, seconds, fps))
-    return tasks, skipped
+    """The first ``n`` tasks of the plan (:func:`iter_tasks`) and the skipped trials."""
+    trials, skipped = readable_trials(root, kinds)
+    stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
+    return [next(stream) for _ in range(n)], skipped
 
 
 def synthesize(
@@ -85,73 +137,152 @@ def synthesize(
     progress: bool = True,
     max_assistance: float | None = None,
     max_tries: int = 20,
+    resume: bool = False,
 ) -> DatasetSummary:
     """Generate ``n`` clips into ``out_dir`` (see the module docstring).
 
-    ``max_assistance`` [body weight]: keep only clips whose mean root assistance is at most this
-    (physical clips: ``sim.simulate.generate.PHYSICAL_BUDGET``); the others are dropped and more
-    tasks of the same plan (the next indices) are simulated until ``n`` clips are kept or
-    ``max_tries * n`` tasks were tried. ``summary.rejected`` counts the dropped clips per kind
+    ``max_assistance`` [body weight]: keep only clips whose mean root assistance, force [body
+    weight] and torque [body weight x 1 m], is at most this (physical clips:
+    ``sim.simulate.generate.PHYSICAL_BUDGET``); the plan's next tasks are
+    simulated until ``n`` clips are kept or ``max_tries * n`` tasks were tried. The clips kept
+    are the first ``n`` within the budget in plan order (whatever order tasks finish in);
+    ``summary.rejected`` counts, per kind, the clips over the budget before the last one kept
     (also in ``index.json``).
+
+    ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
+    another ``n``, else a ``ValueError``); its finished tasks are not simulated again.
     """
+    with ray_session(ray, workers):  # Ray started or joined once for both batches
+        return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progress,
+                           max_assistance, max_tries, resume)  # fmt: skip
+
+
+def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progress,
+                max_assistance, max_tries, resume) -> DatasetSummary:  # fmt: skip
     start = time.perf_counter()
     out_dir = Path(out_dir)
-    planned, skipped = plan_tasks(root, n, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
-    out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
-    summary = DatasetSummary(skipped=skipped)
-    rejected: dict[str, int] = {}
-    tried = 0
-    while True:
-        tasks = planned[tried:]
-        tried = len(planned)
-        for task, o in zip(
-            tasks,
-            run_batch(generate, tasks, workers=workers, ray=ray, desc="synth", progress=progress),
-            strict=True,
-        ):  # fmt: skip
-            if len(summary.written) >= n:
-                continue  # enough kept: the rest of this round is not written
-            if not o.ok:
-                summary.skipped.append({"task": task_dict(task), "amc": task.amc, "error": o.error})
-                continue
-            clip, record = o.result
-            if max_assistance is not None and record["mean_assistance"] > max_assistance:
-                rejected[task.kind] = rejected.get(task.kind, 0) + 1
-                continue
-            labels = record.pop("labels", None)  # per-frame arrays: the clip file, not the index
-            name = f"{task.kind}_{task.index:05d}"
-            path = out_dir / task.kind / f"{name}.npz"
-            save_npz(clip, path, extra=labels)
-            summary.written.append(
-                {
-                    "subject": task.kind,
-                    "trial": name,
-                    "asf": task.asf,
-                    "amc": task.amc,
-                    "file": str(path.relative_to(out_dir)),
-                    "frames": clip.n_frames,
-                    "fps": clip.fps,
-                    "notes": [],
-                    "task": task_dict(task),
-                    **record,
-                }
-            )
-        missing = n - len(summary.written)
-        if max_assistance is None or missing <= 0 or tried >= max_tries * n:
-            break
-        # the next tasks of the same plan, as many as the acceptance so far suggests (+1)
-        kept = max(len(summary.written), 1)
-        more = min(max_tries * n, tried + int(np.ceil(missing * tried / kept)) + 1)
-        planned, _ = plan_tasks(root, more, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
-    summary.seconds = time.perf_counter() - start
-    summary.rejected = rejected
-    index = {
+    trials, skipped_inputs = readable_trials(root, kinds, workers=workers, ray=ray)
+    params = {
         "source": None if root is None else str(Path(root).resolve()),
+        "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds, "fps": fps,
+        "max_assistance": max_assistance, "max_tries": max_tries,
+    }  # fmt: skip
+    out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
+    done = _read_journal(out_dir / JOURNAL, params) if resume else {}
+    limit = n if max_assistance is None else max_tries * n
+    kept = {i for i, e in done.items() if "kept" in e}
+    summary = DatasetSummary(skipped=list(skipped_inputs))
+
+    def enough() -> bool:  # n kept (max_assistance: the plan's first n within the budget)
+        return len(kept) >= n
+
+    def pending_tasks() -> Iterator[SynthTask]:
+        stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
+        for task in stream:
+            if task.index >= limit or enough():
+                return
+            if task.index not in done:
+                yield task
+
+    mode = "a" if resume and done else "w"
+    with open(out_dir / JOURNAL, mode) as journal:
+        if mode == "w":
+            journal.write(json.dumps({"params": params}) + "\n")
+            journal.flush()
+        for _, o in iter_batch(
+            simulate_file, pending_tasks(), workers=workers, ray=ray, desc="synth",
+            progress=progress, total=n if max_assistance is None else None,
+        ):  # fmt: skip
+            task: SynthTask = o.item
+            if not o.ok:
+                entry = {"skipped": {"task": task_dict(task), "amc": task.amc, "error": o.error}}
+            else:
+                data, record = o.result
+                level = max(record["mean_assistance"], record["mean_assist_torque"])
+                if max_assistance is not None and level > max_assistance:
+                    entry = {"rejected": task.kind}
+                else:
+                    name = f"{task.kind}_{task.index:05d}"
+                    path = out_dir / task.kind / f"{name}.npz"
+                    path.parent.mkdir(exist_ok=True)
+                    write_atomic(path, lambda f, data=data: f.write(data))  # whole or absent
+                    entry = {"kept": _index_entry(task, name, path, out_dir, record)}
+                    kept.add(task.index)
+            done[task.index] = entry
+            journal.write(json.dumps({"index": task.index, **entry}) + "\n")
+            journal.flush()  # a crash after this line loses nothing it names
+    return _finish(out_dir, done, n, params, summary, start)
+
+
+def _index_entry(task, name, path, out_dir, record) -> dict:
+    record = dict(record)
+    return {
+        "subject": task.kind,
+        "trial": name,
+        "asf": task.asf,
+        "amc": task.amc,
+        "file": str(path.relative_to(out_dir)),
+        "frames": record.pop("frames"),
+        "fps": record.pop("fps"),
+        "notes": [],
+        "task": task_dict(task),
+        **record,
+    }
+
+
+def _read_journal(path: Path, params: dict) -> dict[int, dict]:
+    """Finished tasks of the run journalled at ``path`` (task index -> its entry); a kept clip
+    whose file is gone counts as not done. Raises ``ValueError`` if the run had other
+    parameters than ``params`` (the number of clips may differ: the plan is the same)."""
+    if not path.is_file():
+        return {}
+    done: dict[int, dict] = {}
+    with open(path) as f:
+        lines = iter(f)
+        head = json.loads(next(lines, "{}") or "{}").get("params")
+        same = lambda a: {k: v for k, v in (a or {}).items() if k != "n"}  # noqa: E731
+        if same(head) != same(params):
+            raise ValueError(f"{path}: a run with other parameters ({head}); cannot resume")
+        for line in lines:
+            try:
+                e = json.loads(line)
+            except ValueError:  # a line cut short by the crash: that task is redone
+                continue
+            i = int(e.pop("index"))
+            if "kept" in e and not (path.parent / e["kept"]["file"]).is_file():
+                continue
+            done[i] = e
+    return done
+
+
+def _finish(out_dir: Path, done: dict, n: int, params: dict, summary, start) -> DatasetSummary:
+    """Write ``index.json``: the first ``n`` kept clips in plan order; files of clips kept past
+    them (tasks that were already running) are removed, so the folder does not depend on the
+    order tasks finished in."""
+    kept = sorted(i for i, e in done.items() if "kept" in e)
+    last = kept[n - 1] if len(kept) >= n else max(done, default=-1)
+    for i in kept[n:]:
+        (out_dir / done[i]["kept"]["file"]).unlink(missing_ok=True)
+    rejected: dict[str, int] = {}
+    for i in sorted(done):
+        if i > last:
+            break
+        e = done[i]
+        if "kept" in e:
+            summary.written.append(e["kept"])
+        elif "rejected" in e:
+            rejected[e["rejected"]] = rejected.get(e["rejected"], 0) + 1
+        else:
+            summary.skipped.append(e["skipped"])
+    summary.rejected = rejected
+    summary.seconds = time.perf_counter() - start
+    index = {
+        "source": params["source"],
         "skeleton": "humanoid",
-        "fps": fps,
+        "fps": params["fps"],
         "synthetic": {
-            "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds,
-            "max_assistance": max_assistance, "tasks_tried": tried, "rejected": rejected,
+            **{k: params[k] for k in ("n", "seed", "kinds", "seconds", "max_assistance")},
+            "tasks_tried": last + 1, "rejected": rejected,
         },
         "trials": summary.written,
         "skipped": summary.skipped,

@@ -34,12 +34,13 @@ from sim.motion.clip import Clip
 from sim.motion.retarget import local_rotations_from_world
 from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
-from sim.simulate.controller import Push, Weakening, track
-from sim.simulate.model import CONTROL_HZ, Gains, scaled_skeleton, sim_model
+from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Weakening, track
+from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_model, total_mass
 from sim.simulate.reference import on_floor, time_warp, trial_qpos
 
 KINDS = ("track", "fall", "procedural")  # the default mix
-# a clip is "physical" when its mean root assistance is within this share of its body weight
+# a clip is "physical" when its mean root assistance force is within this share of its body
+# weight and its mean root assistance torque within this share of body weight x 1 m
 PHYSICAL_BUDGET = 0.05
 # per-frame learning labels stored in each clip file (``save_npz``'s ``extra``), with shapes:
 # F frames, U = nu actuators (one per hinge, the order of the clip's ``joint_names``)
@@ -49,11 +50,19 @@ LABELS = {
     "sim_assist_wrench": "(F, 6) root assistance: force [N] world frame, torque [N m] root frame",
     "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor",
     "sim_foot_force": "(F, 2, 3) floor contact force [N, world frame] on the left, right foot",
+    "sim_contact_penetration": "(F,) deepest floor contact penetration [m], 0 without contact",
+    "sim_fallen": "(F,) bool: the figure has fallen (root below half its reference height)",
 }
 ALL_KINDS = (*KINDS, "follow")
 # root assistance bound [body weight]; procedural motion is not physically plausible (its feet
 # slide and its root glides), so it gets the whole body weight and the label says how much it took
 ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
+
+
+def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
+    """Whether a clip's mean root assistance, force [body weight] and torque [body weight x
+    1 m], is within :data:`PHYSICAL_BUDGET`: the motion is (nearly) the body's own doing."""
+    return mean_force_bw <= PHYSICAL_BUDGET and mean_torque_bw_m <= PHYSICAL_BUDGET
 
 
 class UnstableSimulation(RuntimeError):
@@ -137,10 +146,12 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
 def generate(task: SynthTask) -> tuple[Clip, dict]:
     """Simulate one clip; returns it and a record of its parameters and tracking measures.
 
-    The record holds ``generation`` (parameters and seed), ``assistance`` (per clip frame: root
-    assistance force over body weight), ``tracking_mpjpe_mm``, ``fell`` (and ``fall_frame``),
-    ``mean_assistance``, ``physical`` (mean assistance within :data:`PHYSICAL_BUDGET`) and
-    ``labels``: the per-frame arrays of :data:`LABELS`, for the clip file, not the index.
+    The record holds ``generation`` (parameters and seed), ``tracking_mpjpe_mm``, ``fell`` (and
+    ``fall_frame``), ``mean_assistance`` (root assistance force [body weight], mean over frames),
+    ``mean_assist_torque`` (its torque [body weight x 1 m]), ``physical`` (:func:`is_physical`),
+    ``penetration_mm`` (deepest floor contact), ``self_penetration_mm`` (deepest contact between
+    two body geoms) and ``labels``: the per-frame arrays of
+    :data:`LABELS`, for the clip file, not the index.
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
@@ -194,22 +205,30 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         model, skeleton, ref[:: int(round(CONTROL_HZ / task.fps))],
         np.zeros((len(result.qpos), model.nv)), task.fps, "",
     ).positions  # fmt: skip
+    weight = total_mass(model) * G
+    torque = np.linalg.norm(result.assist_wrench[:, 3:], axis=1) / (weight * ROOT_TORQUE_LEVER)
+    F = len(result.qpos)
+    fallen = np.zeros(F, dtype=bool)
+    if result.fall_frame >= 0:
+        fallen[result.fall_frame :] = True
     record = {
         "generation": p,
-        "assistance": result.assistance.tolist(),
         "mean_assistance": float(result.assistance.mean()),
+        "mean_assist_torque": float(torque.mean()),
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
         "fall_frame": int(result.fall_frame),
-        "physical": bool(result.assistance.mean() <= PHYSICAL_BUDGET),
+        "physical": is_physical(float(result.assistance.mean()), float(torque.mean())),
         "penetration_mm": 1000 * result.penetration,
-        "contact_penetration_mm": (1000 * result.contact_penetration).tolist(),
+        "self_penetration_mm": 1000 * result.self_penetration,
         "labels": {
             "sim_actions": result.actions,
             "sim_joint_torque": result.joint_torque,
             "sim_assist_wrench": result.assist_wrench,
             "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
             "sim_foot_force": result.foot_force,
+            "sim_contact_penetration": result.contact_penetration,
+            "sim_fallen": fallen,
         },
     }
     return out, record

@@ -18,14 +18,16 @@ module edits its output through ``mujoco.MjSpec``:
 * a stiff floor: contact time constant 0.005 s (MuJoCo's default 0.02 s; the floor is stiffer
   than 2.4 physics steps only if the step shrinks) with priority over the body's geoms, so its
   ``solref`` is used as is (MuJoCo otherwise averages it with the body geoms' default 0.02 s:
-  the former 0.01 s floor acted as 0.015 s); only body-floor contacts (the capsules of motion
-  capture interpenetrate: hands through thighs). MuJoCo's soft contact settles where the
+  the former 0.01 s floor acted as 0.015 s). MuJoCo's soft contact settles where the
   reference acceleration ``-k d r`` balances ``(1 - d) / d`` times the contact's unconstrained
   acceleration ``a0`` (``k = 1 / (d_max tc)^2``), so ``r = (1 - d) a0 (d_max tc)^2 / d^2``: for a
   body resting under its weight (``a0 = g``) 0.012 mm, but a foot pushed down by the legs has an
   ``a0`` of hundreds of m/s^2 (light segment, body weight through it): measured, the humanoid
   holding a pose under its weight sinks 0.4 mm on two feet, 0.7 mm on one, and a walking stance
   foot 0.4-0.8 mm (median), landings 5-15 mm;
+* self-collision: body geoms collide with each other except bodies within two joints of each
+  other and pairs overlapping in the rest pose (:func:`self_collision_exclusions`), so a
+  falling body's limbs cannot pass through each other or through its trunk;
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
   integrator is ``implicitfast`` so the actuators' damping is integrated implicitly.
 """
@@ -136,12 +138,16 @@ def sim_model(
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     for g in spec.geoms:
         if g.name == "floor":
-            g.contype, g.conaffinity = 1, 2
+            g.contype, g.conaffinity = FLOOR_BITS
             g.solref = [FLOOR_TIMECONST, FLOOR_DAMPRATIO]
             g.solimp = list(FLOOR_SOLIMP)
             g.priority = 1  # the floor's contact parameters win (not averaged with the body's)
         else:
-            g.contype, g.conaffinity = 2, 1
+            g.contype, g.conaffinity = BODY_BITS
+            g.solref = [SELF_TIMECONST, 1.0]
+    for a, b in self_collision_exclusions(spec.compile()):
+        e = spec.add_exclude()
+        e.bodyname1, e.bodyname2 = a, b
     plain = spec.compile()
     inertia, _ = rest_inertia(plain)
     for j in range(1, plain.njnt):
@@ -163,6 +169,51 @@ def sim_model(
         joint = spec.joint(name)
         joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
     return spec.compile()
+
+
+# contype, conaffinity: the floor touches every body geom; body geoms touch each other (bit 4)
+# except the pairs of :func:`self_collision_exclusions`
+FLOOR_BITS = (1, 2)
+BODY_BITS = (2 | 4, 1 | 4)
+ADJACENT_HOPS = 2  # bodies this close in the kinematic tree never collide with each other
+SELF_TIMECONST = 0.01  # [s] contact time constant between body geoms (MuJoCo default 0.02)
+
+
+def self_collision_exclusions(model) -> list[tuple[str, str]]:
+    """Body pairs that never collide: those within :data:`ADJACENT_HOPS` joints of each other
+    (parent and child, siblings, grandparent: their capsules meet at a shared joint: clavicles
+    and neck, hip joints and lower back), those within one hand (the fingers' and thumb's
+    capsules overlap in nearly every frame of CMU's grips) and those whose capsules overlap in
+    the standing rest pose. Every other pair collides: a shin cannot pass through a shin.
+
+    ``model``: the humanoid with body-body contacts enabled (:data:`BODY_BITS`)."""
+    parent = model.body_parentid
+
+    def chain(b: int) -> list[int]:
+        out = [b]
+        while out[-1] != 0:
+            out.append(int(parent[out[-1]]))
+        return out
+
+    pairs = set()
+    chains = {b: chain(b) for b in range(1, model.nbody)}
+    wrists = {b for b in range(1, model.nbody) if model.body(b).name.endswith("wrist")}
+    for a in range(1, model.nbody):
+        for b in range(a + 1, model.nbody):
+            common = next(x for x in chains[a] if x in chains[b])
+            if chains[a].index(common) + chains[b].index(common) <= ADJACENT_HOPS:
+                pairs.add((a, b))
+            elif wrists & set(chains[a]) & set(chains[b]):
+                pairs.add((a, b))  # within one hand (fingers, thumb): a coarse model of a grip
+    data = mujoco.MjData(model)
+    data.qpos[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # upright (y up -> z up)
+    data.qpos[2] = 2.0  # clear of the floor
+    mujoco.mj_forward(model, data)
+    for c in range(data.ncon):
+        a, b = sorted(int(model.geom_bodyid[g]) for g in data.contact.geom[c])
+        if a > 0:
+            pairs.add((a, b))
+    return sorted((model.body(a).name, model.body(b).name) for a, b in pairs)
 
 
 def rest_inertia(model) -> tuple[np.ndarray, np.ndarray]:

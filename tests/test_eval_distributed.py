@@ -1,0 +1,36 @@
+"""``evaluate`` distributes the per-clip work (methods, physics, forward simulation): the rows are
+the same in this process, in a process pool and on Ray, in the same order."""
+
+from __future__ import annotations
+
+import pytest
+
+from sidql.evaluation.evaluate import evaluate, load_cases
+
+
+def _without_times(out: dict) -> dict:
+    drop = {"decision_ms", "median_decision_ms"}
+    return {k: [{f: v for f, v in r.items() if f not in drop} for r in rows]
+            for k, rows in out.items()}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def cases(cmu_dir):
+    cases, _ = load_cases(cmu_dir, subjects=["02", "07"], progress=False)
+    by_trial: dict = {}
+    for c in cases:  # two clips of each of three trials: chunks of two trials' clips
+        by_trial.setdefault(c.clip.source, []).append(c)
+    return [c for group in list(by_trial.values())[:3] for c in group[:2]]
+
+
+def test_pool_and_ray_give_the_rows_of_one_process(cases):
+    kw = dict(seed=3, progress=False, physics=True, simulate=True, chunk=1)
+    one = evaluate(cases, ["random", "optimal"], [8], **kw)
+    assert [r["method"] for r in one["results"]] == ["original", "random", "optimal"]
+    assert len(one["per_clip"]) == 3 * len(cases)
+    assert all(r["sim_error_mm"] is not None for r in one["per_clip"])
+    pool = evaluate(cases, ["random", "optimal"], [8], workers=2, **kw)
+    assert _without_times(pool) == _without_times(one)
+    pytest.importorskip("ray")
+    on_ray = evaluate(cases, ["random", "optimal"], [8], workers=2, ray="local", **kw)
+    assert _without_times(on_ray) == _without_times(one)
