@@ -29,7 +29,7 @@ from sidql.keyframes import pitch
 from sidql.keyframes.optimal import catmull_rom_optimal, optimal_table
 from sidql.keyframes.reconstruct import (
     Reconstruction,
-    interpolate,
+    interpolate_derivatives,
     points_reconstruction,
     reconstruct_series,
     validate_keyframes,
@@ -158,6 +158,6 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     k = validate_keyframes(keyframes, N)
     pos = clip.positions[:, idx].reshape(N, -1)
     vel = clip.velocities[:, idx].reshape(N, -1)
-    P, V = interpolate(pos, vel, k, clip.dt, "hermite")
-    P, V = P.reshape(N, len(POINTS), 3), V.reshape(N, len(POINTS), 3)
-    return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps)
+    P, V, A = interpolate_derivatives(pos, vel, k, clip.dt, "hermite")
+    P, V, A = (x.reshape(N, len(POINTS), 3) for x in (P, V, A))
+    return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps, A)
