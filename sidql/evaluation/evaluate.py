@@ -41,7 +41,8 @@ from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials, load_dataset_clips
 from sim.motion.ingest import load_clips
 from sim.physics.analysis import PhysicsJob
-from sim.physics.ground import estimate_ground
+from sim.physics.contacts import Contacts, trial_contacts
+from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip
 from sim.simulate.model import sim_model
 from sim.simulate.validate import SIMULATE_KEYS, ForwardValidation
@@ -166,18 +167,19 @@ def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
     docstring).
 
-    ``physics``: ``(job, ground)`` (:class:`sim.physics.analysis.PhysicsJob` on the protocol
-    points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction;
-    ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its
-    forward simulation's figures (the IK fit tracked without assistance)."""
+    ``physics``: the trial's :class:`TrialPhysics` adds the :mod:`sim.physics` figures of the
+    reconstruction (its curve's own velocities and accelerations, the original's contacts
+    labelled over the whole trial); ``simulate`` (a
+    :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its forward
+    simulation's figures (the IK fit tracked without assistance)."""
     s = case.series
     rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
     phys = {}
     if physics:
-        analysis = physics[0].analyse(case.clip, rec.positions, physics[1])
+        analysis = physics.analyse(case.clip, rec)
         phys = physics_figures(analysis)
         if simulate is not None:
-            original = physics[0].analyse(case.clip, None, physics[1])["per_frame"]["qpos"]
+            original = physics.analyse(case.clip)["per_frame"]["qpos"]
             phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original))
     return {
         **phys,
@@ -237,9 +239,41 @@ def _simulate_means(rows: Sequence[dict]) -> dict:
     return out
 
 
+@dataclass(frozen=True)
+class TrialPhysics:
+    """What the physics of one trial's clips share: the subject's
+    :class:`sim.physics.analysis.PhysicsJob` on the protocol points, the trial's ground, and the
+    original's contacts labelled once over the whole trial (``start``: each clip object's id ->
+    its first frame in ``contacts``)."""
+
+    job: PhysicsJob
+    ground: Ground
+    contacts: Contacts
+    start: dict
+
+    def clip_contacts(self, clip: Clip) -> Contacts | None:
+        """The original's contacts over ``clip``'s frames (None for a clip not of this trial:
+        the job labels it on its own)."""
+        i = self.start.get(id(clip))
+        return None if i is None else self.contacts.slice(i, i + clip.n_frames)
+
+    def analyse(self, clip: Clip, rec=None) -> dict:
+        """:meth:`sim.physics.analysis.PhysicsJob.analyse` of the original (``rec`` None) or of a
+        reconstruction (its points, velocities and accelerations)."""
+        c = self.clip_contacts(clip)
+        if rec is None:
+            return self.job.analyse(clip, None, self.ground, contacts=c)
+        acc = getattr(rec, "accelerations", None)
+        return self.job.analyse(
+            clip, rec.positions, self.ground, contacts=c,
+            velocities=None if acc is None else rec.velocities, accelerations=acc,
+        )  # fmt: skip
+
+
 def physics_setup(cases: Sequence[Case]) -> dict:
-    """Per trial (``clip.source``): ``(job, ground)`` for :func:`score`, the ground from all the
-    trial's clips, one :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
+    """Per trial (``clip.source``): its :class:`TrialPhysics` for :func:`score`: the ground and
+    the original's contacts from all the trial's clips (in time order), one
+    :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
 
     jobs, out = {}, {}
     by_trial: dict[str, list[Case]] = {}
@@ -251,13 +285,23 @@ def physics_setup(cases: Sequence[Case]) -> dict:
             )  # fmt: skip
         by_trial.setdefault(c.clip.source, []).append(c)
     for source, group in by_trial.items():
+        group = sorted(group, key=lambda c: c.clip.start_frame)
         clip = group[0].clip
         if group[0].asf not in jobs:
             pts = from_clip(clip).restrict(POINTS)
             model = subject_model(group[0].asf)[1]
             jobs[group[0].asf] = PhysicsJob(model, pts.names, pts.parents, clip.fps)
         pos = np.concatenate([c.clip.positions for c in group])
-        out[source] = (jobs[group[0].asf], estimate_ground(pos, clip.names, clip.fps))
+        vel = np.concatenate([c.clip.velocities for c in group])
+        ground = estimate_ground(pos, clip.names, clip.fps)
+        start, i = {}, 0
+        for c in group:
+            start[id(c.clip)] = i
+            i += c.clip.n_frames
+        out[source] = TrialPhysics(
+            jobs[group[0].asf], ground, trial_contacts(pos, clip.names, clip.fps, ground, vel),
+            start,
+        )  # fmt: skip
     return out
 
 
@@ -310,8 +354,7 @@ def evaluate(
     if physics and cases:
         rows = []
         for case in tqdm(cases, desc="physics of originals", unit="clip", disable=not progress):
-            job, ground = setup[case.clip.source]
-            analysis = job.analyse(case.clip, None, ground)
+            analysis = setup[case.clip.source].analyse(case.clip)
             sim = {}
             if simulate:
                 sim = bodies[case.clip.source].run(analysis["per_frame"]["qpos"], case.clip.fps)

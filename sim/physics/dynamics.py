@@ -24,14 +24,16 @@ Pipeline per motion (``qpos`` (T, nq) on a model from :func:`sim.model.humanoid.
    ``qfrc_inverse``; its six free-joint entries are the external wrench Newton-Euler requires
    beyond gravity: force ``F = m (a_com - g)`` [N] (world axes) and, moved to the centre of mass,
    torque ``tau = dL/dt`` [N m], the rate of angular momentum about the CoM.
-3. **Residual.** Ground forces may act at the motion's foot points in contact (projected onto the
-   ground plane), each inside a friction pyramid of ``PYRAMID_EDGES`` edges with coefficient ``mu``
-   (default 0.8, shoe on floor). A non-negative least-squares fit of the edge magnitudes
-   (``scipy.optimize.nnls``) to ``(F, tau / L)`` (torque rows weighted by ``L = 1 m``) leaves the
-   residual wrench: what no admissible ground force explains. With no foot in contact the frame is
-   ballistic and the whole wrench is residual.
-4. **Joint torques.** ``qfrc_inverse`` minus the generalised force of the fitted ground forces
-   (``J^T f`` at the contact points); its hinge entries are the joint torques [N m].
+3. **Residual, force and torque apart.** Ground forces may act at the sole points of the feet in
+   contact (:meth:`sim.physics.contacts.Contacts.points`, on the floor plane), each inside a
+   friction pyramid of ``PYRAMID_EDGES`` edges with coefficient ``mu`` (default 0.8, shoe on
+   floor). The *residual force* is what a non-negative least-squares fit of the edge magnitudes
+   (``scipy.optimize.nnls``) to ``F`` alone leaves: the force no admissible ground force supplies.
+   The *residual torque* is what a second fit, to ``F`` first (rows weighted
+   ``FORCE_PRIORITY``) and then ``tau`` (per metre), leaves of ``tau``. With no foot in contact
+   the frame is ballistic and the whole wrench is residual.
+4. **Joint torques.** ``qfrc_inverse`` minus the generalised force of the force-first fit's
+   ground forces (``J^T f`` at the contact points); its hinge entries are the joint torques [N m].
 
 The analysis model is a copy with joint armature and damping set to zero (they are simulation
 stabilisers, not anatomy: the armature alone would turn a jittery thumb into hundreds of N m).
@@ -51,7 +53,8 @@ from scipy.signal import savgol_filter
 
 MU = 0.8  # friction coefficient of the ground (shoe sole on a floor)
 PYRAMID_EDGES = 4
-TORQUE_SCALE_M = 1.0  # [m] weight of torque rows against force rows in the fit
+TORQUE_SCALE_M = 1.0  # [m] torque rows per metre in the force-first fit
+FORCE_PRIORITY = 100.0  # weight of force rows over torque rows: the force is explained first
 
 
 def analysis_model(model):
@@ -155,7 +158,16 @@ def residual_wrench(
     mu: float = MU,
     edges: int = PYRAMID_EDGES,
 ):
-    """The part of a required wrench no ground forces at ``contacts`` can supply.
+    """The part of a required wrench no ground forces at ``contacts`` can supply, force and
+    torque apart.
+
+    * Residual force: what remains of ``force`` after the best non-negative combination of the
+      friction pyramids' edges at the contact points (force rows only: any point of contact can
+      carry any force inside its cone, so this is the force no contact can supply, whatever the
+      torque).
+    * Residual torque: with the ground forces chosen to explain the force first (force rows
+      weighted :data:`FORCE_PRIORITY` times the torque rows, torque rows per metre
+      :data:`TORQUE_SCALE_M`), the torque about the CoM they leave unexplained.
 
     Args:
         force: (3,) required external force [N] (beyond gravity).
@@ -163,7 +175,8 @@ def residual_wrench(
         com: (3,) centre of mass [m].
         contacts: (K, 3) contact points [m] (K may be 0: ballistic frame).
     Returns:
-        residual force (3,) [N], residual torque (3,) [N m], contact forces (K, 3) [N].
+        residual force (3,) [N], residual torque (3,) [N m], contact forces (K, 3) [N] of the
+        force-first fit.
     """
     K = len(contacts)
     if K == 0:
@@ -171,13 +184,17 @@ def residual_wrench(
     D = pyramid(mu, edges)  # (E, 3)
     r = np.asarray(contacts) - com  # (K, 3)
     top = np.tile(D.T, (1, K))  # (3, K E)
+    lam_f, _ = nnls(top, np.asarray(force, float), maxiter=50 * top.shape[1])
+    res_force = np.asarray(force, float) - top @ lam_f
     bot = np.cross(np.repeat(r, edges, axis=0), np.tile(D, (K, 1))).T / TORQUE_SCALE_M
-    A = np.vstack([top, bot])
-    b = np.concatenate([force, np.asarray(torque) / TORQUE_SCALE_M])
+    A = np.vstack([FORCE_PRIORITY * top, bot])
+    b = np.concatenate(
+        [FORCE_PRIORITY * np.asarray(force, float), np.asarray(torque) / TORQUE_SCALE_M]
+    )
     lam, _ = nnls(A, b, maxiter=50 * A.shape[1])
-    res = b - A @ lam
     f = (lam.reshape(K, edges, 1) * D[None]).sum(axis=1)
-    return res[:3], res[3:] * TORQUE_SCALE_M, f
+    res_torque = np.asarray(torque, float) - np.cross(r, f).sum(axis=0)
+    return res_force, res_torque, f
 
 
 @dataclass(frozen=True)
@@ -189,7 +206,8 @@ class Dynamics:
         com: (T, 3) centre of mass [m].
         force, torque: (T, 3) required external wrench beyond gravity: force [N] and torque about
             the CoM [N m] (= rate of angular momentum about the CoM), world axes.
-        residual_force, residual_torque: (T, 3) the part no ground force explains [N, N m].
+        residual_force: (T, 3) the force no ground force explains [N] (force-only fit).
+        residual_torque: (T, 3) the torque about the CoM the force-first fit leaves [N m].
         contact_force: (T, 3) total fitted ground force [N].
         joint_torque: (T, H) hinge torques [N m] with the fitted ground forces acting.
         mass: total mass [kg]; weight: its weight [N].
