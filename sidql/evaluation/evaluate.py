@@ -33,6 +33,7 @@ from tqdm import tqdm
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
+from sidql.evaluation.significance import CLOSENESS, comparisons_markdown, paired_comparisons
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
 from sim.batch import run_batch
 from sim.errors import MotionDataError
@@ -40,7 +41,7 @@ from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials, load_dataset_clips
 from sim.motion.ingest import load_clips
-from sim.physics.analysis import PhysicsJob
+from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip
@@ -177,7 +178,7 @@ def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate
     phys = {}
     if physics:
         analysis = physics.analyse(case.clip, rec)
-        phys = physics_figures(analysis)
+        phys = physics_figures(analysis, physics.analyse(case.clip))
         if simulate is not None:
             original = physics.analyse(case.clip)["per_frame"]["qpos"]
             phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original))
@@ -195,17 +196,33 @@ def score(case: Case, keyframes: np.ndarray, method: str, physics=None, simulate
 #: The :mod:`sim.physics` figures ``evaluate(..., physics=True)`` adds to rows (means over clips).
 PHYSICS_KEYS = (
     "penetration_mm", "float_mm", "skate_mm_s", "contact_precision", "contact_recall",
+    "physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
     "self_pen_excess_mm", "lost_contacts", "limit_excess_deg", "residual_force_bw",
     "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
+    "joint_torque_rms_nm_kg_distance",
     "residual_force_bw_excess", "residual_torque_nm_kg_excess", "joint_torque_rms_nm_kg_excess",
     "ik_error_mm",
 )  # fmt: skip
 
+#: Heights above the floor: not scored (None) in a trial whose floor does not fit.
+FLOOR_KEYS = HEIGHT_KEYS
 
-def physics_figures(analysis: dict) -> dict:
+
+def physics_figures(analysis: dict, original: dict | None = None) -> dict:
     """The per-clip numbers of a :mod:`sim.physics` analysis (no per-frame arrays; NaN, a mean
-    over no samples, becomes None so that the JSON is standard)."""
-    return {k: _none_if_nan(v) for k, v in analysis.items() if k != "per_frame"}
+    over no samples, becomes None so that the JSON is standard). With the ``original``'s
+    analysis, figures of :data:`sidql.evaluation.significance.CLOSENESS` also get
+    ``<key>_distance``, |value - original's|. Where the floor does not fit, the heights above it
+    (:data:`FLOOR_KEYS`) are None."""
+    out = {k: _none_if_nan(v) for k, v in analysis.items() if k != "per_frame"}
+    base = analysis if original is None else original
+    for k in CLOSENESS:
+        if out.get(k) is not None and base.get(k) is not None:
+            out[f"{k}_distance"] = abs(float(out[k]) - float(base[k]))
+    if not analysis.get("floor_fits", True):
+        for k in FLOOR_KEYS:
+            out[k] = None
+    return out
 
 
 def _none_if_nan(v):
@@ -256,6 +273,11 @@ class TrialPhysics:
         the job labels it on its own)."""
         i = self.start.get(id(clip))
         return None if i is None else self.contacts.slice(i, i + clip.n_frames)
+
+    def noise_floor(self, clip: Clip, *, seed: int = 0) -> dict:
+        """The original re-captured with marker noise, analysed against the original
+        (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`)."""
+        return self.job.noise_floor(clip, self.ground, contacts=self.clip_contacts(clip), seed=seed)
 
     def analyse(self, clip: Clip, rec=None) -> dict:
         """:meth:`sim.physics.analysis.PhysicsJob.analyse` of the original (``rec`` None) or of a
@@ -352,28 +374,34 @@ def evaluate(
     setup = physics_setup(cases) if physics else {}
     bodies = simulate_setup(cases) if simulate else {}
     if physics and cases:
-        rows = []
+        rows, noise = [], []
         for case in tqdm(cases, desc="physics of originals", unit="clip", disable=not progress):
-            analysis = setup[case.clip.source].analyse(case.clip)
+            tp = setup[case.clip.source]
+            analysis = tp.analyse(case.clip)
             sim = {}
             if simulate:
                 sim = bodies[case.clip.source].run(analysis["per_frame"]["qpos"], case.clip.fps)
+            key = {"source": case.clip.source, "start_frame": case.clip.start_frame}
             rows.append(
+                {**key, "method": "original", "keyframes": case.clip.n_frames,
+                 **physics_figures(analysis), **sim}
+            )  # fmt: skip
+            noisy = tp.noise_floor(case.clip, seed=clip_seed(seed, case.index, 0))
+            noise.append(
+                {**key, "method": NOISE_FLOOR, "keyframes": case.clip.n_frames,
+                 **noise_figures(physics_figures(noisy, analysis), rows[-1])}
+            )  # fmt: skip
+        per_clip.extend(rows + noise)
+        zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
+        for name, group in (("original", rows), (NOISE_FLOOR, noise)):
+            results.append(
                 {
-                    "source": case.clip.source, "start_frame": case.clip.start_frame,
-                    "method": "original", "keyframes": case.clip.n_frames,
-                    **physics_figures(analysis), **sim,
+                    "method": name, "keyframes": cases[0].clip.n_frames, "clips": len(group),
+                    **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0,
+                    "median_decision_ms": 0.0, **_physics_means(group),
+                    **(_simulate_means(group) if simulate and name == "original" else {}),
                 }
             )  # fmt: skip
-        per_clip.extend(rows)
-        zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
-        results.append(
-            {
-                "method": "original", "keyframes": cases[0].clip.n_frames, "clips": len(rows),
-                **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0, "median_decision_ms": 0.0,
-                **_physics_means(rows), **(_simulate_means(rows) if simulate else {}),
-            }
-        )  # fmt: skip
     jobs = [(m, W) for m in method_names for W in counts]
     for name, W in tqdm(jobs, desc="evaluate", unit="run", disable=not progress):
         rows = []
@@ -409,13 +437,64 @@ def evaluate(
                     **(_simulate_means(rows) if simulate else {}),
                 }
             )
-    return {"results": results, "per_clip": per_clip}
+    out = {"results": results, "per_clip": per_clip}
+    out["comparisons"] = paired_comparisons(per_clip, method_names, seed=seed)
+    if physics:
+        out["floors"] = floor_report(setup)
+    return out
+
+
+#: The method name of the noise-floor rows: the original re-captured with marker noise.
+NOISE_FLOOR = "noise floor"
+
+
+def noise_figures(noisy: dict, original: dict) -> dict:
+    """A noise-floor row: per figure, how far the original re-captured with marker noise
+    (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`) departs from the original,
+    ``|noisy - original|`` (None where either lacks it)."""
+    out = {}
+    for k, v in noisy.items():
+        o = original.get(k)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        out[k] = None if v is None or o is None else abs(float(v) - float(o))
+    return out
+
+
+def floor_report(setup: dict) -> list[dict]:
+    """Per trial its floor (:meth:`sim.physics.ground.Ground.summary`) and whether it fits."""
+    return [{"source": src, **tp.ground.summary()} for src, tp in setup.items()]
+
+
+def floors_markdown(floors: Sequence[dict]) -> str:
+    """The trials whose floor does not fit, with how far their planted feet depart from it (their
+    float and penetration are not scored)."""
+    bad = [f for f in floors if not f["floor_fits"]]
+    if not bad:
+        return f"The floor fits every one of the {len(floors)} trials."
+    lines = [
+        f"Floor does not fit {len(bad)} of {len(floors)} trials (float and penetration not "
+        "scored there):",
+        "",
+        "| trial | deviation (mm) | spread (mm) | drift (mm) | below (mm) | footprints |",
+        "|---|---|---|---|---|---|",
+    ]
+    for f in bad:
+
+        def mm(k):
+            return "-" if f[k] is None else f"{f[k]:.1f}"
+
+        lines.append(
+            f"| {Path(f['source']).stem} | {mm('floor_deviation_mm')} | {mm('floor_spread_mm')} "
+            f"| {mm('floor_drift_mm')} | {mm('floor_below_mm')} | {f['floor_footprints']} |"
+        )
+    return "\n".join(lines)
 
 
 def table3_markdown(results: Sequence[dict]) -> str:
     """Markdown table of mean Q per method (rows) and W (columns), the paper's figure beside ours
     where it has one, then the chart-free errors."""
-    results = [r for r in results if r["method"] != "original"]
+    results = [r for r in results if r["method"] not in ("original", NOISE_FLOOR)]
     counts = sorted({r["keyframes"] for r in results})
     names = list(dict.fromkeys(r["method"] for r in results))
     by = {(r["method"], r["keyframes"]): r for r in results}
@@ -448,26 +527,36 @@ def table3_markdown(results: Sequence[dict]) -> str:
 
 def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
     """Markdown table of the :mod:`sim.physics` means (``stat="median"``: medians) over clips per
-    method and W (``original`` first)."""
+    method and W: ``original`` first, then the ``noise floor`` (per figure, how far the original
+    re-captured with marker noise departs from it), then the methods. ``|JT - orig|``: the joint
+    torque RMS's distance from the original's (over-smoothed motion needs less than the
+    original, not better); PhysDiff columns are Yuan et al.'s definitions."""
     rows = [r for r in results if "residual_force_bw" in r]
-    rows.sort(key=lambda r: r["method"] != "original")
+    rows.sort(key=lambda r: (r["method"] != "original", r["method"] != NOISE_FLOOR))
     cols = (
         ("Q", "mean_q", ".4f"), ("pen. (mm)", "penetration_mm", ".1f"),
         ("float (mm)", "float_mm", ".1f"), ("skate (mm/s)", "skate_mm_s", ".0f"),
         ("contact P", "contact_precision", ".2f"), ("contact R", "contact_recall", ".2f"),
+        ("PhysDiff penetrate (mm)", "physdiff_penetrate_mm", ".1f"),
+        ("PhysDiff float (mm)", "physdiff_float_mm", ".1f"),
+        ("PhysDiff skate", "physdiff_skate", ".3f"),
         ("self-pen. excess (mm)", "self_pen_excess_mm", ".2f"),
         ("lost contacts", "lost_contacts", ".1f"), ("limit excess (deg)", "limit_excess_deg", ".2f"),
-        ("residual F (BW)", "residual_force_bw", ".3f"),
-        ("residual F p95 (BW)", "residual_force_bw_p95", ".2f"),
+        ("residual force (BW)", "residual_force_bw", ".3f"),
+        ("residual force p95 (BW)", "residual_force_bw_p95", ".2f"),
         ("residual torque (N m/kg)", "residual_torque_nm_kg", ".3f"),
         ("joint torque RMS (N m/kg)", "joint_torque_rms_nm_kg", ".3f"),
+        ("\\|JT - orig\\| (N m/kg)", "joint_torque_rms_nm_kg_distance", ".3f"),
     )  # fmt: skip
     lines = [
         "| method | W | clips | " + " | ".join(c[0] for c in cols) + " |",
         "|---|---|---|" + "---|" * len(cols),
     ]
     for r in rows:
-        vals = [r[k] if stat == "mean" or k == "mean_q" else r[f"{k}_median"] for _, k, f in cols]
+        vals = [
+            r.get(k) if stat == "mean" or k == "mean_q" else r.get(f"{k}_median")
+            for _, k, f in cols
+        ]
         cells = [
             "-" if v is None else format(v, f) for v, (_, _, f) in zip(vals, cols, strict=True)
         ]

@@ -61,6 +61,7 @@ from sim.physics.dynamics import MU, Dynamics, InverseDynamics
 from sim.physics.feet import FOOT_POINTS, SOLE_POINTS
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
+from sim.physics.noise import NOISE_MM, noisy_original
 from sim.replay.capsules import bones_of
 from sim.replay.checks import (
     CollisionScene,
@@ -77,6 +78,11 @@ EXCESS_KEYS = (
     "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
     "physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
 )  # fmt: skip
+
+
+#: Heights above the floor: meaningless where the trial's floor does not fit
+#: (:attr:`sim.physics.ground.Ground.fits`), so not scored there (eval and the report say so).
+HEIGHT_KEYS = ("penetration_mm", "float_mm", "physdiff_penetrate_mm", "physdiff_float_mm")
 
 
 #: Originals a job keeps (a few hundred kB each): ``sidql eval`` revisits every clip per method and W.
@@ -347,6 +353,30 @@ class PhysicsJob:
             "qpos": mp.fit.qpos,  # (T, nq) the fitted configurations (forward simulation's input)
         }
         return out
+
+    def noise_floor(
+        self,
+        clip,
+        ground: Ground,
+        *,
+        contacts: Contacts | None = None,
+        sigma_mm: float = NOISE_MM,
+        seed: int = 0,
+    ) -> dict:
+        """:meth:`analyse` of the original re-captured with ``sigma_mm`` of marker noise
+        (:func:`sim.physics.noise.noisy_original`, seeded): each figure's excess over the
+        original is what capture noise alone does to it, its noise floor."""
+        idx = [clip.names.index(n) for n in self.names]
+        pos = np.asarray(clip.positions, dtype=np.float64)[:, idx]
+        vel, acc = _source_derivatives(clip, idx)
+        if vel is None:  # no source frames: positions only, the filter differentiates
+            vel = acc = np.zeros_like(pos)
+            noisy = noisy_original(pos, vel, acc, clip.fps, clip.fps, sigma_mm=sigma_mm, seed=seed)
+            return self.analyse(clip, noisy[0], ground, contacts=contacts)
+        p, v, a = noisy_original(
+            pos, vel, acc, clip.fps, clip.source_fps, sigma_mm=sigma_mm, seed=seed
+        )
+        return self.analyse(clip, p, ground, contacts=contacts, velocities=v, accelerations=a)
 
 
 def summarise_dynamics(dyn: Dynamics, anatomical: np.ndarray) -> dict:
