@@ -15,8 +15,8 @@ from sidql.evaluation.evaluate import (
     simulate_markdown,
     table3_markdown,
 )
-from sidql.evaluation.significance import comparisons_markdown
 from sidql.evaluation.rate import rate_distortion, write_plot
+from sidql.evaluation.significance import comparisons_markdown
 from sidql.keyframes.methods import get
 from sim.files import write_atomic
 

@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from sidql.evaluation.significance import CLOSENESS, paired_comparisons
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
-from sidql.evaluation.significance import CLOSENESS, comparisons_markdown, paired_comparisons
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
 from sim.batch import run_batch
 from sim.errors import MotionDataError
