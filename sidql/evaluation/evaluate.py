@@ -479,15 +479,10 @@ def floors_markdown(floors: Sequence[dict]) -> str:
         "| trial | deviation (mm) | spread (mm) | drift (mm) | below (mm) | footprints |",
         "|---|---|---|---|---|---|",
     ]
+    keys = ("floor_deviation_mm", "floor_spread_mm", "floor_drift_mm", "floor_below_mm")
     for f in bad:
-
-        def mm(k):
-            return "-" if f[k] is None else f"{f[k]:.1f}"
-
-        lines.append(
-            f"| {Path(f['source']).stem} | {mm('floor_deviation_mm')} | {mm('floor_spread_mm')} "
-            f"| {mm('floor_drift_mm')} | {mm('floor_below_mm')} | {f['floor_footprints']} |"
-        )
+        cells = " | ".join("-" if f[k] is None else f"{f[k]:.1f}" for k in keys)
+        lines.append(f"| {Path(f['source']).stem} | {cells} | {f['floor_footprints']} |")
     return "\n".join(lines)
 
 
