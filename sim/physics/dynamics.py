@@ -2,24 +2,17 @@
 
 Pipeline per motion (``qpos`` (T, nq) on a model from :func:`sim.model.humanoid.build_mjcf`):
 
-1. **Derivatives**, from where they are known. Consecutive samples are differenced on the
-   configuration manifold (``mj_differentiatePos``: root linear velocity in world axes, root
-   angular velocity in its own axes, hinge rates, hinge steps wrapped) and summed into a
-   tangent-space path ``s`` (T, nv).
-
-   * Given ``qvel``/``qacc`` (e.g. from an analytic curve), :meth:`InverseDynamics.run` uses them.
-   * Given a denser sampling of the motion (the original's 120 fps source frames, a
-     reconstruction's curve evaluated at 120 Hz), :func:`stencil_derivatives` takes central
-     differences at spacing ``h`` around each analysis frame: ``v = (s+ - s-) / 2h``,
-     ``a = (s+ - 2 s0 + s-) / h^2`` (one-sided at the motion's ends). Their gains on a sinusoid of
-     frequency ``f`` are ``sin(wh) / wh`` and ``(2 - 2 cos wh) / (wh)^2`` (``w = 2 pi f``): at
-     h = 1/120 s, 0.996 and 0.998 at 3 Hz, 0.955 and 0.977 at 10 Hz; an impact blurs over +-h only.
-   * Otherwise (frames at the analysis rate only) :func:`derivatives` is a Savitzky-Golay filter
-     of ``s`` (cubic, ``window`` frames, default 9 = 0.3 s at 30 fps; polynomial fits at the clip
-     ends), there because second differences of raw mocap amplify marker noise into accelerations
-     of hundreds of rad/s^2. Its gain at 30 fps: velocity 0.994 at 1.5 Hz, 0.92 at 3 Hz, 0.56 at
-     5 Hz; acceleration 0.87 at 1.5 Hz, 0.56 at 3 Hz, 0.14 at 5 Hz; an impact spreads over +-4
-     frames.
+1. **Derivatives**, from where they are known: :meth:`InverseDynamics.run` takes the motion's
+   ``qvel``/``qacc`` where the caller has them (:class:`sim.physics.analysis.PhysicsJob` maps the
+   original's source-frame point derivatives and a reconstruction's curve derivatives through
+   the fitted humanoid's Jacobians, :meth:`sim.physics.ik.HumanoidIK.rates`). Otherwise (frames
+   at the analysis rate only) :func:`derivatives` differences consecutive samples on the
+   configuration manifold (``mj_differentiatePos``, hinge steps wrapped) into a tangent path and
+   applies a Savitzky-Golay filter (cubic, ``window`` frames, default 9 = 0.3 s at 30 fps;
+   polynomial fits at the clip ends), there because second differences of raw mocap amplify
+   marker noise. Its gain at 30 fps: velocity 0.994 at 1.5 Hz, 0.92 at 3 Hz, 0.56 at 5 Hz;
+   acceleration 0.87 at 1.5 Hz, 0.56 at 3 Hz, 0.14 at 5 Hz
+   (:func:`sim.motion.velocities.local_polynomial_gain`); an impact spreads over +-4 frames.
 2. **Whole-body wrench.** ``mj_inverse`` with constraints (contacts, limits) disabled gives
    ``qfrc_inverse``; its six free-joint entries are the external wrench Newton-Euler requires
    beyond gravity: force ``F = m (a_com - g)`` [N] (world axes) and, moved to the centre of mass,
@@ -101,44 +94,6 @@ def derivatives(model, qpos: np.ndarray, fps: float, *, window: int = 9, polyord
     dt = 1.0 / fps
     vel = savgol_filter(s, w, p, deriv=1, delta=dt, axis=0, mode="interp")
     acc = savgol_filter(s, w, p, deriv=2, delta=dt, axis=0, mode="interp") if p >= 2 else 0 * s
-    return vel, acc
-
-
-def stencil_weights(k: int, where: int, h: float, degree: int) -> np.ndarray:
-    """(2, k) weights giving the first and second derivative at sample ``where`` of ``k`` samples
-    ``h`` [s] apart: those of the least-squares polynomial of ``degree`` through them (exact
-    differences when ``degree = k - 1``; a Savitzky-Golay filter at the sample rate otherwise)."""
-    x = (np.arange(k) - where) * h
-    V = np.vander(x, degree + 1, increasing=True)  # (k, degree + 1)
-    coef = np.linalg.pinv(V)  # polynomial coefficients from the samples
-    return np.stack([coef[1], 2 * coef[2] if degree >= 2 else 0 * coef[1]])
-
-
-def stencil_derivatives(model, samples: np.ndarray, h: float, where, *, degree: int | None = None):
-    """``qvel`` and ``qacc`` (T, nv) of each frame from ``k`` samples of the motion around it.
-
-    Args:
-        samples: (T, k, nq) per frame ``k`` configurations ``h`` apart in time (k >= 3).
-        h: sample spacing [s] (1/120 for CMU's source frames).
-        where: (T,) index of the frame among its samples (``(k - 1) / 2`` central; else one-sided
-            near a motion's end).
-        degree: of the local polynomial (default ``k - 1``: exact differences; k = 3 central is
-            ``v = (s+ - s-) / 2h``, ``a = (s+ - 2 s0 + s-) / h^2``, gains in the module doc).
-    Returns:
-        qvel, qacc (T, nv) [rad/s, m/s and per s].
-    """
-    q = np.asarray(samples, dtype=np.float64)
-    T, k = q.shape[:2]
-    if k < 3:
-        raise ValueError(f"need at least 3 samples per frame; got {k}")
-    degree = k - 1 if degree is None else degree
-    where = np.broadcast_to(np.asarray(where, dtype=int), (T,))
-    weights = {w: stencil_weights(k, w, h, degree) for w in np.unique(where)}
-    vel, acc = np.zeros((T, model.nv)), np.zeros((T, model.nv))
-    for t in range(T):
-        s = tangent_path(model, q[t])  # (k, nv), s[0] = 0
-        W = weights[int(where[t])]
-        vel[t], acc[t] = W[0] @ s, W[1] @ s
     return vel, acc
 
 
