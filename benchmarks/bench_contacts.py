@@ -154,7 +154,7 @@ def simulated_labels(data: Path) -> str:
     pooled = [f"{tp / n_lab:.3f}" for s in "lr" for tp, n_lab in [counts[s][:2]]]
     pooled_r = [f"{counts[s][0] / counts[s][2]:.3f}" for s in "lr"]
     line = (
-        f"| **pooled** | {sum(int(c[2]) for c in counts.values())} true contacts | "
+        f"| **pooled** | {sum(int(c[2]) for c in counts.values())} foot-frames in contact | "
         f"{pooled[0]} | {pooled_r[0]} | {pooled[1]} | {pooled_r[1]} |"
     )
     print(line)

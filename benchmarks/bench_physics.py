@@ -360,9 +360,9 @@ def figures(data: Path) -> str:
     ]  # fmt: skip
     # optimal against uniform
     lines += [
-        "| W | optimal's residual force lower than uniform's (share of clips) "
-        "| mean(optimal - uniform) [95 % CI] (BW) | decided |",
-        "|---|---:|---|---|",
+        "| W | clips where optimal's residual force is lower / equal (to 1 mBW) / higher than "
+        "uniform's | mean(optimal - uniform) [95 % CI] (BW) | decided |",
+        "|---|---|---|---|",
     ]
     for W in (5, 10, 15):
         o = {(r["source"], r["start_frame"]): r for r in per if r["method"] == "optimal"

@@ -222,7 +222,6 @@ class PhysicsJob:
             fit = self.ik.fit(positions, q_init=start)
         if self._observed is None:  # the same hinges for the original and every reconstruction
             self._observed = self.ik.observed_hinges(fit.qpos[0])
-        T = len(positions)
         if velocities is not None and accelerations is not None:
             prior = rates if rates is not None else (None, None)
             qvel, qacc = self.ik.rates(
@@ -239,12 +238,10 @@ class PhysicsJob:
         )
         motion = PointMotion(self.names, self.parents, positions, self.fps)
         checks = self._replay(motion, motion if reference is None else reference, ground)
-        b = self._bones
         lowest = lowest_body_point(
-            positions, self.names, self.parents, b.radius, ground, contacts.sole,
+            positions, self.names, self.parents, self._bones.radius, ground, contacts.sole,
             bones=self._body_bones,
         )  # fmt: skip
-        assert lowest.shape == (T,)
         return MotionPhysics(
             positions, fit, dyn, contacts, checks,
             limit_excess(fit.qpos, self.model, self._observed), lowest, source,
