@@ -1,7 +1,21 @@
-"""Physics of one 60-frame clip for one method (IK fit + inverse dynamics) on one core, and the
-wall time of ``sidql eval --physics``.
+"""The physics figures: ground truth of the derivatives, what the evaluation finds on CMU, and speed.
 
-Usage: .venv/bin/python benchmarks/bench_physics.py [--data ../shared/cmu] [--repeats 5] [--eval]
+Usage: .venv/bin/python benchmarks/bench_physics.py [--data ../shared/cmu] [--truth] [--figures]
+       [--repeats 5] [--eval] [--write]
+
+``--truth``: the ground-truth cases of ``tests/test_physics_truth.py`` (``mj_step`` at 1200 Hz,
+limbs at 1.5-3 Hz, pushes on the thorax and a hand in flight, a push while standing, a kick on a
+foot, a landing), analysed at 30 fps three ways: the original's path (its 120 Hz samples), the
+exact point derivatives (a reconstruction's curve), and the 9-frame Savitzky-Golay filter of the
+30 fps frames alone (the baseline). Targets: unpushed flight <= 3 % body weight mean, a push's
+impulse within 5 % and peak within 15 %, no impact leaking > 10 % BW beyond 2 frames.
+
+``--figures``: ``sidql eval --physics`` (five methods, W = 5 10 15) on ``--data``, in process:
+the original's residual force per trial (target <= 0.03 BW mean) and torque, the noise floors,
+Spearman's rho of Q against the residual force across method/W rows and clip by clip, and how
+often optimal beats uniform on residual force (with the paired bootstrap interval).
+
+``--write``: writes ``docs/results/physics.md`` (the parts run).
 
 Part 1 (one core: the process is pinned to CPU 0 and BLAS to one thread): a real CMU clip (02_01,
 clip 0, 30 fps, 23 protocol points), its uniform W=10 spherical Hermite reconstruction, and three
@@ -106,7 +120,7 @@ def mink_fit(model, names, pts: np.ndarray, q_init: np.ndarray) -> Fit:
     return Fit(q, e, it)
 
 
-def part1(data: Path, repeats: int) -> None:
+def part1(data: Path, repeats: int) -> str:
     asf = data / "02" / "02.asf"
     clips = load_clips(asf, data / "02" / "02_01.amc")
     clip = clips[0]
@@ -119,7 +133,8 @@ def part1(data: Path, repeats: int) -> None:
     job.analyse(clip, None, ground)  # the original: computed once per clip, cached
     ik = HumanoidIK(model, POINTS)
     inv = InverseDynamics(model)
-    contacts = job.ground_contacts(pts, ground)[3]  # same dynamics work for every fit
+    orig = job.original(clip, ground)
+    contacts = job.force_points(orig.contacts, ground)  # same dynamics work for every fit
     q0 = clip.qpos[0]
 
     def dyn(fit):
@@ -134,51 +149,274 @@ def part1(data: Path, repeats: int) -> None:
         t_fit, fit = best(fit_fn, repeats)
         t_dyn, _ = best(lambda fit=fit: dyn(fit), repeats)
         rows.append((name, t_fit, t_dyn, fit))
-    t_all, _ = best(lambda: job.analyse(clip, pts, ground), repeats)
-    print(f"clip 02_01 #0: {len(pts)} frames, {len(POINTS)} points, nv = {model.nv}; one core")
-    print("| IK | fit (s) | dynamics (s) | fit + dynamics (s) | vs ours | mean iterations "
-          "| max point error (mm) |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|")
+    t_all, _ = best(
+        lambda: job.analyse(
+            clip, pts, ground, velocities=rec.velocities, accelerations=rec.accelerations
+        ),
+        repeats,
+    )
+    lines = [
+        f"clip 02_01 #0: {len(pts)} frames, {len(POINTS)} points, nv = {model.nv}; one core",
+        "",
+        "| IK | fit (s) | dynamics (s) | fit + dynamics (s) | vs ours | mean iterations "
+        "| max point error (mm) |",
+        "|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
     ours = rows[0][1] + rows[0][2]
     for name, tf, td, fit in rows:
-        print(
+        lines.append(
             f"| {name} | {tf:.3f} | {td:.3f} | {tf + td:.3f} | {(tf + td) / ours:.1f}x "
             f"| {fit.iterations.mean():.1f} | {1e3 * fit.error.max():.2f} |"
         )
-    print(f"whole PhysicsJob.analyse (IK, contacts, capsule replay, dynamics): {t_all:.3f} s")
-    print(
-        f"target <= 0.5 s for fit + dynamics: {'met' if ours <= 0.5 else 'NOT met'} ({ours:.3f} s)"
+    lines.append("")
+    lines.append(
+        f"whole PhysicsJob.analyse of the reconstruction (IK, curve derivatives through the "
+        f"Jacobians, contacts, capsule replay, dynamics): {t_all:.3f} s ({t_all / ours:.1f}x ours)"
     )
+    text = "\n".join(lines)
+    print(text)
+    return text
 
 
-def part2(data: Path) -> None:
+def part2(data: Path) -> str:
     base = [sys.executable, "-m", "sidql.commands.main", "eval", "--data", str(data),
             "--keyframes", "5", "10", "15", "--quiet"]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         env.pop(k, None)
+    lines, took = [], []
     with tempfile.TemporaryDirectory() as d:
         for extra in ([], ["--physics"]):
             t0 = time.perf_counter()
             subprocess.run(base + ["--out", f"{d}/r.json"] + extra, check=True, env=env,
                            stdout=subprocess.DEVNULL, cwd=REPO)  # fmt: skip
-            dt = time.perf_counter() - t0
+            took.append(time.perf_counter() - t0)
             label = "sidql eval --physics" if extra else "sidql eval (baseline)"
-            print(f"{label}: {dt:.0f} s ({dt / 60:.1f} min); load average {os.getloadavg()}")
+            lines.append(f"{label}: {took[-1]:.0f} s ({took[-1] / 60:.1f} min)")
+    lines.append(f"ratio: {took[1] / took[0]:.1f}x; load average {os.getloadavg()[0]:.1f}")
+    text = "\n".join(lines)
+    print(text)
+    return text
+
+
+# ---------------------------------------------------------------- ground truth (--truth)
+
+
+def truth() -> str:
+    """The ground-truth cases of tests/test_physics_truth.py, measured three ways."""
+    sys.path.insert(0, str(REPO / "tests"))
+    import test_physics_truth as gt  # the simulations the tests check, not copied
+
+    from sim.physics.ground import Ground
+
+    humanoid = gt.humanoid_model()
+    model = humanoid[1]
+    push = np.array([200.0, -120.0, 120.0])
+    rows = []
+
+    def analyse(sim, way, ground=None):
+        if way == "filter":  # the 30 fps frames alone, 9-frame Savitzky-Golay
+            job, clip, idx = gt._job_and_clip(humanoid, sim)
+            mp = job.motion_physics(clip.positions[:, idx], None, ground or Ground(-5.0), clip.qpos)
+            return mp, np.arange(0, len(sim["qpos"]), gt.DENSE_HZ // gt.FPS)
+        return gt._analyse(humanoid, sim, exact=way == "exact", ground=ground)
+
+    def near_of(on):
+        near = np.zeros(len(on), bool)
+        i = np.flatnonzero(on)
+        near[max(i[0] - 2, 0) : i[-1] + 3] = True
+        return near
+
+    for body in ("thorax", "lhand"):
+        sim = gt._simulate(model, seconds=1.0, z0=3.0, v0=(0.5, 0, 2.0),
+                           pushes=[(body, push, 0.4, 0.6, "sine")])  # fmt: skip
+        for way in ("source", "exact", "filter"):
+            mp, centre = analyse(sim, way)
+            rf, W = mp.dynamics.residual_force, mp.dynamics.weight
+            on = np.linalg.norm(sim["push"][centre], axis=1) > 0
+            near = near_of(on)
+            true = sim["push"].sum(0) / gt.DENSE_HZ
+            imp = np.linalg.norm(rf[near].sum(0) / gt.FPS - true) / np.linalg.norm(true)
+            peak = abs(np.linalg.norm(rf[on], axis=1).max() - np.linalg.norm(push))
+            quiet = np.linalg.norm(rf[~near], axis=1) / W
+            rows.append((f"push on the {body}, in flight", way, quiet.mean(), quiet.max(),
+                         imp, peak / np.linalg.norm(push), None))  # fmt: skip
+    kick = np.array([0.0, 1500.0, 3700.0])
+    sim = gt._simulate(model, seconds=0.8, z0=3.0, pushes=[("rfoot", kick, 0.395, 0.405, "box")])
+    for way in ("source", "exact", "filter"):
+        mp, centre = analyse(sim, way)
+        rf = np.linalg.norm(mp.dynamics.residual_force, axis=1) / mp.dynamics.weight
+        far = np.abs(np.arange(len(centre)) - int(round(0.4 * gt.FPS))) > 2
+        rows.append(("kick on a foot, in flight", way, rf[far].mean(), None, None, None,
+                     rf[far].max()))  # fmt: skip
+    stand = np.array([150.0, -150.0, 150.0])
+    sim = gt._simulate(model, seconds=1.0, z0=None, floor=True, kp=600.0, kd=20.0,
+                       driven=gt.ARMS, pushes=[("thorax", stand, 0.4, 0.6, "sine")])  # fmt: skip
+    for way in ("source", "exact", "filter"):
+        mp, centre = analyse(sim, way, Ground(0.0))
+        floor = np.array([sim["floor"][max(c - 2, 0) : c + 2].mean(axis=0) for c in centre])
+        extra = mp.dynamics.force - floor
+        on = np.linalg.norm(sim["push"][centre], axis=1) > 0
+        near = near_of(on)
+        quiet = ~near
+        quiet[:3] = quiet[-3:] = False
+        true = sim["push"].sum(0) / gt.DENSE_HZ
+        imp = np.linalg.norm(extra[near].sum(0) / gt.FPS - true) / np.linalg.norm(true)
+        peak = abs(np.linalg.norm(extra[on], axis=1).max() - np.linalg.norm(stand))
+        q = np.linalg.norm(extra[quiet], axis=1) / mp.dynamics.weight
+        rows.append(("push on the thorax, standing (required - floor force)", way, q.mean(),
+                     q.max(), imp, peak / np.linalg.norm(stand), None))  # fmt: skip
+    sim = gt._simulate(model, seconds=0.9, z0=1.05, floor=True, kp=300.0, kd=10.0)
+    for way in ("source", "exact", "filter"):
+        mp, centre = analyse(sim, way, Ground(0.0))
+        rf = np.linalg.norm(mp.dynamics.residual_force, axis=1) / mp.dynamics.weight
+        first = int(np.argmax(np.linalg.norm(sim["floor"][centre], axis=1) > 0))
+        rows.append(("landing: free fall > 2 frames before touch-down", way,
+                     rf[: first - 2].mean(), rf[: first - 2].max(), None, None, None))  # fmt: skip
+    names = {"source": "source frames (original)", "exact": "curve (exact)",
+             "filter": "30 fps filter only (baseline)"}  # fmt: skip
+
+    def f(x, pct=False):
+        return "-" if x is None else (f"{100 * x:.1f} %" if pct else f"{x:.3f}")
+
+    lines = [
+        "| case | derivatives | unpushed mean (BW) | unpushed max (BW) | impulse error "
+        "| peak error | leak > 2 frames away, max (BW) |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for case, way, qm, qx, imp, pk, leak in rows:
+        lines.append(
+            f"| {case} | {names[way]} | {f(qm)} | {f(qx)} | {f(imp, True)} | {f(pk, True)} "
+            f"| {f(leak)} |"
+        )
+    lines.append(
+        "\nTargets: unpushed frames <= 0.03 BW mean; impulse within 5 %, peak within 15 %; "
+        "nothing > 0.10 BW beyond 2 frames of an impact."
+    )
+    text = "\n".join(lines)
+    print(text)
+    return text
+
+
+# ---------------------------------------------------------------- CMU figures (--figures)
+
+
+def figures(data: Path) -> str:
+    """``sidql eval --physics`` in process and the figures drawn from it."""
+    from scipy.stats import spearmanr
+
+    from sidql.evaluation.evaluate import NOISE_FLOOR, evaluate, load_cases, physics_markdown
+    from sidql.evaluation.significance import bootstrap_mean_ci
+
+    t0 = time.perf_counter()
+    cases, _ = load_cases(data, progress=False)
+    methods = ["random", "uniform", "greedy", "optimal", "pitch"]
+    out = evaluate(cases, methods, [5, 10, 15], physics=True, progress=False)
+    took = time.perf_counter() - t0
+    per = out["per_clip"]
+    lines = [f"{len(cases)} clips of {data}; {took:.0f} s in one process.", ""]
+    # the original, per trial
+    orig = [r for r in per if r["method"] == "original"]
+    by_trial: dict[str, list[dict]] = {}
+    for r in orig:
+        by_trial.setdefault(Path(r["source"]).stem, []).append(r)
+    lines += ["### The original's residual, per trial (means over its clips)", "",
+              "| trial | clips | residual force (BW) | residual torque (N m/kg) | floor fits |",
+              "|---|---:|---:|---:|---|"]  # fmt: skip
+    for t, rs in sorted(by_trial.items()):
+        lines.append(
+            f"| {t} | {len(rs)} | {np.mean([r['residual_force_bw'] for r in rs]):.3f} "
+            f"| {np.mean([r['residual_torque_nm_kg'] for r in rs]):.2f} "
+            f"| {'yes' if rs[0]['floor_fits'] else 'no'} |"
+        )
+    rf = np.array([r["residual_force_bw"] for r in orig])
+    fits = np.array([r["floor_fits"] for r in orig])
+    lines += ["", f"The original's mean residual force over all {len(orig)} clips: "
+              f"**{rf.mean():.3f} BW** (median {np.median(rf):.3f}); over the {fits.sum()} clips "
+              f"of trials whose floor fits: {rf[fits].mean():.3f} BW. Target 0.03 BW.", ""]  # fmt: skip
+    lines += ["### Means over clips (noise floor: how far 1.5 mm of marker noise moves each "
+              "figure)", "", physics_markdown(out["results"]), ""]  # fmt: skip
+    # Q against the residual force
+    rows = [r for r in out["results"] if r["method"] not in ("original", NOISE_FLOOR)]
+    q = [r["mean_q"] for r in rows]
+    rho_mean = spearmanr(q, [r["residual_force_bw"] for r in rows]).statistic
+    rho_median = spearmanr(q, [r["residual_force_bw_median"] for r in rows]).statistic
+    clips = {}
+    for r in per:
+        if r["method"] in methods:
+            clips.setdefault((r["source"], r["start_frame"]), []).append(r)
+    per_clip_rho = []
+    for rs in clips.values():
+        a = [r["q"] for r in rs]
+        b = [r["residual_force_bw"] for r in rs]
+        if np.ptp(a) > 0 and np.ptp(b) > 0:
+            per_clip_rho.append(spearmanr(a, b).statistic)
+    per_clip_rho = np.array(per_clip_rho)
+    lines += [
+        "### Does lower Q mean less residual force?", "",
+        f"Spearman's rho of Q against the residual force across the {len(rows)} method/W rows: "
+        f"{rho_mean:.2f} (means), {rho_median:.2f} (medians). Clip by clip (the 15 "
+        f"reconstructions of a clip): median rho {np.median(per_clip_rho):.2f}, positive in "
+        f"{100 * (per_clip_rho > 0).mean():.0f} % of {len(per_clip_rho)} clips.", "",
+    ]  # fmt: skip
+    # optimal against uniform
+    lines += [
+        "| W | clips where optimal's residual force is lower / equal (to 1 mBW) / higher than "
+        "uniform's | mean(optimal - uniform) [95 % CI] (BW) | decided |",
+        "|---|---|---|---|",
+    ]
+    for W in (5, 10, 15):
+        o = {(r["source"], r["start_frame"]): r for r in per if r["method"] == "optimal"
+             and r["keyframes"] == W}  # fmt: skip
+        u = {(r["source"], r["start_frame"]): r for r in per if r["method"] == "uniform"
+             and r["keyframes"] == W}  # fmt: skip
+        d = np.array([o[k]["residual_force_bw"] - u[k]["residual_force_bw"] for k in o if k in u])
+        mean, lo, hi = bootstrap_mean_ci(d)
+        decided = "optimal" if hi < 0 else ("uniform" if lo > 0 else "not told apart")
+        eq = np.abs(d) < 1e-3  # both explained by the ground to the mBW
+        shares = f"{100 * (d < 0)[~eq].sum() / len(d):.0f} / {100 * eq.mean():.0f} / " + (
+            f"{100 * (d > 0)[~eq].sum() / len(d):.0f} %"
+        )
+        lines.append(f"| {W} | {shares} | {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] | {decided} |")
+    text = "\n".join(lines)
+    print(text)
+    return text
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=default_data_dir())
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--truth", action="store_true", help="the ground-truth cases, measured")
+    ap.add_argument("--figures", action="store_true", help="eval --physics figures on --data")
+    ap.add_argument("--speed", action="store_true", help="time one clip's physics (one core)")
     ap.add_argument("--eval", action="store_true", help="also time sidql eval with/without physics")
+    ap.add_argument("--write", action="store_true", help="write docs/results/physics.md")
     args = ap.parse_args()
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    parts = []
     print(f"mujoco {mujoco.__version__}; load average {os.getloadavg()}")
-    part1(args.data, args.repeats)
-    if args.eval:
-        part2(args.data)
+    if args.truth:
+        parts.append(("Derivatives against an mj_step ground truth at 30 fps", truth()))
+    if args.figures:
+        parts.append(("What the evaluation finds on CMU", figures(args.data)))
+    if args.speed or args.eval:
+        if hasattr(os, "sched_setaffinity"):
+            os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+        if args.speed:
+            parts.append(("Speed of one clip's physics (one core)", part1(args.data, args.repeats)))
+        if args.eval:
+            parts.append(("Wall time of sidql eval", part2(args.data)))
+    if args.write and parts:
+        sys.path.insert(0, str(REPO / "benchmarks"))
+        from results import write_results
+
+        flags = " ".join(
+            f for f, on in (("--truth", args.truth), ("--figures", args.figures),
+                            ("--speed", args.speed), ("--eval", args.eval)) if on
+        )  # fmt: skip
+        body = "\n\n".join(f"## {title}\n\n{text}" for title, text in parts)
+        print(write_results("physics", "Physics figures", body,
+                            f"python benchmarks/bench_physics.py {flags} --write"))  # fmt: skip
 
 
 if __name__ == "__main__":

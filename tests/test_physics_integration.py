@@ -11,27 +11,48 @@ KEYS = (
     "ground_z_m", "penetration_mm", "float_mm", "skate_mm_s", "contact_precision",
     "contact_recall", "self_pen_excess_mm", "lost_contacts", "limit_excess_deg",
     "residual_force_bw", "residual_force_bw_p95", "residual_torque_nm_kg",
-    "joint_torque_rms_nm_kg",
+    "joint_torque_rms_nm_kg", "physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
+    "floor_fits", "floor_deviation_mm",
 )  # fmt: skip
 
 
-def test_eval_physics_adds_figures_and_an_original_row(cmu_dir):
+def test_eval_physics_adds_figures_an_original_row_a_noise_floor_and_comparisons(cmu_dir):
     from sidql.evaluation.evaluate import (
+        NOISE_FLOOR,
         PHYSICS_KEYS,
         evaluate,
+        floors_markdown,
         load_cases,
         physics_markdown,
         table3_markdown,
     )
+    from sidql.evaluation.significance import comparisons_markdown
 
     cases, _ = load_cases(cmu_dir, subjects=["02"], progress=False)
     cases = cases[:2]
-    out = evaluate(cases, ["uniform"], [5], progress=False, physics=True)
+    out = evaluate(cases, ["uniform", "optimal"], [5], progress=False, physics=True)
     rows = {r["method"]: r for r in out["results"]}
-    assert set(rows) == {"original", "uniform"}
+    assert set(rows) == {"original", NOISE_FLOOR, "uniform", "optimal"}
     for r in rows.values():
         assert all(k in r for k in PHYSICS_KEYS)
         assert r["clips"] == len(cases)
+    # the noise floor: how far marker noise moves each figure (the original's own: 0)
+    noise = rows[NOISE_FLOOR]
+    assert noise["contact_recall"] > 0 and noise["residual_force_bw"] >= 0
+    # closeness to the original's joint torques, clip by clip
+    per_u = [r for r in out["per_clip"] if r["method"] == "uniform"]
+    per_o = [r for r in out["per_clip"] if r["method"] == "original"]
+    assert per_u[0]["joint_torque_rms_nm_kg_distance"] == pytest.approx(
+        abs(per_u[0]["joint_torque_rms_nm_kg"] - per_o[0]["joint_torque_rms_nm_kg"])
+    )
+    # paired bootstrap comparisons: every figure, the interval around the mean difference
+    cmp = [c for c in out["comparisons"] if c["metric"] == "q"]
+    assert cmp and cmp[0]["ci_low"] <= cmp[0]["mean_diff"] <= cmp[0]["ci_high"]
+    assert cmp[0]["better"] in (None, "uniform", "optimal") and cmp[0]["clips"] == len(cases)
+    assert "uniform vs optimal" in comparisons_markdown(out["comparisons"])
+    # the trial's floor, and the word when it does not fit
+    assert out["floors"] and "floor_fits" in out["floors"][0]
+    assert "floor" in floors_markdown(out["floors"]).lower()
     orig, uni = rows["original"], rows["uniform"]
     assert orig["contact_recall"] == 1.0 and orig["self_pen_excess_mm"] == 0.0
     assert orig["residual_force_bw_excess"] == 0.0
@@ -39,7 +60,9 @@ def test_eval_physics_adds_figures_and_an_original_row(cmu_dir):
     assert np.isclose(uni["residual_force_bw"], np.mean([r["residual_force_bw"] for r in per]))
     assert all(k in per[0] for k in KEYS)
     assert "original" not in table3_markdown(out["results"])
+    assert NOISE_FLOOR not in table3_markdown(out["results"])
     assert "| original | 60 |" in physics_markdown(out["results"])
+    assert f"| {NOISE_FLOOR} | 60 |" in physics_markdown(out["results"])
     json.dumps(out, allow_nan=False)  # standard JSON
 
 
@@ -55,6 +78,7 @@ def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tm
     v = validate_clip(clips[0], ["uniform"], 5, physics=physics_job(model, clips[0]), ground=ground)
     doc = json.loads(json.dumps(checks_document([v], {})))
     c = doc["clips"][0]
+    assert c["noise_floor"]["contact_recall"] >= 0  # each figure's noise floor on this clip
     for row in [c["original"], *c["methods"]]:
         assert all(k in row["physics"] for k in KEYS)
         assert len(row["physics_per_frame"]["residual_force_bw"]) == clips[0].n_frames
@@ -137,8 +161,8 @@ def test_eval_physics_on_a_dataset_folder_and_clean_refusals(cmu_dir, tmp_path, 
         == 0
     )
     a, b = (json.loads((tmp_path / f).read_text())["results"] for f in ("a.json", "b.json"))
-    assert [r["method"] for r in b] == ["original", "uniform"]
-    assert b[1]["residual_force_bw"] == pytest.approx(a[1]["residual_force_bw"])
+    assert [r["method"] for r in b] == ["original", "noise floor", "uniform"]
+    assert b[2]["residual_force_bw"] == pytest.approx(a[2]["residual_force_bw"])
     capsys.readouterr()
     out = tmp_path / "c.json"
     humanoid = ["eval", "--data", str(tmp_path / "cmu"), "--skeleton", "humanoid", *argv]

@@ -179,7 +179,16 @@ def test_best_value_per_column_and_declared_metrics():
     assert len(keys) == len(METRICS)
     assert {"penetration_mm", "float_mm", "skate_mm_s", "contact_precision", "contact_recall",
             "self_pen_excess_mm", "residual_force_bw", "joint_torque_rms_nm_kg"} <= keys  # fmt: skip
-    assert all(m.better in ("lower", "higher", "zero", "") for m in METRICS)
+    assert all(m.better in ("lower", "higher", "zero", "original", "") for m in METRICS)
+    # closeness to the original's value: the joint torque nearest the original's (0.35), not
+    # the lowest (over-smoothed motion needs less)
+    close = Metric("k", "k", "", "original", "d", "{:.2f}")
+    assert best_rows(close, [0.30, 0.36, 0.45], original=0.35) == {1}
+    # beyond the noise floor only: differences within it are no difference
+    assert best_rows(low, [1.0, 1.3, 2.0], noise=0.5) == {0, 1}
+    assert best_rows(low, [1.0, 1.3, 1.4], noise=0.5) == set()
+    assert {"physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
+            "residual_torque_nm_kg"} <= keys  # fmt: skip
 
 
 @pytest.fixture(scope="module")

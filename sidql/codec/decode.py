@@ -12,10 +12,11 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.skeleton import fit_motion, skeleton_hash
-from sidql.keyframes.curves import interpolate
+from sidql.keyframes.curves import interpolate_derivatives
 from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import (
     POINTS,
+    accelerations_from_chart,
     clip_from_chart,
     positions_from_chart,
     split_channels,
@@ -30,8 +31,10 @@ def decoded_chart(stream: sidq.Stream) -> dict[str, np.ndarray]:
     """The chart the decoder rebuilds: every frame of the trial.
 
     Returns:
-        ``{"values": (N, D), "rates": (N, D)}`` with D = 2 M + 3 channels
-        [theta | phi | root position (CMU axes)] in [rad, rad, m] and their rates per second.
+        ``{"values": (N, D), "rates": (N, D), "second": (N, D)}`` with D = 2 M + 3 channels
+        [theta | phi | root position (CMU axes)] in [rad, rad, m], their rates per second and
+        second derivatives per second squared (of the curve itself,
+        :func:`sidql.keyframes.curves.interpolate_derivatives`).
     """
     k = np.asarray(stream.keyframes, dtype=np.int64)
     N = int(k[-1]) + 1
@@ -43,8 +46,8 @@ def decoded_chart(stream: sidq.Stream) -> dict[str, np.ndarray]:
     if stream.reconstruction == "hermite":
         rates = np.zeros((N, D))
         rates[k] = q.decode_rates(stream.rate_codes)
-    x, xd = interpolate(values, rates, k, 1.0 / stream.fps, stream.reconstruction)
-    return {"values": x, "rates": xd}
+    x, xd, xdd = interpolate_derivatives(values, rates, k, 1.0 / stream.fps, stream.reconstruction)
+    return {"values": x, "rates": xd, "second": xdd}
 
 
 def _split(stream: sidq.Stream, chart: dict):
@@ -55,10 +58,16 @@ def _split(stream: sidq.Stream, chart: dict):
 
 
 def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
-    """The decoded points: positions and velocities (N, J, 3), world axes z up [m, m/s]."""
-    theta, phi, dtheta, dphi, root, root_vel = _split(stream, decoded_chart(stream))
+    """The decoded points: positions, velocities and accelerations (N, J, 3), world axes z up
+    [m, m/s, m/s^2]."""
+    chart = decoded_chart(stream)
+    theta, phi, dtheta, dphi, root, root_vel = _split(stream, chart)
+    ddtheta, ddphi, root_acc = split_channels(chart["second"], stream.quantiser.n_bones)
     P, V = positions_from_chart(
         root, root_vel, theta, phi, dtheta, dphi, stream.lengths, stream.parents
+    )
+    A = accelerations_from_chart(
+        root_acc, theta, phi, dtheta, dphi, ddtheta, ddphi, stream.lengths, stream.parents
     )
     return Reconstruction(
         positions=P,
@@ -70,6 +79,7 @@ def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
         keyframes=np.asarray(stream.keyframes).copy(),
         reconstruction=stream.reconstruction,
         fps=float(stream.fps),
+        accelerations=A,
     )
 
 

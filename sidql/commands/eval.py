@@ -19,12 +19,14 @@ from sidql.commands.usage import (
 )
 from sidql.evaluation.evaluate import (
     evaluate,
+    floors_markdown,
     load_cases,
     physics_markdown,
     simulate_markdown,
     table3_markdown,
 )
 from sidql.evaluation.rate import rate_distortion, write_plot
+from sidql.evaluation.significance import comparisons_markdown
 from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic
@@ -65,7 +67,9 @@ def register(sub) -> None:
         action="store_true",
         help="also fit the subject's humanoid to every reconstruction and the original and add "
         "ground-contact, self-penetration, joint-limit and inverse-dynamics figures "
-        "(sim.physics) to every row, plus a row for method 'original'",
+        "(sim.physics) to every row, plus rows for method 'original' and its 'noise floor' (the "
+        "original re-captured with 1.5 mm marker noise), each trial's floor fit (trials whose "
+        "floor does not fit are listed) and paired bootstrap comparisons of the methods",
     )
     p.add_argument(
         "--simulate",
@@ -144,10 +148,14 @@ def _run(args) -> int:
     print(f"{len(cases)} clips of {args.length} frames from {args.data}; skipped {len(skipped)}")
     print(table3_markdown(out["results"]))
     if args.physics:
+        print(floors_markdown(out["floors"]))
         print("physics, means over clips:")
         print(physics_markdown(out["results"]))
         print("physics, medians over clips:")
         print(physics_markdown(out["results"], "median"))
+    if out.get("comparisons"):
+        print("paired comparisons over clips (bootstrap 95 % CI):")
+        print(comparisons_markdown(out["comparisons"]))
     if args.simulate:
         print("forward simulation (human-strength body, no assistance), means over clips:")
         print(simulate_markdown(out["results"]))

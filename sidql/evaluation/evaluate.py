@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sidql.evaluation.significance import CLOSENESS, paired_comparisons
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
@@ -39,8 +40,9 @@ from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials, load_dataset_clips
 from sim.motion.ingest import load_clips
-from sim.physics.analysis import PhysicsJob
-from sim.physics.ground import estimate_ground
+from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob
+from sim.physics.contacts import Contacts, trial_contacts
+from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip
 from sim.simulate.model import sim_model
 from sim.simulate.validate import SIMULATE_KEYS, ForwardValidation
@@ -167,20 +169,21 @@ def score(
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
     docstring).
 
-    ``physics``: ``(job, ground)`` (:class:`sim.physics.analysis.PhysicsJob` on the protocol
-    points, the trial's ground) adds the :mod:`sim.physics` figures of the reconstruction;
-    ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its
-    forward simulation's figures (the IK fit tracked without assistance; ``original_qpos``: the
+    ``physics``: the trial's :class:`TrialPhysics` adds the :mod:`sim.physics` figures of the
+    reconstruction (its curve's own velocities and accelerations, the original's contacts
+    labelled over the whole trial); ``simulate`` (a
+    :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its forward
+    simulation's figures (the IK fit tracked without assistance; ``original_qpos``: the
     original's fit, computed here when None)."""
     s = case.series
     rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
     phys = {}
     if physics:
-        analysis = physics[0].analyse(case.clip, rec.positions, physics[1])
-        phys = physics_figures(analysis)
+        analysis = physics.analyse(case.clip, rec)
+        phys = physics_figures(analysis, physics.analyse(case.clip))
         if simulate is not None:
             if original_qpos is None:
-                original_qpos = physics[0].analyse(case.clip, None, physics[1])["per_frame"]["qpos"]
+                original_qpos = physics.analyse(case.clip)["per_frame"]["qpos"]
             phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original_qpos))
     return {
         **phys,
@@ -196,17 +199,33 @@ def score(
 #: The :mod:`sim.physics` figures ``evaluate(..., physics=True)`` adds to rows (means over clips).
 PHYSICS_KEYS = (
     "penetration_mm", "float_mm", "skate_mm_s", "contact_precision", "contact_recall",
+    "physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
     "self_pen_excess_mm", "lost_contacts", "limit_excess_deg", "residual_force_bw",
     "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
+    "joint_torque_rms_nm_kg_distance",
     "residual_force_bw_excess", "residual_torque_nm_kg_excess", "joint_torque_rms_nm_kg_excess",
     "ik_error_mm",
 )  # fmt: skip
 
+#: Heights above the floor: not scored (None) in a trial whose floor does not fit.
+FLOOR_KEYS = HEIGHT_KEYS
 
-def physics_figures(analysis: dict) -> dict:
+
+def physics_figures(analysis: dict, original: dict | None = None) -> dict:
     """The per-clip numbers of a :mod:`sim.physics` analysis (no per-frame arrays; NaN, a mean
-    over no samples, becomes None so that the JSON is standard)."""
-    return {k: _none_if_nan(v) for k, v in analysis.items() if k != "per_frame"}
+    over no samples, becomes None so that the JSON is standard). With the ``original``'s
+    analysis, figures of :data:`sidql.evaluation.significance.CLOSENESS` also get
+    ``<key>_distance``, |value - original's|. Where the floor does not fit, the heights above it
+    (:data:`FLOOR_KEYS`) are None."""
+    out = {k: _none_if_nan(v) for k, v in analysis.items() if k != "per_frame"}
+    base = analysis if original is None else original
+    for k in CLOSENESS:
+        if out.get(k) is not None and base.get(k) is not None:
+            out[f"{k}_distance"] = abs(float(out[k]) - float(base[k]))
+    if not analysis.get("floor_fits", True):
+        for k in FLOOR_KEYS:
+            out[k] = None
+    return out
 
 
 def _none_if_nan(v):
@@ -240,9 +259,47 @@ def _simulate_means(rows: Sequence[dict]) -> dict:
     return out
 
 
+@dataclass(frozen=True)
+class TrialPhysics:
+    """What the physics of one trial's clips share: the subject's
+    :class:`sim.physics.analysis.PhysicsJob` on the protocol points, the trial's ground, and the
+    original's contacts labelled once over the whole trial (``start``: each clip's
+    ``start_frame`` -> its first frame in ``contacts``; clip objects do not keep their identity
+    on the way to worker processes or Ray)."""
+
+    job: PhysicsJob
+    ground: Ground
+    contacts: Contacts
+    start: dict
+
+    def clip_contacts(self, clip: Clip) -> Contacts | None:
+        """The original's contacts over ``clip``'s frames (None for a clip not of this trial:
+        the job labels it on its own)."""
+        i = self.start.get(clip.start_frame)
+        return None if i is None else self.contacts.slice(i, i + clip.n_frames)
+
+    def noise_floor(self, clip: Clip, *, seed: int = 0) -> dict:
+        """The original re-captured with marker noise, analysed against the original
+        (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`)."""
+        return self.job.noise_floor(clip, self.ground, contacts=self.clip_contacts(clip), seed=seed)
+
+    def analyse(self, clip: Clip, rec=None) -> dict:
+        """:meth:`sim.physics.analysis.PhysicsJob.analyse` of the original (``rec`` None) or of a
+        reconstruction (its points, velocities and accelerations)."""
+        c = self.clip_contacts(clip)
+        if rec is None:
+            return self.job.analyse(clip, None, self.ground, contacts=c)
+        acc = getattr(rec, "accelerations", None)
+        return self.job.analyse(
+            clip, rec.positions, self.ground, contacts=c,
+            velocities=None if acc is None else rec.velocities, accelerations=acc,
+        )  # fmt: skip
+
+
 def physics_setup(cases: Sequence[Case]) -> dict:
-    """Per trial (``clip.source``): ``(job, ground)`` for :func:`score`, the ground from all the
-    trial's clips, one :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
+    """Per trial (``clip.source``): its :class:`TrialPhysics` for :func:`score`: the ground and
+    the original's contacts from all the trial's clips (in time order), one
+    :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
 
     jobs, out = {}, {}
     by_trial: dict[str, list[Case]] = {}
@@ -254,13 +311,23 @@ def physics_setup(cases: Sequence[Case]) -> dict:
             )  # fmt: skip
         by_trial.setdefault(c.clip.source, []).append(c)
     for source, group in by_trial.items():
+        group = sorted(group, key=lambda c: c.clip.start_frame)
         clip = group[0].clip
         if group[0].asf not in jobs:
             pts = from_clip(clip).restrict(POINTS)
             model = subject_model(group[0].asf)[1]
             jobs[group[0].asf] = PhysicsJob(model, pts.names, pts.parents, clip.fps)
         pos = np.concatenate([c.clip.positions for c in group])
-        out[source] = (jobs[group[0].asf], estimate_ground(pos, clip.names, clip.fps))
+        vel = np.concatenate([c.clip.velocities for c in group])
+        ground = estimate_ground(pos, clip.names, clip.fps)
+        start, i = {}, 0
+        for c in group:
+            start[c.clip.start_frame] = i
+            i += c.clip.n_frames
+        out[source] = TrialPhysics(
+            jobs[group[0].asf], ground, trial_contacts(pos, clip.names, clip.fps, ground, vel),
+            start,
+        )  # fmt: skip
     return out
 
 
@@ -334,17 +401,20 @@ def evaluate(
     per_clip: list[dict] = []
     results: list[dict] = []
     if physics and cases:
-        rows = [by_case[i][0] for i in range(len(cases))]
-        per_clip.extend(rows)
+        originals = [by_case[i][0] for i in range(len(cases))]
+        noise = [by_case[i][1] for i in range(len(cases))]
+        per_clip.extend(originals + noise)
         zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
-        results.append(
-            {
-                "method": "original", "keyframes": cases[0].clip.n_frames, "clips": len(rows),
-                **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0, "median_decision_ms": 0.0,
-                **_physics_means(rows), **(_simulate_means(rows) if simulate else {}),
-            }
-        )  # fmt: skip
-    first = 1 if physics else 0
+        for name, group in (("original", originals), (NOISE_FLOOR, noise)):
+            results.append(
+                {
+                    "method": name, "keyframes": cases[0].clip.n_frames, "clips": len(group),
+                    **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0,
+                    "median_decision_ms": 0.0, **_physics_means(group),
+                    **(_simulate_means(group) if simulate and name == "original" else {}),
+                }
+            )  # fmt: skip
+    first = 2 if physics else 0
     for j, (name, W) in enumerate((m, W) for m in method_names for W in counts):
         rows = [by_case[i][first + j] for i in range(len(cases))]
         per_clip.extend(rows)
@@ -365,7 +435,53 @@ def evaluate(
                     **(_simulate_means(rows) if simulate else {}),
                 }
             )
-    return {"results": results, "per_clip": per_clip}
+    out = {"results": results, "per_clip": per_clip}
+    out["comparisons"] = paired_comparisons(per_clip, method_names, seed=seed)
+    if physics:
+        out["floors"] = floor_report(setup)
+    return out
+
+
+#: The method name of the noise-floor rows: the original re-captured with marker noise.
+NOISE_FLOOR = "noise floor"
+
+
+def noise_figures(noisy: dict, original: dict) -> dict:
+    """A noise-floor row: per figure, how far the original re-captured with marker noise
+    (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`) departs from the original,
+    ``|noisy - original|`` (None where either lacks it)."""
+    out = {}
+    for k, v in noisy.items():
+        o = original.get(k)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        out[k] = None if v is None or o is None else abs(float(v) - float(o))
+    return out
+
+
+def floor_report(setup: dict) -> list[dict]:
+    """Per trial its floor (:meth:`sim.physics.ground.Ground.summary`) and whether it fits."""
+    return [{"source": src, **tp.ground.summary()} for src, tp in setup.items()]
+
+
+def floors_markdown(floors: Sequence[dict]) -> str:
+    """The trials whose floor does not fit, with how far their planted feet depart from it (their
+    float and penetration are not scored)."""
+    bad = [f for f in floors if not f["floor_fits"]]
+    if not bad:
+        return f"The floor fits every one of the {len(floors)} trials."
+    lines = [
+        f"Floor does not fit {len(bad)} of {len(floors)} trials (float and penetration not "
+        "scored there):",
+        "",
+        "| trial | deviation (mm) | spread (mm) | drift (mm) | below (mm) | footprints |",
+        "|---|---|---|---|---|---|",
+    ]
+    keys = ("floor_deviation_mm", "floor_spread_mm", "floor_drift_mm", "floor_below_mm")
+    for f in bad:
+        cells = " | ".join("-" if f[k] is None else f"{f[k]:.1f}" for k in keys)
+        lines.append(f"| {Path(f['source']).stem} | {cells} | {f['floor_footprints']} |")
+    return "\n".join(lines)
 
 
 def _trial_chunks(cases: Sequence[Case], size: int) -> list[list[int]]:
@@ -388,17 +504,19 @@ def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list
     out = []
     for position, case in cases:
         rows, original_qpos = [], None
-        if phys is not None:
-            job, ground = phys
-            analysis = job.analyse(case.clip, None, ground)
+        if phys is not None:  # the original's row, then the noise floor's
+            analysis = phys.analyse(case.clip)
             original_qpos = analysis["per_frame"]["qpos"]
             sim = body.run(original_qpos, case.clip.fps) if body is not None else {}
+            key = {"source": case.clip.source, "start_frame": case.clip.start_frame}
             rows.append(
-                {
-                    "source": case.clip.source, "start_frame": case.clip.start_frame,
-                    "method": "original", "keyframes": case.clip.n_frames,
-                    **physics_figures(analysis), **sim,
-                }
+                {**key, "method": "original", "keyframes": case.clip.n_frames,
+                 **physics_figures(analysis), **sim}
+            )  # fmt: skip
+            noisy = phys.noise_floor(case.clip, seed=clip_seed(seed, case.index, 0))
+            rows.append(
+                {**key, "method": NOISE_FLOOR, "keyframes": case.clip.n_frames,
+                 **noise_figures(physics_figures(noisy, analysis), rows[-1])}
             )  # fmt: skip
         for name in method_names:
             for W in counts:
@@ -423,7 +541,7 @@ def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list
 def table3_markdown(results: Sequence[dict]) -> str:
     """Markdown table of mean Q per method (rows) and W (columns), the paper's figure beside ours
     where it has one, then the chart-free errors."""
-    results = [r for r in results if r["method"] != "original"]
+    results = [r for r in results if r["method"] not in ("original", NOISE_FLOOR)]
     counts = sorted({r["keyframes"] for r in results})
     names = list(dict.fromkeys(r["method"] for r in results))
     by = {(r["method"], r["keyframes"]): r for r in results}
@@ -456,26 +574,36 @@ def table3_markdown(results: Sequence[dict]) -> str:
 
 def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
     """Markdown table of the :mod:`sim.physics` means (``stat="median"``: medians) over clips per
-    method and W (``original`` first)."""
+    method and W: ``original`` first, then the ``noise floor`` (per figure, how far the original
+    re-captured with marker noise departs from it), then the methods. ``|JT - orig|``: the joint
+    torque RMS's distance from the original's (over-smoothed motion needs less than the
+    original, not better); PhysDiff columns are Yuan et al.'s definitions."""
     rows = [r for r in results if "residual_force_bw" in r]
-    rows.sort(key=lambda r: r["method"] != "original")
+    rows.sort(key=lambda r: (r["method"] != "original", r["method"] != NOISE_FLOOR))
     cols = (
         ("Q", "mean_q", ".4f"), ("pen. (mm)", "penetration_mm", ".1f"),
         ("float (mm)", "float_mm", ".1f"), ("skate (mm/s)", "skate_mm_s", ".0f"),
         ("contact P", "contact_precision", ".2f"), ("contact R", "contact_recall", ".2f"),
+        ("PhysDiff penetrate (mm)", "physdiff_penetrate_mm", ".1f"),
+        ("PhysDiff float (mm)", "physdiff_float_mm", ".1f"),
+        ("PhysDiff skate", "physdiff_skate", ".3f"),
         ("self-pen. excess (mm)", "self_pen_excess_mm", ".2f"),
         ("lost contacts", "lost_contacts", ".1f"), ("limit excess (deg)", "limit_excess_deg", ".2f"),
-        ("residual F (BW)", "residual_force_bw", ".3f"),
-        ("residual F p95 (BW)", "residual_force_bw_p95", ".2f"),
+        ("residual force (BW)", "residual_force_bw", ".3f"),
+        ("residual force p95 (BW)", "residual_force_bw_p95", ".2f"),
         ("residual torque (N m/kg)", "residual_torque_nm_kg", ".3f"),
         ("joint torque RMS (N m/kg)", "joint_torque_rms_nm_kg", ".3f"),
+        ("\\|JT - orig\\| (N m/kg)", "joint_torque_rms_nm_kg_distance", ".3f"),
     )  # fmt: skip
     lines = [
         "| method | W | clips | " + " | ".join(c[0] for c in cols) + " |",
         "|---|---|---|" + "---|" * len(cols),
     ]
     for r in rows:
-        vals = [r[k] if stat == "mean" or k == "mean_q" else r[f"{k}_median"] for _, k, f in cols]
+        vals = [
+            r.get(k) if stat == "mean" or k == "mean_q" else r.get(f"{k}_median")
+            for _, k, f in cols
+        ]
         cells = [
             "-" if v is None else format(v, f) for v, (_, _, f) in zip(vals, cols, strict=True)
         ]

@@ -47,9 +47,10 @@ from sim.files import write_atomic
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
-from sim.physics.analysis import PhysicsJob
-from sim.physics.contacts import foot_states
+from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob
+from sim.physics.contacts import foot_states, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
+from sim.physics.noise import NOISE_MM
 from sim.replay.checks import (
     CollisionScene,
     FrameChecks,
@@ -112,6 +113,23 @@ class ClipValidation:
     runs: list[MethodRun] = field(default_factory=list)
     physics: dict = field(default_factory=dict)
     ground: Ground | None = None  # the trial's, when the replay used one
+    noise: dict = field(default_factory=dict)  # the original re-captured with marker noise
+
+    @property
+    def noise_floor(self) -> dict:
+        """Per figure, how far the original re-captured with marker noise
+        (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`) departs from the original: a
+        difference between methods smaller than this is capture noise."""
+        out = {}
+        for k, v in with_physics({}, self.noise).items():
+            o = self.baseline_figures.get(k)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or o is None:
+                continue
+            if isinstance(o, bool) or not isinstance(o, (int, float)):
+                continue
+            if math.isfinite(v) and math.isfinite(o):
+                out[k] = abs(float(v) - float(o))
+        return out
 
     @property
     def baseline_figures(self) -> dict:
@@ -151,6 +169,15 @@ class DecodedStream:
         )  # fmt: skip
         return keys, part
 
+    def accelerations(self, clip: Clip) -> np.ndarray | None:
+        """(T, 23, 3) the decoded curve's point accelerations [m/s^2] over ``clip``'s frames
+        (None if the decoder gave none)."""
+        acc = getattr(self.motion, "accelerations", None)
+        if acc is None:
+            return None
+        i0 = int(round(clip.start_frame / (clip.source_fps / clip.fps)))
+        return np.asarray(acc)[i0 : i0 + clip.n_frames]
+
 
 def load_stream(path: str | os.PathLike, asf: str | os.PathLike) -> DecodedStream:
     """Decode a ``.sidq`` file for a report of a trial of the subject ``asf``; a stream encoded
@@ -185,6 +212,7 @@ def validate_clip(
     physics=None,
     ground=None,
     simulate=None,
+    contacts=None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -201,6 +229,8 @@ def validate_clip(
         simulate: a :class:`sim.simulate.validate.ForwardValidation` of the subject (with
             ``physics``): the human-strength body tracks the IK fit of the original and of every
             run in ``mj_step`` without assistance; its figures join ``physics``.
+        contacts: the original's foot contacts labelled over the whole trial, by the clip's
+            ``start_frame`` (:func:`trial_contacts`); default: labelled on the clip.
     """
     if physics is not None and ground is None:
         ground = estimate_ground(clip.positions, clip.names, clip.fps)
@@ -213,18 +243,27 @@ def validate_clip(
     kw = dict(**floor, joint_ranges=joint_ranges, scene=scene)
     base_checks = replay(orig, full, **kw)
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks), ground=ground)
-    if physics is not None:
-        out.physics = physics.analyse(clip, None, ground)
-    original_qpos = out.physics["per_frame"]["qpos"] if out.physics else None
+    trial_labels = (contacts or {}).get(clip.start_frame)
 
-    def analyse(positions) -> dict:  # the sim.physics figures, and the forward simulation's
-        figures = physics.analyse(clip, positions, ground)
-        if simulate is not None:
+    def analyse(rec, acc=None):  # a reconstruction's physics: its points and curve's derivatives
+        r = rec.restrict(orig.names)
+        ix = [rec.names.index(n) for n in orig.names]
+        acc = getattr(rec, "accelerations", None) if acc is None else acc
+        figures = physics.analyse(
+            clip, r.positions, ground, contacts=trial_labels,
+            velocities=None if acc is None else np.asarray(rec.velocity())[:, ix],
+            accelerations=None if acc is None else np.asarray(acc)[:, ix],
+        )  # fmt: skip
+        if simulate is not None:  # the forward simulation's figures join the physics
+            original_qpos = out.physics["per_frame"]["qpos"]
             figures.update(simulate.run(figures["per_frame"]["qpos"], clip.fps, original_qpos))
         return figures
 
-    if simulate is not None and physics is not None:
-        out.physics.update(simulate.run(original_qpos, clip.fps))
+    if physics is not None:
+        out.physics = physics.analyse(clip, None, ground, contacts=trial_labels)
+        out.noise = physics.noise_floor(clip, ground, contacts=trial_labels, seed=seed)
+        if simulate is not None:
+            out.physics.update(simulate.run(out.physics["per_frame"]["qpos"], clip.fps))
     for m in methods:
         keys = np.asarray(select(m, clip, W, seed=seed))
         own = reconstruction_of(m)  # every method under Hermite, and under its own if other
@@ -233,12 +272,13 @@ def validate_clip(
         )
         hermite = [] if own != "hermite" and shown else ["hermite"]  # e.g. xyz's = uniform's
         for name in hermite + ([own] if own != "hermite" else []):
-            rec = from_reconstruction(reconstructions.rebuild(name, clip, keys), clip.fps)
+            built = reconstructions.rebuild(name, clip, keys)
+            rec = from_reconstruction(built, clip.fps)
             checks = replay(rec, full, **kw)
             s = summarise(checks)
             run = MethodRun(m, name, keys, rec, checks, s, excess(s, out.baseline))
             if physics is not None:
-                run.physics = analyse(rec.restrict(orig.names).positions)
+                run.physics = analyse(built)
             out.runs.append(run)
     for stream in streams:
         keys, rec = stream.clip_part(clip)
@@ -254,7 +294,7 @@ def validate_clip(
             excess(s, out.baseline),
         )
         if physics is not None:
-            run.physics = analyse(rec.restrict(orig.names).positions)
+            run.physics = analyse(rec, stream.accelerations(clip))
         out.runs.append(run)
     return out
 
@@ -309,6 +349,7 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
                     "per_frame": per_frame(v.baseline_checks),
                     **_physics_entry(v.physics),
                 },
+                "noise_floor": v.noise_floor,
                 "methods": [
                     {
                         "method": r.method,
@@ -327,8 +368,13 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
 
 
 def with_physics(summary: dict, physics: dict) -> dict:
-    """``summary`` plus the scalar :mod:`sim.physics` figures (what the page's table reads)."""
-    return {**summary, **{k: v for k, v in physics.items() if k != "per_frame"}}
+    """``summary`` plus the scalar :mod:`sim.physics` figures (what the page's table reads);
+    where the trial's floor does not fit, heights above it (:data:`HEIGHT_KEYS`) are left out."""
+    out = {**summary, **{k: v for k, v in physics.items() if k != "per_frame"}}
+    if physics and not physics.get("floor_fits", True):
+        for k in HEIGHT_KEYS:
+            out[k] = None
+    return out
 
 
 def _physics_entry(physics: dict) -> dict:
@@ -353,7 +399,8 @@ class Metric:
         key: key in the summaries (``MethodRun.summary``/``excess``, ``ClipValidation.baseline``).
         label: column heading; unit: shown beside it (``""`` for counts and ratios).
         better: ``"lower"``, ``"higher"``, ``"zero"`` (closest to 0 is best: an excess over the
-            original either way) or ``""`` (not ranked).
+            original either way), ``"original"`` (closest to the original's own value is best) or
+            ``""`` (not ranked).
         description: one sentence for the legend.
         fmt: Python format of a value; ``excess``: method rows show ``MethodRun.excess[key]``.
         per_frame: key of the :func:`per_frame` array plotted per frame, if any.
@@ -407,17 +454,28 @@ METRICS: tuple[Metric, ...] = (
     Metric("joint_limit_max_deg", "joint limit", "deg", "zero",
            "largest hinge angle past its ASF limit (needs joint angles); methods: excess",
            "{:+.1f}", excess=True, superseded_by="limit_excess_deg"),
-    # physics (issue 10): filled by sim.physics where it runs
+    # physics: filled by sim.physics where it runs
     Metric("penetration_mm", "penetration", "mm", "lower",
-           "mean depth of foot points below the ground", "{:.1f}", group="contacts"),
+           "mean depth of a foot's lowest sole point below the floor", "{:.1f}", group="contacts"),
     Metric("float_mm", "float", "mm", "lower",
-           "mean height of a foot point while the original's is in contact", "{:.1f}", group="contacts"),
+           "mean height of a foot's lowest sole point while the original's foot is in contact",
+           "{:.1f}", group="contacts"),
     Metric("skate_mm_s", "skate (contact)", "mm/s", "lower",
-           "mean horizontal foot speed while the original's foot is in contact", "{:.0f}", group="contacts"),
+           "mean horizontal speed of a foot's lowest sole point while the original's foot is in "
+           "contact", "{:.0f}", group="contacts"),
     Metric("contact_precision", "contact precision", "", "higher",
            "share of the reconstruction's contacts that the original also has", "{:.2f}", group="contacts"),
     Metric("contact_recall", "contact recall", "", "higher",
            "share of the original's contacts that the reconstruction keeps", "{:.2f}", group="contacts"),
+    Metric("physdiff_penetrate_mm", "PhysDiff penetrate", "mm", "lower",
+           "PhysDiff (Yuan et al. 2023): mean depth of the body surface's lowest point below the "
+           "floor", "{:.1f}", group="contacts"),
+    Metric("physdiff_float_mm", "PhysDiff float", "mm", "lower",
+           "PhysDiff: mean height of the body surface's lowest point above the floor, beyond 5 mm",
+           "{:.1f}", group="contacts"),
+    Metric("physdiff_skate", "PhysDiff skate", "", "lower",
+           "PhysDiff-style skate: share of frames in which a foot in contact in it and the "
+           "previous frame moves more than 2.5 cm horizontally", "{:.2f}", group="contacts"),
     Metric("self_pen_excess_mm", "self-pen. excess", "mm", "lower",
            "mean per-pair overlap beyond the original's in the same frame", "{:.1f}", group="contacts"),
     Metric("lost_contacts", "lost contacts", "", "lower",
@@ -426,13 +484,17 @@ METRICS: tuple[Metric, ...] = (
            "worst anatomical hinge angle of the fitted humanoid past its ASF limit", "{:.1f}",
            group="contacts"),
     Metric("residual_force_bw", "residual force", "BW", "lower",
-           "mean external force no ground contact can supply, in body weights", "{:.2f}", group="dynamics"),
+           "mean external force no ground contact can supply (force alone), in body weights",
+           "{:.2f}", group="dynamics"),
     Metric("residual_force_bw_p95", "residual force p95", "BW", "lower",
            "95th percentile of the residual force, in body weights", "{:.2f}", group="dynamics"),
     Metric("residual_torque_nm_kg", "residual torque", "N m/kg", "lower",
-           "mean residual torque per kg of body mass", "{:.2f}", group="dynamics"),
-    Metric("joint_torque_rms_nm_kg", "joint torque RMS", "N m/kg", "lower",
-           "RMS joint torque per kg from inverse dynamics", "{:.2f}", group="dynamics"),
+           "mean torque about the centre of mass that the ground forces supplying the force "
+           "leave, per kg of body mass", "{:.2f}", group="dynamics"),
+    Metric("joint_torque_rms_nm_kg", "joint torque RMS", "N m/kg", "original",
+           "RMS joint torque per kg from inverse dynamics; closest to the original's is best "
+           "(over-smoothed motion needs less than the original, not better)", "{:.2f}",
+           group="dynamics"),
     # forward simulation (report --simulate): filled by sim.simulate.validate
     Metric("sim_error_mm", "sim. error", "mm", "lower",
            "mean distance of the simulated body's points from the motion it tracked", "{:.0f}",
@@ -471,8 +533,9 @@ GROUPS = (
 )
 
 _BETTER = {"lower": "lower is better", "higher": "higher is better",
-           "zero": "closest to 0 (the original) is best", "": "not ranked"}  # fmt: skip
-_ARROW = {"lower": "\u2193", "higher": "\u2191", "zero": "\u21950", "": ""}
+           "zero": "closest to 0 (the original) is best",
+           "original": "closest to the original's value is best", "": "not ranked"}  # fmt: skip
+_ARROW = {"lower": "\u2193", "higher": "\u2191", "zero": "\u21950", "original": "\u2248o", "": ""}
 #: Method colours shared by plots, table swatches and video cards.
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",
            "#bcbd22", "#ff7f0e", "#7f7f7f")  # fmt: skip
@@ -505,33 +568,53 @@ def _cell(fmt: str, value) -> str:
     return fmt.format(value)
 
 
-def best_rows(m: Metric, values) -> set[int]:
+def best_rows(m: Metric, values, *, original=None, noise: float = 0.0) -> set[int]:
     """Indices of the best of ``values`` (``None`` skipped) by ``m.better``, compared as shown
-    (formatted); empty when not ranked, fewer than two values, or all show the same."""
+    (formatted); empty when not ranked, fewer than two values, or all show the same.
+
+    ``original``: the original's value (``better == "original"`` scores ``|v - original|``).
+    ``noise``: the figure's noise floor (how far capture noise alone moves it): values within it
+    of the best tie with it, and none is marked unless some value is worse than the best by more
+    than the noise floor (a noise-level difference is no difference)."""
     shown = [(i, v) for i, v in enumerate(values) if v is not None]
-    if not m.better or len(shown) < 2:
+    if not m.better or len(shown) < 2 or (m.better == "original" and original is None):
         return set()
-    score = {"lower": lambda v: v, "higher": lambda v: -v, "zero": abs}[m.better]
+    score = {
+        "lower": lambda v: v, "higher": lambda v: -v, "zero": abs,
+        "original": lambda v: abs(v - original),
+    }[m.better]  # fmt: skip
     if m.resolution > 0:
-        text = {i: str(round(v / m.resolution)) for i, v in shown}
+        text = {i: str(round(score(v) / m.resolution)) for i, v in shown}
     else:
-        text = {i: _cell(m.fmt.replace("+", ""), v) for i, v in shown}
-    if m.better == "zero":
-        text = {i: t.lstrip("+-") for i, t in text.items()}
+        text = {i: _cell(m.fmt.replace("+", ""), abs(score(v))) for i, v in shown}
     if len(set(text.values())) == 1:
         return set()
     top = min(score(v) for _, v in shown)
+    if noise > 0:
+        if max(score(v) for _, v in shown) - top <= noise:
+            return set()
+        return {i for i, v in shown if score(v) - top <= noise}
     best = next(text[i] for i, v in shown if score(v) == top)
     return {i for i, _ in shown if text[i] == best}
 
 
+def _best(v: ClipValidation, m: Metric, values) -> set[int]:
+    """:func:`best_rows` of one clip's column, against the original's value and beyond the
+    figure's noise floor on that clip."""
+    return best_rows(
+        m, values, original=metric_value(m, v.baseline_figures),
+        noise=v.noise_floor.get(m.key, 0.0) if not m.excess else 0.0,
+    )  # fmt: skip
+
+
 def shown_metrics(v: ClipValidation) -> list[Metric]:
-    """The metrics with a value in at least one row of the clip, less those a present
-    :mod:`sim.physics` metric supersedes."""
+    """The metrics with a value in at least one row of the clip, less those a :mod:`sim.physics`
+    metric supersedes where the rows carry it (even as n/a: heights above a floor that does not
+    fit are not scored, nor are the older checks' against it)."""
     rows = [(v.baseline_figures, None)] + [(r.figures, r.excess) for r in v.runs]
     present = [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]
-    keys = {m.key for m in present}
-    return [m for m in present if m.superseded_by not in keys]
+    carried = {k for s, _ in rows for k in s}
+    return [m for m in present if m.superseded_by not in carried]
 
 
 def _tables(v: ClipValidation, colours) -> str:
@@ -543,10 +626,13 @@ def _tables(v: ClipValidation, colours) -> str:
         if ms:
             out.append(f"<h3>{html.escape(heading)}</h3>" + _table(v, colours, ms))
     return "".join(out) + (
-        "<p class='note'>Green cell: the best method in that column (none marked when all methods "
-        "show the same). Original row: its own figures; method rows: MPJPE, velocity error and bone "
-        "drift against the original, columns marked \u21950 the excess over the original (0 = as "
-        "the original).</p>"
+        "<p class='note'>Green cell: the best method in that column; methods within the column's "
+        "noise floor of the best are marked with it, and none is marked when all methods lie "
+        "within the noise floor of each other (or show the same). Original row: its own figures; "
+        "noise-floor row: how far each figure moves when the original is captured again with "
+        f"{NOISE_MM:g} mm of marker noise. Method rows: MPJPE, velocity error and bone drift "
+        "against the original, columns marked \u21950 the excess over the original (0 = as the "
+        "original), \u2248o closest to the original's own value.</p>"
     )
 
 
@@ -558,12 +644,21 @@ def _table(v: ClipValidation, colours, ms: list[Metric]) -> str:
         for m in ms
     )
     vals = {m.key: [metric_value(m, r.figures, r.excess) for r in v.runs] for m in ms}
-    best = {m.key: best_rows(m, vals[m.key]) for m in ms}
+    nf = v.noise_floor
+    best = {m.key: _best(v, m, vals[m.key]) for m in ms}
     base = "".join(
         f"<td>{html.escape(_cell(m.fmt.replace('+', ''), metric_value(m, v.baseline_figures)))}</td>"
         for m in ms
     )
     rows = [f"<tr class='orig'><td>original (baseline)</td><td>-</td>{base}</tr>"]
+    if any(nf.get(m.key) is not None for m in ms):
+        noise = "".join(
+            f"<td>{html.escape(_cell(m.fmt.replace('+', ''), nf.get(m.key)))}</td>" for m in ms
+        )
+        rows.append(
+            f"<tr class='noise'><td>noise floor</td><td class='k'>original + {NOISE_MM:g} mm "
+            f"noise</td>{noise}</tr>"
+        )
     for i, (r, colour) in enumerate(zip(v.runs, colours, strict=True)):
         cells = "".join(
             f"<td{' class=best' if i in best[m.key] else ''}>"
@@ -642,7 +737,7 @@ def summary_plot(v: ClipValidation, colours) -> bytes | None:
     y = np.arange(n)
     for ax, m in zip(axes.flat, ms, strict=False):
         vals = [metric_value(m, r.figures, r.excess) for r in v.runs]
-        best = best_rows(m, vals)
+        best = _best(v, m, vals)
         x = [0.0 if a is None else a for a in vals]
         ax.barh(y, x, color=colours, height=0.7)
         for i, a in enumerate(vals):
@@ -740,6 +835,7 @@ td:first-child,th:first-child{text-align:left;white-space:nowrap}
 td.k{font-family:monospace;font-size:11px;text-align:left}
 td.best{background:#c9efcf;font-weight:700}
 tr.orig{background:#eef}
+tr.noise{background:#f7f7f7;color:#666;font-style:italic}
 details.legend{margin:18px 0 4px 0;font-size:13px}
 details.legend summary{cursor:pointer;font-weight:600}
 .note{font-size:12px;color:#555;max-width:1100px}
@@ -820,6 +916,25 @@ def _jpeg(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def floor_sentence(physics: dict) -> str:
+    """One sentence on the trial's floor (:meth:`sim.physics.ground.Ground.summary` figures):
+    where it is, its slope, how far the planted feet sit from it, and whether it fits."""
+    sx, sy = physics.get("floor_slope", (0.0, 0.0))
+    dev = physics.get("floor_deviation_mm")
+    head = (
+        f"Floor of the trial (sim.physics, fitted to {physics.get('floor_footprints', 0)} "
+        f"footprints): z = {physics['floor_z_m']:.3f} m at its centre, slope "
+        f"{1e3 * sx:+.1f}, {1e3 * sy:+.1f} mm/m"
+    )
+    if physics.get("floor_fits"):
+        return f"{head}; the planted feet sit within {dev:.1f} mm of it."
+    why = "no foot stands still long enough" if dev is None else f"they depart by {dev:.1f} mm"
+    return (
+        f"{head}. THE FLOOR DOES NOT FIT this trial ({why}: uneven ground, a drifting capture "
+        "floor or support other than the floor): float and penetration are not scored (n/a)."
+    )
+
+
 def ground_and_feet(v: ClipValidation, run: MethodRun) -> tuple[float, FootState]:
     """Floor height [m] and foot states drawn for one method's video: the trial's ground
     (:mod:`sim.physics.ground`, from the clip when the report had no trial ground) and the
@@ -882,11 +997,7 @@ def write_report(
                 f"source frame {start}, {T} frames (0-{T - 1}) at {v.clip.fps:g} fps, W = {v.W}</h2>"
             )
             if v.physics:
-                parts.append(
-                    f"<p class='note'>Ground of the trial (sim.physics): z = "
-                    f"{v.physics['ground_z_m']:.3f} m; the drawn and replayed floor is at "
-                    f"{v.physics['floor_z_m']:.3f} m (the sole capsules' radius lower).</p>"
-                )
+                parts.append(f"<p class='note'>{html.escape(floor_sentence(v.physics))}</p>")
             parts.append(_tables(v, colours))
             parts.append(legend_html(shown_metrics(v)))
             bars = summary_plot(v, colours)
@@ -1000,6 +1111,7 @@ def report_clips(
     streams: tuple[DecodedStream, ...] = (),
     model=None,
     ground=None,
+    contacts=None,
     workers: int = 1,
     ray: str | None = None,
     simulate=None,
@@ -1007,7 +1119,8 @@ def report_clips(
     """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
     report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
     labels and file names (default 0, 1, ...). With ``model`` (the subject's humanoid) every motion
-    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip), and with
+    also gets the :mod:`sim.physics` figures, on ``ground`` (default: estimated per clip) with the
+    original's ``contacts`` labelled over the trial (:func:`trial_contacts_by_clip`), and with
     ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`) the forward simulation's. Clips are
     validated through ``sim.batch.run_batch`` (``workers`` processes or Ray); a clip that fails is
     listed in the report's ``failed`` field."""
@@ -1015,7 +1128,8 @@ def report_clips(
     job = physics_job(model, clips[0]) if model is not None and clips else None
     validate = partial(
         validate_clip, methods=list(methods), W=W, seed=seed, joint_ranges=joint_ranges,
-        streams=streams, physics=job, ground=ground, simulate=simulate if job else None,
+        streams=streams, physics=job, ground=ground, contacts=contacts,
+        simulate=simulate if job else None,
     )  # fmt: skip
     outcomes = run_batch(
         validate, clips, workers=workers, ray=ray, desc="replay", progress=progress
@@ -1076,6 +1190,7 @@ def report_trial(
     if bad:
         raise ValueError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")
     skeleton, model = subject_model(asf)
+    ground = trial_ground(all_clips)
     forward = None
     if simulate:
         names = from_clip(all_clips[0]).restrict(POINTS).names
@@ -1086,7 +1201,8 @@ def report_trial(
         title=f"Replay checks: {Path(amc).stem}",
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
         progress=progress, clip_numbers=list(clips), streams=decoded, model=model,
-        ground=trial_ground(all_clips), workers=workers, ray=ray, simulate=forward,
+        ground=ground, contacts=trial_contacts_by_clip(all_clips, ground), workers=workers,
+        ray=ray, simulate=forward,
     )  # fmt: skip
 
 
@@ -1100,3 +1216,16 @@ def trial_ground(clips: list[Clip]):
     """The trial's :class:`sim.physics.ground.Ground` from all its clips."""
     pos = np.concatenate([c.positions for c in clips])
     return estimate_ground(pos, clips[0].names, clips[0].fps)
+
+
+def trial_contacts_by_clip(clips: list[Clip], ground: Ground) -> dict:
+    """The original's foot contacts labelled once over the trial (its clips in order), as
+    ``{clip.start_frame: Contacts of its frames}`` (:func:`sim.physics.contacts.trial_contacts`)."""
+    pos = np.concatenate([c.positions for c in clips])
+    vel = np.concatenate([c.velocities for c in clips])
+    whole = trial_contacts(pos, clips[0].names, clips[0].fps, ground, vel)
+    out, i = {}, 0
+    for c in clips:
+        out[c.start_frame] = whole.slice(i, i + c.n_frames)
+        i += c.n_frames
+    return out

@@ -91,37 +91,75 @@ def interpolate(
         (N, D) reconstructed values and (N, D) their time derivatives [u/s]. For "linear" the
         derivative at an inner keyframe is the mean of the two adjacent slopes.
     """
+    x, xd, _ = interpolate_derivatives(values, rates, keyframes, dt, curve)
+    return x, xd
+
+
+def _segment_polynomials(values, rates, k, dt, curve):
+    """Per segment ``w`` (between keyframes k[w] and k[w+1]) the curve as a cubic in the time
+    ``tau`` [s] since k[w]: coefficients (W-1, 4, D) of 1, tau, tau^2, tau^3."""
+    xa, xb = values[k[:-1]], values[k[1:]]
+    h = ((k[1:] - k[:-1]) * dt)[:, None]
+    c = np.zeros((len(k) - 1, 4, values.shape[1]))
+    if curve == "linear":
+        c[:, 0], c[:, 1] = xa, (xb - xa) / h
+        return c
+    if curve == "hermite":
+        if rates is None:
+            raise ValueError("the hermite curve needs rates")
+        m = rates[k]
+    else:
+        m = keyframe_rates(values, k, dt)
+    ma, mb = m[:-1], m[1:]
+    c[:, 0] = xa
+    c[:, 1] = ma
+    c[:, 2] = (3 * (xb - xa) / h - 2 * ma - mb) / h
+    c[:, 3] = (2 * (xa - xb) / h + ma + mb) / h**2
+    return c
+
+
+def _eval_cubic(c, tau):
+    """Value, first and second derivative of cubics ``c`` (n, 4, D) at ``tau`` (n, 1)."""
+    x = c[:, 0] + tau * (c[:, 1] + tau * (c[:, 2] + tau * c[:, 3]))
+    v = c[:, 1] + tau * (2 * c[:, 2] + 3 * tau * c[:, 3])
+    a = 2 * c[:, 2] + 6 * tau * c[:, 3]
+    return x, v, a
+
+
+def interpolate_derivatives(
+    values: np.ndarray,
+    rates: np.ndarray | None,
+    keyframes,
+    dt: float,
+    curve: str = "hermite",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`interpolate` with the curve's second derivative.
+
+    Returns:
+        (N, D) values, (N, D) rates [u/s] and (N, D) second derivatives [u/s^2], all from the
+        curve itself (its piecewise polynomials). At an inner keyframe, where the curve's rate
+        ("linear") or second derivative ("hermite", "catmull_rom") jumps, the second derivative
+        is the mean of both sides' plus the rate's jump spread over the frame,
+        ``(a(t-) + a(t+)) / 2 + (v(t+) - v(t-)) / dt`` (an impulse); the rate there is the mean of
+        both sides for "linear" and the (continuous) rate otherwise.
+    """
     check_curve(curve)
     values = np.asarray(values, dtype=float)
     N = values.shape[0]
     k = validate_keyframes(keyframes, N)
     n = np.arange(N)
     seg = np.clip(np.searchsorted(k, n, side="right") - 1, 0, len(k) - 2)
-    a, b = k[seg], k[seg + 1]
-    h = ((b - a) * dt)[:, None]
-    s = ((n - a) / (b - a))[:, None]
-    xa, xb = values[a], values[b]
-    if curve == "linear":
-        slope = (xb - xa) / h
-        out = xa + s * (xb - xa)
-        rate = slope.copy()
-        inner = k[1:-1]
-        if len(inner):
-            left = (values[inner] - values[k[:-2]]) / ((inner - k[:-2]) * dt)[:, None]
-            right = (values[k[2:]] - values[inner]) / ((k[2:] - inner) * dt)[:, None]
-            rate[inner] = 0.5 * (left + right)
-        return out, rate
-    if curve == "hermite":
-        if rates is None:
-            raise ValueError("the hermite curve needs rates")
-        ma, mb = rates[a], rates[b]
-    else:
-        mk = keyframe_rates(values, k, dt)
-        ma, mb = mk[seg], mk[seg + 1]
-    s2, s3 = s * s, s * s * s
-    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-    out = h00 * xa + h10 * h * ma + h01 * xb + h11 * h * mb
-    d00, d10, d01, d11 = 6 * s2 - 6 * s, 3 * s2 - 4 * s + 1, -6 * s2 + 6 * s, 3 * s2 - 2 * s
-    rate = (d00 * xa + d01 * xb) / h + d10 * ma + d11 * mb
-    # The last frame belongs to the last segment at s = 1; the formulas already give x_b, m_b.
-    return out, rate
+    coef = _segment_polynomials(values, rates, k, dt, curve)
+    tau = ((n - k[seg]) * dt)[:, None]
+    x, v, a = _eval_cubic(coef[seg], tau)
+    x[k] = values[k]  # exact at keyframes (no rounding of the polynomial)
+    inner = k[1:-1]
+    if len(inner):
+        w = np.searchsorted(k, inner)  # segment starting at each inner keyframe
+        _, v_right, a_right = _eval_cubic(coef[w], np.zeros((len(inner), 1)))
+        h_left = ((inner - k[w - 1]) * dt)[:, None]
+        _, v_left, a_left = _eval_cubic(coef[w - 1], h_left)
+        a[inner] = 0.5 * (a_left + a_right) + (v_right - v_left) / dt
+        if curve == "linear":
+            v[inner] = 0.5 * (coef[w - 1, 1] + coef[w, 1])
+    return x, v, a

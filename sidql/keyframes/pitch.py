@@ -201,9 +201,41 @@ def _segments(keyframes: np.ndarray, N: int):
     return seg, a, b, (n - a) / (b - a)
 
 
+def _slerp_points(rig: Rig, root: np.ndarray, local: np.ndarray, a, b, s, dt: float):
+    """Positions, velocities and accelerations (n, 23, 3) of the slerp reconstruction at ``n``
+    instants, the instant ``i`` a share ``s[i]`` of the way through the segment from keyframe
+    ``a[i]`` to keyframe ``b[i]`` (frame indices). Within a segment every local rotation turns at a
+    constant rate ``w`` in its body's frame (``log(q_a^-1 q_b) / h``), so a body's world angular
+    acceleration is its parent's plus ``Om x (R w)``, and the root moves at a constant velocity."""
+    h = (b - a) * dt
+    root_rec = root[a] + s[:, None] * (root[b] - root[a])
+    slope = (root[b] - root[a]) / h[:, None]
+    local_rec = quat.slerp(local[a], local[b], s[:, None])
+    omega = quat.log(quat.mul(quat.conj(local[a]), local[b])) / h[:, None, None]
+    P, world = forward(rig, root_rec, local_rec)
+    rel = quat.rotate(world, omega)  # each body's rate relative to its parent, world axes
+    Om, Al = rel.copy(), np.zeros_like(rel)
+    V, A = np.empty_like(P), np.empty_like(P)
+    V[:, 0], A[:, 0] = slope, 0.0
+    Al[:, 0] = quat.cross(Om[:, 0], rel[:, 0])  # = 0: the root's own rate is constant
+    for j in range(1, len(rig.parents)):
+        p = rig.parents[j]
+        Om[:, j] = Om[:, p] + rel[:, j]
+        Al[:, j] = Al[:, p] + quat.cross(Om[:, j], rel[:, j])
+        r1 = quat.rotate(world[:, p], rig.origin[j])
+        r2 = quat.rotate(world[:, j], rig.offset[j])
+        V[:, j] = V[:, p] + quat.cross(Om[:, p], r1) + quat.cross(Om[:, j], r2)
+        A[:, j] = (
+            A[:, p]
+            + quat.cross(Al[:, p], r1) + quat.cross(Om[:, p], quat.cross(Om[:, p], r1))
+            + quat.cross(Al[:, j], r2) + quat.cross(Om[:, j], quat.cross(Om[:, j], r2))
+        )  # fmt: skip
+    return P, V, A
+
+
 def slerp_points(
     clip: Clip, keyframes, rig: Rig | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Li et al. 2015 reconstruction of ``clip``'s 23 protocol points from its keyframes (the
     ``slerp`` reconstruction of :mod:`sidql.keyframes.reconstructions`).
 
@@ -212,9 +244,11 @@ def slerp_points(
     given ``rig``, from :func:`fit_rig`, to save refitting).
 
     Returns:
-        Positions and velocities (N, 23, 3) world z-up [m, m/s] (velocities are the exact
-        derivatives of the interpolants; at an inner keyframe the mean of both sides), and the
-        (23,) parent indices.
+        Positions, velocities and accelerations (N, 23, 3) world z-up [m, m/s, m/s^2], the
+        exact derivatives of the interpolants (at an inner keyframe, where the rates jump, the
+        velocity is the mean of both sides and the acceleration the mean of both sides' plus
+        the velocity's jump spread over the frame, ``(a(t-) + a(t+)) / 2 + (v(t+) - v(t-)) /
+        dt``, an impulse), and the (23,) parent indices.
     """
     pos, local, parents = protocol_rotations(clip)
     N = clip.n_frames
@@ -222,37 +256,20 @@ def slerp_points(
     dt = clip.dt
     if rig is None:
         rig, _ = fit_rig(pos, local, parents)
-    seg, a, b, s = _segments(k, N)
-    h = (b - a) * dt
-    # Root position: linear; velocity: slope (inner keyframes: mean of both sides).
+    _, a, b, s = _segments(k, N)
     root = pos[:, 0]
-    root_rec = root[a] + s[:, None] * (root[b] - root[a])
-    slope = (root[b] - root[a]) / h[:, None]
-    # Local rotations: slerp; body-frame angular velocity: log(q_a^-1 q_b) / h, constant per segment.
-    local_rec = quat.slerp(local[a], local[b], s[:, None])
-    rel = quat.log(quat.mul(quat.conj(local[a]), local[b]))  # (N, 23, 3)
-    omega = rel / h[:, None, None]
+    P, V, A = _slerp_points(rig, root, local, a, b, s, dt)
     inner = k[1:-1]
     if len(inner):
-        prev = np.searchsorted(k, inner) - 1  # segment ending at each inner keyframe
-        left_slope = (root[inner] - root[k[prev]]) / ((inner - k[prev]) * dt)[:, None]
-        slope[inner] = 0.5 * (slope[inner] + left_slope)
-        left_rel = quat.log(quat.mul(quat.conj(local[k[prev]]), local[inner]))
-        omega[inner] = 0.5 * (omega[inner] + left_rel / ((inner - k[prev]) * dt)[:, None, None])
-    P, world = forward(rig, root_rec, local_rec)
-    # World angular velocities down the tree, then point velocities.
-    Om = quat.rotate(world, omega)  # body-frame rate expressed in world axes (relative part)
-    V = np.empty_like(P)
-    V[:, 0] = slope
-    for j in range(1, len(parents)):
-        p = parents[j]
-        Om[:, j] = Om[:, p] + Om[:, j]
-        V[:, j] = (
-            V[:, p]
-            + quat.cross(Om[:, p], quat.rotate(world[:, p], rig.origin[j]))
-            + quat.cross(Om[:, j], quat.rotate(world[:, j], rig.offset[j]))
-        )
-    return P, V, parents
+        nxt = k[np.searchsorted(k, inner) + 1]
+        prv = k[np.searchsorted(k, inner) - 1]
+        one = np.ones(len(inner))
+        _, v_at, _ = _slerp_points(rig, root, local, prv, inner, one, dt)
+        _, v_right, _ = _slerp_points(rig, root, local, inner, nxt, 0.5 / (nxt - inner), dt)
+        _, v_left, _ = _slerp_points(rig, root, local, prv, inner, 1 - 0.5 / (inner - prv), dt)
+        V[inner] = 0.5 * (V[inner] + v_at)
+        A[inner] = (v_right - v_left) / dt
+    return P, V, A, parents
 
 
 def pitch_error(true_pos: np.ndarray, rec_pos: np.ndarray) -> float:

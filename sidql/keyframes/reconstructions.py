@@ -40,13 +40,14 @@ from functools import partial
 import numpy as np
 
 from sidql.keyframes import pitch
-from sidql.keyframes.curves import check_curve, interpolate, validate_keyframes
+from sidql.keyframes.curves import check_curve, interpolate_derivatives, validate_keyframes
 from sidql.keyframes.optimal import catmull_rom_optimal, optimal_table
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import (
     M_BONES,
     POINTS,
     SphericalSeries,
+    accelerations_from_chart,
     angles_and_rates,
     chart,
     positions_from_chart,
@@ -77,12 +78,17 @@ class Reconstruction(PointMotion):
         theta: (N, 22) polar angles [rad] of the rebuilt bones; phi: (N, 22) azimuths [rad].
         keyframes: (W,) keyframe indices used.
         reconstruction: the name it was rebuilt by (a key of :data:`RECONSTRUCTIONS`).
+        accelerations: (N, 23, 3) point accelerations [m/s^2], world axes, from the curves
+            themselves (:func:`~sidql.keyframes.curves.interpolate_derivatives`: at an inner
+            keyframe the mean over the frame's interval); None where a reconstruction does not
+            provide them.
     """
 
     theta: np.ndarray
     phi: np.ndarray
     keyframes: np.ndarray
     reconstruction: str
+    accelerations: np.ndarray | None = None
 
     @property
     def dt(self) -> float:
@@ -97,11 +103,12 @@ def points_reconstruction(
     keyframes: np.ndarray,
     reconstruction: str,
     fps: float,
+    accelerations: np.ndarray | None = None,
 ) -> Reconstruction:
     """A reconstruction rebuilt as points rather than in the chart (``slerp``, ``cartesian``):
-    the 23 protocol points' positions (N, 23, 3) [m] and velocities [m/s], world axes (z up),
-    with their (23,) ``parents``; its bones' theta/phi (N, 22) [rad] are measured from the
-    points."""
+    the 23 protocol points' positions (N, 23, 3) [m], velocities [m/s] and accelerations
+    [m/s^2], world axes (z up), with their (23,) ``parents``; its bones' theta/phi (N, 22) [rad]
+    are measured from the points."""
     child = np.arange(1, len(parents))
     bones = positions[:, child] - positions[:, parents[child]]
     theta, phi, _, _ = angles_and_rates(world_to_chart(bones))
@@ -115,6 +122,7 @@ def points_reconstruction(
         keyframes=keyframes,
         reconstruction=reconstruction,
         fps=fps,
+        accelerations=accelerations,
     )
 
 
@@ -133,11 +141,15 @@ def reconstruct_series(
     k = validate_keyframes(keyframes, series.n_frames)
     M = series.n_bones
     values, rates = series.channels()
-    x, xd = interpolate(values, rates, k, series.dt, curve)
+    x, xd, xdd = interpolate_derivatives(values, rates, k, series.dt, curve)
     theta, phi, root = split_channels(x, M)
     dtheta, dphi, root_vel = split_channels(xd, M)
+    ddtheta, ddphi, root_acc = split_channels(xdd, M)
     P, V = positions_from_chart(
         root, root_vel, theta, phi, dtheta, dphi, series.lengths, series.parents
+    )
+    A = accelerations_from_chart(
+        root_acc, theta, phi, dtheta, dphi, ddtheta, ddphi, series.lengths, series.parents
     )
     return Reconstruction(
         positions=P,
@@ -149,6 +161,7 @@ def reconstruct_series(
         keyframes=k,
         reconstruction=curve,
         fps=1.0 / series.dt,
+        accelerations=A,
     )
 
 
@@ -254,8 +267,8 @@ def slerp(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Recon
     """Li et al. 2015: local rotations slerped, root linear (:func:`sidql.keyframes.pitch.slerp_points`);
     23 quaternions and the root position per keyframe."""
     k = validate_keyframes(keyframes, clip.n_frames)
-    P, V, parents = pitch.slerp_points(clip, k)
-    return points_reconstruction(P, V, parents, k, "slerp", clip.fps)
+    P, V, A, parents = pitch.slerp_points(clip, k)
+    return points_reconstruction(P, V, parents, k, "slerp", clip.fps, A)
 
 
 @register("cartesian", payload_floats=2 * 3 * len(POINTS))
@@ -271,6 +284,6 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     k = validate_keyframes(keyframes, N)
     pos = clip.positions[:, idx].reshape(N, -1)
     vel = clip.velocities[:, idx].reshape(N, -1)
-    P, V = interpolate(pos, vel, k, clip.dt, "hermite")
-    P, V = P.reshape(N, len(POINTS), 3), V.reshape(N, len(POINTS), 3)
-    return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps)
+    P, V, A = interpolate_derivatives(pos, vel, k, clip.dt, "hermite")
+    P, V, A = (x.reshape(N, len(POINTS), 3) for x in (P, V, A))
+    return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps, A)

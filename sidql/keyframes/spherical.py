@@ -390,6 +390,47 @@ def positions_from_chart(
     return chart_to_world(P), chart_to_world(V)
 
 
+def direction_accelerations(theta, phi, dtheta, dphi, ddtheta, ddphi) -> np.ndarray:
+    """(..., 3) second time derivative [1/s^2] of :func:`directions` given angle rates [rad/s]
+    and their rates [rad/s^2]."""
+    st, ct = np.sin(theta), np.cos(theta)
+    sp, cp = np.sin(phi), np.cos(phi)
+    d_t = np.stack([ct * cp, ct * sp, -st], axis=-1)  # d/d theta
+    d_p = np.stack([-st * sp, st * cp, np.zeros_like(st)], axis=-1)  # d/d phi
+    d_tt = -np.stack([st * cp, st * sp, ct], axis=-1)
+    d_tp = np.stack([-ct * sp, ct * cp, np.zeros_like(st)], axis=-1)
+    d_pp = np.stack([-st * cp, -st * sp, np.zeros_like(st)], axis=-1)
+    tt, pp = dtheta[..., None], dphi[..., None]
+    return (
+        d_tt * tt**2 + 2 * d_tp * tt * pp + d_pp * pp**2
+        + d_t * ddtheta[..., None] + d_p * ddphi[..., None]
+    )  # fmt: skip
+
+
+def accelerations_from_chart(
+    root_acc_c: np.ndarray,
+    theta: np.ndarray,
+    phi: np.ndarray,
+    dtheta: np.ndarray,
+    dphi: np.ndarray,
+    ddtheta: np.ndarray,
+    ddphi: np.ndarray,
+    lengths: np.ndarray,
+    parents: np.ndarray,
+) -> np.ndarray:
+    """(N, M+1, 3) point accelerations [m/s^2], world axes (z up), of the points
+    :func:`positions_from_chart` rebuilds, from the root's acceleration (N, 3) [m/s^2] in CMU
+    axes and the bone angles, rates and their rates (N, M) [rad, rad/s, rad/s^2]."""
+    N, M = theta.shape
+    ddu = direction_accelerations(theta, phi, dtheta, dphi, ddtheta, ddphi)
+    ddu = ddu * lengths[None, :, None]
+    A = np.empty((N, M + 1, 3))
+    A[:, 0] = root_acc_c
+    for j in range(1, M + 1):
+        A[:, j] = A[:, parents[j]] + ddu[:, j - 1]
+    return chart_to_world(A)
+
+
 def protocol_parent_indices() -> np.ndarray:
     """(23,) parents of :data:`POINTS` in the CMU skeleton, as indices into POINTS."""
     return np.array([-1] + [POINTS.index(_CMU_PARENT[p]) for p in POINTS[1:]], dtype=np.int64)

@@ -40,6 +40,10 @@ class Clip:
         joint_names: (nq-7,) names of the hinge joints that follow the free joint in ``qpos``.
         angular_velocities: (T, J, 3) world angular velocity [rad/s] of each point's body, from the
             kinematic chain (None when unknown, e.g. for reconstructions).
+        source_velocities, accelerations: (T, J, 3) point velocities [m/s] and accelerations
+            [m/s^2] from the source frames' positions around each frame
+            (:func:`sim.motion.velocities.point_derivatives`; None when unknown): right through
+            the Euler-angle flips where ``velocities`` (J q-dot) fail.
     """
 
     names: tuple[str, ...]
@@ -55,6 +59,8 @@ class Clip:
     source_fps: float = 120.0
     joint_names: tuple[str, ...] = field(default_factory=tuple)
     angular_velocities: np.ndarray | None = None
+    source_velocities: np.ndarray | None = None
+    accelerations: np.ndarray | None = None
 
     def __post_init__(self):
         T, J = self.positions.shape[:2]
@@ -73,6 +79,10 @@ class Clip:
             raise ValueError(
                 f"angular_velocities must be (T, J, 3); got {self.angular_velocities.shape}"
             )
+        for name in ("source_velocities", "accelerations"):
+            a = getattr(self, name)
+            if a is not None and a.shape != (T, J, 3):
+                raise ValueError(f"{name} must be (T, J, 3); got {a.shape}")
         if self.fps <= 0:
             raise ValueError(f"fps must be positive; got {self.fps}")
 
@@ -116,6 +126,10 @@ class Clip:
             angular_velocities=None
             if self.angular_velocities is None
             else self.angular_velocities[start:stop],
+            source_velocities=None
+            if self.source_velocities is None
+            else self.source_velocities[start:stop],
+            accelerations=None if self.accelerations is None else self.accelerations[start:stop],
             start_frame=int(round(self.start_frame + start * step)),
         )
 
@@ -125,21 +139,24 @@ class Clip:
 
 
 _ARRAY_KEYS = ("parents", "positions", "velocities", "qpos", "qvel", "rotations")
+_OPTIONAL_KEYS = ("angular_velocities", "source_velocities", "accelerations")
 
 
 def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> Path:
     """Write ``clip`` to ``path`` atomically (temporary file in the same folder, then rename).
 
     Keys: names, parents, positions, velocities, qpos, qvel, rotations, fps, source, start_frame,
-    source_fps, joint_names, and angular_velocities when known; plus the arrays of ``extra``
+    source_fps, joint_names, and angular_velocities, source_velocities and accelerations when
+    known; plus the arrays of ``extra``
     under their own names (per-frame labels of simulated clips: :func:`load_npz` ignores them,
     :func:`load_extra` reads them).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {k: getattr(clip, k) for k in _ARRAY_KEYS}
-    if clip.angular_velocities is not None:
-        payload["angular_velocities"] = clip.angular_velocities
+    for name in _OPTIONAL_KEYS:
+        if getattr(clip, name) is not None:
+            payload[name] = getattr(clip, name)
     payload.update(
         names=np.array(clip.names),
         joint_names=np.array(clip.joint_names, dtype=str),
@@ -148,7 +165,7 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> 
         start_frame=np.int64(clip.start_frame),
         source_fps=np.float64(clip.source_fps),
     )
-    clash = set(extra or {}) & (set(payload) | {"angular_velocities"})
+    clash = set(extra or {}) & (set(payload) | set(_OPTIONAL_KEYS))
     if clash:
         raise ValueError(f"extra arrays {sorted(clash)} would overwrite clip keys")
     payload.update(extra or {})
@@ -160,7 +177,7 @@ def load_extra(path: str | os.PathLike, prefix: str = "") -> dict[str, np.ndarra
     """The arrays of a clip file written through ``save_npz(..., extra=...)`` whose names start
     with ``prefix`` (every non-clip key when empty)."""
     clip_keys = {*_ARRAY_KEYS, "names", "joint_names", "fps", "source", "start_frame",
-                 "source_fps", "angular_velocities"}  # fmt: skip
+                 "source_fps", *_OPTIONAL_KEYS}  # fmt: skip
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: z[k] for k in z.files if k not in clip_keys and k.startswith(prefix)}
@@ -179,7 +196,7 @@ def load_npz(path: str | os.PathLike) -> Clip:
                 source=str(z["source"]),
                 start_frame=int(z["start_frame"]),
                 source_fps=float(z["source_fps"]),
-                angular_velocities=z["angular_velocities"] if "angular_velocities" in z else None,
+                **{k: (z[k] if k in z else None) for k in _OPTIONAL_KEYS},
                 **{k: z[k] for k in _ARRAY_KEYS},
             )
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as e:  # truncated: zip

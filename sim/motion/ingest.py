@@ -19,7 +19,7 @@ from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
 from sim.motion.retarget import leg_length, local_rotations_from_world, motion_to_qpos
-from sim.motion.velocities import point_kinematics, qvel_from_qpos
+from sim.motion.velocities import point_derivatives, point_kinematics, qvel_from_qpos
 
 SKELETONS = ("subject", "humanoid")
 CMU_FPS = 120.0
@@ -51,7 +51,9 @@ def clip_from_qpos(
     """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
 
     Point ``j`` is the site ``<names[j]>_end`` (the root: the root body's origin). Velocities are
-    taken at the source rate (central differences of qpos), then mapped through the chain.
+    taken at the source rate (central differences of qpos), then mapped through the chain; the
+    points' ``source_velocities`` and ``accelerations`` come from their positions in every source
+    frame (:func:`sim.motion.velocities.point_derivatives`).
     ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
     per trial).
 
@@ -75,8 +77,14 @@ def clip_from_qpos(
         pos, vel, xquat, omega = point_kinematics(
             model, data, qpos[frames], qvel, body_ids, site_ids
         )
+        every = point_kinematics(
+            model, data, qpos, np.zeros((len(qpos), model.nv)), body_ids, site_ids
+        )[0]
+        src_vel, acc = point_derivatives(every, source_fps, frames)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
-    for what, a in (("positions", pos), ("velocities", vel), ("rotations", xquat)):
+    arrays = (("positions", pos), ("velocities", vel), ("rotations", xquat),
+              ("source velocities", src_vel), ("accelerations", acc))  # fmt: skip
+    for what, a in arrays:
         if not np.isfinite(a).all():
             raise MotionDataError(source or None, None, f"non-finite {what} from the motion")
     if not np.isfinite(omega).all():
@@ -95,6 +103,8 @@ def clip_from_qpos(
         source_fps=float(source_fps),
         joint_names=joint_names,
         angular_velocities=omega,
+        source_velocities=src_vel,
+        accelerations=acc,
     )
 
 

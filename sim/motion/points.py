@@ -1,5 +1,5 @@
 """A point set moving over time: the one container of positions that replay, render and the
-reconstructions share (a :class:`~sidql.keyframes.reconstruct.Reconstruction` is one).
+reconstructions share (a :class:`~sidql.keyframes.reconstructions.Reconstruction` is one).
 
 Pure numpy (no MuJoCo). Units: metres, seconds; world z up.
 """

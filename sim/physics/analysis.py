@@ -10,23 +10,36 @@ original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or 
   where it does not fit, float and penetration are measured against a floor the feet do not
   follow;
 * ``penetration_mm``, ``float_mm``, ``skate_mm_s``, ``contact_precision``, ``contact_recall``
-  against the original's contacts (:mod:`sim.physics.contacts`), each with ``*_n`` samples;
+  against the original's contacts (:mod:`sim.physics.contacts`), each with ``*_n`` samples, and
+  PhysDiff's ``physdiff_penetrate_mm``, ``physdiff_float_mm``, ``physdiff_skate``;
 * ``self_pen_excess_mm``, ``lost_contacts``: self-penetration beyond the original's, pair by pair
   (:func:`sim.replay.checks.self_penetration_excess`);
 * ``limit_excess_deg``: mean over frames of the worst wrapped anatomical hinge angle beyond its
   ASF range, on the humanoid fitted to the points (:mod:`sim.physics.ik`), ``limit_excess_max_deg``;
   only hinges the points observe count (a forearm's twist, say, is invisible without the hand);
-* ``residual_force_bw`` (mean) and ``residual_force_bw_p95``: residual force / body weight;
-  ``residual_torque_nm_kg``: mean |residual torque| / body mass; ``joint_torque_rms_nm_kg``: RMS
-  anatomical joint torque / body mass (:mod:`sim.physics.dynamics`), with ``dynamics_n`` frames;
+* ``residual_force_bw`` (mean) and ``residual_force_bw_p95``: the force no ground contact can
+  supply / body weight; ``residual_torque_nm_kg``: mean |residual torque| / body mass, the torque
+  the ground forces that supply the force leave (:func:`sim.physics.dynamics.residual_wrench`);
+  ``joint_torque_rms_nm_kg``: RMS anatomical joint torque / body mass, with ``dynamics_n``
+  frames and ``derivatives`` (where the velocities and accelerations came from);
 * ``ik_error_mm``: mean RMS distance of the fitted humanoid's points to the motion's (large when
   a reconstruction stretches bones);
 * ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
 * ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
 
-Both the original and the reconstruction go through the same pipeline (IK on the same points, each
-frame started from the original's pose at that frame; same filter, same contact rules), so their
-difference is the reconstruction's.
+Derivatives come from where they are known, as point velocities and accelerations mapped onto
+the fitted humanoid through its Jacobians (:meth:`sim.physics.ik.HumanoidIK.rates`). The
+original's: its points in the source frames around each frame (``clip.source_velocities``,
+``clip.accelerations``: :func:`sim.motion.velocities.point_derivatives`, a local polynomial at
+120 fps whose response is stated there). A reconstruction's: its curve's own
+(``Reconstruction.velocities`` and ``accelerations``); degrees of freedom the points do not see
+keep the original's rates, as the fit keeps their angles. Only where neither exists (points
+alone) the Savitzky-Golay filter of :func:`sim.physics.dynamics.derivatives` differentiates the
+fit.
+
+Contacts: the original's labels come from the whole trial, labelled once (pass them as
+``contacts``; else the clip's own); a reconstruction's from the soles of its fitted humanoid,
+starting from the original's state at frame 0. Both use :mod:`sim.physics.contacts`.
 """
 
 from __future__ import annotations
@@ -37,11 +50,18 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.physics.contacts import contact_metrics, foot_heights, label_contacts, point_speed
+from sim.physics.contacts import (
+    Contacts,
+    contact_metrics,
+    lowest_body_point,
+    motion_contacts,
+    physdiff_metrics,
+)
 from sim.physics.dynamics import MU, Dynamics, InverseDynamics
-from sim.physics.feet import SOLE_RADIUS
-from sim.physics.ground import Ground, estimate_ground, foot_points, horizontal_speed
+from sim.physics.feet import FOOT_POINTS, SOLE_POINTS
+from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
+from sim.physics.noise import NOISE_MM, noisy_original
 from sim.replay.capsules import bones_of
 from sim.replay.checks import (
     CollisionScene,
@@ -56,7 +76,13 @@ from sim.replay.checks import (
 EXCESS_KEYS = (
     "penetration_mm", "float_mm", "skate_mm_s", "limit_excess_deg", "residual_force_bw",
     "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
+    "physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
 )  # fmt: skip
+
+
+#: Heights above the floor: meaningless where the trial's floor does not fit
+#: (:attr:`sim.physics.ground.Ground.fits`), so not scored there (eval and the report say so).
+HEIGHT_KEYS = ("penetration_mm", "float_mm", "physdiff_penetrate_mm", "physdiff_float_mm")
 
 
 #: Originals a job keeps (a few hundred kB each): ``sidql eval`` revisits every clip per method and W.
@@ -65,17 +91,16 @@ ORIGINALS_CACHED = 1024
 
 @dataclass(frozen=True)
 class MotionPhysics:
-    """Everything computed for one motion (T frames, F foot points)."""
+    """Everything computed for one motion (T frames, F feet)."""
 
     positions: np.ndarray  # (T, P, 3) [m]
     fit: Fit
     dynamics: Dynamics
-    feet: tuple[str, ...]
-    height: np.ndarray  # (T, F) [m] above stance level
-    hspeed: np.ndarray  # (T, F) [m/s]
-    contact: np.ndarray  # (T, F) bool
+    contacts: Contacts
     checks: FrameChecks
     limit: np.ndarray  # (T,) [deg]
+    lowest: np.ndarray  # (T,) [m] lowest body surface point above the floor
+    derivatives: str  # where qvel/qacc came from
 
 
 class PhysicsJob:
@@ -86,7 +111,8 @@ class PhysicsJob:
         names: (P,) point names of the motions (``"root"`` and bone names).
         parents: (P,) parent index of each point.
         fps: frame rate [1/s].
-        mu: ground friction coefficient; window: Savitzky-Golay window [frames].
+        mu: ground friction coefficient; window: Savitzky-Golay window [frames] (only for motions
+            without known derivatives).
     """
 
     def __init__(self, model, names, parents, fps: float, *, mu: float = MU, window: int = 9):
@@ -97,18 +123,24 @@ class PhysicsJob:
         self.ik = HumanoidIK(model, self.names)
         self.inv = InverseDynamics(model, mu=mu, window=window)
         self.model = model
+        self._data = mujoco.MjData(model)
         self._scene: CollisionScene | None = None
         self._observed: tuple[str, ...] | None = None
         self._originals: dict = {}
         hinges = hinge_names(model)
         self._anatomical = np.array([h.rsplit("_", 1)[0] not in NON_ANATOMICAL for h in hinges])
-        self._site_body = {
-            n: int(
-                model.site_bodyid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{n}_end")]
-            )
-            for n in self.names
-            if n != "root"
-        }
+        # the soles of the fitted humanoid: its ankle, ball and toe-tip sites
+        self._feet = tuple(
+            n for n in FOOT_POINTS
+            if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{n}_end") >= 0
+        )  # fmt: skip
+        self._feet_site = np.array([model.site(f"{n}_end").id for n in self._feet], dtype=int)
+        self._jac = np.zeros((3, model.nv))
+        # capsules of the body surface (PhysDiff's lowest point); the feet are their soles
+        self._bones = bones_of(self.names, self.parents)
+        self._body_bones = np.array(
+            [self.names[c] not in SOLE_POINTS for c in self._bones.child], dtype=bool
+        )
 
     def __reduce__(self):
         # Sent to another process (a pool or Ray worker) as its constructor's arguments: the job's
@@ -117,64 +149,107 @@ class PhysicsJob:
         model, names, parents, fps, mu, window = self._args
         return (_rebuild_job, (model, names, parents, fps, mu, window))
 
-    def _replay(self, motion: PointMotion, reference: PointMotion, floor_z: float) -> FrameChecks:
+    def _replay(self, motion: PointMotion, reference: PointMotion, ground: Ground) -> FrameChecks:
         if self._scene is None:
             self._scene = CollisionScene(bones_of(self.names, self.parents, _lengths(reference)))
-        self._scene.move_floor(floor_z)
-        return replay(motion, reference, floor_z=floor_z, scene=self._scene)
+        self._scene.move_floor(ground.floor_z)
+        return replay(motion, reference, floor_z=ground.floor_z, scene=self._scene, ground=ground)
 
-    def ground_contacts(self, positions: np.ndarray, ground: Ground):
-        """A motion's own foot contacts.
+    def feet_of_fit(self, qpos: np.ndarray, qvel: np.ndarray | None = None):
+        """The fitted humanoid's foot points (ankle, ball, toe tip) per frame.
 
-        Args:
-            positions: (T, P, 3) [m] in this job's ``names`` order.
         Returns:
-            feet (F,) foot point names, height (T, F) above stance level [m], contact (T, F) bool,
-            and per frame the ``(body id, point (3,))`` list where ground forces may act (the
-            points in contact, dropped onto the floor plane ``ground.floor_z``).
+            names (F,), positions (T, F, 3) [m], velocities (T, F, 3) [m/s] (``J qvel``; finite
+            differences without ``qvel``).
         """
-        feet = tuple(f for f in foot_points(self.names) if f in ground.points)
-        pf = np.asarray(positions)[:, [self.names.index(f) for f in feet]]
-        height = foot_heights(pf, ground, feet)
-        contact = label_contacts(height, point_speed(pf, self.fps), points=feet)
-        floor = ground.level(pf[..., :2]) - SOLE_RADIUS  # (T, F) the plane under each point
-        contacts = [
-            [
-                (self._site_body[f], np.array([pf[t, k, 0], pf[t, k, 1], floor[t, k]]))
-                for k, f in enumerate(feet)
-                if contact[t, k]
-            ]
-            for t in range(len(pf))
-        ]
-        return feet, height, contact, contacts
+        m, d = self.model, self._data
+        T = len(qpos)
+        pos = np.empty((T, len(self._feet), 3))
+        vel = np.empty_like(pos)
+        for t in range(T):
+            d.qpos[:] = qpos[t]
+            mujoco.mj_kinematics(m, d)
+            pos[t] = d.site_xpos[self._feet_site]
+            if qvel is not None:
+                mujoco.mj_comPos(m, d)
+                for k, s in enumerate(self._feet_site):
+                    mujoco.mj_jacSite(m, d, self._jac, None, int(s))
+                    vel[t, k] = self._jac @ qvel[t]
+        if qvel is None:
+            vel = np.gradient(pos, 1.0 / self.fps, axis=0) if T > 1 else np.zeros_like(pos)
+        return self._feet, pos, vel
+
+    def force_points(self, contacts: Contacts, ground: Ground) -> list:
+        """Per frame the ``(body id, point (3,))`` list where ground forces may act
+        (:meth:`sim.physics.contacts.Contacts.points`)."""
+        out = []
+        for t in range(contacts.contact.shape[0]):
+            out.append([(self.model.body(b).id, p) for b, p in contacts.points(ground, t)])
+        return out
 
     def motion_physics(
-        self, positions: np.ndarray, reference: PointMotion | None, ground: Ground, start
+        self,
+        positions: np.ndarray,
+        reference: PointMotion | None,
+        ground: Ground,
+        start,
+        *,
+        velocities: np.ndarray | None = None,
+        accelerations: np.ndarray | None = None,
+        rates: tuple[np.ndarray, np.ndarray] | None = None,
+        contacts: Contacts | None = None,
+        initial=None,
+        source: str = "curve",
     ) -> MotionPhysics:
         """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
 
-        ``reference``: the original on this job's points (bone lengths of the collision scene;
-        default the motion itself); ``start``: IK start, None (cold), (nq,) for frame 0 (then
-        warm starts) or (T, nq) per frame (:meth:`sim.physics.ik.HumanoidIK.fit`'s ``guesses``)."""
-        feet, height, contact, contacts = self.ground_contacts(positions, ground)
-        pf = positions[:, [self.names.index(f) for f in feet]]
+        Args:
+            reference: the original on this job's points (bone lengths of the collision scene;
+                default the motion itself).
+            start: IK start, None (cold), (nq,) for frame 0 (then warm starts) or (T, nq) per
+                frame (:meth:`sim.physics.ik.HumanoidIK.fit`'s ``guesses``).
+            velocities, accelerations: (T, P, 3) the points' own derivatives [m/s, m/s^2] (the
+                original's source frames, a reconstruction's curve): mapped onto the fit by
+                :meth:`sim.physics.ik.HumanoidIK.rates`, ``rates`` the prior.
+            rates: ``(qvel, qacc)`` (T, nv): the prior of that mapping (default 0).
+            source: what the derivatives are, for the figures' ``derivatives``.
+            contacts: the motion's foot contacts (the original's, from its trial); default from
+                the fitted humanoid's soles, starting from ``initial`` (F,).
+        """
         if start is not None and np.ndim(start) == 2:
             fit = self.ik.fit(positions, guesses=start)
         else:
             fit = self.ik.fit(positions, q_init=start)
         if self._observed is None:  # the same hinges for the original and every reconstruction
             self._observed = self.ik.observed_hinges(fit.qpos[0])
-        floor = ground.floor_z
-        dyn = self.inv.run(fit.qpos, self.fps, contacts)
+        if velocities is not None and accelerations is not None:
+            prior = rates if rates is not None else (None, None)
+            qvel, qacc = self.ik.rates(
+                fit.qpos, velocities, accelerations, prior_qvel=prior[0], prior_qacc=prior[1]
+            )
+        else:
+            qvel = qacc = None
+            source = f"Savitzky-Golay {self.inv.window} frames"
+        if contacts is None:
+            feet, fp, fv = self.feet_of_fit(fit.qpos, qvel)
+            contacts = motion_contacts(fp, feet, self.fps, ground, initial=initial, velocities=fv)
+        dyn = self.inv.run(
+            fit.qpos, self.fps, self.force_points(contacts, ground), qvel=qvel, qacc=qacc
+        )
         motion = PointMotion(self.names, self.parents, positions, self.fps)
-        checks = self._replay(motion, motion if reference is None else reference, floor)
+        checks = self._replay(motion, motion if reference is None else reference, ground)
+        lowest = lowest_body_point(
+            positions, self.names, self.parents, self._bones.radius, ground, contacts.sole,
+            bones=self._body_bones,
+        )  # fmt: skip
         return MotionPhysics(
-            positions, fit, dyn, feet, height, horizontal_speed(pf, self.fps), contact, checks,
-            limit_excess(fit.qpos, self.model, self._observed),
+            positions, fit, dyn, contacts, checks,
+            limit_excess(fit.qpos, self.model, self._observed), lowest, source,
         )  # fmt: skip
 
-    def original(self, clip, ground: Ground) -> MotionPhysics:
-        """The original clip's physics on this job's points (cached per clip and ground).
+    def original(self, clip, ground: Ground, contacts: Contacts | None = None) -> MotionPhysics:
+        """The original clip's physics on this job's points (cached per clip, ground and
+        contacts).
 
         The cache key holds the points themselves (a digest) and the whole ground: clips can share
         source, start and length yet differ (synthetic clips of one trial all start at frame 0)."""
@@ -182,19 +257,35 @@ class PhysicsJob:
         pos = np.ascontiguousarray(np.asarray(clip.positions, dtype=np.float64)[:, idx])
         key = (
             clip.source, clip.start_frame, pos.shape, hashlib.sha1(pos.tobytes()).hexdigest(),
-            float(ground.z), tuple(ground.points), tuple(ground.slope), tuple(ground.origin),
-            np.asarray(ground.clearance, dtype=np.float64).tobytes(),
+            float(ground.z), tuple(ground.sides), tuple(ground.slope), tuple(ground.origin),
+            np.asarray(ground.offset, dtype=np.float64).tobytes(), float(ground.spread),
+            None if contacts is None else contacts.contact.tobytes(),
         )  # fmt: skip
         if key not in self._originals:
             ref = PointMotion(self.names, self.parents, pos, self.fps)
             if len(self._originals) >= ORIGINALS_CACHED:
                 self._originals.clear()
             q0 = _q_init(clip, self.model)
-            self._originals[key] = self.motion_physics(ref.positions, ref, ground, q0)
+            if contacts is None:
+                contacts = motion_contacts(
+                    clip.positions, clip.names, self.fps, ground, velocities=clip.velocities
+                )
+            vel, acc = _source_derivatives(clip, idx)
+            self._originals[key] = self.motion_physics(
+                ref.positions, ref, ground, q0, velocities=vel, accelerations=acc,
+                contacts=contacts, source="source frames",
+            )  # fmt: skip
         return self._originals[key]
 
     def analyse(
-        self, clip, positions: np.ndarray | None = None, ground: Ground | None = None
+        self,
+        clip,
+        positions: np.ndarray | None = None,
+        ground: Ground | None = None,
+        *,
+        contacts: Contacts | None = None,
+        velocities: np.ndarray | None = None,
+        accelerations: np.ndarray | None = None,
     ) -> dict:
         """Figures of a motion against the original ``clip`` (see the module docstring).
 
@@ -203,16 +294,21 @@ class PhysicsJob:
             positions: (T, P, 3) [m] the reconstruction's points in this job's ``names`` order;
                 ``None`` analyses the original itself (the baseline row: excesses 0).
             ground: the trial's ground (default: estimated from ``clip`` alone).
+            contacts: the original's contacts over the clip's frames (:meth:`Contacts.slice` of
+                :func:`sim.physics.contacts.trial_contacts`; default: labelled on the clip).
+            velocities, accelerations: (T, P, 3) the reconstruction's own point derivatives
+                [m/s, m/s^2] (its curve's); without them its fit is differentiated by the filter.
         Returns:
-            JSON-ready numbers plus ``per_frame``: ``foot_names`` (F,), ``contact`` (T, F) 0/1,
-            ``foot_height_mm`` (T, F), ``foot_speed_mm_s`` (T, F) horizontal,
-            ``residual_force_bw`` (T,), ``residual_torque_nm_kg`` (T,),
-            ``joint_torque_rms_nm_kg`` (T,), ``limit_excess_deg`` (T,), ``ik_error_mm`` (T,),
-            ``qpos`` (T, nq) the IK fit.
+            JSON-ready numbers plus ``per_frame``: ``foot_names`` (F,) feet, ``contact`` (T, F)
+            0/1, ``foot_height_mm`` (T, F) lowest sole point above the floor,
+            ``foot_speed_mm_s`` (T, F) its horizontal speed, ``residual_force_bw`` (T,),
+            ``residual_torque_nm_kg`` (T,), ``joint_torque_rms_nm_kg`` (T,),
+            ``limit_excess_deg`` (T,), ``ik_error_mm`` (T,), ``lowest_mm`` (T,) the lowest body
+            surface point above the floor, ``qpos`` (T, nq) the IK fit.
         """
         if ground is None:
             ground = estimate_ground(clip.positions, clip.names, clip.fps)
-        orig = self.original(clip, ground)
+        orig = self.original(clip, ground, contacts)
         if positions is None:
             mp = orig
         else:
@@ -220,12 +316,18 @@ class PhysicsJob:
             if p.shape != orig.positions.shape:
                 raise ValueError(f"positions must be {orig.positions.shape}; got {p.shape}")
             ref = PointMotion(self.names, self.parents, orig.positions, self.fps)
-            mp = self.motion_physics(p, ref, ground, _q_init(clip, self.model))
+            mp = self.motion_physics(
+                p, ref, ground, _q_init(clip, self.model), velocities=velocities,
+                accelerations=accelerations, rates=(orig.dynamics.qvel, orig.dynamics.qacc),
+                initial=orig.contacts.contact[0],
+            )  # fmt: skip
         out = {"ground_z_m": ground.z, **ground.summary()}
-        out.update(contact_metrics(orig.contact, mp.height, mp.hspeed, mp.contact))
+        out.update(contact_metrics(orig.contacts.contact, mp.contacts))
+        out.update(physdiff_metrics(mp.lowest, mp.contacts, self.fps))
         out.update(self_penetration_excess(mp.checks, orig.checks))
         frames = summarise_dynamics(mp.dynamics, self._anatomical)
         out.update(frames.pop("summary"))
+        out["derivatives"] = mp.derivatives
         out["limit_excess_deg"] = float(mp.limit.mean())
         out["limit_excess_max_deg"] = float(mp.limit.max(initial=0.0))
         out["limit_excess_n"] = int(len(mp.limit))
@@ -233,20 +335,45 @@ class PhysicsJob:
         if positions is None:
             base = out
         else:
-            base = self.analyse(clip, None, ground)
+            base = self.analyse(clip, None, ground, contacts=contacts)
         for k in EXCESS_KEYS:
             out[f"{k}_excess"] = out[k] - base[k]
         out["per_frame"] = {
-            "foot_names": list(mp.feet),
-            "contact": mp.contact.astype(int),
-            "foot_height_mm": 1e3 * mp.height,
-            "foot_speed_mm_s": 1e3 * mp.hspeed,
+            "foot_names": list(mp.contacts.sides),
+            "contact": mp.contacts.contact.astype(int),
+            "foot_height_mm": 1e3 * mp.contacts.foot_gap,
+            "foot_speed_mm_s": 1e3 * mp.contacts.foot_speed,
             **frames,
             "limit_excess_deg": mp.limit,
             "ik_error_mm": 1e3 * mp.fit.error,
+            "lowest_mm": 1e3 * mp.lowest,
             "qpos": mp.fit.qpos,  # (T, nq) the fitted configurations (forward simulation's input)
         }
         return out
+
+    def noise_floor(
+        self,
+        clip,
+        ground: Ground,
+        *,
+        contacts: Contacts | None = None,
+        sigma_mm: float = NOISE_MM,
+        seed: int = 0,
+    ) -> dict:
+        """:meth:`analyse` of the original re-captured with ``sigma_mm`` of marker noise
+        (:func:`sim.physics.noise.noisy_original`, seeded): each figure's excess over the
+        original is what capture noise alone does to it, its noise floor."""
+        idx = [clip.names.index(n) for n in self.names]
+        pos = np.asarray(clip.positions, dtype=np.float64)[:, idx]
+        vel, acc = _source_derivatives(clip, idx)
+        if vel is None:  # no source frames: positions only, the filter differentiates
+            vel = acc = np.zeros_like(pos)
+            noisy = noisy_original(pos, vel, acc, clip.fps, clip.fps, sigma_mm=sigma_mm, seed=seed)
+            return self.analyse(clip, noisy[0], ground, contacts=contacts)
+        p, v, a = noisy_original(
+            pos, vel, acc, clip.fps, clip.source_fps, sigma_mm=sigma_mm, seed=seed
+        )
+        return self.analyse(clip, p, ground, contacts=contacts, velocities=v, accelerations=a)
 
 
 def summarise_dynamics(dyn: Dynamics, anatomical: np.ndarray) -> dict:
@@ -278,6 +405,16 @@ def _q_init(clip, model) -> np.ndarray | None:
     else None (cold start, then warm starts and the soft limit penalty)."""
     q = np.asarray(clip.qpos)
     return q if q.ndim == 2 and q.shape[1] == model.nq and len(q) == clip.n_frames else None
+
+
+def _source_derivatives(clip, idx):
+    """The clip's point velocities and accelerations (T, P, 3) from its source frames on the
+    points ``idx``, or (None, None) where the clip has none (the filter differentiates the fit)."""
+    vel = getattr(clip, "source_velocities", None)
+    acc = getattr(clip, "accelerations", None)
+    if vel is None or acc is None:
+        return None, None
+    return np.asarray(vel, dtype=np.float64)[:, idx], np.asarray(acc, dtype=np.float64)[:, idx]
 
 
 def analyse(

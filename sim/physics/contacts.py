@@ -1,142 +1,299 @@
-"""Foot contacts of the original and PhysDiff-style contact metrics of a reconstruction.
+"""Foot contacts from the sole's geometry, and contact metrics of a motion against the original's.
 
-Labels: a foot point (heel, ball, toes; :data:`sim.physics.feet.FOOT_POINTS`) is in contact when
-its height above its stance level on the trial's floor (:meth:`sim.physics.ground.Ground.heights`)
-is low and it is slow, with hysteresis so that marker noise does not flicker the label: it
-*enters* contact below ``h_on`` and ``v_on`` and *leaves* above ``h_off`` or ``v_off``
-(thresholds in :mod:`sim.physics.feet`). A foot rolling heel to toe moves its lifting points at
-0.5-2 m/s while they are still 1-2 cm up: while another point of the same foot is low and slow
-(the pivot), a low point counts as in contact up to ``v_roll``.
+Labels (:func:`label_contacts`): a foot is in contact while the lowest of its sole spheres
+(:mod:`sim.physics.feet`) is on the floor. "On the floor" is judged over the frame's own time
+interval, not only at its instant: the sphere's gap is also read half a frame before and after
+(linear between frames), so a foot landing or lifting between two frames is in contact in the
+frame whose interval holds the touch. A foot *enters* contact when that gap is within
+``enter = max(CONTACT_GAP, 2 x the floor's spread)`` and its lowest sphere moves slower than
+:data:`~sim.physics.feet.ENTER_SPEED` horizontally (a swinging foot passes low and fast), and
+*leaves* once the gap exceeds ``enter`` plus the floor's spread (hysteresis against marker noise,
+none on a noise-free floor). A foot
+rolling heel to toe stays in contact: its lowest point passes from the heel sphere to the ball and
+the toes while each in turn rests on the floor. The labels of a whole trial are made once
+(:func:`trial_contacts`); a clip's are a slice of them, and a reconstruction's own labels start
+from the original's state at its first frame (keyframe 0 is the original's frame).
 
-Metrics of a motion against the original's contacts (Yuan et al., PhysDiff, ICCV 2023, adapted to
-per-point contacts), each a mean with its sample count:
+Metrics of a motion against the original's contacts, per (frame, foot), each a mean with its
+sample count:
 
-* ``penetration_mm``: depth below the stance level, ``max(0, -height)``, over every
-  (frame, foot point) sample;
-* ``float_mm``: ``max(0, height)`` over the samples where the *original's* point is in contact;
-* ``skate_mm_s``: horizontal speed over the same samples;
+* ``penetration_mm``: depth of the foot's lowest sole point below the floor, over every sample;
+* ``float_mm``: its height above the floor where the *original's* foot is in contact;
+* ``skate_mm_s``: the horizontal speed of that point over the same samples;
 * ``contact_precision``/``contact_recall``: the motion's own labels against the original's.
+
+PhysDiff's definitions (Yuan et al., ICCV 2023, after UHC's evaluation; :func:`physdiff_metrics`),
+named as such so our numbers can sit beside published tables: per frame the lowest point of the
+whole body's surface (the sole spheres and every bone's capsule of :mod:`sim.replay.capsules`)
+against the floor, ``physdiff_penetrate_mm`` its depth below, ``physdiff_float_mm`` its height
+above beyond a 5 mm tolerance, means over frames; ``physdiff_skate`` the share of frames in which
+a foot in contact in both that frame and the previous one moves more than 2.5 cm horizontally.
 
 Units: metres and m/s in, millimetres and mm/s out.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from sim.motion.points import PointMotion
-from sim.physics.feet import H_OFF, H_ON, V_OFF, V_ON, V_ROLL, side
-from sim.physics.ground import Ground, horizontal_speed
+from sim.physics.feet import (
+    CONTACT_GAP,
+    ENTER_SPEED,
+    FOOT_PART,
+    ROLL_BACK,
+    ROLL_FRONT,
+    ROLL_RATE,
+    ROLL_TOLERANCE,
+    SUPPORT_GAP,
+    Sole,
+    foot_points,
+    sole,
+)
+from sim.physics.ground import Ground, horizontal_speed, speed
 from sim.replay.foot_state import FootState
+
+#: PhysDiff's float tolerance [m] and skate threshold [m of horizontal travel between frames].
+PHYSDIFF_FLOAT_TOL, PHYSDIFF_SKATE_M = 0.005, 0.025
 
 
 def point_speed(positions: np.ndarray, fps: float) -> np.ndarray:
     """(T, ...) speed [m/s] of ``positions`` (T, ..., 3) [m] by central differences."""
-    p = np.asarray(positions, dtype=np.float64)
-    if p.shape[0] < 2:
-        return np.zeros(p.shape[:-1])
-    return np.linalg.norm(np.gradient(p, 1.0 / fps, axis=0), axis=-1)
+    return speed(positions, fps)
+
+
+#: How far into the neighbouring frames a frame's interval reaches, as a share of the frame
+#: interval, when judging whether a foot touches the floor during it (1/2: the whole interval).
+INTERVAL_REACH = 0.25
+
+
+def interval_gap(gap: np.ndarray, reach: float | None = None) -> np.ndarray:
+    """(T, ...) the least of ``gap`` (T, ...) at each frame and ``reach`` (default
+    :data:`INTERVAL_REACH`) of a frame before and after it (linear between frames): how close to
+    the floor a point comes during the frame's interval."""
+    reach = INTERVAL_REACH if reach is None else reach
+    g = np.asarray(gap, dtype=np.float64)
+    if len(g) < 2:
+        return g.copy()
+    out = g.copy()
+    out[1:] = np.minimum(out[1:], g[1:] + reach * (g[:-1] - g[1:]))
+    out[:-1] = np.minimum(out[:-1], g[:-1] + reach * (g[1:] - g[:-1]))
+    return out
+
+
+def enter_gap(ground: Ground) -> float:
+    """[m] the gap within which a foot enters contact on ``ground`` (:data:`CONTACT_GAP`, or
+    twice the floor's spread where the planted feet scatter more)."""
+    return max(CONTACT_GAP, 2.0 * ground.noise)
+
+
+def rolling_contact(
+    ankle: np.ndarray,
+    ball: np.ndarray,
+    ankle_velocity: np.ndarray,
+    ball_velocity: np.ndarray,
+    ground: Ground,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whether a foot rolls on the floor: its instantaneous centre of rotation on the floor.
+
+    The foot is the rigid segment ankle -> ball (T, 3) [m] with velocities (T, 3) [m/s]; its
+    angular velocity across the segment is ``w = u x (v_ball - v_ankle) / L`` and the point of the
+    segment's plane of motion that stands still is ``c = ankle + w x v_ankle / |w|^2``. The foot
+    rolls on the floor where it turns faster than :data:`~sim.physics.feet.ROLL_RATE` about a
+    ``c`` within :data:`~sim.physics.feet.ROLL_TOLERANCE` of the floor and along the foot
+    (:data:`~sim.physics.feet.ROLL_BACK` behind the ankle to
+    :data:`~sim.physics.feet.ROLL_FRONT` beyond the ball).
+
+    Returns:
+        rolling (T,) bool and ``c`` (T, 3) [m].
+    """
+    d = ball - ankle
+    L = np.linalg.norm(d, axis=-1, keepdims=True)
+    u = d / np.maximum(L, 1e-9)
+    w = np.cross(u, (ball_velocity - ankle_velocity) / np.maximum(L, 1e-9))
+    w2 = np.sum(w * w, axis=-1, keepdims=True)
+    c = ankle + np.cross(w, ankle_velocity) / np.maximum(w2, 1e-12)
+    h = c[..., 2] - ground.level(c[..., :2])
+    along = np.sum((c - ankle) * u, axis=-1)
+    ok = (
+        (np.sqrt(w2[..., 0]) >= ROLL_RATE)
+        & (np.abs(h) <= ROLL_TOLERANCE)
+        & (along >= -ROLL_BACK)
+        & (along <= L[..., 0] + ROLL_FRONT)
+    )
+    return ok, c
 
 
 def label_contacts(
-    height: np.ndarray,
-    speed: np.ndarray,
+    gap: np.ndarray,
+    hspeed: np.ndarray,
     *,
-    h_on: float = H_ON,
-    h_off: float = H_OFF,
-    v_on: float = V_ON,
-    v_off: float = V_OFF,
-    v_roll: float = V_ROLL,
-    points=None,
+    enter: float = CONTACT_GAP,
+    release: float = 0.0,
+    enter_speed: float = ENTER_SPEED,
+    initial=None,
+    rolling=None,
 ) -> np.ndarray:
-    """(T, F) contact labels with hysteresis.
+    """(T, F) contact labels of F feet with hysteresis.
 
     Args:
-        height: (T, F) height of each foot point above its stance level [m].
-        speed: (T, F) its speed [m/s].
-        points: (F,) foot point names (:data:`sim.physics.feet.FOOT_POINTS`): points of one foot
-            roll together. None: every point on its own (no rolling allowance).
-    Returns:
-        bool (T, F): a point enters contact when ``height < h_on`` and ``speed < v_on``, stays in
-        contact until ``height > h_off`` or ``speed > v_off``; while another point of its foot
-        is low and slow (``height < h_on``, ``speed < v_on``), ``v_roll`` replaces ``v_on`` and
-        ``v_off``.
+        gap: (T, F) each foot's lowest sole gap over the frame's interval [m]
+            (:func:`interval_gap` of the sphere gaps, least over the foot's spheres).
+        hspeed: (T, F) horizontal speed of that lowest sphere [m/s].
+        enter, release, enter_speed: a foot enters contact when ``gap <= enter`` and
+            ``hspeed < enter_speed``, and leaves when ``gap > enter + release``.
+        initial: (F,) bool state before frame 0 (e.g. the original's label at a reconstruction's
+            first frame); default out of contact.
+        rolling: (T, F) bool, the foot rolls on the floor (:func:`rolling_contact`): in contact
+            whatever the gap (the real heel lies below the humanoid's heel sphere).
     """
-    height, speed = np.asarray(height), np.asarray(speed)
-    if height.shape != speed.shape or height.ndim != 2:
-        raise ValueError(f"height and speed must both be (T, F); got {height.shape}, {speed.shape}")
-    if not (h_on <= h_off and v_on <= v_off):
-        raise ValueError("hysteresis needs h_on <= h_off and v_on <= v_off")
-    F = height.shape[1]
-    if points is None:
-        same = np.eye(F, dtype=bool)
-    else:
-        if len(points) != F:
-            raise ValueError(f"points must name the {F} columns; got {len(points)}")
-        same = np.array([[side(a) == side(b) for b in points] for a in points])
-    np.fill_diagonal(same, False)
-    pivot_now = (height < h_on) & (speed < v_on)  # (T, F)
-    rolling = (pivot_now.astype(int) @ same.T.astype(int)) > 0  # another point of the foot pivots
-    v_in = np.where(rolling, max(v_on, v_roll), v_on)
-    v_out = np.where(rolling, max(v_off, v_roll), v_off)
-    enter_all = (height < h_on) & (speed < v_in)
-    leave_all = (height > h_off) | (speed > v_out)
-    out = np.zeros(height.shape, dtype=bool)
-    state = np.zeros(F, dtype=bool)
-    for t in range(height.shape[0]):
-        state = np.where(state, ~leave_all[t], enter_all[t])
+    gap, hspeed = np.asarray(gap, dtype=np.float64), np.asarray(hspeed, dtype=np.float64)
+    if gap.shape != hspeed.shape or gap.ndim != 2:
+        raise ValueError(f"gap and hspeed must both be (T, F); got {gap.shape}, {hspeed.shape}")
+    if release < 0:
+        raise ValueError("release must be >= 0")
+    enter_all = (gap <= enter) & (hspeed < enter_speed)
+    stay_all = gap <= enter + release
+    if rolling is not None:
+        enter_all |= np.asarray(rolling, dtype=bool)
+        stay_all |= np.asarray(rolling, dtype=bool)
+    out = np.zeros(gap.shape, dtype=bool)
+    state = np.zeros(gap.shape[1], dtype=bool) if initial is None else np.array(initial, bool)
+    for t in range(gap.shape[0]):
+        state = np.where(state, stay_all[t], enter_all[t])
         out[t] = state
     return out
 
 
-def foot_heights(positions: np.ndarray, ground: Ground, names) -> np.ndarray:
-    """(T, F) height [m] of foot points ``positions`` (T, F, 3) named ``names`` above their stance
-    levels on ``ground`` (:meth:`sim.physics.ground.Ground.heights`)."""
-    return ground.heights(positions, names)
+@dataclass(frozen=True)
+class Contacts:
+    """A motion's foot contacts (T frames, F feet, S sole spheres).
+
+    Attributes:
+        sides: (F,) the feet (``"l"``, ``"r"``).
+        contact: (T, F) bool labels.
+        sole: the sole spheres (:class:`sim.physics.feet.Sole`).
+        gap: (T, S) each sphere's gap above the floor [m] at the frame's instant.
+        foot_gap: (T, F) each foot's lowest gap [m] at the frame's instant.
+        foot_speed: (T, F) horizontal speed of each foot's lowest sphere [m/s].
+        lowest: (T, F, 3) each foot's lowest sole surface point [m].
+    """
+
+    sides: tuple[str, ...]
+    contact: np.ndarray
+    sole: Sole
+    gap: np.ndarray
+    foot_gap: np.ndarray
+    foot_speed: np.ndarray
+    lowest: np.ndarray
+
+    def slice(self, start: int, stop: int) -> Contacts:
+        """Frames ``[start, stop)`` (a clip of a trial labelled once)."""
+        s = self.sole
+        part = Sole(s.centres[start:stop], s.radius, s.side, s.part, s.body)
+        return Contacts(
+            self.sides, self.contact[start:stop], part, self.gap[start:stop],
+            self.foot_gap[start:stop], self.foot_speed[start:stop], self.lowest[start:stop],
+        )  # fmt: skip
+
+    def points(self, ground: Ground, t: int) -> list[tuple[str, np.ndarray]]:
+        """Where ground forces may act in frame ``t``: ``(body name, point (3,))`` for every sole
+        sphere of a foot in contact that is within :data:`~sim.physics.feet.SUPPORT_GAP` of the
+        floor (the lowest always), its lowest point dropped onto the floor plane."""
+        out = []
+        b = self.sole.bottoms[t]
+        for f, x in enumerate(self.sides):
+            if not self.contact[t, f]:
+                continue
+            ks = self.sole.of(x)
+            low = ks[np.argmin(self.gap[t, ks])]
+            for k in ks:
+                if k == low or self.gap[t, k] <= SUPPORT_GAP:
+                    p = b[k].copy()
+                    p[2] = float(ground.level(p[:2]))
+                    out.append((self.sole.body[k], p))
+        return out
 
 
-def trial_contacts(positions: np.ndarray, names, fps: float, ground: Ground):
-    """The contact labels of a whole trial, labelled once (the hysteresis' memory runs through).
+def contacts_of_sole(
+    s: Sole, fps: float, ground: Ground, *, initial=None, enter: float | None = None, rolling=None
+) -> Contacts:
+    """The :class:`Contacts` of sole ``s`` at ``fps`` on ``ground`` (see the module docstring).
+
+    ``initial``: (F,) contact state before frame 0; ``enter``: default :func:`enter_gap`;
+    ``rolling``: (T, F) :func:`rolling_contact` of each foot (None: geometry only)."""
+    gap = ground.gaps(s)  # (T, S)
+    ig = interval_gap(gap)
+    hs = horizontal_speed(s.centres, fps)  # (T, S)
+    T = gap.shape[0]
+    fg, fi, fs, lo = [], [], [], []
+    b = s.bottoms
+    for x in s.sides:
+        ks = s.of(x)
+        k_int = ks[np.argmin(ig[:, ks], axis=1)]
+        k_now = ks[np.argmin(gap[:, ks], axis=1)]
+        fi.append(ig[np.arange(T), k_int])
+        fs.append(hs[np.arange(T), k_now])
+        fg.append(gap[np.arange(T), k_now])
+        lo.append(b[np.arange(T), k_now])
+    fi, fs = np.stack(fi, axis=1), np.stack(fs, axis=1)
+    labels = label_contacts(
+        fi, fs, enter=enter_gap(ground) if enter is None else enter, release=ground.noise,
+        initial=initial, rolling=rolling,
+    )  # fmt: skip
+    return Contacts(s.sides, labels, s, gap, np.stack(fg, 1), fs, np.stack(lo, axis=1))
+
+
+def motion_contacts(
+    positions: np.ndarray, names, fps: float, ground: Ground, *, initial=None, velocities=None
+) -> Contacts:
+    """:func:`contacts_of_sole` of the sole of points ``positions`` (T, P, 3) [m] named
+    ``names``, rolling contact included; ``velocities`` (T, P, 3) [m/s] where known (default:
+    central differences)."""
+    names = tuple(names)
+    p = np.asarray(positions, dtype=np.float64)
+    v = np.gradient(p, 1.0 / fps, axis=0) if velocities is None or len(p) < 2 else velocities
+    if len(p) < 2:
+        v = np.zeros_like(p)
+    s = sole(p, names)
+    roll = []
+    for x in s.sides:
+        a, b = names.index(x + "tibia"), names.index(x + "foot")
+        roll.append(rolling_contact(p[:, a], p[:, b], v[:, a], v[:, b], ground)[0])
+    return contacts_of_sole(s, fps, ground, initial=initial, rolling=np.stack(roll, axis=1))
+
+
+def trial_contacts(
+    positions: np.ndarray, names, fps: float, ground: Ground, velocities=None
+) -> Contacts:
+    """The contacts of a whole trial, labelled once (the hysteresis' memory runs through; a
+    clip's labels are :meth:`Contacts.slice` of these).
 
     Args:
-        positions: (T, J, 3) the trial's points [m]; names: (J,); fps [1/s].
-    Returns:
-        feet (F,) the foot points of ``ground`` present, contact (T, F) bool.
+        positions: (T, J, 3) the trial's points [m]; names: (J,); fps [1/s]; velocities:
+            (T, J, 3) [m/s] where known (a clip's chain velocities).
     """
-    names = tuple(names)
-    feet = tuple(n for n in ground.points if n in names)
-    pf = np.asarray(positions, dtype=np.float64)[:, [names.index(n) for n in feet]]
-    h = ground.heights(pf, feet)
-    return feet, label_contacts(h, point_speed(pf, fps), points=feet)
+    return motion_contacts(positions, names, fps, ground, velocities=velocities)
 
 
 def _mean(x: np.ndarray) -> tuple[float, int]:
     return (float(x.mean()) if x.size else float("nan")), int(x.size)
 
 
-def contact_metrics(
-    reference_contact: np.ndarray,
-    height: np.ndarray,
-    horizontal_speed: np.ndarray,
-    contact: np.ndarray,
-) -> dict[str, float]:
-    """PhysDiff-style metrics of a motion's foot points against the original's contacts.
+def contact_metrics(reference: np.ndarray, motion: Contacts) -> dict[str, float]:
+    """Contact metrics of ``motion`` against the original's labels ``reference`` (T, F) (same
+    feet, same frames); see the module docstring.
 
-    Args:
-        reference_contact: (T, F) the original's contact labels.
-        height: (T, F) the motion's heights above stance level [m].
-        horizontal_speed: (T, F) its horizontal speeds [m/s].
-        contact: (T, F) its own contact labels.
     Returns:
         ``penetration_mm`` (+ ``penetration_n``, ``penetration_max_mm``), ``float_mm``
         (+ ``float_n``), ``skate_mm_s`` (+ ``skate_n``), ``contact_precision`` (+
         ``contact_precision_n``: the motion's contact samples), ``contact_recall`` (+
         ``contact_recall_n``: the original's). Means over no samples are NaN.
     """
-    ref = np.asarray(reference_contact, dtype=bool)
-    own = np.asarray(contact, dtype=bool)
-    h = np.asarray(height, dtype=np.float64)
-    v = np.asarray(horizontal_speed, dtype=np.float64)
+    ref = np.asarray(reference, dtype=bool)
+    own, h, v = motion.contact, motion.foot_gap, motion.foot_speed
     if not (ref.shape == own.shape == h.shape == v.shape):
         raise ValueError("contact metrics need arrays of one shape (T, F)")
     pen, n_pen = _mean(np.maximum(-h, 0.0).ravel())
@@ -158,38 +315,94 @@ def contact_metrics(
     }
 
 
-#: Flags of a reconstruction's foot point against the original's contacts, for drawing: floating
-#: higher than this above its stance level [m] while the original's is in contact, sinking deeper
-#: than this below it [m], skating this much faster horizontally [m/s] while the original's stands.
+def lowest_body_point(
+    positions, names, parents, radius, ground: Ground, s: Sole, *, bones=None
+) -> np.ndarray:
+    """(T,) height [m] above the floor of the lowest point of the body's surface: the capsule of
+    every bone (``radius`` (B,) for the B non-root points in order, on the segment from its
+    parent; ``bones`` (B,) bool: which count, default all) and the sole spheres of ``s`` (their
+    gaps, with the feet's stance offsets)."""
+    p = np.asarray(positions, dtype=np.float64)
+    parents = np.asarray(parents)
+    child = np.flatnonzero(parents >= 0)
+    keep = np.ones(len(child), dtype=bool) if bones is None else np.asarray(bones, dtype=bool)
+    child, r = child[keep], np.asarray(radius, dtype=np.float64)[keep]
+    sole_low = ground.gaps(s).min(axis=1)
+    if not len(child):
+        return sole_low
+    ends = np.concatenate([p[:, child], p[:, parents[child]]], axis=1)  # (T, 2B, 3)
+    h = ends[..., 2] - ground.level(ends[..., :2]) - np.concatenate([r, r])
+    return np.minimum(h.min(axis=1), sole_low)
+
+
+def physdiff_metrics(lowest: np.ndarray, contacts: Contacts, fps: float) -> dict[str, float]:
+    """PhysDiff's ground metrics (see the module docstring) from the lowest body point's height
+    ``lowest`` (T,) [m] and the motion's own foot contacts.
+
+    Returns ``physdiff_penetrate_mm``, ``physdiff_float_mm`` (means over frames) and
+    ``physdiff_skate`` (share of frame pairs), with ``physdiff_n`` frames."""
+    lo = np.asarray(lowest, dtype=np.float64)
+    c = contacts.contact
+    step = np.linalg.norm(np.diff(contacts.lowest[..., :2], axis=0), axis=-1)  # (T-1, F)
+    both = c[1:] & c[:-1]
+    skate = (both & (step > PHYSDIFF_SKATE_M)).any(axis=1)
+    return {
+        "physdiff_penetrate_mm": 1e3 * float(np.maximum(-lo, 0.0).mean()) if lo.size else 0.0,
+        "physdiff_float_mm": 1e3 * float(np.maximum(lo - PHYSDIFF_FLOAT_TOL, 0.0).mean())
+        if lo.size
+        else 0.0,
+        "physdiff_skate": float(skate.mean()) if skate.size else 0.0,
+        "physdiff_n": int(lo.size),
+    }
+
+
+#: Flags of a reconstruction's foot against the original's contacts, for drawing: floating
+#: higher than this above the floor while the original's is in contact [m], sinking deeper than
+#: this below it [m], skating this much faster horizontally [m/s] while the original's stands.
 FLOAT_HEIGHT, SINK_DEPTH, SKATE_SPEED = 0.03, 0.02, 0.3
+
+
+def _point_rows(c: Contacts, points) -> tuple[np.ndarray, np.ndarray]:
+    """Per foot point (ankle, ball, toes) its foot's label and its part's gap (T, P): the
+    ankle stands for the heel sphere, the ball for the ball sphere, the toes for the toes'."""
+    part = {"heel": "heel", "ball": "ball", "toes": "toes"}
+    T = c.contact.shape[0]
+    lab, gap = np.zeros((T, len(points)), bool), np.zeros((T, len(points)))
+    for j, n in enumerate(points):
+        x, want = FOOT_PART[n].split("_")
+        f = c.sides.index(x)
+        ks = [k for k in c.sole.of(x) if c.sole.part[k] == part[want]] or list(c.sole.of(x))
+        gap[:, j] = c.gap[:, ks].min(axis=1)
+        lab[:, j] = c.contact[:, f] & (gap[:, j] <= SUPPORT_GAP)
+    return lab, gap
 
 
 def foot_states(
     original: PointMotion, reconstruction: PointMotion | None, ground: Ground
 ) -> FootState:
-    """What the renderer draws at the foot points of ``ground`` that both motions have.
-
-    The original's contacts are :func:`label_contacts` of its heights above the stance levels
-    and speeds; the reconstruction's own contacts by the same rule, and its flags by
-    :data:`FLOAT_HEIGHT`, :data:`SINK_DEPTH` and :data:`SKATE_SPEED` (``None``: no flags).
-    """
-    names = [n for n in ground.points if n in original.names]
+    """What the renderer draws at the foot points both motions have: the original's foot in
+    contact (:func:`motion_contacts`), and the reconstruction's flags by :data:`FLOAT_HEIGHT`,
+    :data:`SINK_DEPTH` and :data:`SKATE_SPEED` (``None``: no flags)."""
+    names = foot_points(original.names)
     if reconstruction is not None:
-        names = [n for n in names if n in reconstruction.names]
-
-    def measure(m: PointMotion):
-        p = m.positions[:, [m.names.index(n) for n in names]]
-        h = ground.heights(p, names)
-        c = label_contacts(h, point_speed(p, m.fps), points=names)
-        return h, c, horizontal_speed(p, m.fps)
-
-    _, contact, s_o = measure(original)
+        names = tuple(n for n in names if n in reconstruction.names)
+    o = motion_contacts(original.positions, original.names, original.fps, ground)
+    names = tuple(n for n in names if n[0] in o.sides)
+    contact, _ = _point_rows(o, names)
     if reconstruction is None:
         no = np.zeros_like(contact)
-        return FootState(tuple(names), contact, contact.copy(), no, no.copy(), no.copy())
-    h_r, rec_contact, s_r = measure(reconstruction)
+        return FootState(names, contact, contact.copy(), no, no.copy(), no.copy())
+    r = motion_contacts(
+        reconstruction.positions, reconstruction.names, reconstruction.fps, ground,
+        initial=o.contact[0],
+    )  # fmt: skip
+    rec_contact, h_r = _point_rows(r, names)
+    idx_o = [original.names.index(n) for n in names]
+    idx_r = [reconstruction.names.index(n) for n in names]
+    s_o = horizontal_speed(original.positions[:, idx_o], original.fps)
+    s_r = horizontal_speed(reconstruction.positions[:, idx_r], reconstruction.fps)
     return FootState(
-        points=tuple(names),
+        points=names,
         contact=contact,
         rec_contact=rec_contact,
         floating=contact & (h_r > FLOAT_HEIGHT),

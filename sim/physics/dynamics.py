@@ -2,36 +2,31 @@
 
 Pipeline per motion (``qpos`` (T, nq) on a model from :func:`sim.model.humanoid.build_mjcf`):
 
-1. **Derivatives**, from where they are known. Consecutive samples are differenced on the
-   configuration manifold (``mj_differentiatePos``: root linear velocity in world axes, root
-   angular velocity in its own axes, hinge rates, hinge steps wrapped) and summed into a
-   tangent-space path ``s`` (T, nv).
-
-   * Given ``qvel``/``qacc`` (e.g. from an analytic curve), :meth:`InverseDynamics.run` uses them.
-   * Given a denser sampling of the motion (the original's 120 fps source frames, a
-     reconstruction's curve evaluated at 120 Hz), :func:`stencil_derivatives` takes central
-     differences at spacing ``h`` around each analysis frame: ``v = (s+ - s-) / 2h``,
-     ``a = (s+ - 2 s0 + s-) / h^2`` (one-sided at the motion's ends). Their gains on a sinusoid of
-     frequency ``f`` are ``sin(wh) / wh`` and ``(2 - 2 cos wh) / (wh)^2`` (``w = 2 pi f``): at
-     h = 1/120 s, 0.996 and 0.998 at 3 Hz, 0.955 and 0.977 at 10 Hz; an impact blurs over +-h only.
-   * Otherwise (frames at the analysis rate only) :func:`derivatives` is a Savitzky-Golay filter
-     of ``s`` (cubic, ``window`` frames, default 9 = 0.3 s at 30 fps; polynomial fits at the clip
-     ends), there because second differences of raw mocap amplify marker noise into accelerations
-     of hundreds of rad/s^2. Its gain at 30 fps: velocity 0.994 at 1.5 Hz, 0.92 at 3 Hz, 0.56 at
-     5 Hz; acceleration 0.87 at 1.5 Hz, 0.56 at 3 Hz, 0.14 at 5 Hz; an impact spreads over +-4
-     frames.
+1. **Derivatives**, from where they are known: :meth:`InverseDynamics.run` takes the motion's
+   ``qvel``/``qacc`` where the caller has them (:class:`sim.physics.analysis.PhysicsJob` maps the
+   original's source-frame point derivatives and a reconstruction's curve derivatives through
+   the fitted humanoid's Jacobians, :meth:`sim.physics.ik.HumanoidIK.rates`). Otherwise (frames
+   at the analysis rate only) :func:`derivatives` differences consecutive samples on the
+   configuration manifold (``mj_differentiatePos``, hinge steps wrapped) into a tangent path and
+   applies a Savitzky-Golay filter (cubic, ``window`` frames, default 9 = 0.3 s at 30 fps;
+   polynomial fits at the clip ends), there because second differences of raw mocap amplify
+   marker noise. Its gain at 30 fps: velocity 0.994 at 1.5 Hz, 0.92 at 3 Hz, 0.56 at 5 Hz;
+   acceleration 0.87 at 1.5 Hz, 0.56 at 3 Hz, 0.14 at 5 Hz
+   (:func:`sim.motion.velocities.local_polynomial_gain`); an impact spreads over +-4 frames.
 2. **Whole-body wrench.** ``mj_inverse`` with constraints (contacts, limits) disabled gives
    ``qfrc_inverse``; its six free-joint entries are the external wrench Newton-Euler requires
    beyond gravity: force ``F = m (a_com - g)`` [N] (world axes) and, moved to the centre of mass,
    torque ``tau = dL/dt`` [N m], the rate of angular momentum about the CoM.
-3. **Residual.** Ground forces may act at the motion's foot points in contact (projected onto the
-   ground plane), each inside a friction pyramid of ``PYRAMID_EDGES`` edges with coefficient ``mu``
-   (default 0.8, shoe on floor). A non-negative least-squares fit of the edge magnitudes
-   (``scipy.optimize.nnls``) to ``(F, tau / L)`` (torque rows weighted by ``L = 1 m``) leaves the
-   residual wrench: what no admissible ground force explains. With no foot in contact the frame is
-   ballistic and the whole wrench is residual.
-4. **Joint torques.** ``qfrc_inverse`` minus the generalised force of the fitted ground forces
-   (``J^T f`` at the contact points); its hinge entries are the joint torques [N m].
+3. **Residual, force and torque apart.** Ground forces may act at the sole points of the feet in
+   contact (:meth:`sim.physics.contacts.Contacts.points`, on the floor plane), each inside a
+   friction pyramid of ``PYRAMID_EDGES`` edges with coefficient ``mu`` (default 0.8, shoe on
+   floor). The *residual force* is what a non-negative least-squares fit of the edge magnitudes
+   (``scipy.optimize.nnls``) to ``F`` alone leaves: the force no admissible ground force supplies.
+   The *residual torque* is what a second fit, to ``F`` first (rows weighted
+   ``FORCE_PRIORITY``) and then ``tau`` (per metre), leaves of ``tau``. With no foot in contact
+   the frame is ballistic and the whole wrench is residual.
+4. **Joint torques.** ``qfrc_inverse`` minus the generalised force of the force-first fit's
+   ground forces (``J^T f`` at the contact points); its hinge entries are the joint torques [N m].
 
 The analysis model is a copy with joint armature and damping set to zero (they are simulation
 stabilisers, not anatomy: the armature alone would turn a jittery thumb into hundreds of N m).
@@ -53,7 +48,8 @@ from sim.model.angles import wrap_angle
 
 MU = 0.8  # friction coefficient of the ground (shoe sole on a floor)
 PYRAMID_EDGES = 4
-TORQUE_SCALE_M = 1.0  # [m] weight of torque rows against force rows in the fit
+TORQUE_SCALE_M = 1.0  # [m] torque rows per metre in the force-first fit
+FORCE_PRIORITY = 100.0  # weight of force rows over torque rows: the force is explained first
 
 
 def analysis_model(model):
@@ -103,44 +99,6 @@ def derivatives(model, qpos: np.ndarray, fps: float, *, window: int = 9, polyord
     return vel, acc
 
 
-def stencil_weights(k: int, where: int, h: float, degree: int) -> np.ndarray:
-    """(2, k) weights giving the first and second derivative at sample ``where`` of ``k`` samples
-    ``h`` [s] apart: those of the least-squares polynomial of ``degree`` through them (exact
-    differences when ``degree = k - 1``; a Savitzky-Golay filter at the sample rate otherwise)."""
-    x = (np.arange(k) - where) * h
-    V = np.vander(x, degree + 1, increasing=True)  # (k, degree + 1)
-    coef = np.linalg.pinv(V)  # polynomial coefficients from the samples
-    return np.stack([coef[1], 2 * coef[2] if degree >= 2 else 0 * coef[1]])
-
-
-def stencil_derivatives(model, samples: np.ndarray, h: float, where, *, degree: int | None = None):
-    """``qvel`` and ``qacc`` (T, nv) of each frame from ``k`` samples of the motion around it.
-
-    Args:
-        samples: (T, k, nq) per frame ``k`` configurations ``h`` apart in time (k >= 3).
-        h: sample spacing [s] (1/120 for CMU's source frames).
-        where: (T,) index of the frame among its samples (``(k - 1) / 2`` central; else one-sided
-            near a motion's end).
-        degree: of the local polynomial (default ``k - 1``: exact differences; k = 3 central is
-            ``v = (s+ - s-) / 2h``, ``a = (s+ - 2 s0 + s-) / h^2``, gains in the module doc).
-    Returns:
-        qvel, qacc (T, nv) [rad/s, m/s and per s].
-    """
-    q = np.asarray(samples, dtype=np.float64)
-    T, k = q.shape[:2]
-    if k < 3:
-        raise ValueError(f"need at least 3 samples per frame; got {k}")
-    degree = k - 1 if degree is None else degree
-    where = np.broadcast_to(np.asarray(where, dtype=int), (T,))
-    weights = {w: stencil_weights(k, w, h, degree) for w in np.unique(where)}
-    vel, acc = np.zeros((T, model.nv)), np.zeros((T, model.nv))
-    for t in range(T):
-        s = tangent_path(model, q[t])  # (k, nv), s[0] = 0
-        W = weights[int(where[t])]
-        vel[t], acc[t] = W[0] @ s, W[1] @ s
-    return vel, acc
-
-
 def pyramid(mu: float = MU, edges: int = PYRAMID_EDGES) -> np.ndarray:
     """(edges, 3) unit edge directions of the friction pyramid about +z."""
     a = 2 * np.pi * np.arange(edges) / edges
@@ -157,7 +115,16 @@ def residual_wrench(
     mu: float = MU,
     edges: int = PYRAMID_EDGES,
 ):
-    """The part of a required wrench no ground forces at ``contacts`` can supply.
+    """The part of a required wrench no ground forces at ``contacts`` can supply, force and
+    torque apart.
+
+    * Residual force: what remains of ``force`` after the best non-negative combination of the
+      friction pyramids' edges at the contact points (force rows only: any point of contact can
+      carry any force inside its cone, so this is the force no contact can supply, whatever the
+      torque).
+    * Residual torque: with the ground forces chosen to explain the force first (force rows
+      weighted :data:`FORCE_PRIORITY` times the torque rows, torque rows per metre
+      :data:`TORQUE_SCALE_M`), the torque about the CoM they leave unexplained.
 
     Args:
         force: (3,) required external force [N] (beyond gravity).
@@ -165,7 +132,8 @@ def residual_wrench(
         com: (3,) centre of mass [m].
         contacts: (K, 3) contact points [m] (K may be 0: ballistic frame).
     Returns:
-        residual force (3,) [N], residual torque (3,) [N m], contact forces (K, 3) [N].
+        residual force (3,) [N], residual torque (3,) [N m], contact forces (K, 3) [N] of the
+        force-first fit.
     """
     K = len(contacts)
     if K == 0:
@@ -173,13 +141,17 @@ def residual_wrench(
     D = pyramid(mu, edges)  # (E, 3)
     r = np.asarray(contacts) - com  # (K, 3)
     top = np.tile(D.T, (1, K))  # (3, K E)
+    lam_f, _ = nnls(top, np.asarray(force, float), maxiter=50 * top.shape[1])
+    res_force = np.asarray(force, float) - top @ lam_f
     bot = np.cross(np.repeat(r, edges, axis=0), np.tile(D, (K, 1))).T / TORQUE_SCALE_M
-    A = np.vstack([top, bot])
-    b = np.concatenate([force, np.asarray(torque) / TORQUE_SCALE_M])
+    A = np.vstack([FORCE_PRIORITY * top, bot])
+    b = np.concatenate(
+        [FORCE_PRIORITY * np.asarray(force, float), np.asarray(torque) / TORQUE_SCALE_M]
+    )
     lam, _ = nnls(A, b, maxiter=50 * A.shape[1])
-    res = b - A @ lam
     f = (lam.reshape(K, edges, 1) * D[None]).sum(axis=1)
-    return res[:3], res[3:] * TORQUE_SCALE_M, f
+    res_torque = np.asarray(torque, float) - np.cross(r, f).sum(axis=0)
+    return res_force, res_torque, f
 
 
 @dataclass(frozen=True)
@@ -191,7 +163,8 @@ class Dynamics:
         com: (T, 3) centre of mass [m].
         force, torque: (T, 3) required external wrench beyond gravity: force [N] and torque about
             the CoM [N m] (= rate of angular momentum about the CoM), world axes.
-        residual_force, residual_torque: (T, 3) the part no ground force explains [N, N m].
+        residual_force: (T, 3) the force no ground force explains [N] (force-only fit).
+        residual_torque: (T, 3) the torque about the CoM the force-first fit leaves [N m].
         contact_force: (T, 3) total fitted ground force [N].
         joint_torque: (T, H) hinge torques [N m] with the fitted ground forces acting.
         mass: total mass [kg]; weight: its weight [N].

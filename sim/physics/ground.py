@@ -1,47 +1,50 @@
 """Per-trial floor from the original motion's planted feet: a robust tilted plane and how well it fits.
 
-CMU trials do not share a floor level (the soles' markers stand anywhere from about -11 cm to +16 cm
-in the files' own frame) and some capture floors are tilted or drift. The estimator, per trial:
+CMU trials do not share a floor level (the soles stand anywhere from about -20 cm to +16 cm in the
+files' own frame) and some capture floors are tilted or drift. The estimator, per trial:
 
-1. foot points: :data:`sim.physics.contacts.FOOT_POINTS` (heel, ball, toes per side) present in
-   the motion;
-2. *still* samples: a sole point (ball or toes) slower than ``slow_speed`` (3-D) for a run of at
-   least ``run_s`` seconds;
-3. *planted* samples: still samples within ``band`` of the current floor (first the low
-   ``percentile`` of still sole heights, then the fitted plane); a foot held still in the air (a
-   one-leg balance) is not planted;
-4. the floor ``z = z0 + sx (x - x0) + sy (y - y0)`` by iteratively reweighted least squares
-   (Tukey biweight, scale from the median absolute residual) over the planted samples, planted
-   samples re-selected against each new plane; tilted only along directions in which the planted
-   feet spread ``min_span`` (a straight walk fixes the slope along its path);
-5. each foot point's *clearance*: its median height above the plane over the frames its foot is
-   planted and it is still (the ankle stands ~5-8 cm above the sole markers in stance).
+1. the sole (:func:`sim.physics.feet.sole`): per foot its lowest surface point in every frame;
+2. *footprints*: runs of at least ``run_s`` seconds in which a foot's lowest sole sphere moves
+   slower than ``slow_speed``; each footprint is one sample (its median position), so a long
+   stand does not outweigh the steps of a walk;
+3. the floor ``z = z0 + sx (x - x0) + sy (y - y0)`` plus a height offset per foot (the skeleton's
+   feet are not always the same height above the floor) by iteratively reweighted least squares
+   (Tukey biweight, scale from the median absolute residual, at least ``min_scale``) over the
+   footprints, started from a horizontal plane at the lowest footprints: a foot held still in the
+   air (a one-leg balance) or standing on a box is an outlier, not a floor; the plane tilts only
+   along directions in which the inlier footprints spread ``min_span`` (a straight walk fixes the
+   slope along its path), and never steeper than :data:`MAX_SLOPE` (few footprints);
+4. *planted* samples: still frames whose lowest sole point is within ``band`` of the plane.
 
-How far the planted feet sit from the plane: ``spread`` (robust standard deviation of the
-residuals), ``drift`` (range of the median residual over quarters of the take), ``tilt`` (how far
-the plane departs from horizontal across the planted area) and ``below`` (how far the soles go
-below it on average). A slope steeper than ``MAX_SLOPE`` is not believed (few footprints):
-the floor stays horizontal. The floor *fits* when spread, drift and below are within ``FLAT_TOLERANCE``; where it does not, heights above it (float, penetration) are not to
-be trusted and the report and ``eval`` flag the trial with :attr:`Ground.deviation`.
-Heights "above ground" of a point are ``z - plane(x, y) - clearance``.
+How far the planted feet sit from the plane: ``spread`` (robust standard deviation of the planted
+samples' residuals), ``drift`` (range of their median over the take's quarters), ``tilt`` (how far
+the plane departs from horizontal across the planted area) and ``below`` (mean depth of the soles
+below it over every frame). The floor *fits* when spread, drift and below are within
+:data:`FLAT_TOLERANCE`; where it does not, heights above it (float, penetration) are not to be
+trusted and the report and ``eval`` flag the trial with :attr:`Ground.deviation`.
+
+The *gap* of a sole sphere is the height of its lowest surface point above the plane, less its
+foot's offset (:meth:`Ground.gaps`): 0 where it rests on the floor.
 
 Units: metres, metres per second; world z up.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from sim.physics.feet import FOOT_POINTS, SOLE_POINTS, SOLE_RADIUS, foot_points, side
+from sim.physics.feet import FOOT_POINTS, SIDES, Sole, foot_points, sole
 
-__all__ = ["FOOT_POINTS", "SOLE_POINTS", "SOLE_RADIUS", "Ground", "estimate_ground", "foot_points"]
+__all__ = ["FOOT_POINTS", "FLAT_TOLERANCE", "MAX_SLOPE", "Ground", "estimate_ground", "foot_points"]
 
-#: [m] the floor fits when the planted feet's residual spread and drift stay within this.
+#: [m] the floor fits when the planted feet's residual spread, drift and depth stay within this.
 FLAT_TOLERANCE = 0.01
 #: [m/m] steepest floor fitted (about 3 degrees): a steeper fit comes from too few footprints.
 MAX_SLOPE = 0.05
+#: [m] largest stance offset of a foot from the plane (skeleton asymmetry, not a raised foot).
+MAX_OFFSET = 0.0075
 
 
 @dataclass(frozen=True)
@@ -49,35 +52,38 @@ class Ground:
     """A trial's floor.
 
     Attributes:
-        z: floor height [m] at ``origin``: the level of the sole points in stance.
-        points: (F,) foot point names the clearances belong to.
-        clearance: (F,) each foot point's stance height above the floor [m].
-        frames: planted (frame, sole point) samples the fit used.
+        z: floor height [m] at ``origin``: where the lowest sole surfaces rest in stance.
+        sides: the feet (``"l"``, ``"r"``) the offsets belong to.
+        offset: (len(sides),) each foot's stance height above the plane [m] (0 for the lower).
+        frames: planted (frame, foot) samples behind the fit (0: no foot was planted).
         slope: (2,) the plane's dz/dx and dz/dy (0, 0: horizontal).
         origin: (2,) the horizontal point [m] where the plane has height ``z``.
         spread: robust standard deviation (1.4826 MAD) of the planted samples' residuals [m].
         drift: range of the median planted residual over the take's quarters [m].
         tilt: largest |plane - z| over the planted samples [m]: how far a horizontal floor at
             ``z`` would be off.
-        below: mean depth of the sole points below the floor over every frame [m]: large when the
-            feet stand on a lower floor than the one found.
+        below: mean depth of the soles below the floor over every frame [m]: large when the feet
+            stand on a lower floor than the one found.
+        footprints: footprints found (still runs of a foot); ``inliers``: those on the plane.
     """
 
     z: float
-    points: tuple[str, ...]
-    clearance: np.ndarray
-    frames: int
+    sides: tuple[str, ...] = SIDES
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    frames: int = 0
     slope: tuple[float, float] = (0.0, 0.0)
     origin: tuple[float, float] = (0.0, 0.0)
     spread: float = 0.0
     drift: float = 0.0
     tilt: float = 0.0
     below: float = 0.0
+    footprints: int = 0
+    inliers: int = 0
 
     @property
     def floor_z(self) -> float:
-        """Height [m] of the plane the replay's foot capsules stand on (for replay and rendering)."""
-        return float(self.z - SOLE_RADIUS)
+        """Height [m] of the floor plane at ``origin`` (for replay and rendering)."""
+        return float(self.z)
 
     @property
     def deviation(self) -> float:
@@ -93,9 +99,15 @@ class Ground:
         measured against this floor are meaningful."""
         return bool(self.deviation <= FLAT_TOLERANCE)  # NaN: False
 
-    def clearance_of(self, names) -> np.ndarray:
-        """(len(names),) clearances [m] of the foot points ``names`` (each must be in ``points``)."""
-        return np.array([self.clearance[self.points.index(n)] for n in names])
+    @property
+    def noise(self) -> float:
+        """[m] how far a planted sole may stand off this floor by the fit's own scatter (its
+        spread; 0 when none was measured)."""
+        return 0.0 if np.isnan(self.spread) else float(self.spread)
+
+    def offset_of(self, s: str) -> float:
+        """Stance height [m] of foot ``s`` above the plane (0 for a foot the fit did not see)."""
+        return float(self.offset[self.sides.index(s)]) if s in self.sides else 0.0
 
     def level(self, xy: np.ndarray) -> np.ndarray:
         """(...,) the floor's height [m] under horizontal points ``xy`` (..., 2) [m]."""
@@ -106,16 +118,23 @@ class Ground:
             + self.slope[1] * (xy[..., 1] - self.origin[1])
         )
 
-    def heights(self, positions: np.ndarray, names) -> np.ndarray:
-        """(T, F) heights [m] of foot points ``positions`` (T, F, 3) named ``names`` (F,) above
-        their stance levels on this floor: ``z - level(x, y) - clearance``."""
-        p = np.asarray(positions, dtype=np.float64)
-        return p[..., 2] - self.level(p[..., :2]) - self.clearance_of(names)
+    def gaps(self, s: Sole) -> np.ndarray:
+        """(T, S) gap [m] of each sole sphere of ``s``: its lowest surface point above the floor,
+        less its foot's stance offset (0: resting on the floor; negative: below it)."""
+        b = s.bottoms
+        off = np.array([self.offset_of(x) for x in s.side])
+        return b[..., 2] - self.level(b[..., :2]) - off
+
+    def moved(self, floor_z: float) -> Ground:
+        """This ground with the whole frame shifted so that the floor at ``origin`` is at height
+        ``floor_z`` (e.g. a simulated clip whose floor is known to be z = 0)."""
+        return replace(self, z=float(floor_z))
 
     def summary(self) -> dict[str, float | bool]:
         """JSON-ready floor figures: ``floor_z_m``, ``floor_slope`` (dz/dx, dz/dy),
-        ``floor_spread_mm``, ``floor_drift_mm``, ``floor_tilt_mm``, ``floor_deviation_mm``,
-        ``floor_fits``, ``floor_samples`` (NaN figures as None)."""
+        ``floor_spread_mm``, ``floor_drift_mm``, ``floor_tilt_mm``, ``floor_below_mm``,
+        ``floor_deviation_mm``, ``floor_fits``, ``floor_samples``, ``floor_footprints``
+        (NaN figures as None)."""
 
         def mm(x: float):
             return None if np.isnan(x) else 1e3 * float(x)
@@ -130,6 +149,7 @@ class Ground:
             "floor_deviation_mm": mm(self.deviation),
             "floor_fits": bool(self.fits),
             "floor_samples": int(self.frames),
+            "floor_footprints": int(self.footprints),
         }
 
 
@@ -141,59 +161,81 @@ def horizontal_speed(positions: np.ndarray, fps: float) -> np.ndarray:
     return np.linalg.norm(np.gradient(p[..., :2], 1.0 / fps, axis=0), axis=-1)
 
 
-def _speed(p: np.ndarray, fps: float) -> np.ndarray:
+def speed(positions: np.ndarray, fps: float) -> np.ndarray:
+    """(T, ...) speed [m/s] of ``positions`` (T, ..., 3) [m] (central differences)."""
+    p = np.asarray(positions, dtype=np.float64)
     if p.shape[0] < 2:
         return np.zeros(p.shape[:-1])
     return np.linalg.norm(np.gradient(p, 1.0 / fps, axis=0), axis=-1)
 
 
-def _long_runs(mask: np.ndarray, n: int) -> np.ndarray:
-    """(T, F) ``mask`` (T, F) kept only in runs of at least ``n`` consecutive True frames."""
-    out = np.zeros_like(mask)
-    for k in range(mask.shape[1]):
-        m = np.concatenate([[False], mask[:, k], [False]]).astype(np.int8)
-        d = np.diff(m)
-        for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
-            if e - s >= n:
-                out[s:e, k] = True
-    return out
+def runs(mask: np.ndarray, n: int) -> list[tuple[int, int]]:
+    """``[start, stop)`` of the runs of at least ``n`` consecutive True values of ``mask`` (T,)."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]]).astype(np.int8)
+    d = np.diff(m)
+    return [
+        (int(s), int(e))
+        for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True)
+        if e - s >= n
+    ]
 
 
-def _fit_plane(xy, z, group, n_groups: int, min_span: float, iters=20, max_slope=MAX_SLOPE):
-    """Tukey-biweight IRLS fit of ``z ~ c[group] + s . (xy - origin)``: one plane, an offset per
-    foot point (the ball stands higher than the toe tip). The plane tilts only along horizontal
-    directions in which the samples spread at least ``min_span`` (standard deviation [m]): a
-    straight walk fixes the slope along its path, not across it; a slope steeper than
-    ``max_slope`` falls back to a horizontal plane. Returns (c (G,), s (2,),
-    origin (2,), residuals (N,))."""
-    origin = np.median(xy, axis=0)
-    G = n_groups
-    onehot = np.eye(G)[group]
-    d = xy - origin
-    if len(z) > 2:
-        var, vec = np.linalg.eigh(np.cov(d.T))
-        axes = vec[:, np.sqrt(np.clip(var, 0, None)) >= min_span]  # (2, k), k = 0, 1, 2
-    else:
-        axes = np.zeros((2, 0))
-    k = axes.shape[1]
-    A = np.column_stack([onehot, d @ axes])
-    if k and max_slope < np.inf:  # a steeper fit is noise over a few footprints: stay level
-        c, s, o, r = _fit_plane(xy, z, group, n_groups, np.inf, iters)
-        coef_t = _fit_plane(xy, z, group, n_groups, min_span, iters, np.inf)
-        return coef_t if np.abs(coef_t[1]).max() <= max_slope else (c, s, o, r)
-    w = np.ones(len(z))
-    coef = np.zeros(A.shape[1])
+def lowest_points(s: Sole) -> tuple[np.ndarray, np.ndarray]:
+    """Per foot of ``s`` the lowest sole surface point (T, F, 3) [m] and the index (T, F) of its
+    sphere (feet in ``s.sides`` order)."""
+    b = s.bottoms
+    T = b.shape[0]
+    pts, idx = [], []
+    for x in s.sides:
+        ks = s.of(x)
+        k = ks[np.argmin(b[:, ks, 2], axis=1)]
+        pts.append(b[np.arange(T), k])
+        idx.append(k)
+    return np.stack(pts, axis=1), np.stack(idx, axis=1)
+
+
+def _plane_fit(xy, z, group, n_groups, axes, weights):
+    """Weighted least squares ``z ~ c[group] + s . (xy @ axes)``; returns (c, s_along_axes)."""
+    onehot = np.eye(n_groups)[group]
+    A = np.column_stack([onehot, xy @ axes]) if axes.shape[1] else onehot
+    sw = np.sqrt(weights)
+    coef = np.linalg.lstsq(A * sw[:, None], z * sw, rcond=None)[0]
+    return coef[:n_groups], coef[n_groups:], z - A @ coef
+
+
+def _robust_plane(xy, z, group, n_groups, *, min_span, min_scale, iters=30):
+    """Tukey-biweight IRLS of footprints ``z ~ c[group] + slope . xy`` started from a horizontal
+    plane through the lowest footprints. Returns (c (G,), slope (2,), weights (N,))."""
+    N = len(z)
+    # start: horizontal, each group at its low quantile (a raised foot must not pull the floor up)
+    c = np.array([np.percentile(z[group == g], 25) if np.any(group == g) else 0.0
+                  for g in range(n_groups)])  # fmt: skip
+    r = z - c[group]
+    slope = np.zeros(2)
+    w = np.ones(N)
     for _ in range(iters):
-        sw = np.sqrt(w)
-        coef = np.linalg.lstsq(A * sw[:, None], z * sw, rcond=None)[0]
-        r = z - A @ coef
-        scale = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-3)
+        scale = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), min_scale)
         u = r / (4.685 * scale)
         w = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
-        if w.sum() < A.shape[1] + 1:
+        if w.sum() < 1e-9:
             break
-    s = axes @ coef[G : G + k] if k else np.zeros(2)
-    return coef[:G], s, origin, z - A @ coef
+        inl = w > 0
+        axes = np.zeros((2, 0))
+        if inl.sum() > 2:
+            d = xy[inl] - np.average(xy[inl], axis=0, weights=w[inl])
+            var, vec = np.linalg.eigh(np.cov(d.T, aweights=w[inl]))
+            axes = vec[:, np.sqrt(np.clip(var, 0, None)) >= min_span]
+        c_new, s_ax, r_new = _plane_fit(xy, z, group, n_groups, axes, w)
+        s_new = axes @ s_ax if axes.shape[1] else np.zeros(2)
+        if np.abs(s_new).max(initial=0.0) > MAX_SLOPE:  # few footprints: stay level
+            c_new, _, r_new = _plane_fit(xy, z, group, n_groups, np.zeros((2, 0)), w)
+            s_new = np.zeros(2)
+        # groups without inliers keep their start
+        seen = np.array([np.any(inl & (group == g)) for g in range(n_groups)])
+        c = np.where(seen, c_new, c)
+        slope = s_new
+        r = z - c[group] - xy @ slope
+    return c, slope, w
 
 
 def estimate_ground(
@@ -201,84 +243,80 @@ def estimate_ground(
     names,
     fps: float,
     *,
-    percentile: float = 5.0,
     slow_speed: float = 0.25,
     run_s: float = 0.15,
     band: float = 0.03,
     min_span: float = 0.3,
-    min_frames: int = 10,
+    min_scale: float = 0.003,
+    percentile: float = 5.0,
 ) -> Ground:
-    """The trial's floor and foot-point clearances (see the module docstring).
+    """The trial's floor (see the module docstring).
 
     Args:
         positions: (T, J, 3) the original's points [m] over the whole trial (clips concatenated
             are fine: speeds at the seams are off for one frame each).
-        names: (J,) point names; at least one foot point must be among them.
+        names: (J,) point names; at least one foot's ankle and ball must be among them.
         fps: frame rate [1/s].
-        percentile: the low percentile of still sole heights that starts the fit [%].
-        slow_speed: a point slower than this (3-D) [m/s] ...
-        run_s: ... for at least this long [s] is still.
-        band: a still sole point within this of the floor [m] is planted.
-        min_span: the plane tilts along a horizontal direction only where the planted feet
+        slow_speed: a foot whose lowest sole sphere is slower than this [m/s] ...
+        run_s: ... for at least this long [s] leaves a footprint.
+        band: a still foot within this of the plane [m] is planted.
+        min_span: the plane tilts along a horizontal direction only where the inlier footprints
             spread at least this far (standard deviation [m]).
-        min_frames: below this many planted samples, the floor is the low percentile of all sole
-            heights, horizontal.
-
-    Returns:
-        The :class:`Ground`.
+        min_scale: smallest residual scale of the robust fit [m] (mocap-level noise).
+        percentile: without any footprint, the floor is this low percentile of the soles'
+            lowest points, horizontal, and flagged (``frames`` 0, deviation NaN).
     """
     names = tuple(names)
-    feet = foot_points(names)
-    if not feet:
-        raise ValueError(f"no foot point among {names}; need one of {FOOT_POINTS}")
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (len(names), 3) or p.shape[0] < 1:
         raise ValueError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
     if not np.all(np.isfinite(p)):
         raise ValueError("positions must be finite")
-    pf = p[:, [names.index(n) for n in feet]]  # (T, F, 3)
-    T = len(pf)
-    still = _long_runs(_speed(pf, fps) < slow_speed, max(1, int(round(run_s * fps))))
-    sole = np.array([n in SOLE_POINTS for n in feet])
-    if not sole.any():
-        sole[:] = True
-    zs = pf[:, sole, 2]
-    pool = zs[still[:, sole]] if still[:, sole].sum() >= min_frames else zs.ravel()
-    z0 = float(np.percentile(pool, percentile))
-    ground = Ground(z0, feet, np.zeros(len(feet)), 0)
-    planted = np.zeros((T, len(feet)), dtype=bool)
-    col = np.broadcast_to(np.arange(len(feet))[None, :], planted.shape)
-    r = np.zeros(0)
-    for _ in range(3):
-        resid = pf[..., 2] - ground.level(pf[..., :2]) - ground.clearance
-        planted = still & sole[None, :] & (np.abs(resid) < band)
-        if planted.sum() < min_frames:
-            break
-        xy, z = pf[planted][:, :2], pf[planted][:, 2]
-        c, s, origin, r = _fit_plane(xy, z, col[planted], len(feet), min_span)
-        has = np.isin(np.arange(len(feet)), col[planted])
-        z_floor = float(c[has & sole].min())
-        clear = np.where(has, c - z_floor, 0.0)
-        ground = Ground(z_floor, feet, clear, int(planted.sum()), (s[0], s[1]), tuple(origin))
-    if planted.sum() < min_frames:  # no foot ever planted: a floor nobody can vouch for
-        return Ground(z0, feet, np.zeros(len(feet)), 0, spread=np.nan)
-    resid = pf[..., 2] - ground.level(pf[..., :2])  # (T, F) above the floor, clearance not taken
+    if not foot_points(names):
+        raise ValueError(f"no foot point among {names}; need one of {FOOT_POINTS}")
+    s = sole(p, names)
+    low, idx = lowest_points(s)  # (T, F, 3), (T, F)
+    T, F = low.shape[:2]
+    centres = s.centres[np.arange(T)[:, None], idx]  # (T, F, 3) the lowest spheres' centres
+    still = speed(centres, fps) < slow_speed
+    if F > 1:  # demonstrably planted: not held above the other foot (a one-leg balance)
+        still &= low[..., 2] <= low[..., 2].min(axis=1, keepdims=True) + band
+    n_run = max(1, int(round(run_s * fps)))
+    prints = [(f, a, e) for f in range(F) for a, e in runs(still[:, f], n_run)]
+    if not prints:  # no foot ever planted: a floor nobody can vouch for
+        z0 = float(np.percentile(low[..., 2], percentile))
+        return Ground(z0, s.sides, np.zeros(F), 0, spread=np.nan)
+    fp_xy = np.array([np.median(low[a:e, f, :2], axis=0) for f, a, e in prints])
+    fp_z = np.array([np.median(low[a:e, f, 2]) for f, a, e in prints])
+    fp_g = np.array([f for f, _, _ in prints])
+    origin = np.median(fp_xy, axis=0)
+    # one plane for both feet (a raised foot is an outlier, not a floor of its own) ...
+    c, slope, w = _robust_plane(
+        fp_xy - origin, fp_z, np.zeros(len(fp_z), int), 1, min_span=min_span, min_scale=min_scale
+    )
+    # ... then each foot's stance offset from its footprints on that plane (skeletons put the
+    # two feet at slightly different heights), bounded
+    r = fp_z - c[0] - (fp_xy - origin) @ slope
+    off = np.array([np.median(r[(fp_g == f) & (w > 0)]) if np.any((fp_g == f) & (w > 0)) else 0.0
+                    for f in range(F)])  # fmt: skip
+    off = np.clip(off, -MAX_OFFSET, MAX_OFFSET)
+    z0 = float(c[0] + off.min())
+    ground = Ground(z0, s.sides, off - off.min(), 0, (float(slope[0]), float(slope[1])),
+                    (float(origin[0]), float(origin[1])))  # fmt: skip
+    gap = low[..., 2] - ground.level(low[..., :2]) - ground.offset[None, :]  # (T, F)
+    planted = still & (np.abs(gap) < band)
+    n = int(planted.sum())
+    if n == 0:
+        return replace(ground, spread=np.nan, footprints=len(prints))
+    r = gap[planted]
     spread = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-    sole_h = (resid - ground.clearance)[:, sole]
-    below = float(np.maximum(-sole_h, 0.0).mean())
     t_of = np.broadcast_to(np.arange(T)[:, None], planted.shape)[planted]
     quarters = [r[(t_of >= q * T / 4) & (t_of < (q + 1) * T / 4)] for q in range(4)]
-    medians = [float(np.median(x)) for x in quarters if len(x) >= min_frames]
+    medians = [float(np.median(x)) for x in quarters if len(x) >= 5]
     drift = max(medians) - min(medians) if medians else 0.0
-    tilt = float(np.abs(ground.level(pf[planted][:, :2]) - ground.z).max())
-    foot_planted = {s_: planted[:, [side(n) == s_ for n in feet]].any(axis=1) for s_ in "lr"}
-    clearance = np.array(ground.clearance, dtype=np.float64)
-    for k, n in enumerate(feet):
-        if sole[k]:
-            continue  # fitted with the plane
-        use = foot_planted[side(n)] & still[:, k]
-        clearance[k] = float(np.median(resid[use, k])) if use.sum() >= min_frames else 0.0
-    return Ground(
-        ground.z, feet, clearance, int(planted.sum()), ground.slope, ground.origin,
-        spread, drift, tilt, below,
+    tilt = float(np.abs(ground.level(low[planted][:, :2]) - ground.z).max())
+    below = float(np.maximum(-gap, 0.0).mean())
+    return replace(
+        ground, frames=n, spread=spread, drift=drift, tilt=tilt, below=below,
+        footprints=len(prints), inliers=int((w > 0).sum()),
     )  # fmt: skip

@@ -240,6 +240,54 @@ class HumanoidIK:
             self.limit_weight = weight
         return Fit(qpos, err, its)
 
+    def rates(
+        self,
+        qpos: np.ndarray,
+        velocities: np.ndarray,
+        accelerations: np.ndarray,
+        *,
+        prior_qvel: np.ndarray | None = None,
+        prior_qacc: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``qvel`` and ``qacc`` (T, nv) of fitted configurations ``qpos`` (T, nq) whose points move
+        with ``velocities`` and ``accelerations`` (T, P, 3) [m/s, m/s^2].
+
+        The points' velocity is ``J qvel`` and their acceleration ``J qacc + Jdot qvel`` (MuJoCo's
+        ``mj_jacSite``/``mj_jacDot``), so per frame ``qvel = argmin |J qvel - v|^2 +
+        lambda |qvel - prior|^2`` and likewise ``qacc`` for ``a - Jdot qvel``: degrees of freedom
+        the points see follow the points exactly, those they do not (a forearm's twist without
+        the hand) keep the prior's rates, as :meth:`fit` keeps their angles (default prior 0).
+        """
+        q = np.asarray(qpos, dtype=np.float64)
+        v = np.asarray(velocities, dtype=np.float64).reshape(len(q), -1)
+        a = np.asarray(accelerations, dtype=np.float64).reshape(len(q), -1)
+        m, d = self.model, self.data
+        nv = m.nv
+        pv = np.zeros((len(q), nv)) if prior_qvel is None else np.asarray(prior_qvel, float)
+        pa = np.zeros((len(q), nv)) if prior_qacc is None else np.asarray(prior_qacc, float)
+        lam = self.damping
+        qvel, qacc = np.zeros((len(q), nv)), np.zeros((len(q), nv))
+        jdot = np.zeros((3, nv))
+        bias = np.zeros(3 * len(self.names))
+        for t in range(len(q)):
+            d.qpos[:] = q[t]
+            mujoco.mj_kinematics(m, d)
+            J = self._jacobian()  # (3P, nv), comPos done
+            A = J.T @ J + lam * np.eye(nv)
+            qvel[t] = np.linalg.solve(A, J.T @ v[t] + lam * pv[t])
+            d.qvel[:] = qvel[t]
+            mujoco.mj_comVel(m, d)
+            for k in range(len(self.names)):
+                if k == self._root_slot:
+                    point, body = d.xpos[self._root_body], self._root_body
+                else:
+                    s_ = int(self._sites[k])
+                    point, body = d.site_xpos[s_], int(m.site_bodyid[s_])
+                mujoco.mj_jacDot(m, d, jdot, None, point, body)
+                bias[3 * k : 3 * k + 3] = jdot @ qvel[t]
+            qacc[t] = np.linalg.solve(A, J.T @ (a[t] - bias) + lam * pa[t])
+        return qvel, qacc
+
 
 def anatomical_ranges(model) -> dict[str, tuple[float, float]]:
     """Hinge name -> (lo, hi) [rad] of every limited hinge except :data:`NON_ANATOMICAL` bones'."""

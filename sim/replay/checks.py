@@ -1,11 +1,13 @@
 """Kinematic replay of a motion (original or reconstruction) in MuJoCo, and what a person would see.
 
 Each frame's points are mapped onto bone-aligned capsules on mocap bodies (:mod:`sim.replay.capsules`);
-MuJoCo's collision detection then measures floor penetration, self-penetration between non-adjacent
-bones and foot contact. Together with bone-length drift, foot skating, joint-limit violations (where
-the motion carries joint angles), MPJPE and velocity error against the original, these are the
-per-frame :class:`FrameChecks`; :func:`summarise` condenses them per clip and :func:`excess`
-subtracts the original clip's own figures (the baseline).
+MuJoCo's collision detection then measures floor penetration and self-penetration between
+non-adjacent bones. Foot contact is the one definition of :mod:`sim.physics.contacts` (the sole's
+geometry against the trial's floor, rolling contact allowed). Together with bone-length drift,
+foot skating, joint-limit violations (where the motion carries joint angles), MPJPE and velocity
+error against the original, these are the per-frame :class:`FrameChecks`; :func:`summarise`
+condenses them per clip and :func:`excess` subtracts the original clip's own figures (the
+baseline).
 
 Why capsules on mocap bodies rather than inverse kinematics onto the humanoid: the checks must judge
 the reconstruction's points themselves. IK would first move the points (to satisfy the humanoid's
@@ -13,7 +15,7 @@ fixed bone lengths and hinge axes) and then measure the IK's result, hiding exac
 (stretched bones, feet through the floor) the checks exist to find. Capsules placed bone by bone
 reproduce every point exactly, for any point set (23 protocol points, 31 CMU points, synthetic).
 
-Units: metres, seconds, radians; world z up; the floor is the plane z = ``floor_z``.
+Units: metres, seconds, radians; world z up; the capsules' floor is the plane z = ``floor_z``.
 """
 
 from __future__ import annotations
@@ -23,12 +25,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.motion.points import PointMotion, finite_velocity
-from sim.physics.feet import SOLE_POINTS
+from sim.motion.points import PointMotion, finite_velocity  # noqa: F401 (re-exported)
+from sim.physics.contacts import motion_contacts
+from sim.physics.feet import SIDES
+from sim.physics.ground import Ground
 from sim.replay.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
-
-#: The replay's foot capsules: the bones ending at the sole points (:mod:`sim.physics.feet`).
-FEET = SOLE_POINTS
 
 
 def from_clip(clip) -> PointMotion:
@@ -62,9 +63,9 @@ class FrameChecks:
         floor_bones: (T,) number of bone capsules below the floor.
         self_count: (T,) number of penetrating pairs of non-adjacent bone capsules.
         self_depth: (T,) deepest such penetration [m] (0 if none).
-        foot_names: (F,) foot points found in the motion.
-        foot_contact: (T, F) foot capsule within ``contact_height`` of the floor.
-        foot_speed: (T, F) horizontal speed of the foot point [m/s].
+        foot_names: (F,) the feet found in the motion (``"l"``, ``"r"``: ankle and ball present).
+        foot_contact: (T, F) the foot touches the floor (:mod:`sim.physics.contacts`).
+        foot_speed: (T, F) horizontal speed of the foot's lowest sole point [m/s].
         skate_speed: (T,) max horizontal speed of a foot in contact [m/s] (0 if none in contact).
         mpjpe: (T,) mean point position error against the reference [m].
         velocity_error: (T,) mean |v - v_ref| over points [m/s].
@@ -100,7 +101,7 @@ class CollisionScene:
     Args:
         bones: the point set's bones.
         floor_z: floor height [m].
-        contact_height: a bone within this distance of the floor [m] is in contact.
+        contact_height: MuJoCo's floor margin [m]: bones nearer the floor than this are measured.
         hops: bones this close in the tree are adjacent and never tested: 1 = bones sharing a
             point (parent/child, siblings from one joint); 2 (default) also bones joined through one
             bone, because the short, thick capsules of the spine and neck overlap at rest.
@@ -198,6 +199,7 @@ def replay(
     hops: int = 2,
     joint_ranges: dict[str, tuple[float, float]] | None = None,
     scene: CollisionScene | None = None,
+    ground: Ground | None = None,
 ) -> FrameChecks:
     """Replay ``motion`` frame by frame and measure it.
 
@@ -210,6 +212,8 @@ def replay(
         scene: the clip's :class:`CollisionScene` (:meth:`CollisionScene.for_reference` of the
             restricted reference), reused across calls; built here when None. ValueError when it
             was built for other bones or other floor settings.
+        ground: the trial's floor for the foot contacts (:mod:`sim.physics.contacts`); default a
+            horizontal floor at ``floor_z``.
     """
     ref = motion if reference is None else reference.restrict(motion.names)
     if ref.n_frames != motion.n_frames:
@@ -233,11 +237,8 @@ def replay(
     )
     drift = np.abs(cur_len - true_len).max(axis=1) if len(bones.child) else np.zeros(T)
 
-    feet = tuple(n for n in FEET if n in motion.names)
-    foot_bone = [int(np.flatnonzero(bones.child == motion.names.index(f))[0]) for f in feet]
     floor_depth, floor_bones = np.zeros(T), np.zeros(T, dtype=int)
     self_count, self_depth = np.zeros(T, dtype=int), np.zeros(T)
-    contact = np.zeros((T, len(feet)), dtype=bool)
     bname = bones.bone_names
     pairs = []
     for t in range(T):
@@ -248,12 +249,16 @@ def replay(
         floor_depth[t] = float(-gap[below].min()) if below.any() else 0.0
         self_count[t] = len(pen)
         self_depth[t] = max((p[2] for p in pen), default=0.0)
-        contact[t] = gap[foot_bone] < contact_height if feet else contact[t]
 
-    fidx = [motion.names.index(f) for f in feet]
-    vxy = finite_velocity(motion.positions[:, fidx, :2], motion.fps)
-    speed = np.linalg.norm(vxy, axis=-1)
-    skate = np.where(contact, speed, 0.0).max(axis=1) if feet else np.zeros(T)
+    if any(x + "tibia" in motion.names and x + "foot" in motion.names for x in SIDES):
+        c = motion_contacts(
+            motion.positions, motion.names, motion.fps,
+            Ground(float(floor_z)) if ground is None else ground, velocities=motion.velocities,
+        )  # fmt: skip
+        feet, contact, speed = c.sides, c.contact, c.foot_speed
+        skate = np.where(contact, speed, 0.0).max(axis=1)
+    else:
+        feet, contact, speed, skate = (), np.zeros((T, 0), bool), np.zeros((T, 0)), np.zeros(T)
 
     mpjpe = np.linalg.norm(motion.positions - ref.positions, axis=-1).mean(axis=1)
     verr = np.linalg.norm(motion.velocity() - ref.velocity(), axis=-1).mean(axis=1)

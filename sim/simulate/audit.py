@@ -25,7 +25,7 @@ from scipy.signal import savgol_filter
 from sim.model.humanoid import build_mjcf, canonical_skeleton
 from sim.model.mass import DEFAULT_BODY_MASS_KG
 from sim.physics.analysis import PhysicsJob
-from sim.physics.ground import FOOT_POINTS, SOLE_RADIUS, Ground, estimate_ground
+from sim.physics.ground import FOOT_POINTS, Ground, estimate_ground
 from sim.simulate.model import G, scaled_skeleton
 
 QUIET_BW = 0.02  # [body weight] recorded help below this: a frame "without assistance"
@@ -41,12 +41,9 @@ def clip_model(generation: dict):
 
 
 def floor_ground(clip) -> Ground:
-    """The clip's ground (:func:`sim.physics.ground.estimate_ground`: contact labels from its
-    own feet) moved so that the plane the ground forces act on is the simulator's floor z = 0
-    (heights above stance, so the contact labels, are unchanged)."""
-    g = estimate_ground(clip.positions, clip.names, clip.fps)
-    shift = g.z - SOLE_RADIUS
-    return Ground(SOLE_RADIUS, g.points, g.clearance + shift, g.frames)
+    """The clip's ground (:func:`sim.physics.ground.estimate_ground`: its feet's stance offsets
+    and fit) with its plane at the simulator's floor z = 0, where the ground forces act."""
+    return estimate_ground(clip.positions, clip.names, clip.fps).moved(0.0)
 
 
 def acceleration_kernel(window: int, polyorder: int = 3) -> np.ndarray:
