@@ -26,9 +26,11 @@ def cases(cmu_dir):
 def test_pool_and_ray_give_the_rows_of_one_process(cases):
     kw = dict(seed=3, progress=False, physics=True, simulate=True, chunk=1)
     one = evaluate(cases, ["random", "optimal"], [8], **kw)
-    assert [r["method"] for r in one["results"]] == ["original", "random", "optimal"]
-    assert len(one["per_clip"]) == 3 * len(cases)
-    assert all(r["sim_error_mm"] is not None for r in one["per_clip"])
+    methods = ["original", "noise floor", "random", "optimal"]
+    assert [r["method"] for r in one["results"]] == methods
+    assert len(one["per_clip"]) == len(methods) * len(cases)
+    simulated = [r for r in one["per_clip"] if r["method"] != "noise floor"]
+    assert all(r["sim_error_mm"] is not None for r in simulated)
     pool = evaluate(cases, ["random", "optimal"], [8], workers=2, **kw)
     assert _without_times(pool) == _without_times(one)
     pytest.importorskip("ray")
