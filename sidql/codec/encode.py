@@ -30,14 +30,18 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decoded_chart
+from sidql.codec.entropy import encode_integers
 from sidql.codec.plan import (
     DEFAULT_MAX_GAP,
     band_costs,
     least_keyframes,
+    plan,
     plan_for_budget,
     plan_for_quality,
+    position_band_costs,
 )
-from sidql.codec.quantise import fit_quantiser
+from sidql.codec.positions import chart_points, position_errors
+from sidql.codec.quantise import PositionQuantiser, fit_quantiser
 from sidql.codec.skeleton import skeleton_hash
 from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
 from sidql.keyframes.metrics import q_from_angles
@@ -60,6 +64,8 @@ class Encoded:
         q: measured Q [rad] of the decoded chart (eq. 18, keyframes included).
         bytes_per_second: ``len(data)`` over the trial's duration ``N / fps`` [B/s].
         candidates: "reconstruction/bits" -> (q, bytes) of every encoding tried.
+        mean_error_mm, p95_error_mm: mean and 95th percentile of the decoded points' Euclidean
+            error [mm] against the chart's points (all points, all frames).
     """
 
     stream: sidq.Stream
@@ -67,6 +73,8 @@ class Encoded:
     q: float
     bytes_per_second: float
     candidates: dict
+    mean_error_mm: float = float("nan")
+    p95_error_mm: float = float("nan")
 
 
 def _measure(series: SphericalSeries, stream: sidq.Stream) -> float:
@@ -192,6 +200,192 @@ def _encode_one(
     return out
 
 
+#: step sizes tried for a mean position error target e: these multiples of e [m] (the position
+#: step that moves points by about twice the target error balanced quantisation against
+#: keyframe density best on the CMU trials of ``../shared``).
+STEP_FACTORS: tuple[float, ...] = (1.5, 2.0, 2.5)
+_LAM_LO, _LAM_HI = 1e-7, 1e3
+_BISECT = 18
+#: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
+#: extrapolation); 0.5 measured best on the CMU trials of ``../shared``.
+PREDICTOR = 0.5
+
+
+class _PositionSearch:
+    """Keyframes and step sizes of one reconstruction under coding 2 (position-coded)."""
+
+    def __init__(self, series, recon, G, build):
+        self.series, self.recon, self.build = series, recon, build
+        values, _ = series.channels()
+        self.values = values
+        self.lengths = series.lengths.astype(np.float32).astype(np.float64)
+        self.truth = chart_points(values, series.lengths, series.parents)
+        self.C = position_band_costs(
+            values, values, None, G, recon, self.lengths, series.parents
+        )
+        self.least = least_keyframes(self.C)
+        self.plans: dict = {}
+        self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
+
+    def quantiser(self, step: float) -> PositionQuantiser:
+        M = self.series.n_bones
+        return PositionQuantiser(
+            M, self.lengths, self.series.parents, float(np.float32(step)), PREDICTOR
+        )
+
+    def keys(self, lam: float) -> np.ndarray:
+        if lam not in self.plans:
+            self.plans[lam] = plan(self.C, lam).keyframes
+        return self.plans[lam]
+
+    def code(self, lam: float, step: float):
+        keys = self.keys(lam)
+        q = self.quantiser(step)
+        codes, kv = q.encode_keyframes(self.values[keys], keys)
+        return keys, q, codes, kv
+
+    def size(self, keys, codes) -> int:
+        gaps = np.diff(keys, prepend=0)
+        rows = np.vstack([np.diff(gaps, prepend=0)[None], codes.T])
+        return self.header + len(encode_integers(rows))
+
+    def errors(self, keys, kv) -> np.ndarray:
+        return position_errors(
+            self.truth, keys, kv, self.recon, self.lengths, self.series.parents
+        )
+
+    def for_error(self, target: float, step: float):
+        """(keys, q, codes, errors) of the sparsest plan at ``step`` whose mean error <= target
+        [m], or None when even the densest misses it."""
+        lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
+        keys, q, codes, kv = self.code(_LAM_LO, step)
+        E = self.errors(keys, kv)
+        if E.mean() > target:
+            return None
+        best = (keys, q, codes, E)
+        for _ in range(_BISECT):
+            mid = 0.5 * (lo + hi)
+            keys, q, codes, kv = self.code(float(np.exp(mid)), step)
+            E = self.errors(keys, kv)
+            if E.mean() <= target:
+                lo, best = mid, (keys, q, codes, E)
+            else:
+                hi = mid
+        return best
+
+    def for_budget(self, budget: float, step: float):
+        """(keys, q, codes, errors) of the densest plan at ``step`` whose size fits ``budget``
+        bytes, or None when even the sparsest does not fit."""
+        lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
+        keys, q, codes, kv = self.code(_LAM_HI, step)
+        if self.size(keys, codes) > budget:
+            return None
+        best = (keys, q, codes, kv)
+        k0, q0, c0, kv0 = self.code(_LAM_LO, step)
+        if self.size(k0, c0) <= budget:
+            best = (k0, q0, c0, kv0)
+        else:
+            for _ in range(_BISECT):
+                mid = 0.5 * (lo + hi)
+                keys, q, codes, kv = self.code(float(np.exp(mid)), step)
+                if self.size(keys, codes) <= budget:
+                    hi, best = mid, (keys, q, codes, kv)
+                else:
+                    lo = mid
+        keys, q, codes, kv = best
+        return keys, q, codes, self.errors(keys, kv)
+
+
+def _encode_position(
+    series: SphericalSeries,
+    recon: str,
+    *,
+    rate: float | None,
+    max_error: float | None,
+    max_gap: int,
+    fps: float,
+    skel_hash: bytes,
+    where: str,
+) -> list[Encoded]:
+    """Coding 2: keyframes by the position-error programme, values by their effect on positions
+    (:class:`~sidql.codec.quantise.PositionQuantiser`), range-coded. ``max_error`` [mm]."""
+    N = series.n_frames
+    duration = N / fps
+    G = min(max_gap, sidq.MAX_GAP)
+
+    def build(keys, quant, codes=None) -> sidq.Stream:
+        return sidq.Stream(
+            reconstruction=recon,
+            latency=0,
+            fps=float(np.float32(fps)),
+            skeleton_hash=skel_hash,
+            names=POINTS,
+            parents=series.parents,
+            lengths=series.lengths.astype(np.float32).astype(np.float64),
+            quantiser=quant,
+            keyframes=keys,
+            pose_codes=codes if codes is not None else np.zeros((len(keys), 2 * series.n_bones + 3)),
+            rate_codes=None,
+            coding=2,
+        )
+
+    search = _PositionSearch(series, recon, G, build)
+    found = []
+    if max_error is not None:
+        target = max_error / 1000.0
+        for f in STEP_FACTORS:
+            step = f * target
+            r = search.for_error(target, step)
+            while r is None and step > 1e-6:  # quantisation alone misses: finer steps
+                step *= 0.5
+                r = search.for_error(target, step)
+            if r is not None:
+                found.append(r)
+        if not found:
+            raise MotionDataError(where or None, None, f"cannot reach {max_error} mm")
+        best = min(found, key=lambda r: search.size(r[0], r[2]))
+    else:
+        budget = rate * duration
+        step, tried = 4e-3, {}
+        for _ in range(4):  # the best step is about twice the error it yields
+            r = search.for_budget(budget, step)
+            if r is None:
+                step *= 4.0
+                continue
+            tried[step] = r
+            nxt = float(np.clip(STEP_FACTORS[1] * r[3].mean(), 1e-5, 1.0))
+            if abs(np.log(nxt / step)) < 0.1:
+                break
+            step = nxt
+        if tried:
+            s0 = min(tried, key=lambda s: tried[s][3].mean())
+            for f in (STEP_FACTORS[0] / STEP_FACTORS[1], STEP_FACTORS[2] / STEP_FACTORS[1]):
+                r = search.for_budget(budget, s0 * f)
+                if r is not None:
+                    tried[s0 * f] = r
+        if not tried:
+            size = search.size(*search.code(_LAM_HI, 1.0)[::2])
+            raise MotionDataError(
+                where or None, None, f"rate too low: the sparsest plan needs {size} bytes, "
+                f"budget {budget:.0f}",
+            )  # fmt: skip
+        best = min(tried.values(), key=lambda r: r[3].mean())
+    keys, q, codes, E = best
+    stream = build(keys, q, codes)
+    data = sidq.to_bytes(stream)
+    return [
+        Encoded(
+            stream,
+            data,
+            _measure(series, stream),
+            len(data) / duration,
+            {},
+            float(1000.0 * E.mean()),
+            float(1000.0 * np.percentile(E, 95)),
+        )
+    ]
+
+
 def _payload(enc: Encoded) -> int:
     """Bytes of a packed encoding's keyframes (its size less header, count, .lzma header, CRC)."""
     return len(enc.data) - len(sidq.header_bytes(enc.stream)) - 4 - 13 - 4
@@ -253,32 +447,45 @@ def encode_series(
     *,
     rate: float | None = None,
     max_q: float | None = None,
+    max_error: float | None = None,
     reconstruction: str = "auto",
     latency: int = 0,
     max_gap: int = DEFAULT_MAX_GAP,
     skel_hash: bytes = bytes(8),
     where: str = "",
+    objective: str = "position",
 ) -> Encoded:
     """Encode a chart (see the module docstring).
+
+    With ``objective="position"`` (the default), offline streams at a ``rate`` or a
+    ``max_error`` are position-coded (coding 2): keyframes and bits go where they lower the mean
+    joint position error most. ``max_q``, ``objective="angle"``, Hermite and any latency use the
+    angle-error coding (codings 0 and 1), which minimises Q.
 
     Args:
         series: the trial's chart (N frames at ``1 / series.dt`` fps, M = 22 bones).
         rate: byte budget [B/s] for the whole file (header and checksum included), or
-        max_q: the largest acceptable Q [rad]; exactly one of the two.
+        max_q: the largest acceptable Q [rad], or
+        max_error: the largest acceptable mean joint position error [mm]; exactly one of the three.
         reconstruction: "auto", "hermite", "linear" or "catmull_rom".
         latency: 0 (offline, whole trial) or the look-ahead L >= 1 [frames].
         max_gap: G, the largest gap between keyframes [frames] (<= 255).
         skel_hash: 8 bytes naming the source skeleton.
+        objective: "position" (mean joint position error) or "angle" (Q).
 
     Raises:
         MotionDataError: the rate cannot be met; ValueError: bad arguments.
     """
-    if (rate is None) == (max_q is None):
-        raise ValueError("give exactly one of rate and max_q")
+    if objective not in ("position", "angle"):
+        raise ValueError(f"objective must be 'position' or 'angle'; got {objective!r}")
+    if sum(x is not None for x in (rate, max_q, max_error)) != 1:
+        raise ValueError("give exactly one of rate, max_q and max_error")
     if rate is not None and not rate > 0:
         raise ValueError(f"rate must be positive; got {rate}")
     if max_q is not None and not max_q >= 0:
         raise ValueError(f"max_q must be >= 0; got {max_q}")
+    if max_error is not None and not max_error > 0:
+        raise ValueError(f"max_error must be positive; got {max_error}")
     if reconstruction not in CHOICES:
         raise ValueError(f"unknown reconstruction {reconstruction!r}; known: {', '.join(CHOICES)}")
     if not (0 <= latency <= 65535 and max_gap >= 1):
@@ -286,25 +493,36 @@ def encode_series(
     if series.n_frames < 2:
         raise MotionDataError(where or None, None, "a trial needs at least 2 frames")
     fps = 1.0 / series.dt
-    names = sidq.RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
-    results, errors = {}, []
-    common = dict(
-        rate=rate,
-        max_q=max_q,
-        latency=latency,
-        max_gap=max_gap,
-        fps=fps,
-        skel_hash=skel_hash,
-        where=where,
+    position = (
+        objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
     )
+    if max_error is not None and not position:
+        raise ValueError("max_error needs an offline stream (latency 0), linear or catmull_rom")
+    if position:
+        names = sidq.POSITION_RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
+    else:
+        names = sidq.RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
+    results, errors = {}, []
+    common = dict(max_gap=max_gap, fps=fps, skel_hash=skel_hash, where=where)
     for r in names:
         try:
-            for e in _encode_one(series, r, **common):
-                results[f"{r}/{e.stream.quantiser.bits}"] = e
+            if position:
+                found = _encode_position(series, r, rate=rate, max_error=max_error, **common)
+            else:
+                found = _encode_one(series, r, rate=rate, max_q=max_q, latency=latency, **common)
+            for e in found:
+                results[f"{r}/{e.stream.quantiser.bits if e.stream.coding != 2 else 'position'}"] = e
         except MotionDataError as e:
             errors.append(e)
     if not results:
         raise errors[0]
+    if position:
+        cand = {r: (e.mean_error_mm, len(e.data)) for r, e in results.items()}
+        if max_error is not None:
+            key = min(results, key=lambda r: (len(results[r].data), results[r].mean_error_mm))
+        else:
+            key = min(results, key=lambda r: (results[r].mean_error_mm, len(results[r].data)))
+        return replace(results[key], candidates=cand)
     cand = {r: (e.q, len(e.data)) for r, e in results.items()}
     return replace(results[_best(results, rate, max_q)], candidates=cand)
 

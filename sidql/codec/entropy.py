@@ -1,0 +1,238 @@
+"""Adaptive binary range coding of small signed integers, channel by channel (numba).
+
+The coder is LZMA's range coder (Pavlov; 32-bit range, 11-bit probabilities adapted by a shift
+of 5, carry propagated through a cached byte), driven by a binarisation that suits prediction
+residuals of smooth signals. Each integer ``r`` of channel ``c`` is sent as
+
+* ``r == 0`` (one bit; context: the channel and whether its previous residual was zero),
+* else the sign (context: the channel and the previous residual's sign), then ``|r| - 1`` in
+  Elias-gamma form: the bit length ``k`` of ``|r|`` in unary (one adaptive context per unary
+  position per channel, up to :data:`MAX_CLASS`), then the ``k - 1`` bits below the leading one,
+  the first of them adaptive (context: channel and ``k``), the rest with a fixed probability 1/2.
+
+Every channel has its own contexts, so channels of very different spread (a quiet spine, a busy
+wrist) each get a code fitted to them as the stream goes. Residuals are limited to
+``|r| < 2^MAX_CLASS``.
+
+Decoding is bounded by construction: the caller gives the count of integers (checked against the
+stream's limits first); reads past the end of the data see zero bytes, so corrupt input decodes to
+some integers (caught by the container's checksum) and never reads out of bounds.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: largest bit length of a residual's magnitude (|r| < 2^MAX_CLASS).
+MAX_CLASS = 30
+_PROB_BITS = 11
+_PROB_INIT = 1 << (_PROB_BITS - 1)
+_MOVE = 5
+_TOP = 1 << 24
+_MASK32 = 0xFFFFFFFF
+# contexts per channel: zero flag (2), sign (3), unary (MAX_CLASS + 1), first mantissa bit
+_ZERO, _SIGN, _UNARY, _MANT = 0, 2, 5, 5 + MAX_CLASS + 1
+_PER_CHANNEL = _MANT + MAX_CLASS + 1
+
+
+@numba.njit(cache=True)
+def _shift_low(st, out):
+    # st: [low, range, cache, cache_size, pos]
+    low = st[0]
+    if low < 0xFF000000 or low > _MASK32:
+        carry = low >> 32
+        temp = st[2]
+        while True:
+            out[st[4]] = (temp + carry) & 0xFF
+            st[4] += 1
+            temp = 0xFF
+            st[3] -= 1
+            if st[3] == 0:
+                break
+        st[2] = (low >> 24) & 0xFF
+    st[3] += 1
+    st[0] = (low & 0x00FFFFFF) << 8
+
+
+@numba.njit(cache=True)
+def _encode_bit(st, out, probs, i, bit):
+    p = probs[i]
+    bound = (st[1] >> _PROB_BITS) * p
+    if bit == 0:
+        st[1] = bound
+        probs[i] = p + (((1 << _PROB_BITS) - p) >> _MOVE)
+    else:
+        st[0] += bound
+        st[1] -= bound
+        probs[i] = p - (p >> _MOVE)
+    while st[1] < _TOP:
+        st[1] = (st[1] << 8) & _MASK32
+        _shift_low(st, out)
+
+
+@numba.njit(cache=True)
+def _encode_direct(st, out, bit):
+    st[1] = st[1] >> 1
+    if bit:
+        st[0] += st[1]
+    while st[1] < _TOP:
+        st[1] = (st[1] << 8) & _MASK32
+        _shift_low(st, out)
+
+
+@numba.njit(cache=True)
+def _encode_kernel(values, group, n_groups):
+    """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column.
+    Returns the coded bytes."""
+    C, W = values.shape
+    out = np.zeros(16 + C * W * 8, dtype=np.uint8)
+    st = np.zeros(5, dtype=np.int64)
+    st[1] = _MASK32
+    st[3] = 1
+    probs = np.full(C * n_groups * _PER_CHANNEL, _PROB_INIT, dtype=np.int64)
+    for c in range(C):
+        prev_zero = 0
+        prev_sign = 2
+        for w in range(W):
+            base = (c * n_groups + group[w]) * _PER_CHANNEL
+            r = values[c, w]
+            if r == 0:
+                _encode_bit(st, out, probs, base + _ZERO + prev_zero, 0)
+                prev_zero = 1
+                prev_sign = 2
+                continue
+            _encode_bit(st, out, probs, base + _ZERO + prev_zero, 1)
+            prev_zero = 0
+            neg = 1 if r < 0 else 0
+            _encode_bit(st, out, probs, base + _SIGN + prev_sign, neg)
+            prev_sign = neg
+            a = -r if neg else r
+            k = 0
+            t = a
+            while t > 0:
+                k += 1
+                t >>= 1
+            for u in range(1, k):
+                _encode_bit(st, out, probs, base + _UNARY + u, 1)
+            if k < MAX_CLASS:
+                _encode_bit(st, out, probs, base + _UNARY + k, 0)
+            if k >= 2:
+                _encode_bit(st, out, probs, base + _MANT + k, (a >> (k - 2)) & 1)
+                for b in range(k - 3, -1, -1):
+                    _encode_direct(st, out, (a >> b) & 1)
+    for _ in range(5):
+        _shift_low(st, out)
+    return out[: st[4]].copy()
+
+
+@numba.njit(cache=True)
+def _next_byte(data, st):
+    pos = st[3]
+    st[3] = pos + 1
+    if pos < data.shape[0]:
+        return np.int64(data[pos])
+    return np.int64(0)
+
+
+@numba.njit(cache=True)
+def _decode_bit(data, st, probs, i):
+    # st: [code, range, unused, pos]
+    p = probs[i]
+    bound = (st[1] >> _PROB_BITS) * p
+    if st[0] < bound:
+        st[1] = bound
+        probs[i] = p + (((1 << _PROB_BITS) - p) >> _MOVE)
+        bit = 0
+    else:
+        st[0] -= bound
+        st[1] -= bound
+        probs[i] = p - (p >> _MOVE)
+        bit = 1
+    while st[1] < _TOP:
+        st[1] = (st[1] << 8) & _MASK32
+        st[0] = ((st[0] << 8) | _next_byte(data, st)) & _MASK32
+    return bit
+
+
+@numba.njit(cache=True)
+def _decode_direct(data, st):
+    st[1] = st[1] >> 1
+    bit = 0
+    if st[0] >= st[1]:
+        st[0] -= st[1]
+        bit = 1
+    while st[1] < _TOP:
+        st[1] = (st[1] << 8) & _MASK32
+        st[0] = ((st[0] << 8) | _next_byte(data, st)) & _MASK32
+    return bit
+
+
+@numba.njit(cache=True)
+def _decode_kernel(data, C, W, group, n_groups):
+    values = np.zeros((C, W), dtype=np.int64)
+    st = np.zeros(4, dtype=np.int64)
+    st[1] = _MASK32
+    for _ in range(5):
+        st[0] = ((st[0] << 8) | _next_byte(data, st)) & _MASK32
+    probs = np.full(C * n_groups * _PER_CHANNEL, _PROB_INIT, dtype=np.int64)
+    for c in range(C):
+        prev_zero = 0
+        prev_sign = 2
+        for w in range(W):
+            base = (c * n_groups + group[w]) * _PER_CHANNEL
+            if _decode_bit(data, st, probs, base + _ZERO + prev_zero) == 0:
+                prev_zero = 1
+                prev_sign = 2
+                continue
+            prev_zero = 0
+            neg = _decode_bit(data, st, probs, base + _SIGN + prev_sign)
+            prev_sign = neg
+            k = 1
+            while k < MAX_CLASS and _decode_bit(data, st, probs, base + _UNARY + k) == 1:
+                k += 1
+            a = 1
+            if k >= 2:
+                a = (a << 1) | _decode_bit(data, st, probs, base + _MANT + k)
+                for _b in range(k - 3, -1, -1):
+                    a = (a << 1) | _decode_direct(data, st)
+            values[c, w] = -a if neg else a
+    return values, st[3]
+
+
+def _groups(group, W: int) -> tuple[np.ndarray, int]:
+    if group is None:
+        return np.zeros(W, dtype=np.int64), 1
+    g = np.ascontiguousarray(group, dtype=np.int64)
+    if g.shape != (W,) or (W and g.min() < 0):
+        raise ValueError("group must be (W,) non-negative integers")
+    return g, int(g.max()) + 1 if W else 1
+
+
+def encode_integers(values: np.ndarray, group: np.ndarray | None = None) -> bytes:
+    """Range-code a (C, W) array of integers channel by channel (see the module docstring);
+    ``group`` (W,) gives each column a context group (e.g. its level in a coarse-to-fine order),
+    so columns of different spread learn separate statistics.
+
+    Raises:
+        ValueError: a value's magnitude reaches 2^MAX_CLASS.
+    """
+    v = np.ascontiguousarray(values, dtype=np.int64)
+    if v.ndim != 2:
+        raise ValueError(f"values must be (channels, count); got shape {v.shape}")
+    if v.size and np.abs(v).max() >= (1 << MAX_CLASS):
+        raise ValueError(f"residual beyond 2^{MAX_CLASS}")
+    g, n = _groups(group, v.shape[1])
+    return bytes(_encode_kernel(v, g, n))
+
+
+def decode_integers(
+    data: bytes, n_channels: int, count: int, group: np.ndarray | None = None
+) -> tuple[np.ndarray, int]:
+    """The (n_channels, count) int64 array :func:`encode_integers` coded into ``data`` (with the
+    same ``group``), and the number of bytes the decoder read (more than ``len(data)``: the data
+    was short)."""
+    buf = np.frombuffer(bytes(data), dtype=np.uint8)
+    g, n = _groups(group, int(count))
+    values, used = _decode_kernel(buf, int(n_channels), int(count), g, n)
+    return values, int(used)
