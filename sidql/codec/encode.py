@@ -30,7 +30,7 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decoded_chart
-from sidql.codec.entropy import encode_integers
+from sidql.codec.entropy import encode_integers, estimate_size
 from sidql.codec.plan import (
     DEFAULT_MAX_GAP,
     band_costs,
@@ -205,14 +205,19 @@ def _encode_one(
 #: keyframe density best on the CMU trials of ``../shared``).
 STEP_FACTORS: tuple[float, ...] = (1.5, 2.0, 2.5)
 _LAM_LO, _LAM_HI = 1e-7, 1e3
-_BISECT = 18
+_BISECT = 14
+#: runs of the range coder per step size tried at a byte budget (the size model does the rest)
+_REAL_CODINGS = 3
 #: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
 #: extrapolation); 0.5 measured best on the CMU trials of ``../shared``.
 PREDICTOR = 0.5
 
 
 class _PositionSearch:
-    """Keyframes and step sizes of one reconstruction under coding 2 (position-coded)."""
+    """Keyframes and step sizes of one reconstruction under coding 2 (position-coded).
+
+    Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
+    the range coder itself runs only on the few plans that may be kept."""
 
     def __init__(self, series, recon, G, build):
         self.series, self.recon, self.build = series, recon, build
@@ -220,10 +225,7 @@ class _PositionSearch:
         self.values = values
         self.lengths = series.lengths.astype(np.float32).astype(np.float64)
         self.truth = chart_points(values, series.lengths, series.parents)
-        self.C = position_band_costs(
-            values, values, None, G, recon, self.lengths, series.parents
-        )
-        self.least = least_keyframes(self.C)
+        self.C = position_band_costs(values, values, None, G, recon, self.lengths, series.parents)
         self.plans: dict = {}
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
@@ -244,15 +246,19 @@ class _PositionSearch:
         codes, kv = q.encode_keyframes(self.values[keys], keys)
         return keys, q, codes, kv
 
-    def size(self, keys, codes) -> int:
+    @staticmethod
+    def rows(keys, codes) -> np.ndarray:
         gaps = np.diff(keys, prepend=0)
-        rows = np.vstack([np.diff(gaps, prepend=0)[None], codes.T])
-        return self.header + len(encode_integers(rows))
+        return np.vstack([np.diff(gaps, prepend=0)[None], codes.T])
+
+    def estimate(self, keys, codes) -> float:
+        return self.header + estimate_size(self.rows(keys, codes))
+
+    def size(self, keys, codes) -> int:
+        return self.header + len(encode_integers(self.rows(keys, codes)))
 
     def errors(self, keys, kv) -> np.ndarray:
-        return position_errors(
-            self.truth, keys, kv, self.recon, self.lengths, self.series.parents
-        )
+        return position_errors(self.truth, keys, kv, self.recon, self.lengths, self.series.parents)
 
     def for_error(self, target: float, step: float):
         """(keys, q, codes, errors) of the sparsest plan at ``step`` whose mean error <= target
@@ -273,32 +279,61 @@ class _PositionSearch:
                 hi = mid
         return best
 
-    def for_budget(self, budget: float, step: float):
-        """(keys, q, codes, errors) of the densest plan at ``step`` whose size fits ``budget``
-        bytes, or None when even the sparsest does not fit."""
+    def _densest_within(self, target: float, step: float):
+        """The densest plan whose *estimated* size is <= target bytes, or None."""
         lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
-        keys, q, codes, kv = self.code(_LAM_HI, step)
-        if self.size(keys, codes) > budget:
+        top = self.code(_LAM_HI, step)
+        if self.estimate(top[0], top[2]) > target:
             return None
-        best = (keys, q, codes, kv)
-        k0, q0, c0, kv0 = self.code(_LAM_LO, step)
-        if self.size(k0, c0) <= budget:
-            best = (k0, q0, c0, kv0)
-        else:
-            for _ in range(_BISECT):
-                mid = 0.5 * (lo + hi)
-                keys, q, codes, kv = self.code(float(np.exp(mid)), step)
-                if self.size(keys, codes) <= budget:
-                    hi, best = mid, (keys, q, codes, kv)
-                else:
-                    lo = mid
-        keys, q, codes, kv = best
-        return keys, q, codes, self.errors(keys, kv)
+        dense = self.code(_LAM_LO, step)
+        if self.estimate(dense[0], dense[2]) <= target:
+            return dense
+        best = top
+        for _ in range(_BISECT):
+            mid = 0.5 * (lo + hi)
+            r = self.code(float(np.exp(mid)), step)
+            if self.estimate(r[0], r[2]) <= target:
+                hi, best = mid, r
+            else:
+                lo = mid
+        return best
+
+    def for_budget(self, budget: float, step: float, real: bool = False):
+        """(keys, q, codes, errors, size) of the densest plan at ``step`` that fits ``budget``
+        bytes, or None. Plans are found with the size model; with ``real``, its error is
+        corrected from real sizes (at most :data:`_REAL_CODINGS` runs of the range coder) and
+        the size returned is the real one."""
+        if not real:
+            r = self._densest_within(budget, step)
+            if r is None:
+                return None
+            keys, q, codes, kv = r
+            return keys, q, codes, self.errors(keys, kv), self.estimate(keys, codes)
+        scale, best, tried = 1.0, None, set()
+        for _ in range(_REAL_CODINGS):
+            r = self._densest_within(budget * scale, step)
+            if r is None:
+                break
+            keys, q, codes, kv = r
+            if len(keys) in tried:
+                break
+            tried.add(len(keys))
+            real = self.size(keys, codes)
+            est = self.estimate(keys, codes)
+            if real <= budget and (best is None or len(keys) > len(best[0])):
+                best = (keys, q, codes, kv, real)
+            if real <= budget and (budget - real < 0.01 * budget or len(keys) == len(self.values)):
+                break
+            scale = scale * min(max(est / real, 0.5), 2.0) * (1.0 if real <= budget else 0.995)
+        if best is None:
+            return None
+        keys, q, codes, kv, real = best
+        return keys, q, codes, self.errors(keys, kv), real
 
 
 def _encode_position(
     series: SphericalSeries,
-    recon: str,
+    recons: tuple[str, ...],
     *,
     rate: float | None,
     max_error: float | None,
@@ -306,84 +341,115 @@ def _encode_position(
     fps: float,
     skel_hash: bytes,
     where: str,
-) -> list[Encoded]:
+) -> tuple[Encoded, dict]:
     """Coding 2: keyframes by the position-error programme, values by their effect on positions
-    (:class:`~sidql.codec.quantise.PositionQuantiser`), range-coded. ``max_error`` [mm]."""
+    (:class:`~sidql.codec.quantise.PositionQuantiser`), range-coded; the best of ``recons``.
+
+    ``max_error`` [mm]: for each reconstruction and each step in :data:`STEP_FACTORS` times the
+    target, the sparsest plan meeting it; the fewest bytes win. ``rate`` [B/s]: for each
+    reconstruction the step is iterated towards twice the error it yields (a plan per step by the
+    size model), the least mean error wins, and only the winner is range-coded (at most
+    :data:`_REAL_CODINGS` times, correcting the model). Returns the encoding and every
+    candidate's (mean error [mm], bytes or estimated bytes) by "reconstruction/position".
+    """
     N = series.n_frames
     duration = N / fps
     G = min(max_gap, sidq.MAX_GAP)
 
-    def build(keys, quant, codes=None) -> sidq.Stream:
-        return sidq.Stream(
-            reconstruction=recon,
-            latency=0,
-            fps=float(np.float32(fps)),
-            skeleton_hash=skel_hash,
-            names=POINTS,
-            parents=series.parents,
-            lengths=series.lengths.astype(np.float32).astype(np.float64),
-            quantiser=quant,
-            keyframes=keys,
-            pose_codes=codes if codes is not None else np.zeros((len(keys), 2 * series.n_bones + 3)),
-            rate_codes=None,
-            coding=2,
-        )
+    def builder(recon):
+        def build(keys, quant, codes=None) -> sidq.Stream:
+            return sidq.Stream(
+                reconstruction=recon,
+                latency=0,
+                fps=float(np.float32(fps)),
+                skeleton_hash=skel_hash,
+                names=POINTS,
+                parents=series.parents,
+                lengths=series.lengths.astype(np.float32).astype(np.float64),
+                quantiser=quant,
+                keyframes=keys,
+                pose_codes=np.zeros((len(keys), 2 * series.n_bones + 3), dtype=np.int64)
+                if codes is None
+                else codes,
+                rate_codes=None,
+                coding=2,
+            )
 
-    search = _PositionSearch(series, recon, G, build)
-    found = []
+        return build
+
+    searches = {r: _PositionSearch(series, r, G, builder(r)) for r in recons}
+    cands: dict = {}  # recon -> (keys, q, codes, errors, est bytes, step)
     if max_error is not None:
         target = max_error / 1000.0
-        for f in STEP_FACTORS:
-            step = f * target
-            r = search.for_error(target, step)
-            while r is None and step > 1e-6:  # quantisation alone misses: finer steps
-                step *= 0.5
+        for recon, search in searches.items():
+            for f in STEP_FACTORS:
+                step = f * target
                 r = search.for_error(target, step)
-            if r is not None:
-                found.append(r)
-        if not found:
+                while r is None and step > 1e-7:  # quantisation alone misses: finer steps
+                    step *= 0.5
+                    r = search.for_error(target, step)
+                if r is not None:
+                    est = search.estimate(r[0], r[2])
+                    if recon not in cands or est < cands[recon][4]:
+                        cands[recon] = (*r, est, step)
+        if not cands:
             raise MotionDataError(where or None, None, f"cannot reach {max_error} mm")
-        best = min(found, key=lambda r: search.size(r[0], r[2]))
+        recon = min(cands, key=lambda r: cands[r][4])
+        keys, q, codes, E = cands[recon][:4]
     else:
         budget = rate * duration
-        step, tried = 4e-3, {}
-        for _ in range(4):  # the best step is about twice the error it yields
-            r = search.for_budget(budget, step)
-            if r is None:
-                step *= 4.0
-                continue
-            tried[step] = r
-            nxt = float(np.clip(STEP_FACTORS[1] * r[3].mean(), 1e-5, 1.0))
-            if abs(np.log(nxt / step)) < 0.1:
-                break
-            step = nxt
-        if tried:
-            s0 = min(tried, key=lambda s: tried[s][3].mean())
-            for f in (STEP_FACTORS[0] / STEP_FACTORS[1], STEP_FACTORS[2] / STEP_FACTORS[1]):
-                r = search.for_budget(budget, s0 * f)
-                if r is not None:
-                    tried[s0 * f] = r
-        if not tried:
+        for recon, search in searches.items():
+            step, tried = 4e-3, {}
+            for _ in range(8):  # the best step is about twice the error it yields
+                r = search.for_budget(budget, step)
+                if r is None:  # even the sparsest plan is too large: coarser
+                    step *= 4.0
+                    continue
+                tried[step] = r
+                if len(r[0]) == N and r[4] < 0.97 * budget:  # every frame sent, room left
+                    step *= max(0.25, (r[4] / budget) ** 2)
+                    continue
+                nxt = float(np.clip(STEP_FACTORS[1] * r[3].mean(), 1e-7, 1.0))
+                if abs(np.log(nxt / step)) < 0.15:
+                    break
+                step = nxt
+            if tried:
+                s0 = min(tried, key=lambda x: tried[x][3].mean())
+                for f in (STEP_FACTORS[0] / STEP_FACTORS[1], STEP_FACTORS[2] / STEP_FACTORS[1]):
+                    if not any(abs(np.log(s0 * f / x)) < 0.05 for x in tried):
+                        r = search.for_budget(budget, s0 * f)
+                        if r is not None:
+                            tried[s0 * f] = r
+                step = min(tried, key=lambda x: tried[x][3].mean())
+                cands[recon] = (*tried[step], step)
+        if not cands:
+            search = next(iter(searches.values()))
             size = search.size(*search.code(_LAM_HI, 1.0)[::2])
             raise MotionDataError(
                 where or None, None, f"rate too low: the sparsest plan needs {size} bytes, "
                 f"budget {budget:.0f}",
             )  # fmt: skip
-        best = min(tried.values(), key=lambda r: r[3].mean())
-    keys, q, codes, E = best
-    stream = build(keys, q, codes)
+        recon = min(cands, key=lambda r: cands[r][3].mean())
+        final = searches[recon].for_budget(budget, cands[recon][5], real=True)
+        if final is None:  # the model was optimistic everywhere at this step: a coarser one
+            final = searches[recon].for_budget(budget, 2.0 * cands[recon][5], real=True)
+        if final is None:
+            raise MotionDataError(where or None, None, "rate too low for the position coding")
+        keys, q, codes, E = final[:4]
+    stream = builder(recon)(keys, q, codes)
     data = sidq.to_bytes(stream)
-    return [
-        Encoded(
-            stream,
-            data,
-            _measure(series, stream),
-            len(data) / duration,
-            {},
-            float(1000.0 * E.mean()),
-            float(1000.0 * np.percentile(E, 95)),
-        )
-    ]
+    enc = Encoded(
+        stream,
+        data,
+        _measure(series, stream),
+        len(data) / duration,
+        {},
+        float(1000.0 * E.mean()),
+        float(1000.0 * np.percentile(E, 95)),
+    )
+    summary = {f"{r}/position": (1000.0 * c[3].mean(), int(round(c[4]))) for r, c in cands.items()}
+    summary[f"{recon}/position"] = (enc.mean_error_mm, len(data))
+    return enc, summary
 
 
 def _payload(enc: Encoded) -> int:
@@ -502,27 +568,19 @@ def encode_series(
         names = sidq.POSITION_RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
     else:
         names = sidq.RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
-    results, errors = {}, []
     common = dict(max_gap=max_gap, fps=fps, skel_hash=skel_hash, where=where)
+    if position:
+        enc, cand = _encode_position(series, names, rate=rate, max_error=max_error, **common)
+        return replace(enc, candidates=cand)
+    results, errors = {}, []
     for r in names:
         try:
-            if position:
-                found = _encode_position(series, r, rate=rate, max_error=max_error, **common)
-            else:
-                found = _encode_one(series, r, rate=rate, max_q=max_q, latency=latency, **common)
-            for e in found:
-                results[f"{r}/{e.stream.quantiser.bits if e.stream.coding != 2 else 'position'}"] = e
+            for e in _encode_one(series, r, rate=rate, max_q=max_q, latency=latency, **common):
+                results[f"{r}/{e.stream.quantiser.bits}"] = e
         except MotionDataError as e:
             errors.append(e)
     if not results:
         raise errors[0]
-    if position:
-        cand = {r: (e.mean_error_mm, len(e.data)) for r, e in results.items()}
-        if max_error is not None:
-            key = min(results, key=lambda r: (len(results[r].data), results[r].mean_error_mm))
-        else:
-            key = min(results, key=lambda r: (results[r].mean_error_mm, len(results[r].data)))
-        return replace(results[key], candidates=cand)
     cand = {r: (e.q, len(e.data)) for r, e in results.items()}
     return replace(results[_best(results, rate, max_q)], candidates=cand)
 

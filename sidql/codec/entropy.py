@@ -236,3 +236,34 @@ def decode_integers(
     g, n = _groups(group, int(count))
     values, used = _decode_kernel(buf, int(n_channels), int(count), g, n)
     return values, int(used)
+
+
+@numba.njit(cache=True)
+def _estimate_bits(values):
+    C, W = values.shape
+    total = 0.0
+    counts = np.zeros(MAX_CLASS + 1)
+    for c in range(C):
+        counts[:] = 0.0
+        for w in range(W):
+            a = abs(values[c, w])
+            k = 0
+            while a > 0:
+                k += 1
+                a >>= 1
+            counts[k] += 1.0
+            if k > 0:
+                total += k  # sign and the k - 1 bits below the leading one
+        for k in range(MAX_CLASS + 1):
+            if counts[k] > 0:
+                total -= counts[k] * np.log2(counts[k] / W)
+    return total
+
+
+def estimate_size(values: np.ndarray) -> float:
+    """Estimated bytes of :func:`encode_integers` of a (C, W) array: per channel, the empirical
+    entropy of each integer's bit-length class plus its sign and lower bits (a static model of
+    what the adaptive coder learns; within a few per cent of the real size on motion residuals).
+    O(C W), several times faster than coding."""
+    v = np.ascontiguousarray(values, dtype=np.int64)
+    return float(_estimate_bits(v)) / 8.0

@@ -92,11 +92,13 @@ def _band_costs(X, Xq, Rq, G, mode):
     return C
 
 
-@numba.njit(cache=True, fastmath=True)
-def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight):
+@numba.njit(cache=True, fastmath=True, parallel=True)
+def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap):
     """(N, G + 1) position-error segment costs [m]: like :func:`_band_costs`, but frame n adds
     ``sum_b weight[b] sqrt(e_theta_b^2 + sin(theta_b)^2 e_phi_b^2) + root_weight |e_root|``, the
     summed displacement of all points to first order (a bone's error moves every point below it).
+    A segment whose mean cost per inner frame exceeds ``cap`` ends the row: it and every longer
+    segment from the same keyframe stay inf (no plan worth having uses them).
 
     X, Xq, Rq: (N, 2 M + 3) all channels [theta | phi | root]; weight: (M,) bone length times the
     number of points at or below the bone [m]; sin_theta: (N, M) of the true angles.
@@ -104,10 +106,10 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight):
     N, D = X.shape
     M = (D - 3) // 2
     C = np.full((N, G + 1), np.inf)
-    ma = np.empty(D)
-    mb = np.empty(D)
-    e = np.empty(D)
-    for i in range(N):
+    for i in numba.prange(N):
+        ma = np.empty(D)
+        mb = np.empty(D)
+        e = np.empty(D)
         C[i, 0] = 0.0
         for g in range(1, G + 1):
             j = i + g
@@ -139,7 +141,9 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight):
                     h10 = (s3 - 2.0 * s2 + s) * g
                     h11 = (s3 - s2) * g
                 for d in range(D):
-                    e[d] = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
+                    e[d] = (
+                        Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
+                    )
                 acc = 0.0
                 for b in range(M):
                     et = e[b]
@@ -153,7 +157,14 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight):
                 acc += root_weight * np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
                 total += acc
             C[i, g] = total
+            if total > cap * (g - 1):
+                break
     return C
+
+
+#: segments whose frames' first-order mean position error bound exceeds this [mm] are not
+#: considered (far beyond any error a plan at a useful rate has; saves most of the table).
+POSITION_COST_CAP_MM = 200.0
 
 
 def subtree_sizes(parents: np.ndarray) -> np.ndarray:
@@ -179,10 +190,12 @@ def position_band_costs(
     reconstruction: str,
     lengths: np.ndarray,
     parents: np.ndarray,
+    cap_mm: float = POSITION_COST_CAP_MM,
 ) -> np.ndarray:
     """(N, G + 1) banded segment costs in summed point displacement [m] (first order; see
     :func:`_position_band_costs`): divided by ``N J`` a plan's total is an upper bound on its
-    mean joint position error, to first order.
+    mean joint position error, to first order. Segments from a keyframe stop at the first whose
+    frames' mean error bound exceeds ``cap_mm`` [mm] (longer ones stay inf).
 
     Args:
         X: (N, 2 M + 3) true channels [theta | phi | root]; Xq: the keyframe values the decoder
@@ -198,9 +211,9 @@ def position_band_costs(
     G = int(min(max_gap, max(X.shape[0] - 1, 1)))
     w = position_weights(lengths, parents)
     sin_theta = np.ascontiguousarray(np.sin(X[:, :M]))
-    return _position_band_costs(
-        X, Xq, Rq, G, MODES[reconstruction], w, sin_theta, float(len(parents))
-    )
+    J = float(len(parents))
+    cap = J * cap_mm / 1000.0
+    return _position_band_costs(X, Xq, Rq, G, MODES[reconstruction], w, sin_theta, J, cap)
 
 
 @numba.njit(cache=True)

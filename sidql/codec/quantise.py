@@ -232,7 +232,6 @@ class PositionQuantiser:
 
     def scales(self) -> np.ndarray:
         """(2 M + 3,) per-channel steps before phi's sin theta division [rad, rad, m]."""
-        from sidql.codec.plan import position_weights
 
         from sidql.codec.plan import subtree_sizes
 
