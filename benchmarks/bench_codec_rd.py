@@ -284,7 +284,7 @@ def write_plot(base, codec, angle, path: Path, title: str) -> None:
             ax.plot([r["bytes_per_second"] for r in rows], [r[key] for r in rows], "-D",
                     color=color, ms=4, lw=2, label=name)  # fmt: skip
     for ax, label in zip(
-        axes, ("mean joint position error [mm]", "95th percentile [mm]", "Q [rad]")
+        axes, ("mean joint position error [mm]", "95th percentile [mm]", "Q [rad]"), strict=True
     ):
         ax.set_xscale("log")
         ax.set_yscale("log")
