@@ -205,7 +205,7 @@ def _encode_one(
 #: keyframe density best on the CMU trials of ``../shared``).
 STEP_FACTORS: tuple[float, ...] = (1.5, 2.0, 2.5)
 _LAM_LO, _LAM_HI = 1e-7, 1e3
-_BISECT = 14
+_LAM_PRECISION = 0.003  # of a bisection on log lam
 #: runs of the range coder per step size tried at a byte budget (the size model does the rest)
 _REAL_CODINGS = 3
 #: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
@@ -227,6 +227,7 @@ class _PositionSearch:
         self.truth = chart_points(values, series.lengths, series.parents)
         self.C = position_band_costs(values, values, None, G, recon, self.lengths, series.parents)
         self.plans: dict = {}
+        self.last = None  # log lam of the previous search's answer
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
     def quantiser(self, step: float) -> PositionQuantiser:
@@ -260,43 +261,60 @@ class _PositionSearch:
     def errors(self, keys, kv) -> np.ndarray:
         return position_errors(self.truth, keys, kv, self.recon, self.lengths, self.series.parents)
 
+    def _boundary(self, good, step):
+        """Bisection on log lam for the plan nearest the boundary of a predicate ``good(r)`` of
+        a coded plan r = (keys, q, codes, kv) that holds at one end of [_LAM_LO, _LAM_HI] (the
+        caller checked it). Starts from a narrow bracket around the previous search's answer
+        (steps of nearby sizes have nearby multipliers) and widens it when needed. Returns the
+        good plan nearest the boundary."""
+        lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
+        sparse_good = good(self.code(_LAM_HI, step))  # which end is good
+        a, b = lo, hi
+        if self.last is not None:
+            a, b = max(lo, self.last - 1.0), min(hi, self.last + 1.0)
+            while a > lo and good(self.code(float(np.exp(a)), step)) != (not sparse_good):
+                a = max(lo, a - 4.0 * (b - a))
+            while b < hi and good(self.code(float(np.exp(b)), step)) != sparse_good:
+                b = min(hi, b + 4.0 * (b - a))
+        best = self.code(float(np.exp(b if sparse_good else a)), step)  # the good end
+        steps = max(int(np.ceil(np.log2(max(b - a, 1e-9) / _LAM_PRECISION))), 1)
+        for _ in range(steps):
+            mid = 0.5 * (a + b)
+            r = self.code(float(np.exp(mid)), step)
+            ok = good(r)
+            if ok:
+                best = r
+            if ok == sparse_good:
+                b = mid
+            else:
+                a = mid
+        self.last = b if sparse_good else a
+        return best
+
     def for_error(self, target: float, step: float):
         """(keys, q, codes, errors) of the sparsest plan at ``step`` whose mean error <= target
         [m], or None when even the densest misses it."""
-        lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
-        keys, q, codes, kv = self.code(_LAM_LO, step)
-        E = self.errors(keys, kv)
-        if E.mean() > target:
+        dense = self.code(_LAM_LO, step)
+        if self.errors(dense[0], dense[3]).mean() > target:
             return None
-        best = (keys, q, codes, E)
-        for _ in range(_BISECT):
-            mid = 0.5 * (lo + hi)
-            keys, q, codes, kv = self.code(float(np.exp(mid)), step)
-            E = self.errors(keys, kv)
-            if E.mean() <= target:
-                lo, best = mid, (keys, q, codes, E)
-            else:
-                hi = mid
-        return best
+        top = self.code(_LAM_HI, step)
+        if self.errors(top[0], top[3]).mean() <= target:
+            keys, q, codes, kv = top
+        else:
+            keys, q, codes, kv = self._boundary(
+                lambda r: self.errors(r[0], r[3]).mean() <= target, step
+            )
+        return keys, q, codes, self.errors(keys, kv)
 
     def _densest_within(self, target: float, step: float):
         """The densest plan whose *estimated* size is <= target bytes, or None."""
-        lo, hi = np.log(_LAM_LO), np.log(_LAM_HI)
         top = self.code(_LAM_HI, step)
         if self.estimate(top[0], top[2]) > target:
             return None
         dense = self.code(_LAM_LO, step)
         if self.estimate(dense[0], dense[2]) <= target:
             return dense
-        best = top
-        for _ in range(_BISECT):
-            mid = 0.5 * (lo + hi)
-            r = self.code(float(np.exp(mid)), step)
-            if self.estimate(r[0], r[2]) <= target:
-                hi, best = mid, r
-            else:
-                lo = mid
-        return best
+        return self._boundary(lambda r: self.estimate(r[0], r[2]) <= target, step)
 
     def for_budget(self, budget: float, step: float, real: bool = False):
         """(keys, q, codes, errors, size) of the densest plan at ``step`` that fits ``budget``

@@ -36,49 +36,50 @@ _ZERO, _SIGN, _UNARY, _MANT = 0, 2, 5, 5 + MAX_CLASS + 1
 _PER_CHANNEL = _MANT + MAX_CLASS + 1
 
 
-@numba.njit(cache=True)
-def _shift_low(st, out):
-    # st: [low, range, cache, cache_size, pos]
-    low = st[0]
+@numba.njit(cache=True, inline="always")
+def _shift_low(low, cache, csize, pos, out):
     if low < 0xFF000000 or low > _MASK32:
         carry = low >> 32
-        temp = st[2]
+        temp = cache
         while True:
-            out[st[4]] = (temp + carry) & 0xFF
-            st[4] += 1
+            out[pos] = (temp + carry) & 0xFF
+            pos += 1
             temp = 0xFF
-            st[3] -= 1
-            if st[3] == 0:
+            csize -= 1
+            if csize == 0:
                 break
-        st[2] = (low >> 24) & 0xFF
-    st[3] += 1
-    st[0] = (low & 0x00FFFFFF) << 8
+        cache = (low >> 24) & 0xFF
+    csize += 1
+    low = (low & 0x00FFFFFF) << 8
+    return low, cache, csize, pos
 
 
-@numba.njit(cache=True)
-def _encode_bit(st, out, probs, i, bit):
+@numba.njit(cache=True, inline="always")
+def _bit(low, rng, cache, csize, pos, out, probs, i, bit):
     p = probs[i]
-    bound = (st[1] >> _PROB_BITS) * p
+    bound = (rng >> _PROB_BITS) * p
     if bit == 0:
-        st[1] = bound
+        rng = bound
         probs[i] = p + (((1 << _PROB_BITS) - p) >> _MOVE)
     else:
-        st[0] += bound
-        st[1] -= bound
+        low += bound
+        rng -= bound
         probs[i] = p - (p >> _MOVE)
-    while st[1] < _TOP:
-        st[1] = (st[1] << 8) & _MASK32
-        _shift_low(st, out)
+    while rng < _TOP:
+        rng = (rng << 8) & _MASK32
+        low, cache, csize, pos = _shift_low(low, cache, csize, pos, out)
+    return low, rng, cache, csize, pos
 
 
-@numba.njit(cache=True)
-def _encode_direct(st, out, bit):
-    st[1] = st[1] >> 1
+@numba.njit(cache=True, inline="always")
+def _direct(low, rng, cache, csize, pos, out, bit):
+    rng = rng >> 1
     if bit:
-        st[0] += st[1]
-    while st[1] < _TOP:
-        st[1] = (st[1] << 8) & _MASK32
-        _shift_low(st, out)
+        low += rng
+    while rng < _TOP:
+        rng = (rng << 8) & _MASK32
+        low, cache, csize, pos = _shift_low(low, cache, csize, pos, out)
+    return low, rng, cache, csize, pos
 
 
 @numba.njit(cache=True)
@@ -86,10 +87,8 @@ def _encode_kernel(values, group, n_groups):
     """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column.
     Returns the coded bytes."""
     C, W = values.shape
-    out = np.zeros(16 + C * W * 8, dtype=np.uint8)
-    st = np.zeros(5, dtype=np.int64)
-    st[1] = _MASK32
-    st[3] = 1
+    out = np.empty(16 + C * W * 8, dtype=np.uint8)
+    low, rng, cache, csize, pos = np.int64(0), np.int64(_MASK32), np.int64(0), np.int64(1), 0
     probs = np.full(C * n_groups * _PER_CHANNEL, _PROB_INIT, dtype=np.int64)
     for c in range(C):
         prev_zero = 0
@@ -98,14 +97,20 @@ def _encode_kernel(values, group, n_groups):
             base = (c * n_groups + group[w]) * _PER_CHANNEL
             r = values[c, w]
             if r == 0:
-                _encode_bit(st, out, probs, base + _ZERO + prev_zero, 0)
+                low, rng, cache, csize, pos = _bit(
+                    low, rng, cache, csize, pos, out, probs, base + _ZERO + prev_zero, 0
+                )
                 prev_zero = 1
                 prev_sign = 2
                 continue
-            _encode_bit(st, out, probs, base + _ZERO + prev_zero, 1)
+            low, rng, cache, csize, pos = _bit(
+                low, rng, cache, csize, pos, out, probs, base + _ZERO + prev_zero, 1
+            )
             prev_zero = 0
             neg = 1 if r < 0 else 0
-            _encode_bit(st, out, probs, base + _SIGN + prev_sign, neg)
+            low, rng, cache, csize, pos = _bit(
+                low, rng, cache, csize, pos, out, probs, base + _SIGN + prev_sign, neg
+            )
             prev_sign = neg
             a = -r if neg else r
             k = 0
@@ -114,16 +119,24 @@ def _encode_kernel(values, group, n_groups):
                 k += 1
                 t >>= 1
             for u in range(1, k):
-                _encode_bit(st, out, probs, base + _UNARY + u, 1)
+                low, rng, cache, csize, pos = _bit(
+                    low, rng, cache, csize, pos, out, probs, base + _UNARY + u, 1
+                )
             if k < MAX_CLASS:
-                _encode_bit(st, out, probs, base + _UNARY + k, 0)
+                low, rng, cache, csize, pos = _bit(
+                    low, rng, cache, csize, pos, out, probs, base + _UNARY + k, 0
+                )
             if k >= 2:
-                _encode_bit(st, out, probs, base + _MANT + k, (a >> (k - 2)) & 1)
+                low, rng, cache, csize, pos = _bit(
+                    low, rng, cache, csize, pos, out, probs, base + _MANT + k, (a >> (k - 2)) & 1
+                )
                 for b in range(k - 3, -1, -1):
-                    _encode_direct(st, out, (a >> b) & 1)
+                    low, rng, cache, csize, pos = _direct(
+                        low, rng, cache, csize, pos, out, (a >> b) & 1
+                    )
     for _ in range(5):
-        _shift_low(st, out)
-    return out[: st[4]].copy()
+        low, cache, csize, pos = _shift_low(low, cache, csize, pos, out)
+    return out[:pos].copy()
 
 
 @numba.njit(cache=True)

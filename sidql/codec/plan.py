@@ -164,7 +164,7 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap
 
 #: segments whose frames' first-order mean position error bound exceeds this [mm] are not
 #: considered (far beyond any error a plan at a useful rate has; saves most of the table).
-POSITION_COST_CAP_MM = 200.0
+POSITION_COST_CAP_MM = 100.0
 
 
 def subtree_sizes(parents: np.ndarray) -> np.ndarray:
