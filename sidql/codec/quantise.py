@@ -158,16 +158,22 @@ MAX_PHI_STEP = 0.5
 #: square root of their number; 0.5 measured best (bytes at equal mean error, and p95) over 0.75
 #: and 1 on the CMU trials of ``../shared`` (``benchmarks/bench_codec_rd.py``).
 SUBTREE_EXPONENT = 0.5
+#: the partner predictor (see :func:`_dpcm`): its adaptation rate and the range of its weights.
+PARTNER_RATE = 0.5
+PARTNER_WEIGHTS = (-0.5, 1.5)
 
 
 @numba.njit(cache=True)
-def _dpcm(values, codes, keys, scale, n_bones, rho, encode):
+def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi):
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
-    ``p = x[w-1] + rho * (x[w-1] - x[w-2]) * gap_w / gap_{w-1}`` (the ratio capped at 2;
-    ``x[w-1]`` alone for w = 1, 0 for w = 0), and sent as ``r = round((x - p) / step)``; the
-    decoder rebuilds ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
+    ``t = x[w-1] + rho * (x[w-1] - x[w-2]) * gap_w / gap_{w-1}`` (the ratio capped at 2;
+    ``x[w-1]`` alone for w = 1, 0 for w = 0), plus ``kappa_d`` times the innovation
+    ``x - t`` its partner channel (``partners[d]``, decoded before it: the parent bone's same
+    angle) had at this keyframe (a bone tends to turn with its parent); ``kappa_d`` starts at 0
+    and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
+    The value is sent as ``r = round((x - p) / step)``; the decoder rebuilds ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
     ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being
     the same keyframe's decoded theta of that bone (decoded first). encode: fill ``codes`` from
     ``values``; else read ``codes``. Returns the decoded (W, D) values.
@@ -175,6 +181,9 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode):
     W, D = codes.shape
     M = n_bones
     out = np.zeros((W, D))
+    innov = np.zeros(D)
+    P = partners.shape[1]
+    kappa = np.zeros((D, P))
     for w in range(W):
         ratio = 0.0
         if w >= 2:
@@ -188,6 +197,12 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode):
                 pred = out[0, d]
             else:
                 pred = out[w - 1, d] + rho * ratio * (out[w - 1, d] - out[w - 2, d])
+            temporal = pred
+            if w >= 1:
+                for j in range(P):
+                    pc = partners[d, j]
+                    if pc >= 0:
+                        pred += kappa[d, j] * innov[pc]
             step = scale[d]
             if M <= d < 2 * M:
                 s = np.sin(out[w, d - M])
@@ -199,6 +214,20 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode):
             if encode:
                 codes[w, d] = np.int64(np.floor((values[w, d] - pred) / step + 0.5))
             out[w, d] = pred + codes[w, d] * step
+            own = out[w, d] - temporal
+            if w >= 1:
+                err = own - (pred - temporal)
+                norm = 1e-8
+                for j in range(P):
+                    pc = partners[d, j]
+                    if pc >= 0:
+                        norm += innov[pc] * innov[pc]
+                for j in range(P):
+                    pc = partners[d, j]
+                    if pc >= 0:
+                        k = kappa[d, j] + mu * err * innov[pc] / norm
+                        kappa[d, j] = min(max(k, lo), hi)
+            innov[d] = own
     return out
 
 
@@ -240,16 +269,32 @@ class PositionQuantiser:
         s = np.float64(np.float32(self.step))
         return np.concatenate([s / lever, s / lever, np.full(3, s / n[0])])
 
+    def partners(self) -> np.ndarray:
+        """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
+        its own: the parent bone's same angle (-1: none; the root's children and the root)."""
+        M = self.n_bones
+        p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
+        out = np.full((2 * M + 3, 1), -1, dtype=np.int64)
+        out[:M, 0] = np.where(p >= 0, p, -1)
+        out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
+        return out
+
     def encode_keyframes(self, values: np.ndarray, keys: np.ndarray):
         """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values)."""
         v = np.ascontiguousarray(values, dtype=np.float64)
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
-        out = _dpcm(v, codes, k, self.scales(), self.n_bones, float(self.rho), True)
+        out = _dpcm(
+            v, codes, k, self.scales(), self.n_bones, float(self.rho), True, self.partners(),
+            PARTNER_RATE, *PARTNER_WEIGHTS,
+        )
         return codes, out
 
     def decode_keyframes(self, codes: np.ndarray, keys: np.ndarray) -> np.ndarray:
         """(W, D) residual codes -> (W, D) decoded keyframe values [rad, rad, m]."""
         c = np.ascontiguousarray(codes, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
-        return _dpcm(np.zeros(c.shape), c, k, self.scales(), self.n_bones, float(self.rho), False)
+        return _dpcm(
+            np.zeros(c.shape), c, k, self.scales(), self.n_bones, float(self.rho), False,
+            self.partners(), PARTNER_RATE, *PARTNER_WEIGHTS,
+        )
