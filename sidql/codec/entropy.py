@@ -28,7 +28,7 @@ import numpy as np
 MAX_CLASS = 30
 _PROB_BITS = 11
 _PROB_INIT = 1 << (_PROB_BITS - 1)
-_MOVE = 5
+_MOVE = 4
 _TOP = 1 << 24
 _MASK32 = 0xFFFFFFFF
 # contexts per channel: zero flag (2), sign (3), unary (MAX_CLASS + 1), first mantissa bit
