@@ -223,7 +223,7 @@ class _PositionSearch:
         self.series, self.recon, self.build = series, recon, build
         values, _ = series.channels()
         self.values = values
-        self.lengths = series.lengths.astype(np.float32).astype(np.float64)
+        self.lengths = sidq.position_lengths(series.lengths)
         self.truth = chart_points(values, series.lengths, series.parents)
         self.C = position_band_costs(values, values, None, G, recon, self.lengths, series.parents)
         self.plans: dict = {}
@@ -383,7 +383,7 @@ def _encode_position(
                 skeleton_hash=skel_hash,
                 names=POINTS,
                 parents=series.parents,
-                lengths=series.lengths.astype(np.float32).astype(np.float64),
+                lengths=sidq.position_lengths(series.lengths),
                 quantiser=quant,
                 keyframes=keys,
                 pose_codes=np.zeros((len(keys), 2 * series.n_bones + 3), dtype=np.int64)

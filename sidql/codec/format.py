@@ -144,11 +144,13 @@ def header_bytes(stream: Stream) -> bytes:
             b = n.encode("ascii")
             out += struct.pack("<B", len(b)) + b
         out += np.asarray(stream.parents, dtype=np.int8).tobytes()
-    out += np.asarray(stream.lengths, dtype="<f4").tobytes()
     if stream.coding == 2:
+        exponent, codes = length_codes(stream.lengths)
+        out += struct.pack("<b", exponent) + codes.astype("<u2").tobytes()
         q = stream.quantiser
         out += struct.pack("<fB", q.step, int(round(q.rho * 8)))
         return bytes(out)
+    out += np.asarray(stream.lengths, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_step, dtype="<f4").tobytes()
     if stream.reconstruction == "hermite":
@@ -216,6 +218,26 @@ def packed_bytes(stream: Stream) -> bytes:
     return struct.pack("<I", W) + lzma.compress(
         _planar(stream), format=lzma.FORMAT_ALONE, filters=_LZMA_FILTERS
     )
+
+
+def length_codes(lengths: np.ndarray) -> tuple[int, np.ndarray]:
+    """Coding 2's bone lengths: an exponent e (int8; unit 2^e m, the least power of two with the
+    longest bone within 65535 units) and (M,) uint16 multiples of the unit (at most 7 um of
+    rounding for bones under 0.9 m). Stored lengths code to themselves."""
+    lengths = np.asarray(lengths, dtype=np.float64)
+    top = max(float(lengths.max(initial=0.0)), 1e-9)
+    e = int(np.clip(np.ceil(np.log2(top / 65535.0)), -127, 127))
+    return e, np.clip(np.rint(lengths / 2.0**e), 0, 65535).astype(np.uint16)
+
+
+def lengths_from_codes(exponent: int, codes: np.ndarray) -> np.ndarray:
+    """(M,) bone lengths [m] a coding-2 stream stores (the inverse of :func:`length_codes`)."""
+    return np.asarray(codes, dtype=np.float64) * 2.0 ** int(exponent)
+
+
+def position_lengths(lengths: np.ndarray) -> np.ndarray:
+    """The bone lengths [m] a decoder of a coding-2 stream will use for ``lengths``."""
+    return lengths_from_codes(*length_codes(lengths))
 
 
 #: reconstructions coding 2 carries (no rates are sent).
@@ -332,9 +354,12 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
             raise MotionDataError(where, None, f"non-finite {what}")
         return v
 
-    lengths = floats(M, "bone lengths")
     if coding == 2:
+        (exponent,) = struct.unpack("<b", r.take(1, "length unit"))
+        codes = np.frombuffer(r.take(2 * M, "bone lengths"), dtype="<u2")
+        lengths = lengths_from_codes(exponent, codes)
         return _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths)
+    lengths = floats(M, "bone lengths")
     origin = floats(3, "root origin")
     step = floats(3, "root step")
     rate_step = floats(D, "rate steps") if recon == "hermite" else None

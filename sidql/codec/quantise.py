@@ -285,8 +285,16 @@ class PositionQuantiser:
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
         out = _dpcm(
-            v, codes, k, self.scales(), self.n_bones, float(self.rho), True, self.partners(),
-            PARTNER_RATE, *PARTNER_WEIGHTS,
+            v,
+            codes,
+            k,
+            self.scales(),
+            self.n_bones,
+            float(self.rho),
+            True,
+            self.partners(),
+            PARTNER_RATE,
+            *PARTNER_WEIGHTS,
         )
         return codes, out
 
@@ -295,6 +303,14 @@ class PositionQuantiser:
         c = np.ascontiguousarray(codes, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
         return _dpcm(
-            np.zeros(c.shape), c, k, self.scales(), self.n_bones, float(self.rho), False,
-            self.partners(), PARTNER_RATE, *PARTNER_WEIGHTS,
+            np.zeros(c.shape),
+            c,
+            k,
+            self.scales(),
+            self.n_bones,
+            float(self.rho),
+            False,
+            self.partners(),
+            PARTNER_RATE,
+            *PARTNER_WEIGHTS,
         )
