@@ -114,8 +114,8 @@ def main() -> int:
     lines.append(
         "\nOn 2 cores with other processes spinning, any one-thread computation gets about half a "
         "core, so a plain busy / quiet ratio near 2 is the machine, not the code; greedy's ratio "
-        "in the same run is the yardstick. Torch's default thread pool made the decision 6-17x "
-        "slower under load before the decision moved into compiled code."
+        "in the same run is the yardstick (a decision through torch's default thread pool would "
+        "slow down far more: its threads oversubscribe the cores)."
     )
     if Path(args.data).is_dir():
         from sidql.keyframes.segment_costs import segment_cost_matrix
