@@ -205,7 +205,7 @@ def _encode_one(
 #: keyframe density best on the CMU trials of ``../shared``).
 STEP_FACTORS: tuple[float, ...] = (1.5, 2.0, 2.5)
 _LAM_LO, _LAM_HI = 1e-7, 1e3
-_LAM_PRECISION = 0.003  # of a bisection on log lam
+_LAM_PRECISION = 0.01  # of a bisection on log lam
 #: runs of the range coder per step size tried at a byte budget (the size model does the rest)
 _REAL_CODINGS = 3
 #: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
