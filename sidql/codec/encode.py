@@ -8,8 +8,14 @@ bisection; the error of every candidate measured by running the decoder itself. 
 every reconstruction and keeps the least measured Q (``--rate``) or the fewest bytes
 (``--max-q``).
 
-Offline streams are packed (coding 1: delta + LZMA) at a bit depth of 9, 11, 13 or 16 bits per
-pose channel. At a rate, the trial is encoded at 11 bits with real sizes (the keyframe count is
+Offline streams at a rate or a mean position error target (``max_error``) are position-coded
+(coding 2, :func:`_encode_position`): keyframes by a programme over the summed point displacement
+(:func:`sidql.codec.plan.position_band_costs`), values quantised by their effect on positions and
+range-coded (:class:`sidql.codec.quantise.PositionQuantiser`), the step and the multiplier searched
+with a size model and the exact position error (:mod:`sidql.codec.positions`).
+
+The angle coding (``max_q``, ``objective="angle"``, Hermite, latency): offline streams are packed
+(coding 1: delta + LZMA) at a bit depth of 9, 11, 13 or 16 bits per pose channel. At a rate, the trial is encoded at 11 bits with real sizes (the keyframe count is
 corrected from the measured size a few times); the other depths are judged with a size model
 (each extra bit costs one bit per pose channel per keyframe) and their measured Q at the
 modelled keyframe count, and the best is re-encoded with real sizes if it beats 11 bits. With

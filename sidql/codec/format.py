@@ -1,4 +1,10 @@
-"""The ``.sidq`` container, version 1: bytes <-> :class:`Stream`.
+"""The ``.sidq`` container, versions 1 and 2: bytes <-> :class:`Stream`.
+
+Version 1 carries codings 0 and 1 (below); version 2 carries coding 2, the position coding
+(:func:`position_bytes`; after the point table: int8 exponent e of the bone-length unit 2^e m,
+M uint16 bone lengths in that unit, float32 position step, uint8 predictor weight x 8, uint32
+keyframe count W, one range-coded block of 1 + D channels of W integers, CRC-32; the values as
+:class:`sidql.codec.quantise.PositionQuantiser` rebuilds them).
 
 All numbers little-endian. Layout::
 

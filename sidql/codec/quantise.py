@@ -20,6 +20,10 @@ clipped; the clipping is part of the measured error).
 
 Every dequantised value is computed in float64 from the stored float32 parameters, by the same
 function on both sides, so the encoder knows exactly what the decoder will see.
+
+:class:`PositionQuantiser` is the position coding's (coding 2): a step per channel from its effect
+on point positions, values predicted along the keyframes in closed loop (:func:`_dpcm`, one
+compiled function for both directions), integer residuals of any size.
 """
 
 from __future__ import annotations
