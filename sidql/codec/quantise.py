@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from sidql.codec.plan import subtree_sizes
+
 THETA_STEP = np.pi / 65535.0  # at 16 bits
 PHI_STEP = 2.0 * np.pi / 65536.0  # at 16 bits
 RATE_PERCENTILE = 99.9
@@ -265,8 +267,6 @@ class PositionQuantiser:
 
     def scales(self) -> np.ndarray:
         """(2 M + 3,) per-channel steps before phi's sin theta division [rad, rad, m]."""
-
-        from sidql.codec.plan import subtree_sizes
 
         n = subtree_sizes(self.parents).astype(np.float64) ** SUBTREE_EXPONENT
         lever = np.maximum(np.asarray(self.lengths, dtype=np.float64) * n[1:], 1e-6)
