@@ -233,6 +233,7 @@ class _PositionSearch:
         self.truth = chart_points(values, series.lengths, series.parents)
         self.C = position_band_costs(values, values, None, G, recon, self.lengths, series.parents)
         self.plans: dict = {}
+        self.coded: dict = {}
         self.last = None  # log lam of the previous search's answer
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
@@ -249,9 +250,12 @@ class _PositionSearch:
 
     def code(self, lam: float, step: float):
         keys = self.keys(lam)
-        q = self.quantiser(step)
-        codes, kv = q.encode_keyframes(self.values[keys], keys)
-        return keys, q, codes, kv
+        key = (hash(keys.tobytes()), len(keys), step)  # nearby multipliers often share a plan
+        if key not in self.coded:
+            q = self.quantiser(step)
+            codes, kv = q.encode_keyframes(self.values[keys], keys)
+            self.coded[key] = (keys, q, codes, kv)
+        return self.coded[key]
 
     @staticmethod
     def rows(keys, codes) -> np.ndarray:
