@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -225,6 +226,20 @@ def test_fuzzed_position_streams_fail_cleanly(encoded, data):
     rec = reconstruct_stream(s)  # ...and must then decode to finite frames within the limit
     assert rec.positions.shape[0] == s.n_frames <= sidq.MAX_FRAMES
     assert np.isfinite(rec.positions).all()
+
+
+def test_residuals_that_run_away_are_refused(encoded):
+    """A stream whose residuals drive the predictor to overflow (no encoder writes one, a hostile
+    sender can) is one clean error, not infinite points."""
+    s = encoded.stream
+    W = 600
+    keys = np.arange(W, dtype=np.int64)
+    huge = np.zeros((W, s.pose_codes.shape[1]), dtype=np.int64)
+    huge[1::2], huge[2::2] = (1 << 29) - 1, -((1 << 29) - 1)  # alternating: the slope explodes
+    hostile = replace(s, keyframes=keys, pose_codes=huge, quantiser=replace(s.quantiser, rho=2.0))
+    data = sidq.to_bytes(hostile)
+    with pytest.raises(MotionDataError, match="implausible"):
+        sidq.from_bytes(data, "hostile.sidq")
 
 
 # --------------------------------------------------------------------------------- real data

@@ -246,6 +246,9 @@ def position_lengths(lengths: np.ndarray) -> np.ndarray:
     return lengths_from_codes(*length_codes(lengths))
 
 
+#: the largest magnitude a decoded coding-2 keyframe value may have [rad or m].
+MAX_DECODED_VALUE = 1e6
+
 #: reconstructions coding 2 carries (no rates are sent).
 POSITION_RECONSTRUCTIONS: tuple[str, ...] = ("linear", "catmull_rom")
 
@@ -447,6 +450,16 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
         raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others 1..255)")
     _check_gaps(gaps, fps, J, where)
     quant = PositionQuantiser(M, lengths.astype(np.float64), parents, float(step), rho8 / 8.0)
+    keys = np.cumsum(gaps)
+    pose = rows[1:].T.copy()
+    with np.errstate(all="ignore"):
+        values = quant.decode_keyframes(pose, keys)
+    # residuals that make the prediction run away (no encoder writes them): angles and root
+    # positions beyond any motion's (a million radians or metres), or overflow
+    if not (np.abs(values) <= MAX_DECODED_VALUE).all():
+        raise MotionDataError(
+            where, None, "coded keyframes decode to non-finite or implausible values"
+        )
     return Stream(
         reconstruction=recon,
         latency=int(latency),
@@ -456,8 +469,8 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
         parents=parents,
         lengths=lengths.astype(np.float64),
         quantiser=quant,
-        keyframes=np.cumsum(gaps),
-        pose_codes=rows[1:].T.copy(),
+        keyframes=keys,
+        pose_codes=pose,
         rate_codes=None,
         coding=2,
     )
