@@ -171,6 +171,20 @@ def test_rate_is_met_and_error_falls_with_rate(series):
     assert errors[1] < errors[0]
 
 
+@pytest.mark.parametrize("n", [2, 3, 7])
+def test_the_shortest_trials_encode_within_their_budget(series, n):
+    sub = series.frames(slice(0, n))
+    budget = 5000.0 * n * series.dt
+    enc = encode_series(sub, rate=5000.0)
+    assert len(enc.data) <= budget and enc.stream.n_frames == n
+    assert encode_series(sub, max_error=1.0).mean_error_mm <= 1.0
+
+
+def test_an_unreachable_error_says_what_can_be_reached(series):
+    with pytest.raises(MotionDataError, match="cannot reach 1e-05 mm: the finest stream has"):
+        encode_series(series, max_error=1e-5)
+
+
 def test_max_error_needs_an_offline_position_stream(series):
     with pytest.raises(ValueError, match="offline"):
         encode_series(series, max_error=2.0, latency=5)

@@ -420,8 +420,14 @@ def _encode_position(
                     est = search.estimate(r[0], r[2])
                     if recon not in cands or est < cands[recon][4]:
                         cands[recon] = (*r, est, step)
-        if not cands:
-            raise MotionDataError(where or None, None, f"cannot reach {max_error} mm")
+        if not cands:  # even every frame at the finest step misses it (e.g. the stored lengths)
+            search = next(iter(searches.values()))
+            keys, _, _, kv = search.code(_LAM_LO, 1e-7)
+            floor = 1000.0 * search.errors(keys, kv).mean()
+            raise MotionDataError(
+                where or None, None, f"cannot reach {max_error} mm: the finest stream has a mean "
+                f"error of {floor:.4f} mm",
+            )  # fmt: skip
         recon = min(cands, key=lambda r: cands[r][4])
         keys, q, codes, E = cands[recon][:4]
     else:
@@ -458,9 +464,11 @@ def _encode_position(
                 f"budget {budget:.0f}",
             )  # fmt: skip
         recon = min(cands, key=lambda r: cands[r][3].mean())
-        final = searches[recon].for_budget(budget, cands[recon][5], real=True)
-        if final is None:  # the model was optimistic everywhere at this step: a coarser one
-            final = searches[recon].for_budget(budget, 2.0 * cands[recon][5], real=True)
+        final = None
+        for f in 1.25 ** np.arange(31):  # the size model was optimistic at this step: coarser
+            final = searches[recon].for_budget(budget, f * cands[recon][5], real=True)
+            if final is not None:
+                break
         if final is None:
             raise MotionDataError(where or None, None, "rate too low for the position coding")
         keys, q, codes, E = final[:4]
