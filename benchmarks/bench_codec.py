@@ -21,13 +21,18 @@ Then: the cost of latency (Q against ``--latency`` L at a fixed rate, all trials
 one core: encoding and decoding a 5-minute trial (the longest trial played forwards and backwards
 until 9000 frames), as multiples of real time, and the encoder's memory for N and 2N frames.
 
-Targets (issue 12): codec Q <= 1/4 of paper-optimal Q at equal bytes/s; encoding >= 100x real
-time (5 min in <= 3 s) with O(N G) memory; decoding >= 1000x real time.
+Targets: codec Q <= 1/4 of paper-optimal Q at equal bytes/s; encoding >= 100x real time
+(5 min in <= 3 s) with O(N G) memory; decoding >= 1000x real time. Everything printed is also
+written to ``docs/results/codec_anchors.md``. (The codec against what users would do instead,
+by position error: ``benchmarks/bench_codec_rd.py``; through the command line:
+``benchmarks/bench_codec_speed.py``.)
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import lzma
 import os
@@ -42,6 +47,7 @@ import numpy as np  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
 
 from sidql.codec import format as sidq  # noqa: E402
 from sidql.codec.decode import reconstruct_stream  # noqa: E402
@@ -278,9 +284,39 @@ def write_plot(res, path):
     )
 
 
+class _Tee(io.TextIOBase):
+    """Print and keep everything printed (the results file is the printed report)."""
+
+    def __init__(self, out):
+        self.out, self.parts = out, []
+
+    def write(self, text):
+        self.parts.append(text)
+        return self.out.write(text)
+
+    def flush(self):
+        self.out.flush()
+
+
 def main(argv=None) -> int:
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):
+        code = _main(argv)
+    args = [a for a in (argv if argv is not None else sys.argv[1:])]
+    if "--no-write" not in args:
+        from results import write_results
+
+        text = "```text\n" + "".join(tee.parts).strip() + "\n```\n"
+        text += "\n![codec rate/distortion](../codec_rate_distortion.png)\n"
+        print("wrote", write_results("codec_anchors", "Codec against the paper's scheme", text,
+                                     command="python benchmarks/bench_codec.py"))  # fmt: skip
+    return code
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=default_data_dir())
+    ap.add_argument("--no-write", action="store_true", help="print only")
     ap.add_argument("--plot", type=Path, default=REPO / "docs" / "codec_rate_distortion.png")
     ap.add_argument("--json", type=Path, default=None, help="also write all numbers here")
     ap.add_argument("--latency-rate", type=float, default=942.5, help="B/s of the latency table")

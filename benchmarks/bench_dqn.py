@@ -3,10 +3,13 @@ measured in the same run (greedy and the exact optimum on the same cost matrices
 
     python benchmarks/bench_dqn.py [--data ../shared/cmu] [--keyframes 15] [--policy FILE]
 
-The policy needs the clip's features and its segment-cost matrix; the cost matrix is issue 3's
-(also what greedy and optimal need), so it is timed separately and reported alongside. Without
-data the benchmark uses synthetic tasks of the same shape (60 frames, 88 feature channels).
-Target (issue 4): at most 1 ms per clip for W = 15 (paper: 4 ms for W = 5).
+The policy needs the clip's features and its segment-cost matrix; the cost matrix (also what
+greedy and optimal need) is timed separately and reported alongside. Without data the benchmark
+uses synthetic tasks of the same shape (60 frames, 88 feature channels). Every decision figure is
+measured twice in the same run: on the machine as it is, and with ``--load`` extra processes
+spinning (:mod:`busy`); their ratio shows whether other work slows the decision down (torch's
+thread pool would, oversubscribing the cores). Targets: at most 1 ms per clip for W = 15 (paper:
+4 ms for W = 5), and no more than 1.5x slower under load.
 """
 
 from __future__ import annotations
@@ -19,9 +22,10 @@ from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
+from busy import busy  # noqa: E402
 
 from sim.paths import default_data_dir  # noqa: E402
 
@@ -36,13 +40,30 @@ def per_clip_ms(fn, n_clips: int, repeat: int = 5) -> float:
     return 1e3 * best / n_clips
 
 
+def grouped_ms(fn, n: int, size: int = 1, repeat: int = 5) -> float:
+    """Mean per clip [ms] over the ``n // size`` groups of ``size`` clips, each group timed as
+    the best of ``repeat`` calls of ``fn(start, stop)``: short timings, robust to a process being
+    switched out now and then on a shared machine, and the same clips for every column."""
+    times = []
+    for a in range(0, n - size + 1, size):
+        best = np.inf
+        for _ in range(repeat):
+            t = time.perf_counter()
+            fn(a, a + size)
+            best = min(best, time.perf_counter() - t)
+        times.append(best / size)
+    return 1e3 * float(np.mean(times))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", default=str(default_data_dir() or ""))
     parser.add_argument("--keyframes", type=int, nargs="+", default=[5, 15])
     parser.add_argument("--policy", default=None, help="policy file (default: the shipped one)")
+    parser.add_argument("--load", type=int, default=2, help="spinning processes for 'busy'")
+    parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args()
-    torch.set_num_threads(1)
+    # torch keeps its default threads: the decision path itself must not depend on them
 
     from sidql.keyframes.methods import greedy_from_costs
     from sidql.keyframes.optimal import solve
@@ -62,25 +83,51 @@ def main() -> int:
         costs = np.triu(rng.uniform(0, 1, (100, 60, 60)), 1)
         source = "100 synthetic clips (no data found)"
     n = len(feats)
-    print(f"decision time per clip, one core, {source}")
-    print("| W | dqn batched [ms] | dqn one clip [ms] | greedy [ms] | optimal DP [ms] | "
-          "greedy / dqn batched |")  # fmt: skip
-    print("|---|---|---|---|---|---|")
+    lines = [
+        f"Decision time per clip (each clip, or batch of 8 clips, timed as the best of 5; mean over all clips), one core, {source}; quiet = the machine as it was, busy = "
+        f"with {args.load} more processes spinning; load average {os.getloadavg()[0]:.1f} at "
+        "the start.",
+        "",
+        "| W | | dqn, batches of 8 [ms] | dqn one clip [ms] | greedy [ms] | optimal DP [ms] |",
+        "|---|---|---|---|---|---|",
+    ]
+    ratios = []
     for w in args.keyframes:
         policy.decide(feats[:2], costs[:2], w)  # warm-up
-        batched = per_clip_ms(lambda w=w: policy.decide(feats, costs, w), n)
-        m = min(n, 20)
-        single = per_clip_ms(
-            lambda w=w, m=m: [
-                policy.decide(feats[i : i + 1], costs[i : i + 1], w) for i in range(m)
-            ],
-            m,
-        )
-        greedy = per_clip_ms(lambda w=w: [greedy_from_costs(c, w) for c in costs], n)
         solve(costs[0], 22, w)
-        optimal = per_clip_ms(lambda w=w: [solve(c, 22, w).keyframes(w) for c in costs], n)
-        print(f"| {w} | {batched:.3f} | {single:.3f} | {greedy:.3f} | {optimal:.3f} | "
-              f"{greedy / batched:.2f} |")  # fmt: skip
+        got = {}
+        for label, extra in (("quiet", 0), ("busy", args.load)):
+            with busy(extra):
+                got[label] = (
+                    grouped_ms(lambda a, b, w=w: policy.decide(feats[a:b], costs[a:b], w), n, 8),
+                    grouped_ms(lambda a, b, w=w: policy.decide(feats[a:b], costs[a:b], w), n),
+                    grouped_ms(lambda a, b, w=w: [greedy_from_costs(c, w) for c in costs[a:b]], n),
+                    grouped_ms(
+                        lambda a, b, w=w: [solve(c, 22, w).keyframes(w) for c in costs[a:b]], n
+                    ),
+                )
+        for label, v in got.items():
+            lines.append(f"| {w} | {label} | " + " | ".join(f"{x:.3f}" for x in v) + " |")
+        r = [b / q for b, q in zip(got["busy"], got["quiet"], strict=True)]
+        ratios.append((w, r, got["quiet"][1]))
+        lines.append(f"| {w} | busy / quiet | " + " | ".join(f"{x:.2f}x" for x in r) + " |")
+    lines.append("")
+    for w, r, single in ratios:
+        dqn = r[1]  # one clip at a time, as a decision is made (batches: a longer window to lose)
+        rel = dqn / r[2]
+        lines.append(
+            f"W = {w}: one clip {single:.3f} ms (target <= 1 ms: "
+            f"{'met' if single <= 1 else 'not met'}); one clip busy / quiet {dqn:.2f}x, which is "
+            f"{rel:.2f}x the slow-down of greedy, a one-thread compiled kernel sharing the same "
+            f"cores (target: the decision no more sensitive to load than 1.5x: "
+            f"{'met' if rel <= 1.5 else 'not met'})."
+        )
+    lines.append(
+        "\nOn 2 cores with other processes spinning, any one-thread computation gets about half a "
+        "core, so a plain busy / quiet ratio near 2 is the machine, not the code; greedy's ratio "
+        "in the same run is the yardstick (a decision through torch's default thread pool would "
+        "slow down far more: its threads oversubscribe the cores)."
+    )
     if Path(args.data).is_dir():
         from sidql.keyframes.segment_costs import segment_cost_matrix
         from sidql.keyframes.spherical import chart
@@ -92,7 +139,16 @@ def main() -> int:
         series = [chart(c) for c in clips]
         segment_cost_matrix(series[0])
         ms = per_clip_ms(lambda: [segment_cost_matrix(s) for s in series], len(series))
-        print(f"\nsegment-cost matrix (needed by dqn, greedy and optimal alike): {ms:.3f} ms/clip")
+        lines.append(
+            f"\nSegment-cost matrix (needed by dqn, greedy and optimal alike): {ms:.3f} ms/clip."
+        )
+    text = "\n".join(lines)
+    print(text)
+    if not args.no_write:
+        from results import write_results
+
+        print("wrote", write_results("dqn_decision", "DQN decision time, quiet and busy", text,
+                                     command="python benchmarks/bench_dqn.py"))  # fmt: skip
     return 0
 
 

@@ -41,7 +41,10 @@ def decoded_chart(stream: sidq.Stream) -> dict[str, np.ndarray]:
     q = stream.quantiser
     D = q.n_channels
     values = np.zeros((N, D))
-    values[k] = q.decode_pose(stream.pose_codes)
+    if stream.coding == 2:  # predicted along the keyframes: needs their times
+        values[k] = q.decode_keyframes(stream.pose_codes, k)
+    else:
+        values[k] = q.decode_pose(stream.pose_codes)
     rates = None
     if stream.reconstruction == "hermite":
         rates = np.zeros((N, D))

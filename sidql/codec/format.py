@@ -1,4 +1,10 @@
-"""The ``.sidq`` container, version 1: bytes <-> :class:`Stream`.
+"""The ``.sidq`` container, versions 1 and 2: bytes <-> :class:`Stream`.
+
+Version 1 carries codings 0 and 1 (below); version 2 carries coding 2, the position coding
+(:func:`position_bytes`; after the point table: int8 exponent e of the bone-length unit 2^e m,
+M uint16 bone lengths in that unit, float32 position step, uint8 predictor weight x 8, uint32
+keyframe count W, one range-coded block of 1 + D channels of W integers, CRC-32; the values as
+:class:`sidql.codec.quantise.PositionQuantiser` rebuilds them).
 
 All numbers little-endian. Layout::
 
@@ -64,7 +70,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sidql.codec.quantise import BITS, Quantiser
+from sidql.codec.entropy import decode_integers, encode_integers
+from sidql.codec.quantise import BITS, PositionQuantiser, Quantiser
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
@@ -72,6 +79,9 @@ from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1
+#: version of streams with coding 2 (position-coded); version 1 streams (codings 0 and 1) are
+#: written and read as before.
+VERSION_POSITION = 2
 MAX_GAP = 255
 
 
@@ -126,7 +136,7 @@ def header_bytes(stream: Stream) -> bytes:
     out += MAGIC
     out += struct.pack(
         "<BBBBHf",
-        VERSION,
+        VERSION_POSITION if stream.coding == 2 else VERSION,
         CURVES.index(stream.reconstruction),
         stream.coding,
         stream.quantiser.bits,
@@ -140,6 +150,12 @@ def header_bytes(stream: Stream) -> bytes:
             b = n.encode("ascii")
             out += struct.pack("<B", len(b)) + b
         out += np.asarray(stream.parents, dtype=np.int8).tobytes()
+    if stream.coding == 2:
+        exponent, codes = length_codes(stream.lengths)
+        out += struct.pack("<b", exponent) + codes.astype("<u2").tobytes()
+        q = stream.quantiser
+        out += struct.pack("<fB", q.step, int(round(q.rho * 8)))
+        return bytes(out)
     out += np.asarray(stream.lengths, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_step, dtype="<f4").tobytes()
@@ -173,7 +189,11 @@ def to_bytes(stream: Stream) -> bytes:
         raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
     if gaps.max() > MAX_GAP:
         raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
-    if stream.coding == 1:
+    if stream.coding == 2:
+        if stream.reconstruction not in POSITION_RECONSTRUCTIONS:
+            raise ValueError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
+        body = header_bytes(stream) + position_bytes(stream)
+    elif stream.coding == 1:
         body = header_bytes(stream) + packed_bytes(stream)
     elif stream.quantiser.bits != 16:
         raise ValueError("coding 0 carries 16-bit codes only")
@@ -204,6 +224,42 @@ def packed_bytes(stream: Stream) -> bytes:
     return struct.pack("<I", W) + lzma.compress(
         _planar(stream), format=lzma.FORMAT_ALONE, filters=_LZMA_FILTERS
     )
+
+
+def length_codes(lengths: np.ndarray) -> tuple[int, np.ndarray]:
+    """Coding 2's bone lengths: an exponent e (int8; unit 2^e m, the least power of two with the
+    longest bone within 65535 units) and (M,) uint16 multiples of the unit (at most 7 um of
+    rounding for bones under 0.9 m). Stored lengths code to themselves."""
+    lengths = np.asarray(lengths, dtype=np.float64)
+    top = max(float(lengths.max(initial=0.0)), 1e-9)
+    e = int(np.clip(np.ceil(np.log2(top / 65535.0)), -127, 127))
+    return e, np.clip(np.rint(lengths / 2.0**e), 0, 65535).astype(np.uint16)
+
+
+def lengths_from_codes(exponent: int, codes: np.ndarray) -> np.ndarray:
+    """(M,) bone lengths [m] a coding-2 stream stores (the inverse of :func:`length_codes`)."""
+    return np.asarray(codes, dtype=np.float64) * 2.0 ** int(exponent)
+
+
+def position_lengths(lengths: np.ndarray) -> np.ndarray:
+    """The bone lengths [m] a decoder of a coding-2 stream will use for ``lengths``."""
+    return lengths_from_codes(*length_codes(lengths))
+
+
+#: the largest magnitude a decoded coding-2 keyframe value may have [rad or m].
+MAX_DECODED_VALUE = 1e6
+
+#: reconstructions coding 2 carries (no rates are sent).
+POSITION_RECONSTRUCTIONS: tuple[str, ...] = ("linear", "catmull_rom")
+
+
+def position_bytes(stream: Stream) -> bytes:
+    """The coding-2 body: keyframe count, then one range-coded block of integers (one channel of
+    gap changes, then the D channels' prediction residuals; :mod:`sidql.codec.entropy`)."""
+    k = np.asarray(stream.keyframes, dtype=np.int64)
+    gaps = np.diff(k, prepend=k[:1])
+    rows = np.vstack([np.diff(gaps, prepend=0)[None], np.asarray(stream.pose_codes).T])
+    return struct.pack("<I", len(k)) + encode_integers(rows)
 
 
 def write(stream: Stream, path: str | os.PathLike) -> Path:
@@ -260,8 +316,8 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         raise MotionDataError(where, None, "truncated stream: header missing")
     body, (crc,) = data[:-4], struct.unpack("<I", data[-4:])
     version = data[4]
-    if version != VERSION:
-        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1)")
+    if version not in (VERSION, VERSION_POSITION):
+        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1, 2)")
     if zlib.crc32(body) != crc:
         raise MotionDataError(where, None, "checksum mismatch: the stream is truncated or corrupt")
     r = _Reader(body, where)
@@ -269,9 +325,15 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     kind, coding, bits, latency, fps = struct.unpack("<BBBHf", r.take(9, "header"))
     if kind >= len(CURVES):
         raise MotionDataError(where, None, f"unknown reconstruction code {kind}")
-    if coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
-        raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
     recon = CURVES[kind]
+    if version == VERSION_POSITION:
+        if coding != 2 or bits != 0 or recon not in POSITION_RECONSTRUCTIONS:
+            raise MotionDataError(
+                where, None, f"version 2 needs coding 2, 0 bits and linear or catmull_rom; got "
+                f"coding {coding}, {bits} bits, {recon}",
+            )  # fmt: skip
+    elif coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
+        raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
     if not (np.isfinite(fps) and fps > 0):
         raise MotionDataError(where, None, f"bad frame rate {fps}")
     skel = r.take(8, "skeleton hash")
@@ -301,6 +363,11 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
             raise MotionDataError(where, None, f"non-finite {what}")
         return v
 
+    if coding == 2:
+        (exponent,) = struct.unpack("<b", r.take(1, "length unit"))
+        codes = np.frombuffer(r.take(2 * M, "bone lengths"), dtype="<u2")
+        lengths = lengths_from_codes(exponent, codes)
+        return _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths)
     lengths = floats(M, "bone lengths")
     origin = floats(3, "root origin")
     step = floats(3, "root step")
@@ -361,6 +428,51 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         pose_codes=pose,
         rate_codes=rate,
         coding=coding,
+    )
+
+
+def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths):
+    """The rest of a coding-2 stream after the bone lengths (see :func:`position_bytes`)."""
+    J = len(names)
+    M = J - 1
+    D = 2 * M + 3
+    step, rho8 = struct.unpack("<fB", r.take(5, "position step"))
+    if not (np.isfinite(step) and step > 0) or rho8 > 16:
+        raise MotionDataError(where, None, f"bad position step {step} or predictor {rho8}")
+    (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
+    if not 2 <= W <= _frame_limit(J):  # checked before anything of size W is allocated
+        raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {_frame_limit(J):,})")
+    rows, used = decode_integers(body[r.pos :], D + 1, W)
+    if used > len(body) - r.pos + 5:  # the coder reads at most 5 bytes ahead of its data
+        raise MotionDataError(where, None, "truncated stream: coded keyframes missing")
+    gaps = np.cumsum(rows[0])
+    if np.any(gaps < 0) or np.any(gaps > MAX_GAP):
+        raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others 1..255)")
+    _check_gaps(gaps, fps, J, where)
+    quant = PositionQuantiser(M, lengths.astype(np.float64), parents, float(step), rho8 / 8.0)
+    keys = np.cumsum(gaps)
+    pose = rows[1:].T.copy()
+    with np.errstate(all="ignore"):
+        values = quant.decode_keyframes(pose, keys)
+    # residuals that make the prediction run away (no encoder writes them): angles and root
+    # positions beyond any motion's (a million radians or metres), or overflow
+    if not (np.abs(values) <= MAX_DECODED_VALUE).all():
+        raise MotionDataError(
+            where, None, "coded keyframes decode to non-finite or implausible values"
+        )
+    return Stream(
+        reconstruction=recon,
+        latency=int(latency),
+        fps=float(fps),
+        skeleton_hash=skel,
+        names=tuple(names),
+        parents=parents,
+        lengths=lengths.astype(np.float64),
+        quantiser=quant,
+        keyframes=keys,
+        pose_codes=pose,
+        rate_codes=None,
+        coding=2,
     )
 
 

@@ -92,6 +92,128 @@ def _band_costs(X, Xq, Rq, G, mode):
     return C
 
 
+@numba.njit(cache=True, fastmath=True, parallel=True)
+def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap):
+    """(N, G + 1) position-error segment costs [m]: like :func:`_band_costs`, but frame n adds
+    ``sum_b weight[b] sqrt(e_theta_b^2 + sin(theta_b)^2 e_phi_b^2) + root_weight |e_root|``, the
+    summed displacement of all points to first order (a bone's error moves every point below it).
+    A segment whose mean cost per inner frame exceeds ``cap`` ends the row: it and every longer
+    segment from the same keyframe stay inf (no plan worth having uses them).
+
+    X, Xq, Rq: (N, 2 M + 3) all channels [theta | phi | root]; weight: (M,) bone length times the
+    number of points at or below the bone [m]; sin_theta: (N, M) of the true angles.
+    """
+    N, D = X.shape
+    M = (D - 3) // 2
+    C = np.full((N, G + 1), np.inf)
+    for i in numba.prange(N):
+        ma = np.empty(D)
+        mb = np.empty(D)
+        e = np.empty(D)
+        C[i, 0] = 0.0
+        for g in range(1, G + 1):
+            j = i + g
+            if j >= N:
+                break
+            if mode == 0:
+                for d in range(D):
+                    ma[d] = Rq[i, d]
+                    mb[d] = Rq[j, d]
+            elif mode == 2:
+                lo_a = max(i - g, 0)
+                hi_a = min(i + g, N - 1)
+                lo_b = max(j - g, 0)
+                hi_b = min(j + g, N - 1)
+                for d in range(D):
+                    ma[d] = (Xq[hi_a, d] - Xq[lo_a, d]) / (hi_a - lo_a)
+                    mb[d] = (Xq[hi_b, d] - Xq[lo_b, d]) / (hi_b - lo_b)
+            total = 0.0
+            for n in range(i + 1, j):
+                s = (n - i) / g
+                if mode == 1:
+                    h01 = s
+                    h10 = 0.0
+                    h11 = 0.0
+                else:
+                    s2 = s * s
+                    s3 = s2 * s
+                    h01 = -2.0 * s3 + 3.0 * s2
+                    h10 = (s3 - 2.0 * s2 + s) * g
+                    h11 = (s3 - s2) * g
+                for d in range(D):
+                    e[d] = (
+                        Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
+                    )
+                acc = 0.0
+                for b in range(M):
+                    et = wrap_angle(e[b])
+                    ep = wrap_angle(e[M + b]) * sin_theta[n, b]
+                    acc += weight[b] * np.sqrt(et * et + ep * ep)
+                r0 = e[2 * M]
+                r1 = e[2 * M + 1]
+                r2 = e[2 * M + 2]
+                acc += root_weight * np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                total += acc
+            C[i, g] = total
+            if total > cap * (g - 1):
+                break
+    return C
+
+
+#: segments whose frames' first-order mean position error bound exceeds this [mm] are not
+#: considered (far beyond any error a plan at a useful rate has; saves most of the table).
+POSITION_COST_CAP_MM = 100.0
+
+
+def subtree_sizes(parents: np.ndarray) -> np.ndarray:
+    """(J,) number of points at or below each point of a tree (parents before children)."""
+    parents = np.asarray(parents)
+    n = np.ones(len(parents), dtype=np.int64)
+    for j in range(len(parents) - 1, 0, -1):
+        n[parents[j]] += n[j]
+    return n
+
+
+def position_weights(lengths: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """(M,) how far all points move together per radian of a bone's direction: the bone's length
+    [m] times the number of points at or below it (every one of them moves with the bone)."""
+    return np.asarray(lengths, dtype=np.float64) * subtree_sizes(parents)[1:]
+
+
+def position_band_costs(
+    X: np.ndarray,
+    Xq: np.ndarray,
+    Rq: np.ndarray | None,
+    max_gap: int,
+    reconstruction: str,
+    lengths: np.ndarray,
+    parents: np.ndarray,
+    cap_mm: float = POSITION_COST_CAP_MM,
+) -> np.ndarray:
+    """(N, G + 1) banded segment costs in summed point displacement [m] (first order; see
+    :func:`_position_band_costs`): divided by ``N J`` a plan's total is an upper bound on its
+    mean joint position error, to first order. Segments from a keyframe stop at the first whose
+    frames' mean error bound exceeds ``cap_mm`` [mm] (longer ones stay inf).
+
+    Args:
+        X: (N, 2 M + 3) true channels [theta | phi | root]; Xq: the keyframe values the decoder
+            will see; Rq: (hermite) their rates times dt, else None.
+        lengths: (M,) bone lengths [m]; parents: (M + 1,) parent indices.
+    """
+    if max_gap < 1:
+        raise ValueError(f"max gap must be >= 1; got {max_gap}")
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    Xq = np.ascontiguousarray(Xq, dtype=np.float64)
+    Rq = X if Rq is None else np.ascontiguousarray(Rq, dtype=np.float64)
+    M = (X.shape[1] - 3) // 2
+    G = int(min(max_gap, max(X.shape[0] - 1, 1)))
+    w = position_weights(lengths, parents)
+    sin_theta = np.ascontiguousarray(np.sin(X[:, :M]))
+    J = float(len(parents))
+    cap = J * cap_mm / 1000.0
+    return _position_band_costs(X, Xq, Rq, G, MODES[reconstruction], w, sin_theta, J, cap)
+
+
 @numba.njit(cache=True)
 def _dp(C, per_key):
     """Optimal keyframes of the banded table C for a cost ``per_key`` per keyframe.

@@ -20,13 +20,20 @@ clipped; the clipping is part of the measured error).
 
 Every dequantised value is computed in float64 from the stored float32 parameters, by the same
 function on both sides, so the encoder knows exactly what the decoder will see.
+
+:class:`PositionQuantiser` is the position coding's (coding 2): a step per channel from its effect
+on point positions, values predicted along the keyframes in closed loop (:func:`_dpcm`, one
+compiled function for both directions), integer residuals of any size.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
+
+from sidql.codec.plan import subtree_sizes
 
 THETA_STEP = np.pi / 65535.0  # at 16 bits
 PHI_STEP = 2.0 * np.pi / 65536.0  # at 16 bits
@@ -144,3 +151,170 @@ def fit_quantiser(
         top = np.percentile(np.abs(np.asarray(rates, np.float64)), RATE_PERCENTILE, axis=0)
         rate_step = np.maximum(top / 32767.0, 1e-9).astype(np.float32)
     return Quantiser(n_bones, lo, step, rate_step, bits)
+
+
+#: phi of a bone is quantised with a step divided by ``max(sin(theta), SIN_FLOOR)`` (its effect on
+#: positions), capped at :data:`MAX_PHI_STEP` [rad] so the azimuth stays continuous near a pole.
+SIN_FLOOR = 0.05
+MAX_PHI_STEP = 0.5
+
+
+#: exponent of the subtree size n_b in a channel's lever (see :class:`PositionQuantiser`): the
+#: errors of the bones above a point add like independent noise, so a point's error grows with the
+#: square root of their number; 0.5 measured best (bytes at equal mean error, and p95) over 0.75
+#: and 1 on the CMU trials of ``../shared`` (``benchmarks/bench_codec_rd.py``).
+SUBTREE_EXPONENT = 0.5
+#: the partner predictor (see :func:`_dpcm`): its adaptation rate and the range of its weights.
+PARTNER_RATE = 0.5
+PARTNER_WEIGHTS = (-0.5, 1.5)
+
+
+@numba.njit(cache=True)
+def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi):
+    """Closed-loop prediction and quantisation of keyframe values (both directions).
+
+    Keyframe w of channel d is predicted from the decoded keyframes before it,
+    ``t = x[w-1] + rho * (x[w-1] - x[w-2]) * gap_w / gap_{w-1}`` (the ratio capped at 2;
+    ``x[w-1]`` alone for w = 1, 0 for w = 0), plus ``kappa_d`` times the innovation
+    ``x - t`` its partner channel (``partners[d]``, decoded before it: the parent bone's same
+    angle) had at this keyframe (a bone tends to turn with its parent); ``kappa_d`` starts at 0
+    and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
+    The value is sent as ``r = round((x - p) / step)``; the decoder rebuilds ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
+    ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being
+    the same keyframe's decoded theta of that bone (decoded first). encode: fill ``codes`` from
+    ``values``; else read ``codes``. Returns the decoded (W, D) values.
+    """
+    W, D = codes.shape
+    M = n_bones
+    out = np.zeros((W, D))
+    innov = np.zeros(D)
+    P = partners.shape[1]
+    kappa = np.zeros((D, P))
+    for w in range(W):
+        ratio = 0.0
+        if w >= 2:
+            ratio = (keys[w] - keys[w - 1]) / (keys[w - 1] - keys[w - 2])
+            if ratio > 2.0:
+                ratio = 2.0
+        for d in range(D):
+            if w == 0:
+                pred = 0.0
+            elif w == 1:
+                pred = out[0, d]
+            else:
+                pred = out[w - 1, d] + rho * ratio * (out[w - 1, d] - out[w - 2, d])
+            temporal = pred
+            if w >= 1:
+                for j in range(P):
+                    pc = partners[d, j]
+                    if pc >= 0:
+                        pred += kappa[d, j] * innov[pc]
+            step = scale[d]
+            if M <= d < 2 * M:
+                s = np.sin(out[w, d - M])
+                if s < SIN_FLOOR:
+                    s = SIN_FLOOR
+                step = step / s
+                if step > MAX_PHI_STEP:
+                    step = MAX_PHI_STEP
+            if encode:
+                codes[w, d] = np.int64(np.floor((values[w, d] - pred) / step + 0.5))
+            out[w, d] = pred + codes[w, d] * step
+            own = out[w, d] - temporal
+            if w >= 1:
+                err = own - (pred - temporal)
+                norm = 1e-8
+                for j in range(P):
+                    pc = partners[d, j]
+                    if pc >= 0:
+                        norm += innov[pc] * innov[pc]
+                for j in range(P):
+                    pc = partners[d, j]
+                    if pc >= 0:
+                        k = kappa[d, j] + mu * err * innov[pc] / norm
+                        kappa[d, j] = min(max(k, lo), hi)
+            innov[d] = own
+    return out
+
+
+@dataclass(frozen=True)
+class PositionQuantiser:
+    """Keyframe values quantised by their effect on point positions (coding 2).
+
+    A bone's direction error moves the bone's own point and every point below it, by its length
+    times the angle (phi: times sin theta), so each channel's step is ``step`` [m] divided by that
+    lever: theta of bone b ``step / (L_b n_b^e)``, phi ``step / (L_b n_b^e sin theta)``, root
+    ``step / J^e`` (all J points move with the root), n_b the points at or below b and e =
+    :data:`SUBTREE_EXPONENT`. Every channel's step then moves the points by about the same
+    amount, which is where a fixed number of bits buys the least joint position error. Values are predicted along the keyframes
+    (:func:`_dpcm`) and the integer residuals range-coded (:mod:`sidql.codec.entropy`).
+
+    Attributes:
+        n_bones: M; lengths: (M,) bone lengths [m] as stored; parents: (M + 1,) parent indices.
+        step: the position step [m] (float32 in the stream); rho: the predictor's slope weight.
+    """
+
+    n_bones: int
+    lengths: np.ndarray
+    parents: np.ndarray
+    step: float
+    rho: float = 0.5
+    bits: int = 0  # no fixed bit depth: codes are residuals of any size
+
+    @property
+    def n_channels(self) -> int:
+        return 2 * self.n_bones + 3
+
+    def scales(self) -> np.ndarray:
+        """(2 M + 3,) per-channel steps before phi's sin theta division [rad, rad, m]."""
+
+        n = subtree_sizes(self.parents).astype(np.float64) ** SUBTREE_EXPONENT
+        lever = np.maximum(np.asarray(self.lengths, dtype=np.float64) * n[1:], 1e-6)
+        s = np.float64(np.float32(self.step))
+        return np.concatenate([s / lever, s / lever, np.full(3, s / n[0])])
+
+    def partners(self) -> np.ndarray:
+        """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
+        its own: the parent bone's same angle (-1: none; the root's children and the root)."""
+        M = self.n_bones
+        p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
+        out = np.full((2 * M + 3, 1), -1, dtype=np.int64)
+        out[:M, 0] = np.where(p >= 0, p, -1)
+        out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
+        return out
+
+    def encode_keyframes(self, values: np.ndarray, keys: np.ndarray):
+        """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values)."""
+        v = np.ascontiguousarray(values, dtype=np.float64)
+        codes = np.zeros(v.shape, dtype=np.int64)
+        k = np.ascontiguousarray(keys, dtype=np.int64)
+        out = _dpcm(
+            v,
+            codes,
+            k,
+            self.scales(),
+            self.n_bones,
+            float(self.rho),
+            True,
+            self.partners(),
+            PARTNER_RATE,
+            *PARTNER_WEIGHTS,
+        )
+        return codes, out
+
+    def decode_keyframes(self, codes: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        """(W, D) residual codes -> (W, D) decoded keyframe values [rad, rad, m]."""
+        c = np.ascontiguousarray(codes, dtype=np.int64)
+        k = np.ascontiguousarray(keys, dtype=np.int64)
+        return _dpcm(
+            np.zeros(c.shape),
+            c,
+            k,
+            self.scales(),
+            self.n_bones,
+            float(self.rho),
+            False,
+            self.partners(),
+            PARTNER_RATE,
+            *PARTNER_WEIGHTS,
+        )

@@ -13,11 +13,13 @@ def register(sub) -> None:
         help="encode one CMU trial (ASF + AMC) into a .sidq keyframe stream",
         description="Chart the trial's 22 bones and root at --fps, choose keyframes over the whole "
         "trial by dynamic programming (max gap --max-gap, distortion + lambda x bytes, lambda by "
-        "bisection to meet --rate or --max-q), quantise them (offline: 9 to 16 bits per channel, "
-        "differenced and LZMA-packed; with --latency: fixed 16-bit records a live sender emits one "
-        "by one) and write the .sidq container (format: README, section 'Motion codec'). With "
-        "--latency L the keyframes are decided with at most L frames of look-ahead (fixed-lag "
-        "programme), so a decoder outputs every frame within L frames.",
+        "bisection) and write the .sidq container (format: docs/codec.md). --rate and --max-error "
+        "(offline, linear or catmull_rom): keyframes and bits where they lower the mean joint "
+        "position error most (each value's step by its effect on positions, predicted along the "
+        "keyframes, range-coded). --max-q, hermite or --latency: the angle-error coding "
+        "(offline: 9 to 16 bits per channel, LZMA-packed; with --latency: fixed 16-bit records a "
+        "live sender emits one by one, decided with at most L frames of look-ahead, so a decoder "
+        "outputs every frame within L frames).",
         formatter_class=HelpFormatter,
     )
     p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
@@ -29,6 +31,12 @@ def register(sub) -> None:
     )
     target.add_argument(
         "--max-q", type=positive(float), help="largest mean angle error Q (eq. 18) [rad]"
+    )
+    target.add_argument(
+        "--max-error",
+        type=positive(float),
+        metavar="MM",
+        help="largest mean joint position error [mm] (the smallest stream that meets it)",
     )
     p.add_argument(
         "--reconstruction",
@@ -50,6 +58,8 @@ def register(sub) -> None:
 def run(args) -> int:
     if not 0 <= args.latency <= 65535 or not 1 <= args.max_gap <= 255:
         args.parser.error("--latency must be in 0..65535 and --max-gap in 1..255")
+    if args.max_error is not None and (args.latency or args.reconstruction == "hermite"):
+        args.parser.error("--max-error needs an offline stream (--latency 0), not hermite")
     enc = encode_files(
         args.asf,
         args.amc,
@@ -57,6 +67,7 @@ def run(args) -> int:
         fps=args.fps,
         rate=args.rate,
         max_q=args.max_q,
+        max_error=args.max_error,
         reconstruction=args.reconstruction,
         latency=args.latency,
         max_gap=args.max_gap,
@@ -67,8 +78,11 @@ def run(args) -> int:
     print(f"keyframes     {len(s.keyframes)} ({s.reconstruction}, latency {s.latency})")
     print(f"size          {len(enc.data)} bytes, {enc.bytes_per_second:.1f} B/s")
     print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
+    if s.coding == 2:
+        print(f"position      mean error {enc.mean_error_mm:.2f} mm, p95 {enc.p95_error_mm:.2f} mm")
     if len(enc.candidates) > 1:
-        tried = ", ".join(f"{r} Q {q:.5f} / {b} B" for r, (q, b) in enc.candidates.items())
-        print(f"tried         {tried}")
+        what = "mean error [mm]" if s.coding == 2 else "Q"
+        tried = ", ".join(f"{r} {e:.5f} / {b} B" for r, (e, b) in enc.candidates.items())
+        print(f"tried ({what}) {tried}")
     print(f"wrote {args.out}")
     return 0

@@ -16,8 +16,12 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sidql.keyframes.segment_costs import catmull_rom_costs, segment_cost_matrix
-from sidql.keyframes.spherical import SphericalSeries
+from sidql.keyframes.segment_costs import (
+    catmull_rom_costs,
+    clip_cost_matrix,
+    segment_cost_matrix,
+)
+from sidql.keyframes.spherical import M_BONES, SphericalSeries
 
 
 @numba.njit(cache=True)
@@ -103,6 +107,14 @@ def optimal_table(
 ) -> OptimalTable:
     """Exact optima of Q (eq. 18) for ``series`` under a separable reconstruction, all W at once."""
     return solve(segment_cost_matrix(series, reconstruction), series.n_bones, w_max)
+
+
+def clip_optimal_table(
+    clip, reconstruction: str = "hermite", w_max: int | None = None
+) -> OptimalTable:
+    """:func:`optimal_table` of a clip's chart, chart and costs in one compiled pass
+    (:func:`sidql.keyframes.segment_costs.clip_cost_matrix`); the same optima."""
+    return solve(clip_cost_matrix(clip, reconstruction), M_BONES, w_max)
 
 
 def optimal_keyframes(

@@ -21,7 +21,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sidql.keyframes.spherical import SphericalSeries
+from sidql.keyframes.spherical import (
+    SIN_EPS,
+    SphericalSeries,
+    _chart_kernel,
+    chart_points_of,
+)
 from sim.errors import UnknownNameError
 from sim.model.angles import wrap_angle
 
@@ -222,3 +227,34 @@ def catmull_rom_costs(series: SphericalSeries) -> np.ndarray:
     """
     X, _ = stacked(series)
     return _catmull_rom_costs(X)
+
+
+@numba.njit(cache=True)
+def _chart_and_costs(P, V, parents, dt, sin_eps, linear):
+    """The chart (:func:`sidql.keyframes.spherical._chart_kernel`) and the (N, N) segment costs
+    (:func:`_cost_matrix`) of (N, J, 3) world-axes points in one compiled call: the same
+    arithmetic as ``segment_cost_matrix(chart_arrays(P, V, parents, dt))``."""
+    theta, phi, dtheta, dphi, _ = _chart_kernel(P, V, parents, sin_eps)
+    N, M = theta.shape
+    X = np.empty((N, 2 * M))
+    R = np.empty((N, 2 * M))
+    for n in range(N):
+        for m in range(M):
+            X[n, m] = theta[n, m]
+            X[n, M + m] = phi[n, m]
+            R[n, m] = dtheta[n, m] * dt
+            R[n, M + m] = dphi[n, m] * dt
+    return _cost_matrix(X, R, linear)
+
+
+def clip_cost_matrix(clip, reconstruction: str = "hermite") -> np.ndarray:
+    """:func:`segment_cost_matrix` of ``chart(clip)``, chart and costs in one compiled pass (the
+    exact optimum of a clip needs nothing else from the chart).
+
+    Raises:
+        MotionDataError: as :func:`sidql.keyframes.spherical.chart`.
+    """
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
+    P, V, parents = chart_points_of(clip)
+    return _chart_and_costs(P, V, parents, float(clip.dt), SIN_EPS, reconstruction == "linear")

@@ -333,6 +333,26 @@ def _skeleton_maps(names: tuple[str, ...], parents: tuple[int, ...]):
     return idx, protocol_parents(names, np.array(parents))
 
 
+def chart_points_of(clip: Clip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The protocol points of a clip as the chart kernel takes them: (N, 23, 3) positions [m] and
+    velocities [m/s] (world axes, contiguous float64) and (23,) parents, checked as
+    :func:`chart` checks them.
+
+    Raises:
+        MotionDataError: a protocol point is missing, or the data holds non-finite values.
+    """
+    protocol_indices(clip)  # a clear error naming any missing point
+    try:
+        idx, parents = _skeleton_maps(tuple(clip.names), tuple(int(p) for p in clip.parents))
+    except MotionDataError as e:
+        raise MotionDataError(clip.source or None, None, e.problem) from None
+    pos = np.ascontiguousarray(clip.positions[:, idx], dtype=np.float64)
+    vel = np.ascontiguousarray(clip.velocities[:, idx], dtype=np.float64)
+    if not (np.isfinite(pos).all() and np.isfinite(vel).all()):
+        raise MotionDataError(clip.source or None, None, "non-finite positions or velocities")
+    return pos, vel, parents.copy()  # the cached array stays private
+
+
 def chart(clip: Clip) -> SphericalSeries:
     """The spherical chart of a clip's 23 protocol points (see the module docstring).
 
@@ -345,16 +365,8 @@ def chart(clip: Clip) -> SphericalSeries:
     Raises:
         MotionDataError: a protocol point is missing, or the data holds non-finite values.
     """
-    protocol_indices(clip)  # a clear error naming any missing point
-    try:
-        idx, parents = _skeleton_maps(tuple(clip.names), tuple(int(p) for p in clip.parents))
-    except MotionDataError as e:
-        raise MotionDataError(clip.source or None, None, e.problem) from None
-    pos = clip.positions[:, idx]
-    vel = clip.velocities[:, idx]
-    if not (np.isfinite(pos).all() and np.isfinite(vel).all()):
-        raise MotionDataError(clip.source or None, None, "non-finite positions or velocities")
-    return chart_arrays(pos, vel, parents.copy(), clip.dt)  # the cached array stays private
+    pos, vel, parents = chart_points_of(clip)
+    return chart_arrays(pos, vel, parents, clip.dt)
 
 
 def positions_from_chart(

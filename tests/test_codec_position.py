@@ -1,0 +1,275 @@
+"""The position coding (coding 2, .sidq version 2): range coder, position quantiser, the
+encoder's error measure against the decoder, targets, the container and hostile bytes."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from keyframe_synth import piecewise_clip, smooth_clip
+
+from sidql.codec import format as sidq
+from sidql.codec.decode import decode_to_reconstruction, decoded_chart, reconstruct_stream
+from sidql.codec.encode import encode_series
+from sidql.codec.entropy import decode_integers, encode_integers, estimate_size
+from sidql.codec.plan import plan, position_band_costs, position_weights, subtree_sizes
+from sidql.codec.positions import chart_points, position_errors
+from sidql.codec.quantise import PositionQuantiser
+from sidql.commands.main import main
+from sidql.keyframes.spherical import chart, protocol_indices
+from sim.errors import MotionDataError
+from sim.motion.ingest import load_motion
+
+
+@pytest.fixture(scope="module")
+def series():
+    return chart(smooth_clip(N=150, fps=30.0, seed=5))
+
+
+@pytest.fixture(scope="module")
+def encoded(series):
+    return encode_series(series, max_error=2.0)
+
+
+def _points(clip):
+    return clip.positions[:, protocol_indices(clip)]
+
+
+# ------------------------------------------------------------------------------ range coder
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(1, 6),
+    st.integers(1, 80),
+    st.floats(0.0, 5000.0),
+    st.integers(0, 2**32 - 1),
+    st.booleans(),
+)
+def test_range_coder_round_trips(C, W, scale, seed, grouped):
+    rng = np.random.default_rng(seed)
+    v = np.rint(rng.laplace(0.0, scale + 1e-9, (C, W))).astype(np.int64)
+    v[:, : min(W, 2)] = rng.integers(-(2**29), 2**29, (C, min(W, 2)))  # large first values
+    group = rng.integers(0, 3, W) if grouped else None
+    data = encode_integers(v, group)
+    back, used = decode_integers(data, C, W, group)
+    assert np.array_equal(back, v)
+    assert used <= len(data) + 5
+
+
+def test_range_coder_beats_lzma_and_the_size_model_is_close():
+    import lzma
+
+    rng = np.random.default_rng(0)
+    v = np.rint(rng.laplace(0.0, 3.0, (47, 1500))).astype(np.int64)
+    real = len(encode_integers(v))
+    assert real < len(lzma.compress(v.astype("<i2").tobytes(), preset=9 | lzma.PRESET_EXTREME))
+    assert abs(estimate_size(v) / real - 1.0) < 0.05
+
+
+def test_range_coder_refuses_values_beyond_its_range():
+    with pytest.raises(ValueError, match="beyond"):
+        encode_integers(np.array([[1 << 30]]))
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.binary(max_size=300), st.integers(1, 48), st.integers(1, 400))
+def test_range_decoder_of_garbage_is_bounded(data, C, W):
+    values, used = decode_integers(data, C, W)
+    assert values.shape == (C, W) and np.abs(values).max(initial=0) < 2**30
+    assert used >= 5
+
+
+# ------------------------------------------------------------------------ position quantiser
+def test_levers_are_length_times_points_below():
+    parents = np.array([-1, 0, 1, 2, 0, 4])  # two chains of 3 bones from the root
+    assert subtree_sizes(parents).tolist() == [6, 3, 2, 1, 2, 1]
+    lengths = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
+    assert np.allclose(position_weights(lengths, parents), lengths * [3, 2, 1, 2, 1])
+
+
+def test_quantiser_round_trip_and_error_bound(series):
+    values, _ = series.channels()
+    keys = np.arange(0, series.n_frames, 3)
+    keys[-1] = series.n_frames - 1
+    q = PositionQuantiser(series.n_bones, series.lengths, series.parents, 0.004, 0.5)
+    codes, dec = q.encode_keyframes(values[keys], keys)
+    assert np.array_equal(q.decode_keyframes(codes, keys), dec)
+    M = series.n_bones
+    scale = q.scales()
+    err = np.abs(dec - values[keys])
+    # theta and root within half a step; phi within half its (sin theta scaled) step
+    assert np.all(err[:, :M] <= 0.5 * scale[:M] + 1e-12)
+    assert np.all(err[:, 2 * M :] <= 0.5 * scale[2 * M :] + 1e-12)
+    phi_step = np.minimum(scale[M : 2 * M] / np.maximum(np.sin(dec[:, :M]), 0.05), 0.5)
+    assert np.all(err[:, M : 2 * M] <= 0.5 * phi_step + 1e-12)
+    # a channel's step moves the points it carries by about the same amount: lever x step
+    lever = position_weights(series.lengths, series.parents) / np.sqrt(
+        subtree_sizes(series.parents)[1:]
+    )
+    assert np.allclose(lever * scale[:M], scale[2 * M] * np.sqrt(len(series.parents)))
+
+
+# -------------------------------------------------------------------------- error measure
+@pytest.mark.parametrize("reconstruction", ["linear", "catmull_rom"])
+def test_encoder_error_is_the_decoded_error(series, reconstruction):
+    """The compiled error measure the encoder searches with equals the error of the decoder's
+    own output (decoded chart, then points) to rounding."""
+    values, _ = series.channels()
+    truth = chart_points(values, series.lengths, series.parents)
+    enc = encode_series(series, max_error=1.5, reconstruction=reconstruction)
+    s = enc.stream
+    kv = s.quantiser.decode_keyframes(s.pose_codes, s.keyframes)
+    mine = position_errors(truth, s.keyframes, kv, reconstruction, s.lengths, s.parents)
+    decoded = chart_points(decoded_chart(s)["values"], s.lengths, s.parents)
+    assert np.allclose(mine, np.linalg.norm(decoded - truth, axis=-1), atol=1e-12)
+    assert enc.mean_error_mm == pytest.approx(1000.0 * mine.mean())
+
+
+@pytest.mark.parametrize(
+    ("reconstruction", "keys"),
+    [("linear", [0, 9, 25, 40, 59]), ("catmull_rom", [0, 59])],  # Catmull-Rom: one straight line
+)
+def test_motion_the_curve_represents_costs_nothing_between_its_keyframes(reconstruction, keys):
+    """Angles and root moving on the reconstruction's own curve between keyframes give zero
+    segment costs there; the plan finds exactly those keyframes."""
+    keys = np.array(keys)
+    clip = piecewise_clip(keys, 60, 30.0, seed=2, curve="linear")
+    s = chart(clip)
+    values, _ = s.channels()
+    C = position_band_costs(values, values, None, 60, reconstruction, s.lengths, s.parents)
+    for a, b in zip(keys[:-1], keys[1:], strict=True):
+        assert C[a, b - a] < 1e-9
+    assert plan(C, 1e-3).keyframes.tolist() == keys.tolist()
+
+
+# --------------------------------------------------------------------------------- targets
+def test_max_error_is_met_and_tighter_costs_more(series):
+    clip_points = chart_points(series.channels()[0], series.lengths, series.parents)
+    sizes = []
+    for e in (4.0, 1.0):
+        enc = encode_series(series, max_error=e)
+        rec = reconstruct_stream(sidq.from_bytes(enc.data))
+        assert rec.positions.shape[0] == series.n_frames
+        assert enc.mean_error_mm <= e
+        sizes.append(len(enc.data))
+    assert sizes[1] > sizes[0]
+    assert clip_points.shape == (series.n_frames, 23, 3)
+
+
+def test_rate_is_met_and_error_falls_with_rate(series):
+    duration = series.n_frames * series.dt
+    errors = []
+    for rate in (300.0, 900.0):
+        enc = encode_series(series, rate=rate)
+        assert enc.stream.coding == 2
+        assert len(enc.data) <= rate * duration
+        errors.append(enc.mean_error_mm)
+    assert errors[1] < errors[0]
+
+
+@pytest.mark.parametrize("n", [2, 3, 7])
+def test_the_shortest_trials_encode_within_their_budget(series, n):
+    sub = series.frames(slice(0, n))
+    budget = 5000.0 * n * series.dt
+    enc = encode_series(sub, rate=5000.0)
+    assert len(enc.data) <= budget and enc.stream.n_frames == n
+    assert encode_series(sub, max_error=1.0).mean_error_mm <= 1.0
+
+
+def test_an_unreachable_error_says_what_can_be_reached(series):
+    with pytest.raises(MotionDataError, match="cannot reach 1e-05 mm: the finest stream has"):
+        encode_series(series, max_error=1e-5)
+
+
+def test_max_error_needs_an_offline_position_stream(series):
+    with pytest.raises(ValueError, match="offline"):
+        encode_series(series, max_error=2.0, latency=5)
+    with pytest.raises(ValueError, match="exactly one"):
+        encode_series(series, max_error=2.0, rate=500.0)
+
+
+# ------------------------------------------------------------------------------- container
+def test_container_round_trip(encoded):
+    s = sidq.from_bytes(encoded.data)
+    assert encoded.data[4] == sidq.VERSION_POSITION and s.coding == 2
+    assert np.array_equal(s.keyframes, encoded.stream.keyframes)
+    assert np.array_equal(s.pose_codes, encoded.stream.pose_codes)
+    assert np.array_equal(s.lengths, encoded.stream.lengths)
+    assert sidq.to_bytes(s) == encoded.data
+    a = decoded_chart(s)["values"]
+    b = decoded_chart(encoded.stream)["values"]
+    assert np.array_equal(a, b)
+
+
+def test_stored_lengths_code_to_themselves():
+    rng = np.random.default_rng(1)
+    for top in (0.01, 0.45, 3.0):
+        L = rng.uniform(0.0, top, 22)
+        stored = sidq.position_lengths(L)
+        assert np.array_equal(sidq.position_lengths(stored), stored)
+        assert np.abs(stored - L).max() <= top / 65535.0
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.data())
+def test_fuzzed_position_streams_fail_cleanly(encoded, data):
+    raw = bytearray(encoded.data)
+    kind = data.draw(st.sampled_from(["truncate", "flip", "garbage", "recrc"]))
+    if kind == "truncate":
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+    elif kind == "flip":
+        i = data.draw(st.integers(0, len(raw) - 1))
+        raw[i] ^= data.draw(st.integers(1, 255))
+    elif kind == "garbage":
+        raw = bytearray(b"SIDQ\x02\x02\x02\x00" + data.draw(st.binary(max_size=400)))
+        raw += struct.pack("<I", zlib.crc32(bytes(raw)))
+    else:  # a defect behind a valid checksum: only the parser's checks can catch it
+        i = data.draw(st.integers(4, len(raw) - 5))
+        raw[i] ^= data.draw(st.integers(1, 255))
+        raw[-4:] = struct.pack("<I", zlib.crc32(bytes(raw[:-4])))
+    try:
+        s = sidq.from_bytes(bytes(raw), "fuzz.sidq")
+    except MotionDataError as e:
+        assert "\n" not in str(e) and str(e).startswith("fuzz.sidq")
+        return
+    assert kind in ("recrc", "garbage")  # a corrupt value behind a valid checksum may parse...
+    rec = reconstruct_stream(s)  # ...and must then decode to finite frames within the limit
+    assert rec.positions.shape[0] == s.n_frames <= sidq.MAX_FRAMES
+    assert np.isfinite(rec.positions).all()
+
+
+def test_residuals_that_run_away_are_refused(encoded):
+    """A stream whose residuals drive the predictor to overflow (no encoder writes one, a hostile
+    sender can) is one clean error, not infinite points."""
+    s = encoded.stream
+    W = 600
+    keys = np.arange(W, dtype=np.int64)
+    huge = np.zeros((W, s.pose_codes.shape[1]), dtype=np.int64)
+    huge[1::2], huge[2::2] = (1 << 29) - 1, -((1 << 29) - 1)  # alternating: the slope explodes
+    hostile = replace(s, keyframes=keys, pose_codes=huge, quantiser=replace(s.quantiser, rho=2.0))
+    data = sidq.to_bytes(hostile)
+    with pytest.raises(MotionDataError, match="implausible"):
+        sidq.from_bytes(data, "hostile.sidq")
+
+
+# --------------------------------------------------------------------------------- real data
+def test_cli_max_error_on_a_real_trial(cmu_dir, tmp_path, capsys):
+    asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
+    out = tmp_path / "walk.sidq"
+    assert main(["encode", str(asf), str(amc), "--out", str(out), "--max-error", "3"]) == 0
+    assert "position      mean error" in capsys.readouterr().out
+    rec = decode_to_reconstruction(out)
+    truth = _points(load_motion(asf, amc))  # MuJoCo's kinematics, not the codec's
+    err = 1000.0 * np.linalg.norm(rec.positions - truth, axis=-1)
+    assert err.mean() <= 3.0 + 1e-6
+    with pytest.raises(SystemExit) as e:
+        main(
+            ["encode", str(asf), str(amc), "--out", str(out), "--max-error", "3", "--latency", "4"]
+        )
+    assert e.value.code == 2
+    err_line = capsys.readouterr().err.strip()
+    assert err_line.startswith("sidql encode: error:") and "--max-error" in err_line
