@@ -32,7 +32,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.metrics import q_error
 from sidql.keyframes.optimal import clip_optimal_table
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
-from sidql.keyframes.segment_costs import SEPARABLE_VARIANTS, greedy_keyframes
+from sidql.keyframes.segment_costs import SEPARABLE, greedy_keyframes
 from sidql.keyframes.spherical import chart
 from sim.errors import UnknownNameError
 from sim.motion.clip import Clip
@@ -216,7 +216,7 @@ def optimal(
     optimum = reconstructions.get(reconstruction).optimum
     if optimum is None:
         raise ValueError(f"reconstruction {reconstruction!r} has no registered optimum")
-    if memo is None and reconstruction in SEPARABLE_VARIANTS:  # chart + costs in one pass
+    if memo is None and reconstruction in SEPARABLE:  # chart + costs in one pass
         return clip_optimal_table(clip, reconstruction, w_max=W).keyframes(W)
     series = _memo_chart(clip, memo)
     if memo is None:
