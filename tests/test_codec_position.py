@@ -22,7 +22,7 @@ from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser
 from sidql.commands.main import main
 from sidql.keyframes.spherical import chart, protocol_indices
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UnmetTargetError
 from sim.motion.ingest import load_motion
 
 
@@ -181,7 +181,7 @@ def test_the_shortest_trials_encode_within_their_budget(series, n):
 
 
 def test_an_unreachable_error_says_what_can_be_reached(series):
-    with pytest.raises(MotionDataError, match="cannot reach 1e-05 mm: the finest stream has"):
+    with pytest.raises(UnmetTargetError, match="cannot reach 1e-05 mm: the finest stream has"):
         encode_series(series, max_error=1e-5)
 
 

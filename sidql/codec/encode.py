@@ -430,9 +430,9 @@ def _encode_position(
             search = next(iter(searches.values()))
             keys, _, _, kv = search.code(_LAM_LO, 1e-7)
             floor = 1000.0 * search.errors(keys, kv).mean()
-            raise MotionDataError(
-                where or None, None, f"cannot reach {max_error} mm: the finest stream has a mean "
-                f"error of {floor:.4f} mm",
+            raise UnmetTargetError(
+                _where(where, f"cannot reach {max_error} mm: the finest stream has a mean error "
+                       f"of {floor:.4f} mm")
             )  # fmt: skip
         recon = min(cands, key=lambda r: cands[r][4])
         keys, q, codes, E = cands[recon][:4]
@@ -465,9 +465,9 @@ def _encode_position(
         if not cands:
             search = next(iter(searches.values()))
             size = search.size(*search.code(_LAM_HI, 1.0)[::2])
-            raise MotionDataError(
-                where or None, None, f"rate too low: the sparsest plan needs {size} bytes, "
-                f"budget {budget:.0f}",
+            raise UnmetTargetError(
+                _where(where, f"rate too low: the sparsest plan needs {size} bytes, budget "
+                       f"{budget:.0f}")
             )  # fmt: skip
         recon = min(cands, key=lambda r: cands[r][3].mean())
         final = None
@@ -476,7 +476,7 @@ def _encode_position(
             if final is not None:
                 break
         if final is None:
-            raise MotionDataError(where or None, None, "rate too low for the position coding")
+            raise UnmetTargetError(_where(where, "rate too low for the position coding"))
         keys, q, codes, E = final[:4]
     stream = builder(recon)(keys, q, codes)
     data = sidq.to_bytes(stream)
