@@ -49,8 +49,8 @@ def _band_costs(X, Xq, Rq, G, mode):
     """
     N, D = X.shape
     C = np.full((N, G + 1), np.inf)
-    ma = np.empty(D)
-    mb = np.empty(D)
+    ma = np.zeros(D)  # zeros: "linear" multiplies the end rates by 0 (0 x stale NaN is NaN)
+    mb = np.zeros(D)
     for i in range(N):
         C[i, 0] = 0.0
         for g in range(1, G + 1):
@@ -107,9 +107,11 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap
     M = (D - 3) // 2
     C = np.full((N, G + 1), np.inf)
     for i in numba.prange(N):
-        ma = np.empty(D)
-        mb = np.empty(D)
-        e = np.empty(D)
+        # zeros, not empty: "linear" (mode 1) multiplies the end rates by 0, and 0 x a stale
+        # inf or NaN would leak garbage into the costs
+        ma = np.zeros(D)
+        mb = np.zeros(D)
+        e = np.zeros(D)
         C[i, 0] = 0.0
         for g in range(1, G + 1):
             j = i + g
