@@ -273,5 +273,3 @@ def test_cli_max_error_on_a_real_trial(cmu_dir, tmp_path, capsys):
     assert e.value.code == 2
     err_line = capsys.readouterr().err.strip()
     assert err_line.startswith("sidql encode: error:") and "--max-error" in err_line
-
-
