@@ -15,11 +15,12 @@ import os
 import pickle
 import re
 import warnings
+import zipfile
 
 import torch
 
 from sim.errors import MotionDataError
-from sim.files import MAX_CHECKPOINT_BYTES, open_regular, write_atomic
+from sim.files import MAX_CHECKPOINT_BYTES, check_zip, open_regular, write_atomic
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
@@ -32,6 +33,46 @@ CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
 class ModelFileError(MotionDataError):
     """A policy or checkpoint file that is refused: not a plain tensor file (e.g. a pickle that
     would construct arbitrary objects), unreadable, or of another format or version."""
+
+
+#: Stated limits of a policy or checkpoint archive, checked on its zip directory before
+#: ``torch.load`` reads anything: members (one per tensor storage, plus a few) and the size of
+#: its pickle (the values other than tensors: settings, logs; a few KB in real files).
+MAX_ARCHIVE_MEMBERS = 4096
+MAX_PICKLE_BYTES = 4 << 20
+
+
+def check_archive(f, path: str) -> None:
+    """Check the zip directory of a ``torch.save`` file ``f`` before it is loaded, then rewind.
+
+    ``torch.save`` stores every member uncompressed, so a file inflates to no more than its own
+    size: a compressed member (a deflate bomb), overlapping members, more than
+    :data:`MAX_ARCHIVE_MEMBERS` members or a pickle larger than :data:`MAX_PICKLE_BYTES` is
+    refused.
+
+    Raises:
+        ModelFileError: one line naming the file and the problem.
+    """
+    size = os.fstat(f.fileno()).st_size
+    try:
+        with zipfile.ZipFile(f) as zf:
+            infos = check_zip(
+                zf, size, path, max_members=MAX_ARCHIVE_MEMBERS, max_inflated=size,
+                stored_only=True,
+            )  # fmt: skip
+    except zipfile.BadZipFile as e:
+        raise ModelFileError(
+            path, None, f"refused: not a file of tensors (a torch.save zip archive): {e}"[:200]
+        ) from None
+    except MotionDataError as e:
+        raise ModelFileError(path, None, f"refused: {e.problem}") from None
+    pickles = [i for i in infos if i.filename.endswith("data.pkl")]
+    if len(pickles) != 1 or pickles[0].file_size > MAX_PICKLE_BYTES:
+        raise ModelFileError(
+            path, None, f"refused: not a torch.save archive with one pickle of at most "
+            f"{MAX_PICKLE_BYTES:,} bytes",
+        )  # fmt: skip
+    f.seek(0)
 
 
 def save_payload(path: str | os.PathLike, payload: dict) -> None:
@@ -64,9 +105,10 @@ def load_payload(
         raise FileNotFoundError(f"no file at {path}")
     try:
         with open_regular(path, max_bytes) as f, warnings.catch_warnings():
+            check_archive(f, path)
             warnings.simplefilter("ignore")  # e.g. "Detected pickle protocol 4": verdict follows
             payload = torch.load(f, map_location="cpu", weights_only=True)
-    except MotionDataError:  # not a regular file, too large
+    except MotionDataError:  # not a regular file, too large, not a plain archive
         raise
     except pickle.UnpicklingError as e:
         found = re.search(r"GLOBAL ([\w.]+)", str(e))
