@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import cmu_rate, positive
+from sidql.commands.usage import cmu_rate, positive, ray_address
 from sim.motion.dataset import ingest_directory
 
 
@@ -27,7 +27,7 @@ def register(sub) -> None:
         "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
     )
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="run the trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     p.set_defaults(func=run)

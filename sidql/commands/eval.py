@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from sidql.commands.usage import UsageError, cmu_rate, positive
+from sidql.commands.usage import UsageError, cmu_rate, positive, ray_address
 from sidql.evaluation.evaluate import (
     evaluate,
     load_cases,
@@ -72,7 +72,7 @@ def register(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--workers", type=positive(int), default=1, help="processes loading trials")
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="load trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     p.set_defaults(func=run)

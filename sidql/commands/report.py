@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import UsageError, positive
+from sidql.commands.usage import UsageError, positive, ray_address
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
 from sim.errors import MotionDataError
@@ -42,7 +42,7 @@ def register(sub) -> None:
     )  # fmt: skip
     p.add_argument("--workers", type=positive(int), default=1, help="processes validating clips")
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="validate the clips as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     p.set_defaults(func=run)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from sidql.commands.usage import UsageError, cmu_rate, positive
+from sidql.commands.usage import UsageError, cmu_rate, positive, ray_address
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import export_hdf5
 from sim.simulate.generate import ALL_KINDS, KINDS
@@ -39,7 +39,7 @@ def register(sub) -> None:
         "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
     )
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="run the tasks on Ray: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     p.add_argument(

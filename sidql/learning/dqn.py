@@ -54,7 +54,7 @@ from sidql.learning.files import (
 from sidql.learning.policy import Policy
 from sidql.learning.qnet import KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
-from sidql.learning.settings import RESUME_MAY_CHANGE, Args
+from sidql.learning.settings import RESUME_MAY_CHANGE, Args, settings_problems
 from sidql.learning.tasks import (
     KeyframeTask,
     clip_task,
@@ -547,6 +547,9 @@ def train(args: Args) -> dict:
             checkpoint that ``--resume`` refuses (unsafe file, other format or other settings).
     """
     # setup: files, checkpoint (checked before any data is read), data, networks, environments
+    problems = settings_problems(args)
+    if problems:
+        raise ValueError(problems[0])
     torch.set_num_threads(args.threads)
     files = RunFiles.beside(args.out)
     resume = args.resume and files.checkpoint.exists()
