@@ -20,7 +20,7 @@ import zipfile
 import torch
 
 from sim.errors import MotionDataError
-from sim.files import MAX_CHECKPOINT_BYTES, check_zip, open_regular, write_atomic
+from sim.files import MAX_CHECKPOINT_BYTES, check_zip, excerpt, open_regular, write_atomic
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
@@ -125,5 +125,7 @@ def load_payload(
         ) from None
     found = payload.get("format") if isinstance(payload, dict) else None
     if found != expected_format:
-        raise ModelFileError(path, None, f"format {found!r}; expected {expected_format!r}")
+        raise ModelFileError(
+            path, None, f"format {excerpt(repr(found))}; expected {expected_format!r}"
+        )
     return payload

@@ -68,15 +68,23 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
     root = Path(root)
     if not root.is_dir():
         raise MotionDataError(str(root), None, "not a directory")
+
+    def skip(amc, asf, problem):
+        if skipped is None:
+            warnings.warn(problem, MotionDataWarning, stacklevel=3)
+        else:
+            skipped.append({"amc": excerpt(str(amc), 300, quote=False),
+                            "asf": excerpt(str(asf), 300, quote=False), "error": problem})  # fmt: skip
+
     trials = []
     named = sorted(p for p in root.rglob("*") if p.suffix.lower() == ".amc" and not p.is_dir())
-    for amc in [p for p in named if not p.is_file()]:  # FIFOs, devices, sockets, broken links
-        problem = f"{amc}: not a regular file ({_kind(amc)}); skipped"
-        if skipped is None:
-            warnings.warn(problem, MotionDataWarning, stacklevel=2)
-        else:
-            skipped.append({"amc": str(amc), "asf": "", "error": problem})
-    for amc in [p for p in named if p.is_file()]:
+    for amc in named:
+        if not str(amc.relative_to(root)).isprintable():  # control characters: not echoed
+            skip(amc, "", f"{excerpt(str(amc))}: a name that cannot be printed; skipped")
+            continue
+        if not amc.is_file():  # FIFOs, devices, sockets, broken links: never opened
+            skip(amc, "", f"{amc}: not a regular file ({_kind(amc)}); skipped")
+            continue
         m = _TRIAL_RE.match(amc.name)
         subject = m.group("subject") if m else amc.parent.name
         asfs = {p.name.lower(): p for p in amc.parent.iterdir() if p.suffix.lower() == ".asf"}
@@ -85,13 +93,12 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
             asf = next(iter(asfs.values()))
         if asf is None:
             asf = amc.parent / f"{subject}.asf"
+        if not asf.name.isprintable():
+            skip(amc, asf, f"{excerpt(str(asf))}: a name that cannot be printed; skipped")
+            continue
         leaving = [p for p in (amc, asf) if p.exists() and not inside(p, root)]
         if leaving:
-            problem = f"{leaving[0]}: a symbolic link to a file outside {root}; skipped"
-            if skipped is None:
-                warnings.warn(problem, MotionDataWarning, stacklevel=2)
-            else:
-                skipped.append({"amc": str(amc), "asf": str(asf), "error": problem})
+            skip(amc, asf, f"{leaving[0]}: a symbolic link to a file outside {root}; skipped")
             continue
         trials.append(Trial(subject=subject, name=amc.stem, asf=asf, amc=amc))
     return sorted(trials, key=lambda t: (t.subject, t.name))
@@ -371,6 +378,8 @@ def confined(folder: Path, name: str, what: str, index: Path) -> Path:
     path = folder / name
     if not name or PurePosixPath(name).is_absolute() or Path(name).is_absolute():
         problem = "is absolute"
+    elif not name.isprintable():  # control characters would reach terminals through messages
+        problem = "holds characters that cannot be printed"
     elif not inside(path, folder):
         problem = "leaves the dataset folder"
     else:
