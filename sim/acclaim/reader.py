@@ -144,6 +144,19 @@ class Motion:
 # ----------------------------------------------------------------------------------------- ASF
 
 
+def _known(names, chars: int = 300) -> str:
+    """``names`` for an error message: as many as fit in about ``chars`` characters, then how
+    many there are in all (a hostile skeleton may have a thousand names of 64 characters)."""
+    names = list(names)
+    shown, size = [], 0
+    for name in names:
+        if size + len(name) > chars:
+            return ", ".join(shown) + f", ... ({len(names)} in all)"
+        shown.append(name)
+        size += len(name) + 2
+    return ", ".join(shown)
+
+
 def check_bone_name(name: str) -> str | None:
     """Why ``name`` is not an acceptable bone name, or None when it is (see the module docstring)."""
     if not _BONE_NAME_RE.match(name):
@@ -480,7 +493,7 @@ def _hierarchy_parents(hierarchy, by_name, path) -> dict[str, str]:
                 raise MotionDataError(
                     path,
                     ln,
-                    f"unknown bone {excerpt(n)} in hierarchy; known: root, {', '.join(by_name)}",
+                    f"unknown bone {excerpt(n)} in hierarchy; known: {_known(['root', *by_name])}",
                 )
         for c in children:
             if c == "root":
@@ -493,7 +506,7 @@ def _hierarchy_parents(hierarchy, by_name, path) -> dict[str, str]:
     missing = [n for n in by_name if n not in parent_of]
     if missing:
         raise MotionDataError(
-            path, by_name[missing[0]]["line"], f"bones not in ':hierarchy': {', '.join(missing)}"
+            path, by_name[missing[0]]["line"], f"bones not in ':hierarchy': {_known(missing)}"
         )
     return parent_of
 
@@ -518,7 +531,7 @@ def _topological(parent_of: dict[str, str], by_name: dict, path: str) -> list[st
         raise MotionDataError(
             path,
             by_name[cyclic[0]]["line"],
-            f"hierarchy cycle: bones not reachable from root: {', '.join(sorted(cyclic))}",
+            f"hierarchy cycle: bones not reachable from root: {_known(sorted(cyclic))}",
         )
     return order
 
@@ -674,7 +687,7 @@ class _AmcParser:
         name = tokens[0]
         if name not in self.layout:
             raise MotionDataError(
-                path, ln, f"unknown bone {excerpt(name)}; known: {', '.join(sorted(self.layout))}"
+                path, ln, f"unknown bone {excerpt(name)}; known: {_known(sorted(self.layout))}"
             )
         if name in self.current:
             raise MotionDataError(path, ln, f"bone {name!r} appears twice in one frame")
@@ -700,7 +713,7 @@ class _AmcParser:
             self.columns = {name: [] for name in self.names}
         missing = set(self.names) - set(current)
         if missing:
-            problem = f"truncated frame {self.first + self.n}: missing {', '.join(sorted(missing))}"
+            problem = f"truncated frame {self.first + self.n}: missing {_known(sorted(missing))}"
             if at_end is not None and not self.strict and self.n >= 1:
                 where = f"{self.path}:{self.current_line}"
                 self.notes.append(f"{where}: {problem}; dropped the incomplete final frame")
@@ -710,7 +723,7 @@ class _AmcParser:
         if extra:
             raise MotionDataError(
                 self.path, self.current_line,
-                f"frame has bones the first frame lacks: {sorted(extra)}",
+                f"frame has bones the first frame lacks: {_known(sorted(extra))}",
             )  # fmt: skip
         self.rows.append([current[name] for name in self.names])
         self.n += 1
