@@ -404,7 +404,11 @@ def main(argv=None) -> int:
         "--memory-limit-mb", type=int, default=2048,
         help="address space each reader may add (ulimit -v) [MB]",
     )  # fmt: skip
-    p.add_argument("--data", default=str(REPO.parent / "shared" / "cmu"), help="CMU files")
+    p.add_argument(
+        "--data",
+        default=os.environ.get("SIDQL_CMU", str(REPO.parent / "shared" / "cmu")),
+        help="folder of CMU files (default: $SIDQL_CMU or ../shared/cmu)",
+    )
     p.add_argument("--out", default="fuzz_campaign.json", help="JSON summary (repros beside it)")
     p.add_argument("--no-results", action="store_true", help="do not write docs/results/")
     p.add_argument("--no-progress", action="store_true")
