@@ -900,6 +900,8 @@ def _read_checkpoint(path: Path, folder: Path, args_dict) -> list:
         ck, net, target, opt, memory, demos, rng, path=str(path), keyframes=args.keyframes,
         n_tasks=len(train_tasks),
     )  # fmt: skip
+    if not len(memory):  # as train() does: no gradient step before there is a transition
+        return [np.array(list(counters.values()), dtype=float)]
     batch, _ = dqn.sample_batch(memory, demos, rng, args)
     loss, q = dqn.td_loss(
         net, target, feats, torch.as_tensor(costs_np.astype(np.float32)), costs_np, batch, args

@@ -139,6 +139,25 @@ def _memory_problem(found, memory, what: str, max_w: int, n_tasks: int) -> str |
             return f"{what}.{k}: non-finite values"
         if k in ranges and len(a) and not (a.min() >= 0 and a.max() < ranges[k]):
             return f"{what}.{k}: values outside [0, {ranges[k]})"
+    return _transitions_problem(found, what, memory.size if found["full"] else found["pos"])
+
+
+def _transitions_problem(found: dict, what: str, n: int) -> str | None:
+    """The stored transitions (the first ``n``) are ones an episode can make: an action on a
+    free frame with keyframes left to choose, a discount in [0, 1], and unless the episode
+    ended, a next state with a free frame and keyframes left (else its value is undefined)."""
+    t = {k: v.numpy()[:n] for k, v in found.items() if isinstance(v, torch.Tensor)}
+    rows = np.arange(n)
+    if np.any(t["mask"][rows, t["action"]]) or np.any(t["mask"].all(axis=1)):
+        return f"{what}: a transition acts on a frame already chosen"
+    if np.any(t["rem"] < 1):
+        return f"{what}: a transition with no keyframe left to choose"
+    if not (np.isin(t["done"], (0.0, 1.0)).all() and (t["disc"] >= 0).all()
+            and (t["disc"] <= 1).all()):  # fmt: skip
+        return f"{what}: 'done' not 0 or 1, or a discount outside [0, 1]"
+    going = t["done"] == 0
+    if np.any(t["next_mask"][going].all(axis=1)) or np.any(t["next_rem"][going] < 1):
+        return f"{what}: an unfinished transition whose next state has nothing left to choose"
     return None
 
 

@@ -311,7 +311,11 @@ def load_extra(path: str | os.PathLike, prefix: str = "") -> dict[str, np.ndarra
     with ``prefix`` (every non-clip key when empty)."""
     with NpzReader(path) as z:
         keys = [k for k in z.headers if k not in _CLIP_KEYS and k.startswith(prefix)]
-        return {k: z.array(k) for k in keys}
+        out = {k: z.array(k) for k in keys}
+    for k, v in out.items():
+        if v.dtype.kind == "f" and not np.isfinite(v).all():
+            raise MotionDataError(str(path), None, f"non-finite values in {excerpt(k)}")
+    return out
 
 
 def load_npz(path: str | os.PathLike) -> Clip:
