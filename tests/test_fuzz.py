@@ -1,9 +1,13 @@
-"""Property-based fuzzing of the Acclaim readers over mutations of the real CMU files.
+"""Property-based fuzzing of every reader over mutations of real files.
 
 Property: reading a mutated ASF/AMC raises only MotionDataError (naming a file, and a real line when
 it gives one) or returns all-finite values; for a subset the full path (parse -> model build ->
-retarget -> velocities) holds it too. Deterministic (``derandomize``) and bounded for CI; the long
-campaign is ``benchmarks/fuzz_campaign.py``.
+retarget -> velocities) holds it too. The same holds for every other file type a command reads
+(``.sidq`` streams, clip ``.npz`` files, dataset folders with their ``index.json``, policy files,
+training checkpoints; ``tests/hostile_inputs.py``): one printable line naming a file inside the
+input's folder, nothing read from outside it, or finite values (valid decisions, a checkpoint that
+resumes and trains a step). Deterministic (``derandomize``) and bounded for CI; the long campaign,
+with memory and time measured per input, is ``benchmarks/fuzz_campaign.py``.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ import functools
 import random
 from pathlib import Path
 
+import hostile_inputs
+import pytest
 from acclaim_mutations import MUTATORS, check_outcome, mutate, seed_amc
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -101,3 +107,42 @@ def test_mutated_files_survive_model_build_retarget_and_velocities(cmu_dir, tmp_
         amc, _ = mutate(amc, rng)
     skeleton = data.draw(st.sampled_from(("subject", "humanoid")))
     run_case(tmp_path_factory.mktemp("full"), asf, amc, full=True, skeleton=skeleton)
+
+
+# --- every other file type --------------------------------------------------------------------
+
+
+@pytest.fixture(scope="session")
+def hostile_seeds(cmu_dir, tmp_path_factory):
+    """Real seeds of every file type (``hostile_inputs.build_seeds``: a few seconds)."""
+    return hostile_inputs.build_seeds(cmu_dir, tmp_path_factory.mktemp("seeds"))
+
+
+def read_hostile(kind, seeds, tmp_path_factory, data) -> str:
+    case = hostile_inputs.make_case(kind, seeds, rng_from(data))
+    folder = tmp_path_factory.mktemp(kind) / "case"
+    folder.mkdir()
+    return hostile_inputs.run_case(case, folder, seeds.checkpoint_args)
+
+
+@pytest.mark.parametrize(
+    ("kind", "examples"),
+    [("sidq", 60), ("npz", 60), ("index", 40), ("policy", 40), ("checkpoint", 30)],
+)
+def test_every_reader_reads_cleanly_or_fails_cleanly(kind, examples, hostile_seeds,
+                                                      tmp_path_factory):  # fmt: skip
+    @settings(FUZZ, max_examples=examples)
+    @given(data=st.data())
+    def property_holds(data):
+        assert read_hostile(kind, hostile_seeds, tmp_path_factory, data) in ("ok", "error")
+
+    property_holds()
+
+
+@pytest.mark.parametrize("kind", hostile_inputs.KINDS)
+def test_the_seeds_themselves_read(kind, hostile_seeds, tmp_path):
+    """The property is not vacuous: every unmutated seed reads to finite values."""
+    folder = tmp_path / "case"
+    folder.mkdir()
+    case = hostile_inputs.seed_case(kind, hostile_seeds)
+    assert hostile_inputs.run_case(case, folder, hostile_seeds.checkpoint_args) == "ok"

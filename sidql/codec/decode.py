@@ -6,6 +6,7 @@ Deterministic: the same bytes give the same arrays (pure numpy, no randomness, f
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,10 @@ from sim.acclaim.reader import parse_asf
 from sim.acclaim.writer import write_amc
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip, save_npz
+
+#: Frames turned into points at a time (:func:`reconstruct_stream`, :func:`stream_to_clip`): the
+#: work is per frame, so chunks keep the temporaries small however long the stream.
+CLIP_CHUNK_FRAMES = 4096
 
 
 def decoded_chart(stream: sidq.Stream) -> dict[str, np.ndarray]:
@@ -62,16 +67,23 @@ def _split(stream: sidq.Stream, chart: dict):
 
 def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
     """The decoded points: positions, velocities and accelerations (N, J, 3), world axes z up
-    [m, m/s, m/s^2]."""
+    [m, m/s, m/s^2], rebuilt a chunk of frames at a time (bounded temporaries)."""
     chart = decoded_chart(stream)
     theta, phi, dtheta, dphi, root, root_vel = _split(stream, chart)
     ddtheta, ddphi, root_acc = split_channels(chart["second"], stream.quantiser.n_bones)
-    P, V = positions_from_chart(
-        root, root_vel, theta, phi, dtheta, dphi, stream.lengths, stream.parents
-    )
-    A = accelerations_from_chart(
-        root_acc, theta, phi, dtheta, dphi, ddtheta, ddphi, stream.lengths, stream.parents
-    )
+    del chart
+    N, J = theta.shape[0], len(stream.names)
+    P, V, A = np.empty((N, J, 3)), np.empty((N, J, 3)), np.empty((N, J, 3))
+    for start in range(0, N, CLIP_CHUNK_FRAMES):
+        part = slice(start, start + CLIP_CHUNK_FRAMES)
+        P[part], V[part] = positions_from_chart(
+            *(c[part] for c in (root, root_vel, theta, phi, dtheta, dphi)),
+            stream.lengths, stream.parents,
+        )  # fmt: skip
+        A[part] = accelerations_from_chart(
+            *(c[part] for c in (root_acc, theta, phi, dtheta, dphi, ddtheta, ddphi)),
+            stream.lengths, stream.parents,
+        )  # fmt: skip
     return Reconstruction(
         positions=P,
         velocities=V,
@@ -103,10 +115,23 @@ def stream_to_clip(stream: sidq.Stream, source: str = "") -> Clip:
     """The decoded trial as a 23-point :class:`Clip` (the ``sidql ingest`` format)."""
     if tuple(stream.names) != POINTS:
         raise MotionDataError(source or None, None, "stream points are not the CMU protocol's")
-    theta, phi, dtheta, dphi, root, root_vel = _split(stream, decoded_chart(stream))
-    return clip_from_chart(
-        theta, phi, dtheta, dphi, root, root_vel, stream.lengths, stream.fps, source=source
-    )
+    channels = _split(stream, decoded_chart(stream))
+    N = channels[0].shape[0]
+    parts = None
+    for start in range(0, N, CLIP_CHUNK_FRAMES):
+        stop = min(start + CLIP_CHUNK_FRAMES, N)
+        part = clip_from_chart(
+            *(c[start:stop] for c in channels), stream.lengths, stream.fps, source=source
+        )
+        if parts is None:  # the whole clip's arrays, filled chunk by chunk
+            parts = {k: np.empty((N, *getattr(part, k).shape[1:])) for k in _FRAME_ARRAYS}
+            first = part
+        for k in _FRAME_ARRAYS:
+            parts[k][start:stop] = getattr(part, k)
+    return replace(first, **parts)
+
+
+_FRAME_ARRAYS = ("positions", "velocities", "qpos", "qvel", "rotations")
 
 
 def decode_file(

@@ -602,6 +602,12 @@ def encode_series(
     if series.n_frames < 2:
         raise MotionDataError(where or None, None, "a trial needs at least 2 frames")
     fps = 1.0 / series.dt
+    limit = sidq.frame_limit(series.theta.shape[1] + 1)
+    if series.n_frames > limit:  # the decoder's stated limit: refuse rather than write it
+        raise MotionDataError(
+            where or None, None, f"{series.n_frames:,} frames exceed the .sidq limit of "
+            f"{limit:,} ({limit / fps:.4g} s at {fps:g} fps); encode at a lower --fps",
+        )  # fmt: skip
     position = (
         objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
     )

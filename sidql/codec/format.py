@@ -54,6 +54,11 @@ exactly ``W (1 + 2 D)`` bytes (``W (1 + 4 D)`` for Hermite), channel by channel:
 
 The trial has ``1 + sum(gaps)`` frames; its last frame is the last keyframe.
 
+Limits (checked before anything of their size is allocated): at most :data:`MAX_FRAMES` frames
+(fewer for skeletons of more than 23 points), a rate in (0, :data:`MAX_FPS`], lengths, origin and
+steps within :data:`MAX_METRES` / :data:`MAX_STEP`, an LZMA dictionary within
+:data:`LZMA_MEMLIMIT`; the packed keyframes are inflated incrementally, the gaps first.
+
 Any deviation (bad magic, unknown version or reconstruction, short read, a body that is not a
 whole number of records, a bad gap, a checksum mismatch) raises :class:`MotionDataError` with one
 line naming the file and the problem.
@@ -189,6 +194,11 @@ def to_bytes(stream: Stream) -> bytes:
         raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
     if gaps.max() > MAX_GAP:
         raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
+    if int(stream.keyframes[-1]) + 1 > frame_limit(len(stream.names)):
+        raise ValueError(
+            f"{int(stream.keyframes[-1]) + 1} frames exceed the format's limit of "
+            f"{frame_limit(len(stream.names))}"
+        )
     if stream.coding == 2:
         if stream.reconstruction not in POSITION_RECONSTRUCTIONS:
             raise ValueError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
@@ -270,14 +280,26 @@ def write(stream: Stream, path: str | os.PathLike) -> Path:
     return path
 
 
-#: Stated limit on a stream's length: frames (1 + the sum of its gaps), hence also keyframes,
-#: checked before the keyframes are unpacked (2^16 frames: 9 minutes at 120 fps), for the
-#: protocol's 23 points; a skeleton of J points may have ``MAX_FRAMES * 23 // J`` frames, so that
-#: decoding any accepted stream stays within a few hundred MB.
-MAX_FRAMES = 1 << 16
+#: Stated limits of a stream, checked before anything is unpacked (:func:`from_bytes`): its
+#: length in frames (1 + the sum of its gaps, hence also its keyframe count) for the protocol's
+#: 23 points, 2^15 frames (4.5 minutes at 120 fps, 18 at the default 30), so that decoding any
+#: accepted stream (:func:`sidql.codec.decode.stream_to_clip`) peaks at a few hundred MB; a
+#: skeleton of J > 23 points may have ``MAX_FRAMES * 23 // J`` frames.
+MAX_FRAMES = 1 << 15
+#: Frame rate [1/s] at most (a stream's rate is positive).
+MAX_FPS = 1000.0
+#: Bound [m] on bone lengths and on the root origin; [m or rad, per code step] on the root and
+#: rate quantisation steps: far beyond any motion (a trial spans metres, codes steps of mm),
+#: so that every decoded value is finite.
+MAX_METRES = 1e4
+MAX_STEP = 1.0
+#: Memory [bytes] the LZMA decoder may use: a stream declaring a larger dictionary is refused
+#: (the encoder's is 1 MiB; the format allows up to 4 GiB).
+LZMA_MEMLIMIT = 16 << 20
 
 
-def _frame_limit(J: int) -> int:
+def frame_limit(J: int) -> int:
+    """The most frames a stream of a ``J``-point skeleton may have (see :data:`MAX_FRAMES`)."""
     return MAX_FRAMES * len(POINTS) // max(J, len(POINTS))
 
 
@@ -287,7 +309,7 @@ def _check_gaps(gaps: np.ndarray, fps: float, J: int, where: str) -> None:
     if gaps[0] != 0 or not gaps[1:].all():
         raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
     frames = 1 + int(gaps.sum(dtype=np.int64))
-    limit = _frame_limit(J)
+    limit = frame_limit(J)
     if frames > limit:
         raise MotionDataError(
             where, None, f"{frames:,} frames exceed the limit of {limit:,} "
@@ -334,8 +356,8 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
             )  # fmt: skip
     elif coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
         raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
-    if not (np.isfinite(fps) and fps > 0):
-        raise MotionDataError(where, None, f"bad frame rate {fps}")
+    if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
+        raise MotionDataError(where, None, f"frame rate {fps:g} outside (0, {MAX_FPS:g}]")
     skel = r.take(8, "skeleton hash")
     (J,) = r.take(1, "point count")
     if J == 1:
@@ -357,10 +379,10 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     M = J - 1
     D = 2 * M + 3
 
-    def floats(n, what):
+    def floats(n, what, low, high):
         v = np.frombuffer(r.take(4 * n, what), dtype="<f4").astype(np.float32)
-        if not np.isfinite(v).all():
-            raise MotionDataError(where, None, f"non-finite {what}")
+        if not (np.isfinite(v).all() and (v >= low).all() and (v <= high).all()):
+            raise MotionDataError(where, None, f"{what} outside [{low:g}, {high:g}]")
         return v
 
     if coding == 2:
@@ -368,10 +390,10 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         codes = np.frombuffer(r.take(2 * M, "bone lengths"), dtype="<u2")
         lengths = lengths_from_codes(exponent, codes)
         return _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths)
-    lengths = floats(M, "bone lengths")
-    origin = floats(3, "root origin")
-    step = floats(3, "root step")
-    rate_step = floats(D, "rate steps") if recon == "hermite" else None
+    lengths = floats(M, "bone lengths", 0.0, MAX_METRES)
+    origin = floats(3, "root origin", -MAX_METRES, MAX_METRES)
+    step = floats(3, "root step", -MAX_STEP, MAX_STEP)
+    rate_step = floats(D, "rate steps", -MAX_STEP, MAX_STEP) if recon == "hermite" else None
     size = record_size(recon, M)
     if coding == 0:
         rest = len(body) - r.pos
@@ -389,10 +411,10 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         rate = np.array(rec["rate"]) if recon == "hermite" else None
     else:
         (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
-        if not 2 <= W <= _frame_limit(J):  # checked before anything of size W is allocated
-            raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {_frame_limit(J):,})")
+        if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
+            raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
         want = W * size
-        dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE)
+        dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE, memlimit=LZMA_MEMLIMIT)
         try:  # incremental, capped: the gaps first, checked, then the codes they vouch for
             raw = dec.decompress(body[r.pos :], max_length=W)
             if len(raw) == W:
@@ -440,8 +462,8 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
     if not (np.isfinite(step) and step > 0) or rho8 > 16:
         raise MotionDataError(where, None, f"bad position step {step} or predictor {rho8}")
     (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
-    if not 2 <= W <= _frame_limit(J):  # checked before anything of size W is allocated
-        raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {_frame_limit(J):,})")
+    if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
+        raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
     rows, used = decode_integers(body[r.pos :], D + 1, W)
     if used > len(body) - r.pos + 5:  # the coder reads at most 5 bytes ahead of its data
         raise MotionDataError(where, None, "truncated stream: coded keyframes missing")

@@ -10,6 +10,7 @@ from sidql.commands.usage import (
     cmu_rate,
     data_folder,
     positive,
+    ray_address,
 )
 from sim.motion.dataset import ingest_directory
 
@@ -37,7 +38,7 @@ def register(sub) -> None:
         help="worker processes (default: cores)",
     )
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="run the trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     add_quiet(p)

@@ -16,6 +16,7 @@ from sidql.commands.usage import (
     cmu_rate,
     data_folder,
     positive,
+    ray_address,
 )
 from sidql.evaluation.evaluate import (
     evaluate,
@@ -88,7 +89,7 @@ def register(sub) -> None:
         help="processes loading trials and evaluating clips (methods, physics, simulation)",
     )  # fmt: skip
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="load trials and evaluate clips as Ray tasks: a local runtime, or the cluster at "
         "ADDRESS",
     )  # fmt: skip

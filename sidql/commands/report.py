@@ -9,6 +9,7 @@ from sidql.commands.usage import (
     add_methods,
     add_quiet,
     positive,
+    ray_address,
 )
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
@@ -53,7 +54,7 @@ def register(sub) -> None:
     )  # fmt: skip
     p.add_argument("--workers", type=positive(int), default=1, help="processes validating clips")
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="validate the clips as Ray tasks: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     add_quiet(p)

@@ -10,6 +10,7 @@ from sidql.commands.usage import (
     cmu_rate,
     data_folder,
     positive,
+    ray_address,
 )
 from sim.errors import SidqlError
 from sim.simulate.dataset import synthesize
@@ -46,7 +47,7 @@ def register(sub) -> None:
         "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
     )
     p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help="run the tasks on Ray: a local runtime, or the cluster at ADDRESS",
     )  # fmt: skip
     p.add_argument(

@@ -13,7 +13,7 @@ from sidql.commands.usage import (
     add_quiet,
     data_folder,
 )
-from sidql.learning.settings import Args, field_docs
+from sidql.learning.settings import Args, field_docs, settings_problems
 
 
 def register(sub) -> None:
@@ -68,8 +68,6 @@ def _bool(text: str) -> bool:
 
 
 def run(args) -> int:
-    from sidql.learning.dqn import train  # lazy: imports torch, needed only when training starts
-
     bad = [w for w in args.keyframes if not 3 <= w <= 60]
     if bad:
         raise UsageError(f"--keyframes values must be in [3, 60]; got {bad}")
@@ -80,6 +78,11 @@ def run(args) -> int:
     values["keyframes"] = tuple(args.keyframes)
     values["test_subjects"] = tuple(args.test_subjects) if args.test_subjects else None
     values["progress"] = not args.quiet
+    problems = settings_problems(Args(**values))
+    if problems:
+        raise UsageError(problems[0])
+    from sidql.learning.dqn import train  # lazy: imports torch, needed only when training starts
+
     result = train(Args(**values))
     print(f"held-out subjects: {', '.join(result['split']['test'])}")
     print("| W | dqn | greedy | optimal | dqn / optimal |")

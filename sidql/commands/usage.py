@@ -15,11 +15,14 @@ one line ``warning: FILE:LINE: MESSAGE`` (no Python source line).
 from __future__ import annotations
 
 import argparse
+import re
+import socket
 import sys
 import warnings
 from pathlib import Path
 
 from sim.errors import MotionDataWarning, SidqlError
+from sim.files import excerpt
 from sim.paths import DATA_ENV, data_dir
 
 
@@ -204,3 +207,50 @@ def add_skeleton(parser: argparse.ArgumentParser) -> None:
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``-q/--quiet``: no progress bars."""
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+
+
+#: Seconds ``--ray HOST:PORT`` waits for the cluster to answer before it is refused.
+RAY_CONNECT_TIMEOUT_S = 3.0
+_HOST = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9.-]{0,252})|\[[0-9A-Fa-f:.]{2,45}\]")
+
+
+def ray_address(text):
+    """An argparse ``type`` for ``--ray ADDRESS``: ``local``, ``auto`` (Ray finds the cluster), or
+    ``[ray://]HOST:PORT`` that answers on that port within :data:`RAY_CONNECT_TIMEOUT_S` seconds;
+    anything else is a one-line usage error before any work starts (instead of Ray's traceback,
+    or its 20 s of retries for an address nobody answers on)."""
+    if text in ("local", "auto"):
+        return text
+    bare = text.removeprefix("ray://")
+    host, sep, port = bare.rpartition(":")
+    if not (sep and _HOST.fullmatch(host) and port.isascii() and port.isdigit()
+            and 1 <= int(port) <= 65535):  # fmt: skip
+        raise argparse.ArgumentTypeError(
+            f"not a Ray address: {excerpt(text)} (expected local, auto, HOST:PORT or "
+            "ray://HOST:PORT)"
+        )
+    try:
+        _answers_grpc(host.strip("[]"), int(port))
+    except OSError as e:
+        why = e.strerror or str(e) or type(e).__name__
+        raise argparse.ArgumentTypeError(
+            f"no Ray cluster answers at {excerpt(text)} ({why})"
+        ) from None
+    return text
+
+
+def _answers_grpc(host: str, port: int) -> None:
+    """Raise OSError unless ``host:port`` answers the HTTP/2 preface with a SETTINGS frame, as
+    Ray's gRPC servers (the GCS, the client server) do: an open port alone is not enough (a
+    proxy or firewall may accept any connection)."""
+    with socket.create_connection((host, port), RAY_CONNECT_TIMEOUT_S) as s:
+        s.settimeout(RAY_CONNECT_TIMEOUT_S)
+        s.sendall(b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))
+        head = b""
+        while len(head) < 9:
+            part = s.recv(9 - len(head))
+            if not part:
+                break
+            head += part
+    if len(head) < 9 or head[3] != 4:
+        raise OSError("it does not speak gRPC")

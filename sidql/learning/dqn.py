@@ -42,6 +42,7 @@ from tqdm import tqdm
 
 from sidql.keyframes.methods import greedy_from_costs
 from sidql.keyframes.optimal import solve
+from sidql.learning.checkpoint import checkpoint_problem
 from sidql.learning.env import KeyframeEnv
 from sidql.learning.files import (
     CHECKPOINT_FORMAT,
@@ -52,7 +53,7 @@ from sidql.learning.files import (
 from sidql.learning.policy import Policy
 from sidql.learning.qnet import KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
-from sidql.learning.settings import RESUME_MAY_CHANGE, Args
+from sidql.learning.settings import RESUME_MAY_CHANGE, Args, settings_problems
 from sidql.learning.tasks import (
     KeyframeTask,
     clip_task,
@@ -62,7 +63,7 @@ from sidql.learning.tasks import (
     synthetic_tasks,
 )
 from sim.errors import ModelFileError, MotionDataError
-from sim.files import write_atomic
+from sim.files import excerpt, write_atomic
 from sim.motion.dataset import dataset_entries, find_trials, origin_subject
 
 # --- replay memory -------------------------------------------------------------------------------
@@ -387,8 +388,10 @@ def load_checkpoint(path: Path, args: Args) -> dict:
     return ck
 
 
-def _show(value) -> str:
-    return " ".join(map(str, value)) if isinstance(value, list | tuple) else str(value)
+def _show(value, limit: int = 80) -> str:
+    """A setting as the command line spells it, cut short (a checkpoint may hold anything)."""
+    text = " ".join(map(str, value)) if isinstance(value, list | tuple) else str(value)
+    return excerpt(text, limit, quote=False)
 
 
 def save_policy(net, path, args, split, final, baselines) -> None:
@@ -500,15 +503,32 @@ def training_state(net, target, opt, memory, demos, counters, log_rows, rng, spl
     }  # fmt: skip
 
 
-def restore(ck: dict, net, target, opt, memory, demos, rng) -> tuple[dict, list[dict]]:
-    """Load a checkpoint's state into the run's objects; returns (counters, log rows)."""
-    net.load_state_dict(ck["net"])
-    target.load_state_dict(ck["target"])
-    opt.load_state_dict(ck["opt"])
-    memory.load_state_dict(ck["memory"])
-    demos.load_state_dict(ck["demos"])
-    rng.bit_generator.state = ck["rng"]
-    torch.set_rng_state(ck["torch_rng"])
+def restore(ck: dict, net, target, opt, memory, demos, rng, *, path: str = "",
+            keyframes=(), n_tasks: int = 0) -> tuple[dict, list[dict]]:  # fmt: skip
+    """Load a checkpoint's state into the run's objects; returns (counters, log rows).
+
+    Every entry is checked against those objects first (:func:`checkpoint_problem`), so a file
+    whose settings match but whose contents do not is refused before anything is loaded.
+
+    Raises:
+        ModelFileError: one line naming ``path`` and the entry that does not fit.
+    """
+    problem = checkpoint_problem(
+        ck, net=net, opt=opt, memory=memory, demos=demos, keyframes=keyframes, n_tasks=n_tasks
+    )
+    if problem:
+        raise ModelFileError(path or None, None, f"cannot resume from it: {problem}")
+    try:
+        net.load_state_dict(ck["net"])
+        target.load_state_dict(ck["target"])
+        opt.load_state_dict(ck["opt"])
+        memory.load_state_dict(ck["memory"])
+        demos.load_state_dict(ck["demos"])
+        rng.bit_generator.state = ck["rng"]
+        torch.set_rng_state(ck["torch_rng"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as e:  # a second line of defence
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ModelFileError(path or None, None, f"cannot resume from it: {first}") from None
     return {k: int(ck[k]) for k in ("step", "updates", "episodes")}, list(ck["log"])
 
 
@@ -527,6 +547,9 @@ def train(args: Args) -> dict:
             other settings).
     """
     # setup: files, checkpoint (checked before any data is read), data, networks, environments
+    problems = settings_problems(args)
+    if problems:
+        raise ValueError(problems[0])
     torch.set_num_threads(args.threads)
     files = RunFiles.beside(args.out)
     resume = args.resume and files.checkpoint.exists()
@@ -538,8 +561,9 @@ def train(args: Args) -> dict:
     train_tasks, test_tasks, split = make_tasks(args)
     if ck is not None and (ck.get("split") != split or ck.get("n_tasks") != len(train_tasks)):
         raise ModelFileError(
-            str(files.checkpoint), None, f"written for another data split ({ck.get('n_tasks')} "
-            f"training clips, {ck.get('split')}); this run has {len(train_tasks)}, {split}",
+            str(files.checkpoint), None, f"written for another data split ({_show(ck.get('n_tasks'))} "
+            f"training clips, {_show(ck.get('split'))}); this run has {len(train_tasks)}, "
+            f"{_show(split)}",
         )  # fmt: skip
     n = train_tasks[0].n_frames
     feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
@@ -552,7 +576,10 @@ def train(args: Args) -> dict:
     memory = ReplayMemory(args.buffer_size, n)
     demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
     if ck is not None:
-        counters, log_rows = restore(ck, net, target, opt, memory, demos, rng)
+        counters, log_rows = restore(
+            ck, net, target, opt, memory, demos, rng, path=str(files.checkpoint),
+            keyframes=args.keyframes, n_tasks=len(train_tasks),
+        )  # fmt: skip
         seeds = [args.seed + 1000 * (counters["step"] + 1) + i for i in range(len(envs))]
     else:
         counters, log_rows = {"step": 0, "updates": 0, "episodes": 0}, []

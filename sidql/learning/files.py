@@ -15,11 +15,12 @@ import os
 import pickle
 import re
 import warnings
+import zipfile
 
 import torch
 
 from sim.errors import ModelFileError, MotionDataError
-from sim.files import MAX_CHECKPOINT_BYTES, open_regular, write_atomic
+from sim.files import MAX_CHECKPOINT_BYTES, check_zip, excerpt, open_regular, write_atomic
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
@@ -27,6 +28,46 @@ from sim.files import MAX_CHECKPOINT_BYTES, open_regular, write_atomic
 POLICY_FORMAT = "sidql-dqn-policy/2"
 #: Kind and version of a training checkpoint (OUT.ckpt); replay memories are stored as tensors.
 CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
+
+
+#: Stated limits of a policy or checkpoint archive, checked on its zip directory before
+#: ``torch.load`` reads anything: members (one per tensor storage, plus a few) and the size of
+#: its pickle (the values other than tensors: settings, logs; a few KB in real files).
+MAX_ARCHIVE_MEMBERS = 4096
+MAX_PICKLE_BYTES = 4 << 20
+
+
+def check_archive(f, path: str) -> None:
+    """Check the zip directory of a ``torch.save`` file ``f`` before it is loaded, then rewind.
+
+    ``torch.save`` stores every member uncompressed, so a file inflates to no more than its own
+    size: a compressed member (a deflate bomb), overlapping members, more than
+    :data:`MAX_ARCHIVE_MEMBERS` members or a pickle larger than :data:`MAX_PICKLE_BYTES` is
+    refused.
+
+    Raises:
+        ModelFileError: one line naming the file and the problem.
+    """
+    size = os.fstat(f.fileno()).st_size
+    try:
+        with zipfile.ZipFile(f) as zf:
+            infos = check_zip(
+                zf, size, path, max_members=MAX_ARCHIVE_MEMBERS, max_inflated=size,
+                stored_only=True,
+            )  # fmt: skip
+    except zipfile.BadZipFile as e:
+        raise ModelFileError(
+            path, None, f"refused: not a file of tensors (a torch.save zip archive): {e}"[:200]
+        ) from None
+    except MotionDataError as e:
+        raise ModelFileError(path, None, f"refused: {e.problem}") from None
+    pickles = [i for i in infos if i.filename.endswith("data.pkl")]
+    if len(pickles) != 1 or pickles[0].file_size > MAX_PICKLE_BYTES:
+        raise ModelFileError(
+            path, None, f"refused: not a torch.save archive with one pickle of at most "
+            f"{MAX_PICKLE_BYTES:,} bytes",
+        )  # fmt: skip
+    f.seek(0)
 
 
 def save_payload(path: str | os.PathLike, payload: dict) -> None:
@@ -59,6 +100,7 @@ def load_payload(
         raise FileNotFoundError(f"no file at {path}")
     try:
         with open_regular(path, max_bytes) as f, warnings.catch_warnings():
+            check_archive(f, path)
             warnings.simplefilter("ignore")  # e.g. "Detected pickle protocol 4": verdict follows
             payload = torch.load(f, map_location="cpu", weights_only=True)
     except MotionDataError as e:  # not a regular file, too large: a refused model file
@@ -78,5 +120,7 @@ def load_payload(
         ) from None
     found = payload.get("format") if isinstance(payload, dict) else None
     if found != expected_format:
-        raise ModelFileError(path, None, f"format {found!r}; expected {expected_format!r}")
+        raise ModelFileError(
+            path, None, f"format {excerpt(repr(found))}; expected {expected_format!r}"
+        )
     return payload

@@ -306,8 +306,15 @@ class Policy:
     def select(self, clip, W: int) -> np.ndarray:
         """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart, features, costs, :meth:`decide`)."""
         series = chart(clip)
+        features = clip_features(series)
+        c = int(self.net.config["n_features"])
+        if features.shape[-1] != c:  # a policy trained on clips of another skeleton
+            raise ModelFileError(
+                self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
+                f"of {series.theta.shape[1]} bones give {features.shape[-1]}",
+            )  # fmt: skip
         cost = segment_cost_matrix(series, "hermite")
-        return self.decide(clip_features(series)[None], cost[None], W)[0]
+        return self.decide(features[None], cost[None], W)[0]
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -523,6 +530,12 @@ def check_config(cfg, state_dict) -> tuple:
     extra = sorted(set(state_dict) - set(shapes), key=str)
     if extra:
         raise ValueError(f"weights the declared network lacks: {str(extra[0])[:60]}")
+    for k in shapes:
+        v = state_dict[k]
+        if not v.is_floating_point() or not torch.isfinite(v).all():
+            raise ValueError(f"weight {k}: not all finite floating-point numbers")
+    if not (state_dict["feature_std"] > 0).all():
+        raise ValueError("weight feature_std: not all positive")
     return c, h, tuple(dil), prior
 
 
@@ -539,6 +552,7 @@ def _load(path: str, _mtime: int) -> Policy:
         first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
         raise ModelFileError(path, None, f"not a usable policy: {first}") from None
     meta = {k: v for k, v in payload.items() if k != "state_dict"}
+    meta["file"] = path
     return Policy(net, keyframes, meta)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import inspect
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -110,4 +111,47 @@ def field_docs() -> dict[str, str]:
             and isinstance(doc.value.value, str)
         ):
             out[field_node.target.id] = " ".join(doc.value.value.replace("``", "").split())
+    return out
+
+
+#: What each numeric setting must be (``sidql train`` refuses anything else in one line, before
+#: reading any data): a description and the test. Upper bounds keep the replay memories and the
+#: network within memory (``hidden`` as :data:`sidql.learning.policy.MAX_HIDDEN`).
+LIMITS = {
+    "steps": ("an integer >= 1", lambda v: v >= 1),
+    "stride": ("an integer >= 1", lambda v: v >= 1),
+    "synthetic_tasks": ("an integer in [4, 100000]", lambda v: 4 <= v <= 100_000),
+    "buffer_size": ("an integer in [1, 2000000]", lambda v: 1 <= v <= 2_000_000),
+    "batch_size": ("an integer in [1, 65536]", lambda v: 1 <= v <= 65_536),
+    "learning_rate": ("a number in (0, 1]", lambda v: 0 < v <= 1),
+    "gamma": ("a number in (0, 1]", lambda v: 0 < v <= 1),
+    "n_step": ("an integer in [1, 64]", lambda v: 1 <= v <= 64),
+    "train_frequency": ("an integer >= 1", lambda v: v >= 1),
+    "target_update": ("an integer >= 1", lambda v: v >= 1),
+    "learning_starts": ("an integer >= 0", lambda v: v >= 0),
+    "eps_start": ("a number in [0, 1]", lambda v: 0 <= v <= 1),
+    "eps_end": ("a number in [0, 1]", lambda v: 0 <= v <= 1),
+    "eps_fraction": ("a number in [0, 1]", lambda v: 0 <= v <= 1),
+    "demo_episodes": ("an integer in [0, 100000]", lambda v: 0 <= v <= 100_000),
+    "demo_fraction": ("a number in [0, 1)", lambda v: 0 <= v < 1),
+    "margin": ("a number >= 0", lambda v: v >= 0),
+    "margin_weight": ("a number >= 0", lambda v: v >= 0),
+    "hidden": ("an integer in [1, 1024]", lambda v: 1 <= v <= 1024),
+    "n_envs": ("an integer in [1, 1024]", lambda v: 1 <= v <= 1024),
+    "grad_clip": ("a number > 0", lambda v: v > 0),
+    "eval_every": ("an integer >= 1", lambda v: v >= 1),
+    "threads": ("an integer in [1, 256]", lambda v: 1 <= v <= 256),
+}
+
+
+def settings_problems(args: Args) -> list[str]:
+    """What is wrong with ``args`` (see :data:`LIMITS`), one line each; empty when nothing is."""
+    out = []
+    for name, (what, ok) in LIMITS.items():
+        v = getattr(args, name)
+        finite = not isinstance(v, float) or math.isfinite(v)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not finite or not ok(v):
+            out.append(f"--{name.replace('_', '-')} must be {what}; got {v}")
+    if not args.keyframes or any(not 3 <= w <= 60 for w in args.keyframes):
+        out.append(f"--keyframes values must be in [3, 60]; got {list(args.keyframes)}")
     return out

@@ -33,6 +33,7 @@ from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
 from sim.errors import MotionDataError
 from sim.files import write_atomic
+from sim.motion.clip import read_arrays
 from sim.motion.dataset import find_trials
 from sim.motion.ingest import load_motion
 
@@ -222,6 +223,23 @@ def _cache_path(cache_dir: Path, amc: Path, length: int, stride: int, fps: float
     return cache_dir / f"{amc.stem}-{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
 
 
+def _read_cache(path: Path, length: int):
+    """``(features, costs, starts, n_bones)`` of a cache file, or None when it is unreadable or
+    not of the expected layout (it is then rebuilt): read within stated limits like any input."""
+    try:
+        z = read_arrays(path, ("features", "costs", "starts", "n_bones"))
+    except MotionDataError:
+        return None
+    f, c, s, n = z["features"], z["costs"], z["starts"], z["n_bones"]
+    K = len(s)
+    if (f.ndim != 3 or f.shape[:2] != (K, length) or c.shape != (K, length, length)
+            or s.ndim != 1 or n.shape != () or f.dtype.kind != "f" or c.dtype.kind != "f"
+            or s.dtype.kind not in "iu" or n.dtype.kind not in "iu"
+            or not (np.isfinite(f).all() and np.isfinite(c).all())):  # fmt: skip
+        return None
+    return f, c, s, int(n)
+
+
 def trial_tasks(
     trial, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None
 ) -> TrialTasks:
@@ -241,12 +259,9 @@ def trial_tasks(
         cache_dir = default_cache_dir()
     if cache_dir is not False:
         path = _cache_path(Path(cache_dir), amc, length, stride, fps)
-        if path.exists():
-            with np.load(path) as z:
-                return TrialTasks(
-                    trial.subject, str(amc), z["features"], z["costs"], z["starts"],
-                    int(z["n_bones"]),
-                )  # fmt: skip
+        cached = _read_cache(path, length) if path.exists() else None
+        if cached is not None:
+            return TrialTasks(trial.subject, str(amc), *cached)
     motion = load_motion(trial.asf, trial.amc, fps=fps)
     if motion.n_frames < length:
         raise MotionDataError(str(amc), None, f"{motion.n_frames} frames < one {length}-frame clip")

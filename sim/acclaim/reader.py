@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sim.errors import MotionDataError, MotionDataWarning, UnknownNameError
-from sim.files import MAX_AMC_BYTES, MAX_ASF_BYTES, read_regular
+from sim.files import MAX_AMC_BYTES, MAX_ASF_BYTES, excerpt, open_regular, read_regular, text_lines
 
 INCH = 0.0254  # [m]
 ROTATION_DOFS = ("rx", "ry", "rz")
@@ -124,7 +124,7 @@ class Motion:
         root: (T, 6) root channels reordered to (tx, ty, tz, rx, ry, rz); translations [m],
             rotations [deg].
         angles: dict bone name -> (T, len(bone.dofs)) rotations [deg] in the bone's dof order.
-            Bones with dofs that the file never mentions are zeros.
+            Bones with dofs that the file never mentions are zeros (read-only).
         first_frame: the file's number of its first frame (usually 1).
         notes: repairs made while reading (e.g. an incomplete final frame dropped), each naming
             the file and line.
@@ -144,10 +144,23 @@ class Motion:
 # ----------------------------------------------------------------------------------------- ASF
 
 
+def _known(names, chars: int = 300) -> str:
+    """``names`` for an error message: as many as fit in about ``chars`` characters, then how
+    many there are in all (a hostile skeleton may have a thousand names of 64 characters)."""
+    names = list(names)
+    shown, size = [], 0
+    for name in names:
+        if size + len(name) > chars:
+            return ", ".join(shown) + f", ... ({len(names)} in all)"
+        shown.append(name)
+        size += len(name) + 2
+    return ", ".join(shown)
+
+
 def check_bone_name(name: str) -> str | None:
     """Why ``name`` is not an acceptable bone name, or None when it is (see the module docstring)."""
     if not _BONE_NAME_RE.match(name):
-        return f"bone name {name!r} is not of the form {BONE_NAME_GRAMMAR}"
+        return f"bone name {excerpt(name)} is not of the form {BONE_NAME_GRAMMAR}"
     if name.lower() in RESERVED_NAMES:
         return f"bone name {name!r} is reserved ({', '.join(RESERVED_NAMES)})"
     return None
@@ -178,13 +191,15 @@ def _float_list(
         values = [float(t) for t in tokens]
     except ValueError:
         bad = next(t for t in tokens if not _is_float(t))
-        raise MotionDataError(path, line, f"non-numeric value {bad!r} in {what}") from None
+        raise MotionDataError(path, line, f"non-numeric value {excerpt(bad)} in {what}") from None
     bounds = [bound] * len(values) if bound is None or isinstance(bound, (int, float)) else bound
     for t, v, b in zip(tokens, values, bounds, strict=True):
         if not math.isfinite(v):
-            raise MotionDataError(path, line, f"non-finite value {t!r} in {what}")
+            raise MotionDataError(path, line, f"non-finite value {excerpt(t)} in {what}")
         if b is not None and abs(v) > b:
-            raise MotionDataError(path, line, f"value {t} in {what} exceeds {b:g} in magnitude")
+            raise MotionDataError(
+                path, line, f"value {excerpt(t, quote=False)} in {what} exceeds {b:g} in magnitude"
+            )
     return values
 
 
@@ -250,14 +265,16 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
                 lo, hi = UNITS_LENGTH_RANGE
                 if not lo <= value <= hi:
                     raise MotionDataError(
-                        path, ln, f"units length {tokens[1]} outside [{lo:g}, {hi:g}]"
+                        path,
+                        ln,
+                        f"units length {excerpt(tokens[1], quote=False)} outside [{lo:g}, {hi:g}]",
                     )
                 units["length"] = value
             elif len(tokens) >= 2 and tokens[0] == "angle":
                 unit = tokens[1].lower()
                 if unit not in ("deg", "rad"):
                     raise MotionDataError(
-                        path, ln, f"angle unit {tokens[1]!r}; expected deg or rad"
+                        path, ln, f"angle unit {excerpt(tokens[1])}; expected deg or rad"
                     )
                 units["angle"] = unit
         elif section == "root":
@@ -266,7 +283,9 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
                 order = tuple(t.lower() for t in tokens[1:])
                 if sorted(order) != sorted(ROOT_CHANNELS):
                     raise MotionDataError(
-                        path, ln, f"root order {' '.join(tokens[1:])!r}; expected TX TY TZ RX RY RZ"
+                        path,
+                        ln,
+                        f"root order {excerpt(' '.join(tokens[1:]))}; expected TX TY TZ RX RY RZ",
                     )
                 root["order"] = order
             elif key == "axis":
@@ -347,7 +366,9 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
 def _axis_order(tokens: list[str], path: str, ln: int) -> str:
     order = tokens[0].upper() if tokens else ""
     if sorted(order) != ["X", "Y", "Z"]:
-        raise MotionDataError(path, ln, f"axis order {order!r}; expected a permutation of XYZ")
+        raise MotionDataError(
+            path, ln, f"axis order {excerpt(order)}; expected a permutation of XYZ"
+        )
     return order
 
 
@@ -367,7 +388,7 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits, angle_bound):
             raise MotionDataError(path, ln, "'begin' inside an open bone block")
         return 0, {"line": ln, "axis_order": "XYZ", "dofs": (), "limits_raw": []}
     if bone is None:
-        raise MotionDataError(path, ln, f"{tokens[0]!r} outside a begin/end bone block")
+        raise MotionDataError(path, ln, f"{excerpt(tokens[0])} outside a begin/end bone block")
     if key == "end":
         _finish_bone(bone, path, raw_bones)
         return 0, None
@@ -390,7 +411,9 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits, angle_bound):
         bone["length"] = _floats(tokens[1:], path, ln, "length")[0]
         bone["length_line"] = ln
         if not bone["length"] >= 0:
-            raise MotionDataError(path, ln, f"negative bone length {tokens[1]}")
+            raise MotionDataError(
+                path, ln, f"negative bone length {excerpt(tokens[1], quote=False)}"
+            )
     elif key == "axis":
         if len(tokens) != 5:
             raise MotionDataError(path, ln, "axis needs 3 angles and an order, e.g. '0 0 20 XYZ'")
@@ -401,7 +424,7 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits, angle_bound):
         for d in dofs:
             if d not in ROTATION_DOFS:
                 raise MotionDataError(
-                    path, ln, f"unsupported dof {d!r}; supported: {', '.join(ROTATION_DOFS)}"
+                    path, ln, f"unsupported dof {excerpt(d)}; supported: {', '.join(ROTATION_DOFS)}"
                 )
         if len(set(dofs)) != len(dofs):
             raise MotionDataError(path, ln, f"repeated dof in {' '.join(dofs)}")
@@ -415,7 +438,7 @@ def _bone_line(tokens, path, ln, bone, raw_bones, pending_limits, angle_bound):
     elif key in ("bodymass", "cofmass"):
         pass
     else:
-        raise MotionDataError(path, ln, f"unknown bone field {tokens[0]!r}")
+        raise MotionDataError(path, ln, f"unknown bone field {excerpt(tokens[0])}")
     return pending_limits, bone
 
 
@@ -435,11 +458,17 @@ def _finish_bone(bone: dict, path: str, raw_bones: list[dict]) -> None:
     for lln, text in bone["limits_raw"]:
         found = _LIMIT_RE.findall(text)
         if not found or _LIMIT_RE.sub("", text).strip():
-            raise MotionDataError(path, lln, f"cannot read limits {text!r}; expected '(lo hi)'")
+            raise MotionDataError(
+                path, lln, f"cannot read limits {excerpt(text)}; expected '(lo hi)'"
+            )
         for lo, hi in found:
             pair = _floats([lo, hi], path, lln, "limits", bone["angle_bound"])
             if pair[0] > pair[1]:
-                raise MotionDataError(path, lln, f"limits ({lo} {hi}): lower above upper")
+                raise MotionDataError(
+                    path,
+                    lln,
+                    f"limits ({excerpt(lo, quote=False)} {excerpt(hi, quote=False)}): lower above upper",
+                )
             limits.append(pair)
     if limits and len(limits) != len(bone["dofs"]):
         lln = bone["limits_raw"][0][0]
@@ -462,7 +491,9 @@ def _hierarchy_parents(hierarchy, by_name, path) -> dict[str, str]:
         for n in (parent, *children):
             if n not in known:
                 raise MotionDataError(
-                    path, ln, f"unknown bone {n!r} in hierarchy; known: root, {', '.join(by_name)}"
+                    path,
+                    ln,
+                    f"unknown bone {excerpt(n)} in hierarchy; known: {_known(['root', *by_name])}",
                 )
         for c in children:
             if c == "root":
@@ -475,7 +506,7 @@ def _hierarchy_parents(hierarchy, by_name, path) -> dict[str, str]:
     missing = [n for n in by_name if n not in parent_of]
     if missing:
         raise MotionDataError(
-            path, by_name[missing[0]]["line"], f"bones not in ':hierarchy': {', '.join(missing)}"
+            path, by_name[missing[0]]["line"], f"bones not in ':hierarchy': {_known(missing)}"
         )
     return parent_of
 
@@ -500,7 +531,7 @@ def _topological(parent_of: dict[str, str], by_name: dict, path: str) -> list[st
         raise MotionDataError(
             path,
             by_name[cyclic[0]]["line"],
-            f"hierarchy cycle: bones not reachable from root: {', '.join(sorted(cyclic))}",
+            f"hierarchy cycle: bones not reachable from root: {_known(sorted(cyclic))}",
         )
     return order
 
@@ -515,6 +546,11 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
     07_12.amc) loses that frame with a :class:`MotionDataWarning` and a note in ``Motion.notes``,
     unless ``strict``, where it is an error like any other truncated frame.
 
+    Bounded memory: the file is read a chunk at a time (:func:`sim.files.text_lines`) and each
+    chunk's values go straight into arrays, so the peak is the motion's own arrays (8 bytes per
+    value the file spells out, at least 2 characters each, so at most 4x the file's size) plus a
+    chunk. Bones the file never mentions share one read-only row of zeros.
+
     Returns:
         The motion with root translations in metres and rotations in degrees.
 
@@ -523,227 +559,297 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
             no frames...
     """
     path = str(path)
-    lines = _read_lines(path)
-    in_deg = skeleton.angles_in_degrees
-    body_start = None
-    for i, raw in enumerate(lines):
-        text = raw.strip()
-        if not text or text.startswith("#"):
-            continue
-        if text.startswith(":"):
-            flag = text.split()[0].upper()
-            if flag == ":DEGREES":
-                in_deg = True
-            elif flag == ":RADIANS":
-                in_deg = False
-            continue
-        body_start = i
-        break
-    if body_start is None:
-        raise MotionDataError(path, None, "no frames")
-    layout = {b.name: len(b.dofs) for b in skeleton.bones}
-    layout["root"] = 6
-    # Bounds in the file's units: |translation| <= MAX_METRES, |angle| <= MAX_DEGREES.
-    bounds = {
-        n: np.full(k, MAX_DEGREES if in_deg else np.deg2rad(MAX_DEGREES)) for n, k in layout.items()
-    }
-    for c in ("tx", "ty", "tz"):
-        bounds["root"][skeleton.root_order.index(c)] = MAX_METRES / skeleton.length_to_metres
-    parsed = _parse_frames_fast(lines, body_start, layout)
-    if parsed is not None and not _within(parsed[1], bounds):
-        parsed = None  # the checked parser names the offending line
-    if parsed is None:
-        parsed = _parse_frames_checked(lines, body_start, layout, path, strict, bounds)
-    first, columns, notes = parsed if len(parsed) == 3 else (*parsed, ())
-    if "root" not in columns:  # unreachable: both parsers check
-        raise MotionDataError(path, None, "no root line")
-    for note in notes:
+    parser = _AmcParser(path, skeleton, strict)
+    with open_regular(path, MAX_AMC_BYTES) as f:  # regular files only, of bounded size
+        for first_line, lines in text_lines(f, path, MAX_AMC_BYTES):
+            parser.feed(first_line, lines)
+    motion = parser.finish()
+    for note in motion.notes:
         warnings.warn(note, MotionDataWarning, stacklevel=2)
-    T = len(columns["root"])
-    root = np.asarray(columns.pop("root"), dtype=np.float64).reshape(T, 6)
-    root = root[:, [skeleton.root_order.index(c) for c in ROOT_CHANNELS]]
-    root[:, :3] *= skeleton.length_to_metres
-    angles = {}
-    for b in skeleton.bones:
-        if not b.dofs:
-            continue
-        v = columns.get(b.name)
-        a = np.zeros((T, len(b.dofs))) if v is None else np.asarray(v, np.float64)
-        angles[b.name] = a.reshape(T, len(b.dofs))
-    if not in_deg:
-        root[:, 3:] = np.rad2deg(root[:, 3:])
-        angles = {k: np.rad2deg(v) for k, v in angles.items()}
-    # Finite: every parsed value passed _within (finite, bounded), and rad2deg of a bounded value
-    # is finite; the zeros filled in for unmentioned bones are too.
-    return Motion(path=path, root=root, angles=angles, first_frame=first, notes=tuple(notes))
-
-
-def _within(columns: dict, bounds: dict) -> bool:
-    """Every value finite and within its channel's bound."""
-    for name, v in columns.items():  # min/max reduce without temporaries; nan propagates
-        if not len(v):
-            continue
-        b = bounds[name]
-        if name == "root":  # per channel: translations and angles differ
-            if not ((v.max(axis=0) <= b).all() and (v.min(axis=0) >= -b).all()):
-                return False
-        elif not (v.max() <= b[0] and v.min() >= -b[0]):
-            return False
-    return True
+    return motion
 
 
 def _is_frame_number(token: str) -> bool:
     return _FRAME_NUMBER_RE.match(token) is not None
 
 
-def _parse_frames_fast(lines: list[str], start: int, layout: dict[str, int]):
-    """Vectorised parse when every frame has the first frame's exact layout; None otherwise.
+def _frame_number_line(raw: str) -> bool:
+    """Whether ``raw`` is a line holding one token of digits (a frame number, valid or not)."""
+    tokens = raw.split()
+    return len(tokens) == 1 and tokens[0].isdigit()
 
-    Any irregularity (blank lines, a different bone order, a bad token) returns None so the
-    line-by-line parser can report it precisely.
+
+class _AmcParser:
+    """The AMC body as a state machine fed a chunk of lines at a time.
+
+    Frames go to per-bone arrays: runs of frames laid out exactly like the first frame are
+    converted by numpy a chunk at a time (the fast path); anything else goes line by line (the
+    checked path), which names the offending line. Both accept the same files and give the same
+    values: the fast path only takes what it can verify, and hands any doubt to the checked path.
     """
-    body = lines[start:]
-    while body and not body[-1].strip():
-        body.pop()
-    if not body or not _is_frame_number(body[0].strip()):
-        return None
-    frame_layout = []
-    for raw in body[1:]:
-        tokens = raw.split()
-        if not tokens or tokens[0].isdigit():
-            break
-        frame_layout.append((tokens[0], len(tokens) - 1))
-    L = 1 + len(frame_layout)
-    names = [n for n, _ in frame_layout]
-    if (
-        not frame_layout
-        or len(body) % L
-        or len(set(names)) != len(names)
-        or "root" not in names
-        or any(layout.get(n) != k for n, k in frame_layout)
-    ):
-        return None
-    T = len(body) // L
-    first = int(body[0])
-    number_lines = body[0::L]
-    digits = "".join(number_lines)
-    if not (digits.isascii() and digits.replace(" ", "").replace("\t", "").isdigit()):
-        return None  # signs, underscores, unicode digits: the checked parser decides
-    try:
-        numbers = np.array(number_lines, dtype=np.int64)
-    except (ValueError, OverflowError):
-        return None
-    if not np.array_equal(numbers, np.arange(first, first + T)):
-        return None
-    columns = {}
-    for k, (name, count) in enumerate(frame_layout, start=1):
-        slot = body[k::L]
-        prefix = name + " " if count else name
-        # Every line of the slot starts with the bone's name: T - 1 line starts after the first.
-        joined = "\n".join(slot)
-        if not joined.startswith(prefix) or joined.count("\n" + prefix) != T - 1:
-            return None
-        if count == 0:
-            continue
-        n = len(prefix)
-        try:  # numpy's C reader; a wrong count or a bad token raises
-            values = np.loadtxt([line[n:] for line in slot], dtype=np.float64, ndmin=2)
-        except (ValueError, IndexError):
-            return None
-        if values.shape != (T, count):
-            return None
-        columns[name] = values
-    return first, columns
 
+    ROWS = 256  # frames of the checked path held as Python lists before they become arrays
 
-def _parse_frames_checked(lines, start, layout, path, strict, bounds):
-    """Line-by-line parse with precise errors (the slow path)."""
-    frames: list[dict[str, list[float]]] = []
-    frame_lines: list[int] = []
-    expected_names = None
-    first = None
-    current: dict | None = None
+    def __init__(self, path: str, skeleton: Skeleton, strict: bool):
+        self.path, self.skeleton, self.strict = path, skeleton, strict
+        self.layout = {b.name: len(b.dofs) for b in skeleton.bones}
+        self.layout["root"] = 6
+        self.in_deg = skeleton.angles_in_degrees
+        self.in_header, self.seen_text = True, False
+        self.bounds: dict[str, list[float]] = {}
+        self.first: int | None = None  # the file's number of its first frame
+        self.n = 0  # frames closed
+        self.names: tuple[str, ...] | None = None  # the first frame's bones, in file order
+        self.current: dict | None = None  # the frame being read (checked path)
+        self.current_line = 0
+        self.rows: list[list] = []  # closed frames of the checked path, not yet arrays
+        self.columns: dict[str, list[np.ndarray]] = {}  # bone -> (frames, dofs) pieces
+        self.notes: list[str] = []
 
-    def close(ln_next):
-        if current is None:
-            return
-        nonlocal expected_names
-        if expected_names is None:
-            expected_names = set(current)
-        missing = expected_names - set(current)
-        if missing:
-            raise MotionDataError(
-                path,
-                frame_lines[-1],
-                f"truncated frame {first + len(frames) - 1}: missing {', '.join(sorted(missing))}",
-            )
-        extra = set(current) - expected_names
-        if extra:
-            raise MotionDataError(
-                path, frame_lines[-1], f"frame has bones the first frame lacks: {sorted(extra)}"
+    # -- feeding ---------------------------------------------------------------------------------
+
+    def feed(self, first_line: int, lines: list[str]) -> None:
+        """Read the next chunk of lines; ``first_line``: the number of ``lines[0]``."""
+        i = 0
+        if self.in_header:
+            i = self._header(lines)
+            if self.in_header:
+                return
+        last = len(lines) - 1  # the chunk's last frame may go on in the next chunk: not fast
+        while last > i and not _frame_number_line(lines[last]):
+            last -= 1
+        fast = True
+        while i < len(lines):
+            if fast and self.names is not None and i < last and _frame_number_line(lines[i]):
+                self._close(None)
+                done = self._fast(lines, i, last)
+                if done > i:
+                    i = done
+                    continue
+                fast = False  # irregular: the rest of this chunk goes line by line
+            self._line(first_line + i, lines[i])
+            i += 1
+
+    def _header(self, lines: list[str]) -> int:
+        """Skip blank lines, comments and ``:`` flags; returns the index of the first body line
+        (the header ends there) or ``len(lines)``."""
+        for i, raw in enumerate(lines):
+            text = raw.strip()
+            if text:
+                self.seen_text = True
+            if not text or text.startswith("#"):
+                continue
+            if text.startswith(":"):
+                flag = text.split()[0].upper()
+                if flag == ":DEGREES":
+                    self.in_deg = True
+                elif flag == ":RADIANS":
+                    self.in_deg = False
+                continue
+            self.in_header = False
+            self._set_bounds()
+            return i
+        return len(lines)
+
+    def _set_bounds(self) -> None:
+        """Bounds in the file's units: |translation| <= MAX_METRES, |angle| <= MAX_DEGREES."""
+        angle = MAX_DEGREES if self.in_deg else float(np.deg2rad(MAX_DEGREES))
+        self.bounds = {n: [angle] * k for n, k in self.layout.items()}
+        for c in ("tx", "ty", "tz"):
+            self.bounds["root"][self.skeleton.root_order.index(c)] = (
+                MAX_METRES / self.skeleton.length_to_metres
             )
 
-    for ln, raw in enumerate(lines[start:], start=start + 1):
+    # -- the checked path ------------------------------------------------------------------------
+
+    def _line(self, ln: int, raw: str) -> None:
+        path = self.path
         tokens = raw.split()
         if not tokens:
-            continue
-        if len(tokens) == 1 and tokens[0].isdigit() and not _is_frame_number(tokens[0]):
-            raise MotionDataError(
-                path, ln, f"frame number {tokens[0][:20]!r} is not 1 to 12 ASCII digits"
-            )
-        if len(tokens) == 1 and _is_frame_number(tokens[0]):
-            close(ln)
-            number = int(tokens[0])
-            if first is None:
-                first = number
-            elif number != first + len(frames):
+            return
+        if len(tokens) == 1 and tokens[0].isdigit():
+            if not _is_frame_number(tokens[0]):
                 raise MotionDataError(
-                    path, ln, f"frame number {number}; expected {first + len(frames)}"
+                    path, ln, f"frame number {excerpt(tokens[0], 20)} is not 1 to 12 ASCII digits"
                 )
-            current = {}
-            frames.append(current)
-            frame_lines.append(ln)
-            continue
-        if current is None:
-            raise MotionDataError(path, ln, f"expected a frame number, got {tokens[0]!r}")
+            self._close(None)
+            number = int(tokens[0])
+            if self.first is None:
+                self.first = number
+            elif number != self.first + self.n:
+                raise MotionDataError(
+                    path, ln, f"frame number {number}; expected {self.first + self.n}"
+                )
+            self.current, self.current_line = {}, ln
+            return
+        if self.current is None:
+            raise MotionDataError(path, ln, f"expected a frame number, got {excerpt(tokens[0])}")
         name = tokens[0]
-        if name not in layout:
+        if name not in self.layout:
             raise MotionDataError(
-                path, ln, f"unknown bone {name!r}; known: {', '.join(sorted(layout))}"
+                path, ln, f"unknown bone {excerpt(name)}; known: {_known(sorted(self.layout))}"
             )
-        if name in current:
+        if name in self.current:
             raise MotionDataError(path, ln, f"bone {name!r} appears twice in one frame")
-        if len(tokens) - 1 != layout[name]:
+        if len(tokens) - 1 != self.layout[name]:
             raise MotionDataError(
-                path, ln, f"bone {name!r} needs {layout[name]} values, got {len(tokens) - 1}"
+                path, ln, f"bone {name!r} needs {self.layout[name]} values, got {len(tokens) - 1}"
             )
-        try:  # bounds are checked on the whole arrays at the end (per line would cost ~40 %)
-            current[name] = [float(t) for t in tokens[1:]]
+        self.current[name] = _float_list(tokens[1:], path, ln, f"bone {name!r}", self.bounds[name])
+
+    def _close(self, at_end: int | None) -> None:
+        """Close the frame being read: check it has the first frame's bones, queue its values.
+
+        ``at_end``: the file's last line when this is its final frame (an incomplete final frame
+        is dropped with a note unless ``strict``)."""
+        current = self.current
+        if current is None:
+            return
+        self.current = None
+        if self.names is None:
+            if "root" not in current:
+                raise MotionDataError(self.path, self.current_line, "frame has no 'root' line")
+            self.names = tuple(current)
+            self.columns = {name: [] for name in self.names}
+        missing = set(self.names) - set(current)
+        if missing:
+            problem = f"truncated frame {self.first + self.n}: missing {_known(sorted(missing))}"
+            if at_end is not None and not self.strict and self.n >= 1:
+                where = f"{self.path}:{self.current_line}"
+                self.notes.append(f"{where}: {problem}; dropped the incomplete final frame")
+                return
+            raise MotionDataError(self.path, self.current_line, problem)
+        extra = set(current) - set(self.names)
+        if extra:
+            raise MotionDataError(
+                self.path, self.current_line,
+                f"frame has bones the first frame lacks: {_known(sorted(extra))}",
+            )  # fmt: skip
+        self.rows.append([current[name] for name in self.names])
+        self.n += 1
+        if len(self.rows) >= self.ROWS:
+            self._flush()
+
+    def _flush(self) -> None:
+        """The checked path's queued frames as arrays, one per bone."""
+        if not self.rows:
+            return
+        for k, name in enumerate(self.names):
+            values = np.array([row[k] for row in self.rows], dtype=np.float64)
+            self.columns[name].append(values.reshape(len(self.rows), self.layout[name]))
+        self.rows = []
+
+    # -- the fast path ---------------------------------------------------------------------------
+
+    def _fast(self, lines: list[str], start: int, stop: int) -> int:
+        """Convert the frames of ``lines[start:stop]`` (``start`` and ``stop`` frame-number
+        lines) in one go when every one is laid out exactly like the first frame, their numbers
+        follow on and every value is finite and within bounds; returns ``stop``, or ``start``
+        (nothing done) so that the checked path reads them and names any problem."""
+        names = self.names
+        L = len(names) + 1
+        if (stop - start) % L:
+            return start
+        T = (stop - start) // L
+        number_lines = lines[start:stop:L]
+        digits = "".join(number_lines)
+        if not (digits.isascii() and digits.replace(" ", "").replace("\t", "").isdigit()):
+            return start  # signs, underscores, unicode digits, other blanks: the checked path
+        try:
+            numbers = [int(x) for x in number_lines]
         except ValueError:
-            _float_list(tokens[1:], path, ln, f"bone {name!r}")  # raises, naming the token
-    if not frames:
-        raise MotionDataError(path, None, "no frames")
-    notes = []
-    try:
-        close(None)
-    except MotionDataError as e:
-        if strict or len(frames) < 2 or not e.problem.startswith("truncated frame"):
-            raise
-        frames.pop()
-        notes.append(f"{e}; dropped the incomplete final frame")
-    if "root" not in expected_names:
-        raise MotionDataError(path, frame_lines[0], "frame has no 'root' line")
-    columns = {n: np.array([f[n] for f in frames], dtype=np.float64) for n in expected_names}
-    if not _within(columns, bounds):
-        _raise_out_of_bounds(lines, start, layout, path, bounds)
-    return first, columns, notes
+            return start
+        expected = self.first + self.n
+        if numbers != list(range(expected, expected + T)) or any(
+            len(x.strip()) > 12 for x in number_lines
+        ):
+            return start
+        block = {}
+        for k, name in enumerate(names, start=1):
+            count = self.layout[name]
+            slot = lines[start + k : stop : L]
+            prefix = name + " " if count else name
+            joined = "\n".join(slot)
+            if not joined.startswith(prefix) or joined.count("\n" + prefix) != T - 1:
+                return start
+            if count == 0:
+                if any(line != name for line in slot):
+                    return start
+                continue
+            n = len(prefix)
+            try:  # numpy's C reader; a wrong count or a bad token raises
+                values = np.loadtxt(
+                    [line[n:] for line in slot], dtype=np.float64, ndmin=2, comments=None
+                )
+            except (ValueError, IndexError):
+                return start
+            if values.shape != (T, count) or not _within(values, self.bounds[name]):
+                return start
+            block[name] = values
+        self._flush()
+        for name, values in block.items():
+            self.columns[name].append(values)
+        self.n += T
+        return stop
+
+    # -- the result ------------------------------------------------------------------------------
+
+    def finish(self) -> Motion:
+        path = self.path
+        if not self.seen_text:
+            raise MotionDataError(path, None, "empty file")
+        if self.in_header:
+            raise MotionDataError(path, None, "no frames")
+        had_frame = self.current is not None or self.n > 0
+        self._close(at_end=True)
+        if not had_frame:
+            raise MotionDataError(path, None, "no frames")
+        self._flush()
+        T = self.n
+        skeleton = self.skeleton
+        columns = self.columns
+        order = [skeleton.root_order.index(c) for c in ROOT_CHANNELS]
+        root = _concatenate(columns.pop("root"), T, 6, order)
+        root[:, :3] *= skeleton.length_to_metres
+        if not self.in_deg:
+            np.rad2deg(root[:, 3:], out=root[:, 3:])
+        angles = {}
+        for b in skeleton.bones:
+            if not b.dofs:
+                continue
+            pieces = columns.pop(b.name, None)
+            if pieces is None:  # never mentioned: zeros, one shared read-only row
+                angles[b.name] = np.broadcast_to(np.zeros(len(b.dofs)), (T, len(b.dofs)))
+                continue
+            a = _concatenate(pieces, T, len(b.dofs))
+            del pieces
+            if not self.in_deg:
+                np.rad2deg(a, out=a)
+            angles[b.name] = a
+        # Finite: every value passed its bound (finite, bounded), and rad2deg of a bounded value
+        # is finite; the zeros of unmentioned bones are too.
+        return Motion(
+            path=path, root=root, angles=angles, first_frame=self.first, notes=tuple(self.notes)
+        )
 
 
-def _raise_out_of_bounds(lines, start, layout, path, bounds):
-    """Raise for the first line holding a non-finite or out-of-bounds value."""
-    for ln, raw in enumerate(lines[start:], start=start + 1):
-        tokens = raw.split()
-        if tokens and tokens[0] in layout and len(tokens) - 1 == layout[tokens[0]]:
-            bound = [float(b) for b in bounds[tokens[0]]]
-            _float_list(tokens[1:], path, ln, f"bone {tokens[0]!r}", bound)
-    raise MotionDataError(path, None, "non-finite or out-of-bounds value")  # unreachable
+def _concatenate(pieces: list[np.ndarray], T: int, k: int, order=None) -> np.ndarray:
+    """(T, k) float64 of ``pieces`` stacked (columns in ``order`` when given), emptying the list
+    as they are copied, so that at most one piece is held twice."""
+    out = np.empty((T, k))
+    row = 0
+    pieces.reverse()
+    while pieces:
+        piece = pieces.pop()
+        out[row : row + len(piece)] = piece if order is None else piece[:, order]
+        row += len(piece)
+    return out
+
+
+def _within(values: np.ndarray, bound: list[float]) -> bool:
+    """Every value of ``values`` (frames, channels) finite and within its channel's bound."""
+    if not len(values):
+        return True
+    b = np.asarray(bound)
+    # min/max reduce without temporaries; nan propagates
+    return bool((values.max(axis=0) <= b).all() and (values.min(axis=0) >= -b).all())

@@ -29,7 +29,7 @@ import numpy as np
 
 from sim.acclaim.reader import Skeleton, check_bone_name, parse_asf
 from sim.errors import MotionDataError
-from sim.files import write_atomic
+from sim.files import MAX_ASF_BYTES, read_regular, write_atomic
 from sim.model import quaternion as quat
 from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
@@ -214,11 +214,8 @@ def subject_model(asf_path: str | os.PathLike):
         MotionDataError: unreadable or malformed ASF, or a skeleton MuJoCo refuses.
     """
     path = str(Path(asf_path).resolve())
-    try:
-        digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    except OSError as e:
-        raise MotionDataError(str(asf_path), None, f"cannot read file: {e.strerror or e}") from e
-    return _model_for_asf(path, digest)
+    data = read_regular(asf_path, MAX_ASF_BYTES)  # a regular file of bounded size, never a device
+    return _model_for_asf(path, hashlib.sha256(data).hexdigest())
 
 
 @lru_cache(maxsize=1)

@@ -9,15 +9,18 @@ bone vector of point ``j`` is ``positions[:, j] - positions[:, parents[j]]``.
 
 from __future__ import annotations
 
+import math
 import os
 import zipfile
+import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from numpy.lib import format as npformat
 
 from sim.errors import MotionDataError, UnknownNameError
-from sim.files import write_atomic
+from sim.files import MAX_NPZ_BYTES, check_zip, excerpt, open_regular, write_atomic
 
 
 @dataclass(frozen=True)
@@ -173,31 +176,248 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> 
     return path
 
 
+#: Stated limits of a clip file (:func:`load_npz`), checked on the arrays' headers before any
+#: array is read: frames (18 minutes at 120 fps), points, generalised coordinates, characters
+#: of a name; and the members' inflated size: at most :data:`MAX_NPZ_INFLATED` bytes, and at
+#: most :data:`NPZ_INFLATION` times the file's size once past :data:`NPZ_INFLATION_FLOOR` (real
+#: clip files inflate ~1.2x; a deflate bomb ~1000x).
+MAX_CLIP_FRAMES = 1 << 17
+MAX_POINTS = 512
+MAX_COORDINATES = 2048
+MAX_NAME_CHARS = 256
+MAX_NPZ_MEMBERS = 256
+MAX_NPZ_INFLATED = 1 << 30
+NPZ_INFLATION = 128
+NPZ_INFLATION_FLOOR = 64 << 20
+_NPY_HEADER_BYTES = 10_000
+_KINDS = {"f": "floating-point", "i": "integer", "u": "unsigned integer", "b": "boolean",
+          "U": "text"}  # fmt: skip
+
+
+class NpzReader:
+    """A ``.npz`` file opened for bounded reading: a regular file of at most ``max_bytes``, its
+    zip directory checked (:func:`sim.files.check_zip`), every member an ``.npy`` array whose
+    header (shape, dtype) is read and checked against its member's size before any array is
+    read. Arrays of numbers, booleans and text only (never objects: nothing is unpickled).
+
+    Use as a context manager; :attr:`headers` maps each key to ``(shape, dtype)``; :meth:`array`
+    reads one array.
+
+    Raises:
+        MotionDataError: one line naming the file and the problem.
+    """
+
+    def __init__(self, path: str | os.PathLike, max_bytes: int = MAX_NPZ_BYTES):
+        self.path = str(path)
+        self._file = open_regular(path, max_bytes)
+        try:
+            self._open()
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _open(self) -> None:
+        path = self.path
+        size = os.fstat(self._file.fileno()).st_size
+        try:
+            self._zip = zipfile.ZipFile(self._file)
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+            raise MotionDataError(path, None, f"not a clip file (npz): {_first_line(e)}") from None
+        cap = min(MAX_NPZ_INFLATED, max(NPZ_INFLATION_FLOOR, NPZ_INFLATION * size))
+        infos = check_zip(
+            self._zip, size, path, max_members=MAX_NPZ_MEMBERS, max_inflated=cap,
+            stored_only=False,
+        )  # fmt: skip
+        self.headers: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
+        self._members: dict[str, tuple] = {}
+        for info in infos:
+            key = info.filename[:-4] if info.filename.endswith(".npy") else None
+            if not key:
+                raise MotionDataError(
+                    path, None, f"zip member {excerpt(info.filename)} is not an .npy array"
+                )
+            shape, fortran, dtype, offset = self._header(info)
+            self.headers[key] = (shape, dtype)
+            self._members[key] = (info, fortran, offset)
+
+    def _header(self, info):
+        path, what = self.path, f"array {excerpt(info.filename)}"
+        try:
+            with self._zip.open(info) as f:
+                version = npformat.read_magic(f)
+                read = {(1, 0): npformat.read_array_header_1_0,
+                        (2, 0): npformat.read_array_header_2_0}.get(version)  # fmt: skip
+                if read is None:
+                    raise ValueError(f"npy format version {version}")
+                shape, fortran, dtype = read(f, max_header_size=_NPY_HEADER_BYTES)
+                offset = f.tell()
+        except (ValueError, OSError, EOFError, SyntaxError, zipfile.BadZipFile, zlib.error) as e:
+            raise MotionDataError(path, None, f"{what}: bad header: {_first_line(e)}") from None
+        if dtype.kind not in _KINDS or dtype.fields is not None or dtype.subdtype is not None:
+            raise MotionDataError(path, None, f"{what}: dtype {excerpt(str(dtype))} refused")
+        if dtype.itemsize > 4 * MAX_NAME_CHARS or dtype.itemsize == 0:
+            raise MotionDataError(path, None, f"{what}: items of {dtype.itemsize} bytes")
+        if any(not 0 <= n <= MAX_CLIP_FRAMES * MAX_COORDINATES for n in shape) or len(shape) > 4:
+            raise MotionDataError(path, None, f"{what}: shape {excerpt(str(shape))} refused")
+        nbytes = math.prod(shape) * dtype.itemsize
+        if offset + nbytes != info.file_size:
+            raise MotionDataError(
+                path, None, f"{what}: {info.file_size - offset:,} bytes of data; its header "
+                f"{shape} {dtype} needs {nbytes:,}",
+            )  # fmt: skip
+        return shape, fortran, dtype, offset
+
+    def array(self, key: str) -> np.ndarray:
+        """The array ``key``, read straight into its own memory (a writable copy)."""
+        info, fortran, offset = self._members[key]
+        shape, dtype = self.headers[key]
+        out = np.empty(shape[::-1] if fortran else shape, dtype=dtype)
+        view = memoryview(out.reshape(-1).view(np.uint8)) if out.size else memoryview(b"")
+        try:
+            with self._zip.open(info) as f:
+                if len(f.read(offset)) != offset:  # the header, read and checked already
+                    raise EOFError("header ends early")
+                done = 0
+                while done < len(view):
+                    n = f.readinto(view[done:])
+                    if not n:
+                        raise EOFError("data end early")
+                    done += n
+                f.read(1)  # reaching the end checks the member's CRC-32
+        except (OSError, EOFError, zipfile.BadZipFile, zlib.error, ValueError) as e:
+            raise MotionDataError(
+                self.path, None, f"array {excerpt(key)}: unreadable: {_first_line(e)}"
+            ) from None
+        return out.T if fortran else out
+
+    def close(self) -> None:
+        self._zip.close()
+        self._file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _first_line(e: BaseException) -> str:
+    return excerpt((str(e).strip().splitlines() or [type(e).__name__])[0], 120, quote=False)
+
+
+def read_arrays(
+    path: str | os.PathLike, keys=None, *, prefix: str = "", max_bytes: int = MAX_NPZ_BYTES
+) -> dict[str, np.ndarray]:
+    """The arrays of a ``.npz`` file, read within stated limits (:class:`NpzReader`): those named
+    in ``keys`` (each must be there), else every one whose name starts with ``prefix``."""
+    with NpzReader(path, max_bytes) as z:
+        if keys is None:
+            keys = [k for k in z.headers if k.startswith(prefix)]
+        missing = [k for k in keys if k not in z.headers]
+        if missing:
+            raise MotionDataError(str(path), None, f"no array {excerpt(missing[0])}")
+        return {k: z.array(k) for k in keys}
+
+
+_CLIP_KEYS = (*_ARRAY_KEYS, "names", "joint_names", "fps", "source", "start_frame",
+              "source_fps", *_OPTIONAL_KEYS)  # fmt: skip
+
+
 def load_extra(path: str | os.PathLike, prefix: str = "") -> dict[str, np.ndarray]:
     """The arrays of a clip file written through ``save_npz(..., extra=...)`` whose names start
     with ``prefix`` (every non-clip key when empty)."""
-    clip_keys = {*_ARRAY_KEYS, "names", "joint_names", "fps", "source", "start_frame",
-                 "source_fps", *_OPTIONAL_KEYS}  # fmt: skip
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files if k not in clip_keys and k.startswith(prefix)}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise MotionDataError(str(path), None, f"not a clip file: {e}") from e
+    with NpzReader(path) as z:
+        keys = [k for k in z.headers if k not in _CLIP_KEYS and k.startswith(prefix)]
+        out = {k: z.array(k) for k in keys}
+    for k, v in out.items():
+        if v.dtype.kind == "f" and not np.isfinite(v).all():
+            raise MotionDataError(str(path), None, f"non-finite values in {excerpt(k)}")
+    return out
 
 
 def load_npz(path: str | os.PathLike) -> Clip:
-    """Read a clip written by :func:`save_npz`."""
+    """Read a clip written by :func:`save_npz`, within stated limits: a regular file of at most
+    :data:`~sim.files.MAX_NPZ_BYTES`, every array's shape and type checked against the clip
+    layout and :data:`MAX_CLIP_FRAMES` etc. from the headers before any array is read, every
+    number finite, parents a tree.
+
+    Raises:
+        MotionDataError: one line naming the file and the problem.
+    """
+    path = str(path)
+    with NpzReader(path) as z:
+        _check_clip_layout(z.headers, path)
+        a = {k: z.array(k) for k in _CLIP_KEYS if k in z.headers}
+    for k in ("positions", "velocities", "qpos", "qvel", "rotations", *_OPTIONAL_KEYS,
+              "fps", "source_fps"):  # fmt: skip
+        if k in a:
+            a[k] = a[k].astype(np.float64, copy=False)
+            if not np.isfinite(a[k]).all():
+                raise MotionDataError(path, None, f"non-finite values in {k}")
+    J = len(a["names"])
+    parents = a["parents"].astype(np.int64)
+    if J and (parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= J)
+              or np.any(parents[1:] == np.arange(1, J))):  # fmt: skip
+        raise MotionDataError(path, None, "parents: not a tree (the root first, -1)")
+    fps, source_fps = float(a["fps"]), float(a["source_fps"])
+    if not (0 < fps <= 1e4 and 0 < source_fps <= 1e4):
+        raise MotionDataError(path, None, f"frame rates {fps:g}, {source_fps:g} out of (0, 1e4]")
+    start = int(a["start_frame"])
+    if not 0 <= start <= 1 << 40:
+        raise MotionDataError(path, None, f"start_frame {start} out of range")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return Clip(
-                names=tuple(str(n) for n in z["names"]),
-                joint_names=tuple(str(n) for n in z["joint_names"]),
-                fps=float(z["fps"]),
-                source=str(z["source"]),
-                start_frame=int(z["start_frame"]),
-                source_fps=float(z["source_fps"]),
-                **{k: (z[k] if k in z else None) for k in _OPTIONAL_KEYS},
-                **{k: z[k] for k in _ARRAY_KEYS},
+        return Clip(
+            names=tuple(str(n) for n in a["names"]),
+            joint_names=tuple(str(n) for n in a["joint_names"]),
+            fps=fps,
+            source=str(a["source"]),
+            start_frame=start,
+            source_fps=source_fps,
+            **{k: a.get(k) for k in _OPTIONAL_KEYS},
+            parents=parents,
+            **{k: a[k] for k in _ARRAY_KEYS if k != "parents"},
+        )
+    except ValueError as e:  # unreachable after the layout check; a second line of defence
+        raise MotionDataError(path, None, f"not a clip file: {_first_line(e)}") from None
+
+
+def _check_clip_layout(headers: dict, path: str) -> None:
+    """Every clip array present, of the right kind and of consistent shapes within the limits
+    (from the headers alone: nothing is read yet)."""
+    want = {
+        "names": "U", "joint_names": "U", "source": "U", "parents": "iu", "positions": "f",
+        "velocities": "f", "qpos": "f", "qvel": "f", "rotations": "f", "fps": "fiu",
+        "start_frame": "iu", "source_fps": "fiu", **dict.fromkeys(_OPTIONAL_KEYS, "f"),
+    }  # fmt: skip
+    for key, kinds in want.items():
+        if key not in headers:
+            if key in _OPTIONAL_KEYS:
+                continue
+            raise MotionDataError(path, None, f"not a clip file: no array {key!r}")
+        if headers[key][1].kind not in kinds:
+            raise MotionDataError(
+                path, None, f"{key}: {_KINDS[headers[key][1].kind]} values, expected "
+                f"{' or '.join(_KINDS[k] for k in kinds)}",
+            )  # fmt: skip
+    shape = {k: headers[k][0] for k in want if k in headers}
+    T, J = (shape["positions"] + (0, 0))[:2]
+    nq, nv = (shape["qpos"] + (0, 0))[1], (shape["qvel"] + (0, 0))[1]
+    expected = {
+        "names": (J,), "parents": (J,), "positions": (T, J, 3), "velocities": (T, J, 3),
+        "rotations": (T, J, 4), "qpos": (T, nq), "qvel": (T, nv), "fps": (), "source": (),
+        "start_frame": (), "source_fps": (), **dict.fromkeys(_OPTIONAL_KEYS, (T, J, 3)),
+        "joint_names": (shape["joint_names"] + (0,))[:1],
+    }  # fmt: skip
+    for key, s in expected.items():
+        if key in shape and shape[key] != s:
+            raise MotionDataError(
+                path, None, f"{key}: shape {shape[key]}, the clip's layout needs {s}"
             )
-    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as e:  # truncated: zip
-        raise MotionDataError(str(path), None, f"not a clip file: {e}") from e
+    for what, n, limit in (("frames", T, MAX_CLIP_FRAMES), ("points", J, MAX_POINTS),
+                           ("qpos columns", nq, MAX_COORDINATES),
+                           ("qvel columns", nv, MAX_COORDINATES),
+                           ("joint names", shape["joint_names"][0], MAX_COORDINATES)):  # fmt: skip
+        if n > limit:
+            raise MotionDataError(path, None, f"{n:,} {what}; at most {limit:,}")
+    if T < 1:
+        raise MotionDataError(path, None, "a clip of no frames")

@@ -14,6 +14,7 @@ import hashlib
 import json
 import os
 import re
+import stat
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -21,7 +22,7 @@ from pathlib import Path, PurePosixPath
 
 from sim.batch import WRITE_LOCK, run_batch
 from sim.errors import MotionDataError, MotionDataWarning
-from sim.files import MAX_ASF_BYTES, MAX_INDEX_BYTES, inside, read_regular, write_atomic
+from sim.files import MAX_ASF_BYTES, MAX_INDEX_BYTES, excerpt, inside, read_regular, write_atomic
 from sim.motion.clip import load_npz, save_npz
 from sim.motion.ingest import load_motion
 
@@ -67,8 +68,23 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
     root = Path(root)
     if not root.is_dir():
         raise MotionDataError(str(root), None, "not a directory")
+
+    def skip(amc, asf, problem):
+        if skipped is None:
+            warnings.warn(problem, MotionDataWarning, stacklevel=3)
+        else:
+            skipped.append({"amc": excerpt(str(amc), 300, quote=False),
+                            "asf": excerpt(str(asf), 300, quote=False), "error": problem})  # fmt: skip
+
     trials = []
-    for amc in sorted(p for p in root.rglob("*") if p.suffix.lower() == ".amc" and p.is_file()):
+    named = sorted(p for p in root.rglob("*") if p.suffix.lower() == ".amc" and not p.is_dir())
+    for amc in named:
+        if not str(amc.relative_to(root)).isprintable():  # control characters: not echoed
+            skip(amc, "", f"{excerpt(str(amc))}: a name that cannot be printed; skipped")
+            continue
+        if not amc.is_file():  # FIFOs, devices, sockets, broken links: never opened
+            skip(amc, "", f"{amc}: not a regular file ({_kind(amc)}); skipped")
+            continue
         m = _TRIAL_RE.match(amc.name)
         subject = m.group("subject") if m else amc.parent.name
         asfs = {p.name.lower(): p for p in amc.parent.iterdir() if p.suffix.lower() == ".asf"}
@@ -77,16 +93,28 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
             asf = next(iter(asfs.values()))
         if asf is None:
             asf = amc.parent / f"{subject}.asf"
+        if not asf.name.isprintable():
+            skip(amc, asf, f"{excerpt(str(asf))}: a name that cannot be printed; skipped")
+            continue
         leaving = [p for p in (amc, asf) if p.exists() and not inside(p, root)]
         if leaving:
-            problem = f"{leaving[0]}: a symbolic link to a file outside {root}; skipped"
-            if skipped is None:
-                warnings.warn(problem, MotionDataWarning, stacklevel=2)
-            else:
-                skipped.append({"amc": str(amc), "asf": str(asf), "error": problem})
+            skip(amc, asf, f"{leaving[0]}: a symbolic link to a file outside {root}; skipped")
             continue
         trials.append(Trial(subject=subject, name=amc.stem, asf=asf, amc=amc))
     return sorted(trials, key=lambda t: (t.subject, t.name))
+
+
+def _kind(path: Path) -> str:
+    """What a path that is no regular file is, in words."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return "a broken symbolic link" if path.is_symlink() else "unreadable"
+    for test, what in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):  # fmt: skip
+        if test(mode):
+            return what
+    return "not a file"
 
 
 def safe_name(name: str, max_len: int = 100) -> str:
@@ -275,25 +303,68 @@ def dataset_entries(out_dir: str | os.PathLike, length: int = 60) -> list[tuple]
     return _read_dataset(out_dir, length)[1]
 
 
-def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
-    out_dir = Path(out_dir)
-    path = out_dir / "index.json"
+#: Bound [bytes] on what parsing an ``index.json`` may allocate, estimated from its bytes before
+#: parsing (:func:`read_index`).
+MAX_INDEX_ALLOCATION = 512 << 20
+
+
+def read_index(path: str | os.PathLike) -> dict:
+    """The ``index.json`` at ``path`` (``sidql dataset`` / ``sidql synth``), read within stated
+    limits: a regular file of at most :data:`~sim.files.MAX_INDEX_BYTES` whose parsing allocates
+    (estimated from its bytes before parsing: Python objects cost up to ~24x the characters that
+    spell them) at most :data:`MAX_INDEX_ALLOCATION`, nested within Python's recursion limit; a
+    JSON object with a list of ``trials``, each an object.
+
+    Raises:
+        MotionDataError: one line naming the file and the problem.
+    """
+    path = str(path)
     data = read_regular(path, MAX_INDEX_BYTES)  # a regular file of bounded size
+    # containers ([ {) cost ~64-232 bytes, other values (, :) ~32-60, characters one or more
+    estimate = 232 * (data.count(b"{") + data.count(b"[")) + 60 * data.count(b",") + len(data)
+    if estimate > MAX_INDEX_ALLOCATION:
+        raise MotionDataError(
+            path, None, f"not a dataset index: parsing would take ~{estimate >> 20} MB; at most "
+            f"{MAX_INDEX_ALLOCATION >> 20} MB",
+        )  # fmt: skip
     try:
         index = json.loads(data)
     except (ValueError, RecursionError) as e:  # RecursionError: nested too deeply
-        problem = str(e)[:120] if isinstance(e, ValueError) else "nested too deeply"
-        raise MotionDataError(str(path), None, f"not a dataset index: {problem}") from None
+        problem = str(e) if isinstance(e, ValueError) else "nested too deeply"
+        problem = excerpt(problem, 120, quote=False)
+        raise MotionDataError(path, None, f"not a dataset index: {problem}") from None
     trials = index.get("trials", []) if isinstance(index, dict) else None
     if not isinstance(trials, list):
-        raise MotionDataError(str(path), None, "not a dataset index: no list of 'trials'")
+        raise MotionDataError(path, None, "not a dataset index: no list of 'trials'")
+    for i, entry in enumerate(trials):
+        if not isinstance(entry, dict):
+            raise MotionDataError(path, None, f"not a dataset index: trials[{i}] is no object")
+    index["trials"] = trials
+    return index
+
+
+def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
+    out_dir = Path(out_dir)
+    path = out_dir / "index.json"
+    index = read_index(path)
+    trials = index.get("trials", [])
     out = []
     for i, entry in enumerate(trials):
-        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
-            raise MotionDataError(str(path), None, f"trials[{i}] has no 'file' name")
-        file = confined(out_dir, entry["file"], f"trials[{i}].file", path)
-        out += [(c, entry) for c in load_npz(file).split(length)]
+        out += [(c, entry) for c in load_npz(entry_file(out_dir, index, i)).split(length)]
     return index, out
+
+
+def entry_file(folder: str | os.PathLike, index: dict, i: int) -> Path:
+    """The clip file of entry ``i`` of a :func:`read_index` index of ``folder``: its ``file``,
+    a relative path confined to ``folder`` (:func:`confined`).
+
+    Raises:
+        MotionDataError: no ``file`` name, or one that is absolute or leaves the folder."""
+    folder = Path(folder)
+    name = index["trials"][i].get("file")
+    if not isinstance(name, str):
+        raise MotionDataError(str(folder / "index.json"), None, f"trials[{i}] has no 'file' name")
+    return confined(folder, name, f"trials[{i}].file", folder / "index.json")
 
 
 def confined(folder: Path, name: str, what: str, index: Path) -> Path:
@@ -307,6 +378,8 @@ def confined(folder: Path, name: str, what: str, index: Path) -> Path:
     path = folder / name
     if not name or PurePosixPath(name).is_absolute() or Path(name).is_absolute():
         problem = "is absolute"
+    elif not name.isprintable():  # control characters would reach terminals through messages
+        problem = "holds characters that cannot be printed"
     elif not inside(path, folder):
         problem = "leaves the dataset folder"
     else:

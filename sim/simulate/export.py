@@ -26,7 +26,6 @@ path changes; every array of a clip keeps its frame axis first:
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -36,6 +35,7 @@ import numpy as np
 from sim.errors import MotionDataError
 from sim.files import write_atomic
 from sim.motion.clip import load_extra, load_npz
+from sim.motion.dataset import entry_file, read_index
 
 FORMAT = "sidql-sim-episodes"
 _INFOS = ("joint_torque", "assist_wrench", "foot_contact", "foot_force")
@@ -57,17 +57,16 @@ def export_hdf5(
         MotionDataError: the index or a clip file is unreadable or a clip has no labels.
     """
     root = Path(dataset_dir)
-    try:
-        index = json.loads((root / "index.json").read_text())
-    except (OSError, ValueError) as e:
-        raise MotionDataError(str(root / "index.json"), None, f"not a synth index: {e}") from e
-    trials = [r for r in index.get("trials", []) if r.get("physical") or not physical_only]
+    index = read_index(root / "index.json")  # bounded, regular file; MotionDataError otherwise
+    chosen = [i for i, r in enumerate(index["trials"]) if r.get("physical") or not physical_only]
+    trials = [index["trials"][i] for i in chosen]
     episodes = []
-    for r in trials:
-        clip = load_npz(root / r["file"])
-        labels = load_extra(root / r["file"], "sim_")
+    for i, r in zip(chosen, trials, strict=True):
+        file = entry_file(root, index, i)  # relative, inside the folder
+        clip = load_npz(file)
+        labels = load_extra(file, "sim_")
         if "sim_actions" not in labels:
-            raise MotionDataError(str(root / r["file"]), None, "no sim_ labels: not a synth clip")
+            raise MotionDataError(str(file), None, "no sim_ labels: not a synth clip")
         episodes.append((r, clip, labels))
     if not episodes and trials:
         raise MotionDataError(str(root), None, "no clip to export")
