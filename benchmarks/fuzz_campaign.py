@@ -19,7 +19,7 @@ Every input runs in a fresh process forked from a warm one per file type (which 
 what that type's command imports and read one good file): the child gets an address-space limit
 (its size at the fork + ``--memory-limit-mb``, i.e. ``ulimit -v``), reads the input as the
 command would (``run_case``) and reports; the parent kills it after ``--timeout`` seconds (a
-hang) and takes its peak RSS and CPU time from ``wait4``. Outcomes: ``error`` (MotionDataError:
+hang) and takes its peak RSS and CPU time from ``wait4``. Outcomes: ``error`` (BadFileError:
 one printable line naming the file), ``ok`` (finite values), and the failures ``foreign`` (any
 other exception), ``non-finite``, ``bad-error``, ``bad-name``, ``read-outside``, ``over-memory``
 (MemoryError under the limit), ``hang``. Separately, inputs over the targets (peak RSS above

@@ -13,7 +13,7 @@ checkpoint) by byte-level and format-aware mutations (header fields, counts, dec
 bombs, lying array headers, overlapping zip members, tampered tensors and settings...).
 
 The property (:func:`run_case`): reading a case either raises
-:class:`~sim.errors.MotionDataError` naming a file inside the case's folder (and, when it gives a
+:class:`~sim.errors.BadFileError` (MotionDataError, ModelFileError) naming a file inside the case's folder (and, when it gives a
 line, one that exists), in one printable line of bounded length that quotes nothing of a file
 outside the folder, or returns values that are all finite (decisions that are valid keyframes,
 a checkpoint that resumes and trains a step). Anything else raises: :class:`Breach` for a broken
@@ -40,7 +40,7 @@ import numpy as np
 from acclaim_mutations import Breach, line_count, mutate, non_finite, read_all, seed_amc
 
 from sim.acclaim.reader import check_bone_name
-from sim.errors import MotionDataError
+from sim.errors import BadFileError
 
 KINDS = ("asf", "amc", "sidq", "npz", "index", "policy", "checkpoint")
 CANARY = b"CANARY-7f3a9"  # the content of every file outside a case's folder
@@ -773,7 +773,7 @@ def materialise(case: Case, folder: Path) -> Path:
 
 def run_case(case: Case, folder: Path, checkpoint_args: dict | None = None) -> str:
     """Materialise ``case`` in the empty ``folder`` and read it as the commands do: ``"error"``
-    (a clean MotionDataError) or ``"ok"`` (finite values); :class:`Breach` when the property
+    (a clean BadFileError: MotionDataError or ModelFileError) or ``"ok"`` (finite values); :class:`Breach` when the property
     fails; any other exception propagates (a foreign error)."""
     target = materialise(case, folder)
     try:
@@ -786,7 +786,7 @@ def run_case(case: Case, folder: Path, checkpoint_args: dict | None = None) -> s
                 raise Breach("bad-name", "; ".join(names))
         else:
             values = _READERS[case.kind](target, folder, checkpoint_args)
-    except MotionDataError as e:
+    except BadFileError as e:  # MotionDataError, or ModelFileError for policies and checkpoints
         _check_error(e, folder, target, confined=case.kind == "index")
         return "error"
     bad = [n for v in values for n in non_finite(v)] + [
@@ -798,7 +798,7 @@ def run_case(case: Case, folder: Path, checkpoint_args: dict | None = None) -> s
     return "ok"
 
 
-def _check_error(e: MotionDataError, folder: Path, target: Path, confined: bool) -> None:
+def _check_error(e: BadFileError, folder: Path, target: Path, confined: bool) -> None:
     """A clean error: names a file inside ``folder`` as given (or what the file under test
     ``target`` resolves to), an existing line if any, in one printable line of bounded length;
     with ``confined`` (a folder's files, not a path the user named, which may lead anywhere),
