@@ -334,7 +334,7 @@ def test_train_refuses_a_batch_of_zero_before_reading_anything(tmp_path):
 def test_ray_addresses_are_checked_before_any_work(tmp_path):
     from sidql.commands.usage import ray_address
 
-    one_line_exit_2(cli("dataset", str(tmp_path), "--out", str(tmp_path / "o"), "--ray",
+    one_line_exit_2(cli("dataset", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--ray",
                         "bogus::address"), "not a Ray address")  # fmt: skip
     mute = socket.create_server(("127.0.0.1", 0))  # accepts, never answers: not a cluster
     grpc = socket.create_server(("127.0.0.1", 0))  # answers the HTTP/2 preface like Ray's GCS
