@@ -54,7 +54,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from sidql.evaluation.evaluate import make_case  # noqa: E402
-from sidql.evaluation.report import physics_job, trial_ground  # noqa: E402
+from sidql.evaluation.validation import physics_job, trial_ground  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402

@@ -67,7 +67,12 @@ def test_eval_physics_adds_figures_an_original_row_a_noise_floor_and_comparisons
 
 
 def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tmp_path):
-    from sidql.evaluation.report import checks_document, physics_job, trial_ground, validate_clip
+    from sidql.evaluation.validation import (
+        checks_document,
+        physics_job,
+        trial_ground,
+        validate_clip,
+    )
     from sim.model.humanoid import subject_model
     from sim.motion.ingest import load_clips
 
@@ -85,7 +90,7 @@ def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tm
         assert row["physics"]["ground_z_m"] == round(ground.z, 6)
     assert c["original"]["physics"]["contact_recall"] == 1.0
     # the page shows the physics figures and leaves out the older checks they supersede
-    from sidql.evaluation.report import METRICS, shown_metrics
+    from sidql.evaluation.metrics import METRICS, shown_metrics
 
     shown = {m.key for m in shown_metrics(v)}
     assert {"residual_force_bw", "penetration_mm", "skate_mm_s", "mpjpe_mm"} <= shown
@@ -100,7 +105,7 @@ def test_a_physics_job_sent_to_another_process_measures_the_same(cmu_dir):
     (fresh, writable MuJoCo buffers) and gives the same figures."""
     import pickle
 
-    from sidql.evaluation.report import physics_job, trial_ground
+    from sidql.evaluation.validation import physics_job, trial_ground
     from sim.model.humanoid import subject_model
     from sim.motion.ingest import load_clips
 
