@@ -27,13 +27,11 @@ class Metric:
             ``""`` (not ranked).
         description: one sentence for the legend.
         fmt: Python format of a value; ``excess``: method rows show ``MethodRun.excess[key]``.
-        per_frame: key of the :func:`per_frame` array plotted per frame, if any.
+        per_frame: key of the :func:`sidql.evaluation.validation.per_frame` array plotted per
+            frame, if any.
         resolution: differences below this are ties when choosing the best (e.g. bone drift of
             1e-13 mm is rounding, not a better method); 0: compare as shown.
         group: which table of the clip shows it (:data:`GROUPS`).
-        superseded_by: a :mod:`sim.physics` key that measures the same thing better (calibrated
-            ground, contact labels, per-pair excess); where rows carry it, this metric is left
-            out of the page (it stays in ``checks.json``).
     """
 
     key: str
@@ -46,7 +44,6 @@ class Metric:
     per_frame: str | None = None
     resolution: float = 0.0
     group: str = "accuracy"
-    superseded_by: str | None = None
 
 
 #: Every figure the page knows, in column order. Keys absent from a run show ``n/a``; keys absent
@@ -60,25 +57,9 @@ METRICS: tuple[Metric, ...] = (
     Metric("bone_drift_max_mm", "bone drift", "mm", "lower",
            "largest change of a bone's length against the original", "{:.2g}",
            resolution=0.01),
-    Metric("floor_depth_max_mm", "floor depth", "mm", "zero",
-           "deepest capsule below the floor z = 0; methods: excess over the original", "{:+.1f}",
-           excess=True, per_frame="floor_depth_mm", superseded_by="penetration_mm"),
-    Metric("floor_frames", "floor frames", "", "zero",
-           "frames with a capsule > 1 mm below the floor; methods: excess over the original",
-           "{:+d}", excess=True, superseded_by="penetration_mm"),
-    Metric("self_pen_frames", "self-pen. frames", "", "zero",
-           "frames where non-adjacent bones overlap; methods: excess over the original", "{:+d}",
-           excess=True, superseded_by="self_pen_excess_mm"),
-    Metric("self_pen_depth_max_mm", "self-pen. depth", "mm", "zero",
-           "deepest overlap of non-adjacent bones; methods: excess over the original", "{:+.1f}",
-           excess=True, per_frame="self_pen_depth_mm", superseded_by="self_pen_excess_mm"),
-    Metric("skate_mean_mm_s", "skate", "mm/s", "zero",
-           "mean horizontal foot speed while a foot touches the floor; methods: excess over the "
-           "original", "{:+.0f}", excess=True, per_frame="skate_speed_mm_s", superseded_by="skate_mm_s"),
-    Metric("joint_limit_max_deg", "joint limit", "deg", "zero",
-           "largest hinge angle past its ASF limit (needs joint angles); methods: excess",
-           "{:+.1f}", excess=True, superseded_by="limit_excess_deg"),
-    # physics: filled by sim.physics where it runs
+    # physics: filled by sim.physics where it runs (contacts, penetration, joint limits of the
+    # fitted humanoid, dynamics); the kinematic replay's own floor, skating and joint-limit figures
+    # are in checks.json only, so each idea has one column
     Metric("penetration_mm", "penetration", "mm", "lower",
            "mean depth of a foot's lowest sole point below the floor", "{:.1f}", group="contacts"),
     Metric("float_mm", "float", "mm", "lower",
@@ -231,10 +212,6 @@ def best_in_clip(v: ClipValidation, m: Metric, values) -> set[int]:
 
 
 def shown_metrics(v: ClipValidation) -> list[Metric]:
-    """The metrics with a value in at least one row of the clip, less those a :mod:`sim.physics`
-    metric supersedes where the rows carry it (even as n/a: heights above a floor that does not
-    fit are not scored, nor are the older checks' against it)."""
+    """The metrics with a value in at least one row of the clip."""
     rows = [(v.baseline_figures, None)] + [(r.figures, r.excess) for r in v.runs]
-    present = [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]
-    carried = {k for s, _ in rows for k in s}
-    return [m for m in present if m.superseded_by not in carried]
+    return [m for m in METRICS if any(metric_value(m, s, e) is not None for s, e in rows)]

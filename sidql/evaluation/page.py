@@ -76,8 +76,8 @@ def _tables(v: ClipValidation, colours) -> str:
         "within the noise floor of each other (or show the same). Original row: its own figures; "
         "noise-floor row: how far each figure moves when the original is captured again with "
         f"{NOISE_MM:g} mm of marker noise. Method rows: MPJPE, velocity error and bone drift "
-        "against the original, columns marked \u21950 the excess over the original (0 = as the "
-        "original), \u2248o closest to the original's own value.</p>"
+        "against the original; columns marked \u2248o: closest to the original's own value is "
+        "best.</p>"
     )
 
 
