@@ -145,7 +145,7 @@ def test_report_on_ray_equals_the_report_in_process(cmu_dir, tmp_path):
 
 def test_eval_physics_on_a_dataset_folder_and_clean_refusals(cmu_dir, tmp_path, capsys):
     """A 'sidql dataset' folder of subject-skeleton trials gets the same physics as the CMU files
-    (it crashed with a ValueError); clips not on their subject's skeleton exit 2 with one line
+    (no ValueError); clips not on their subject's skeleton exit 2 with one line
     (the humanoid's points were fitted with the subject's model)."""
     import shutil
 
