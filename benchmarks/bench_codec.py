@@ -64,7 +64,7 @@ from sidql.keyframes.spherical import (  # noqa: E402
     protocol_indices,
     split_channels,
 )
-from sim.errors import MotionDataError  # noqa: E402
+from sim.errors import MotionDataError, UnmetTargetError  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
@@ -160,7 +160,7 @@ def codec(trials, rates, reconstruction, latency=0):
                 enc = encode_series(
                     t.series, rate=rate, reconstruction=reconstruction, latency=latency
                 )
-            except MotionDataError:
+            except UnmetTargetError:  # a rate below the trial's sparsest plan
                 failed += 1
                 continue
             acc.add_stream(t, enc)

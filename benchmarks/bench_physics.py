@@ -28,7 +28,7 @@ ways to get that reconstruction's physics, each followed by the same inverse dyn
 * mink: ``mink.solve_ik`` with one position ``FrameTask`` per point (daqp QP), warm-started,
   iterated per frame until the step is below 1e-6 or 20 iterations.
 
-Best of ``--repeats``; target (issue 10): <= 0.5 s for ours (fit + dynamics).
+Best of ``--repeats``; the aim: at most 0.5 s for ours (fit + dynamics).
 
 Part 2 (``--eval``): wall time of ``sidql eval`` on ``--data`` at W = 5 10 15 for the five default
 methods, without and with ``--physics`` (the baseline is the first). Target: ~10 minutes on 2
@@ -54,7 +54,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from sidql.evaluation.evaluate import make_case  # noqa: E402
-from sidql.evaluation.report import physics_job, trial_ground  # noqa: E402
+from sidql.evaluation.validation import physics_job, trial_ground  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402

@@ -42,7 +42,7 @@ _API = {
     "KeyframeEnv": "sidql.learning.env",
     "load_cases": "sidql.evaluation.evaluate",
     "evaluate": "sidql.evaluation.evaluate",
-    "validate_clip": "sidql.evaluation.report",
+    "validate_clip": "sidql.evaluation.validation",
     "report_clips": "sidql.evaluation.report",
     "report_trial": "sidql.evaluation.report",
     "encode_clip": "sidql.codec.encode",

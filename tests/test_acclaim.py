@@ -240,7 +240,7 @@ def knee_renamed(name: str) -> str:
     return ASF.replace("name knee", f"name {name}").replace("hip knee", f"hip {name}")
 
 
-# ------------------------------------------------------------- hostile input (issue 8, part 2)
+# ------------------------------------------------------------- hostile input ----------------
 # Each case is the tiny ASF/AMC above with one change; the error must be a MotionDataError naming
 # the file and the line of the change.
 

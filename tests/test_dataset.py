@@ -108,7 +108,7 @@ def test_clip_start_frames_count_source_frames(walk_clip):
     assert c.start_frame == 40 and c.n_frames == 10
 
 
-# ---------------------------------------------------------------- hostile layouts (issue 8, part 3)
+# ---------------------------------------------------------------- hostile layouts ----------------
 
 
 def test_output_paths_are_safe_and_unique(tmp_path):
@@ -243,7 +243,7 @@ def test_workers_exit_when_the_dataset_parent_is_killed(tmp_path, cmu_dir):
     assert not (tmp_path / "out" / "index.json").exists()
 
 
-# ----------------------------------------------- nothing non-finite leaves the ingest (issue 8, 2)
+# ----------------------------------------------- nothing non-finite leaves the ingest -----------
 
 
 def test_cli_ingest_and_dataset_refuse_a_nan_axis_naming_its_line(tmp_path, cmu_dir, capsys):

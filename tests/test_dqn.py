@@ -283,7 +283,7 @@ def test_untrained_rollout_prior_network_is_the_rollout_algorithm(tasks):
     )
 
 
-# --- hostile files, refused settings, the kernel's named modules (issue 8 part 1 and 3, issue 9) ---
+# --- hostile files, refused settings, the kernel's named modules ------------------------------
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -187,8 +187,8 @@ def test_load_cases_keeps_only_the_named_subjects(cmu_dir):
 
 
 def test_case_indices_count_clips_across_trials_with_several_clips(cmu_dir):
-    """The index seeds the random method: one per clip, in order (a regression once skipped
-    numbers inside trials of several clips, which changed Table 3's random row)."""
+    """The index seeds the random method: one per clip, in order, also inside trials of several
+    clips (a skipped number would change Table 3's random row)."""
     from sidql.evaluation.evaluate import load_cases
 
     cases, _ = load_cases(cmu_dir, subjects=["05"], progress=False)

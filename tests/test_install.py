@@ -73,7 +73,8 @@ def installed(tmp_path_factory) -> dict:
 def test_the_wheel_holds_the_packages_and_their_files(installed):
     names = set(zipfile.ZipFile(installed["wheel"]).namelist())
     for f in ("sim/data/cmu_humanoid.xml", "sim/data/canonical.asf", "sidql/data/policy.pt",
-              "sim/paths.py", "sidql/commands/main.py"):  # fmt: skip
+              "sidql/data/report.css", "sidql/data/report.js", "sim/paths.py",
+              "sidql/commands/main.py"):  # fmt: skip
         assert f in names, f
     assert not any(n.startswith(("tests/", "benchmarks/", "docs/")) for n in names)
 

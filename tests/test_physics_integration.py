@@ -67,7 +67,12 @@ def test_eval_physics_adds_figures_an_original_row_a_noise_floor_and_comparisons
 
 
 def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tmp_path):
-    from sidql.evaluation.report import checks_document, physics_job, trial_ground, validate_clip
+    from sidql.evaluation.validation import (
+        checks_document,
+        physics_job,
+        trial_ground,
+        validate_clip,
+    )
     from sim.model.humanoid import subject_model
     from sim.motion.ingest import load_clips
 
@@ -84,15 +89,28 @@ def test_report_checks_json_carries_physics_for_original_and_methods(cmu_dir, tm
         assert len(row["physics_per_frame"]["residual_force_bw"]) == clips[0].n_frames
         assert row["physics"]["ground_z_m"] == round(ground.z, 6)
     assert c["original"]["physics"]["contact_recall"] == 1.0
-    # the page shows the physics figures and leaves out the older checks they supersede
-    from sidql.evaluation.report import METRICS, shown_metrics
+    # the page shows one column per idea: the physics figures; the kinematic replay's own floor,
+    # skating and joint-limit figures are in checks.json only
+    from sidql.evaluation.metrics import METRICS, shown_metrics
 
     shown = {m.key for m in shown_metrics(v)}
     assert {"residual_force_bw", "penetration_mm", "skate_mm_s", "mpjpe_mm"} <= shown
-    superseded = {m.key for m in METRICS if m.superseded_by}
-    assert superseded and not superseded & shown
-    plain = validate_clip(clips[0], ["uniform"], 5)  # no physics: the older checks stay
-    assert superseded & {m.key for m in shown_metrics(plain)}
+    replay_only = {
+        "floor_depth_max_mm",
+        "skate_mean_mm_s",
+        "self_pen_frames",
+        "joint_limit_max_deg",
+    }
+    assert replay_only <= set(c["original"]["summary"]) and replay_only <= set(
+        c["methods"][0]["excess"]
+    )
+    assert not replay_only & {m.key for m in METRICS}
+    plain = validate_clip(clips[0], ["uniform"], 5)  # no physics: accuracy and geometry only
+    assert {m.key for m in shown_metrics(plain)} == {
+        "mpjpe_mm",
+        "velocity_error_mm_s",
+        "bone_drift_max_mm",
+    }
 
 
 def test_a_physics_job_sent_to_another_process_measures_the_same(cmu_dir):
@@ -100,7 +118,7 @@ def test_a_physics_job_sent_to_another_process_measures_the_same(cmu_dir):
     (fresh, writable MuJoCo buffers) and gives the same figures."""
     import pickle
 
-    from sidql.evaluation.report import physics_job, trial_ground
+    from sidql.evaluation.validation import physics_job, trial_ground
     from sim.model.humanoid import subject_model
     from sim.motion.ingest import load_clips
 
@@ -127,7 +145,7 @@ def test_report_on_ray_equals_the_report_in_process(cmu_dir, tmp_path):
 
 def test_eval_physics_on_a_dataset_folder_and_clean_refusals(cmu_dir, tmp_path, capsys):
     """A 'sidql dataset' folder of subject-skeleton trials gets the same physics as the CMU files
-    (it crashed with a ValueError); clips not on their subject's skeleton exit 2 with one line
+    (no ValueError); clips not on their subject's skeleton exit 2 with one line
     (the humanoid's points were fitted with the subject's model)."""
     import shutil
 

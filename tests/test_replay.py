@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sidql.evaluation.report import validate_clip
+from sidql.evaluation.validation import validate_clip
 from sim.replay.capsules import adjacent_pairs, bone_poses, bones_of
 from sim.replay.checks import (
     CollisionScene,

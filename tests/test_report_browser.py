@@ -161,7 +161,7 @@ def test_report_files_and_checks(report_dir):
 
 
 def test_best_value_per_column_and_declared_metrics():
-    from sidql.evaluation.report import METRICS, Metric, best_rows, metric_value
+    from sidql.evaluation.metrics import METRICS, Metric, best_rows, metric_value
 
     low = Metric("k", "k", "", "lower", "d", "{:.1f}")
     assert best_rows(low, [3.0, 1.0, None, 1.04, 2.0]) == {1, 3}  # equal as shown: 1.0

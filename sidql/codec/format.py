@@ -1,58 +1,13 @@
 """The ``.sidq`` container, versions 1 and 2: bytes <-> :class:`Stream`.
 
-Version 1 carries codings 0 and 1 (below); version 2 carries coding 2, the position coding
-(:func:`position_bytes`; after the point table: int8 exponent e of the bone-length unit 2^e m,
-M uint16 bone lengths in that unit, float32 position step, uint8 predictor weight x 8, uint32
-keyframe count W, one range-coded block of 1 + D channels of W integers, CRC-32; the values as
-:class:`sidql.codec.quantise.PositionQuantiser` rebuilds them).
-
-All numbers little-endian. Layout::
-
-    offset  size        field
-    0       4           magic b"SIDQ"
-    4       1           version (1)
-    5       1           reconstruction: 0 hermite, 1 linear, 2 catmull_rom (index in curves.CURVES)
-    6       1           coding: 0 fixed-size records (live streaming), 1 packed (LZMA, offline)
-    7       1           b, bits per pose channel (8..16; always 16 with coding 0)
-    8       2           latency L [frames] the encoder decided with (0: whole trial, offline)
-    10      4           fps, float32 (frames per second of the stream)
-    14      8           skeleton hash: first 8 bytes of SHA-256 of the canonical skeleton text
-                        (:func:`sidql.codec.skeleton.skeleton_hash`)
-    22      1           J, number of points; M = J - 1 bones. J = 0 stands for the CMU
-                        protocol's 23 points (:data:`sidql.keyframes.spherical.POINTS`, root,
-                        lhipjoint, lfemur, ... rwrist, with their CMU parents) and the next two
-                        fields are then absent
-    23      J x (1+n)   point names: length byte n, then n ASCII bytes
-    ..      J           parents, int8 (-1 for the root), each parent before its child
-    ..      4 M         bone lengths [m], float32
-    ..      12          root origin [m], 3 x float32 (CMU axes, y up)
-    ..      12          root step [m], 3 x float32
-    ..      4 D         (Hermite only) rate steps, D = 2 M + 3 float32 [rad/s or m/s]
-    ..      ...         the keyframes (below)
-    end-4   4           CRC-32 (zlib / IEEE 802.3) of every byte before it
-
-D = 2 M + 3 channels per keyframe: theta[M], phi[M], root[3]; :mod:`sidql.codec.quantise` gives
-the code of each (b bits, unsigned) and of the rates (int16).
-
-**Coding 0**, fixed-size records back to back until the trailer (a live sender emits each as it
-decides it; a reader checks that the body is a whole number of records)::
-
-    1 byte     gap: frames since the previous keyframe (0 for the first record, which is frame 0;
-               1..255 afterwards)
-    2 D bytes  pose codes, uint16
-    2 D bytes  (Hermite only) rate codes, int16
-
-**Coding 1**, ``W`` (uint32, the number of keyframes) then one ``.lzma`` stream ("LZMA alone"
-format, as written by ``xz --format=lzma``; 13-byte header, then LZMA1 data) that inflates to
-exactly ``W (1 + 2 D)`` bytes (``W (1 + 4 D)`` for Hermite), channel by channel::
-
-    W bytes        gaps, uint8 (as in coding 0)
-    D x 2W bytes   for each channel d: the W pose codes' differences along the keyframes,
-                   uint16, modulo 2^16 (the first against 0): code_w = sum of the first w + 1
-                   values modulo 2^16
-    D x 2W bytes   (Hermite only) for each channel: the W rate codes, int16
-
-The trial has ``1 + sum(gaps)`` frames; its last frame is the last keyframe.
+The byte format is specified once, in ``docs/codec.md`` ("The .sidq format"): version 1 carries
+codings 0 (fixed-size records, for live streaming) and 1 (packed, LZMA, offline), version 2
+carries coding 2, the position coding (:func:`position_bytes`; values as
+:class:`sidql.codec.quantise.PositionQuantiser` rebuilds them). All numbers are little-endian;
+the header names the reconstruction (its index in :data:`sidql.keyframes.curves.CURVES`), the
+stream rate, the skeleton's hash (:func:`sidql.codec.skeleton.skeleton_hash`) and the points
+(J = 0: the CMU protocol's 23, :data:`sidql.keyframes.spherical.POINTS`), and a CRC-32 of every
+byte before it ends the file. This module is that specification's reader and writer.
 
 Limits (checked before anything of their size is allocated): at most :data:`MAX_FRAMES` frames
 (fewer for skeletons of more than 23 points), a rate in (0, :data:`MAX_FPS`], lengths, origin and

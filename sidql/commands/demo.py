@@ -14,7 +14,8 @@ from sidql.commands.usage import (
     add_quiet,
     data_folder,
 )
-from sidql.evaluation.report import joint_ranges, report_clips
+from sidql.evaluation.report import report_clips
+from sidql.evaluation.validation import joint_ranges
 from sidql.keyframes.methods import available
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.motion.clip import save_npz

@@ -23,8 +23,8 @@ The registered reconstructions:
     adding one.
 
 Adding a reconstruction = one function + one :func:`register` call + its test; :mod:`evaluate
-<sidql.evaluation.evaluate>`, :mod:`rate <sidql.evaluation.rate>` and :mod:`report
-<sidql.evaluation.report>` pick it up from here. A keyframe method names the reconstruction it is
+<sidql.evaluation.evaluate>`, :mod:`rate <sidql.evaluation.rate>` and :mod:`validation
+<sidql.evaluation.validation>` pick it up from here. A keyframe method names the reconstruction it is
 meant for when it registers (:func:`sidql.keyframes.methods.register`; ``pitch`` -> ``slerp``,
 every other -> ``hermite``).
 

@@ -5,7 +5,7 @@ reduced to what the decision needs:
 
 - ``features`` (N, C) float32: per-frame inputs of the policy (the paper's F and V: bone angles
   [rad] and angular rates [rad/frame]; see :func:`sidql.learning.tasks.clip_features`);
-- ``cost`` (N, N) float64: the segment-cost matrix of issue 3, ``cost[i, j]`` (i < j) = summed
+- ``cost`` (N, N) float64: the Hermite segment-cost matrix (:mod:`sidql.keyframes.segment_costs`), ``cost[i, j]`` (i < j) = summed
   |Δθ| + |Δφ| [rad] over the frames strictly between keyframes i and j and over the M bones, so
   the paper's error of a sorted keyframe set K is ``Q(K) = sum_w cost[k_w, k_{w+1}] / (N M)``
   (eq. 18, :func:`sidql.learning.tasks.keyframe_q`).

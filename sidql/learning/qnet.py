@@ -1,8 +1,8 @@
 """The Q-network: one Q-value per frame of a clip, for the next keyframe to add.
 
 Inputs per clip: the paper's per-frame features F, V (N, C), the clip's segment-cost matrix
-(N, N) — a deterministic function of F and V (issue 3's Hermite costs of the chart the features
-come from) — the keyframe mask X (N,) and the number of keyframes still to choose.
+(N, N) — a deterministic function of F and V (the Hermite segment costs of the chart the
+features come from, :mod:`sidql.keyframes.segment_costs`) — the keyframe mask X (N,) and the number of keyframes still to choose.
 
 Two parts, so that a decision of W keyframes costs one encoder pass and W - 2 cheap head passes:
 

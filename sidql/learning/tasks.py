@@ -8,7 +8,7 @@
   arguments and by CI's tiny training run;
 - :func:`clip_features` / :func:`clip_task`: a 60-frame motion clip -> the paper's state
   inputs F, V (bone angles and rates of the spherical chart) and the Hermite segment-cost matrix
-  of issue 3;
+  (:mod:`sidql.keyframes.segment_costs`);
 - :func:`load_tasks`: every trial under a CMU directory, cut into 60-frame clips (optionally with a
   stride smaller than 60 for more, overlapping training clips), cached per trial as ``.npz`` in
   :func:`default_cache_dir` (``$SIDQL_CACHE`` or ``~/.cache/sidql/tasks``) unless told otherwise,

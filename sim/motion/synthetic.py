@@ -18,6 +18,7 @@ from sim.model.kinematics import point_names, point_parents
 from sim.model.rotations import Y_UP_TO_Z_UP, axis_rotation
 from sim.motion.clip import Clip
 from sim.motion.ingest import CMU_FPS, clip_from_qpos
+from sim.physics.feet import SOLE_POINTS
 
 
 def synthetic_qpos(
@@ -71,7 +72,7 @@ def synthetic_qpos(
 
 def _stand_on_floor(model, data, qpos: np.ndarray) -> None:
     """Shift the root height so the lowest foot site touches z = 0 (smoothed over time)."""
-    feet = [model.site(n).id for n in ("lfoot_end", "rfoot_end", "ltoes_end", "rtoes_end")]
+    feet = [model.site(f"{n}_end").id for n in SOLE_POINTS]
     low = np.empty(len(qpos))
     for i, q in enumerate(qpos):
         data.qpos[:] = q

@@ -2,7 +2,9 @@
 
 The one definition of foot points, sole geometry and contact thresholds: :mod:`sim.physics.ground`
 (the floor), :mod:`sim.physics.contacts` (labels and metrics), :mod:`sim.physics.analysis` (where
-ground forces act) and :mod:`sim.replay.checks` (the kinematic replay's foot contacts) all read it.
+ground forces act), :mod:`sim.replay.checks` (the kinematic replay's foot contacts), and the
+simulator's and synthetic motion's feet (:mod:`sim.simulate`, :mod:`sim.motion.synthetic`) all
+read it.
 
 The sole is the humanoid's own foot geometry (:func:`sim.model.humanoid.build_mjcf`, the body the
 dynamics and the simulator use): the foot bone's capsule from the ankle to the ball, shortened by
@@ -32,8 +34,9 @@ FOOT_PART = {
     "ltibia": "l_heel", "lfoot": "l_ball", "ltoes": "l_toes",
     "rtibia": "r_heel", "rfoot": "r_ball", "rtoes": "r_toes",
 }  # fmt: skip
-#: The sole's points (ball and toes), which rest on the floor in flat stance.
-SOLE_POINTS: tuple[str, ...] = ("lfoot", "ltoes", "rfoot", "rtoes")
+#: The sole's points (balls, then toes), which rest on the floor in flat stance; the bones whose
+#: capsules are the humanoid's foot geoms (the simulator's feet, :mod:`sim.simulate`).
+SOLE_POINTS: tuple[str, ...] = ("lfoot", "rfoot", "ltoes", "rtoes")
 SIDES: tuple[str, ...] = ("l", "r")
 
 #: [m] a foot enters contact when its lowest sole point comes within ``max(CONTACT_GAP, 2 x the

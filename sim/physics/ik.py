@@ -14,8 +14,8 @@ branches ambiguous (a straight knee can bend either way if the thigh turns 180 d
 the penalty picks the branch inside the limits, which the points cannot tell apart, while a
 violation the points force (they cannot be matched inside the range) still shows, at the cost of
 ``limit_weight`` metres per radian of point error. Hard limits (mink's QP constraints) would
-instead hide forced violations; mink (one position task per point, daqp) was also 24-61x slower
-per clip and less exact in ``benchmarks/bench_physics.py``.
+instead hide forced violations; mink (one position task per point, daqp) is also slower per clip
+and less exact on this job (``benchmarks/bench_physics.py``, ``docs/results/physics.md``).
 
 Points: ``"root"`` is the root body's origin; any other name ``b`` is the site ``b_end`` (the end of
 bone ``b``) of a model built by :func:`sim.model.humanoid.build_mjcf`. Units: metres, radians.

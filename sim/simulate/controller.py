@@ -42,8 +42,8 @@ import mujoco
 import numpy as np
 
 from sim.motion.velocities import qvel_from_qpos
+from sim.physics.feet import SOLE_POINTS
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
-from sim.simulate.reference import FOOT_GEOMS
 
 ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
 FALLEN_TONE = 0.3  # share of stiffness and strength with which a fallen body holds its pose
@@ -210,7 +210,7 @@ def contact_feedforward(
     ``data``: an ``MjData`` of ``model`` to work in (its state is overwritten), a new one if None.
     """
     data = data if data is not None else mujoco.MjData(model)
-    ids = [model.geom(n).id for n in FOOT_GEOMS]
+    ids = [model.geom(n).id for n in SOLE_POINTS]  # the foot and toe capsules
     out = force.copy()
     jacp = np.zeros((3, model.nv))
     for t in range(len(qpos)):
@@ -330,7 +330,7 @@ def track(
     lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
     floor = model.geom("floor").id
     side = np.full(model.ngeom, -1)
-    for name in FOOT_GEOMS:
+    for name in SOLE_POINTS:
         side[model.geom(name).id] = 0 if name.startswith("l") else 1
     push_ids = [model.body(p.body).id for p in pushes]
     dt = 1.0 / CONTROL_HZ

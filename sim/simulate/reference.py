@@ -17,8 +17,7 @@ from sim.acclaim.reader import parse_amc, parse_asf
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.motion.retarget import leg_length, motion_to_qpos
-
-FOOT_GEOMS = ("lfoot", "rfoot", "ltoes", "rtoes")
+from sim.physics.feet import SOLE_POINTS
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -43,7 +42,7 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     """(T,) height [m] of the lowest surface point of the foot and toe capsules in each frame."""
     data = mujoco.MjData(model)
-    ids = [model.geom(n).id for n in FOOT_GEOMS if mujoco.mj_name2id(model, 5, n) >= 0]
+    ids = [model.geom(n).id for n in SOLE_POINTS if mujoco.mj_name2id(model, 5, n) >= 0]
     low = np.empty(len(qpos))
     for t, q in enumerate(qpos):
         data.qpos[:] = q
