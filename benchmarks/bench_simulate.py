@@ -2,9 +2,9 @@
 
 Usage::
 
-    python benchmarks/bench_simulate.py --cmu ../shared/cmu [--keyframes 10] [--workers 2]
+    python benchmarks/bench_simulate.py --data ../shared/cmu [--keyframes 10] [--workers 2]
 
-Every 60-frame clip (30 fps) of the trials under ``--cmu`` is rebuilt by each method; the
+Every 60-frame clip (30 fps) of the trials under ``--data`` is rebuilt by each method; the
 subject's humanoid is fitted to the original and to every reconstruction (``sim.physics``) and
 the subject's torque-limited body tracks each fit in ``mj_step`` with no assistance
 (``sim.simulate.validate``), exactly as ``sidql eval --physics --simulate`` does. Per method:
@@ -26,11 +26,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from results import write_results  # noqa: E402
 
 from sidql.evaluation.evaluate import evaluate, load_cases, simulate_markdown  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cmu", required=True, help="folder of CMU trials")
+    ap.add_argument(
+        "--data", "--cmu", dest="cmu", default=default_data_dir(),
+        help="folder of CMU trials (default: $SIDQL_DATA or ../shared/cmu)",
+    )  # fmt: skip
     ap.add_argument("--keyframes", type=int, nargs="+", default=[10])
     ap.add_argument("--methods", nargs="+",
                     default=["random", "uniform", "greedy", "optimal", "pitch"])  # fmt: skip

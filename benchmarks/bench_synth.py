@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/bench_synth.py --cmu ../shared/cmu [--n 90] [--workers 2] [--audit]
+    python benchmarks/bench_synth.py --data ../shared/cmu [--n 90] [--workers 2] [--audit]
 
 Quality (deterministic for a seed, unaffected by machine load): ``synthesize`` writes ``--n``
 clips of the default mix into a temporary folder (or ``--synth DIR`` reads a folder written by
@@ -44,6 +44,7 @@ from sim.model.humanoid import canonical_skeleton  # noqa: E402
 from sim.motion.clip import load_extra, load_npz  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 from sim.physics.contacts import trial_contacts  # noqa: E402
 from sim.physics.ground import estimate_ground, horizontal_speed  # noqa: E402
 from sim.simulate.controller import track  # noqa: E402
@@ -256,7 +257,10 @@ def speed(cmu: str, clips: int, seed: int) -> tuple[str, dict]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cmu", required=True, help="folder of CMU trials")
+    ap.add_argument(
+        "--data", "--cmu", dest="cmu", default=default_data_dir(),
+        help="folder of CMU trials (default: $SIDQL_DATA or ../shared/cmu)",
+    )  # fmt: skip
     ap.add_argument("--synth", default=None, help="a folder written by sidql synth (else made)")
     ap.add_argument("--n", type=int, default=90, help="clips to synthesize for the figures")
     ap.add_argument("--seed", type=int, default=0)
