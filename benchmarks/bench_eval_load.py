@@ -78,11 +78,16 @@ def main(argv=None) -> int:
     ]
     for label, (q, b) in figures.items():
         rows.append(f"| {label} | {q:.2f} | {b:.2f} | {b / q:.2f}x |")
+    (q1, b1), (q0, b0) = figures.values()
     text = (
         f"`evaluate` on the {len(cases)} clips of the shipped policy's held-out subjects "
         f"({', '.join(subjects)}), W = {', '.join(map(str, COUNTS))}, one process, best of "
-        f"{args.repeats} runs each; {os.cpu_count()} cores. Aim: the run with the learned policy "
-        "at most 1.5x its quiet time under load, like the compiled baselines.\n\n" + "\n".join(rows)
+        f"{args.repeats} runs each; {os.cpu_count()} cores.\n\n" + "\n".join(rows) + "\n\n"
+        f"With the learned policy the run slows down {b1 / q1:.2f}x under load, "
+        f"{(b1 / q1) / (b0 / q0):.2f}x the slow-down of the compiled baselines alone (aim: at "
+        "most 1.5x under load; on 2 cores with other processes spinning any one-thread "
+        "computation gets part of a core, so the baselines' ratio in the same run is the "
+        "yardstick)."
     )
     print(text)
     if args.write:
