@@ -51,7 +51,8 @@ def clip_from_qpos(
     """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
 
     Point ``j`` is the site ``<names[j]>_end`` (the root: the root body's origin). Velocities are
-    taken at the source rate (central differences of qpos), then mapped through the chain; the
+    taken at the source rate (central differences of qpos, never across a pose jump of the data:
+    :func:`sim.motion.velocities.qvel_from_qpos`), then mapped through the chain; the
     points' ``source_velocities`` and ``accelerations`` come from their positions in every source
     frame (:func:`sim.motion.velocities.point_derivatives`).
     ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
@@ -71,7 +72,7 @@ def clip_from_qpos(
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
     data = mujoco.MjData(model) if data is None else data
     with np.errstate(all="ignore"):  # overflow shows up as non-finite values, refused below
-        qvel = qvel_from_qpos(model, qpos, source_fps, frames)
+        qvel = qvel_from_qpos(model, qpos, source_fps, frames, across_jumps=False)
         if not np.isfinite(qvel).all():
             raise MotionDataError(source or None, None, "non-finite joint velocities (qvel)")
         pos, vel, xquat, omega = point_kinematics(
