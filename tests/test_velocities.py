@@ -13,6 +13,7 @@ from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import (
     body_rotation_steps,
     kin_related,
+    point_derivatives,
     pose_jumps,
     qvel_from_qpos,
 )
@@ -168,3 +169,24 @@ def test_real_take_with_pose_jumps_keeps_velocities_to_the_points(cmu_dir):
     err = err[~near[1:-1]]
     assert np.median(err) < 0.01
     assert np.percentile(err, 99) < 0.5  # [m/s]; the rest: 15-60 deg steps, second order
+
+
+def test_source_derivatives_are_not_taken_across_a_pose_jump():
+    """A point whose data jumps 30 cm (a solver's flip) keeps, on each side of the jump, the
+    derivatives of its own smooth path; a point the jump does not move is untouched."""
+    rate, T = 120.0, 80
+    t = np.arange(T) / rate
+    smooth = np.stack([np.sin(3 * t), np.cos(2 * t), 0.1 * t], axis=-1)
+    p = np.stack([smooth, smooth], axis=1)  # (T, 2, 3)
+    p[40:, 0, 0] += 0.3  # point 0 jumps between samples 39 and 40
+    cuts = np.zeros((T - 1, 2), bool)
+    cuts[39, 0] = True
+    vel, acc = point_derivatives(p, rate, cuts=cuts)
+    v_true = np.stack([3 * np.cos(3 * t), -2 * np.sin(2 * t), 0.1 + 0 * t], axis=-1)
+    a_true = np.stack([-9 * np.sin(3 * t), -4 * np.cos(2 * t), 0 * t], axis=-1)
+    np.testing.assert_allclose(vel[:, 0], v_true, atol=2e-3)
+    np.testing.assert_allclose(acc[:, 0], a_true, atol=0.2)
+    plain_v, plain_a = point_derivatives(p, rate)
+    assert np.abs(plain_a[:, 0] - a_true).max() > 100  # across it: 0.3 m in 8 ms
+    np.testing.assert_array_equal(vel[:, 1], plain_v[:, 1])
+    np.testing.assert_array_equal(acc[:, 1], plain_a[:, 1])

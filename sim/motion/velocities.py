@@ -9,6 +9,8 @@ differences of positions.
 
 from __future__ import annotations
 
+import functools
+
 import mujoco
 import numpy as np
 
@@ -71,6 +73,18 @@ def kin_related(model) -> np.ndarray:
     return related
 
 
+def point_cuts(model, jumps: np.ndarray, body_ids) -> np.ndarray:
+    """(T-1, J) bool: pose jumps (``jumps`` (T-1, nbody)) that move points on bodies
+    ``body_ids`` (J,): a jump of the point's body or of any body above it."""
+    body_ids = np.asarray(body_ids)
+    above = np.zeros((model.nbody, len(body_ids)), dtype=bool)
+    for j, b in enumerate(body_ids):
+        while b > 0:
+            above[b, j] = True
+            b = model.body_parentid[b]
+    return (np.asarray(jumps, dtype=np.int64) @ above.astype(np.int64)) > 0
+
+
 def pose_jumps(steps: np.ndarray, fps: float, related: np.ndarray | None = None) -> np.ndarray:
     """(T-1, nbody) bool: the step from frame t to t+1 is a pose jump of that body.
 
@@ -122,6 +136,7 @@ def qvel_from_qpos(
     frames: np.ndarray | None = None,
     *,
     across_jumps: bool = True,
+    jumps: np.ndarray | None = None,
 ):
     """(F, nv) generalised velocities at ``frames`` of a ``qpos`` stream sampled at ``fps``.
 
@@ -138,6 +153,7 @@ def qvel_from_qpos(
         qpos: (T, nq) positions sampled every ``1 / fps`` seconds.
         frames: indices where velocities are wanted (default: all T).
         across_jumps: difference straight across pose jumps (the plain stencil).
+        jumps: (T-1, nbody) the stream's pose jumps when already known (default: found here).
     """
     T = qpos.shape[0]
     frames = np.arange(T) if frames is None else np.asarray(frames)
@@ -152,7 +168,8 @@ def qvel_from_qpos(
         return out
     rot = body_joint_rotations(model, qpos)
     steps = rotation_angle(rot[:-1], rot[1:])
-    jumps = pose_jumps(steps, fps, kin_related(model))
+    if jumps is None:
+        jumps = pose_jumps(steps, fps, kin_related(model))
     bodies = np.flatnonzero(jumps.any(axis=0))
     ks = np.flatnonzero((frames > 0) & (frames < T - 1))
     if len(bodies) == 0 or len(ks) == 0:
@@ -189,11 +206,13 @@ def qvel_from_qpos(
 
 #: Derivatives of the original's points from its source frames: a local polynomial of degree
 #: SOURCE_DEGREE through SOURCE_WINDOW source samples around each frame (at CMU's 120 fps, 17
-#: samples = +-67 ms, two 30 fps frames either side; shifted inward at a take's ends). Its gain
-#: (:func:`local_polynomial_gain`) on an acceleration is 1.00 up to 3 Hz, 0.975 at 5 Hz and 0.72
-#: at 10 Hz (velocity: 0.994, 0.96, 0.59); an impulse spreads over +-2 frames at 30 fps and no
-#: further. Marker noise is why it is not the exact 3-sample difference: at 120 Hz a second
-#: difference turns 1 mm of noise into ~35 m/s^2.
+#: samples = +-67 ms, two 30 fps frames either side). Its gain (:func:`local_polynomial_gain`)
+#: on an acceleration is 1.00 up to 3 Hz, 0.975 at 5 Hz and 0.72 at 10 Hz (velocity: 0.994,
+#: 0.96, 0.59); an impulse spreads over +-2 frames at 30 fps and no further. Marker noise is why
+#: it is not the exact 3-sample difference: at 120 Hz a second difference turns 1 mm of noise
+#: into ~35 m/s^2. Near a take's ends (and a pose jump) the window shifts inward: a degree-4 fit
+#: read at its first sample amplifies noise 5x more than the centred one, but a lower degree
+#: there misses 60 % of a 1.5 Hz acceleration.
 SOURCE_WINDOW, SOURCE_DEGREE = 17, 4
 
 
@@ -204,6 +223,13 @@ def local_polynomial_weights(k: int, where: int, h: float, degree: int) -> np.nd
     V = np.vander(x, degree + 1, increasing=True)
     coef = np.linalg.pinv(V)
     return np.stack([coef[1], 2 * coef[2] if degree >= 2 else 0 * coef[1]])
+
+
+@functools.lru_cache(maxsize=4096)
+def _unit_weights(k: int, where: int, degree: int) -> np.ndarray:
+    w = local_polynomial_weights(k, where, 1.0, degree)
+    w.flags.writeable = False
+    return w
 
 
 def local_polynomial_gain(freq, fps: float, k: int = SOURCE_WINDOW, degree: int = SOURCE_DEGREE):
@@ -218,6 +244,12 @@ def local_polynomial_gain(freq, fps: float, k: int = SOURCE_WINDOW, degree: int 
     return vel, acc
 
 
+def _window(t: int, first: int, stop: int, k: int) -> tuple[int, int]:
+    """(start, length) of the window of at most ``k`` samples of ``[first, stop)`` around ``t``."""
+    n = min(k, stop - first)
+    return int(np.clip(t - k // 2, first, stop - n)), n
+
+
 def point_derivatives(
     positions: np.ndarray,
     fps: float,
@@ -225,26 +257,64 @@ def point_derivatives(
     *,
     window: int = SOURCE_WINDOW,
     degree: int = SOURCE_DEGREE,
+    cuts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocities and accelerations (F, J, 3) [m/s, m/s^2] at ``frames`` of points
     ``positions`` (T, J, 3) [m] sampled at ``fps``, by the local polynomial of
-    :data:`SOURCE_WINDOW` (fewer than 3 samples: zeros)."""
+    :data:`SOURCE_WINDOW` (fewer than 3 samples: zeros).
+
+    ``cuts``: (T-1, J) bool, the step from sample t to t+1 of point j is not to be differenced
+    across (a pose jump of the data, :func:`pose_jumps`): the point's windows stay on the side of
+    the frame, as at a take's ends."""
     p = np.asarray(positions, dtype=np.float64)
     T = p.shape[0]
     frames = np.arange(T) if frames is None else np.asarray(frames)
     vel = np.zeros((len(frames),) + p.shape[1:])
     acc = np.zeros_like(vel)
-    k = min(window, T)
-    if k < 3:
+    if min(window, T) < 3:
         return vel, acc
-    degree = min(degree, k - 1)
-    lo = np.clip(frames - k // 2, 0, T - k)
-    weights = {w: local_polynomial_weights(k, w, 1.0 / fps, degree) for w in np.unique(frames - lo)}
-    for w, W in weights.items():
-        sel = np.flatnonzero(frames - lo == w)
-        stack = p[lo[sel][:, None] + np.arange(k)]  # (n, k, J, 3)
-        vel[sel] = np.einsum("k,nkjc->njc", W[0], stack)
-        acc[sel] = np.einsum("k,nkjc->njc", W[1], stack)
+    h = 1.0 / fps
+
+    def weights(n, w):
+        W = _unit_weights(n, w, min(degree, n - 1))
+        return W[0] / h, W[1] / h**2
+
+    starts = [_window(int(t), 0, T, window) for t in frames]
+    groups: dict = {}
+    for i, (lo, n) in enumerate(starts):
+        groups.setdefault((n, int(frames[i]) - lo), []).append(i)
+    for (n, w), sel in groups.items():
+        sel = np.array(sel)
+        lo = np.array([starts[i][0] for i in sel])
+        stack = p[lo[:, None] + np.arange(n)]  # (m, n, J, 3)
+        Wv, Wa = weights(n, w)
+        vel[sel] = np.einsum("k,nkjc->njc", Wv, stack)
+        acc[sel] = np.einsum("k,nkjc->njc", Wa, stack)
+    if cuts is None or not np.any(cuts):
+        return vel, acc
+    cut = np.asarray(cuts, dtype=bool)
+    steps = np.arange(T - 1)
+    lo_all = np.array([lo for lo, _ in starts])
+    n_all = np.array([n for _, n in starts])
+    for j in np.flatnonzero(cut.any(axis=0)):
+        at = steps[cut[:, j]]  # sample t+1 starts a new piece after step t
+        first = np.concatenate([[0], at + 1])
+        stop = np.concatenate([at + 1, [T]])
+        piece = np.searchsorted(first, frames, side="right") - 1
+        long = np.flatnonzero(stop - first >= 3)
+        k = np.searchsorted(at, lo_all)
+        reach = (k < len(at)) & (at[np.minimum(k, len(at) - 1)] < lo_all + n_all - 1)
+        for i in np.flatnonzero(reach):  # frames whose window straddles a cut
+            t = frames[i]
+            q = piece[i]
+            if stop[q] - first[q] < 3 and len(long):  # one or two samples between two cuts:
+                q = long[np.argmin(np.abs(long - q))]  # read the nearest longer piece's fit
+            lo, n = _window(int(t), first[q], stop[q], window)
+            if n < 3:
+                continue  # nothing better exists
+            Wv, Wa = weights(n, int(t) - lo)
+            vel[i, j] = Wv @ p[lo : lo + n, j]
+            acc[i, j] = Wa @ p[lo : lo + n, j]
     return vel, acc
 
 
