@@ -126,7 +126,7 @@ def test_a_foot_rolling_about_its_heel_is_in_contact_though_its_heel_sphere_is_u
     # in contact while its sole comes within ROLL_GAP of the floor during the frame, not above
     reach = interval_gap(c.gap[:, c.sole.of("l")]).min(axis=1)
     up = reach > ROLL_GAP
-    assert up.any() and (~up).sum() >= 3
+    assert up.any() and (~up).sum() >= 2
     np.testing.assert_array_equal(c.contact[:, 0], ~up)
 
 

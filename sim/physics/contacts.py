@@ -161,7 +161,7 @@ def label_contacts(
         enter, release, enter_speed: a foot enters contact when ``gap <= enter`` and
             ``hspeed < enter_speed``, and leaves when ``gap > enter + release``.
         initial: (F,) bool state before frame 0 (e.g. the original's label at a reconstruction's
-            first frame); default: out of contact, the body standing (a take starts on its feet).
+            first frame); default out of contact.
         rolling: (T, F) bool, the foot rolls on the floor (:func:`rolling_contact`): in contact
             while its sole is within :data:`~sim.physics.feet.ROLL_GAP` (the real heel lies
             below the humanoid's heel sphere).
@@ -170,7 +170,7 @@ def label_contacts(
             contact whatever its gap within :data:`~sim.physics.feet.HOLD_GAP`.
 
     Support does not vanish between two frames by a centimetre: when no foot would be in
-    contact though one was in the frame before (or the take starts), every foot within
+    contact though one was in the frame before, every foot within
     :data:`~sim.physics.feet.HOLD_GAP` of the floor and slower than
     :data:`~sim.physics.feet.HOLD_SPEED` (horizontally and vertically) holds the body (a
     forefoot pushing off while the other heel strikes, both a little above the humanoid's
@@ -192,7 +192,7 @@ def label_contacts(
             stay_all |= on
     out = np.zeros(gap.shape, dtype=bool)
     state = np.zeros(gap.shape[1], dtype=bool) if initial is None else np.array(initial, bool)
-    supported = initial is None or state.any()
+    supported = bool(state.any())
     for t in range(gap.shape[0]):
         new = np.where(state, stay_all[t], enter_all[t])
         if supported and not new.any():  # support would vanish: the feet low and still hold

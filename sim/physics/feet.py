@@ -51,7 +51,7 @@ ENTER_SPEED = 1.0
 ROLL_RATE, ROLL_TOLERANCE, ROLL_BACK, ROLL_FRONT = 3.0, 0.015, 0.10, 0.10
 #: Rolling counts only while the foot's lowest sole sphere is within ROLL_GAP [m] of the floor
 #: (a foot swinging in, turning about a point near the floor, is not yet on it).
-ROLL_GAP = 0.04
+ROLL_GAP = 0.03
 #: A foot in contact stays in contact while its lowest sole sphere stays within HOLD_GAP [m] of
 #: the floor and moves slower than HOLD_SPEED [m/s] horizontally: a forefoot pushing off pivots
 #: about toes that bend, where the humanoid's rigid toes capsule rises 1-2 cm.
