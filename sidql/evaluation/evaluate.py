@@ -484,11 +484,14 @@ def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
                 for part, share in (r.get("ground_parts") or {}).items():
                     parts[part] = parts.get(part, 0.0) + share * w / n.sum()
             missing, above = mean("support_missing_share"), mean("support_above_floor_share")
-            flag, why = support_verdict(missing, above, row["floor_fits"])
+            high = [(r["support_above_floor_mm"], w) for r, w in zip(rows, n, strict=True)
+                    if r.get("support_above_floor_mm") is not None]  # fmt: skip
+            above_mm = float(np.average(*zip(*high, strict=True))) if high else None
+            flag, why = support_verdict(missing, above, row["floor_fits"], above_mm)
             row.update(
                 original_residual_force_bw=mean("residual_force_bw"), ground_parts=parts,
                 support_missing_share=missing, support_above_floor_share=above,
-                support_off_floor=flag, support_why=why,
+                support_above_floor_mm=above_mm, support_off_floor=flag, support_why=why,
             )  # fmt: skip
         out.append(row)
     return out

@@ -28,7 +28,8 @@ original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or 
   the share of frames it does (:func:`sim.physics.contacts.body_contacts`); ``unsupported_share``
   the frames with nothing on the floor, ``support_missing_share`` those of them needing more than
   :data:`SUPPORT_MISSING_BW` from outside, ``support_above_floor_share`` those with a foot
-  standing still above the floor (:func:`support_verdict` reads them for a trial);
+  standing still above the floor (``support_above_floor_mm``: how high, median;
+  :func:`support_verdict` reads them for a trial);
 * ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
 * ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
 
@@ -102,15 +103,21 @@ SUPPORT_FLAG_SHARE = 0.05
 PLANTED_SPEED = 0.25
 
 
-def support_verdict(missing: float, above: float, floor_fits: bool) -> tuple[bool, str]:
+def support_verdict(
+    missing: float, above: float, floor_fits: bool, above_mm: float | None = None
+) -> tuple[bool, str]:
     """Whether a trial's support is off the floor, and why, from the shares of its original's
     frames with support missing (``missing``) and, of all frames, with it missing while a foot
-    stands still above the floor (``above``)."""
+    stands still above the floor (``above``; ``above_mm`` how high, median)."""
     if not missing > SUPPORT_FLAG_SHARE:
         return False, ""
     share = f"{100 * missing:.0f} % of frames need support found nowhere on the floor"
     if above >= missing / 2:
-        return True, f"{share}; feet planted above the floor (a box, a climbing frame)"
+        high = "" if above_mm is None else f" about {above_mm / 10:.0f} cm"
+        return True, (
+            f"{share}; a foot stands still{high} above it then (a box, a climbing frame, or a "
+            "sole unlike the humanoid's)"
+        )
     if not floor_fits:
         return True, f"{share}; the floor does not fit"
     return True, f"{share}; held by something else (a partner, a prop) or touching unseen"
@@ -376,10 +383,13 @@ class PhysicsJob:
         unsupported = ~mp.contacts.supported
         missing = unsupported & (frames["residual_force_bw"] > SUPPORT_MISSING_BW)
         c = mp.contacts
-        above = missing & ((c.foot_gap > HOLD_GAP) & (c.foot_speed < PLANTED_SPEED)).any(axis=1)
+        still_up = (c.foot_gap > HOLD_GAP) & (c.foot_speed < PLANTED_SPEED)  # (T, F)
+        above = missing & still_up.any(axis=1)
+        height = np.where(still_up, c.foot_gap, np.inf).min(axis=1)[above]
         out["unsupported_share"] = float(unsupported.mean())
         out["support_missing_share"] = float(missing.mean())
         out["support_above_floor_share"] = float(above.mean())
+        out["support_above_floor_mm"] = 1e3 * float(np.median(height)) if above.any() else None
         if positions is None:
             base = out
         else:
