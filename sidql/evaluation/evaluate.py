@@ -486,7 +486,11 @@ def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
             missing, above = mean("support_missing_share"), mean("support_above_floor_share")
             high = [(r["support_above_floor_mm"], w) for r, w in zip(rows, n, strict=True)
                     if r.get("support_above_floor_mm") is not None]  # fmt: skip
-            above_mm = float(np.average(*zip(*high, strict=True))) if high else None
+            above_mm = (
+                float(np.average([h for h, _ in high], weights=[w for _, w in high]))
+                if high
+                else None
+            )
             flag, why = support_verdict(missing, above, row["floor_fits"], above_mm)
             row.update(
                 original_residual_force_bw=mean("residual_force_bw"), ground_parts=parts,
