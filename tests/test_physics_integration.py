@@ -194,7 +194,7 @@ def test_floor_report_says_where_each_trials_support_was_found():
     assert floors["climb"]["support_off_floor"] and not floors["walk"]["support_off_floor"]
     assert floors["climb"]["support_above_floor_mm"] == pytest.approx(500.0)
     assert floors["climb"]["ground_parts"] == pytest.approx({"lhand": 0.05})
-    assert "about 50 cm above" in floors["climb"]["support_why"]
+    assert "stands still about 50 cm above" in floors["climb"]["support_why"]
     text = floors_markdown(list(floors.values()))
     assert "Support off the floor in 1 of 2 trials" in text and "| climb | 0.500 |" in text
     assert "climb: lhand 5.0 %" in text

@@ -27,8 +27,8 @@ original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or 
 * ``ground_parts``: per body point other than the feet that rests on the floor (a hand, a knee),
   the share of frames it does (:func:`sim.physics.contacts.body_contacts`); ``unsupported_share``
   the frames with nothing on the floor, ``support_missing_share`` those of them needing more than
-  :data:`SUPPORT_MISSING_BW` from outside, ``support_above_floor_share`` those with a foot
-  standing still above the floor (``support_above_floor_mm``: how high, median;
+  :data:`SUPPORT_MISSING_BW` from outside, ``support_above_floor_share`` those with the lower
+  foot standing still above the floor (``support_above_floor_mm``: how high, median;
   :func:`support_verdict` reads them for a trial);
 * ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
 * ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
@@ -98,8 +98,8 @@ HEIGHT_KEYS = ("penetration_mm", "float_mm", "physdiff_penetrate_mm", "physdiff_
 SUPPORT_MISSING_BW = 0.5
 #: A trial whose original lacks found support in more than this share of frames is flagged.
 SUPPORT_FLAG_SHARE = 0.05
-#: [m/s] a foot slower than this horizontally, higher than HOLD_GAP above the floor, while support
-#: is missing, stands on something above the floor (a box, a climbing frame).
+#: [m/s] the lower foot slower than this horizontally, higher than HOLD_GAP above the floor,
+#: while support is missing, stands on something above the floor (a box, a climbing frame).
 PLANTED_SPEED = 0.25
 
 
@@ -115,8 +115,8 @@ def support_verdict(
     if above >= missing / 2:
         high = "" if above_mm is None else f" about {above_mm / 10:.0f} cm"
         return True, (
-            f"{share}; a foot stands still{high} above it then (a box, a climbing frame, or a "
-            "sole unlike the humanoid's)"
+            f"{share}; the lower foot stands still{high} above it then (a box, a climbing frame, "
+            "or a sole unlike the humanoid's)"
         )
     if not floor_fits:
         return True, f"{share}; the floor does not fit"
@@ -383,9 +383,11 @@ class PhysicsJob:
         unsupported = ~mp.contacts.supported
         missing = unsupported & (frames["residual_force_bw"] > SUPPORT_MISSING_BW)
         c = mp.contacts
-        still_up = (c.foot_gap > HOLD_GAP) & (c.foot_speed < PLANTED_SPEED)  # (T, F)
-        above = missing & still_up.any(axis=1)
-        height = np.where(still_up, c.foot_gap, np.inf).min(axis=1)[above]
+        low = np.argmin(c.foot_gap, axis=1)  # the lower foot, the one that could bear the body
+        t = np.arange(len(low))
+        gap_low, speed_low = c.foot_gap[t, low], c.foot_speed[t, low]
+        above = missing & (gap_low > HOLD_GAP) & (speed_low < PLANTED_SPEED)
+        height = gap_low[above]
         out["unsupported_share"] = float(unsupported.mean())
         out["support_missing_share"] = float(missing.mean())
         out["support_above_floor_share"] = float(above.mean())
