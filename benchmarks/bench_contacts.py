@@ -45,13 +45,15 @@ SIMULATED = (("02", "02_01", 2.8), ("02", "02_02", 2.4), ("07", "07_01", 2.6),
 
 
 def original_figures(clip, ground) -> dict:
-    """The original's float/penetration [mm] against ``ground``, labelled once over the take, and
-    the share of frames without any foot in contact."""
-    c = trial_contacts(clip.positions, clip.names, clip.fps, ground, clip.velocities)
+    """The original's float/penetration [mm] against ``ground``, labelled once over the take, the
+    share of frames without any foot in contact, and of those with nothing on the floor (body
+    points other than the feet, :func:`sim.physics.contacts.body_contacts`, included)."""
+    c = trial_contacts(clip.positions, clip.names, clip.fps, ground, clip.velocities, clip.parents)
     m = contact_metrics(c.contact, c)
     return {
         "float_mm": m["float_mm"], "penetration_mm": m["penetration_mm"],
         "no_contact": float((~c.contact.any(axis=1)).mean()),
+        "unsupported": float((~c.supported).mean()), "parts": c.body.shares(),
     }  # fmt: skip
 
 
@@ -74,8 +76,9 @@ def trials(data: Path):
 def floors(data: Path) -> str:
     head = (
         "| trial | description | frames | slope (mm/m) | spread mm | drift mm | below mm | fits "
-        "| float mm | pen. mm | no contact | horizontal: float mm | horizontal: pen. mm |\n"
-        "|---|---|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|"
+        "| float mm | pen. mm | no foot down | nothing down | body on the floor "
+        "| horizontal: float mm | horizontal: pen. mm |\n"
+        "|---|---|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---|---:|---:|"
     )
     print(head)
     rows, lines = [], []
@@ -98,7 +101,9 @@ def floors(data: Path) -> str:
             f"| {amc.stem} | {desc[:40]} | {clip.n_frames} | "
             f"{1e3 * g.slope[0]:+.1f}, {1e3 * g.slope[1]:+.1f} | {mm(g.spread)} | {mm(g.drift)} "
             f"| {mm(g.below)} | {fit_word(g)} | {o['float_mm']:.1f} | {o['penetration_mm']:.1f} "
-            f"| {o['no_contact']:.2f} | {of['float_mm']:.1f} | {of['penetration_mm']:.1f} |"
+            f"| {o['no_contact']:.2f} | {o['unsupported']:.2f} "
+            f"| {', '.join(f'{k} {100 * v:.1f} %' for k, v in o['parts'].items()) or '-'} "
+            f"| {of['float_mm']:.1f} | {of['penetration_mm']:.1f} |"
         )
         print(line, flush=True)
         lines.append(line)

@@ -11,7 +11,10 @@ exact point derivatives (a reconstruction's curve), and the 9-frame Savitzky-Gol
 impulse within 5 % and peak within 15 %, no impact leaking > 10 % BW beyond 2 frames.
 
 ``--figures``: ``sidql eval --physics`` (five methods, W = 5 10 15) on ``--data``, in process:
-the original's residual force per trial (target <= 0.03 BW mean) and torque, the noise floors,
+the original's residual force per trial (target <= 0.03 BW mean) and torque, where its support
+was found (the floor's fit; trials whose support is off the floor, and why; body points other
+than the feet on the floor), the means over all trials and over those whose floor fits and
+whose support is found on it, the noise floors,
 Spearman's rho of Q against the residual force across method/W rows and clip by clip, and how
 often optimal beats uniform on residual force (with the paired bootstrap interval).
 
@@ -317,23 +320,38 @@ def figures(data: Path) -> str:
     lines = [f"{len(cases)} clips of {data}; {took:.0f} s in one process.", ""]
     # the original, per trial
     orig = [r for r in per if r["method"] == "original"]
+    floors = {f["source"]: f for f in out["floors"]}
     by_trial: dict[str, list[dict]] = {}
     for r in orig:
-        by_trial.setdefault(Path(r["source"]).stem, []).append(r)
+        by_trial.setdefault(r["source"], []).append(r)
     lines += ["### The original's residual, per trial (means over its clips)", "",
-              "| trial | clips | residual force (BW) | residual torque (N m/kg) | floor fits |",
-              "|---|---:|---:|---:|---|"]  # fmt: skip
-    for t, rs in sorted(by_trial.items()):
+              "| trial | clips | residual force (BW) | residual torque (N m/kg) | no support "
+              "found | floor fits | support | body on the floor |",
+              "|---|---:|---:|---:|---:|---|---|---|"]  # fmt: skip
+    for src, rs in sorted(by_trial.items(), key=lambda kv: Path(kv[0]).stem):
+        f = floors[src]
+        parts = ", ".join(f"{p} {100 * x:.1f} %" for p, x in f.get("ground_parts", {}).items())
         lines.append(
-            f"| {t} | {len(rs)} | {np.mean([r['residual_force_bw'] for r in rs]):.3f} "
+            f"| {Path(src).stem} | {len(rs)} | {np.mean([r['residual_force_bw'] for r in rs]):.3f} "
             f"| {np.mean([r['residual_torque_nm_kg'] for r in rs]):.2f} "
-            f"| {'yes' if rs[0]['floor_fits'] else 'no'} |"
+            f"| {100 * f['support_missing_share']:.1f} % | {'yes' if f['floor_fits'] else 'no'} "
+            f"| {'off the floor: ' + f['support_why'] if f['support_off_floor'] else 'found'} "
+            f"| {parts or '-'} |"
         )
     rf = np.array([r["residual_force_bw"] for r in orig])
     fits = np.array([r["floor_fits"] for r in orig])
+    found = np.array([not floors[r["source"]]["support_off_floor"] for r in orig])
+    both = fits & found
+    flagged = sorted(Path(s).stem for s, f in floors.items() if f["support_off_floor"])
     lines += ["", f"The original's mean residual force over all {len(orig)} clips: "
               f"**{rf.mean():.3f} BW** (median {np.median(rf):.3f}); over the {fits.sum()} clips "
-              f"of trials whose floor fits: {rf[fits].mean():.3f} BW. Target 0.03 BW.", ""]  # fmt: skip
+              f"of trials whose floor fits: {rf[fits].mean():.3f} BW; over the {both.sum()} clips "
+              f"of trials whose floor fits and whose support is found on it: "
+              f"**{rf[both].mean() if both.any() else float('nan'):.3f} BW** (median "
+              f"{np.median(rf[both]) if both.any() else float('nan'):.3f}). Support off the "
+              f"floor ({len(flagged)} trials: {', '.join(flagged)}): "
+              f"{rf[~found].mean() if (~found).any() else float('nan'):.3f} BW. Target 0.03 BW.",
+              ""]  # fmt: skip
     lines += ["### Means over clips (noise floor: how far 1.5 mm of marker noise moves each "
               "figure)", "", physics_markdown(out["results"]), ""]  # fmt: skip
     # Q against the residual force

@@ -7,14 +7,16 @@ import numpy as np
 import pytest
 
 from sim.physics.contacts import (
+    body_contacts,
     contact_metrics,
     interval_gap,
     label_contacts,
     motion_contacts,
+    planted_feet,
     rolling_contact,
     trial_contacts,
 )
-from sim.physics.feet import sole
+from sim.physics.feet import HOLD_GAP, HOLD_SPEED, ROLL_GAP, STILL_SPEED, sole
 from sim.physics.ground import MAX_OFFSET, Ground, estimate_ground
 
 NAMES = ("ltibia", "lfoot", "ltoes", "rtibia", "rfoot", "rtoes")
@@ -79,15 +81,20 @@ def test_a_foot_held_still_in_the_air_is_not_a_floor():
 
 
 def test_labels_enter_at_the_floor_leave_above_it_and_a_swing_passes_by():
-    gap = np.array([0.1, 0.02, 0.004, 0.0, 0.007, 0.012, 0.004, 0.003, 0.002, 0.0])[:, None]
-    v = np.array([0.0, 0.0, 0.1, 0.1, 0.4, 0.0, 3.0, 0.2, 0.2, 0.2])[:, None]
-    got = label_contacts(gap, v, enter=0.005, release=0.005)[:, 0].tolist()
+    gap = np.array([0.1, 0.02, 0.004, 0.0, 0.007, 0.012, 0.004, 0.003, 0.002, 0.0])
+    v = np.array([0.0, 0.0, 0.1, 0.1, 0.4, 0.0, 3.0, 0.2, 0.2, 0.2])
+    # the other foot stands throughout (the body never loses its support)
+    gap2, v2 = np.column_stack([gap, np.zeros(10)]), np.column_stack([v, np.zeros(10)])
+    got = label_contacts(gap2, v2, enter=0.005, release=0.005)
     # enter at 2 (on the floor, slow); stay through 7 mm (within 5 + 5); leave at 12 mm; frame 6
     # is on the floor but swinging past at 3 m/s; enter at 7
-    assert got == [False, False, True, True, True, False, False, True, True, True]
-    rolling = np.zeros_like(gap, bool)
-    rolling[1] = True  # a foot rolling on the floor is in contact whatever its sole's gap
-    assert label_contacts(gap, v, enter=0.005, release=0.005, rolling=rolling)[1, 0]
+    assert got[:, 0].tolist() == [False, False, True, True, True, False, False, True, True, True]
+    assert got[:, 1].all()
+    rolling = np.zeros_like(gap2, bool)
+    rolling[1, 0] = True  # a foot rolling on the floor is in contact though its sole is 2 cm up
+    assert label_contacts(gap2, v2, enter=0.005, release=0.005, rolling=rolling)[1, 0]
+    rolling[0, 0] = True  # ... but not 10 cm up: ROLL_GAP
+    assert not label_contacts(gap2, v2, enter=0.005, release=0.005, rolling=rolling)[0, 0]
     # the frame's interval: a sole 8 mm up at the frame but landing before the next one
     assert interval_gap(np.array([0.008, -0.008]))[0] == pytest.approx(0.004)
 
@@ -115,7 +122,90 @@ def test_a_foot_rolling_about_its_heel_is_in_contact_though_its_heel_sphere_is_u
     assert roll.all()
     np.testing.assert_allclose(centre[:, [0, 2]], np.tile(pivot[[0, 2]], (T, 1)), atol=1e-9)
     c = motion_contacts(p, NAMES, FPS, ground, velocities=v)
-    assert (c.foot_gap[2:, 0] > 0.015).all() and c.contact[:, 0].all()
+    assert (c.foot_gap[2:, 0] > 0.015).all()
+    # in contact while its sole comes within ROLL_GAP of the floor during the frame, not above
+    reach = interval_gap(c.gap[:, c.sole.of("l")]).min(axis=1)
+    up = reach > ROLL_GAP
+    assert up.any() and (~up).sum() >= 2
+    np.testing.assert_array_equal(c.contact[:, 0], ~up)
+
+
+def test_support_does_not_vanish_between_a_push_off_and_a_heel_strike():
+    """Double support a centimetre or two above the humanoid's rigid soles: the foot pushing off
+    rises slowly, the other comes down; no frame in between is a flight. A foot that lifts or
+    moves fast does not hold, and nothing holds a body already in the air."""
+    T = 8
+    push = np.array([0.0, 0.004, 0.008, 0.012, 0.016, 0.02, 0.03, 0.08])  # [m] rising slowly
+    land = np.array([0.12, 0.08, 0.05, 0.03, 0.022, 0.012, 0.004, 0.0])
+    gap = np.column_stack([push, land])
+    hs = np.column_stack([np.full(T, 0.15), [3.0, 2.0, 1.0, 0.5, 0.3, 0.2, 0.1, 0.1]])
+    vs = np.gradient(gap, 1.0 / FPS, axis=0)
+    assert gap[3:6].min() > 0.008  # enter + release: without holding, frames 3-5 are flights
+    got = label_contacts(gap, hs, enter=0.005, release=0.003, vspeed=vs)
+    assert got.any(axis=1).all()  # supported in every frame
+    assert got[:6, 0].all() and not got[6:, 0].any() and got[5:, 1].all()
+    # the same push-off, but the foot already swinging away fast: a flight in between
+    fast = hs.copy()
+    fast[:, 0] = 2.0 * HOLD_SPEED
+    assert not label_contacts(gap, fast, enter=0.005, release=0.003, vspeed=vs).any(axis=1).all()
+    # a body in the air (no contact in the frame before) is not caught by a low, slow foot
+    air = label_contacts(gap[2:], hs[2:], enter=0.005, release=0.003, vspeed=vs[2:],
+                         initial=[False, False])  # fmt: skip
+    assert not air[:4].any()
+
+
+def test_a_foot_standing_still_a_little_above_the_floor_is_planted_not_one_held_up():
+    """A dancer's forefoot standing still 2 cm above the humanoid's sole level is planted; a foot
+    held still in the air (6 cm: a one-leg balance) is not, nor one moving."""
+    T = 12
+    speed = np.full((T, 3), 0.5 * STILL_SPEED)
+    speed[:, 2] = 3 * STILL_SPEED
+    planted = planted_feet(speed, FPS)
+    assert planted[:, :2].all() and not planted[:, 2].any()
+    gap = np.tile([0.02, 0.06, 0.02], (T, 1))
+    got = label_contacts(gap, np.zeros((T, 3)), enter=0.005, planted=planted, initial=[0, 0, 0])
+    assert got[:, 0].all() and not got[:, 1:].any()
+    assert HOLD_GAP < 0.06
+
+
+def _crawl(T, hand_z, hand_speed=0.0):
+    """Points of a body on hands and knees: (positions (T, P, 3), names, parents)."""
+    names = ("root", "lfemur", "ltibia", "lfoot", "thorax", "lhumerus", "lhand")
+    parents = np.array([-1, 0, 1, 2, 0, 4, 5])
+    base = np.array([[0.0, 0.0, 0.5], [0.0, 0.1, 0.05], [0.35, 0.1, 0.15], [0.45, 0.1, 0.12],
+                     [-0.4, 0.0, 0.5], [-0.45, 0.15, 0.25], [-0.45, 0.15, hand_z]])  # fmt: skip
+    p = np.tile(base, (T, 1, 1))
+    p[:, 6, 0] += hand_speed * np.arange(T) / FPS
+    return p, names, parents
+
+
+def test_hands_and_knees_on_the_floor_are_ground_contacts():
+    ground = Ground(0.0)
+    p, names, parents = _crawl(10, hand_z=0.0)
+    # the knee (end of the thigh) and the hand rest 1 cm into the floor with 4 cm spheres ...
+    p[:, [1, 6], 2] = 0.03
+    b = body_contacts(p, names, parents, FPS, ground, radius=np.full(6, 0.04))
+    on = dict(zip(b.names, b.contact.all(axis=0), strict=True))
+    assert on["lfemur"] and on["lhand"] and not on["root"] and not on["thorax"]
+    assert "ltibia" not in b.names and "lfoot" not in b.names  # the feet are the sole's
+    assert b.shares() == {"lfemur": 1.0, "lhand": 1.0}
+    # ... a hand 10 cm up, or swept past the floor, is not
+    q, *_ = _crawl(10, hand_z=0.13)
+    q[:, 1, 2] = 0.03
+    assert set(body_contacts(q, names, parents, FPS, ground, radius=np.full(6, 0.04))
+               .shares()) == {"lfemur"}  # fmt: skip
+    q, *_ = _crawl(10, hand_z=0.03, hand_speed=3.0)
+    q[:, 1, 2] = 0.03
+    assert "lhand" not in body_contacts(q, names, parents, FPS, ground,
+                                        radius=np.full(6, 0.04)).shares()  # fmt: skip
+    # the forces may act there, on the floor, on the body that carries the point
+    feet = motion_contacts(p[:, [2, 3]], ("ltibia", "lfoot"), FPS, ground)
+    from dataclasses import replace
+
+    c = replace(feet, body=b)
+    pts = dict(c.points(ground, 0))
+    np.testing.assert_allclose(pts["lhand"], [-0.45, 0.15, 0.0])
+    assert c.supported.all()
 
 
 def test_a_trial_is_labelled_once_and_clips_are_slices():

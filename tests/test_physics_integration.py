@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -188,3 +189,34 @@ def test_eval_physics_on_a_dataset_folder_and_clean_refusals(cmu_dir, tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "02_01.amc" in err[0] and "own skeleton" in err[0]
     assert not out.exists()
+
+
+def test_floor_report_says_where_each_trials_support_was_found():
+    """Per trial: the original's residual, the body points on the floor and, where more than 5 %
+    of its frames need support found nowhere on the floor, the flag and why."""
+    from types import SimpleNamespace
+
+    from sidql.evaluation.evaluate import floor_report, floors_markdown
+    from sim.physics.analysis import support_verdict
+    from sim.physics.ground import Ground
+
+    setup = {s: SimpleNamespace(ground=Ground(0.0)) for s in ("x/climb.amc", "x/walk.amc")}
+    climb = {"source": "x/climb.amc", "dynamics_n": 60, "residual_force_bw": 0.5,
+             "support_missing_share": 0.4, "support_above_floor_share": 0.3,
+             "support_above_floor_mm": 480.0, "ground_parts": {"lhand": 0.1}}  # fmt: skip
+    walk = {"source": "x/walk.amc", "dynamics_n": 60, "residual_force_bw": 0.01,
+            "support_missing_share": 0.0, "support_above_floor_share": 0.0,
+            "support_above_floor_mm": None, "ground_parts": {}}  # fmt: skip
+    rows = [climb, {**climb, "support_above_floor_mm": 520.0, "ground_parts": {}}, walk]
+    floors = {Path(f["source"]).stem: f for f in floor_report(setup, rows)}
+    assert floors["climb"]["support_off_floor"] and not floors["walk"]["support_off_floor"]
+    assert floors["climb"]["support_above_floor_mm"] == pytest.approx(500.0)
+    assert floors["climb"]["ground_parts"] == pytest.approx({"lhand": 0.05})
+    assert "stands still about 50 cm above" in floors["climb"]["support_why"]
+    text = floors_markdown(list(floors.values()))
+    assert "Support off the floor in 1 of 2 trials" in text and "| climb | 0.500 |" in text
+    assert "climb: lhand 5.0 %" in text
+    # the other reasons
+    assert support_verdict(0.2, 0.0, False)[1].endswith("the floor does not fit")
+    assert "partner" in support_verdict(0.2, 0.0, True)[1]
+    assert support_verdict(0.04, 0.04, True) == (False, "")

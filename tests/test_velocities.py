@@ -10,7 +10,13 @@ from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.ingest import clip_from_qpos
 from sim.motion.synthetic import synthetic_qpos
-from sim.motion.velocities import qvel_from_qpos
+from sim.motion.velocities import (
+    body_rotation_steps,
+    kin_related,
+    point_derivatives,
+    pose_jumps,
+    qvel_from_qpos,
+)
 
 
 def test_constant_rate_hinge_sweep_is_recovered_exactly():
@@ -76,3 +82,111 @@ def test_real_clip_velocities_are_consistent_with_positions(cmu_dir):
     err = np.linalg.norm(fd - c.velocities[1:-1], axis=-1)
     speed = np.linalg.norm(c.velocities[1:-1], axis=-1)
     assert np.median(err) < 0.01 * np.median(speed) + 1e-3
+
+
+def test_euler_flips_in_an_amc_file_change_no_point_and_no_velocity(cmu_dir, tmp_path):
+    """A take written with some frames' Euler triples swapped for their twins (three-dof bones)
+    and whole turns added (every bone) ingests to the same qpos, points and velocities."""
+    from dataclasses import replace
+
+    from sim.acclaim.reader import parse_amc, parse_asf
+    from sim.acclaim.writer import write_amc
+    from sim.model.rotations import euler_twin
+    from sim.motion.ingest import load_motion
+
+    asf = cmu_dir / "02" / "02.asf"
+    skeleton = parse_asf(asf)
+    motion = parse_amc(cmu_dir / "02" / "02_01.amc", skeleton)
+    motion = replace(motion, root=motion.root[:160], angles={
+        k: v[:160] for k, v in motion.angles.items()})  # fmt: skip
+    rng = np.random.default_rng(0)
+    flipped = {}
+    for b in skeleton.bones:
+        a = motion.angles.get(b.name)
+        if a is None or not b.dofs:
+            continue
+        a = a.copy()
+        if len(b.dofs) == 3:
+            a[30:49] = np.degrees(euler_twin(np.radians(a[30:49])))
+        a += 360.0 * rng.integers(-2, 3, a.shape) * (rng.random(a.shape) < 0.1)
+        flipped[b.name] = a
+    write_amc(tmp_path / "plain.amc", skeleton, motion)
+    write_amc(tmp_path / "flipped.amc", skeleton, replace(motion, angles=flipped))
+    plain = load_motion(asf, tmp_path / "plain.amc")
+    jumpy = load_motion(asf, tmp_path / "flipped.amc")
+    assert np.abs(np.diff(flipped["lfemur"], axis=0)).max() > 90  # the file does jump
+    np.testing.assert_allclose(jumpy.qpos, plain.qpos, atol=1e-9)
+    np.testing.assert_allclose(jumpy.positions, plain.positions, atol=1e-9)
+    np.testing.assert_allclose(jumpy.velocities, plain.velocities, atol=1e-6)
+    assert np.linalg.norm(plain.velocities, axis=-1).max() < 10.0  # a walk
+
+
+def test_a_pose_jump_stays_in_the_positions_and_out_of_the_velocities():
+    """A femur turned half a turn for ten frames (a solver's flip, as in CMU 05_06): the jump is
+    found at its two steps, the velocities everywhere are the unbroken motion's to first order,
+    and frames away from it keep the central difference exactly."""
+    _, model = humanoid_model()
+    rate = 120.0
+    qpos, _ = synthetic_qpos(model, 1.0, seed=2, rate=rate)
+    glitch = qpos.copy()
+    hinge = model.joint("rfemur_rz").qposadr[0]
+    glitch[50:60, hinge] += np.pi
+    femur = model.body("rfemur").id
+    related = kin_related(model)
+    jumps = pose_jumps(body_rotation_steps(model, glitch), rate, related)
+    assert np.flatnonzero(jumps.any(axis=1)).tolist() == [49, 59]
+    assert jumps[[49, 59], femur].all()
+    assert not pose_jumps(body_rotation_steps(model, qpos), rate, related).any()  # smooth: none
+
+    truth = qvel_from_qpos(model, qpos, rate)
+    plain = qvel_from_qpos(model, glitch, rate)
+    fixed = qvel_from_qpos(model, glitch, rate, across_jumps=False)
+    dof = model.joint("rfemur_rz").dofadr[0]
+    assert np.abs(plain[:, dof] - truth[:, dof]).max() > 0.9 * np.pi * rate / 2  # ~188 rad/s
+    scale = np.abs(truth).max()
+    assert np.abs(fixed - truth).max() < 0.05 * scale  # one-sided: first-order error only
+    away = np.r_[0:48, 52:58, 62 : len(qpos)]
+    np.testing.assert_array_equal(fixed[away], plain[away])
+
+
+def test_real_take_with_pose_jumps_keeps_velocities_to_the_points(cmu_dir):
+    """CMU 05_06 turns its right femur by ~180 deg in one source frame and back, several times
+    (the points jump with it: the knee 39 cm in 1/120 s). Velocities beside those frames stay
+    those of the motion; away from them they are the points' finite differences."""
+    from sim.motion.ingest import load_motion
+
+    c = load_motion(cmu_dir / "05" / "05.asf", cmu_dir / "05" / "05_06.amc", fps=120)
+    knee = c.index("rfemur")
+    step = np.linalg.norm(np.diff(c.positions[:, knee], axis=0), axis=-1)
+    assert step.max() > 0.3  # the data's own jump [m per frame], kept
+    speed = np.linalg.norm(c.velocities, axis=-1)
+    assert speed.max() < 30.0  # [m/s]; differenced across the jumps: 165
+    fd = (c.positions[2:] - c.positions[:-2]) * 60.0
+    err = np.linalg.norm(fd - c.velocities[1:-1], axis=-1)
+    near = np.zeros(len(c.positions), dtype=bool)
+    for t in np.flatnonzero(step > 0.1):
+        near[max(t - 2, 0) : t + 4] = True
+    err = err[~near[1:-1]]
+    assert np.median(err) < 0.01
+    assert np.percentile(err, 99) < 0.5  # [m/s]; the rest: 15-60 deg steps, second order
+
+
+def test_source_derivatives_are_not_taken_across_a_pose_jump():
+    """A point whose data jumps 30 cm (a solver's flip) keeps, on each side of the jump, the
+    derivatives of its own smooth path; a point the jump does not move is untouched."""
+    rate, T = 120.0, 80
+    t = np.arange(T) / rate
+    smooth = np.stack([np.sin(3 * t), np.cos(2 * t), 0.1 * t], axis=-1)
+    p = np.stack([smooth, smooth], axis=1)  # (T, 2, 3)
+    p[40:, 0, 0] += 0.3  # point 0 jumps between samples 39 and 40
+    cuts = np.zeros((T - 1, 2), bool)
+    cuts[39, 0] = True
+    vel, acc = point_derivatives(p, rate, cuts=cuts)
+    v_true = np.stack([3 * np.cos(3 * t), -2 * np.sin(2 * t), 0.1 + 0 * t], axis=-1)
+    a_true = np.stack([-9 * np.sin(3 * t), -4 * np.cos(2 * t), 0 * t], axis=-1)
+    np.testing.assert_allclose(vel[:, 0], v_true, atol=2e-3)
+    np.testing.assert_allclose(acc[:, 0], a_true, atol=0.2)
+    plain_v, plain_a = point_derivatives(p, rate)
+    assert np.abs(plain_a[:, 0] - a_true).max() > 100  # across it: 0.3 m in 8 ms
+    np.testing.assert_array_equal(vel[:, 1], plain_v[:, 1])
+    np.testing.assert_array_equal(acc[:, 1], plain_a[:, 1])

@@ -40,7 +40,7 @@ from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import find_trials, load_dataset_clips
 from sim.motion.ingest import load_clips
-from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob
+from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob, support_verdict
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip
@@ -325,7 +325,9 @@ def physics_setup(cases: Sequence[Case]) -> dict:
             start[c.clip.start_frame] = i
             i += c.clip.n_frames
         out[source] = TrialPhysics(
-            jobs[group[0].asf], ground, trial_contacts(pos, clip.names, clip.fps, ground, vel),
+            jobs[group[0].asf], ground,
+            trial_contacts(pos, clip.names, clip.fps, ground, vel, clip.parents,
+                           body_points=jobs[group[0].asf].names),
             start,
         )  # fmt: skip
     return out
@@ -400,6 +402,7 @@ def evaluate(
         by_case.update(o.result)
     per_clip: list[dict] = []
     results: list[dict] = []
+    originals: list[dict] = []
     if physics and cases:
         originals = [by_case[i][0] for i in range(len(cases))]
         noise = [by_case[i][1] for i in range(len(cases))]
@@ -438,7 +441,7 @@ def evaluate(
     out = {"results": results, "per_clip": per_clip}
     out["comparisons"] = paired_comparisons(per_clip, method_names, seed=seed)
     if physics:
-        out["floors"] = floor_report(setup)
+        out["floors"] = floor_report(setup, originals)
     return out
 
 
@@ -459,28 +462,79 @@ def noise_figures(noisy: dict, original: dict) -> dict:
     return out
 
 
-def floor_report(setup: dict) -> list[dict]:
-    """Per trial its floor (:meth:`sim.physics.ground.Ground.summary`) and whether it fits."""
-    return [{"source": src, **tp.ground.summary()} for src, tp in setup.items()]
+def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
+    """Per trial its floor (:meth:`sim.physics.ground.Ground.summary`) and whether it fits, and,
+    from its original's rows, where its support was found: the original's mean residual force
+    (``original_residual_force_bw``), the body points other than feet on the floor
+    (``ground_parts``: share of frames), the share of frames whose support was found nowhere
+    (``support_missing_share``) and the verdict (``support_off_floor``, ``support_why``:
+    :func:`sim.physics.analysis.support_verdict`)."""
+    out = []
+    for src, tp in setup.items():
+        row = {"source": src, **tp.ground.summary()}
+        rows = [r for r in originals if r["source"] == src]
+        if rows:
+            n = np.array([r.get("dynamics_n") or 1 for r in rows], dtype=float)
+
+            def mean(k, rows=rows, n=n):
+                return float(np.average([r.get(k) or 0.0 for r in rows], weights=n))
+
+            parts: dict[str, float] = {}
+            for r, w in zip(rows, n, strict=True):
+                for part, share in (r.get("ground_parts") or {}).items():
+                    parts[part] = parts.get(part, 0.0) + share * w / n.sum()
+            missing, above = mean("support_missing_share"), mean("support_above_floor_share")
+            high = [(r["support_above_floor_mm"], w) for r, w in zip(rows, n, strict=True)
+                    if r.get("support_above_floor_mm") is not None]  # fmt: skip
+            above_mm = (
+                float(np.average([h for h, _ in high], weights=[w for _, w in high]))
+                if high
+                else None
+            )
+            flag, why = support_verdict(missing, above, row["floor_fits"], above_mm)
+            row.update(
+                original_residual_force_bw=mean("residual_force_bw"), ground_parts=parts,
+                support_missing_share=missing, support_above_floor_share=above,
+                support_above_floor_mm=above_mm, support_off_floor=flag, support_why=why,
+            )  # fmt: skip
+        out.append(row)
+    return out
 
 
 def floors_markdown(floors: Sequence[dict]) -> str:
     """The trials whose floor does not fit, with how far their planted feet depart from it (their
-    float and penetration are not scored)."""
+    float and penetration are not scored), the trials whose support is off the floor and why,
+    and the original's residual force over the trials where floor and support are found."""
     bad = [f for f in floors if not f["floor_fits"]]
     if not bad:
-        return f"The floor fits every one of the {len(floors)} trials."
-    lines = [
-        f"Floor does not fit {len(bad)} of {len(floors)} trials (float and penetration not "
-        "scored there):",
-        "",
-        "| trial | deviation (mm) | spread (mm) | drift (mm) | below (mm) | footprints |",
-        "|---|---|---|---|---|---|",
-    ]
-    keys = ("floor_deviation_mm", "floor_spread_mm", "floor_drift_mm", "floor_below_mm")
-    for f in bad:
-        cells = " | ".join("-" if f[k] is None else f"{f[k]:.1f}" for k in keys)
-        lines.append(f"| {Path(f['source']).stem} | {cells} | {f['floor_footprints']} |")
+        lines = [f"The floor fits every one of the {len(floors)} trials."]
+    else:
+        lines = [
+            f"Floor does not fit {len(bad)} of {len(floors)} trials (float and penetration not "
+            "scored there):",
+            "",
+            "| trial | deviation (mm) | spread (mm) | drift (mm) | below (mm) | footprints |",
+            "|---|---|---|---|---|---|",
+        ]
+        keys = ("floor_deviation_mm", "floor_spread_mm", "floor_drift_mm", "floor_below_mm")
+        for f in bad:
+            cells = " | ".join("-" if f[k] is None else f"{f[k]:.1f}" for k in keys)
+            lines.append(f"| {Path(f['source']).stem} | {cells} | {f['floor_footprints']} |")
+    off = [f for f in floors if f.get("support_off_floor")]
+    if off:
+        lines += ["", f"Support off the floor in {len(off)} of {len(floors)} trials:", "",
+                  "| trial | original's residual force (BW) | why |", "|---|---|---|"]  # fmt: skip
+        for f in off:
+            lines.append(
+                f"| {Path(f['source']).stem} | {f['original_residual_force_bw']:.3f} "
+                f"| {f['support_why']} |"
+            )
+    parts = {Path(f["source"]).stem: f["ground_parts"] for f in floors if f.get("ground_parts")}
+    if parts:
+        lines += ["", "Body points other than the feet on the floor (share of the original's "
+                  "frames): " + "; ".join(
+                      f"{t}: " + ", ".join(f"{p} {100 * x:.1f} %" for p, x in ps.items())
+                      for t, ps in parts.items())]  # fmt: skip
     return "\n".join(lines)
 
 

@@ -288,11 +288,14 @@ def trial_ground(clips: list[Clip]):
 
 
 def trial_contacts_by_clip(clips: list[Clip], ground: Ground) -> dict:
-    """The original's foot contacts labelled once over the trial (its clips in order), as
+    """The original's ground contacts labelled once over the trial (its clips in order), as
     ``{clip.start_frame: Contacts of its frames}`` (:func:`sim.physics.contacts.trial_contacts`)."""
     pos = np.concatenate([c.positions for c in clips])
     vel = np.concatenate([c.velocities for c in clips])
-    whole = trial_contacts(pos, clips[0].names, clips[0].fps, ground, vel)
+    protocol = from_clip(clips[0]).restrict(POINTS).names  # the points physics analyses
+    whole = trial_contacts(
+        pos, clips[0].names, clips[0].fps, ground, vel, clips[0].parents, body_points=protocol
+    )
     out, i = {}, 0
     for c in clips:
         out[c.start_frame] = whole.slice(i, i + c.n_frames)

@@ -45,8 +45,7 @@ class Clip:
             kinematic chain (None when unknown, e.g. for reconstructions).
         source_velocities, accelerations: (T, J, 3) point velocities [m/s] and accelerations
             [m/s^2] from the source frames' positions around each frame
-            (:func:`sim.motion.velocities.point_derivatives`; None when unknown): right through
-            the Euler-angle flips where ``velocities`` (J q-dot) fail.
+            (:func:`sim.motion.velocities.point_derivatives`; None when unknown).
     """
 
     names: tuple[str, ...]

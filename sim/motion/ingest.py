@@ -19,7 +19,15 @@ from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
 from sim.motion.retarget import leg_length, local_rotations_from_world, motion_to_qpos
-from sim.motion.velocities import point_derivatives, point_kinematics, qvel_from_qpos
+from sim.motion.velocities import (
+    body_rotation_steps,
+    kin_related,
+    point_cuts,
+    point_derivatives,
+    point_kinematics,
+    pose_jumps,
+    qvel_from_qpos,
+)
 
 SKELETONS = ("subject", "humanoid")
 CMU_FPS = 120.0
@@ -51,9 +59,10 @@ def clip_from_qpos(
     """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
 
     Point ``j`` is the site ``<names[j]>_end`` (the root: the root body's origin). Velocities are
-    taken at the source rate (central differences of qpos), then mapped through the chain; the
+    taken at the source rate (central differences of qpos, never across a pose jump of the data:
+    :func:`sim.motion.velocities.qvel_from_qpos`), then mapped through the chain; the
     points' ``source_velocities`` and ``accelerations`` come from their positions in every source
-    frame (:func:`sim.motion.velocities.point_derivatives`).
+    frame (:func:`sim.motion.velocities.point_derivatives`), never across a pose jump either.
     ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
     per trial).
 
@@ -71,7 +80,8 @@ def clip_from_qpos(
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
     data = mujoco.MjData(model) if data is None else data
     with np.errstate(all="ignore"):  # overflow shows up as non-finite values, refused below
-        qvel = qvel_from_qpos(model, qpos, source_fps, frames)
+        jumps = pose_jumps(body_rotation_steps(model, qpos), source_fps, kin_related(model))
+        qvel = qvel_from_qpos(model, qpos, source_fps, frames, across_jumps=False, jumps=jumps)
         if not np.isfinite(qvel).all():
             raise MotionDataError(source or None, None, "non-finite joint velocities (qvel)")
         pos, vel, xquat, omega = point_kinematics(
@@ -80,7 +90,8 @@ def clip_from_qpos(
         every = point_kinematics(
             model, data, qpos, np.zeros((len(qpos), model.nv)), body_ids, site_ids
         )[0]
-        src_vel, acc = point_derivatives(every, source_fps, frames)
+        cuts = point_cuts(model, jumps, body_ids)
+        src_vel, acc = point_derivatives(every, source_fps, frames, cuts=cuts)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
     arrays = (("positions", pos), ("velocities", vel), ("rotations", xquat),
               ("source velocities", src_vel), ("accelerations", acc))  # fmt: skip

@@ -16,7 +16,7 @@ from sim.acclaim.reader import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
 from sim.model.humanoid import bone_frames
-from sim.model.rotations import Y_UP_TO_Z_UP, euler_matrix, y_up_to_z_up
+from sim.model.rotations import Y_UP_TO_Z_UP, continuous_euler, euler_matrix, y_up_to_z_up
 
 
 def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +45,9 @@ def motion_to_qpos(
 ) -> np.ndarray:
     """(T, nq) ``qpos`` of ``motion`` on ``model`` (free root first, hinges ``<bone>_<dof>``).
 
-    Joints of the model that the skeleton lacks stay at 0; dofs the model lacks are dropped, so the
+    Each bone's hinge angles are continuous over the take (:func:`bone_hinge_angles`): the same
+    rotations as the file's, without its Euler-angle flips. Joints of the model that the skeleton
+    lacks stay at 0; dofs the model lacks are dropped, so the
     same call serves the subject's own model and the shared humanoid.
 
     Args:
@@ -60,12 +62,33 @@ def motion_to_qpos(
     for b in skeleton.bones:
         if not b.dofs:
             continue
-        values = np.deg2rad(motion.angles[b.name])
+        values = bone_hinge_angles(
+            b.dofs, motion.angles[b.name], [f"{b.name}_{d}" in adr for d in b.dofs]
+        )
         for k, dof in enumerate(b.dofs):
             a = adr.get(f"{b.name}_{dof}")
             if a is not None:
                 qpos[:, a] = values[:, k]
     return qpos
+
+
+def bone_hinge_angles(dofs, angles_deg: np.ndarray, kept) -> np.ndarray:
+    """(T, len(dofs)) hinge angles [rad] of one bone's AMC angles ``angles_deg`` [deg], continuous
+    over the take (:func:`sim.model.rotations.continuous_euler`).
+
+    Some AMC files switch a bone's Euler triple to its twin or by whole turns mid-take (the
+    rotation stays smooth): as hinge angles those are jumps of up to 2 pi between frames, and
+    ``qvel`` from them is meaningless. The twin is chosen only when the target keeps all three
+    dofs (``kept``: per dof, whether the model has its hinge); otherwise each angle only loses
+    its whole-turn jumps, so the target's pose never changes.
+    """
+    values = np.deg2rad(np.asarray(angles_deg, dtype=np.float64))
+    order = "".join(d[1] for d in dofs).upper()
+    if all(kept):
+        return continuous_euler(values, order)
+    return np.column_stack(
+        [continuous_euler(values[:, [k]], ax) for k, ax in enumerate(order)]
+    ).reshape(values.shape)
 
 
 MIN_LEG = 1e-3  # [m] shorter legs cannot scale a root translation

@@ -1,25 +1,159 @@
 """True velocities: ``qvel`` from ``qpos`` and point velocities from the kinematic chain.
 
 ``qvel`` comes from central differences of ``qpos`` through ``mujoco.mj_differentiatePos`` (so the
-free joint's quaternion is differentiated on the rotation group), one-sided at the ends. Point
-velocities are then ``v = J(q) q̇``: MuJoCo's ``cvel`` (built from ``cdof`` by ``mj_comVel``) moved to
-each point, never differences of positions.
+free joint's quaternion is differentiated on the rotation group), one-sided at the ends, and
+one-sided beside a pose jump of the data (:func:`pose_jumps`). Point velocities are then
+``v = J(q) q̇``: MuJoCo's ``cvel`` (built from ``cdof`` by ``mj_comVel``) moved to each point, never
+differences of positions.
 """
 
 from __future__ import annotations
 
+import functools
+
 import mujoco
 import numpy as np
 
+from sim.model import quaternion as quat
 
-def qvel_from_qpos(model, qpos: np.ndarray, fps: float, frames: np.ndarray | None = None):
+#: A body's turn between two source frames is a pose jump (a glitch of the capture's solver, not
+#: motion: e.g. a femur turning 180 deg in 1/120 s while the ankle stays put) when it is faster
+#: than JUMP_RATE [rad/s] (50 rad/s: 25 deg per frame at 120 fps) and more than JUMP_RATIO times
+#: the median of the JUMP_WINDOW steps either side, so fast but steady motion never is one; the
+#: bones of its chain that turn as suddenly (any rate) jump with it.
+JUMP_RATE, JUMP_RATIO, JUMP_WINDOW = 50.0, 3.0, 4
+
+
+def body_joint_rotations(model, qpos: np.ndarray) -> np.ndarray:
+    """(T, nbody, 4) rotation ``wxyz`` of each body relative to its parent made by its own joints
+    (hinges, ball and free joints, composed as MuJoCo does; slides and jointless bodies:
+    identity) in each frame of ``qpos`` (T, nq). The body's fixed offset is left out."""
+    T = qpos.shape[0]
+    rot = np.zeros((T, model.nbody, 4))
+    rot[..., 0] = 1.0
+    for j in range(model.njnt):
+        kind, adr, b = model.jnt_type[j], model.jnt_qposadr[j], model.jnt_bodyid[j]
+        if kind == mujoco.mjtJoint.mjJNT_HINGE:
+            half = 0.5 * qpos[:, adr]
+            local = np.column_stack([np.cos(half), np.sin(half)[:, None] * model.jnt_axis[j]])
+        elif kind == mujoco.mjtJoint.mjJNT_BALL:
+            local = qpos[:, adr : adr + 4]
+        elif kind == mujoco.mjtJoint.mjJNT_FREE:
+            local = qpos[:, adr + 3 : adr + 7]
+        else:
+            continue
+        rot[:, b] = quat.mul(rot[:, b], local)  # a body's joints compose left to right
+    return rot
+
+
+def rotation_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(...) angle [rad] of the turn from unit quaternions ``a`` to ``b`` (..., 4), in [0, pi]."""
+    rel = quat.mul(quat.conj(a), b)
+    return 2 * np.arctan2(np.linalg.norm(rel[..., 1:], axis=-1), np.abs(rel[..., 0]))
+
+
+def body_rotation_steps(model, qpos: np.ndarray) -> np.ndarray:
+    """(T-1, nbody) angle [rad] by which each body turns relative to its parent from frame t to
+    t+1 of ``qpos`` (T, nq), by its own joints (:func:`body_joint_rotations`)."""
+    rot = body_joint_rotations(model, qpos)
+    return rotation_angle(rot[:-1], rot[1:])
+
+
+def kin_related(model) -> np.ndarray:
+    """(nbody, nbody) bool: body a is body b, one of its ancestors or one of its descendants
+    (the world is related to none)."""
+    n = model.nbody
+    related = np.eye(n, dtype=bool)
+    for b in range(1, n):
+        a = model.body_parentid[b]
+        while a > 0:
+            related[a, b] = related[b, a] = True
+            a = model.body_parentid[a]
+    related[0] = related[:, 0] = False
+    return related
+
+
+def point_cuts(model, jumps: np.ndarray, body_ids) -> np.ndarray:
+    """(T-1, J) bool: pose jumps (``jumps`` (T-1, nbody)) that move points on bodies
+    ``body_ids`` (J,): a jump of the point's body or of any body above it."""
+    body_ids = np.asarray(body_ids)
+    above = np.zeros((model.nbody, len(body_ids)), dtype=bool)
+    for j, b in enumerate(body_ids):
+        while b > 0:
+            above[b, j] = True
+            b = model.body_parentid[b]
+    return (np.asarray(jumps, dtype=np.int64) @ above.astype(np.int64)) > 0
+
+
+def pose_jumps(steps: np.ndarray, fps: float, related: np.ndarray | None = None) -> np.ndarray:
+    """(T-1, nbody) bool: the step from frame t to t+1 is a pose jump of that body.
+
+    Args:
+        steps: (T-1, nbody) turn of each body between frames [rad]
+            (:func:`body_rotation_steps`).
+        fps: frames per second of the stream.
+        related: (nbody, nbody) bool, which bodies share a chain (:func:`kin_related`; None:
+            every body with every body).
+
+    A body's step is an outlier when it is more than :data:`JUMP_RATIO` times the median of the
+    :data:`JUMP_WINDOW` steps on each side of it (itself left out). It is a jump when it is
+    also faster than :data:`JUMP_RATE`, or when a body of its chain (an ancestor or descendant)
+    jumps in the same step: one glitch of the capture solver turns a whole limb, some bones less
+    than the rate.
+    """
+    s = np.asarray(steps, dtype=np.float64)
+    jumps = np.zeros(s.shape, dtype=bool)
+    rows = np.flatnonzero((s * fps > JUMP_RATE).any(axis=1))  # the only candidates
+    if len(rows) == 0:
+        return jumps
+    w, n = JUMP_WINDOW, s.shape[0]
+    near = rows[:, None] + np.array([d for d in range(-w, w + 1) if d != 0])
+    inside = (near >= 0) & (near < n)
+    around = np.where(inside[..., None], s[np.clip(near, 0, n - 1)], np.nan)
+    typical = np.zeros((len(rows), s.shape[1]))
+    some = inside.any(axis=1)
+    typical[some] = np.nanmedian(around[some], axis=1)
+    outlier = s[rows] > JUMP_RATIO * typical
+    core = outlier & (s[rows] * fps > JUMP_RATE)
+    if related is None:
+        jumps[rows] = outlier & core.any(axis=1, keepdims=True)
+        return jumps
+    link = related.astype(np.int64)
+    jumping = core
+    while True:  # spread through chains of outliers: a whole-body glitch reaches every limb
+        grown = outlier & ((jumping.astype(np.int64) @ link) > 0)
+        if (grown == jumping).all():
+            break
+        jumping = grown
+    jumps[rows] = jumping
+    return jumps
+
+
+def qvel_from_qpos(
+    model,
+    qpos: np.ndarray,
+    fps: float,
+    frames: np.ndarray | None = None,
+    *,
+    across_jumps: bool = True,
+    jumps: np.ndarray | None = None,
+):
     """(F, nv) generalised velocities at ``frames`` of a ``qpos`` stream sampled at ``fps``.
 
     Central differences ``(q[t+1] ⊖ q[t-1]) / 2h`` inside, one-sided at the first and last frame.
 
+    Unless ``across_jumps``, the dofs of a body beside one of its pose jumps (:func:`pose_jumps`)
+    are differenced away from it: a jump on one side, the one-sided difference on the other; on
+    both sides, the central difference when the frame is a lone outlier (its neighbours agree
+    with each other), else, inside a run of jumps, the one-sided difference of the nearest step
+    without a jump. The data's jump stays in the positions; it does not become a velocity of
+    hundreds of rad/s.
+
     Args:
         qpos: (T, nq) positions sampled every ``1 / fps`` seconds.
         frames: indices where velocities are wanted (default: all T).
+        across_jumps: difference straight across pose jumps (the plain stencil).
+        jumps: (T-1, nbody) the stream's pose jumps when already known (default: found here).
     """
     T = qpos.shape[0]
     frames = np.arange(T) if frames is None else np.asarray(frames)
@@ -30,16 +164,55 @@ def qvel_from_qpos(model, qpos: np.ndarray, fps: float, frames: np.ndarray | Non
     for k, t in enumerate(frames):
         a, b = max(t - 1, 0), min(t + 1, T - 1)
         mujoco.mj_differentiatePos(model, out[k], (b - a) * h, qpos[a], qpos[b])
+    if across_jumps or T < 3:
+        return out
+    rot = body_joint_rotations(model, qpos)
+    steps = rotation_angle(rot[:-1], rot[1:])
+    if jumps is None:
+        jumps = pose_jumps(steps, fps, kin_related(model))
+    bodies = np.flatnonzero(jumps.any(axis=0))
+    ks = np.flatnonzero((frames > 0) & (frames < T - 1))
+    if len(bodies) == 0 or len(ks) == 0:
+        return out
+    J = jumps[:, bodies]  # (T-1, B)
+    t = frames[ks][:, None]  # (F', 1)
+    before, after = J[t[:, 0] - 1], J[t[:, 0]]  # (F', B): the steps into and out of each frame
+    # the step whose one-sided difference each (frame, body) takes; -1: keep the central one
+    use = np.where(before & ~after, t, np.where(after & ~before, t - 1, -1))
+    steps_idx = np.arange(T - 1)[:, None]
+    last_clean = np.maximum.accumulate(np.where(~J, steps_idx, -1), axis=0)
+    next_clean = np.minimum.accumulate(np.where(~J, steps_idx, T)[::-1], axis=0)[::-1]
+    for i, c in np.argwhere(before & after):  # frames between two jumps: rare
+        f, b = int(t[i, 0]), bodies[c]
+        if rotation_angle(rot[f - 1, b], rot[f + 1, b]) < min(steps[f - 1, b], steps[f, b]) / 2:
+            continue  # a lone outlier frame: the central difference steps over it
+        back = last_clean[f - 2, c] if f >= 2 else -1
+        ahead = next_clean[f + 1, c] if f + 1 < T - 1 else T
+        options = ([(f - 1 - back, back)] if back >= 0 else []) + (
+            [(ahead - f, ahead)] if ahead < T else []
+        )
+        if options:
+            use[i, c] = min(options)[1]
+    rates = {}  # step s -> (nv,) one-sided difference from frame s to s + 1
+    for i, c in np.argwhere(use >= 0):
+        s = int(use[i, c])
+        if s not in rates:
+            rates[s] = np.zeros(model.nv)
+            mujoco.mj_differentiatePos(model, rates[s], h, qpos[s], qpos[s + 1])
+        dofs = model.dof_bodyid == bodies[c]
+        out[ks[i], dofs] = rates[s][dofs]
     return out
 
 
 #: Derivatives of the original's points from its source frames: a local polynomial of degree
 #: SOURCE_DEGREE through SOURCE_WINDOW source samples around each frame (at CMU's 120 fps, 17
-#: samples = +-67 ms, two 30 fps frames either side; shifted inward at a take's ends). Its gain
-#: (:func:`local_polynomial_gain`) on an acceleration is 1.00 up to 3 Hz, 0.975 at 5 Hz and 0.72
-#: at 10 Hz (velocity: 0.994, 0.96, 0.59); an impulse spreads over +-2 frames at 30 fps and no
-#: further. Marker noise is why it is not the exact 3-sample difference: at 120 Hz a second
-#: difference turns 1 mm of noise into ~35 m/s^2.
+#: samples = +-67 ms, two 30 fps frames either side). Its gain (:func:`local_polynomial_gain`)
+#: on an acceleration is 1.00 up to 3 Hz, 0.975 at 5 Hz and 0.72 at 10 Hz (velocity: 0.994,
+#: 0.96, 0.59); an impulse spreads over +-2 frames at 30 fps and no further. Marker noise is why
+#: it is not the exact 3-sample difference: at 120 Hz a second difference turns 1 mm of noise
+#: into ~35 m/s^2. Near a take's ends (and a pose jump) the window shifts inward: a degree-4 fit
+#: read at its first sample amplifies noise 5x more than the centred one, but a lower degree
+#: there misses 60 % of a 1.5 Hz acceleration.
 SOURCE_WINDOW, SOURCE_DEGREE = 17, 4
 
 
@@ -50,6 +223,13 @@ def local_polynomial_weights(k: int, where: int, h: float, degree: int) -> np.nd
     V = np.vander(x, degree + 1, increasing=True)
     coef = np.linalg.pinv(V)
     return np.stack([coef[1], 2 * coef[2] if degree >= 2 else 0 * coef[1]])
+
+
+@functools.lru_cache(maxsize=4096)
+def _unit_weights(k: int, where: int, degree: int) -> np.ndarray:
+    w = local_polynomial_weights(k, where, 1.0, degree)
+    w.flags.writeable = False
+    return w
 
 
 def local_polynomial_gain(freq, fps: float, k: int = SOURCE_WINDOW, degree: int = SOURCE_DEGREE):
@@ -64,6 +244,12 @@ def local_polynomial_gain(freq, fps: float, k: int = SOURCE_WINDOW, degree: int 
     return vel, acc
 
 
+def _window(t: int, first: int, stop: int, k: int) -> tuple[int, int]:
+    """(start, length) of the window of at most ``k`` samples of ``[first, stop)`` around ``t``."""
+    n = min(k, stop - first)
+    return int(np.clip(t - k // 2, first, stop - n)), n
+
+
 def point_derivatives(
     positions: np.ndarray,
     fps: float,
@@ -71,27 +257,64 @@ def point_derivatives(
     *,
     window: int = SOURCE_WINDOW,
     degree: int = SOURCE_DEGREE,
+    cuts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocities and accelerations (F, J, 3) [m/s, m/s^2] at ``frames`` of points
     ``positions`` (T, J, 3) [m] sampled at ``fps``, by the local polynomial of
-    :data:`SOURCE_WINDOW` (fewer than 3 samples: zeros). Positions, unlike joint angles, are
-    smooth through the Euler-angle flips of some AMC files."""
+    :data:`SOURCE_WINDOW` (fewer than 3 samples: zeros).
+
+    ``cuts``: (T-1, J) bool, the step from sample t to t+1 of point j is not to be differenced
+    across (a pose jump of the data, :func:`pose_jumps`): the point's windows stay on the side of
+    the frame, as at a take's ends."""
     p = np.asarray(positions, dtype=np.float64)
     T = p.shape[0]
     frames = np.arange(T) if frames is None else np.asarray(frames)
     vel = np.zeros((len(frames),) + p.shape[1:])
     acc = np.zeros_like(vel)
-    k = min(window, T)
-    if k < 3:
+    if min(window, T) < 3:
         return vel, acc
-    degree = min(degree, k - 1)
-    lo = np.clip(frames - k // 2, 0, T - k)
-    weights = {w: local_polynomial_weights(k, w, 1.0 / fps, degree) for w in np.unique(frames - lo)}
-    for w, W in weights.items():
-        sel = np.flatnonzero(frames - lo == w)
-        stack = p[lo[sel][:, None] + np.arange(k)]  # (n, k, J, 3)
-        vel[sel] = np.einsum("k,nkjc->njc", W[0], stack)
-        acc[sel] = np.einsum("k,nkjc->njc", W[1], stack)
+    h = 1.0 / fps
+
+    def weights(n, w):
+        W = _unit_weights(n, w, min(degree, n - 1))
+        return W[0] / h, W[1] / h**2
+
+    starts = [_window(int(t), 0, T, window) for t in frames]
+    groups: dict = {}
+    for i, (lo, n) in enumerate(starts):
+        groups.setdefault((n, int(frames[i]) - lo), []).append(i)
+    for (n, w), sel in groups.items():
+        sel = np.array(sel)
+        lo = np.array([starts[i][0] for i in sel])
+        stack = p[lo[:, None] + np.arange(n)]  # (m, n, J, 3)
+        Wv, Wa = weights(n, w)
+        vel[sel] = np.einsum("k,nkjc->njc", Wv, stack)
+        acc[sel] = np.einsum("k,nkjc->njc", Wa, stack)
+    if cuts is None or not np.any(cuts):
+        return vel, acc
+    cut = np.asarray(cuts, dtype=bool)
+    steps = np.arange(T - 1)
+    lo_all = np.array([lo for lo, _ in starts])
+    n_all = np.array([n for _, n in starts])
+    for j in np.flatnonzero(cut.any(axis=0)):
+        at = steps[cut[:, j]]  # sample t+1 starts a new piece after step t
+        first = np.concatenate([[0], at + 1])
+        stop = np.concatenate([at + 1, [T]])
+        piece = np.searchsorted(first, frames, side="right") - 1
+        long = np.flatnonzero(stop - first >= 3)
+        k = np.searchsorted(at, lo_all)
+        reach = (k < len(at)) & (at[np.minimum(k, len(at) - 1)] < lo_all + n_all - 1)
+        for i in np.flatnonzero(reach):  # frames whose window straddles a cut
+            t = frames[i]
+            q = piece[i]
+            if stop[q] - first[q] < 3 and len(long):  # one or two samples between two cuts:
+                q = long[np.argmin(np.abs(long - q))]  # read the nearest longer piece's fit
+            lo, n = _window(int(t), first[q], stop[q], window)
+            if n < 3:
+                continue  # nothing better exists
+            Wv, Wa = weights(n, int(t) - lo)
+            vel[i, j] = Wv @ p[lo : lo + n, j]
+            acc[i, j] = Wa @ p[lo : lo + n, j]
     return vel, acc
 
 

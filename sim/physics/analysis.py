@@ -24,6 +24,12 @@ original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or 
   frames and ``derivatives`` (where the velocities and accelerations came from);
 * ``ik_error_mm``: mean RMS distance of the fitted humanoid's points to the motion's (large when
   a reconstruction stretches bones);
+* ``ground_parts``: per body point other than the feet that rests on the floor (a hand, a knee),
+  the share of frames it does (:func:`sim.physics.contacts.body_contacts`); ``unsupported_share``
+  the frames with nothing on the floor, ``support_missing_share`` those of them needing more than
+  :data:`SUPPORT_MISSING_BW` from outside, ``support_above_floor_share`` those with the lower
+  foot standing still above the floor (``support_above_floor_mm``: how high, median;
+  :func:`support_verdict` reads them for a trial);
 * ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
 * ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
 
@@ -45,20 +51,22 @@ starting from the original's state at frame 0. Both use :mod:`sim.physics.contac
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
 
 from sim.physics.contacts import (
     Contacts,
+    body_contacts,
     contact_metrics,
     lowest_body_point,
     motion_contacts,
     physdiff_metrics,
+    trial_contacts,
 )
 from sim.physics.dynamics import MU, Dynamics, InverseDynamics
-from sim.physics.feet import FOOT_POINTS, SOLE_POINTS
+from sim.physics.feet import FOOT_POINTS, HOLD_GAP, SOLE_POINTS
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
 from sim.physics.noise import NOISE_MM, noisy_original
@@ -83,6 +91,36 @@ EXCESS_KEYS = (
 #: Heights above the floor: meaningless where the trial's floor does not fit
 #: (:attr:`sim.physics.ground.Ground.fits`), so not scored there (eval and the report say so).
 HEIGHT_KEYS = ("penetration_mm", "float_mm", "physdiff_penetrate_mm", "physdiff_float_mm")
+
+
+#: A frame whose motion needs this much external force [body weights] with nothing on the floor
+#: lacks support the labels found (a jump's flight needs none: it falls freely).
+SUPPORT_MISSING_BW = 0.5
+#: A trial whose original lacks found support in more than this share of frames is flagged.
+SUPPORT_FLAG_SHARE = 0.05
+#: [m/s] the lower foot slower than this horizontally, higher than HOLD_GAP above the floor,
+#: while support is missing, stands on something above the floor (a box, a climbing frame).
+PLANTED_SPEED = 0.25
+
+
+def support_verdict(
+    missing: float, above: float, floor_fits: bool, above_mm: float | None = None
+) -> tuple[bool, str]:
+    """Whether a trial's support is off the floor, and why, from the shares of its original's
+    frames with support missing (``missing``) and, of all frames, with it missing while a foot
+    stands still above the floor (``above``; ``above_mm`` how high, median)."""
+    if not missing > SUPPORT_FLAG_SHARE:
+        return False, ""
+    share = f"{100 * missing:.0f} % of frames need support found nowhere on the floor"
+    if above >= missing / 2:
+        high = "" if above_mm is None else f" about {above_mm / 10:.0f} cm"
+        return True, (
+            f"{share}; the lower foot stands still{high} above it then (a box, a climbing frame, "
+            "or a sole unlike the humanoid's)"
+        )
+    if not floor_fits:
+        return True, f"{share}; the floor does not fit"
+    return True, f"{share}; held by something else (a partner, a prop) or touching unseen"
 
 
 #: Originals a job keeps (a few hundred kB each): ``sidql eval`` revisits every clip per method and W.
@@ -199,6 +237,7 @@ class PhysicsJob:
         rates: tuple[np.ndarray, np.ndarray] | None = None,
         contacts: Contacts | None = None,
         initial=None,
+        initial_body=None,
         source: str = "curve",
     ) -> MotionPhysics:
         """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
@@ -213,8 +252,10 @@ class PhysicsJob:
                 :meth:`sim.physics.ik.HumanoidIK.rates`, ``rates`` the prior.
             rates: ``(qvel, qacc)`` (T, nv): the prior of that mapping (default 0).
             source: what the derivatives are, for the figures' ``derivatives``.
-            contacts: the motion's foot contacts (the original's, from its trial); default from
-                the fitted humanoid's soles, starting from ``initial`` (F,).
+            contacts: the motion's ground contacts (the original's, from its trial); default
+                from the fitted humanoid's soles, starting from ``initial`` (F,), and the rest of
+                the motion's body points (:func:`sim.physics.contacts.body_contacts`), starting
+                from ``initial_body``.
         """
         if start is not None and np.ndim(start) == 2:
             fit = self.ik.fit(positions, guesses=start)
@@ -233,6 +274,10 @@ class PhysicsJob:
         if contacts is None:
             feet, fp, fv = self.feet_of_fit(fit.qpos, qvel)
             contacts = motion_contacts(fp, feet, self.fps, ground, initial=initial, velocities=fv)
+            contacts = replace(contacts, body=body_contacts(
+                positions, self.names, self.parents, self.fps, ground, radius=self._bones.radius,
+                initial=initial_body,
+            ))  # fmt: skip
         dyn = self.inv.run(
             fit.qpos, self.fps, self.force_points(contacts, ground), qvel=qvel, qacc=qacc
         )
@@ -267,9 +312,10 @@ class PhysicsJob:
                 self._originals.clear()
             q0 = _q_init(clip, self.model)
             if contacts is None:
-                contacts = motion_contacts(
-                    clip.positions, clip.names, self.fps, ground, velocities=clip.velocities
-                )
+                contacts = trial_contacts(
+                    clip.positions, clip.names, self.fps, ground, clip.velocities, clip.parents,
+                    body_points=self.names,
+                )  # fmt: skip
             vel, acc = _source_derivatives(clip, idx)
             self._originals[key] = self.motion_physics(
                 ref.positions, ref, ground, q0, velocities=vel, accelerations=acc,
@@ -319,7 +365,7 @@ class PhysicsJob:
             mp = self.motion_physics(
                 p, ref, ground, _q_init(clip, self.model), velocities=velocities,
                 accelerations=accelerations, rates=(orig.dynamics.qvel, orig.dynamics.qacc),
-                initial=orig.contacts.contact[0],
+                initial=orig.contacts.contact[0], initial_body=_initial_body(orig, self.names),
             )  # fmt: skip
         out = {"ground_z_m": ground.z, **ground.summary()}
         out.update(contact_metrics(orig.contacts.contact, mp.contacts))
@@ -332,6 +378,20 @@ class PhysicsJob:
         out["limit_excess_max_deg"] = float(mp.limit.max(initial=0.0))
         out["limit_excess_n"] = int(len(mp.limit))
         out["ik_error_mm"] = 1e3 * float(mp.fit.error.mean())
+        body = mp.contacts.body
+        out["ground_parts"] = {} if body is None else body.shares()
+        unsupported = ~mp.contacts.supported
+        missing = unsupported & (frames["residual_force_bw"] > SUPPORT_MISSING_BW)
+        c = mp.contacts
+        low = np.argmin(c.foot_gap, axis=1)  # the lower foot, the one that could bear the body
+        t = np.arange(len(low))
+        gap_low, speed_low = c.foot_gap[t, low], c.foot_speed[t, low]
+        above = missing & (gap_low > HOLD_GAP) & (speed_low < PLANTED_SPEED)
+        height = gap_low[above]
+        out["unsupported_share"] = float(unsupported.mean())
+        out["support_missing_share"] = float(missing.mean())
+        out["support_above_floor_share"] = float(above.mean())
+        out["support_above_floor_mm"] = 1e3 * float(np.median(height)) if above.any() else None
         if positions is None:
             base = out
         else:
@@ -347,6 +407,10 @@ class PhysicsJob:
             "limit_excess_deg": mp.limit,
             "ik_error_mm": 1e3 * mp.fit.error,
             "lowest_mm": 1e3 * mp.lowest,
+            "body_points": [] if body is None else list(body.names),
+            "body_contact": np.zeros((len(mp.lowest), 0), int)
+            if body is None
+            else body.contact.astype(int),
             "qpos": mp.fit.qpos,  # (T, nq) the fitted configurations (forward simulation's input)
         }
         return out
@@ -405,6 +469,17 @@ def _q_init(clip, model) -> np.ndarray | None:
     else None (cold start, then warm starts and the soft limit penalty)."""
     q = np.asarray(clip.qpos)
     return q if q.ndim == 2 and q.shape[1] == model.nq and len(q) == clip.n_frames else None
+
+
+def _initial_body(orig: MotionPhysics, names) -> np.ndarray | None:
+    """The original's body contacts at frame 0 on the job's body points (a reconstruction's
+    start), or None when the original has none labelled."""
+    body = orig.contacts.body
+    if body is None:
+        return None
+    keep = [n for n in names if n not in FOOT_POINTS]
+    on = dict(zip(body.names, body.contact[0], strict=True))
+    return np.array([bool(on.get(n, False)) for n in keep])
 
 
 def _source_derivatives(clip, idx):

@@ -10,7 +10,14 @@ frame whose interval holds the touch. A foot *enters* contact when that gap is w
 *leaves* once the gap exceeds ``enter`` plus the floor's spread (hysteresis against marker noise,
 none on a noise-free floor). A foot
 rolling heel to toe stays in contact: its lowest point passes from the heel sphere to the ball and
-the toes while each in turn rests on the floor. The labels of a whole trial are made once
+the toes while each in turn rests on the floor, and a foot turning about a point on the floor
+(:func:`rolling_contact`) is in contact while its sole is within
+:data:`~sim.physics.feet.ROLL_GAP`. A foot standing still a little above the humanoid's sole
+level (a dancer's forefoot) is planted (:func:`planted_feet`), and support does not vanish for
+a frame between a push-off and a heel strike: when no foot would be in contact though one was,
+the feet still low and slow hold the body (:func:`label_contacts`). The rest of the body rests
+on the floor by the same geometry (:func:`body_contacts`: hands, knees, hips, back), where ground
+forces may act too. The labels of a whole trial are made once
 (:func:`trial_contacts`); a clip's are a slice of them, and a reconstruction's own labels start
 from the original's state at its first frame (keyframe 0 is the original's frame).
 
@@ -34,7 +41,7 @@ Units: metres and m/s in, millimetres and mm/s out.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -43,16 +50,23 @@ from sim.physics.feet import (
     CONTACT_GAP,
     ENTER_SPEED,
     FOOT_PART,
+    FOOT_POINTS,
+    HOLD_GAP,
+    HOLD_SPEED,
     ROLL_BACK,
     ROLL_FRONT,
+    ROLL_GAP,
     ROLL_RATE,
     ROLL_TOLERANCE,
+    STILL_SPEED,
+    STILL_TIME,
     SUPPORT_GAP,
     Sole,
     foot_points,
     sole,
 )
-from sim.physics.ground import Ground, horizontal_speed, speed
+from sim.physics.ground import Ground, horizontal_speed, runs, speed
+from sim.replay.capsules import bones_of
 from sim.replay.foot_state import FootState
 
 #: PhysDiff's float tolerance [m] and skate threshold [m of horizontal travel between frames].
@@ -135,6 +149,8 @@ def label_contacts(
     enter_speed: float = ENTER_SPEED,
     initial=None,
     rolling=None,
+    vspeed=None,
+    planted=None,
 ) -> np.ndarray:
     """(T, F) contact labels of F feet with hysteresis.
 
@@ -147,29 +163,91 @@ def label_contacts(
         initial: (F,) bool state before frame 0 (e.g. the original's label at a reconstruction's
             first frame); default out of contact.
         rolling: (T, F) bool, the foot rolls on the floor (:func:`rolling_contact`): in contact
-            whatever the gap (the real heel lies below the humanoid's heel sphere).
+            while its sole is within :data:`~sim.physics.feet.ROLL_GAP` (the real heel lies
+            below the humanoid's heel sphere).
+        vspeed: (T, F) vertical speed of the lowest sole point [m/s] (default 0).
+        planted: (T, F) bool, the foot stands still near the floor (:func:`planted_feet`): in
+            contact whatever its gap within :data:`~sim.physics.feet.HOLD_GAP`.
+
+    Support does not vanish between two frames by a centimetre: when no foot would be in
+    contact though one was in the frame before, every foot within
+    :data:`~sim.physics.feet.HOLD_GAP` of the floor and slower than
+    :data:`~sim.physics.feet.HOLD_SPEED` (horizontally and vertically) holds the body (a
+    forefoot pushing off while the other heel strikes, both a little above the humanoid's
+    rigid sole).
     """
     gap, hspeed = np.asarray(gap, dtype=np.float64), np.asarray(hspeed, dtype=np.float64)
     if gap.shape != hspeed.shape or gap.ndim != 2:
         raise ValueError(f"gap and hspeed must both be (T, F); got {gap.shape}, {hspeed.shape}")
     if release < 0:
         raise ValueError("release must be >= 0")
+    vs = np.zeros_like(gap) if vspeed is None else np.abs(np.asarray(vspeed, dtype=np.float64))
     enter_all = (gap <= enter) & (hspeed < enter_speed)
     stay_all = gap <= enter + release
-    if rolling is not None:
-        enter_all |= np.asarray(rolling, dtype=bool)
-        stay_all |= np.asarray(rolling, dtype=bool)
+    hold_all = (gap <= HOLD_GAP) & (hspeed < HOLD_SPEED) & (vs < HOLD_SPEED)
+    for extra, within in ((rolling, ROLL_GAP), (planted, HOLD_GAP)):
+        if extra is not None:
+            on = np.asarray(extra, dtype=bool) & (gap <= within)
+            enter_all |= on
+            stay_all |= on
     out = np.zeros(gap.shape, dtype=bool)
     state = np.zeros(gap.shape[1], dtype=bool) if initial is None else np.array(initial, bool)
+    supported = bool(state.any())
     for t in range(gap.shape[0]):
-        state = np.where(state, stay_all[t], enter_all[t])
+        new = np.where(state, stay_all[t], enter_all[t])
+        if supported and not new.any():  # support would vanish: the feet low and still hold
+            new = hold_all[t]
+        state = new
+        supported = state.any()
         out[t] = state
     return out
 
 
+def planted_feet(speed3: np.ndarray, fps: float) -> np.ndarray:
+    """(T, F) bool: the foot's lowest sole sphere moves slower than
+    :data:`~sim.physics.feet.STILL_SPEED` (3D) [m/s] through a run of at least
+    :data:`~sim.physics.feet.STILL_TIME` [s] (``speed3`` (T, F) [m/s])."""
+    sp = np.asarray(speed3, dtype=np.float64)
+    n = max(1, int(round(STILL_TIME * fps)))
+    out = np.zeros(sp.shape, dtype=bool)
+    for f in range(sp.shape[1]):
+        for a, e in runs(sp[:, f] < STILL_SPEED, n):
+            out[a:e, f] = True
+    return out
+
+
+@dataclass(frozen=True)
+class BodyContacts:
+    """Ground contacts of the body beyond the soles (T frames, K body points).
+
+    Attributes:
+        names: (K,) the points (a knee is ``lfemur``, the end of the thigh; the pelvis ``root``):
+            each is the body that carries it, where a ground force on it acts.
+        contact: (T, K) bool labels.
+        gap: (T, K) height of the point's sphere's lowest surface above the floor [m].
+        bottoms: (T, K, 3) that lowest surface point [m].
+    """
+
+    names: tuple[str, ...]
+    contact: np.ndarray
+    gap: np.ndarray
+    bottoms: np.ndarray
+
+    def slice(self, start: int, stop: int) -> BodyContacts:
+        return BodyContacts(
+            self.names, self.contact[start:stop], self.gap[start:stop], self.bottoms[start:stop]
+        )
+
+    def shares(self) -> dict[str, float]:
+        """Share of frames in which each body point that ever touches the floor does."""
+        share = self.contact.mean(axis=0) if len(self.contact) else np.zeros(len(self.names))
+        return {n: float(x) for n, x in zip(self.names, share, strict=True) if x > 0}
+
+
 @dataclass(frozen=True)
 class Contacts:
-    """A motion's foot contacts (T frames, F feet, S sole spheres).
+    """A motion's ground contacts: its feet (T frames, F feet, S sole spheres) and, where known,
+    the rest of its body.
 
     Attributes:
         sides: (F,) the feet (``"l"``, ``"r"``).
@@ -179,6 +257,7 @@ class Contacts:
         foot_gap: (T, F) each foot's lowest gap [m] at the frame's instant.
         foot_speed: (T, F) horizontal speed of each foot's lowest sphere [m/s].
         lowest: (T, F, 3) each foot's lowest sole surface point [m].
+        body: hands, knees, hips, back ... on the floor (:func:`body_contacts`; None: feet only).
     """
 
     sides: tuple[str, ...]
@@ -188,6 +267,7 @@ class Contacts:
     foot_gap: np.ndarray
     foot_speed: np.ndarray
     lowest: np.ndarray
+    body: BodyContacts | None = None
 
     def slice(self, start: int, stop: int) -> Contacts:
         """Frames ``[start, stop)`` (a clip of a trial labelled once)."""
@@ -196,13 +276,26 @@ class Contacts:
         return Contacts(
             self.sides, self.contact[start:stop], part, self.gap[start:stop],
             self.foot_gap[start:stop], self.foot_speed[start:stop], self.lowest[start:stop],
+            None if self.body is None else self.body.slice(start, stop),
         )  # fmt: skip
+
+    @property
+    def supported(self) -> np.ndarray:
+        """(T,) bool: some foot or other body point is on the floor."""
+        on = self.contact.any(axis=1)
+        return on if self.body is None else on | self.body.contact.any(axis=1)
 
     def points(self, ground: Ground, t: int) -> list[tuple[str, np.ndarray]]:
         """Where ground forces may act in frame ``t``: ``(body name, point (3,))`` for every sole
         sphere of a foot in contact that is within :data:`~sim.physics.feet.SUPPORT_GAP` of the
-        floor (the lowest always), its lowest point dropped onto the floor plane."""
+        floor (the lowest always), and every other body point in contact, each lowest point
+        dropped onto the floor plane."""
         out = []
+        if self.body is not None:
+            for k in np.flatnonzero(self.body.contact[t]):
+                p = self.body.bottoms[t, k].copy()
+                p[2] = float(ground.level(p[:2]))
+                out.append((self.body.names[k], p))
         b = self.sole.bottoms[t]
         for f, x in enumerate(self.sides):
             if not self.contact[t, f]:
@@ -239,11 +332,67 @@ def contacts_of_sole(
         fg.append(gap[np.arange(T), k_now])
         lo.append(b[np.arange(T), k_now])
     fi, fs = np.stack(fi, axis=1), np.stack(fs, axis=1)
+    vs = np.gradient(fi, 1.0 / fps, axis=0) if T > 1 else np.zeros_like(fi)
     labels = label_contacts(
         fi, fs, enter=enter_gap(ground) if enter is None else enter, release=ground.noise,
-        initial=initial, rolling=rolling,
+        initial=initial, rolling=rolling, vspeed=vs,
+        planted=planted_feet(np.hypot(fs, vs), fps),
     )  # fmt: skip
     return Contacts(s.sides, labels, s, gap, np.stack(fg, 1), fs, np.stack(lo, axis=1))
+
+
+def body_contacts(
+    positions: np.ndarray,
+    names,
+    parents,
+    fps: float,
+    ground: Ground,
+    *,
+    radius=None,
+    initial=None,
+    enter: float | None = None,
+    points=None,
+) -> BodyContacts:
+    """Which body points other than the feet rest on the floor (T frames).
+
+    Every point but the feet's (ankle, ball, toe tip: the sole's) is a sphere as wide as the
+    widest bone capsule meeting there (:func:`sim.replay.capsules.bones_of`): knees, hips and
+    pelvis, spine, shoulders, elbows, wrists, hands, head. A point enters contact as a foot does:
+    when its sphere comes within ``enter`` (:func:`enter_gap`) of the floor during the frame while
+    it moves slower than :data:`~sim.physics.feet.ENTER_SPEED` horizontally (a hand swept past
+    the floor is not planted on it), and leaves once it is ``enter`` plus the floor's spread up.
+
+    Args:
+        positions: (T, P, 3) points [m]; names, parents: (P,) as in a clip.
+        radius: (P - 1,) capsule radius of each bone (default: :func:`bones_of`'s).
+        initial: (K,) bool state before frame 0.
+        points: the names of the points that may rest on the floor (default: all but the
+            feet's); e.g. the points a reconstruction has, so that the original's support is
+            judged on the same body.
+    """
+    names = tuple(names)
+    p = np.asarray(positions, dtype=np.float64)
+    bones = bones_of(names, parents)
+    r_bone = bones.radius if radius is None else np.asarray(radius, dtype=np.float64)
+    r = np.zeros(len(names))
+    for b, (a, c) in enumerate(zip(bones.parent, bones.child, strict=True)):
+        r[a], r[c] = max(r[a], r_bone[b]), max(r[c], r_bone[b])
+    allowed = set(names) if points is None else set(points)
+    keep = [j for j, n in enumerate(names) if n in allowed and n not in FOOT_POINTS and r[j] > 0]
+    bottoms = p[:, keep].copy()
+    bottoms[..., 2] -= r[keep]
+    gap = bottoms[..., 2] - ground.level(bottoms[..., :2])  # (T, K)
+    ig = interval_gap(gap)
+    fast = horizontal_speed(p[:, keep], fps) >= ENTER_SPEED
+    e = enter_gap(ground) if enter is None else enter
+    enter_all = (ig <= e) & ~fast
+    stay_all = ig <= e + ground.noise
+    out = np.zeros(gap.shape, dtype=bool)
+    state = np.zeros(len(keep), dtype=bool) if initial is None else np.array(initial, bool)
+    for t in range(len(gap)):
+        state = np.where(state, stay_all[t], enter_all[t])
+        out[t] = state
+    return BodyContacts(tuple(names[j] for j in keep), out, gap, bottoms)
 
 
 def motion_contacts(
@@ -266,7 +415,14 @@ def motion_contacts(
 
 
 def trial_contacts(
-    positions: np.ndarray, names, fps: float, ground: Ground, velocities=None
+    positions: np.ndarray,
+    names,
+    fps: float,
+    ground: Ground,
+    velocities=None,
+    parents=None,
+    *,
+    body_points=None,
 ) -> Contacts:
     """The contacts of a whole trial, labelled once (the hysteresis' memory runs through; a
     clip's labels are :meth:`Contacts.slice` of these).
@@ -274,8 +430,14 @@ def trial_contacts(
     Args:
         positions: (T, J, 3) the trial's points [m]; names: (J,); fps [1/s]; velocities:
             (T, J, 3) [m/s] where known (a clip's chain velocities).
+        parents: (J,) the points' parents: the rest of the body may rest on the floor too
+            (:func:`body_contacts`, on ``body_points``: default all); None: the feet only.
     """
-    return motion_contacts(positions, names, fps, ground, velocities=velocities)
+    c = motion_contacts(positions, names, fps, ground, velocities=velocities)
+    if parents is None:
+        return c
+    body = body_contacts(positions, names, parents, fps, ground, points=body_points)
+    return replace(c, body=body)
 
 
 def _mean(x: np.ndarray) -> tuple[float, int]:

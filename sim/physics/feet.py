@@ -52,6 +52,17 @@ ENTER_SPEED = 1.0
 #: (from ROLL_BACK behind the ankle to ROLL_FRONT beyond the ball [m]), rolls on the floor there:
 #: the heel rocker of a heel strike, the forefoot rocker of a push-off, whatever the sole's shape.
 ROLL_RATE, ROLL_TOLERANCE, ROLL_BACK, ROLL_FRONT = 3.0, 0.015, 0.10, 0.10
+#: Rolling counts only while the foot's lowest sole sphere is within ROLL_GAP [m] of the floor
+#: (a foot swinging in, turning about a point near the floor, is not yet on it).
+ROLL_GAP = 0.03
+#: A foot in contact stays in contact while its lowest sole sphere stays within HOLD_GAP [m] of
+#: the floor and moves slower than HOLD_SPEED [m/s] horizontally: a forefoot pushing off pivots
+#: about toes that bend, where the humanoid's rigid toes capsule rises 1-2 cm.
+HOLD_GAP, HOLD_SPEED = 0.035, 0.3
+#: A foot whose lowest sole sphere moves slower than STILL_SPEED [m/s] for STILL_TIME [s] or
+#: longer within HOLD_GAP of the floor is planted (a foot standing on its toes, a dancer's
+#: forefoot) whatever its gap: a sole held still in the air stands higher (a one-leg balance).
+STILL_SPEED, STILL_TIME = 0.1, 0.1
 #: [m] the sole spheres of a foot in contact that are at most this far above the floor bear
 #: ground forces (the heel of a foot standing on its toes does not).
 SUPPORT_GAP = 0.03
