@@ -240,9 +240,10 @@ def test_contact_metrics_match_a_brute_force_count():
 
 # ------------------------------------------------------ against MuJoCo's contacts (sim.simulate)
 
-#: CMU walks tracked in simulation (unperturbed "follow" tasks, none falls) and their length [s].
+#: CMU walks tracked in simulation (unperturbed "follow" tasks) and their length [s], each short
+#: enough that the body stays up (60_01 falls after 3 s).
 SIMULATED = (("02", "02_01", 2.8), ("07", "07_04", 3.7), ("35", "35_01", 2.9),
-             ("05", "05_01", 4.9), ("16", "16_24", 2.4), ("60", "60_01", 4.0))  # fmt: skip
+             ("05", "05_01", 4.9), ("16", "16_24", 2.4), ("60", "60_01", 2.5))  # fmt: skip
 
 
 def test_labels_match_mujocos_contacts_in_simulated_motion(cmu_dir):
