@@ -46,7 +46,7 @@ from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.physics.contacts import trial_contacts  # noqa: E402
-from sim.physics.ground import estimate_ground, horizontal_speed  # noqa: E402
+from sim.physics.ground import estimate_ground  # noqa: E402
 from sim.simulate.controller import track  # noqa: E402
 from sim.simulate.dataset import synthesize  # noqa: E402
 from sim.simulate.generate import PHYSICAL_BUDGET  # noqa: E402
@@ -69,14 +69,14 @@ def speeds(clips) -> tuple[np.ndarray, np.ndarray]:
 
 
 def skating(clips) -> tuple[float, int]:
-    """Mean horizontal speed [mm/s] of foot points labelled in contact, and the sample count:
-    ``sim.physics``'s ground and contact labels from each clip's own points."""
+    """Mean horizontal speed [mm/s] of each foot's lowest sole point while it is labelled in
+    contact, and the sample count: ``sim.physics``'s ground and contact labels from each clip's
+    own points."""
     v = []
     for c in clips:
         ground = estimate_ground(c.positions, c.names, c.fps)
-        feet, contact = trial_contacts(c.positions, c.names, c.fps, ground)
-        idx = [c.names.index(n) for n in feet]
-        v.append(horizontal_speed(c.positions[:, idx], c.fps)[contact])
+        contacts = trial_contacts(c.positions, c.names, c.fps, ground, c.velocities)
+        v.append(contacts.foot_speed[contacts.contact])
     v = np.concatenate(v) if v else np.zeros(0)
     return (1e3 * float(v.mean()) if v.size else float("nan")), int(v.size)
 
