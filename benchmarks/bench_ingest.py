@@ -53,12 +53,12 @@ def main() -> None:
         load_motion(t.asf, t.amc)
         _source_frames[t.amc] = acclaim.parse_amc(t.amc, acclaim.parse_asf(t.asf)).n_frames
     fast, info = run(trials)
-    original = acclaim._parse_frames_fast
-    acclaim._parse_frames_fast = lambda *a: None  # force the checked line-by-line parser
+    original = acclaim._AmcParser._fast
+    acclaim._AmcParser._fast = lambda self, lines, start, stop: start  # all to the checked path
     try:
         slow, _ = run(trials, repeats=1)
     finally:
-        acclaim._parse_frames_fast = original
+        acclaim._AmcParser._fast = original
 
     t0 = time.process_time()
     for t in trials:

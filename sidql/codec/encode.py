@@ -664,7 +664,7 @@ def encode_files(
     """
     skel = skeleton_hash(parse_asf(asf))
     try:
-        clip = load_motion(asf, amc, fps=fps)
+        clip = load_motion(asf, amc, fps=fps, derivatives=False)  # the chart needs no more
     except MotionDataError:
         raise
     except ValueError as e:  # e.g. an output rate that does not divide the source rate

@@ -55,6 +55,7 @@ def clip_from_qpos(
     fps: float,
     source: str = "",
     data: mujoco.MjData | None = None,
+    derivatives: bool = True,
 ) -> Clip:
     """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
 
@@ -64,7 +65,8 @@ def clip_from_qpos(
     points' ``source_velocities`` and ``accelerations`` come from their positions in every source
     frame (:func:`sim.motion.velocities.point_derivatives`), never across a pose jump either.
     ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
-    per trial).
+    per trial). ``derivatives=False`` leaves ``source_velocities`` and ``accelerations`` out (None):
+    a caller that needs neither (the codec) saves the kinematics of every source frame.
 
     Raises:
         MotionDataError: (naming ``source``) a non-finite ``qpos`` or any non-finite result; the
@@ -87,16 +89,18 @@ def clip_from_qpos(
         pos, vel, xquat, omega = point_kinematics(
             model, data, qpos[frames], qvel, body_ids, site_ids
         )
-        every = point_kinematics(
-            model, data, qpos, np.zeros((len(qpos), model.nv)), body_ids, site_ids
-        )[0]
-        cuts = point_cuts(model, jumps, body_ids)
-        src_vel, acc = point_derivatives(every, source_fps, frames, cuts=cuts)
+        src_vel = acc = None
+        if derivatives:
+            every = point_kinematics(
+                model, data, qpos, np.zeros((len(qpos), model.nv)), body_ids, site_ids
+            )[0]
+            cuts = point_cuts(model, jumps, body_ids)
+            src_vel, acc = point_derivatives(every, source_fps, frames, cuts=cuts)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
     arrays = (("positions", pos), ("velocities", vel), ("rotations", xquat),
               ("source velocities", src_vel), ("accelerations", acc))  # fmt: skip
     for what, a in arrays:
-        if not np.isfinite(a).all():
+        if a is not None and not np.isfinite(a).all():
             raise MotionDataError(source or None, None, f"non-finite {what} from the motion")
     if not np.isfinite(omega).all():
         raise MotionDataError(source or None, None, "non-finite angular velocities")
@@ -126,6 +130,7 @@ def load_motion(
     skeleton: str = "subject",
     fps: float = 30.0,
     source_fps: float = CMU_FPS,
+    derivatives: bool = True,
 ) -> Clip:
     """A whole trial as one clip at ``fps``.
 
@@ -136,6 +141,8 @@ def load_motion(
             scaled by the leg-length ratio).
         fps: output rate; ``source_fps / fps`` must be a whole number (CMU: 120 -> 30 takes every
             4th frame).
+        derivatives: also the points' velocities and accelerations from every source frame
+            (``source_velocities``, ``accelerations``; :func:`clip_from_qpos`).
 
     Raises:
         MotionDataError: malformed files (naming file, line and problem).
@@ -158,6 +165,7 @@ def load_motion(
         source_fps=source_fps,
         fps=fps,
         source=str(Path(amc)),
+        derivatives=derivatives,
     )
 
 
