@@ -6,11 +6,11 @@ from sidql.commands.usage import (
     HelpFormatter,
     add_data,
     add_quiet,
+    add_ray,
     add_skeleton,
     cmu_rate,
     data_folder,
     positive,
-    ray_address,
 )
 from sim.motion.dataset import ingest_directory
 
@@ -37,10 +37,7 @@ def register(sub) -> None:
         metavar="N",
         help="worker processes (default: cores)",
     )
-    p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
-        help="run the trials as Ray tasks: a local runtime, or the cluster at ADDRESS",
-    )  # fmt: skip
+    add_ray(p, "the trials")
     add_quiet(p)
     p.set_defaults(func=run)
 

@@ -12,11 +12,11 @@ from sidql.commands.usage import (
     add_keyframes,
     add_methods,
     add_quiet,
+    add_ray,
     add_skeleton,
     cmu_rate,
     data_folder,
     positive,
-    ray_address,
 )
 from sidql.evaluation.evaluate import (
     evaluate,
@@ -88,11 +88,7 @@ def register(sub) -> None:
         "--workers", type=positive(int), default=1,
         help="processes loading trials and evaluating clips (methods, physics, simulation)",
     )  # fmt: skip
-    p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
-        help="load trials and evaluate clips as Ray tasks: a local runtime, or the cluster at "
-        "ADDRESS",
-    )  # fmt: skip
+    add_ray(p, "the trials' loading and the clips' evaluation")
     p.set_defaults(func=run)
 
 

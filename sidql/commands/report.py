@@ -8,8 +8,8 @@ from sidql.commands.usage import (
     add_keyframes,
     add_methods,
     add_quiet,
+    add_ray,
     positive,
-    ray_address,
 )
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
@@ -53,10 +53,7 @@ def register(sub) -> None:
         "torque per method (could a body perform this motion?)",
     )  # fmt: skip
     p.add_argument("--workers", type=positive(int), default=1, help="processes validating clips")
-    p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
-        help="validate the clips as Ray tasks: a local runtime, or the cluster at ADDRESS",
-    )  # fmt: skip
+    add_ray(p, "the clips' validation")
     add_quiet(p)
     p.set_defaults(func=run)
 

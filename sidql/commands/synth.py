@@ -7,10 +7,10 @@ from sidql.commands.usage import (
     UsageError,
     add_data,
     add_quiet,
+    add_ray,
     cmu_rate,
     data_folder,
     positive,
-    ray_address,
 )
 from sim.errors import SidqlError
 from sim.simulate.dataset import synthesize
@@ -46,10 +46,7 @@ def register(sub) -> None:
     p.add_argument(
         "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
     )
-    p.add_argument(
-        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
-        help="run the tasks on Ray: a local runtime, or the cluster at ADDRESS",
-    )  # fmt: skip
+    add_ray(p, "the simulations")
     p.add_argument(
         "--max-assistance", type=float, default=None, metavar="BW",
         help="keep only clips whose mean root assistance is at most BW body weights, force and "

@@ -204,6 +204,15 @@ def add_skeleton(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_ray(parser: argparse.ArgumentParser, what: str = "the tasks") -> None:
+    """``--ray [ADDRESS]``: ``what`` as Ray tasks, in a local runtime or on the cluster at
+    ADDRESS (checked by :func:`ray_address` before any work starts)."""
+    parser.add_argument(
+        "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
+        help=f"run {what} as Ray tasks: a local runtime, or the cluster at ADDRESS",
+    )  # fmt: skip
+
+
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``-q/--quiet``: no progress bars."""
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
