@@ -117,3 +117,20 @@ def test_interpolate_hermite_reproduces_cubics_on_any_grid():
     xd = (-2.0 + t - 0.9 * t**2)[:, None]
     rec, rate = interpolate(x, xd, [0, 24], 0.05, "hermite")
     assert np.allclose(rec, x) and np.allclose(rate, xd)
+
+
+@pytest.mark.parametrize("curve", CURVES)
+def test_long_signals_are_evaluated_in_chunks_with_the_same_result(curve, monkeypatch):
+    """A trial longer than a chunk (and keyframes across chunk borders) gives exactly what one
+    pass over every frame gives."""
+    from sidql.keyframes import curves
+
+    rng = np.random.default_rng(3)
+    N, D = 2 * curves._CHUNK_FRAMES + 123, 5
+    values, rates = rng.normal(size=(N, D)), rng.normal(size=(N, D))
+    keys = np.unique(np.r_[0, rng.choice(N, 3000, replace=False), N - 1])
+    chunked = curves.interpolate_derivatives(values, rates, keys, 1 / 30, curve)
+    monkeypatch.setattr(curves, "_CHUNK_FRAMES", 10 * N)
+    whole = curves.interpolate_derivatives(values, rates, keys, 1 / 30, curve)
+    for a, b in zip(chunked, whole, strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -95,6 +95,10 @@ def interpolate(
     return x, xd
 
 
+#: Frames evaluated at a time by :func:`interpolate_derivatives` (a whole trial can be long).
+_CHUNK_FRAMES = 4096
+
+
 def _segment_polynomials(values, rates, k, dt, curve):
     """Per segment ``w`` (between keyframes k[w] and k[w+1]) the curve as a cubic in the time
     ``tau`` [s] since k[w]: coefficients (W-1, 4, D) of 1, tau, tau^2, tau^3."""
@@ -150,13 +154,16 @@ def interpolate_derivatives(
     n = np.arange(N)
     seg = np.clip(np.searchsorted(k, n, side="right") - 1, 0, len(k) - 2)
     coef = _segment_polynomials(values, rates, k, dt, curve)
-    tau = ((n - k[seg]) * dt)[:, None]
-    x, v, a = _eval_cubic(coef[seg], tau)
+    x, v, a = (np.empty_like(values) for _ in range(3))
+    for start in range(0, N, _CHUNK_FRAMES):  # chunks bound the (frames, 4, D) temporaries
+        part = slice(start, start + _CHUNK_FRAMES)
+        tau = ((n[part] - k[seg[part]]) * dt)[:, None]
+        x[part], v[part], a[part] = _eval_cubic(coef[seg[part]], tau)
     x[k] = values[k]  # exact at keyframes (no rounding of the polynomial)
-    inner = k[1:-1]
-    if len(inner):
-        w = np.searchsorted(k, inner)  # segment starting at each inner keyframe
-        _, v_right, a_right = _eval_cubic(coef[w], np.zeros((len(inner), 1)))
+    for start in range(1, len(k) - 1, _CHUNK_FRAMES):  # inner keyframes, a chunk at a time
+        w = np.arange(start, min(start + _CHUNK_FRAMES, len(k) - 1))  # segments starting there
+        inner = k[w]
+        _, v_right, a_right = _eval_cubic(coef[w], np.zeros((len(w), 1)))
         h_left = ((inner - k[w - 1]) * dt)[:, None]
         _, v_left, a_left = _eval_cubic(coef[w - 1], h_left)
         a[inner] = 0.5 * (a_left + a_right) + (v_right - v_left) / dt
