@@ -39,6 +39,38 @@ MODES = {curve: i for i, curve in enumerate(CURVES)}
 DEFAULT_MAX_GAP = 60
 
 
+@numba.njit(cache=True, inline="always")
+def _end_rates(Xq, Rq, i, j, g, mode, ma, mb):
+    """Fill ``ma``, ``mb`` (D,) with the rates [per frame] the decoder's curve has at the ends
+    of segment (i, j = i + g): the transmitted ones (mode 0, hermite), Catmull-Rom's proxy from
+    the keyframe values g frames away (mode 2); linear (mode 1) uses none (left as they are)."""
+    N, D = Xq.shape
+    if mode == 0:
+        for d in range(D):
+            ma[d] = Rq[i, d]
+            mb[d] = Rq[j, d]
+    elif mode == 2:
+        lo_a = max(i - g, 0)
+        hi_a = min(i + g, N - 1)
+        lo_b = max(j - g, 0)
+        hi_b = min(j + g, N - 1)
+        for d in range(D):
+            ma[d] = (Xq[hi_a, d] - Xq[lo_a, d]) / (hi_a - lo_a)
+            mb[d] = (Xq[hi_b, d] - Xq[lo_b, d]) / (hi_b - lo_b)
+
+
+@numba.njit(cache=True, inline="always")
+def _basis(n, i, g, mode):
+    """(h01, h10, h11) of frame n in segment (i, i + g): the curve is
+    ``x_i + h01 (x_j - x_i) + h10 m_a + h11 m_b`` (straight for linear, cubic Hermite else)."""
+    s = (n - i) / g
+    if mode == 1:
+        return s, 0.0, 0.0
+    s2 = s * s
+    s3 = s2 * s
+    return -2.0 * s3 + 3.0 * s2, (s3 - 2.0 * s2 + s) * g, (s3 - s2) * g
+
+
 @numba.njit(cache=True, fastmath=True)
 def _band_costs(X, Xq, Rq, G, mode):
     """(N, G + 1) segment costs: entry [i, g] for the segment (i, i + g) (inf past the end).
@@ -57,31 +89,10 @@ def _band_costs(X, Xq, Rq, G, mode):
             j = i + g
             if j >= N:
                 break
-            if mode == 0:
-                for d in range(D):
-                    ma[d] = Rq[i, d]
-                    mb[d] = Rq[j, d]
-            elif mode == 2:
-                lo_a = max(i - g, 0)
-                hi_a = min(i + g, N - 1)
-                lo_b = max(j - g, 0)
-                hi_b = min(j + g, N - 1)
-                for d in range(D):
-                    ma[d] = (Xq[hi_a, d] - Xq[lo_a, d]) / (hi_a - lo_a)
-                    mb[d] = (Xq[hi_b, d] - Xq[lo_b, d]) / (hi_b - lo_b)
+            _end_rates(Xq, Rq, i, j, g, mode, ma, mb)
             total = 0.0
             for n in range(i + 1, j):
-                s = (n - i) / g
-                if mode == 1:
-                    h01 = s
-                    h10 = 0.0
-                    h11 = 0.0
-                else:
-                    s2 = s * s
-                    s3 = s2 * s
-                    h01 = -2.0 * s3 + 3.0 * s2
-                    h10 = (s3 - 2.0 * s2 + s) * g
-                    h11 = (s3 - s2) * g
+                h01, h10, h11 = _basis(n, i, g, mode)
                 acc = 0.0
                 for d in range(D):
                     v = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
@@ -117,31 +128,10 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap
             j = i + g
             if j >= N:
                 break
-            if mode == 0:
-                for d in range(D):
-                    ma[d] = Rq[i, d]
-                    mb[d] = Rq[j, d]
-            elif mode == 2:
-                lo_a = max(i - g, 0)
-                hi_a = min(i + g, N - 1)
-                lo_b = max(j - g, 0)
-                hi_b = min(j + g, N - 1)
-                for d in range(D):
-                    ma[d] = (Xq[hi_a, d] - Xq[lo_a, d]) / (hi_a - lo_a)
-                    mb[d] = (Xq[hi_b, d] - Xq[lo_b, d]) / (hi_b - lo_b)
+            _end_rates(Xq, Rq, i, j, g, mode, ma, mb)
             total = 0.0
             for n in range(i + 1, j):
-                s = (n - i) / g
-                if mode == 1:
-                    h01 = s
-                    h10 = 0.0
-                    h11 = 0.0
-                else:
-                    s2 = s * s
-                    s3 = s2 * s
-                    h01 = -2.0 * s3 + 3.0 * s2
-                    h10 = (s3 - 2.0 * s2 + s) * g
-                    h11 = (s3 - s2) * g
+                h01, h10, h11 = _basis(n, i, g, mode)
                 for d in range(D):
                     e[d] = (
                         Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
