@@ -31,6 +31,7 @@ def body_joint_rotations(model, qpos: np.ndarray) -> np.ndarray:
     T = qpos.shape[0]
     rot = np.zeros((T, model.nbody, 4))
     rot[..., 0] = 1.0
+    moved = np.zeros(model.nbody, dtype=bool)  # bodies whose rotation is no longer the identity
     for j in range(model.njnt):
         kind, adr, b = model.jnt_type[j], model.jnt_qposadr[j], model.jnt_bodyid[j]
         if kind == mujoco.mjtJoint.mjJNT_HINGE:
@@ -42,7 +43,9 @@ def body_joint_rotations(model, qpos: np.ndarray) -> np.ndarray:
             local = qpos[:, adr + 3 : adr + 7]
         else:
             continue
-        rot[:, b] = quat.mul(rot[:, b], local)  # a body's joints compose left to right
+        # a body's joints compose left to right (the first needs no product with the identity)
+        rot[:, b] = quat.mul(rot[:, b], local) if moved[b] else local
+        moved[b] = True
     return rot
 
 
@@ -166,10 +169,8 @@ def qvel_from_qpos(
         mujoco.mj_differentiatePos(model, out[k], (b - a) * h, qpos[a], qpos[b])
     if across_jumps or T < 3:
         return out
-    rot = body_joint_rotations(model, qpos)
-    steps = rotation_angle(rot[:-1], rot[1:])
     if jumps is None:
-        jumps = pose_jumps(steps, fps, kin_related(model))
+        jumps = pose_jumps(body_rotation_steps(model, qpos), fps, kin_related(model))
     bodies = np.flatnonzero(jumps.any(axis=0))
     ks = np.flatnonzero((frames > 0) & (frames < T - 1))
     if len(bodies) == 0 or len(ks) == 0:
@@ -184,7 +185,9 @@ def qvel_from_qpos(
     next_clean = np.minimum.accumulate(np.where(~J, steps_idx, T)[::-1], axis=0)[::-1]
     for i, c in np.argwhere(before & after):  # frames between two jumps: rare
         f, b = int(t[i, 0]), bodies[c]
-        if rotation_angle(rot[f - 1, b], rot[f + 1, b]) < min(steps[f - 1, b], steps[f, b]) / 2:
+        rot = body_joint_rotations(model, qpos[f - 1 : f + 2])[:, b]  # frames f-1, f, f+1
+        step_in, step_out = rotation_angle(rot[0], rot[1]), rotation_angle(rot[1], rot[2])
+        if rotation_angle(rot[0], rot[2]) < min(step_in, step_out) / 2:
             continue  # a lone outlier frame: the central difference steps over it
         back = last_clean[f - 2, c] if f >= 2 else -1
         ahead = next_clean[f + 1, c] if f + 1 < T - 1 else T
