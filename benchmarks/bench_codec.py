@@ -49,6 +49,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
+from results import load_trials  # noqa: E402
+
 from sidql.codec import format as sidq  # noqa: E402
 from sidql.codec.decode import reconstruct_stream  # noqa: E402
 from sidql.codec.encode import encode_series  # noqa: E402
@@ -64,9 +66,7 @@ from sidql.keyframes.spherical import (  # noqa: E402
     protocol_indices,
     split_channels,
 )
-from sim.errors import MotionDataError, UnmetTargetError  # noqa: E402
-from sim.motion.dataset import find_trials  # noqa: E402
-from sim.motion.ingest import load_motion  # noqa: E402
+from sim.errors import UnmetTargetError  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 
 COUNTS = (2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
@@ -322,17 +322,8 @@ def _main(argv=None) -> int:
     ap.add_argument("--latency-rate", type=float, default=942.5, help="B/s of the latency table")
     args = ap.parse_args(argv)
 
-    trials, skipped = [], []
-    for tr in find_trials(args.data):
-        try:
-            clip = load_motion(tr.asf, tr.amc)
-        except MotionDataError as e:
-            skipped.append(f"{tr.amc}: {e}")
-            continue
-        if clip.n_frames < 60:
-            skipped.append(f"{tr.amc}: {clip.n_frames} frames < 60")
-            continue
-        trials.append(Trial(clip))
+    clips, skipped = load_trials(args.data)
+    trials = [Trial(clip) for clip in clips]
     seconds = sum(t.n for t in trials) / 30.0
     print(f"{len(trials)} trials from {args.data}, {seconds:.1f} s at 30 fps; skipped: {skipped}")
     rates = [bytes_per_second("hermite", W) for W in COUNTS]

@@ -41,29 +41,21 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
 import scipy.fft  # noqa: E402
-from results import write_results  # noqa: E402
+from results import load_trials, write_results  # noqa: E402
 
 from sidql.codec import format as sidq  # noqa: E402
 from sidql.codec.decode import reconstruct_stream  # noqa: E402
 from sidql.codec.encode import encode_series  # noqa: E402
 from sidql.keyframes.metrics import q_from_angles  # noqa: E402
 from sidql.keyframes.spherical import chart, chart_arrays, protocol_indices  # noqa: E402
-from sim.errors import MotionDataError, UnmetTargetError  # noqa: E402
-from sim.motion.dataset import find_trials  # noqa: E402
-from sim.motion.ingest import load_motion  # noqa: E402
+from sim.errors import UnmetTargetError  # noqa: E402
+from sim.paths import default_data_dir  # noqa: E402
 
 ERRORS_MM = tuple(range(1, 11))
 CODEC_TARGETS_MM = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0, 10.0, 12.0, 15.0)
 ANGLE_RATES = (150.0, 250.0, 400.0, 600.0, 900.0, 1300.0)
 STEPS_MM = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0, 96.0)
 HEADER = 8  # a baseline stream's own header: step (float32) and frame count (uint32)
-
-
-def default_data() -> Path:
-    for base in (REPO.parent, REPO.parent.parent):
-        if (base / "shared" / "cmu").is_dir():
-            return base / "shared" / "cmu"
-    return REPO.parent / "shared" / "cmu"
 
 
 class Trial:
@@ -303,23 +295,14 @@ def write_plot(base, codec, angle, path: Path, title: str) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", type=Path, default=default_data())
+    ap.add_argument("--data", type=Path, default=default_data_dir())
     ap.add_argument("--plot", type=Path, default=REPO / "docs" / "codec_rd.png")
     ap.add_argument("--json", type=Path, default=None, help="also write every number here")
     ap.add_argument("--no-write", action="store_true", help="print only (no docs/results file)")
     args = ap.parse_args(argv)
 
-    trials, skipped = [], []
-    for tr in find_trials(args.data):
-        try:
-            clip = load_motion(tr.asf, tr.amc)
-        except MotionDataError as e:
-            skipped.append(f"{Path(tr.amc).name}: {e.problem}")
-            continue
-        if clip.n_frames < 60:
-            skipped.append(f"{Path(tr.amc).name}: {clip.n_frames} frames")
-            continue
-        trials.append(Trial(clip))
+    clips, skipped = load_trials(args.data)
+    trials = [Trial(clip) for clip in clips]
     seconds = sum(t.n * t.dt for t in trials)
     print(f"{len(trials)} trials, {seconds:.1f} s at 30 fps; skipped: {skipped}")
     base = baselines(trials)

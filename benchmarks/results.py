@@ -54,3 +54,26 @@ def write_results(name: str, title: str, markdown: str, command: str, notes: str
     path = RESULTS_DIR / f"{name}.md"
     write_atomic(path, lambda f: f.write(text.encode()))
     return path
+
+
+def load_trials(data, min_frames: int = 60) -> tuple[list, list[str]]:
+    """Every trial under ``data`` read by ``load_motion`` (30 fps clips, MuJoCo forward
+    kinematics): ``(clips, skipped)``, where ``skipped`` names each trial left out and why (it does
+    not parse, or it is shorter than ``min_frames`` frames)."""
+    from sim.errors import MotionDataError
+    from sim.motion.dataset import find_trials
+    from sim.motion.ingest import load_motion
+
+    clips, skipped = [], []
+    for trial in find_trials(data):
+        name = Path(trial.amc).name
+        try:
+            clip = load_motion(trial.asf, trial.amc)
+        except MotionDataError as e:
+            skipped.append(f"{name}: {e.problem}")
+            continue
+        if clip.n_frames < min_frames:
+            skipped.append(f"{name}: {clip.n_frames} frames < {min_frames}")
+            continue
+        clips.append(clip)
+    return clips, skipped
