@@ -100,15 +100,23 @@ def _direct(low, rng, cache, csize, pos, out, bit):
 
 
 @numba.njit(cache=True)
+def _initial_probs(contexts, prior):
+    """(contexts * _PER_CHANNEL,) adaptive bit probabilities, every context starting at ``prior``
+    (encoder and decoder must start alike)."""
+    probs = np.empty(contexts * _PER_CHANNEL, dtype=np.int64)
+    for j in range(contexts):
+        probs[j * _PER_CHANNEL : (j + 1) * _PER_CHANNEL] = prior
+    return probs
+
+
+@numba.njit(cache=True)
 def _encode_kernel(values, group, n_groups, prior):
     """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column.
     Returns the coded bytes."""
     C, W = values.shape
     out = np.empty(16 + C * W * 8, dtype=np.uint8)
     low, rng, cache, csize, pos = np.int64(0), np.int64(_MASK32), np.int64(0), np.int64(1), 0
-    probs = np.empty(C * n_groups * _PER_CHANNEL, dtype=np.int64)
-    for j in range(C * n_groups):
-        probs[j * _PER_CHANNEL : (j + 1) * _PER_CHANNEL] = prior
+    probs = _initial_probs(C * n_groups, prior)
     for c in range(C):
         prev_zero = 0
         prev_sign = 2
@@ -207,9 +215,7 @@ def _decode_kernel(data, C, W, group, n_groups, prior):
     st[1] = _MASK32
     for _ in range(5):
         st[0] = ((st[0] << 8) | _next_byte(data, st)) & _MASK32
-    probs = np.empty(C * n_groups * _PER_CHANNEL, dtype=np.int64)
-    for j in range(C * n_groups):
-        probs[j * _PER_CHANNEL : (j + 1) * _PER_CHANNEL] = prior
+    probs = _initial_probs(C * n_groups, prior)
     for c in range(C):
         prev_zero = 0
         prev_sign = 2
