@@ -389,11 +389,21 @@ def test_held_frames_need_a_sustained_horizontal_force_no_contact_supplies():
 def test_residual_causes_and_the_support_verdict_for_held_trials():
     from sim.physics.analysis import RESIDUAL_CAUSES, residual_causes, support_verdict
 
-    F = np.array([[0.0, 0.0, 700.0], [900.0, 0.0, 700.0], [0.0, 100.0, -50.0], [10.0, 0, 0.0]])
-    causes = residual_causes(F, np.array([True, True, True, False]), mu=0.8)
+    F = np.array([[0.0, 0.0, 700.0], [900.0, 0.0, 700.0], [0.0, 100.0, -50.0], [10.0, 0, 0.0],
+                  [400.0, 400.0, 700.0], [500.0, 0.0, 700.0]])  # fmt: skip
+    causes = residual_causes(F, np.array([True, True, True, False, True, True]), mu=0.8)
     assert [RESIDUAL_CAUSES[c] if c >= 0 else None for c in causes] == [
-        None, "outside the friction cone", "pulling", "no contact"
+        None, "outside the friction cone", "pulling", "no contact", "outside the friction cone",
+        None,
     ]  # fmt: skip
+    # the cause is exactly where the dynamics' pyramid leaves a residual
+    from sim.physics.dynamics import residual_wrench
+
+    for f, c in zip(F, causes, strict=True):
+        if c == 0:
+            continue  # nothing on the floor: no pyramid to ask
+        left = residual_wrench(f, np.zeros(3), np.zeros(3), np.array([[0.0, 0.0, -1.0]]))[0]
+        assert (np.linalg.norm(left) > 1e-6) == (c >= 0), (f, c)
     flag, why = support_verdict(0.0, 0.0, True, None, held=0.04)
     assert flag and "held by something else (a partner, a prop)" in why and "4 %" in why
     assert support_verdict(0.0, 0.0, False, None, held=0.04)[1].endswith("the floor does not fit")

@@ -72,7 +72,7 @@ from sim.physics.contacts import (
     physdiff_metrics,
     trial_contacts,
 )
-from sim.physics.dynamics import MU, Dynamics, InverseDynamics
+from sim.physics.dynamics import MU, PYRAMID_EDGES, Dynamics, InverseDynamics
 from sim.physics.feet import FOOT_POINTS, HOLD_GAP, SOLE_POINTS
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
@@ -150,15 +150,21 @@ def held_frames(
 RESIDUAL_CAUSES = ("no contact", "pulling", "outside the friction cone")
 
 
-def residual_causes(force: np.ndarray, supported: np.ndarray, mu: float = MU) -> np.ndarray:
+def residual_causes(
+    force: np.ndarray, supported: np.ndarray, mu: float = MU, edges: int = PYRAMID_EDGES
+) -> np.ndarray:
     """(T,) int index into :data:`RESIDUAL_CAUSES` of why a frame's required force ``force``
     (T, 3) [N] is not all supplied by the floor: 0 nothing on the floor where ground forces may
-    act (``supported`` (T,) False), 1 it needs pulling down (F_z < 0), 2 it is too horizontal for friction
-    (|F_xy| > ``mu`` F_z), -1 none (inside the cone: the contacts supply it all)."""
+    act (``supported`` (T,) False), 1 it needs pulling down (F_z < 0), 2 it is too horizontal
+    for friction (outside the ``edges``-edge pyramid of coefficient ``mu`` that
+    :func:`sim.physics.dynamics.residual_wrench` fits: for 4 edges |F_x| + |F_y| > mu F_z),
+    -1 none (inside it: the contacts supply it all)."""
     F = np.asarray(force, dtype=np.float64)
     out = np.full(len(F), -1)
-    cone = np.linalg.norm(F[:, :2], axis=1) > mu * F[:, 2]
-    out[cone] = 2
+    # the pyramid's faces: outward normals between its edges, at mu F_z cos(pi / edges)
+    a = 2 * np.pi * (np.arange(edges) + 0.5) / edges
+    reach = (F[:, :2] @ np.stack([np.cos(a), np.sin(a)])).max(axis=1)
+    out[reach > mu * np.cos(np.pi / edges) * F[:, 2] + 1e-9 * np.abs(F).max(initial=1.0)] = 2
     out[F[:, 2] < 0] = 1
     out[~np.asarray(supported, dtype=bool)] = 0
     return out
