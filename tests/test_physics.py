@@ -364,7 +364,7 @@ def test_cached_original_is_keyed_by_the_points_and_the_whole_ground(walk):
 
 
 def test_held_frames_need_a_sustained_horizontal_force_no_contact_supplies():
-    """A sideways residual over 0.25 BW for 0.2 s or longer is held by something else; an impact
+    """A sideways residual over 0.15 BW for 0.2 s or longer is held by something else; an impact
     the source filter spreads over 5 frames, a vertical residual, a weaker force and a run an
     unmeasured frame breaks are not."""
     from sim.physics.analysis import HELD_BW, held_frames

@@ -276,7 +276,7 @@ def test_a_landing_does_not_leak_into_the_fall_and_stance_needs_no_residual(huma
 def test_a_sustained_pull_is_held_by_something_else_an_impact_and_a_landing_are_not(humanoid):
     """Pulled sideways by 0.4 body weights for 0.4 s in flight (limbs moving, source frames at
     120 Hz): the frames of the pull are held by something else (:func:`held_frames`), the free
-    flight around it is not; a 10 ms kick of 4 kN on a foot (spread by the filter) is not, and
+    flight more than 2 frames from it is not; a 10 ms kick of 4 kN on a foot (spread by the filter) is not, and
     neither is a landing on the floor."""
     from sim.physics.analysis import held_frames
 
@@ -288,7 +288,8 @@ def test_a_sustained_pull_is_held_by_something_else_an_impact_and_a_landing_are_
     on = np.linalg.norm(sim["push"][centre], axis=1) > 0
     inner = on & np.roll(on, 2) & np.roll(on, -2)  # two frames inside the pull's ends
     assert held[inner].all()
-    assert not held[~on].any()
+    near = on | np.roll(on, 2) | np.roll(on, -2) | np.roll(on, 1) | np.roll(on, -1)
+    assert not held[~near].any()  # the filter spreads the pull's steps by +-2 frames, no further
     kick = np.array([4000.0, 0.0, 0.0])
     sim = _simulate(humanoid[1], seconds=0.8, z0=3.0, pushes=[("rfoot", kick, 0.395, 0.405, "box")])
     mp, _ = _analyse(humanoid, sim)
