@@ -64,6 +64,12 @@ from sidql.keyframes.spherical import POINTS  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.motion.ingest import load_clips  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
+from sim.physics.analysis import (  # noqa: E402
+    HELD_BW,
+    HELD_S,
+    MAX_DERIVATIVE_NOISE,
+    RESIDUAL_CAUSES,
+)
 from sim.physics.dynamics import InverseDynamics  # noqa: E402
 from sim.physics.ik import Fit, HumanoidIK  # noqa: E402
 
@@ -325,16 +331,23 @@ def figures(data: Path) -> str:
     for r in orig:
         by_trial.setdefault(r["source"], []).append(r)
     lines += ["### The original's residual, per trial (means over its clips)", "",
-              "| trial | clips | residual force (BW) | residual torque (N m/kg) | no support "
-              "found | floor fits | support | body on the floor |",
-              "|---|---:|---:|---:|---:|---|---|---|"]  # fmt: skip
+              "Means over the measured frames; *unmeasured*: frames whose source window is "
+              "shifted against the take's ends or a pose jump (more than "
+              f"{MAX_DERIVATIVE_NOISE:g}x the centred window's noise), reported, not scored. "
+              "*Held*: measured frames needing a horizontal force over "
+              f"{HELD_BW:g} BW for {HELD_S:g} s or longer that no floor contact supplies.", "",
+              "| trial | clips | residual force (BW) | residual torque (N m/kg) | unmeasured "
+              "frames | no support found | held | floor fits | support | body on the floor |",
+              "|---|---:|---:|---:|---:|---:|---:|---|---|---|"]  # fmt: skip
     for src, rs in sorted(by_trial.items(), key=lambda kv: Path(kv[0]).stem):
         f = floors[src]
         parts = ", ".join(f"{p} {100 * x:.1f} %" for p, x in f.get("ground_parts", {}).items())
         lines.append(
             f"| {Path(src).stem} | {len(rs)} | {np.mean([r['residual_force_bw'] for r in rs]):.3f} "
             f"| {np.mean([r['residual_torque_nm_kg'] for r in rs]):.2f} "
-            f"| {100 * f['support_missing_share']:.1f} % | {'yes' if f['floor_fits'] else 'no'} "
+            f"| {f['dynamics_unmeasured_n']} "
+            f"| {100 * f['support_missing_share']:.1f} % | {100 * f['support_held_share']:.1f} % "
+            f"| {'yes' if f['floor_fits'] else 'no'} "
             f"| {'off the floor: ' + f['support_why'] if f['support_off_floor'] else 'found'} "
             f"| {parts or '-'} |"
         )
@@ -352,6 +365,7 @@ def figures(data: Path) -> str:
               f"floor ({len(flagged)} trials: {', '.join(flagged)}): "
               f"{rf[~found].mean() if (~found).any() else float('nan'):.3f} BW. Target 0.03 BW.",
               ""]  # fmt: skip
+    lines += residual_breakdown([r for r, b in zip(orig, both, strict=True) if b])
     lines += ["### Means over clips (noise floor: how far 1.5 mm of marker noise moves each "
               "figure)", "", physics_markdown(out["results"]), ""]  # fmt: skip
     # Q against the residual force
@@ -399,6 +413,33 @@ def figures(data: Path) -> str:
     text = "\n".join(lines)
     print(text)
     return text
+
+
+def residual_breakdown(rows: list[dict]) -> list[str]:
+    """Where the original's residual force comes from over ``rows`` (its clips): per cause
+    (:func:`sim.physics.analysis.residual_causes`), its share of the mean over the measured
+    frames, and the frames left unmeasured with what they would have added."""
+    n = np.array([r["dynamics_n"] for r in rows], dtype=float)
+    un = np.array([r["dynamics_unmeasured_n"] for r in rows], dtype=float)
+    if not len(rows) or n.sum() == 0:
+        return []
+    lines = [f"Where it comes from, over those {len(rows)} clips ({int(n.sum())} measured frames; "
+             "per cause, the residual force summed over its frames / all measured frames):", "",
+             "| cause | BW |", "|---|---:|"]  # fmt: skip
+    total = 0.0
+    for c in RESIDUAL_CAUSES:
+        v = float(sum(r["residual_force_bw_by_cause"][c] * k for r, k in zip(rows, n, strict=True)))
+        total += v
+        lines.append(f"| {c} | {v / n.sum():.4f} |")
+    lines.append(f"| all (frame-weighted mean) | {total / n.sum():.4f} |")
+    lost = sum(
+        (r["residual_force_bw_unmeasured"] or 0.0) * k for r, k in zip(rows, un, strict=True)
+    )
+    lines += ["", f"Unmeasured there: {int(un.sum())} frames (take edges and pose jumps), "
+              f"{lost / max(un.sum(), 1):.3f} BW on average; scored, the frame-weighted mean "
+              f"over all {int(n.sum() + un.sum())} frames would be "
+              f"{(total + lost) / (n.sum() + un.sum()):.4f} BW.", ""]  # fmt: skip
+    return lines
 
 
 def main() -> None:

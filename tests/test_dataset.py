@@ -95,6 +95,8 @@ def test_npz_round_trip_and_clip_splitting(walk_clip, tmp_path):
     path = save_npz(walk_clip, tmp_path / "c.npz")
     back = load_npz(path)
     np.testing.assert_array_equal(back.positions, walk_clip.positions)
+    np.testing.assert_array_equal(back.derivative_noise, walk_clip.derivative_noise)
+    assert back.slice(0, 5).derivative_noise.shape == (5, len(walk_clip.names))
     assert back.names == walk_clip.names and back.joint_names == walk_clip.joint_names
     clips = walk_clip.split(60)
     assert len(clips) == walk_clip.n_frames // 60

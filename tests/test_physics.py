@@ -361,3 +361,96 @@ def test_cached_original_is_keyed_by_the_points_and_the_whole_ground(walk):
     assert height(job, b, ground) == pytest.approx(ha + 50, abs=1e-6)
     other = dataclasses.replace(ground, z=ground.z + 0.03)
     assert height(job, a, other) == pytest.approx(ha - 30, abs=1e-6)
+
+
+def test_held_frames_need_a_sustained_horizontal_force_no_contact_supplies():
+    """A sideways residual over 0.15 BW for 0.2 s or longer is held by something else; an impact
+    the source filter spreads over 5 frames, a vertical residual, a weaker force and a run an
+    unmeasured frame breaks are not."""
+    from sim.physics.analysis import HELD_BW, held_frames
+
+    W, fps = 700.0, 30.0
+    r = np.zeros((90, 3))
+    r[5:14] = [0.3 * W, 0.25 * W, 0.0]  # 9 frames (0.3 s), 0.39 BW sideways: held
+    r[20:25, 0] = 2.0 * W  # an impact spread over 5 frames (0.17 s): not
+    r[30:45, 2] = -1.0 * W  # pulled down for 0.5 s, nothing sideways: not
+    r[50:65, 1] = 0.9 * HELD_BW * W  # too weak
+    r[70:85, 0] = 0.5 * W  # sustained, but frame 77 unmeasured: two runs of 7 (0.23 s)
+    measured = np.ones(90, dtype=bool)
+    measured[77] = False
+    held = held_frames(r, W, fps, measured)
+    assert held[5:14].all() and held[70:77].all() and held[78:85].all()
+    assert held.sum() == 9 + 14
+    measured[74] = False  # now runs of 4, 2 and 7 frames
+    assert held_frames(r, W, fps, measured)[70:85].sum() == 7
+    assert held_frames(r, W, 60.0).sum() == 15  # at 60 fps 9 frames are 0.15 s: only the 15 hold
+
+
+def test_residual_causes_and_the_support_verdict_for_held_trials():
+    from sim.physics.analysis import RESIDUAL_CAUSES, residual_causes, support_verdict
+
+    F = np.array([[0.0, 0.0, 700.0], [900.0, 0.0, 700.0], [0.0, 100.0, -50.0], [10.0, 0, 0.0],
+                  [400.0, 400.0, 700.0], [500.0, 0.0, 700.0]])  # fmt: skip
+    causes = residual_causes(F, np.array([True, True, True, False, True, True]), mu=0.8)
+    assert [RESIDUAL_CAUSES[c] if c >= 0 else None for c in causes] == [
+        None, "outside the friction cone", "pulling", "no contact", "outside the friction cone",
+        None,
+    ]  # fmt: skip
+    # the cause is exactly where the dynamics' pyramid leaves a residual
+    from sim.physics.dynamics import residual_wrench
+
+    for f, c in zip(F, causes, strict=True):
+        if c == 0:
+            continue  # nothing on the floor: no pyramid to ask
+        left = residual_wrench(f, np.zeros(3), np.zeros(3), np.array([[0.0, 0.0, -1.0]]))[0]
+        assert (np.linalg.norm(left) > 1e-6) == (c >= 0), (f, c)
+    flag, why = support_verdict(0.0, 0.0, True, None, held=0.04)
+    assert flag and "held by something else (a partner, a prop)" in why and "4 %" in why
+    assert support_verdict(0.0, 0.0, False, None, held=0.04)[1].endswith("the floor does not fit")
+    assert support_verdict(0.01, 0.0, True, None, held=0.015) == (False, "")  # a clean trial
+    # support missing on the floor keeps its own reason
+    assert "stands still" in support_verdict(0.3, 0.2, True, 500.0, held=0.1)[1]
+
+
+def test_dynamics_figures_are_over_the_measured_frames_and_say_how_many_are_not():
+    from sim.physics.analysis import summarise_dynamics
+    from sim.physics.dynamics import Dynamics
+
+    T = 6
+    rf = np.zeros((T, 3))
+    rf[0, 0] = 2.0 * 700.0  # a take's first frame: 2 BW from the one-sided window
+    rf[3, 2] = 0.1 * 700.0
+    z = np.zeros((T, 3))
+    dyn = Dynamics(np.zeros((T, 8)), np.zeros((T, 8)), z, z, z, rf, z, z, np.ones((T, 2)),
+                   70.0, 700.0)  # fmt: skip
+    measured = np.array([False, True, True, True, True, True])
+    s = summarise_dynamics(dyn, np.array([True, True]), measured)["summary"]
+    assert s["residual_force_bw"] == pytest.approx(0.1 / 5)
+    assert s["dynamics_n"] == 5 and s["dynamics_unmeasured_n"] == 1
+    assert s["residual_force_bw_unmeasured"] == pytest.approx(2.0)
+    every = summarise_dynamics(dyn, np.array([True, True]))["summary"]
+    assert every["residual_force_bw"] == pytest.approx(2.1 / 6)
+    assert every["dynamics_unmeasured_n"] == 0 and every["residual_force_bw_unmeasured"] is None
+
+
+def test_a_takes_first_frame_is_unmeasured_for_the_original_and_its_reconstructions(walk):
+    """The first frame of a take reads its source window at its first sample (5.3x the noise):
+    its dynamics is not measured, for the original and, on the same frames, for any motion
+    scored against it; every other frame of a walk is."""
+    from sidql.keyframes.spherical import POINTS, protocol_parent_indices
+
+    whole, model, _ = walk
+    clip = whole.slice(0, 30)
+    assert clip.derivative_noise[0].max() > 5 and clip.derivative_noise[4:].max() <= 1.0 + 1e-9
+    job = PhysicsJob(model, POINTS, protocol_parent_indices(), clip.fps)
+    orig = job.analyse(clip)
+    assert orig["dynamics_unmeasured_n"] == 1 and orig["dynamics_n"] == 29
+    pf = orig["per_frame"]
+    assert pf["dynamics_measured"][0] == 0 and pf["dynamics_measured"][1:].all()
+    assert orig["residual_force_bw"] == pytest.approx(pf["residual_force_bw"][1:].mean())
+    idx = [clip.names.index(n) for n in POINTS]
+    rec = job.analyse(clip, np.asarray(clip.positions)[:, idx] + 1e-4)
+    assert rec["dynamics_unmeasured_n"] == 1 and rec["dynamics_n"] == 29
+    assert orig["support_held_share"] == 0.0
+    # a later stretch of the take is measured throughout
+    assert job.analyse(whole.slice(30, 60))["dynamics_unmeasured_n"] == 0

@@ -220,3 +220,29 @@ def test_floor_report_says_where_each_trials_support_was_found():
     assert support_verdict(0.2, 0.0, False)[1].endswith("the floor does not fit")
     assert "partner" in support_verdict(0.2, 0.0, True)[1]
     assert support_verdict(0.04, 0.04, True) == (False, "")
+
+
+def test_the_held_verdict_flags_the_salsa_partner_and_no_clean_trial(cmu_dir):
+    """One rule for every trial: 61_01 (salsa; its partner is subject 60) needs a sideways force
+    no floor contact supplies for 0.2 s and longer in more than 2 % of its frames; the walks,
+    the forward jumps (impacts) and the boxing (hops) never do."""
+    from sidql.evaluation.evaluate import floor_report, load_cases, physics_setup
+
+    cases, _ = load_cases(cmu_dir, subjects=["01", "02", "07", "17", "61"], progress=False)
+    keep = {"01_01", "02_01", "07_04", "17_10", "61_01"}
+    cases = [c for c in cases if Path(c.clip.source).stem in keep]
+    setup = physics_setup(cases)
+    rows = []
+    for c in cases:
+        r = setup[c.clip.source].analyse(c.clip)
+        rows.append({k: v for k, v in r.items() if k != "per_frame"} | {"source": c.clip.source})
+    floors = {Path(f["source"]).stem: f for f in floor_report(setup, rows)}
+    assert set(floors) == keep
+    salsa = floors["61_01"]
+    assert salsa["support_off_floor"] and salsa["support_held_share"] > 0.02
+    assert "held by something else (a partner, a prop)" in salsa["support_why"]
+    for t in keep - {"61_01"}:
+        assert floors[t]["support_held_share"] == 0.0, t
+        assert not floors[t]["support_off_floor"], t
+    # the take's first frame is reported, not scored
+    assert all(floors[t]["dynamics_unmeasured_n"] >= 1 for t in keep)

@@ -271,3 +271,29 @@ def test_a_landing_does_not_leak_into_the_fall_and_stance_needs_no_residual(huma
     stance[: first + 3] = False  # the landing itself
     assert stance.sum() > 5
     assert np.median(rf[stance]) < 0.05
+
+
+def test_a_sustained_pull_is_held_by_something_else_an_impact_and_a_landing_are_not(humanoid):
+    """Pulled sideways by 0.4 body weights for 0.4 s in flight (limbs moving, source frames at
+    120 Hz): the frames of the pull are held by something else (:func:`held_frames`), the free
+    flight more than 2 frames from it is not; a 10 ms kick of 4 kN on a foot (spread by the filter) is not, and
+    neither is a landing on the floor."""
+    from sim.physics.analysis import held_frames
+
+    W = 75.0 * 9.81
+    pull = np.array([0.4 * W, 0.0, 0.0])
+    sim = _simulate(humanoid[1], seconds=1.2, z0=3.0, pushes=[("thorax", pull, 0.4, 0.8, "box")])
+    mp, centre = _analyse(humanoid, sim)
+    held = held_frames(mp.dynamics.residual_force, mp.dynamics.weight, FPS, mp.measured)
+    on = np.linalg.norm(sim["push"][centre], axis=1) > 0
+    inner = on & np.roll(on, 2) & np.roll(on, -2)  # two frames inside the pull's ends
+    assert held[inner].all()
+    near = on | np.roll(on, 2) | np.roll(on, -2) | np.roll(on, 1) | np.roll(on, -1)
+    assert not held[~near].any()  # the filter spreads the pull's steps by +-2 frames, no further
+    kick = np.array([4000.0, 0.0, 0.0])
+    sim = _simulate(humanoid[1], seconds=0.8, z0=3.0, pushes=[("rfoot", kick, 0.395, 0.405, "box")])
+    mp, _ = _analyse(humanoid, sim)
+    assert not held_frames(mp.dynamics.residual_force, mp.dynamics.weight, FPS, mp.measured).any()
+    sim = _simulate(humanoid[1], seconds=0.9, z0=1.05, floor=True, kp=300.0, kd=10.0)
+    mp, _ = _analyse(humanoid, sim, ground=Ground(0.0))
+    assert not held_frames(mp.dynamics.residual_force, mp.dynamics.weight, FPS, mp.measured).any()

@@ -69,7 +69,11 @@ def test_dataset_keys_match_ingest(tmp_path, walk_clip):
     path = tmp_path / "s" / "procedural" / "procedural_00000.npz"
     synth = _arrays(path)
     # (a real trial's points also carry derivatives from its 120 fps source frames)
-    real = set(_arrays(tmp_path / "real.npz")) - {"source_velocities", "accelerations"}
+    real = set(_arrays(tmp_path / "real.npz")) - {
+        "source_velocities",
+        "accelerations",
+        "derivative_noise",
+    }
     assert set(synth) == real | set(LABELS)
     clip = load_npz(path)
     # the learning labels: per frame, shapes as documented, consistent with the index

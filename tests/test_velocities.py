@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+import pytest
 
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import point_names, point_parents
@@ -190,3 +191,58 @@ def test_source_derivatives_are_not_taken_across_a_pose_jump():
     assert np.abs(plain_a[:, 0] - a_true).max() > 100  # across it: 0.3 m in 8 ms
     np.testing.assert_array_equal(vel[:, 1], plain_v[:, 1])
     np.testing.assert_array_equal(acc[:, 1], plain_a[:, 1])
+
+
+def test_edge_windows_differentiate_a_quartic_exactly_and_say_how_much_noise_they_pass():
+    """At a take's ends the source window shifts inward: a quartic is still differentiated
+    exactly there, but sample noise passes 5.3x as strongly into the first frame's
+    acceleration (derivative_noise says so, and seeded noise shows it)."""
+    from sim.motion.velocities import SOURCE_WINDOW, derivative_noise, point_derivatives
+
+    fps, T = 120.0, 49
+    t = np.arange(T) / fps
+    c = np.array([[0.3, -1.2, 4.0, 2.5, -3.0], [1.0, 0.5, -2.0, 6.0, 1.5]])  # (2 points, degree 4)
+    pos = np.zeros((T, 2, 3))
+    vel = np.zeros_like(pos)
+    acc = np.zeros_like(pos)
+    for j in range(2):
+        for k in range(3):
+            cj = c[j] * (k + 1)
+            pos[:, j, k] = sum(cj[n] * t**n for n in range(5))
+            vel[:, j, k] = sum(n * cj[n] * t ** (n - 1) for n in range(1, 5))
+            acc[:, j, k] = sum(n * (n - 1) * cj[n] * t ** (n - 2) for n in range(2, 5))
+    frames = np.array([0, 1, 2, 4, 24, T - 3, T - 1])
+    v, a = point_derivatives(pos, fps, frames)
+    np.testing.assert_allclose(v, vel[frames], atol=1e-8)
+    np.testing.assert_allclose(a, acc[frames], atol=1e-6)
+    gain = derivative_noise(T, frames, points=2)
+    assert gain.shape == (len(frames), 2)
+    assert gain[0, 0] == pytest.approx(5.33, abs=0.01)  # read at the window's first sample
+    assert gain[-1, 0] == pytest.approx(gain[0, 0])  # and at its last
+    assert gain[1, 0] == pytest.approx(3.93, abs=0.01)
+    assert gain[3, 0] <= 1.0 and gain[4, 0] == pytest.approx(1.0)  # four samples in: as centred
+    # the ratio is what noise does: seeded white noise through both windows
+    rng = np.random.default_rng(3)
+    noise = rng.normal(0.0, 1e-3, (4000, T, 1, 3))
+    a_edge = np.array([point_derivatives(n, fps, [0, 24])[1] for n in noise[:, :, :, :]])
+    ratio = a_edge[:, 0].std() / a_edge[:, 1].std()
+    assert ratio == pytest.approx(gain[0, 0], rel=0.05)
+    assert SOURCE_WINDOW == 17
+
+
+def test_derivative_noise_beside_a_pose_jump_is_the_cut_points_own():
+    """A pose jump cuts one point's samples: frames whose window it shortens pass more noise
+    for that point only; a piece too short for a fit reads its neighbour's, extrapolated (more
+    still); a take too short for any fit is not measured at all."""
+    from sim.motion.velocities import NO_WINDOW_NOISE, derivative_noise
+
+    T = 80
+    cuts = np.zeros((T - 1, 2), dtype=bool)
+    cuts[39, 1] = True  # point 1 jumps between samples 39 and 40
+    cuts[41, 1] = True  # and back: samples 40, 41 are a piece of two
+    g = derivative_noise(T, np.arange(T), cuts=cuts)
+    assert np.allclose(g[8 : T - 8, 0], 1.0)  # the other point is untouched
+    assert g[39, 1] == pytest.approx(5.33, abs=0.01)  # the last sample before the jump
+    assert g[41, 1] > g[40, 1] > g[39, 1]  # two samples: the nearest piece's fit, extrapolated
+    assert np.allclose(g[8:30, 1], 1.0) and np.allclose(g[52 : T - 8, 1], 1.0)
+    assert (derivative_noise(2, points=3) == NO_WINDOW_NOISE).all()

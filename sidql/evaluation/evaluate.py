@@ -467,7 +467,9 @@ def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
     from its original's rows, where its support was found: the original's mean residual force
     (``original_residual_force_bw``), the body points other than feet on the floor
     (``ground_parts``: share of frames), the share of frames whose support was found nowhere
-    (``support_missing_share``) and the verdict (``support_off_floor``, ``support_why``:
+    (``support_missing_share``), the share held by something else (``support_held_share``),
+    the frames whose derivatives are not measured (``dynamics_unmeasured_n``, summed over the
+    clips) and the verdict (``support_off_floor``, ``support_why``:
     :func:`sim.physics.analysis.support_verdict`)."""
     out = []
     for src, tp in setup.items():
@@ -491,10 +493,13 @@ def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
                 if high
                 else None
             )
-            flag, why = support_verdict(missing, above, row["floor_fits"], above_mm)
+            held = mean("support_held_share")
+            flag, why = support_verdict(missing, above, row["floor_fits"], above_mm, held)
             row.update(
                 original_residual_force_bw=mean("residual_force_bw"), ground_parts=parts,
                 support_missing_share=missing, support_above_floor_share=above,
+                support_held_share=held, dynamics_unmeasured_n=int(
+                    sum(r.get("dynamics_unmeasured_n") or 0 for r in rows)),
                 support_above_floor_mm=above_mm, support_off_floor=flag, support_why=why,
             )  # fmt: skip
         out.append(row)

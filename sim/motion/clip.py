@@ -46,6 +46,10 @@ class Clip:
         source_velocities, accelerations: (T, J, 3) point velocities [m/s] and accelerations
             [m/s^2] from the source frames' positions around each frame
             (:func:`sim.motion.velocities.point_derivatives`; None when unknown).
+        derivative_noise: (T, J) how much more sample noise reaches each of those accelerations
+            than reaches a centred window (:func:`sim.motion.velocities.derivative_noise`: 1
+            inside a take, more where the window is shifted against the take's ends or a pose
+            jump; None when unknown: taken as 1).
     """
 
     names: tuple[str, ...]
@@ -63,6 +67,7 @@ class Clip:
     angular_velocities: np.ndarray | None = None
     source_velocities: np.ndarray | None = None
     accelerations: np.ndarray | None = None
+    derivative_noise: np.ndarray | None = None
 
     def __post_init__(self):
         T, J = self.positions.shape[:2]
@@ -85,6 +90,8 @@ class Clip:
             a = getattr(self, name)
             if a is not None and a.shape != (T, J, 3):
                 raise ValueError(f"{name} must be (T, J, 3); got {a.shape}")
+        if self.derivative_noise is not None and self.derivative_noise.shape != (T, J):
+            raise ValueError(f"derivative_noise must be (T, J); got {self.derivative_noise.shape}")
         if self.fps <= 0:
             raise ValueError(f"fps must be positive; got {self.fps}")
 
@@ -132,6 +139,9 @@ class Clip:
             if self.source_velocities is None
             else self.source_velocities[start:stop],
             accelerations=None if self.accelerations is None else self.accelerations[start:stop],
+            derivative_noise=None
+            if self.derivative_noise is None
+            else self.derivative_noise[start:stop],
             start_frame=int(round(self.start_frame + start * step)),
         )
 
@@ -141,15 +151,15 @@ class Clip:
 
 
 _ARRAY_KEYS = ("parents", "positions", "velocities", "qpos", "qvel", "rotations")
-_OPTIONAL_KEYS = ("angular_velocities", "source_velocities", "accelerations")
+_OPTIONAL_KEYS = ("angular_velocities", "source_velocities", "accelerations", "derivative_noise")
 
 
 def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> Path:
     """Write ``clip`` to ``path`` atomically (temporary file in the same folder, then rename).
 
     Keys: names, parents, positions, velocities, qpos, qvel, rotations, fps, source, start_frame,
-    source_fps, joint_names, and angular_velocities, source_velocities and accelerations when
-    known; plus the arrays of ``extra``
+    source_fps, joint_names, and angular_velocities, source_velocities, accelerations and
+    derivative_noise when known; plus the arrays of ``extra``
     under their own names (per-frame labels of simulated clips: :func:`load_npz` ignores them,
     :func:`load_extra` reads them).
     """
@@ -405,7 +415,7 @@ def _check_clip_layout(headers: dict, path: str) -> None:
         "names": (J,), "parents": (J,), "positions": (T, J, 3), "velocities": (T, J, 3),
         "rotations": (T, J, 4), "qpos": (T, nq), "qvel": (T, nv), "fps": (), "source": (),
         "start_frame": (), "source_fps": (), **dict.fromkeys(_OPTIONAL_KEYS, (T, J, 3)),
-        "joint_names": (shape["joint_names"] + (0,))[:1],
+        "derivative_noise": (T, J), "joint_names": (shape["joint_names"] + (0,))[:1],
     }  # fmt: skip
     for key, s in expected.items():
         if key in shape and shape[key] != s:

@@ -21,6 +21,7 @@ from sim.motion.clip import Clip
 from sim.motion.retarget import leg_length, local_rotations_from_world, motion_to_qpos
 from sim.motion.velocities import (
     body_rotation_steps,
+    derivative_noise,
     kin_related,
     point_cuts,
     point_derivatives,
@@ -89,13 +90,14 @@ def clip_from_qpos(
         pos, vel, xquat, omega = point_kinematics(
             model, data, qpos[frames], qvel, body_ids, site_ids
         )
-        src_vel = acc = None
+        src_vel = acc = noise = None
         if derivatives:
             every = point_kinematics(
                 model, data, qpos, np.zeros((len(qpos), model.nv)), body_ids, site_ids
             )[0]
             cuts = point_cuts(model, jumps, body_ids)
             src_vel, acc = point_derivatives(every, source_fps, frames, cuts=cuts)
+            noise = derivative_noise(len(qpos), frames, cuts=cuts)
     joint_names = tuple(model.joint(j).name for j in range(1, model.njnt))
     arrays = (("positions", pos), ("velocities", vel), ("rotations", xquat),
               ("source velocities", src_vel), ("accelerations", acc))  # fmt: skip
@@ -120,6 +122,7 @@ def clip_from_qpos(
         angular_velocities=omega,
         source_velocities=src_vel,
         accelerations=acc,
+        derivative_noise=noise,
     )
 
 

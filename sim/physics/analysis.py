@@ -21,15 +21,22 @@ original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or 
   supply / body weight; ``residual_torque_nm_kg``: mean |residual torque| / body mass, the torque
   the ground forces that supply the force leave (:func:`sim.physics.dynamics.residual_wrench`);
   ``joint_torque_rms_nm_kg``: RMS anatomical joint torque / body mass, with ``dynamics_n``
-  frames and ``derivatives`` (where the velocities and accelerations came from);
+  frames and ``derivatives`` (where the velocities and accelerations came from); all over the
+  frames whose derivatives are measured: ``dynamics_unmeasured_n`` frames of the original
+  (and so of every reconstruction of it) are not, where its source window is shifted against
+  the take's ends or a pose jump (:data:`MAX_DERIVATIVE_NOISE`), and
+  ``residual_force_bw_unmeasured`` is what they would have added (mean over them, None if
+  none); ``residual_force_bw_by_cause``: the residual force's mean over the measured frames
+  split by why no ground force supplies it (:func:`residual_causes`);
 * ``ik_error_mm``: mean RMS distance of the fitted humanoid's points to the motion's (large when
   a reconstruction stretches bones);
 * ``ground_parts``: per body point other than the feet that rests on the floor (a hand, a knee),
   the share of frames it does (:func:`sim.physics.contacts.body_contacts`); ``unsupported_share``
   the frames with nothing on the floor, ``support_missing_share`` those of them needing more than
   :data:`SUPPORT_MISSING_BW` from outside, ``support_above_floor_share`` those with the lower
-  foot standing still above the floor (``support_above_floor_mm``: how high, median;
-  :func:`support_verdict` reads them for a trial);
+  foot standing still above the floor (``support_above_floor_mm``: how high, median),
+  ``support_held_share`` the frames needing a sustained horizontal force no contact supplies
+  (:func:`held_frames`; :func:`support_verdict` reads them for a trial);
 * ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
 * ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
 
@@ -65,7 +72,7 @@ from sim.physics.contacts import (
     physdiff_metrics,
     trial_contacts,
 )
-from sim.physics.dynamics import MU, Dynamics, InverseDynamics
+from sim.physics.dynamics import MU, PYRAMID_EDGES, Dynamics, InverseDynamics
 from sim.physics.feet import FOOT_POINTS, HOLD_GAP, SOLE_POINTS
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
@@ -103,14 +110,91 @@ SUPPORT_FLAG_SHARE = 0.05
 PLANTED_SPEED = 0.25
 
 
+#: A frame's dynamics is measured when none of its points' accelerations lets through more than
+#: this many times the sample noise of the centred source window
+#: (:func:`sim.motion.velocities.derivative_noise`): the first frame of a take (5.3x: 1 mm of
+#: marker jitter becomes ~6 m/s^2, up to 2 BW in CMU walks) and frames beside a pose jump are
+#: not; the second frame of a take (1.0x at 30 of 120 fps) is.
+MAX_DERIVATIVE_NOISE = 2.0
+#: [BW] a horizontal residual force this large, for at least HELD_S [s], is held by something
+#: else: the floor cannot push sideways beyond friction nor at all without contact, and the
+#: source filter spreads an impact over +-2 frames at 30 fps (5 frames, 0.17 s), shorter than
+#: HELD_S. 0.15 BW is 20x the residual's noise floor (0.007 BW at 1.5 mm of marker noise); the
+#: CMU captures' own jitter in flight reaches it in single frames, never for HELD_S. On
+#: ../shared/cmu no trial whose support is found holds a run of it; 61_01 (salsa) is held in
+#: 6.7 % of its frames (3.9 % at 0.25 BW; at 0.27 s instead of 0.2 s, 1.5 %: its partner's pulls
+#: last 0.2-0.25 s).
+HELD_BW, HELD_S = 0.15, 0.2
+#: A trial whose original is held in more than this share of its measured frames is flagged.
+HELD_FLAG_SHARE = 0.02
+
+
+def held_frames(
+    residual_force: np.ndarray, weight: float, fps: float, measured: np.ndarray | None = None
+) -> np.ndarray:
+    """(T,) bool: frames in runs of at least :data:`HELD_S` seconds of consecutive measured
+    frames whose residual force ``residual_force`` (T, 3) [N] has a horizontal part over
+    :data:`HELD_BW` body weights (``weight`` [N]): a sustained sideways pull or push no floor
+    contact can supply (a partner, a prop, a rail). An impact's force spread by the derivative
+    filter lasts less; so do single bad frames."""
+    r = np.asarray(residual_force, dtype=np.float64)
+    on = np.linalg.norm(r[:, :2], axis=1) > HELD_BW * weight
+    if measured is not None:
+        on &= np.asarray(measured, dtype=bool)
+    need = int(np.ceil(HELD_S * fps - 1e-9))
+    out = np.zeros(len(on), dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a >= need:
+            out[a:b] = True
+    return out
+
+
+#: The causes of :func:`residual_causes`, in order.
+RESIDUAL_CAUSES = ("no contact", "pulling", "outside the friction cone")
+
+
+def residual_causes(
+    force: np.ndarray, supported: np.ndarray, mu: float = MU, edges: int = PYRAMID_EDGES
+) -> np.ndarray:
+    """(T,) int index into :data:`RESIDUAL_CAUSES` of why a frame's required force ``force``
+    (T, 3) [N] is not all supplied by the floor: 0 nothing on the floor where ground forces may
+    act (``supported`` (T,) False), 1 it needs pulling down (F_z < 0), 2 it is too horizontal
+    for friction (outside the ``edges``-edge pyramid of coefficient ``mu`` that
+    :func:`sim.physics.dynamics.residual_wrench` fits: for 4 edges |F_x| + |F_y| > mu F_z),
+    -1 none (inside it: the contacts supply it all)."""
+    F = np.asarray(force, dtype=np.float64)
+    out = np.full(len(F), -1)
+    # the pyramid's faces: outward normals between its edges, at mu F_z cos(pi / edges)
+    a = 2 * np.pi * (np.arange(edges) + 0.5) / edges
+    reach = (F[:, :2] @ np.stack([np.cos(a), np.sin(a)])).max(axis=1)
+    out[reach > mu * np.cos(np.pi / edges) * F[:, 2] + 1e-9 * np.abs(F).max(initial=1.0)] = 2
+    out[F[:, 2] < 0] = 1
+    out[~np.asarray(supported, dtype=bool)] = 0
+    return out
+
+
 def support_verdict(
-    missing: float, above: float, floor_fits: bool, above_mm: float | None = None
+    missing: float,
+    above: float,
+    floor_fits: bool,
+    above_mm: float | None = None,
+    held: float = 0.0,
 ) -> tuple[bool, str]:
     """Whether a trial's support is off the floor, and why, from the shares of its original's
-    frames with support missing (``missing``) and, of all frames, with it missing while a foot
-    stands still above the floor (``above``; ``above_mm`` how high, median)."""
-    if not missing > SUPPORT_FLAG_SHARE:
+    frames with support missing (``missing``), of them with it missing while a foot stands
+    still above the floor (``above``; ``above_mm`` how high, median), and with a sustained
+    horizontal force no contact supplies (``held``, :func:`held_frames`)."""
+    if not (missing > SUPPORT_FLAG_SHARE or held > HELD_FLAG_SHARE):
         return False, ""
+    if not missing > SUPPORT_FLAG_SHARE:
+        share = (
+            f"{100 * held:.0f} % of frames need a horizontal force over {HELD_BW:g} BW for "
+            f"{HELD_S:g} s or longer that no floor contact supplies"
+        )
+        if not floor_fits:
+            return True, f"{share}; the floor does not fit"
+        return True, f"{share}; held by something else (a partner, a prop)"
     share = f"{100 * missing:.0f} % of frames need support found nowhere on the floor"
     if above >= missing / 2:
         high = "" if above_mm is None else f" about {above_mm / 10:.0f} cm"
@@ -139,6 +223,8 @@ class MotionPhysics:
     limit: np.ndarray  # (T,) [deg]
     lowest: np.ndarray  # (T,) [m] lowest body surface point above the floor
     derivatives: str  # where qvel/qacc came from
+    measured: np.ndarray  # (T,) bool: the frame's derivatives are measured (MAX_DERIVATIVE_NOISE)
+    force_points: np.ndarray  # (T,) int: points where ground forces may act
 
 
 class PhysicsJob:
@@ -239,6 +325,7 @@ class PhysicsJob:
         initial=None,
         initial_body=None,
         source: str = "curve",
+        measured: np.ndarray | None = None,
     ) -> MotionPhysics:
         """IK, contacts, replay and dynamics of one motion's points (T, P, 3) [m].
 
@@ -252,6 +339,7 @@ class PhysicsJob:
                 :meth:`sim.physics.ik.HumanoidIK.rates`, ``rates`` the prior.
             rates: ``(qvel, qacc)`` (T, nv): the prior of that mapping (default 0).
             source: what the derivatives are, for the figures' ``derivatives``.
+            measured: (T,) bool, the frames whose derivatives are measured (default all).
             contacts: the motion's ground contacts (the original's, from its trial); default
                 from the fitted humanoid's soles, starting from ``initial`` (F,), and the rest of
                 the motion's body points (:func:`sim.physics.contacts.body_contacts`), starting
@@ -278,18 +366,20 @@ class PhysicsJob:
                 positions, self.names, self.parents, self.fps, ground, radius=self._bones.radius,
                 initial=initial_body,
             ))  # fmt: skip
-        dyn = self.inv.run(
-            fit.qpos, self.fps, self.force_points(contacts, ground), qvel=qvel, qacc=qacc
-        )
+        points = self.force_points(contacts, ground)
+        dyn = self.inv.run(fit.qpos, self.fps, points, qvel=qvel, qacc=qacc)
         motion = PointMotion(self.names, self.parents, positions, self.fps)
         checks = self._replay(motion, motion if reference is None else reference, ground)
         lowest = lowest_body_point(
             positions, self.names, self.parents, self._bones.radius, ground, contacts.sole,
             bones=self._body_bones,
         )  # fmt: skip
+        T = len(positions)
+        measured = np.ones(T, dtype=bool) if measured is None else np.asarray(measured, bool)
         return MotionPhysics(
             positions, fit, dyn, contacts, checks,
-            limit_excess(fit.qpos, self.model, self._observed), lowest, source,
+            limit_excess(fit.qpos, self.model, self._observed), lowest, source, measured,
+            np.array([len(p) for p in points], dtype=int),
         )  # fmt: skip
 
     def original(self, clip, ground: Ground, contacts: Contacts | None = None) -> MotionPhysics:
@@ -319,7 +409,7 @@ class PhysicsJob:
             vel, acc = _source_derivatives(clip, idx)
             self._originals[key] = self.motion_physics(
                 ref.positions, ref, ground, q0, velocities=vel, accelerations=acc,
-                contacts=contacts, source="source frames",
+                contacts=contacts, source="source frames", measured=measured_frames(clip, idx),
             )  # fmt: skip
         return self._originals[key]
 
@@ -366,13 +456,21 @@ class PhysicsJob:
                 p, ref, ground, _q_init(clip, self.model), velocities=velocities,
                 accelerations=accelerations, rates=(orig.dynamics.qvel, orig.dynamics.qacc),
                 initial=orig.contacts.contact[0], initial_body=_initial_body(orig, self.names),
+                measured=orig.measured,
             )  # fmt: skip
         out = {"ground_z_m": ground.z, **ground.summary()}
         out.update(contact_metrics(orig.contacts.contact, mp.contacts))
         out.update(physdiff_metrics(mp.lowest, mp.contacts, self.fps))
         out.update(self_penetration_excess(mp.checks, orig.checks))
-        frames = summarise_dynamics(mp.dynamics, self._anatomical)
+        measured = mp.measured
+        frames = summarise_dynamics(mp.dynamics, self._anatomical, measured)
         out.update(frames.pop("summary"))
+        causes = residual_causes(mp.dynamics.force, mp.force_points > 0, self.inv.mu)
+        rf, n = frames["residual_force_bw"], max(int(measured.sum()), 1)
+        out["residual_force_bw_by_cause"] = {
+            c: float(rf[measured & (causes == k)].sum() / n) for k, c in enumerate(RESIDUAL_CAUSES)
+        }
+        held = held_frames(mp.dynamics.residual_force, mp.dynamics.weight, self.fps, measured)
         out["derivatives"] = mp.derivatives
         out["limit_excess_deg"] = float(mp.limit.mean())
         out["limit_excess_max_deg"] = float(mp.limit.max(initial=0.0))
@@ -381,7 +479,7 @@ class PhysicsJob:
         body = mp.contacts.body
         out["ground_parts"] = {} if body is None else body.shares()
         unsupported = ~mp.contacts.supported
-        missing = unsupported & (frames["residual_force_bw"] > SUPPORT_MISSING_BW)
+        missing = unsupported & measured & (frames["residual_force_bw"] > SUPPORT_MISSING_BW)
         c = mp.contacts
         low = np.argmin(c.foot_gap, axis=1)  # the lower foot, the one that could bear the body
         t = np.arange(len(low))
@@ -389,8 +487,9 @@ class PhysicsJob:
         above = missing & (gap_low > HOLD_GAP) & (speed_low < PLANTED_SPEED)
         height = gap_low[above]
         out["unsupported_share"] = float(unsupported.mean())
-        out["support_missing_share"] = float(missing.mean())
-        out["support_above_floor_share"] = float(above.mean())
+        out["support_missing_share"] = float(missing.sum() / n)
+        out["support_above_floor_share"] = float(above.sum() / n)
+        out["support_held_share"] = float(held.sum() / n)
         out["support_above_floor_mm"] = 1e3 * float(np.median(height)) if above.any() else None
         if positions is None:
             base = out
@@ -404,6 +503,8 @@ class PhysicsJob:
             "foot_height_mm": 1e3 * mp.contacts.foot_gap,
             "foot_speed_mm_s": 1e3 * mp.contacts.foot_speed,
             **frames,
+            "dynamics_measured": measured.astype(int),
+            "support_held": held.astype(int),
             "limit_excess_deg": mp.limit,
             "ik_error_mm": 1e3 * mp.fit.error,
             "lowest_mm": 1e3 * mp.lowest,
@@ -440,24 +541,36 @@ class PhysicsJob:
         return self.analyse(clip, p, ground, contacts=contacts, velocities=v, accelerations=a)
 
 
-def summarise_dynamics(dyn: Dynamics, anatomical: np.ndarray) -> dict:
-    """Per-frame dynamics figures and their clip summary (key ``"summary"``)."""
+def summarise_dynamics(
+    dyn: Dynamics, anatomical: np.ndarray, measured: np.ndarray | None = None
+) -> dict:
+    """Per-frame dynamics figures (T,) and their clip summary (key ``"summary"``) over the
+    ``measured`` frames (T,) bool (default all; none measured: the figures are nan), with
+    ``dynamics_n`` and ``dynamics_unmeasured_n`` frames and ``residual_force_bw_unmeasured``
+    (mean over the unmeasured frames, None if none)."""
     rf = np.linalg.norm(dyn.residual_force, axis=1) / dyn.weight
     rt = np.linalg.norm(dyn.residual_torque, axis=1) / dyn.mass
     tau = dyn.joint_torque[:, anatomical]
     jt = np.sqrt(np.mean(tau**2, axis=1)) / dyn.mass if tau.shape[1] else np.zeros(len(rf))
+    m = np.ones(len(rf), dtype=bool) if measured is None else np.asarray(measured, dtype=bool)
+    some = bool(m.any())
+    nan = float("nan")
     return {
         "residual_force_bw": rf,
         "residual_torque_nm_kg": rt,
         "joint_torque_rms_nm_kg": jt,
         "summary": {
-            "residual_force_bw": float(rf.mean()),
-            "residual_force_bw_p95": float(np.percentile(rf, 95)),
-            "residual_torque_nm_kg": float(rt.mean()),
-            "joint_torque_rms_nm_kg": float(np.sqrt(np.mean(tau**2)) / dyn.mass)
-            if tau.size
-            else 0.0,
-            "dynamics_n": int(len(rf)),
+            "residual_force_bw": float(rf[m].mean()) if some else nan,
+            "residual_force_bw_p95": float(np.percentile(rf[m], 95)) if some else nan,
+            "residual_torque_nm_kg": float(rt[m].mean()) if some else nan,
+            "joint_torque_rms_nm_kg": (
+                float(np.sqrt(np.mean(tau[m] ** 2)) / dyn.mass) if tau.shape[1] else 0.0
+            )
+            if some
+            else nan,
+            "dynamics_n": int(m.sum()),
+            "dynamics_unmeasured_n": int((~m).sum()),
+            "residual_force_bw_unmeasured": float(rf[~m].mean()) if (~m).any() else None,
         },
     }
 
@@ -480,6 +593,16 @@ def _initial_body(orig: MotionPhysics, names) -> np.ndarray | None:
     keep = [n for n in names if n not in FOOT_POINTS]
     on = dict(zip(body.names, body.contact[0], strict=True))
     return np.array([bool(on.get(n, False)) for n in keep])
+
+
+def measured_frames(clip, idx) -> np.ndarray:
+    """(T,) bool: the frames of ``clip`` whose source derivatives on the points ``idx`` are all
+    measured, none letting through more than :data:`MAX_DERIVATIVE_NOISE` times the centred
+    window's noise (``clip.derivative_noise``; all where the clip does not say)."""
+    noise = getattr(clip, "derivative_noise", None)
+    if noise is None or getattr(clip, "accelerations", None) is None:
+        return np.ones(clip.n_frames, dtype=bool)
+    return (np.asarray(noise)[:, idx] <= MAX_DERIVATIVE_NOISE).all(axis=1)
 
 
 def _source_derivatives(clip, idx):
