@@ -40,6 +40,12 @@ def main() -> None:
                     default=["random", "uniform", "greedy", "optimal", "pitch"])  # fmt: skip
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--max-clips", type=int, default=None)
+    ap.add_argument(
+        "--samples",
+        type=int,
+        default=0,
+        help="sampling tracker's rollouts per window (0: the plain tracker)",
+    )
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])
@@ -47,14 +53,18 @@ def main() -> None:
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
     cases = cases[: args.max_clips]
     out = evaluate(cases, args.methods, args.keyframes, physics=True, simulate=True,
-                   workers=args.workers, progress=False)  # fmt: skip
+                   simulate_samples=args.samples, workers=args.workers,
+                   progress=False)  # fmt: skip
     trials = len({c.clip.source for c in cases})
+    sampled = f" --simulate-samples {args.samples}" if args.samples else ""
+    note = " (the sampling tracker, `sim.simulate.sampling`)" if args.samples else ""
+    limited = f", the first {args.max_clips} clips only (--max-clips)" if args.max_clips else ""
     text = (
         f"{len(cases)} clips of 60 frames from {trials} trials ({len(skipped)} skipped); the "
         f"equivalent command: `sidql eval --data {args.cmu} --keyframes "
         f"{' '.join(map(str, args.keyframes))} --methods {' '.join(args.methods)} --physics "
-        "--simulate`. Means over clips (fall time: over the clips that fell).\n\n"
-        + simulate_markdown(out["results"])
+        f"--simulate{sampled}`{note}{limited}. Means over clips (fall time: over the clips that "
+        "fell).\n\n" + simulate_markdown(out["results"])
     )
     print(text)
     print(f"({time.perf_counter() - t0:.0f} s)")
