@@ -55,3 +55,26 @@ def test_without_noise_it_is_the_plain_tracker(model, walk_ref):
     r = sample_track(model, ref, samples=2, keep=1, torque_sigma=0.0)
     p = track(model, ref, assist_limit=0.0)
     assert np.array_equal(r.qpos, p.qpos) and np.array_equal(r.joint_torque, p.joint_torque)
+
+
+def test_forward_validation_carries_its_sampling_to_other_processes(model):
+    import pickle
+
+    from sim.simulate.validate import ForwardValidation
+
+    fv = pickle.loads(pickle.dumps(ForwardValidation(model, ("root",), samples=8)))
+    assert fv.samples == 8 and fv.names == ("root",)
+    assert pickle.loads(pickle.dumps(ForwardValidation(model, ("root",)))).samples == 0
+
+
+def test_eval_simulate_samples_needs_simulate_and_a_positive_count(tmp_path, capsys):
+    from sidql.commands import main as cli
+
+    out = str(tmp_path / "r.json")
+    argv = ["eval", "--data", str(tmp_path), "--physics", "--simulate-samples", "8", "--out", out]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["sidql eval: error: --simulate-samples needs --simulate"]
+    with pytest.raises(SystemExit) as e:
+        cli.main(["eval", "--data", str(tmp_path), "--simulate-samples", "0", "--out", out])
+    assert e.value.code == 2

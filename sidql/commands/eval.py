@@ -80,10 +80,10 @@ def register(sub) -> None:
         "adds tracking errors, falls and torque per method (sim.simulate.validate)",
     )
     p.add_argument(
-        "--simulate-samples", type=int, default=0, metavar="N",
+        "--simulate-samples", type=positive(int), default=0, metavar="N",
         help="with --simulate: track with the sampling controller (sim.simulate.sampling), N "
-        "rollouts per 0.1 s window (64: about 35 times the plain tracker's time); 0 (default): "
-        "the plain tracker",
+        "rollouts per 0.1 s window (64: 35-100 times the plain tracker's time); without it the "
+        "plain tracker",
     )  # fmt: skip
     p.add_argument(
         "--max-clips", type=positive(int), default=None, metavar="N",
@@ -109,6 +109,8 @@ def _run(args) -> int:
     for W in args.keyframes:
         if not 2 <= W <= args.length:
             raise UsageError(f"--keyframes values must be in [2, {args.length}]; got {W}")
+    if args.simulate_samples and not args.simulate:
+        raise UsageError("--simulate-samples needs --simulate")
     args.data = data_folder(args)
     cases, skipped = load_cases(
         args.data,
