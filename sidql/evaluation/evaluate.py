@@ -232,14 +232,17 @@ def _none_if_nan(v):
     return None if isinstance(v, float) and np.isnan(v) else v
 
 
-def simulate_setup(cases: Sequence[Case]) -> dict:
+def simulate_setup(cases: Sequence[Case], samples: int = 0) -> dict:
     """Per trial (``clip.source``): the :class:`sim.simulate.validate.ForwardValidation` of its
-    subject (one torque-limited simulated body per skeleton) for :func:`score`."""
+    subject (one torque-limited simulated body per skeleton) for :func:`score`; ``samples``:
+    its sampling tracker's rollouts per window (0: the plain tracker)."""
     bodies, out = {}, {}
     for c in cases:
         if c.asf not in bodies:
             skeleton = subject_model(c.asf)[0]
-            bodies[c.asf] = ForwardValidation(sim_model(skeleton), _protocol_names(c.clip))
+            bodies[c.asf] = ForwardValidation(
+                sim_model(skeleton), _protocol_names(c.clip), samples=samples
+            )
         out[c.clip.source] = bodies[c.asf]
     return out
 
@@ -355,6 +358,7 @@ def evaluate(
     progress: bool = True,
     physics: bool = False,
     simulate: bool = False,
+    simulate_samples: int = 0,
     workers: int = 1,
     ray: str | None = None,
     chunk: int = 4,
@@ -376,7 +380,8 @@ def evaluate(
         result row (and per-clip rows) for method ``original``, the clip itself (all frames
         kept: ``keyframes`` = clip length, errors 0). With ``simulate`` (needs ``physics``)
         every row also carries the forward-simulation figures of
-        :mod:`sim.simulate.validate` (result rows: means over clips).
+        :mod:`sim.simulate.validate` (result rows: means over clips); ``simulate_samples``:
+        rollouts per window of its sampling tracker (0: the plain tracker).
     """
     if simulate and not physics:
         raise ValueError("simulate needs physics (the IK fit it tracks)")
@@ -387,7 +392,7 @@ def evaluate(
         if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file
             methods.select(name, cases[0].clip, counts[0], seed=0)
     setup = physics_setup(cases) if physics else {}
-    bodies = simulate_setup(cases) if simulate else {}
+    bodies = simulate_setup(cases, simulate_samples) if simulate else {}
     items = []
     for group in _trial_chunks(cases, chunk):
         source = cases[group[0]].clip.source

@@ -238,6 +238,17 @@ def contact_feedforward(
     return out
 
 
+def reference_feedforward(model, ref_qpos: np.ndarray, data=None):
+    """(T, nv) reference velocity and (T, nv) feed-forward of ``ref_qpos`` (T, nq) at
+    ``CONTROL_HZ``: :func:`inverse_dynamics` without contacts, its root force moved onto the
+    feet by :func:`contact_feedforward` (root rows: residual wrench [N, N m]; hinge rows: joint
+    torques [N m]). ``data``: an ``MjData`` of ``model`` to work in (overwritten)."""
+    data = data if data is not None else mujoco.MjData(model)
+    ref_qvel, ref_qacc = reference_derivatives(model, ref_qpos)
+    force = inverse_dynamics(model, ref_qpos, ref_qvel, ref_qacc, contacts=False, data=data)
+    return ref_qvel, contact_feedforward(model, ref_qpos, force, data=data)
+
+
 def _root_inertia(model, qpos, data) -> np.ndarray:
     """(6, 6) the free joint's block of the mass matrix at ``qpos`` (whole-body mass and
     rotational inertia), without its force-rotation coupling: rotation errors of a jittery
@@ -290,6 +301,7 @@ def track(
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
     record_every: int = 4,
+    offsets: np.ndarray | None = None,
 ) -> Tracking:
     """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
 
@@ -304,6 +316,8 @@ def track(
         assist_in_flight: let the assistance act when nothing touches the floor too (a hand
             holding the body up: only for tests of the audit that must see such a hand).
         record_every: ticks between recorded states (4: the 30 fps clip rate).
+        offsets: (T, nu) [rad] added to the hinge targets at each tick while the body is up
+            (the corrections a sampling controller found: ``sim.simulate.sampling``); None: none.
 
     Returns:
         :class:`Tracking` with states at ticks ``0, record_every, 2 record_every, ...``.
@@ -311,13 +325,7 @@ def track(
     gains = gains or Gains()
     T = ref_qpos.shape[0]
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
-    ref_qvel, ref_qacc = reference_derivatives(model, ref_qpos)
-    ref_force = contact_feedforward(
-        model,
-        ref_qpos,
-        inverse_dynamics(model, ref_qpos, ref_qvel, ref_qacc, contacts=False, data=data),
-        data=data,
-    )
+    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     root_inertia = _root_inertia(model, ref_qpos[0], data)
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
@@ -374,6 +382,8 @@ def track(
                 data.ctrl[:] = fallen_pose
             else:
                 data.ctrl[:] = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
+                if offsets is not None:
+                    data.ctrl[:] += offsets[k]
             # 3. root: bounded assistance, only while the body touches the floor
             helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
             if helped and (assist_in_flight or _floor_contact(data, floor)):

@@ -19,6 +19,7 @@ import numpy as np
 from sim.simulate.controller import track
 from sim.simulate.model import CONTROL_HZ, total_mass
 from sim.simulate.reference import FLOOR_LIFT, floor_track, time_warp
+from sim.simulate.sampling import sample_track
 
 #: figures of :func:`simulate_figures`, in table order
 SIMULATE_KEYS = (
@@ -33,17 +34,21 @@ class ForwardValidation:
     Args:
         model: ``sim.simulate.model.sim_model`` of the subject's skeleton.
         names: (P,) point names (``"root"`` and bone names with sites ``<name>_end``).
+        samples: 0: the plain tracker (``track``); N > 0: the sampling tracker
+            (``sim.simulate.sampling.sample_track``, N rollouts per 0.1 s window, seed 0), which
+            corrects the joints' targets so the body keeps its balance where it can.
     """
 
-    def __init__(self, model, names):
+    def __init__(self, model, names, samples: int = 0):
         self.model = model
         self.names = tuple(names)
+        self.samples = int(samples)
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
 
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
-        return (ForwardValidation, (self.model, self.names))
+        return (ForwardValidation, (self.model, self.names, self.samples))
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -85,7 +90,10 @@ class ForwardValidation:
         ref = self.reference(qpos, fps, floor)
         orig[:, 2] -= floor - FLOOR_LIFT
         every = int(round(CONTROL_HZ / fps))
-        r = track(self.model, ref, assist_limit=0.0, record_every=every)
+        if self.samples:
+            r = sample_track(self.model, ref, samples=self.samples, record_every=every)
+        else:
+            r = track(self.model, ref, assist_limit=0.0, record_every=every)
         sim = self.points(r.qpos)
         n = len(sim)
         target = self.points(ref[::every][:n])
