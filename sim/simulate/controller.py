@@ -40,10 +40,21 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.optimize import nnls
 
 from sim.motion.velocities import qvel_from_qpos
 from sim.physics.feet import SOLE_POINTS
-from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
+from sim.simulate.model import (
+    CONTROL_HZ,
+    FLOOR_BITS,
+    SOLE_GEOMS,
+    SUBSTEPS,
+    G,
+    Gains,
+    total_mass,
+)
+
+FLOOR_CONTYPE = FLOOR_BITS[0]  # a geom touches the floor where its conaffinity has this bit
 
 ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
 FALLEN_TONE = 0.3  # share of stiffness and strength with which a fallen body holds its pose
@@ -193,6 +204,31 @@ def inverse_dynamics(model, qpos, qvel, qacc, *, contacts: bool = True, data=Non
     return out
 
 
+def _support_points(model, data, ids, contact_height: float):
+    """[(point (3,), body id)] of ``ids``' geoms near the floor: a capsule's lowest end point,
+    a box's (a sole's, ``sim.simulate.model.add_soles``) bottom corners, those within
+    ``contact_height`` of z = 0."""
+    out = []
+    for g in ids:
+        R, c, size = data.geom_xmat[g].reshape(3, 3), data.geom_xpos[g], model.geom_size[g]
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+            corners = c + (_CORNERS * size) @ R.T
+            pts = corners[np.argsort(corners[:, 2])[:4]]  # the face nearest the floor
+        else:
+            axis = R[:, 2] * size[1]
+            p = c - axis if axis[2] > 0 else c + axis
+            pts = [p - [0.0, 0.0, size[0]]]
+        out += [(p, int(model.geom_bodyid[g])) for p in pts if p[2] < contact_height]
+    return out
+
+
+_CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+#: weight of the squared edge forces [N^2] against the squared wrench error [N^2, N^2 m^2] in
+#: :func:`balanced_support`'s least squares: among the supports that give the root wrench, the
+#: one with the smallest forces (spread over the points)
+SUPPORT_REGULARISATION = 1e-6
+
+
 def contact_feedforward(
     model, qpos, force, *, contact_height: float = 0.03, friction: float = 0.8, data=None
 ) -> np.ndarray:
@@ -201,14 +237,19 @@ def contact_feedforward(
     ``force`` (T, nv) comes from :func:`inverse_dynamics` without contacts: its root rows are the
     whole external wrench the motion needs (body weight included). In each frame the foot and toe
     capsules whose lowest point is within ``contact_height`` of z = 0 take point forces ``F`` at
-    that point: the root force shared equally, upward only and inside the friction cone (a
+    that point: the root force shared equally, upward only and inside a friction cone (a
     quasi-static support); the hinges get ``tau - J_hinge^T F`` (the stance legs now carry the body) and the
     root keeps the residual the floor cannot give, which is what the assistance has to supply.
+    A model with soles (``sim.simulate.model.add_soles``) gets :func:`balanced_support` instead.
 
     Returns:
         (T, nv) feed-forward: root rows = residual wrench, hinge rows = joint torques.
     ``data``: an ``MjData`` of ``model`` to work in (its state is overwritten), a new one if None.
     """
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, SOLE_GEOMS[0]) >= 0:
+        return balanced_support(
+            model, qpos, force, contact_height=contact_height, friction=friction, data=data
+        )
     data = data if data is not None else mujoco.MjData(model)
     ids = [model.geom(n).id for n in SOLE_POINTS]  # the foot and toe capsules
     out = force.copy()
@@ -218,14 +259,9 @@ def contact_feedforward(
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         cols = []
-        for g in ids:
-            c = data.geom_xpos[g].copy()
-            axis = data.geom_xmat[g].reshape(3, 3)[:, 2] * model.geom_size[g, 1]
-            p = c - axis if axis[2] > 0 else c + axis
-            p[2] -= model.geom_size[g, 0]
-            if p[2] < contact_height:
-                mujoco.mj_jac(model, data, jacp, None, p, model.geom_bodyid[g])
-                cols.append(jacp.T.copy())  # (nv, 3)
+        for p, body in _support_points(model, data, ids, contact_height):
+            mujoco.mj_jac(model, data, jacp, None, p, body)
+            cols.append(jacp.T.copy())  # (nv, 3)
         if not cols:
             continue
         JT = np.concatenate(cols, axis=1)  # (nv, 3k)
@@ -235,6 +271,42 @@ def contact_feedforward(
         cap = friction * F[:, 2]
         F[:, :2] *= np.minimum(1.0, cap / np.maximum(h, 1e-12))[:, None]  # friction cone
         out[t] = force[t] - JT @ F.reshape(-1)
+    return out
+
+
+def balanced_support(
+    model, qpos, force, *, contact_height: float = 0.03, friction: float = 0.8, data=None
+) -> np.ndarray:
+    """:func:`contact_feedforward` for a model with soles: the support points near the floor
+    (the sole boxes' bottom corners and the toe capsules' lowest points, within
+    ``contact_height`` of z = 0) take point forces ``F``, upward only and inside a friction
+    pyramid (four edges, coefficient ``friction``), that best give the root wrench, force and
+    moment (non-negative least squares over the pyramid edges, slightly regularised:
+    :data:`SUPPORT_REGULARISATION`): the centre of pressure lies under the body where the
+    support polygon allows it, instead of the force shared equally by the touching points
+    (whose moment tips the body). Same arguments and result as :func:`contact_feedforward`."""
+    data = data if data is not None else mujoco.MjData(model)
+    names = [n for n in SOLE_POINTS + SOLE_GEOMS if mujoco.mj_name2id(model, 5, n) >= 0]
+    ids = [model.geom(n).id for n in names if int(model.geom(n).conaffinity[0]) & FLOOR_CONTYPE]
+    s = friction / np.sqrt(2.0)
+    edges = np.array([[s, s, 1.0], [s, -s, 1.0], [-s, s, 1.0], [-s, -s, 1.0]]).T  # (3, 4)
+    out = force.copy()
+    jacp = np.zeros((3, model.nv))
+    for t in range(len(qpos)):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        cols = []
+        for p, body in _support_points(model, data, ids, contact_height):
+            mujoco.mj_jac(model, data, jacp, None, p, body)
+            cols.append(jacp.T @ edges)  # (nv, 4): generalized force of each edge
+        if not cols:
+            continue
+        JE = np.concatenate(cols, axis=1)  # (nv, 4k)
+        A = np.vstack([JE[:6], np.sqrt(SUPPORT_REGULARISATION) * np.eye(JE.shape[1])])
+        b = np.concatenate([force[t, :6], np.zeros(JE.shape[1])])
+        c, _ = nnls(A, b)
+        out[t] = force[t] - JE @ c
     return out
 
 
@@ -338,8 +410,10 @@ def track(
     lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
     floor = model.geom("floor").id
     side = np.full(model.ngeom, -1)
-    for name in SOLE_POINTS:
-        side[model.geom(name).id] = 0 if name.startswith("l") else 1
+    for name in SOLE_POINTS + SOLE_GEOMS:
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        if g >= 0:
+            side[g] = 0 if name.startswith("l") else 1
     push_ids = [model.body(p.body).id for p in pushes]
     dt = 1.0 / CONTROL_HZ
     rot_err = np.zeros(3)

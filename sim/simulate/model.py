@@ -28,6 +28,11 @@ module edits its output through ``mujoco.MjSpec``:
 * self-collision: body geoms collide with each other except bodies within two joints of each
   other and pairs overlapping in the rest pose (:func:`self_collision_exclusions`), so a
   falling body's limbs cannot pass through each other or through its trunk;
+* opt-in (``soles=True``, ``stance_ankles=True``; off by default, measured no better): a flat
+  sole box under each foot from :data:`SOLE_HEEL` behind the ankle to the ball
+  (:func:`add_soles`; the foot capsule then touches the body only; ``sim.physics.feet``'s sole
+  points, the physics analysis's, stay the capsules) and ankles at least as stiff as the
+  standing body's toppling stiffness (:func:`stance_stiffness`);
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
   integrator is ``implicitfast`` so the actuators' damping is integrated implicitly.
 """
@@ -127,10 +132,15 @@ def sim_model(
     *,
     body_mass_kg: float = DEFAULT_BODY_MASS_KG,
     gains: Gains | None = None,
+    soles: bool = False,
+    stance_ankles: bool = False,
 ) -> mujoco.MjModel:
     """The actuated humanoid of ``skeleton`` (see the module docstring).
 
-    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``).
+    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``). ``soles``: each foot
+    touches the floor through a flat sole box reaching behind the ankle (:func:`add_soles`)
+    instead of its capsule. ``stance_ankles``: the ankle hinges (``foot_rx``, ``foot_rz``) at
+    least :func:`stance_stiffness` (capped by the torque limit like every joint).
     """
     gains = gains or Gains()
     spec = mujoco.MjSpec.from_string(build_mjcf(skeleton, body_mass_kg=body_mass_kg))
@@ -148,8 +158,11 @@ def sim_model(
     for a, b in self_collision_exclusions(spec.compile()):
         e = spec.add_exclude()
         e.bodyname1, e.bodyname2 = a, b
+    if soles:
+        add_soles(spec)
     plain = spec.compile()
     inertia, _ = rest_inertia(plain)
+    stance = stance_stiffness(plain) if stance_ankles else 0.0
     for j in range(1, plain.njnt):
         name = plain.joint(j).name
         a = spec.add_actuator()
@@ -158,9 +171,11 @@ def sim_model(
         a.trntype = mujoco.mjtTrn.mjTRN_JOINT
         limit = gains.strength * human_torque_limit(name, body_mass_kg)
         kp = gains.omega**2 * inertia[j - 1]
+        raised = max(1.0, stance / kp) if name[1:] in ANKLE_JOINTS else 1.0
+        kp *= raised
         cap = min(1.0, limit / MIN_DEFLECTION / kp)  # human stiffness; damping ratio kept
         kp *= cap
-        kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(cap)
+        kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(raised * cap)
         a.set_to_position(kp=kp, kv=kv)
         a.forcelimited = True
         a.forcerange = [-limit, limit]
@@ -171,10 +186,110 @@ def sim_model(
     return spec.compile()
 
 
+ANKLE_JOINTS = ("foot_rx", "foot_rz")  # the ankle (plantar/dorsiflexion) and subtalar hinges
+STANCE_MARGIN = 1.2  # ankle stiffness over the body's toppling stiffness m g h
+
+
+def stance_stiffness(model) -> float:
+    """[N m/rad] the ankle stiffness that holds the standing body up on its own:
+    :data:`STANCE_MARGIN` times ``m g h`` (``m``: body mass, ``h``: height of the centre of mass
+    above the ankles in the upright rest pose). A body pivoting at the ankle is an inverted
+    pendulum whose gravity torque grows by ``m g h`` per radian of lean; the ankle stiffness
+    must exceed it to stand without active control (Winter et al. 1998, J Neurophysiol 80:1211,
+    "Stiffness control of balance in quiet standing"; Loram & Lakie 2002 measured intrinsic
+    ankle stiffness at 0.9 ``m g h``, the rest being active). Each ankle gets the whole of it,
+    as in single stance."""
+    data = mujoco.MjData(model)
+    data.qpos[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # upright (y up -> z up)
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    ankles = np.mean([data.xpos[model.body(f"{s}foot").id][2] for s in "lr"])
+    h = float(data.subtree_com[0][2] - ankles)
+    return STANCE_MARGIN * total_mass(model) * G * h
+
+
+SOLE_GEOMS = ("lsole", "rsole")
+SOLE_HALF_WIDTH = 0.045  # [m] a foot is about 9 cm wide at the ball
+SOLE_HEEL = 0.05  # [m] the heel reaches this far behind the ankle joint
+SOLE_HALF_THICKNESS = 0.01  # [m]
+
+
+# The sole's normal in the foot bone's frame (x flips for the right foot): the mean "up"
+# direction of a captured foot during floor contact. Measured on CMU walks (02_01, 07_01, 35_01,
+# 16_24, 05_01; per trial within 6 deg of this) on the canonical skeleton; the skeleton's rest pose
+# is no stance (its feet are 18-28 deg off flat), so the rest pose cannot give the sole.
+STANCE_UP = (-0.06, 0.08, 0.995)
+
+
+def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per foot body (``"lfoot"``, ``"rfoot"``), the sole box in that body's frame: centre (3,),
+    orientation (4,) quaternion and half sizes (3,): length, width, thickness [m].
+
+    The box's bottom face is the sole: normal to :data:`STANCE_UP`, through the lowest point of
+    the foot capsule and the toes in that direction, from :data:`SOLE_HEEL` behind the ankle
+    joint to the front of the foot capsule (the ball of the foot), :data:`SOLE_HALF_WIDTH`
+    either side. ``model``: the humanoid of ``build_mjcf`` (capsule feet, sphere or capsule
+    toes), its joints at zero."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    out = {}
+    for side in "lr":
+        foot = model.body(f"{side}foot").id
+        R_foot, x_foot = data.xmat[foot].reshape(3, 3), data.xpos[foot]
+
+        n = np.array(STANCE_UP) * ([1.0, 1.0, 1.0] if side == "l" else [-1.0, 1.0, 1.0])
+        n /= np.linalg.norm(n)
+        g = model.geom(f"{side}foot").id
+        axis = R_foot.T @ data.geom_xmat[g].reshape(3, 3)[:, 2]
+        half, radius = model.geom_size[g, 1], model.geom_size[g, 0]
+        ends = R_foot.T @ (data.geom_xpos[g] - x_foot) + np.outer([half, -half], axis)
+        toe_end = ends[np.argmax(np.linalg.norm(ends, axis=1))]  # away from the ankle
+        depth = float(np.max(-ends @ n)) + radius  # the lowest point along -n
+        toes = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{side}toes")
+        if toes >= 0:
+            toe_centre = R_foot.T @ (data.geom_xpos[toes] - x_foot)
+            depth = max(depth, float(-toe_centre @ n) + model.geom_size[toes, 0])
+        forward = toe_end - (toe_end @ n) * n
+        length = np.linalg.norm(forward)
+        forward /= length
+        lateral = np.cross(n, forward)
+        heel, front = -SOLE_HEEL, length + 0.5 * radius
+        centre = 0.5 * (heel + front) * forward - (depth - SOLE_HALF_THICKNESS) * n
+        q = np.zeros(4)
+        mujoco.mju_mat2Quat(q, np.column_stack([forward, lateral, n]).ravel())
+        size = np.array([0.5 * (front - heel), SOLE_HALF_WIDTH, SOLE_HALF_THICKNESS])
+        out[f"{side}foot"] = (centre, q, size)
+    return out
+
+
+def add_soles(spec) -> None:
+    """Give each foot of ``spec`` a massless sole box (:func:`sole_boxes`) that alone touches the
+    floor for it: a foot then stands on a flat sole, not on the point or edge where a capsule
+    meets a plane. The foot capsule keeps colliding with the other body geoms."""
+    boxes = sole_boxes(spec.compile())
+    for body, (pos, quat, size) in boxes.items():
+        b = spec.body(body)
+        g = b.add_geom()
+        g.name = body[0] + "sole"
+        g.type = mujoco.mjtGeom.mjGEOM_BOX
+        g.size = size
+        g.pos = pos
+        g.quat = quat
+        g.density = 0.0
+        g.mass = 0.0
+        g.contype, g.conaffinity = SOLE_BITS
+        g.group = 3
+        g.solref = [SELF_TIMECONST, 1.0]
+        capsule = spec.geom(body)
+        capsule.contype, capsule.conaffinity = SELF_BITS
+
+
 # contype, conaffinity: the floor touches every body geom; body geoms touch each other (bit 4)
 # except the pairs of :func:`self_collision_exclusions`
 FLOOR_BITS = (1, 2)
 BODY_BITS = (2 | 4, 1 | 4)
+SOLE_BITS = (2, 1)  # the soles touch the floor only
+SELF_BITS = (4, 4)  # the foot capsules touch the body only
 ADJACENT_HOPS = 2  # bodies this close in the kinematic tree never collide with each other
 SELF_TIMECONST = 0.01  # [s] contact time constant between body geoms (MuJoCo default 0.02)
 

@@ -18,6 +18,7 @@ from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.motion.retarget import leg_length, motion_to_qpos
 from sim.physics.feet import SOLE_POINTS
+from sim.simulate.model import SOLE_GEOMS
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -40,9 +41,11 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
 
 
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
-    """(T,) height [m] of the lowest surface point of the foot and toe capsules in each frame."""
+    """(T,) height [m] of the lowest surface point of the foot and toe capsules and the sole
+    boxes (``sim.simulate.model.add_soles``, where the model has them) in each frame."""
     data = mujoco.MjData(model)
-    ids = [model.geom(n).id for n in SOLE_POINTS if mujoco.mj_name2id(model, 5, n) >= 0]
+    names = SOLE_POINTS + SOLE_GEOMS
+    ids = [model.geom(n).id for n in names if mujoco.mj_name2id(model, 5, n) >= 0]
     low = np.empty(len(qpos))
     for t, q in enumerate(qpos):
         data.qpos[:] = q
@@ -54,6 +57,8 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
             if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
                 half = model.geom_size[g, 1] * abs(data.geom_xmat[g, 8])
                 z = min(z, c - half - r)
+            elif model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:  # its lowest corner
+                z = min(z, c - np.abs(data.geom_xmat[g, 6:9]) @ model.geom_size[g])
             else:
                 z = min(z, c - r)
         low[t] = z
@@ -119,4 +124,61 @@ def time_warp(model, qpos: np.ndarray, rate: float, speed: float, out_rate: floa
     w1 = np.where(small, a, np.sin(a * theta) / st)
     q = w0 * q0 + w1 * sign * q1
     out[:, 3:7] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
+
+
+#: [m] a sole whose lowest corner is this high or lower is laid flat on the floor in full; from
+#: there to FLAT_TO it is turned less and less, and above it not at all
+FLAT_FROM, FLAT_TO = 0.02, 0.05
+FLAT_ITERATIONS = 3
+
+
+def flat_soles(model, qpos: np.ndarray) -> np.ndarray:
+    """A copy of ``qpos`` (T, nq, floor at z = 0 or a lift below) in which each sole box
+    (``sim.simulate.model.add_soles``) near the floor is turned flat on it by its ankle hinges
+    (``foot_rx``, ``foot_rz``, within their ranges): in full where its lowest corner is at most
+    :data:`FLAT_FROM` high, in part up to :data:`FLAT_TO`, not above. The rest of the body
+    stays as it is.
+
+    A captured foot's bone points wherever the subject's markers put it: in 60_01's still
+    double-stance frame 108 the sole boxes (whose normal is the mean captured stance direction)
+    sit 15 and 11 deg toe-up, so the body tracking that pose rests on its heels and topples
+    forward. Models without soles come back unchanged."""
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, SOLE_GEOMS[0]) < 0:
+        return qpos.copy()
+    out = qpos.copy()
+    data = mujoco.MjData(model)
+    corners = np.array([[i, j, -1.0] for i in (-1, 1) for j in (-1, 1)])
+
+    def sole(g):
+        R = data.geom_xmat[g].reshape(3, 3)
+        low = (data.geom_xpos[g] + (corners * model.geom_size[g]) @ R.T)[:, 2].min()
+        return R[:2, 2].copy(), low  # the normal's horizontal part, the lowest corner
+
+    for side in "lr":
+        g = model.geom(f"{side}sole").id
+        adr = [model.jnt_qposadr[model.joint(f"{side}foot_{a}").id] for a in ("rx", "rz")]
+        lo = np.array([model.jnt_range[model.joint(f"{side}foot_{a}").id, 0] for a in ("rx", "rz")])
+        hi = np.array([model.jnt_range[model.joint(f"{side}foot_{a}").id, 1] for a in ("rx", "rz")])
+        for t in range(len(out)):
+            data.qpos[:] = out[t]
+            mujoco.mj_kinematics(model, data)
+            _, low = sole(g)
+            w = float(np.clip((FLAT_TO - low) / (FLAT_TO - FLAT_FROM), 0.0, 1.0))
+            if w == 0.0:
+                continue
+            q0 = out[t, adr].copy()
+            q = q0.copy()
+            for _ in range(FLAT_ITERATIONS):  # Gauss-Newton on the normal's tilt
+                data.qpos[adr] = q
+                mujoco.mj_kinematics(model, data)
+                f, _ = sole(g)
+                J = np.empty((2, 2))
+                for k in range(2):
+                    data.qpos[adr[k]] = q[k] + 1e-4
+                    mujoco.mj_kinematics(model, data)
+                    J[:, k] = (sole(g)[0] - f) / 1e-4
+                    data.qpos[adr[k]] = q[k]
+                q = np.clip(q - np.linalg.lstsq(J, f, rcond=None)[0], lo, hi)
+            out[t, adr] = q0 + w * (q - q0)
     return out

@@ -18,7 +18,7 @@ import numpy as np
 
 from sim.simulate.controller import track
 from sim.simulate.model import CONTROL_HZ, total_mass
-from sim.simulate.reference import FLOOR_LIFT, floor_track, time_warp
+from sim.simulate.reference import FLOOR_LIFT, flat_soles, floor_track, time_warp
 from sim.simulate.sampling import sample_track
 
 #: figures of :func:`simulate_figures`, in table order
@@ -62,11 +62,13 @@ class ForwardValidation:
 
     def reference(self, qpos: np.ndarray, fps: float, floor: np.ndarray | None = None):
         """``qpos`` (T, nq) at ``fps`` resampled at the control rate and shifted vertically by
-        ``floor`` ((T', ,) the original's floor track, from :meth:`floor_of`; default its own)."""
+        ``floor`` ((T', ,) the original's floor track, from :meth:`floor_of`; default its own),
+        its soles near the floor laid flat where the model has soles
+        (``sim.simulate.reference.flat_soles``)."""
         ref = time_warp(self.model, qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(ref) if floor is None else floor
         ref[:, 2] -= floor - FLOOR_LIFT
-        return ref
+        return flat_soles(self.model, ref)
 
     def floor_of(self, ref120: np.ndarray) -> np.ndarray:
         """(T',) floor height [m] under a control-rate ``qpos`` stream."""
