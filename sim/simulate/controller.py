@@ -286,7 +286,11 @@ def balanced_support(
     support polygon allows it, instead of the force shared equally by the touching points
     (whose moment tips the body). Same arguments and result as :func:`contact_feedforward`."""
     data = data if data is not None else mujoco.MjData(model)
-    names = [n for n in SOLE_POINTS + SOLE_GEOMS if mujoco.mj_name2id(model, 5, n) >= 0]
+    names = [
+        n
+        for n in SOLE_POINTS + SOLE_GEOMS
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) >= 0
+    ]
     ids = [model.geom(n).id for n in names if int(model.geom(n).conaffinity[0]) & FLOOR_CONTYPE]
     s = friction / np.sqrt(2.0)
     edges = np.array([[s, s, 1.0], [s, -s, 1.0], [-s, s, 1.0], [-s, -s, 1.0]]).T  # (3, 4)

@@ -45,7 +45,11 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     boxes (``sim.simulate.model.add_soles``, where the model has them) in each frame."""
     data = mujoco.MjData(model)
     names = SOLE_POINTS + SOLE_GEOMS
-    ids = [model.geom(n).id for n in names if mujoco.mj_name2id(model, 5, n) >= 0]
+    ids = [
+        model.geom(n).id
+        for n in names
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) >= 0
+    ]
     low = np.empty(len(qpos))
     for t, q in enumerate(qpos):
         data.qpos[:] = q
