@@ -222,6 +222,25 @@ def _support_points(model, data, ids, contact_height: float):
     return out
 
 
+def _support_jacobians(model, qpos, ids, contact_height: float, data=None):
+    """For each frame ``t`` of ``qpos`` (T, nq) with some support point of ``ids``' geoms near
+    the floor (:func:`_support_points`): ``(t, [(nv, 3) transposed point Jacobian, ...])``.
+    ``data``: an ``MjData`` of ``model`` to work in (its state is overwritten), a new one if
+    None."""
+    data = data if data is not None else mujoco.MjData(model)
+    jacp = np.zeros((3, model.nv))
+    for t in range(len(qpos)):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        cols = []
+        for p, body in _support_points(model, data, ids, contact_height):
+            mujoco.mj_jac(model, data, jacp, None, p, body)
+            cols.append(jacp.T.copy())
+        if cols:
+            yield t, cols
+
+
 _CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 #: weight of the squared edge forces [N^2] against the squared wrench error [N^2, N^2 m^2] in
 #: :func:`balanced_support`'s least squares: among the supports that give the root wrench, the
@@ -250,20 +269,9 @@ def contact_feedforward(
         return balanced_support(
             model, qpos, force, contact_height=contact_height, friction=friction, data=data
         )
-    data = data if data is not None else mujoco.MjData(model)
     ids = [model.geom(n).id for n in SOLE_POINTS]  # the foot and toe capsules
     out = force.copy()
-    jacp = np.zeros((3, model.nv))
-    for t in range(len(qpos)):
-        data.qpos[:] = qpos[t]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        cols = []
-        for p, body in _support_points(model, data, ids, contact_height):
-            mujoco.mj_jac(model, data, jacp, None, p, body)
-            cols.append(jacp.T.copy())  # (nv, 3)
-        if not cols:
-            continue
+    for t, cols in _support_jacobians(model, qpos, ids, contact_height, data):
         JT = np.concatenate(cols, axis=1)  # (nv, 3k)
         F = np.tile(force[t, :3] / len(cols), (len(cols), 1))  # shared by the touching points
         F[:, 2] = np.maximum(F[:, 2], 0.0)  # the floor only pushes
@@ -285,7 +293,6 @@ def balanced_support(
     :data:`SUPPORT_REGULARISATION`): the centre of pressure lies under the body where the
     support polygon allows it, instead of the force shared equally by the touching points
     (whose moment tips the body). Same arguments and result as :func:`contact_feedforward`."""
-    data = data if data is not None else mujoco.MjData(model)
     names = [
         n
         for n in SOLE_POINTS + SOLE_GEOMS
@@ -295,18 +302,8 @@ def balanced_support(
     s = friction / np.sqrt(2.0)
     edges = np.array([[s, s, 1.0], [s, -s, 1.0], [-s, s, 1.0], [-s, -s, 1.0]]).T  # (3, 4)
     out = force.copy()
-    jacp = np.zeros((3, model.nv))
-    for t in range(len(qpos)):
-        data.qpos[:] = qpos[t]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        cols = []
-        for p, body in _support_points(model, data, ids, contact_height):
-            mujoco.mj_jac(model, data, jacp, None, p, body)
-            cols.append(jacp.T @ edges)  # (nv, 4): generalized force of each edge
-        if not cols:
-            continue
-        JE = np.concatenate(cols, axis=1)  # (nv, 4k)
+    for t, cols in _support_jacobians(model, qpos, ids, contact_height, data):
+        JE = np.concatenate([JT @ edges for JT in cols], axis=1)  # (nv, 4k): each edge's force
         A = np.vstack([JE[:6], np.sqrt(SUPPORT_REGULARISATION) * np.eye(JE.shape[1])])
         b = np.concatenate([force[t, :6], np.zeros(JE.shape[1])])
         c, _ = nnls(A, b)
