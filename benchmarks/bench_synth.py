@@ -3,6 +3,7 @@
 Usage::
 
     python benchmarks/bench_synth.py --data ../shared/cmu [--n 90] [--workers 2] [--audit]
+    python benchmarks/bench_synth.py --data ../shared/cmu --samples 64 [--n 60] [--kinds track fall]
 
 Quality (deterministic for a seed, unaffected by machine load): ``synthesize`` writes ``--n``
 clips of the default mix into a temporary folder (or ``--synth DIR`` reads a folder written by
@@ -23,6 +24,12 @@ are noisy, re-run them on a quiet one.
 
 ``--audit``: the physics room's residual force against the recorded help per kind
 (``sim.simulate.audit``), written to ``docs/results/synth_audit.md``.
+
+``--samples N``: the clips of real-motion kinds are tracked by the sampling tracker with no
+assistance (``sidql synth --samples N``): every such clip is physical, and the question is how
+many stay up and how fast they move. The quality tables go to ``docs/results/synth_sampled.md``
+with the generation's cost (simulated seconds per wall second per worker); the speed timings of
+the plain tracker are not repeated.
 """
 
 from __future__ import annotations
@@ -49,7 +56,7 @@ from sim.physics.contacts import trial_contacts  # noqa: E402
 from sim.physics.ground import estimate_ground  # noqa: E402
 from sim.simulate.controller import track  # noqa: E402
 from sim.simulate.dataset import synthesize  # noqa: E402
-from sim.simulate.generate import PHYSICAL_BUDGET  # noqa: E402
+from sim.simulate.generate import ALL_KINDS, KINDS, PHYSICAL_BUDGET  # noqa: E402
 from sim.simulate.model import G, sim_model  # noqa: E402
 from sim.simulate.reference import on_floor, trial_qpos  # noqa: E402
 
@@ -85,13 +92,15 @@ def pct(x: np.ndarray) -> str:
     return "/".join(f"{v:.2f}" for v in np.percentile(x, Q)) if x.size else "-"
 
 
-def quality(cmu: str, folder: Path, plot: str | None) -> tuple[str, dict]:
+def quality(
+    cmu: str, folder: Path, plot: str | None, label: str = "`synthesize`"
+) -> tuple[str, dict]:
     index = json.loads((folder / "index.json").read_text())
     rows = index["trials"]
     clips = {r["file"]: load_npz(folder / r["file"]) for r in rows}
     kinds = list(dict.fromkeys(r["subject"] for r in rows))
     lines = [
-        f"{len(rows)} clips of {index['synthetic']['seconds']:g} s (`synthesize`, seed "
+        f"{len(rows)} clips of {index['synthetic']['seconds']:g} s ({label}, seed "
         f"{index['synthetic']['seed']}); physical: mean root assistance force <= "
         f"{PHYSICAL_BUDGET} body weight and torque <= {PHYSICAL_BUDGET} body weight x 1 m.",
         "",
@@ -123,6 +132,16 @@ def quality(cmu: str, folder: Path, plot: str | None) -> tuple[str, dict]:
             f"| {np.median(sp):.1f}/{max(sp):.1f} "
             f"| {np.percentile(pen, 50):.1f}/{np.percentile(pen, 99):.1f} |"
         )
+    warped = [r for r in rows if r["subject"] in ("track", "fall")]
+    if warped:  # does the body keep up with faster motion?
+        up = [r["generation"]["speed"] for r in warped if not r["fell"]]
+        down = [r["generation"]["speed"] for r in warped if r["fell"]]
+        mean = lambda x: f"{np.mean(x):.2f}x ({len(x)})" if x else "- (0)"  # noqa: E731
+        lines += [
+            "",
+            f"Time warp of the track and fall clips, mean: {mean(up)} among those that stayed "
+            f"up, {mean(down)} among those that fell.",
+        ]
     real = [load_motion(t.asf, t.amc, skeleton="humanoid") for t in find_trials(cmu)]
     rp, rw = speeds(real)
     groups = [("real: CMU trials, shared humanoid, 30 fps", real)]
@@ -268,22 +287,48 @@ def main() -> None:
     ap.add_argument("--speed-clips", type=int, default=16, help="clips per worker-count timing")
     ap.add_argument("--plot", default=str(REPO / "docs" / "synth_speeds.png"))
     ap.add_argument("--audit", action="store_true", help="also the physics room's audit")
+    ap.add_argument(
+        "--samples", type=int, default=0,
+        help="track real-motion kinds with the sampling tracker, N rollouts per window, no "
+        "assistance (writes synth_sampled.md; no speed timings)",
+    )  # fmt: skip
+    ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=ALL_KINDS)
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
 
+    sampled = args.samples > 0
+    label = f"`synthesize(..., samples={args.samples})`" if sampled else "`synthesize`"
+    plot = args.plot.replace(".png", "_sampled.png") if sampled else args.plot
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(args.synth) if args.synth else Path(tmp) / "synth"
         if not args.synth:
             t0 = time.perf_counter()
-            synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
-                       progress=False)  # fmt: skip
-            print(f"synthesized {args.n} clips in {time.perf_counter() - t0:.1f} s")
-        table, figures = quality(args.cmu, folder, None if args.no_write else args.plot)
+            s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
+                           kinds=tuple(args.kinds), samples=args.samples,
+                           progress=False)  # fmt: skip
+            wall = time.perf_counter() - t0
+            simulated = sum(r["frames"] for r in s.written) / 30.0
+            cost = (
+                f"Generation: {len(s.written)} clips, {simulated:.0f} simulated s in {wall:.0f} s "
+                f"on {args.workers} worker(s): {simulated / wall / args.workers:.2f} simulated s "
+                "per wall s per worker."
+            )
+            print(cost)
+        table, figures = quality(args.cmu, folder, None if args.no_write else plot, label)
+        if not args.synth:
+            table = cost + "\n\n" + table
         print(table)
         audit_table = audit(folder) if args.audit else None
         if audit_table:
             print(audit_table)
+    if sampled:
+        if not args.no_write:
+            write_results(
+                "synth_sampled", "Synthetic clips tracked by sampling, without assistance",
+                table, command,
+            )  # fmt: skip
+        return
     speed_table, timing = speed(args.cmu, args.speed_clips, args.seed + 99)
     print(speed_table)
     if args.no_write:

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from sim.model.humanoid import canonical_skeleton
-from sim.simulate.controller import track
+from sim.simulate.controller import Push, Weakening, track
 from sim.simulate.model import sim_model
-from sim.simulate.sampling import sample_track
+from sim.simulate.sampling import sample_track, search_offsets
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +57,28 @@ def test_without_noise_it_is_the_plain_tracker(model, walk_ref):
     assert np.array_equal(r.qpos, p.qpos) and np.array_equal(r.joint_torque, p.joint_torque)
 
 
+def test_replay_reaches_the_rolled_out_states_under_pushes_and_a_weakening(model, walk_ref):
+    """The rollouts meet the same pushes and weakening as the replay: ``track`` with the found
+    offsets passes through the very states the search reached at each window's end (not the
+    states its lookahead reached)."""
+    ref = walk_ref[:72]
+    pushes = (Push("thorax", 0.1, 0.15, (150.0, -80.0, 0.0)),)
+    weakenings = (Weakening(0.2, 0.2, 0.5),)
+    kw = dict(pushes=pushes, weakenings=weakenings)
+    offsets, reached = search_offsets(
+        model, ref, samples=6, keep=2, window=12, lookahead=12, seed=3, **kw
+    )
+    r = track(model, ref, assist_limit=0.0, offsets=offsets, record_every=1, **kw)
+    assert not r.fell
+    np.testing.assert_allclose(r.qpos[12::12], reached[:-1], rtol=0, atol=1e-9)
+    # a search blind to the perturbations would have reached other states
+    _, blind = search_offsets(model, ref, samples=6, keep=2, window=12, seed=3)
+    assert np.abs(blind[:-1] - r.qpos[12::12]).max() > 1e-3
+    gain = model.actuator_gainprm[:, 0].copy()
+    sample_track(model, ref[:24], samples=2, keep=1, **kw)
+    assert np.array_equal(model.actuator_gainprm[:, 0], gain)  # the weakening was undone
+
+
 def test_forward_validation_carries_its_sampling_to_other_processes(model):
     import pickle
 
@@ -77,4 +99,35 @@ def test_eval_simulate_samples_needs_simulate_and_a_positive_count(tmp_path, cap
     assert err == ["sidql eval: error: --simulate-samples needs --simulate"]
     with pytest.raises(SystemExit) as e:
         cli.main(["eval", "--data", str(tmp_path), "--simulate-samples", "0", "--out", out])
+    assert e.value.code == 2
+
+
+def test_synth_with_samples_tracks_real_kinds_without_any_help(cmu_dir):
+    """``synth --samples``: real-motion clips come from the sampler with no assistance at all
+    (physical by construction, the sampler's seed recorded); procedural keeps its tracker."""
+    from dataclasses import replace
+
+    from sim.simulate.generate import SynthTask, generate
+
+    amc, asf = str(cmu_dir / "07" / "07_01.amc"), str(cmu_dir / "07" / "07.asf")
+    task = SynthTask("fall", seed=0, index=1, asf=asf, amc=amc, seconds=0.5, samples=4)
+    clip, rec = generate(task)
+    g = rec["generation"]
+    assert g["assist_limit"] == 0.0 and g["sampling"]["samples"] == 4
+    assert rec["physical"] and rec["mean_assistance"] == 0.0
+    assert not rec["labels"]["sim_assist_wrench"].any()
+    again, rec2 = generate(task)
+    assert np.array_equal(clip.qpos, again.qpos) and rec2["generation"] == g
+    plain, rec3 = generate(replace(task, samples=0))
+    assert "sampling" not in rec3["generation"] and rec3["generation"]["assist_limit"] > 0
+    proc = generate(SynthTask("procedural", seed=0, index=2, seconds=0.5, samples=4))[1]
+    assert "sampling" not in proc["generation"] and proc["generation"]["assist_limit"] == 1.0
+
+
+def test_synth_samples_must_be_positive(tmp_path):
+    from sidql.commands import main as cli
+
+    with pytest.raises(SystemExit) as e:
+        cli.main(["synth", "--kinds", "procedural", "--n", "1", "--out", str(tmp_path / "o"),
+                  "--samples", "0"])  # fmt: skip
     assert e.value.code == 2

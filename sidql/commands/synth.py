@@ -54,6 +54,13 @@ def register(sub) -> None:
         "to 20x --n tasks)",
     )  # fmt: skip
     p.add_argument(
+        "--samples", type=positive(int), default=None, metavar="N",
+        help="track real trials with the sampling tracker (N rollouts per 0.1 s window) and no "
+        "assistance at all: every such clip is physical, and a figure that cannot keep up "
+        "falls and is labelled so (about 2.5 s per simulated second at N=64 on one core; "
+        "procedural clips keep the plain tracker)",
+    )  # fmt: skip
+    p.add_argument(
         "--resume", action="store_true",
         help="continue the run whose journal (OUT/journal.jsonl) is in --out: clips are stored "
         "as they arrive, so a stopped run keeps them and is not simulated again",
@@ -76,7 +83,8 @@ def run(args) -> int:
     try:
         s = synthesize(
             data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
-            seconds=args.seconds, fps=args.fps, workers=args.workers, ray=args.ray,
+            seconds=args.seconds, fps=args.fps, samples=args.samples or 0,
+            workers=args.workers, ray=args.ray,
             progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
         )  # fmt: skip
     except ValueError as e:  # --resume of a run with other parameters

@@ -364,6 +364,25 @@ def _floor_contact(data, floor: int) -> bool:
     return bool(np.any(g == floor))
 
 
+def weakening_factor(weakenings: tuple[Weakening, ...], t: float) -> float:
+    """The controller's strength share at time ``t`` [s]: the smallest factor of the weakenings
+    acting then, 1 if none."""
+    factor = 1.0
+    for w in weakenings:
+        if w.start <= t < w.start + w.duration:
+            factor = min(factor, w.factor)
+    return factor
+
+
+def apply_pushes(data, pushes: tuple[Push, ...], body_ids, t: float) -> None:
+    """Set ``data.xfrc_applied`` to the pushes acting at time ``t`` [s] (``body_ids``: each
+    push's body id); every other body's external force is cleared."""
+    data.xfrc_applied[:] = 0.0
+    for p, b in zip(pushes, body_ids, strict=True):
+        if p.start <= t < p.start + p.duration:
+            data.xfrc_applied[b, :3] += p.force
+
+
 def track(
     model,
     ref_qpos: np.ndarray,
@@ -437,10 +456,7 @@ def track(
     with ActuatorEdits(model) as edits:
         for k in range(T):
             t = k * dt
-            factor = 1.0
-            for w in weakenings:
-                if w.start <= t < w.start + w.duration:
-                    factor = min(factor, w.factor)
+            factor = weakening_factor(weakenings, t)
             if fell:  # down: the joints hold the pose of the fall with a lying body's tone
                 factor = min(factor, FALLEN_TONE)
             edits.scale(factor)
@@ -477,10 +493,7 @@ def track(
             data.qfrc_applied[3:6] = torque
             all_assist[k] = np.linalg.norm(force) / weight
             all_wrench[k, :3], all_wrench[k, 3:] = force, torque
-            data.xfrc_applied[:] = 0.0
-            for p, b in zip(pushes, push_ids, strict=True):
-                if p.start <= t < p.start + p.duration:
-                    data.xfrc_applied[b, :3] += p.force
+            apply_pushes(data, pushes, push_ids, t)
             i, on_record = divmod(k, record_every)
             on_record = on_record == 0
             if on_record:

@@ -89,6 +89,7 @@ def iter_tasks(
     kinds: tuple[str, ...] = KINDS,
     seconds: float = 4.0,
     fps: float = 30.0,
+    samples: int = 0,
 ) -> Iterator[SynthTask]:
     """The plan: an endless stream of tasks cycling through ``kinds``; real-motion kinds take
     ``trials`` in seeded shuffled rounds (every trial once per round). Every prefix is the same
@@ -104,7 +105,7 @@ def iter_tasks(
                 order = [trials[j] for j in rng.permutation(len(trials))]
             t = order.pop()
             asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
-        yield SynthTask(kind, seed, i, asf, amc, seconds, fps)
+        yield SynthTask(kind, seed, i, asf, amc, seconds, fps, samples)
         i += 1
 
 
@@ -116,10 +117,11 @@ def plan_tasks(
     kinds: tuple[str, ...] = KINDS,
     seconds: float = 4.0,
     fps: float = 30.0,
+    samples: int = 0,
 ) -> tuple[list[SynthTask], list[dict]]:
     """The first ``n`` tasks of the plan (:func:`iter_tasks`) and the skipped trials."""
     trials, skipped = readable_trials(root, kinds)
-    stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
+    stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, samples=samples)
     return [next(stream) for _ in range(n)], skipped
 
 
@@ -132,6 +134,7 @@ def synthesize(
     kinds: tuple[str, ...] = KINDS,
     seconds: float = 4.0,
     fps: float = 30.0,
+    samples: int = 0,
     workers: int | None = None,
     ray: str | None = None,
     progress: bool = True,
@@ -153,11 +156,11 @@ def synthesize(
     another ``n``, else a ``ValueError``); its finished tasks are not simulated again.
     """
     with ray_session(ray, workers):  # Ray started or joined once for both batches
-        return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progress,
+        return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
 
 
-def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progress,
+def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,
                 max_assistance, max_tries, resume) -> DatasetSummary:  # fmt: skip
     start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -166,6 +169,7 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progr
         "source": None if root is None else str(Path(root).resolve()),
         "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds, "fps": fps,
         "max_assistance": max_assistance, "max_tries": max_tries,
+        **({"samples": samples} if samples else {}),  # an older run's journal has none
     }  # fmt: skip
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     done = _read_journal(out_dir / JOURNAL, params) if resume else {}
@@ -177,7 +181,9 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, workers, ray, progr
         return len(kept) >= n
 
     def pending_tasks() -> Iterator[SynthTask]:
-        stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps)
+        stream = iter_tasks(
+            trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, samples=samples
+        )
         for task in stream:
             if task.index >= limit or enough():
                 return
@@ -282,6 +288,7 @@ def _finish(out_dir: Path, done: dict, n: int, params: dict, summary, start) -> 
         "fps": params["fps"],
         "synthetic": {
             **{k: params[k] for k in ("n", "seed", "kinds", "seconds", "max_assistance")},
+            "samples": params.get("samples", 0),
             "tasks_tried": last + 1, "rejected": rejected,
         },
         "trials": summary.written,

@@ -9,15 +9,18 @@ are tried: per window one offset [rad] per corrected hinge (:data:`CORRECTED`; t
 the trunk), the parent's previous offset times ``persistence`` plus Gaussian noise of standard
 deviation ``torque_sigma`` times the joint's torque limit over its stiffness (the offset that
 asks ``torque_sigma`` of the joint's peak torque). Each candidate runs through the window with
-the same torque-limited actuators and no assistance; its cost (:func:`window_cost`) is added
-to its parent's, and the ``keep`` cheapest states go on. At the end the cheapest sequence of
+the same torque-limited actuators, perturbations and no assistance, then on for ``lookahead``
+more ticks with the same offset; its cost there (:func:`window_cost`: a correction that only
+delays a fall costs what the fall costs) is added to its parent's, and the ``keep`` cheapest
+states, taken at the window's end, go on. At the end the cheapest sequence of
 offsets is replayed by ``track(..., offsets=...)``, so the result is an ordinary
 :class:`sim.simulate.controller.Tracking` of one simulation (the replay is the same
 deterministic computation as the sampled rollout). Deterministic given ``seed``.
 
-Cost: ``samples`` window rollouts per window plus one replay; measured with 64, 2.45 s per 2 s
-clip on one core against the plain tracker's 0.07 s, and the original of 15 of 22 CMU clips
-still falls (22 of 22 with the plain tracker): ``docs/synthetic.md``.
+Cost: ``samples`` rollouts of ``window + lookahead`` ticks per window plus one replay; measured
+with 64 and no lookahead, 2.45 s per 2 s clip on one core against the plain tracker's 0.07 s;
+a lookahead of 48 ticks (``sidql synth --samples``) costs about 5 times that and keeps more
+clips up: ``docs/synthetic.md``.
 """
 
 from __future__ import annotations
@@ -27,8 +30,17 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.simulate.controller import Tracking, reference_feedforward, track
-from sim.simulate.model import SUBSTEPS
+from sim.simulate.controller import (
+    ActuatorEdits,
+    Push,
+    Tracking,
+    Weakening,
+    apply_pushes,
+    reference_feedforward,
+    track,
+    weakening_factor,
+)
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
 CORRECTED = ("femur", "tibia", "foot", "toes", "lowerback", "upperback", "thorax")
@@ -116,17 +128,43 @@ def sample_track(
     model,
     ref_qpos: np.ndarray,
     *,
+    record_every: int = 4,
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
+    **search,
+) -> Tracking:
+    """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance, the hinge targets
+    corrected by sampling (see the module docstring): :func:`search_offsets` (``search``: its
+    keyword arguments), then their replay.
+
+    Returns:
+        ``track(model, ref_qpos, assist_limit=0, offsets=best, record_every=record_every,
+        pushes=pushes, weakenings=weakenings)``: the replay of the cheapest offsets (T, nu).
+    """
+    offsets, _ = search_offsets(model, ref_qpos, pushes=pushes, weakenings=weakenings, **search)
+    return track(
+        model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
+        pushes=pushes, weakenings=weakenings,
+    )  # fmt: skip
+
+
+def search_offsets(
+    model,
+    ref_qpos: np.ndarray,
+    *,
     samples: int = 64,
     keep: int = 8,
     window: int = 12,
     torque_sigma: float = 0.3,
     persistence: float = 0.8,
+    lookahead: int = 0,
     seed: int = 0,
-    record_every: int = 4,
     weights: CostWeights | None = None,
-) -> Tracking:
-    """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance, the hinge targets
-    corrected by sampling (see the module docstring).
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
+    ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
 
     Args:
         samples: candidate rollouts per window (in all, over the kept states).
@@ -134,11 +172,17 @@ def sample_track(
         window: control ticks per window (12: 0.1 s).
         torque_sigma: noise of an offset, as a share of its joint's peak torque.
         persistence: share of the parent's offset a child starts from.
+        lookahead: control ticks each candidate is rolled on past its window (same offset)
+            before its cost is taken: a correction that only delays a fall costs what the fall
+            costs. The state kept is the one at the window's end.
         seed: seeds the noise (same seed, same result).
+        pushes, weakenings: perturbations, as in ``track``; every candidate rollout meets them
+            too, so the corrections are found against the perturbed body.
 
     Returns:
-        ``track(model, ref_qpos, assist_limit=0, offsets=best, record_every=record_every)``:
-        the replay of the cheapest offsets (T, nu).
+        ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
+        out ``qpos`` at the end of each window (tick ``min(T, (w + 1) window)``): what
+        ``track(..., offsets=offsets)`` reaches there while the body is up.
     """
     weights = weights or CostWeights()
     T = ref_qpos.shape[0]
@@ -171,30 +215,47 @@ def sample_track(
     mujoco.mj_getState(model, data, states[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
-    history: list[tuple[np.ndarray, np.ndarray]] = []  # per window: (parent, offset) of kept
+    # per window, of the kept states: (parent, offset, qpos reached)
+    history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     new_states = np.empty((samples, size))
-    for k0 in range(0, T, window):
-        k1 = min(T, k0 + window)
-        parents = np.arange(samples) % len(states)
-        offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
-        new_costs = np.empty(samples)
-        for s in range(samples):
-            mujoco.mj_setState(model, data, states[parents[s]], spec)
-            for k in range(k0, k1):
-                data.ctrl[:] = base[k] + offs[s]
-                mujoco.mj_step(model, data, nstep=SUBSTEPS)
-            mujoco.mj_getState(model, data, new_states[s], spec)
-            f = features(model, data, ee_ids, foot_ids)
-            cost = window_cost(f, ref_feat[min(k1, T - 1)], weights, hinge_w)
-            new_costs[s] = costs[parents[s]] + cost
-        best = np.argsort(new_costs, kind="stable")[:keep]
-        history.append((parents[best], offs[best]))
-        states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
+    new_qpos = np.empty((samples, model.nq))
+    push_ids = [model.body(p.body).id for p in pushes]
+    with ActuatorEdits(model) as edits:  # a weakening scales the actuators; restored on exit
+        for k0 in range(0, T, window):
+            k1 = min(T, k0 + window)
+            parents = np.arange(samples) % len(states)
+            offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
+            new_costs = np.empty(samples)
+            for s in range(samples):
+                mujoco.mj_setState(model, data, states[parents[s]], spec)
+                for k in range(k0, k1):
+                    t = k / CONTROL_HZ
+                    edits.scale(weakening_factor(weakenings, t))
+                    apply_pushes(data, pushes, push_ids, t)
+                    data.ctrl[:] = base[k] + offs[s]
+                    mujoco.mj_step(model, data, nstep=SUBSTEPS)
+                mujoco.mj_getState(model, data, new_states[s], spec)
+                new_qpos[s] = data.qpos
+                k2 = min(T, k1 + lookahead)
+                for k in range(k1, k2):
+                    t = k / CONTROL_HZ
+                    edits.scale(weakening_factor(weakenings, t))
+                    apply_pushes(data, pushes, push_ids, t)
+                    data.ctrl[:] = base[k] + offs[s]
+                    mujoco.mj_step(model, data, nstep=SUBSTEPS)
+                f = features(model, data, ee_ids, foot_ids)
+                cost = window_cost(f, ref_feat[min(k2, T - 1)], weights, hinge_w)
+                new_costs[s] = costs[parents[s]] + cost
+            best = np.argsort(new_costs, kind="stable")[:keep]
+            history.append((parents[best], offs[best], new_qpos[best].copy()))
+            states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
     # the cheapest final state's offsets, window by window back to the start
     offsets = np.zeros((T, nu))
+    window_qpos = np.empty((len(history), model.nq))
     j = 0
     for w in range(len(history) - 1, -1, -1):
-        parent, off = history[w]
+        parent, off, reached = history[w]
         offsets[w * window : min(T, (w + 1) * window)] = off[j]
+        window_qpos[w] = reached[j]
         j = parent[j]
-    return track(model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets)
+    return offsets, window_qpos
