@@ -37,7 +37,7 @@ from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Weakening, track
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_model, total_mass
 from sim.simulate.reference import on_floor, time_warp, trial_qpos
-from sim.simulate.sampling import CostWeights, sample_track
+from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
 
 KINDS = ("track", "fall", "procedural")  # the default mix
 # a clip is "physical" when its mean root assistance force is within this share of its body
@@ -55,14 +55,6 @@ LABELS = {
     "sim_fallen": "(F,) bool: the figure has fallen (root below half its reference height)",
 }
 ALL_KINDS = (*KINDS, "follow")
-# ``synth --samples``: each sampled correction is judged 48 control ticks (0.4 s) past its window
-# and the cost pulls the root's horizontal position back (weight 20). Measured on 15 time-warped
-# 4 s track clips at 64 samples: a lookahead of 0 / 12 / 24 / 48 ticks kept 0 / 2 / 1 / 8 up; at
-# 48, the root pull kept 7 up with about half the drift (median error of the clips that stay up
-# 401-474 mm; 2 s of 07_01: 1.37 -> 0.80 m of root error); judging at the window's end as well
-# was worse (2 of the first 8 up against 4). docs/synthetic.md
-SYNTH_LOOKAHEAD = 48
-SYNTH_COST = CostWeights(root_xy=20.0)
 # root assistance bound [body weight]; procedural motion is not physically plausible (its feet
 # slide and its root glides), so it gets the whole body weight and the label says how much it took
 ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
@@ -207,12 +199,12 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         p["assist_limit"] = 0.0
         p["sampling"] = {
             "samples": task.samples,
-            "lookahead": SYNTH_LOOKAHEAD,
-            "root_xy_weight": SYNTH_COST.root_xy,
+            "lookahead": LOOKAHEAD,
+            "root_xy_weight": CostWeights().root_xy,
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
-        kw = {"samples": task.samples, "lookahead": SYNTH_LOOKAHEAD, "seed": p["sampling"]["seed"]}
-        result = sample_track(model, ref, weights=SYNTH_COST, **kw, **perturbations)
+        kw = {"samples": task.samples, "seed": p["sampling"]["seed"]}
+        result = sample_track(model, ref, **kw, **perturbations)
     else:
         result = track(model, ref, gains=gains, assist_limit=p["assist_limit"], **perturbations)
     if result.unstable:

@@ -35,7 +35,8 @@ class ForwardValidation:
         model: ``sim.simulate.model.sim_model`` of the subject's skeleton.
         names: (P,) point names (``"root"`` and bone names with sites ``<name>_end``).
         samples: 0: the plain tracker (``track``); N > 0: the sampling tracker
-            (``sim.simulate.sampling.sample_track``, N rollouts per 0.1 s window, seed 0), which
+            (``sim.simulate.sampling.sample_track``, N rollouts per 0.1 s window, each judged
+            0.4 s on, seed 0), which
             corrects the joints' targets so the body keeps its balance where it can.
     """
 
