@@ -231,23 +231,18 @@ def search_offsets(
             parents = np.arange(samples) % len(states)
             offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
             new_costs = np.empty(samples)
+            k2 = min(T, k1 + lookahead)
             for s in range(samples):
                 mujoco.mj_setState(model, data, states[parents[s]], spec)
-                for k in range(k0, k1):
+                for k in range(k0, k2):  # the window, then on with the same offset
                     t = k / CONTROL_HZ
                     edits.scale(weakening_factor(weakenings, t))
                     apply_pushes(data, pushes, push_ids, t)
                     data.ctrl[:] = base[k] + offs[s]
                     mujoco.mj_step(model, data, nstep=SUBSTEPS)
-                mujoco.mj_getState(model, data, new_states[s], spec)
-                new_qpos[s] = data.qpos
-                k2 = min(T, k1 + lookahead)
-                for k in range(k1, k2):
-                    t = k / CONTROL_HZ
-                    edits.scale(weakening_factor(weakenings, t))
-                    apply_pushes(data, pushes, push_ids, t)
-                    data.ctrl[:] = base[k] + offs[s]
-                    mujoco.mj_step(model, data, nstep=SUBSTEPS)
+                    if k == k1 - 1:  # the window's end: the state kept
+                        mujoco.mj_getState(model, data, new_states[s], spec)
+                        new_qpos[s] = data.qpos
                 f = features(model, data, ee_ids, foot_ids)
                 cost = window_cost(f, ref_feat[min(k2, T - 1)], weights, hinge_w)
                 new_costs[s] = costs[parents[s]] + cost
