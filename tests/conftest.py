@@ -33,6 +33,21 @@ def walk_clip(cmu_dir):
 
 
 @pytest.fixture(scope="session")
+def trial_on_floor(cmu_dir):
+    """A function: ``(model, "02_01")`` -> that CMU trial's ``qpos`` (T, nq) at 120 Hz for the
+    simulated ``model``, lowered onto its floor (``sim.simulate.reference``)."""
+    from sim.simulate.reference import on_floor, trial_qpos
+
+    def reference(model, trial: str):
+        subject = cmu_dir / trial.split("_")[0]
+        return on_floor(
+            model, trial_qpos(subject / f"{subject.name}.asf", subject / f"{trial}.amc")
+        )
+
+    return reference
+
+
+@pytest.fixture(scope="session")
 def gl_context() -> None:
     """Skip (saying why) only when no offscreen OpenGL context can be created on this machine.
 

@@ -213,18 +213,11 @@ def test_dataset_on_ray_equals_the_process_pool(tmp_path, cmu_dir):
             assert np.array_equal(xa[k], xb[k]), k
 
 
-def _walk_reference(cmu_dir, model, ticks):
-    from sim.simulate.reference import trial_qpos
-
-    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
-    return on_floor(model, q)[:ticks]
-
-
-def test_floor_contact_parameters_are_the_floors_and_feet_stay_within_softness(cmu_dir):
+def test_floor_contact_parameters_are_the_floors_and_feet_stay_within_softness(trial_on_floor):
     from sim.simulate.model import FLOOR_SOLIMP, FLOOR_TIMECONST
 
     model = sim_model(canonical_skeleton())
-    r = track(model, _walk_reference(cmu_dir, model, 240), assist_limit=0.5)
+    r = track(model, trial_on_floor(model, "02_01")[:240], assist_limit=0.5)
     # the floor's solref is used as is, not averaged with the body geoms' (MuJoCo's mixing)
     data = mujoco.MjData(model)
     data.qpos[:] = r.qpos[int(np.argmax(r.contact_penetration > 0))]
@@ -240,7 +233,7 @@ def test_floor_contact_parameters_are_the_floors_and_feet_stay_within_softness(c
     assert r.penetration < 0.01
 
 
-def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu_dir):
+def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(trial_on_floor):
     """The physics room (``sim.physics``) audits simulated motion: with no help recorded its
     residual force is small; with the body walking in the air, held up by the recorded root
     assistance, its residual is that assistance frame by frame."""
@@ -253,7 +246,7 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(cmu
     # limits and swing at frequencies that 30 fps second differences do not resolve (measured
     # 0.10 BW mean residual-help gap, 0.015 at 4x): this test is about the audit, not the body
     model = sim_model(skeleton, gains=Gains(strength=4.0))
-    ref = _walk_reference(cmu_dir, model, 180)  # 1.5 s: the unassisted walk has not fallen yet
+    ref = trial_on_floor(model, "02_01")[:180]  # 1.5 s: the unassisted walk has not fallen yet
     plain = {"generation": {"scale": 1.0, "pushes": []}}
 
     r0 = track(model, ref, assist_limit=0.0)

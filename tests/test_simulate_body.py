@@ -25,11 +25,8 @@ def model():
 
 
 @pytest.fixture(scope="module")
-def walk_ref(cmu_dir, model):
-    from sim.simulate.reference import on_floor, trial_qpos
-
-    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
-    return on_floor(model, q)[:120]
+def walk_ref(trial_on_floor, model):
+    return trial_on_floor(model, "02_01")[:120]
 
 
 def test_limits_are_the_human_table_scaled_by_mass():
@@ -125,15 +122,13 @@ def test_no_assistance_without_floor_contact(model, walk_ref):
     assert held.assistance.mean() > 0.5
 
 
-def test_foot_forces_and_assistance_carry_the_body_weight(model, cmu_dir):
+def test_foot_forces_and_assistance_carry_the_body_weight(model, trial_on_floor):
     """Momentum balance over a 2 s walk: the mean vertical floor force on the feet plus the
     vertical assistance equals the body weight (the body's vertical momentum returns near its
     start); contact labels are where the force is."""
     from sim.simulate.model import total_mass
-    from sim.simulate.reference import on_floor, trial_qpos
 
-    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
-    r = track(model, on_floor(model, q)[:240], assist_limit=0.5)
+    r = track(model, trial_on_floor(model, "02_01")[:240], assist_limit=0.5)
     weight = total_mass(model) * 9.81
     assert not r.fell
     support = (r.foot_force[:, :, 2].sum(axis=1) + r.assist_wrench[:, 2]) / weight
@@ -249,14 +244,12 @@ def test_non_adjacent_bodies_collide_and_near_ones_do_not(model):
     assert 0.0 < deepest < 0.5 * leg_overlap(target)  # they met and stopped at each other
 
 
-def test_a_fallen_body_stays_down_without_help(model, walk_ref, cmu_dir):
+def test_a_fallen_body_stays_down_without_help(model, trial_on_floor):
     """Pushed hard with the joints weakened, the walker falls; from the fall on there is no
     assistance and the joints hold the pose of the fall: the root stays near the floor."""
     from sim.simulate.controller import Push
-    from sim.simulate.reference import on_floor, trial_qpos
 
-    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
-    ref = on_floor(model, q)[:336]
+    ref = trial_on_floor(model, "02_01")[:336]
     r = track(model, ref, assist_limit=0.5, pushes=(Push("thorax", 0.5, 0.2, (700.0, 0, 0)),),
               weakenings=(Weakening(0.5, 0.8, 0.1),))  # fmt: skip
     assert r.fell and r.fall_frame > 0

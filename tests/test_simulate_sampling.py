@@ -19,12 +19,9 @@ def model():
 
 
 @pytest.fixture(scope="module")
-def walk_ref(cmu_dir, model):
+def walk_ref(trial_on_floor, model):
     """2 s of the walk 07_01 on the canonical body, on the floor (120 Hz)."""
-    from sim.simulate.reference import on_floor, trial_qpos
-
-    q = trial_qpos(cmu_dir / "07" / "07.asf", cmu_dir / "07" / "07_01.amc")
-    return on_floor(model, q)[:240]
+    return trial_on_floor(model, "07_01")[:240]
 
 
 def test_sampling_keeps_a_walk_up_where_the_plain_tracker_falls(model, walk_ref):
