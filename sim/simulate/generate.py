@@ -188,7 +188,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         ref = on_floor(model, warped[start : start + n])
         p["source"] = str(task.amc)
         p["start_tick"] = start
-    perturbations = {
+    tracking = {  # what both trackers take: the perturbations and the clip rate
         "pushes": tuple(
             Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]
         ),
@@ -204,9 +204,9 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
         kw = {"samples": task.samples, "seed": p["sampling"]["seed"]}
-        result = sample_track(model, ref, **kw, **perturbations)
+        result = sample_track(model, ref, **kw, **tracking)
     else:
-        result = track(model, ref, gains=gains, assist_limit=p["assist_limit"], **perturbations)
+        result = track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
     if result.unstable:
         raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
     out = simulated_clip(
