@@ -51,6 +51,7 @@ from sim.simulate.model import (
     FLOOR_BITS,
     SOLE_GEOMS,
     SUBSTEPS,
+    TOE_GEOMS,
     G,
     Gains,
     total_mass,
@@ -297,7 +298,7 @@ def balanced_support(
     (whose moment tips the body). Same arguments and result as :func:`contact_feedforward`."""
     names = [
         n
-        for n in SOLE_POINTS + SOLE_GEOMS
+        for n in SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
         if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) >= 0
     ]
     ids = [model.geom(n).id for n in names if int(model.geom(n).conaffinity[0]) & FLOOR_CONTYPE]
@@ -433,7 +434,7 @@ def track(
     lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
     floor = model.geom("floor").id
     side = np.full(model.ngeom, -1)
-    for name in SOLE_POINTS + SOLE_GEOMS:
+    for name in SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS:
         g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
         if g >= 0:
             side[g] = 0 if name.startswith("l") else 1
