@@ -1,0 +1,460 @@
+"""A contact-aware whole-body tracking controller: an inverse-dynamics QP every control tick.
+
+After Macchietto, Zordan & Shelton 2009 (momentum control for balance), Muico et al. 2009
+(contact-aware nonlinear control) and Lee, Kim & Lee 2010 (data-driven biped control): each
+control tick solves one small dense quadratic program over the joint accelerations ``qdd`` (nv,)
+and the floor's contact forces, and applies the joint torques it implies through torque
+actuators (``sim_model(actuators="motor")``), whose range is the human limit. No other force acts
+on the body: no root assistance, ever (pushes, when scripted, are the only external forces).
+
+Variables ``x = [qdd (nv), lam (4 C)]``: ``C`` support points (the four bottom corners of each
+sole box touching the floor, the lowest point of a touching toe capsule), each force a
+non-negative combination of the four edges of a linearised friction pyramid (coefficient
+:attr:`WholeBodyGains.friction`). Constraints:
+
+* the floating base's equations of motion (6 rows, exact): ``M_u qdd + h_u = J_u^T E lam``;
+* ``lam >= 0`` (the floor only pushes, inside the pyramid);
+* the hinge torques ``tau = M_a qdd + h_a - J_a^T E lam`` within the human limits.
+
+Costs (weighted least squares, :class:`WholeBodyGains`), each a PD on the reference plus its
+feed-forward acceleration:
+
+* hinge tracking: ``qdd_hinge = qdd_ref + kp (q_ref - q) + kd (v_ref - v)``;
+* root orientation, the same on the free joint's rotation;
+* centre of mass: ``sum f / m = a_ref + kp (c_ref - c) + kd (cdot_ref - cdot) - g``, and the
+  rate of centroidal angular momentum ``sum (p - c) x f`` towards the reference's: balance,
+  through the contact forces (Macchietto 2009);
+* feet: a foot the reference has on the floor (its sole within :data:`STANCE_GAP`) and that
+  touches it keeps still (its sole's velocity damped to zero: no slip); every other foot
+  tracks the reference's sole pose (position and orientation, world frame): the reference's
+  foot placement;
+* a small regularisation of ``qdd`` and the forces (a unique solution).
+
+``M`` (``mj_fullM``), ``h`` (``qfrc_bias - qfrc_passive``) and the point Jacobians (``mj_jac`` at
+the sole corners) come from MuJoCo at the current state; the QP is solved by DAQP (a dense
+active-set solver). The torques are held for the tick's ``SUBSTEPS`` physics steps; MuJoCo's
+own contacts then decide what the floor does. Deterministic: the same reference gives the same
+simulation bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import daqp
+import mujoco
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from sim.simulate.controller import (
+    ActuatorEdits,
+    Push,
+    Tracking,
+    Weakening,
+    _foot_forces,
+    apply_pushes,
+    reference_derivatives,
+    weakening_factor,
+)
+from sim.simulate.falls import fall_reference, has_fallen
+from sim.simulate.model import (
+    CONTROL_HZ,
+    SOLE_GEOMS,
+    SUBSTEPS,
+    TOE_GEOMS,
+    G,
+    rest_inertia,
+    total_mass,
+)
+
+#: [m] a reference foot whose sole's lowest corner is at most this high stands on the floor
+STANCE_GAP = 0.03
+BIG = 1e30  # an unbounded side of a DAQP constraint
+#: [s] standard deviation of the Gaussian that smooths the reference's velocities before they
+#: are differentiated: a 30 fps clip resampled at 120 Hz has velocity steps at every frame
+SMOOTH_S = 0.025
+
+
+@dataclass(frozen=True)
+class WholeBodyGains:
+    """Gains [1/s^2, 1/s] and weights of the QP's tasks (each task's rows are accelerations
+    [m/s^2, rad/s^2] before weighting)."""
+
+    joint_omega: float = 2 * np.pi * 2.0  # hinge tracking bandwidth [rad/s], critically damped
+    root_omega: float = 2 * np.pi * 1.5  # root orientation
+    com_omega: float = 2 * np.pi * 1.0  # centre of mass
+    momentum_damping: float = 5.0  # [1/s] angular momentum towards the reference's
+    foot_omega: float = 2 * np.pi * 2.0  # swing foot pose
+    stance_omega: float = 2 * np.pi * 3.0  # a stance foot held still and flat on the floor
+    w_joint: float = 1.0
+    w_root: float = 10.0
+    w_com: float = 10.0
+    w_momentum: float = 1.0
+    w_swing: float = 10.0
+    w_stance: float = 100.0
+    w_reg: float = 1e-4  # on qdd
+    w_force: float = 1e-6  # on the edge forces [N^2]
+    friction: float = 0.8
+    anchor: float = 1.0  # share of the support offset the balance targets follow (0: global)
+    anchor_tau: float = 0.1  # [s] its filter's time constant
+    every_step: bool = False  # solve the QP before every physics step, not every control tick
+    placement: float = 0.0  # swing feet placed relative to the CoM (1) or the stance feet (0)
+    placement_v: float = 0.0  # [s] a swing foot's target moves this far per m/s of CoM speed error
+    inertia_power: float = 1.0  # hinge weights: (reflected inertia / mean) to this power
+    corner_gap: float = 0.005  # [m] a touching sole's corners this close to its lowest carry force
+
+
+@dataclass
+class WholeBodyReference:
+    """What the QP tracks, per control tick (T ticks): ``qpos`` (T, nq), ``qvel``/``qacc``
+    (T, nv), centre of mass ``com``/``com_vel``/``com_acc`` (T, 3), centroidal angular momentum
+    ``angmom``/``angmom_rate`` (T, 3), per foot (left, right) the sole's centre ``sole_pos`` /
+    ``sole_vel`` / ``sole_acc`` (T, 2, 3), its orientation ``sole_mat`` (T, 2, 3, 3) and
+    ``stance`` (T, 2) (the sole within :data:`STANCE_GAP` of the floor)."""
+
+    qpos: np.ndarray
+    qvel: np.ndarray
+    qacc: np.ndarray
+    com: np.ndarray
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    angmom: np.ndarray
+    angmom_rate: np.ndarray
+    sole_pos: np.ndarray
+    sole_vel: np.ndarray
+    sole_acc: np.ndarray
+    sole_mat: np.ndarray
+    stance: np.ndarray
+
+
+def _sole_ids(model) -> tuple[np.ndarray, np.ndarray]:
+    soles = np.array([model.geom(n).id for n in SOLE_GEOMS])
+    toes = np.array([model.geom(n).id for n in TOE_GEOMS])
+    return soles, toes
+
+
+_BOTTOM = np.array([[i, j, -1.0] for i in (-1, 1) for j in (-1, 1)])
+
+
+def sole_corners(model, data, g: int) -> np.ndarray:
+    """(4, 3) the bottom corners [m] of sole box ``g`` (``sim.simulate.model.add_soles``)."""
+    R = data.geom_xmat[g].reshape(3, 3)
+    return data.geom_xpos[g] + (_BOTTOM * model.geom_size[g]) @ R.T
+
+
+def wholebody_reference(model, ref_qpos: np.ndarray) -> WholeBodyReference:
+    """The :class:`WholeBodyReference` of ``ref_qpos`` (T, nq at ``CONTROL_HZ``, floor z = 0)."""
+    qvel, _ = reference_derivatives(model, ref_qpos)
+    sigma = SMOOTH_S * CONTROL_HZ
+    if T_ok := len(ref_qpos) > 1:
+        qvel = gaussian_filter1d(qvel, sigma, axis=0, mode="nearest")
+    qacc = np.gradient(qvel, 1.0 / CONTROL_HZ, axis=0) if T_ok else np.zeros_like(qvel)
+    data = mujoco.MjData(model)
+    soles, _ = _sole_ids(model)
+    T = len(ref_qpos)
+    com, com_vel, angmom = np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))
+    sole_pos, sole_mat = np.empty((T, 2, 3)), np.empty((T, 2, 3, 3))
+    low = np.empty((T, 2))
+    for t in range(T):
+        data.qpos[:], data.qvel[:] = ref_qpos[t], qvel[t]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_comVel(model, data)
+        mujoco.mj_subtreeVel(model, data)
+        com[t], com_vel[t], angmom[t] = (
+            data.subtree_com[1],
+            data.subtree_linvel[1],
+            data.subtree_angmom[1],
+        )
+        sole_pos[t] = data.geom_xpos[soles]
+        sole_mat[t] = data.geom_xmat[soles].reshape(2, 3, 3)
+        low[t] = [sole_corners(model, data, g)[:, 2].min() for g in soles]
+    dt = 1.0 / CONTROL_HZ
+
+    def d(x):  # a smoothed derivative: the reference is captured (noisy) or interpolated
+        if T < 2:
+            return np.zeros_like(x)
+        return gaussian_filter1d(np.gradient(x, dt, axis=0), sigma, axis=0, mode="nearest")
+
+    stance = low <= STANCE_GAP
+    # contact-consistent: a stance sole's target sits on the floor (its lowest corner at z = 0),
+    # whatever height the capture's floor estimate left it at
+    sole_pos[..., 2] -= np.where(stance, low, 0.0)
+    sole_vel = d(sole_pos)
+    return WholeBodyReference(
+        qpos=ref_qpos, qvel=qvel, qacc=qacc, com=com, com_vel=com_vel, com_acc=d(com_vel),
+        angmom=angmom, angmom_rate=d(angmom), sole_pos=sole_pos, sole_vel=sole_vel,
+        sole_acc=d(sole_vel), sole_mat=sole_mat, stance=stance,
+    )  # fmt: skip
+
+
+def _edges(mu: float) -> np.ndarray:
+    """(3, 4) unit-free edges of the linearised friction pyramid (normal z, coefficient mu)."""
+    s = mu / np.sqrt(2.0)
+    return np.array([[s, s, 1.0], [s, -s, 1.0], [-s, s, 1.0], [-s, -s, 1.0]]).T
+
+
+@dataclass
+class QPResult:
+    """One tick's solution: ``tau`` (nu,) hinge torques [N m], ``qdd`` (nv,) planned
+    accelerations, ``forces`` (C, 3) planned contact forces [N, world] at ``points`` (C, 3),
+    ``status`` DAQP's exit flag (1: optimal)."""
+
+    tau: np.ndarray
+    qdd: np.ndarray
+    forces: np.ndarray
+    points: np.ndarray
+    status: int
+
+
+def _touching(model, data, floor: int) -> set[int]:
+    n = data.ncon
+    if not n:
+        return set()
+    g = data.contact.geom[:n]
+    return set(g[g[:, 0] == floor, 1].tolist()) | set(g[g[:, 1] == floor, 0].tolist())
+
+
+def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
+            limit: np.ndarray, scratch: dict) -> QPResult:  # fmt: skip
+    """Solve the whole-body QP (module docstring) at ``data``'s state (``mj_forward`` done)
+    for reference tick ``k``; ``limit`` (nu,) the torque limits [N m] now; ``scratch``: reused
+    arrays (an empty dict the first time)."""
+    nv, nu = model.nv, model.nu
+    if not scratch:
+        inertia, _ = rest_inertia(model)
+        share = (inertia / inertia.mean()) ** gains.inertia_power
+        scratch.update(joint_w=gains.w_joint * share, M=np.zeros((nv, nv)), jacp=np.zeros((3, nv)), jacr=np.zeros((3, nv)),
+                       E=_edges(gains.friction), ids=_sole_ids(model),
+                       floor=model.geom("floor").id)  # fmt: skip
+    M, jacp, jacr, E = scratch["M"], scratch["jacp"], scratch["jacr"], scratch["E"]
+    soles, toes = scratch["ids"]
+    mujoco.mj_fullM(model, data, M)
+    h = data.qfrc_bias - data.qfrc_passive
+    touching = _touching(model, data, scratch["floor"])
+    mass = total_mass(model)
+    com = data.subtree_com[1].copy()
+    points, bodies = [], []
+    for side in range(2):
+        if soles[side] in touching:  # the corners on the floor (MuJoCo's contact: within it)
+            corners = sole_corners(model, data, soles[side])
+            on = corners[:, 2] <= corners[:, 2].min() + gains.corner_gap
+            points += list(corners[on])
+            bodies += [int(model.geom_bodyid[soles[side]])] * int(on.sum())
+        g = toes[side]
+        if g in touching:
+            corners = sole_corners(model, data, g)
+            on = corners[:, 2] <= corners[:, 2].min() + gains.corner_gap
+            points += list(corners[on])
+            bodies += [int(model.geom_bodyid[g])] * int(on.sum())
+    C = len(points)
+    n = nv + 4 * C
+    JE = np.empty((nv, 4 * C))  # generalised force of each edge's unit force
+    wrench = np.zeros((6, 4 * C))  # each edge's force and moment about the CoM
+    for c, (p, b) in enumerate(zip(points, bodies, strict=True)):
+        mujoco.mj_jac(model, data, jacp, None, p, b)
+        JE[:, 4 * c : 4 * c + 4] = jacp.T @ E
+        wrench[:3, 4 * c : 4 * c + 4] = E
+        wrench[3:, 4 * c : 4 * c + 4] = np.cross(p - com, E.T).T
+    # the support offset: where the simulated stance feet stand minus where the reference's do
+    # (horizontal); the balance and foot placement targets move with it, so the body keeps the
+    # reference's relation to its own feet (a first-order filter: no jump at a touchdown)
+    shift = [data.geom_xpos[soles[s_], :2] - ref.sole_pos[k, s_, :2]
+             for s_ in range(2) if ref.stance[k, s_] and soles[s_] in touching]  # fmt: skip
+    delta = scratch.setdefault("delta", np.zeros(3))
+    if shift:
+        a = min(1.0, 1.0 / (gains.anchor_tau * CONTROL_HZ))
+        delta[:2] += a * (gains.anchor * np.mean(shift, axis=0) - delta[:2])
+    rows, rhs, weights = [], [], []
+
+    def task(A, b, w):
+        rows.append(A)
+        rhs.append(b)
+        weights.append(np.broadcast_to(w, b.shape))
+
+    kj, dj = gains.joint_omega**2, 2 * gains.joint_omega
+    qr, vr, ar = ref.qpos[k], ref.qvel[k], ref.qacc[k]
+    A = np.zeros((nu, n))
+    A[:, 6:nv] = np.eye(nu)
+    task(
+        A,
+        ar[6:] + kj * (qr[7:] - data.qpos[7:]) + dj * (vr[6:] - data.qvel[6:]),
+        scratch["joint_w"],
+    )
+    kr, dr = gains.root_omega**2, 2 * gains.root_omega
+    rot = np.zeros(3)
+    mujoco.mju_subQuat(rot, qr[3:7], data.qpos[3:7])
+    A = np.zeros((3, n))
+    A[:, 3:6] = np.eye(3)
+    task(A, ar[3:6] + kr * rot + dr * (vr[3:6] - data.qvel[3:6]), gains.w_root)
+    if C:
+        mujoco.mj_subtreeVel(model, data)
+        kc, dc = gains.com_omega**2, 2 * gains.com_omega
+        a_com = (
+            ref.com_acc[k]
+            + kc * (ref.com[k] + delta - com)
+            + dc * (ref.com_vel[k] - data.subtree_linvel[1])
+        )
+        A = np.zeros((3, n))
+        A[:, nv:] = wrench[:3] / mass
+        task(A, a_com + [0.0, 0.0, G], gains.w_com)
+        kdot = ref.angmom_rate[k] + gains.momentum_damping * (
+            ref.angmom[k] - data.subtree_angmom[1]
+        )
+        A = np.zeros((3, n))
+        A[:, nv:] = wrench[3:] / mass
+        task(A, kdot / mass, gains.w_momentum)
+    kf, df = gains.foot_omega**2, 2 * gains.foot_omega
+    for side in range(2):
+        g = soles[side]
+        b = int(model.geom_bodyid[g])
+        p = data.geom_xpos[g]
+        mujoco.mj_jac(model, data, jacp, jacr, p, b)
+        J = np.vstack([jacp, jacr])
+        vel = J @ data.qvel
+        A = np.zeros((6, n))
+        A[:, :nv] = J
+        q_sim, q_ref, err = np.zeros(4), np.zeros(4), np.zeros(3)
+        mujoco.mju_mat2Quat(q_sim, data.geom_xmat[g])
+        mujoco.mju_mat2Quat(q_ref, ref.sole_mat[k, side].ravel())
+        mujoco.mju_subQuat(err, q_ref, q_sim)
+        err = data.geom_xmat[g].reshape(3, 3) @ err  # world frame
+        if ref.stance[k, side] and g in touching:  # stays where it is, flat on the floor
+            low = sole_corners(model, data, g)[:, 2].min()
+            ks, ds = gains.stance_omega**2, 2 * gains.stance_omega
+            lin = -ds * vel[:3] - ks * np.array([0.0, 0.0, low])
+            # its orientation follows the reference's sole (flat, or rolling heel to toe)
+            task(A, np.concatenate([lin, ks * err - ds * vel[3:]]), gains.w_stance)
+        else:  # swing, or a stance foot still in the air: to the reference's sole pose
+            target = ref.sole_pos[k, side] + delta
+            if gains.placement:  # foot placement relative to the body's own centre of mass
+                mujoco.mj_subtreeVel(model, data)
+                dv = (data.subtree_linvel[1] - ref.com_vel[k])[:2]
+                rel = com[:2] + ref.sole_pos[k, side, :2] - ref.com[k, :2] + gains.placement_v * dv
+                target = target.copy()
+                target[:2] = (1 - gains.placement) * target[:2] + gains.placement * rel
+            lin = ref.sole_acc[k, side] + kf * (target - p) + df * (ref.sole_vel[k, side] - vel[:3])
+            task(A, np.concatenate([lin, kf * err - df * vel[3:]]), gains.w_swing)
+    A = np.vstack(rows)
+    b = np.concatenate(rhs)
+    w = np.concatenate(weights)
+    Aw = A * w[:, None]
+    H = A.T @ Aw
+    f = -(Aw.T @ b)
+    H[np.arange(nv), np.arange(nv)] += gains.w_reg
+    H[np.arange(nv, n), np.arange(nv, n)] += gains.w_force
+    # constraints: bounds on lam (first n entries), then the base equations, then torque limits
+    Cm = np.zeros((6 + nu, n))
+    Cm[:, :nv] = M[: 6 + nu]
+    Cm[:, nv:] = -JE[: 6 + nu]
+    upper = np.concatenate([np.full(nv, BIG), np.full(4 * C, BIG), -h[:6], limit - h[6:]])
+    lower = np.concatenate([np.full(nv, -BIG), np.zeros(4 * C), -h[:6], -limit - h[6:]])
+    sense = np.zeros(n + 6 + nu, dtype=np.int32)
+    sense[n : n + 6] = 5  # equality
+    x, _, status, _ = daqp.solve(H, f, Cm, upper, lower, sense)
+    if status < 1:  # infeasible or not converged: the torques that keep the hinges passive
+        x = np.zeros(n)
+        x[:nv] = np.linalg.solve(M, -h)
+    qdd, lam = x[:nv], x[nv:]
+    if scratch.get("debug") is not None:
+        r = A @ x - b
+        k0, out = 0, []
+        for rr in rhs:
+            out.append((float(np.linalg.norm(rr)), float(np.linalg.norm(r[k0 : k0 + len(rr)]))))
+            k0 += len(rr)
+        scratch["debug"].append(out)
+        if C:
+            scratch["debug"].append(("com", a_com + [0, 0, G], wrench[:3] @ lam / mass, C, qdd[:3]))
+    tau = np.clip(M[6:] @ qdd + h[6:] - JE[6:] @ lam, -limit, limit)
+    forces = (E @ lam.reshape(C, 4).T).T if C else np.zeros((0, 3))
+    return QPResult(tau=tau, qdd=qdd, forces=forces, points=np.array(points).reshape(C, 3),
+                    status=int(status))  # fmt: skip
+
+
+def track_wholebody(
+    model,
+    ref_qpos: np.ndarray,
+    *,
+    gains: WholeBodyGains | None = None,
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
+    record_every: int = 4,
+) -> Tracking:
+    """Simulate ``model`` (``sim_model(..., actuators="motor")``) following ``ref_qpos`` (T, nq
+    at ``CONTROL_HZ``, floor at z = 0) with the whole-body QP (module docstring) and nothing
+    else: no assistance (the :class:`Tracking`'s assistance is zero), pushes the only external
+    forces. A weakening scales the torque limits (the QP's and the actuators'). After a fall
+    (``sim.simulate.falls``) the QP goes on tracking: whether the body gets up is its own doing.
+
+    Returns:
+        :class:`Tracking` with states at ticks ``0, record_every, ...``; ``actions`` are the
+        torques [N m] (the actuators' controls).
+    """
+    if model.actuator_biasprm[:, 1].any():
+        raise ValueError("track_wholebody needs torque actuators: sim_model(actuators='motor')")
+    gains = gains or WholeBodyGains()
+    T = ref_qpos.shape[0]
+    ref = wholebody_reference(model, ref_qpos)
+    fall_ref = fall_reference(model, ref_qpos)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = ref_qpos[0], ref.qvel[0]
+    mujoco.mj_forward(model, data)
+    floor = model.geom("floor").id
+    side = np.full(model.ngeom, -1)
+    for name in ("lfoot", "ltoes", "lsole", "ltoesole", "rfoot", "rtoes", "rsole", "rtoesole"):
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        if g >= 0:
+            side[g] = 0 if name.startswith("l") else 1
+    push_ids = [model.body(p.body).id for p in pushes]
+    F = (T + record_every - 1) // record_every
+    rec_q, rec_v = np.empty((F, model.nq)), np.empty((F, model.nv))
+    rec_u, rec_tau = np.empty((F, model.nu)), np.empty((F, model.nu))
+    rec_f, rec_p = np.zeros((F, 2, 3)), np.zeros(F)
+    fell, fall_frame = False, -1
+    deepest = deepest_self = 0.0
+    scratch: dict = {}
+    base_limit = model.actuator_ctrlrange[:, 1].copy()
+    with ActuatorEdits(model) as edits:
+        for k in range(T):
+            t = k / CONTROL_HZ
+            factor = weakening_factor(weakenings, t)
+            edits.scale(factor)
+            mujoco.mj_forward(model, data)
+            if not fell and has_fallen(model, data, fall_ref, k):
+                fell, fall_frame = True, min(F - 1, -(-k // record_every))
+            res = qp_tick(model, data, ref, k, gains, factor * base_limit, scratch)
+            data.ctrl[:] = res.tau
+            apply_pushes(data, pushes, push_ids, t)
+            i, r = divmod(k, record_every)
+            on_record = r == 0
+            n = data.ncon
+            if n:
+                on_floor = (data.contact.geom[:n] == floor).any(axis=1)
+                depth = -data.contact.dist[:n]
+                fd = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
+                sd = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
+                deepest, deepest_self = max(deepest, fd), max(deepest_self, sd)
+                if on_record:
+                    rec_p[i] = fd
+            if on_record:
+                rec_q[i], rec_v[i], rec_u[i] = data.qpos, data.qvel, data.ctrl
+            mujoco.mj_step(model, data)
+            if on_record:
+                rec_tau[i] = data.actuator_force
+                _foot_forces(model, data, floor, side, rec_f[i])
+            if gains.every_step:  # a QP before every physics step, the reference held
+                for _ in range(SUBSTEPS - 1):
+                    mujoco.mj_forward(model, data)
+                    data.ctrl[:] = qp_tick(
+                        model, data, ref, k, gains, factor * base_limit, scratch
+                    ).tau
+                    mujoco.mj_step(model, data)
+            else:
+                mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+    return Tracking(
+        qpos=rec_q, qvel=rec_v, assistance=np.zeros(F), assist_wrench=np.zeros((F, 6)),
+        fell=fell, ticks=T, penetration=deepest, self_penetration=deepest_self,
+        contact_penetration=rec_p,
+        unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
+        actions=rec_u, joint_torque=rec_tau, foot_force=rec_f, fall_frame=fall_frame,
+    )  # fmt: skip
