@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -79,135 +80,161 @@ def parse_asf(path: str | os.PathLike) -> Skeleton:
         MotionDataError: missing section, duplicate or unknown bone, bad numbers, hierarchy cycle...
     """
     path = str(path)
-    lines = _read_lines(path, MAX_ASF_BYTES)
-    sections: dict[str, int] = {}
-    units = {"length": 1.0, "angle": "deg"}
-    root = {"order": ROOT_CHANNELS, "axis": "XYZ", "orientation": np.zeros(3)}
-    raw_bones: list[dict] = []
-    hierarchy: list[tuple[int, list[str]]] = []
-    name = ""
-    section = None
-    bone: dict | None = None
-    pending_limits = 0
-
-    for ln, raw in enumerate(lines, start=1):
-        text = raw.split("#", 1)[0].strip()
-        if not text:
-            continue
-        if text.startswith(":"):
-            key, *rest = text.split()
-            section = key[1:].lower()
-            if section in sections and section in ("root", "bonedata", "hierarchy", "units"):
-                raise MotionDataError(path, ln, f"section ':{section}' appears twice")
-            sections[section] = ln
-            if section == "name" and rest:
-                name = rest[0]
-            if section == "bonedata" or section == "hierarchy":
-                if bone is not None:
-                    raise MotionDataError(path, ln, "bone block not closed with 'end'")
-            continue
-        tokens = text.split()
-        if section == "units":
-            if len(tokens) >= 2 and tokens[0] == "length":
-                value = floats(tokens[1:2], path, ln, "units length")[0]
-                lo, hi = UNITS_LENGTH_RANGE
-                if not lo <= value <= hi:
-                    raise MotionDataError(
-                        path,
-                        ln,
-                        f"units length {excerpt(tokens[1], quote=False)} outside [{lo:g}, {hi:g}]",
-                    )
-                units["length"] = value
-            elif len(tokens) >= 2 and tokens[0] == "angle":
-                unit = tokens[1].lower()
-                if unit not in ("deg", "rad"):
-                    raise MotionDataError(
-                        path, ln, f"angle unit {excerpt(tokens[1])}; expected deg or rad"
-                    )
-                units["angle"] = unit
-        elif section == "root":
-            key = tokens[0].lower()
-            if key == "order":
-                order = tuple(t.lower() for t in tokens[1:])
-                if sorted(order) != sorted(ROOT_CHANNELS):
-                    raise MotionDataError(
-                        path,
-                        ln,
-                        f"root order {excerpt(' '.join(tokens[1:]))}; expected TX TY TZ RX RY RZ",
-                    )
-                root["order"] = order
-            elif key == "axis":
-                root["axis"] = _axis_order(tokens[1:2], path, ln)
-            elif key == "orientation":
-                if len(tokens) != 4:
-                    raise MotionDataError(path, ln, "root orientation needs 3 values")
-                root["orientation"] = floats(
-                    tokens[1:], path, ln, "root orientation", _angle_bound(units)
-                )
-        elif section == "bonedata":
-            pending_limits, bone = _bone_line(
-                tokens, path, ln, bone, raw_bones, pending_limits, _angle_bound(units)
-            )
-        elif section == "hierarchy":
-            if tokens[0] in ("begin", "end"):
-                continue
-            hierarchy.append((ln, tokens))
-
-    for required in ("root", "bonedata", "hierarchy"):
-        if required not in sections:
-            raise MotionDataError(path, None, f"missing section ':{required}'")
-    if bone is not None:
-        raise MotionDataError(path, bone["line"], f"bone block {bone.get('name')!r} has no 'end'")
-    if not raw_bones:
-        raise MotionDataError(path, sections["bonedata"], "no bones in ':bonedata'")
-
-    to_m = INCH / units["length"]
-    in_deg = units["angle"] == "deg"
-    by_name = {b["name"]: b for b in raw_bones}
-    parent_of = _hierarchy_parents(hierarchy, by_name, path)
+    asf = _read_sections(_read_lines(path, MAX_ASF_BYTES), path)
+    to_m = INCH / asf.units["length"]
+    in_deg = asf.units["angle"] == "deg"
+    by_name = {b["name"]: b for b in asf.raw_bones}
+    parent_of = _hierarchy_parents(asf.hierarchy, by_name, path)
     order = _topological(parent_of, by_name, path)
-
-    bones = []
-    for bname in order:
-        b = by_name[bname]
-        d = b["direction"]
-        scale = np.abs(d).max()
-        if scale < 1e-300:
-            raise MotionDataError(path, b["line"], f"bone {bname!r} has a zero direction")
-        d = d / scale
-        norm = np.linalg.norm(d)
-        length = float(b["length"] * to_m)
-        if not length <= MAX_METRES:
-            raise MotionDataError(
-                path,
-                b["length_line"],
-                f"bone {bname!r} length {length:g} m exceeds {MAX_METRES:g} m",
-            )
-        axis = b["axis"] if in_deg else np.rad2deg(b["axis"])
-        limits = b["limits"] if in_deg else np.rad2deg(b["limits"])
-        bones.append(
-            Bone(
-                name=bname,
-                parent=parent_of[bname],
-                direction=d / norm,
-                length=length,
-                axis=axis,
-                axis_order=b["axis_order"],
-                dofs=b["dofs"],
-                limits=limits,
-                line=b["line"],
-            )
-        )
+    bones = [_bone(by_name[b], parent_of[b], to_m, in_deg, path) for b in order]
+    root = asf.root
     orientation = root["orientation"] if in_deg else np.rad2deg(root["orientation"])
     return Skeleton(
         path=path,
-        name=name,
+        name=asf.name,
         length_to_metres=to_m,
         angles_in_degrees=in_deg,
         root_order=root["order"],
         root_axis_order=root["axis"],
         root_orientation=orientation,
         bones=tuple(bones),
+    )
+
+
+@dataclass
+class _Sections:
+    """What an ASF file's sections say, as read line by line (values in the file's units)."""
+
+    sections: dict[str, int] = field(default_factory=dict)  # section -> its line
+    units: dict = field(default_factory=lambda: {"length": 1.0, "angle": "deg"})
+    root: dict = field(
+        default_factory=lambda: {"order": ROOT_CHANNELS, "axis": "XYZ", "orientation": np.zeros(3)}
+    )
+    raw_bones: list[dict] = field(default_factory=list)
+    hierarchy: list[tuple[int, list[str]]] = field(default_factory=list)
+    name: str = ""
+
+
+def _read_sections(lines: list[str], path: str) -> _Sections:
+    """Every line of the file read into its section; checks that the required sections are
+    there and every bone block is closed."""
+    asf = _Sections()
+    section = None
+    bone: dict | None = None
+    pending_limits = 0
+    for ln, raw in enumerate(lines, start=1):
+        text = raw.split("#", 1)[0].strip()
+        if not text:
+            continue
+        if text.startswith(":"):
+            section = _section_line(text, path, ln, asf, bone)
+            continue
+        tokens = text.split()
+        if section == "units":
+            _units_line(tokens, path, ln, asf.units)
+        elif section == "root":
+            _root_line(tokens, path, ln, asf.root, asf.units)
+        elif section == "bonedata":
+            pending_limits, bone = _bone_line(
+                tokens, path, ln, bone, asf.raw_bones, pending_limits, _angle_bound(asf.units)
+            )
+        elif section == "hierarchy":
+            if tokens[0] in ("begin", "end"):
+                continue
+            asf.hierarchy.append((ln, tokens))
+
+    for required in ("root", "bonedata", "hierarchy"):
+        if required not in asf.sections:
+            raise MotionDataError(path, None, f"missing section ':{required}'")
+    if bone is not None:
+        raise MotionDataError(path, bone["line"], f"bone block {bone.get('name')!r} has no 'end'")
+    if not asf.raw_bones:
+        raise MotionDataError(path, asf.sections["bonedata"], "no bones in ':bonedata'")
+    return asf
+
+
+def _section_line(text: str, path: str, ln: int, asf: _Sections, bone: dict | None) -> str:
+    """A ``:section`` line: records where the section starts; returns its name."""
+    key, *rest = text.split()
+    section = key[1:].lower()
+    if section in asf.sections and section in ("root", "bonedata", "hierarchy", "units"):
+        raise MotionDataError(path, ln, f"section ':{section}' appears twice")
+    asf.sections[section] = ln
+    if section == "name" and rest:
+        asf.name = rest[0]
+    if section == "bonedata" or section == "hierarchy":
+        if bone is not None:
+            raise MotionDataError(path, ln, "bone block not closed with 'end'")
+    return section
+
+
+def _units_line(tokens: list[str], path: str, ln: int, units: dict) -> None:
+    """One line of ``:units`` (``length L`` or ``angle deg|rad``; others ignored)."""
+    if len(tokens) >= 2 and tokens[0] == "length":
+        value = floats(tokens[1:2], path, ln, "units length")[0]
+        lo, hi = UNITS_LENGTH_RANGE
+        if not lo <= value <= hi:
+            raise MotionDataError(
+                path,
+                ln,
+                f"units length {excerpt(tokens[1], quote=False)} outside [{lo:g}, {hi:g}]",
+            )
+        units["length"] = value
+    elif len(tokens) >= 2 and tokens[0] == "angle":
+        unit = tokens[1].lower()
+        if unit not in ("deg", "rad"):
+            raise MotionDataError(path, ln, f"angle unit {excerpt(tokens[1])}; expected deg or rad")
+        units["angle"] = unit
+
+
+def _root_line(tokens: list[str], path: str, ln: int, root: dict, units: dict) -> None:
+    """One line of ``:root`` (``order``, ``axis``, ``orientation``; others ignored)."""
+    key = tokens[0].lower()
+    if key == "order":
+        order = tuple(t.lower() for t in tokens[1:])
+        if sorted(order) != sorted(ROOT_CHANNELS):
+            raise MotionDataError(
+                path,
+                ln,
+                f"root order {excerpt(' '.join(tokens[1:]))}; expected TX TY TZ RX RY RZ",
+            )
+        root["order"] = order
+    elif key == "axis":
+        root["axis"] = _axis_order(tokens[1:2], path, ln)
+    elif key == "orientation":
+        if len(tokens) != 4:
+            raise MotionDataError(path, ln, "root orientation needs 3 values")
+        root["orientation"] = floats(tokens[1:], path, ln, "root orientation", _angle_bound(units))
+
+
+def _bone(b: dict, parent: str, to_m: float, in_deg: bool, path: str) -> Bone:
+    """The :class:`Bone` of a bone block as read (lengths times ``to_m``, angles to degrees)."""
+    bname = b["name"]
+    d = b["direction"]
+    scale = np.abs(d).max()
+    if scale < 1e-300:
+        raise MotionDataError(path, b["line"], f"bone {bname!r} has a zero direction")
+    d = d / scale
+    norm = np.linalg.norm(d)
+    length = float(b["length"] * to_m)
+    if not length <= MAX_METRES:
+        raise MotionDataError(
+            path,
+            b["length_line"],
+            f"bone {bname!r} length {length:g} m exceeds {MAX_METRES:g} m",
+        )
+    axis = b["axis"] if in_deg else np.rad2deg(b["axis"])
+    limits = b["limits"] if in_deg else np.rad2deg(b["limits"])
+    return Bone(
+        name=bname,
+        parent=parent,
+        direction=d / norm,
+        length=length,
+        axis=axis,
+        axis_order=b["axis_order"],
+        dofs=b["dofs"],
+        limits=limits,
+        line=b["line"],
     )
 
 
