@@ -90,7 +90,8 @@ def test_euler_flips_in_an_amc_file_change_no_point_and_no_velocity(cmu_dir, tmp
     and whole turns added (every bone) ingests to the same qpos, points and velocities."""
     from dataclasses import replace
 
-    from sim.acclaim.reader import parse_amc, parse_asf
+    from sim.acclaim.amc import parse_amc
+    from sim.acclaim.asf import parse_asf
     from sim.acclaim.writer import write_amc
     from sim.model.rotations import euler_twin
     from sim.motion.ingest import load_motion

@@ -13,7 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc
+from sim.acclaim.amc import parse_amc
 from sim.errors import MotionDataError, UnknownNameError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents

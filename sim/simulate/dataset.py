@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.batch import iter_batch, ray_session, run_batch
 from sim.errors import MotionDataError, UnknownNameError
 from sim.files import write_atomic
