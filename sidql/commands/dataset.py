@@ -24,7 +24,7 @@ DESCRIPTION = (
 
 def register(p) -> None:
     add_data(p, old_positional=True)
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_skeleton(p)
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
     add_workers(p, "the trials")

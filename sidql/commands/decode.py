@@ -13,9 +13,11 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("stream", help="input .sidq file")
-    p.add_argument("--out", required=True, help="output .npz or .amc")
-    p.add_argument("--asf", help="source skeleton (needed for .amc output)")
+    p.add_argument("stream", metavar="F.sidq", help="input stream")
+    p.add_argument(
+        "--out", required=True, metavar="OUT.npz|OUT.amc", help="output points or angles"
+    )
+    p.add_argument("--asf", metavar="ASF", help="source skeleton (needed for .amc output)")
     p.set_defaults(func=run)
 
 

@@ -37,7 +37,7 @@ DESCRIPTION = (
 
 def register(p) -> None:
     add_data(p, "folder of CMU trials holding 02/02.asf and 02/02_01.amc")
-    p.add_argument("--out", default="out/demo", help="output folder")
+    p.add_argument("--out", default="out/demo", metavar="DIR", help="output folder")
     add_keyframes(p, "keyframes W of the report's clip", default=10)
     add_methods(p, None, "keyframe methods (default: every registered one)")
     p.add_argument("--no-report", action="store_true", help="stop after ingesting")

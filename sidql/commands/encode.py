@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
-from sidql.commands.usage import cmu_rate, positive
+from sidql.commands.usage import positive
 
 DESCRIPTION = (
     "Chart the trial's 22 bones and root at --fps, choose keyframes over the whole trial by "
@@ -19,15 +19,21 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
-    p.add_argument("--out", required=True, help="output .sidq file")
+    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    p.add_argument("--out", required=True, metavar="F.sidq", help="output stream")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument(
-        "--rate", type=positive(float), help="byte budget [bytes per second], whole file"
+        "--rate",
+        type=positive(float),
+        metavar="B/S",
+        help="byte budget [bytes per second], whole file",
     )
     target.add_argument(
-        "--max-q", type=positive(float), help="largest mean angle error Q (eq. 18) [rad]"
+        "--max-q",
+        type=positive(float),
+        metavar="Q",
+        help="largest mean angle error Q (eq. 18) [rad]",
     )
     target.add_argument(
         "--max-error",
@@ -45,10 +51,13 @@ def register(p) -> None:
         "--latency",
         type=int,
         default=0,
+        metavar="L",
         help="look-ahead in frames for live streaming (0: offline, the whole trial)",
     )
-    p.add_argument("--max-gap", type=int, default=DEFAULT_MAX_GAP, help="largest keyframe gap G")
-    p.add_argument("--fps", type=cmu_rate, default=30.0, help="stream rate (divides 120)")
+    p.add_argument(
+        "--max-gap", type=int, default=DEFAULT_MAX_GAP, metavar="G", help="largest keyframe gap G"
+    )
+    p.add_argument("--fps", type=positive(float), default=30.0, help="stream rate (divides 120)")
     p.set_defaults(func=run, parser=p)
 
 

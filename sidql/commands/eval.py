@@ -54,9 +54,12 @@ def register(p) -> None:
     )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of the random method")
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
-    p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
+    p.add_argument("--length", type=positive(int), default=60, metavar="N", help="frames per clip")
     add_skeleton(p)
-    p.add_argument("--out", default="results.json", help="JSON of results and per-clip rows")
+    p.add_argument(
+        "--out", default="results.json", metavar="F.json",
+        help="JSON of results and per-clip rows",
+    )  # fmt: skip
     p.add_argument(
         "--rate-plot",
         default=None,

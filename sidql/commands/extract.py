@@ -27,15 +27,15 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
     add_keyframes(p, "keyframes W per clip (several: each in turn)", many=True)
     add_methods(p, ["optimal"], old_option="--method")
     p.add_argument("--seed", type=int, default=0, help="seed of randomised methods")
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
-    p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
+    p.add_argument("--length", type=positive(int), default=60, metavar="N", help="frames per clip")
     add_skeleton(p)
-    p.add_argument("--out", default=None, help="write the keyframes here as JSON")
+    p.add_argument("--out", default=None, metavar="F.json", help="write the keyframes here as JSON")
     p.set_defaults(func=run)
 
 

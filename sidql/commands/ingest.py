@@ -15,15 +15,15 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
     add_skeleton(p)
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
     p.add_argument(
-        "--source-fps", type=positive(float), default=120.0,
+        "--source-fps", type=positive(float), default=120.0, metavar="FPS",
         help="frame rate of the AMC file (a whole multiple of --fps)",
     )  # fmt: skip
-    p.add_argument("--out", required=True, help="output .npz")
+    p.add_argument("--out", required=True, metavar="F.npz", help="output clip file")
     p.set_defaults(func=run)
 
 

@@ -24,18 +24,26 @@ from sim.errors import SidqlError
 
 #: Every command, in the order ``sidql --help`` lists them, with its one-line summary.
 COMMANDS = {
-    "ingest": "read one CMU trial (ASF + AMC) into a clip file (.npz) of positions and true "
-    "velocities",
-    "dataset": "ingest every trial under a folder of CMU files, in parallel, with an index",
+    "ingest": "read one CMU trial (ASF + AMC) into a clip file (.npz): positions, true "
+    "velocities, qpos, qvel",
+    "dataset": "ingest every trial under a folder in parallel, with an index; bad files skipped "
+    "and listed",
     "demo": "ingest CMU trial 02_01 (without data: motion generated on the humanoid) and report "
     "its first clip: every method, replayed, checked and rendered (what ./run.sh demo runs)",
-    "report": "replay, check and render reconstructions of one trial as an HTML report",
-    "eval": "evaluate keyframe methods on every clip of a folder of trials (the paper's Table 3)",
-    "extract": "choose the keyframes of every 60-frame clip of one trial, per method and W",
-    "train": "train the DQN keyframe policy (held-out subjects, CSV log, learning curve)",
-    "encode": "encode one CMU trial (ASF + AMC) into a .sidq keyframe stream",
+    "report": "replay, check (IK, contacts, dynamics; --simulate: forward simulation) and render "
+    "reconstructions of one trial into one HTML page; .sidq streams are reported like methods",
+    "eval": "the paper's Table 3: every method on every 60-frame clip of a folder of trials; "
+    "--physics adds contacts and dynamics with noise floors and paired comparisons, --simulate "
+    "forward simulation without assistance",
+    "extract": "choose the keyframes of every 60-frame clip of one trial, per method and W, with "
+    "their Q",
+    "train": "train the DQN keyframe policy, split by subject: held-out evaluation, CSV log, "
+    "learning curve, checkpoints",
+    "encode": "encode a whole trial into a .sidq keyframe stream at a byte budget, a joint "
+    "position error or an angle error",
     "decode": "decode a .sidq stream to points (.npz) or the source skeleton's angles (.amc)",
-    "synth": "simulate clips (tracking with pushes, falls, procedural) in the dataset format",
+    "synth": "simulate clips (tracking with perturbations, falls, procedural) in the dataset "
+    "format with learning labels; stored as they arrive, resumable",
 }
 
 #: The module of each command (kept for callers that list them).

@@ -28,17 +28,19 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", help="the subject's skeleton (.asf)")
-    p.add_argument("amc", help="one of its motions (.amc)")
+    p.add_argument("asf", metavar="ASF", help="the subject's skeleton (.asf)")
+    p.add_argument("amc", metavar="AMC", help="one of its motions (.amc)")
     add_keyframes(p, "keyframes W per clip", default=10)
     add_methods(
         p, list(DEFAULT_METHODS),
         "methods, and/or .sidq files encoded from this trial (sidql encode): a decoded "
         "stream is checked and rendered like a method",
     )  # fmt: skip
-    p.add_argument("--clips", type=int, nargs="+", default=[0], help="60-frame clip numbers")
+    p.add_argument(
+        "--clips", type=int, nargs="+", default=[0], metavar="N", help="60-frame clip numbers"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of random methods")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--no-video", action="store_true", help="skip the mp4 videos (faster)")
     p.add_argument(
         "--layout", choices=("overlay", "side"), default="overlay",

@@ -30,16 +30,19 @@ DESCRIPTION = (
 def register(p) -> None:
     add_data(p, "folder of CMU trials to track (kinds other than procedural)", old_option="--from")
     p.add_argument("--n", type=positive(int), required=True, help="number of clips")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
     p.add_argument(
         "--kinds",
         nargs="+",
         choices=ALL_KINDS,
         default=list(KINDS),
-        help="clip kinds (follow: unperturbed tracking, the baseline)",
+        metavar="KIND",
+        help=f"clip kinds, of {', '.join(ALL_KINDS)} (follow: unperturbed tracking, the baseline)",
     )
-    p.add_argument("--seconds", type=positive(float), default=4.0, help="clip length [s]")
+    p.add_argument(
+        "--seconds", type=positive(float), default=4.0, metavar="S", help="clip length [s]"
+    )
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
     add_workers(p, "the simulations")
     add_ray(p, "the simulations")

@@ -32,8 +32,8 @@ def register(p) -> None:
     docs = {k: v.replace("%", "%%") for k, v in field_docs().items()}  # help is %-formatted
     add_data(p)
     add_keyframes(p, docs["keyframes"], default=list(d.keyframes), many=True)
-    p.add_argument("--steps", type=int, default=d.steps, help=docs["steps"])
-    p.add_argument("--out", default=d.out, help=docs["out"])
+    p.add_argument("--steps", type=int, default=d.steps, metavar="N", help=docs["steps"])
+    p.add_argument("--out", default=d.out, metavar="F.pt", help=docs["out"])
     p.add_argument("--resume", action="store_true", help=docs["resume"])
     p.add_argument("--seed", type=int, default=d.seed, help=docs["seed"])
     add_test_subjects(p, docs["test_subjects"])
