@@ -30,7 +30,7 @@ import numpy as np
 from sim.acclaim.amc import parse_amc
 from sim.acclaim.asf import parse_asf
 from sim.batch import iter_batch, ray_session, run_batch
-from sim.errors import MotionDataError, UnknownNameError
+from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.files import write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
@@ -239,7 +239,7 @@ def _index_entry(task, name, path, out_dir, record) -> dict:
 
 def _read_journal(path: Path, params: dict) -> dict[int, dict]:
     """Finished tasks of the run journalled at ``path`` (task index -> its entry); a kept clip
-    whose file is gone counts as not done. Raises ``ValueError`` if the run had other
+    whose file is gone counts as not done. Raises :class:`~sim.errors.UsageError` if the run had other
     parameters than ``params`` (the number of clips may differ: the plan is the same)."""
     if not path.is_file():
         return {}
@@ -249,7 +249,7 @@ def _read_journal(path: Path, params: dict) -> dict[int, dict]:
         head = json.loads(next(lines, "{}") or "{}").get("params")
         same = lambda a: {k: v for k, v in (a or {}).items() if k != "n"}  # noqa: E731
         if same(head) != same(params):
-            raise ValueError(f"{path}: a run with other parameters ({head}); cannot resume")
+            raise UsageError(f"{path}: a run with other parameters ({head}); cannot resume")
         for line in lines:
             try:
                 e = json.loads(line)
