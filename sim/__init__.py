@@ -37,7 +37,7 @@ _API = {
     "render_frames": "sim.replay.render",
     "write_video": "sim.replay.render",
     "estimate_ground": "sim.physics.ground",
-    "PhysicsJob": "sim.physics.analysis",
+    "PhysicsJob": "sim.analysis.job",
     "synthesize": "sim.simulate.dataset",
     "run_batch": "sim.batch",
 }

@@ -45,9 +45,9 @@ from sidql.evaluation.plots import metrics_plot, summary_plot
 from sidql.evaluation.validation import ClipValidation, MethodRun, checks_document
 from sim.files import write_atomic
 from sim.physics.contacts import foot_states
+from sim.physics.foot_state import FootState
 from sim.physics.ground import estimate_ground
 from sim.physics.noise import NOISE_MM
-from sim.replay.foot_state import FootState
 from sim.replay.render import (
     DEFAULT_STYLE,
     RenderStyle,

@@ -5,7 +5,7 @@ over it (``layout="overlay"``) or beside it (``layout="side"``); on keyframes a 
 border say so. The ghost's capsules are thinner than the original's (:data:`GHOST_RADIUS_SCALE`), so
 where the two coincide the ghost lies inside the original and the two surfaces never fight for the
 same pixels (no stripes that look like error): only where the reconstruction departs does orange show.
-Feet (:class:`sim.replay.foot_state.FootState`): the original's foot capsules turn teal and a teal
+Feet (:class:`sim.physics.foot_state.FootState`): the original's foot capsules turn teal and a teal
 footprint lies on the ground while a foot point is in contact; the reconstruction's foot point is
 marked by a blue ball when it floats, red when it sinks, magenta when it skates. A soft disc under
 the body stands in for a shadow (real shadow maps cost most of a frame in software). The camera
@@ -33,9 +33,9 @@ from tqdm import tqdm
 
 from sim.errors import UnknownNameError
 from sim.files import write_atomic
+from sim.model.capsules import bone_poses, bones_of, scene_xml
 from sim.motion.points import PointMotion
-from sim.replay.capsules import bone_poses, bones_of, scene_xml
-from sim.replay.foot_state import FootState
+from sim.physics.foot_state import FootState
 
 ORIGINAL_RGBA = (0.35, 0.45, 0.65, 1.0)
 GHOST_RGBA = (1.0, 0.55, 0.15, 0.5)
@@ -158,7 +158,7 @@ class SkeletonRenderer:
             key: a keyframe (the ghost is tinted green where it shows).
             feet: ``None`` or ``(points (F,), state)``: foot point names and a mapping of
                 ``"contact"``, ``"float"``, ``"sink"``, ``"skate"`` to (F,) bools for this frame
-                (one row of a :class:`~sim.replay.foot_state.FootState`).
+                (one row of a :class:`~sim.physics.foot_state.FootState`).
         Returns:
             (H, W, 3) uint8 image.
         """
