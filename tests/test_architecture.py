@@ -253,7 +253,6 @@ OVERSIZED_ELSEWHERE = {
     "sim/model/humanoid.py:build_mjcf",
     "sim/physics/contacts.py",
     "sim/physics/ground.py:estimate_ground",
-    "sim/replay/render.py",
     "sidql/codec/encode.py",
     "sidql/codec/encode.py:_encode_one",
     "sidql/codec/encode.py:_encode_position",
