@@ -2,7 +2,8 @@
 
 * :class:`BadFileError`: a file that cannot be used; names the file, the line (when known) and
   the problem. Its kinds: :class:`MotionDataError` (ASF/AMC files, clips, ``.sidq`` streams,
-  dataset indexes) and :class:`ModelFileError` (policy and checkpoint files).
+  dataset indexes), :class:`ModelFileError` (policy and checkpoint files) and
+  :class:`OutputError` (an output that cannot go where it was asked for).
 * :class:`UnmetTargetError`: a request that cannot be met by any answer (e.g. a byte rate too low
   for the trial).
 * :class:`UnknownNameError`: an unknown name of a method, reconstruction, kind, ...; the message
@@ -55,6 +56,12 @@ class ModelFileError(BadFileError):
     """A policy or checkpoint file that is refused: not a plain tensor file (e.g. a pickle that
     would construct arbitrary objects), unreadable, of another format or version, or of other
     settings."""
+
+
+class OutputError(BadFileError):
+    """An output that cannot be written where it was asked for: below the folder the user named
+    there is a symbolic link, or the target is a directory, FIFO, device or socket (outputs only
+    ever replace regular files), or a clip its own reader would refuse."""
 
 
 class UnmetTargetError(SidqlError, ValueError):

@@ -20,7 +20,8 @@ import numpy as np
 from numpy.lib import format as npformat
 
 from sim.errors import MotionDataError, UnknownNameError
-from sim.files import MAX_NPZ_BYTES, check_zip, excerpt, open_regular, write_atomic
+from sim.files import MAX_NPZ_BYTES, excerpt, open_regular, write_atomic
+from sim.zipcheck import check_zip
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ _ARRAY_KEYS = ("parents", "positions", "velocities", "qpos", "qvel", "rotations"
 _OPTIONAL_KEYS = ("angular_velocities", "source_velocities", "accelerations", "derivative_noise")
 
 
-def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> Path:
+def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None, *, root=None) -> Path:
     """Write ``clip`` to ``path`` atomically (temporary file in the same folder, then rename).
 
     Keys: names, parents, positions, velocities, qpos, qvel, rotations, fps, source, start_frame,
@@ -164,7 +165,6 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> 
     :func:`load_extra` reads them).
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {k: getattr(clip, k) for k in _ARRAY_KEYS}
     for name in _OPTIONAL_KEYS:
         if getattr(clip, name) is not None:
@@ -181,7 +181,7 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> 
     if clash:
         raise ValueError(f"extra arrays {sorted(clash)} would overwrite clip keys")
     payload.update(extra or {})
-    write_atomic(path, lambda f: np.savez_compressed(f, **payload))
+    write_atomic(path, lambda f: np.savez_compressed(f, **payload), root=root)
     return path
 
 
@@ -205,7 +205,7 @@ _KINDS = {"f": "floating-point", "i": "integer", "u": "unsigned integer", "b": "
 
 class NpzReader:
     """A ``.npz`` file opened for bounded reading: a regular file of at most ``max_bytes``, its
-    zip directory checked (:func:`sim.files.check_zip`), every member an ``.npy`` array whose
+    zip directory checked (:func:`sim.zipcheck.check_zip`), every member an ``.npy`` array whose
     header (shape, dtype) is read and checked against its member's size before any array is
     read. Arrays of numbers, booleans and text only (never objects: nothing is unpickled).
 

@@ -185,7 +185,7 @@ def _ingest_one(
         raise MotionDataError(str(trial.amc), None, f"unsafe output path {rel}")
     if write:
         with WRITE_LOCK:  # a worker whose parent died exits only between writes
-            save_npz(clip, out)
+            save_npz(clip, out, root=out_dir)
     record = {
         "subject": trial.subject,
         "trial": trial.name,
@@ -234,7 +234,7 @@ def ingest_directory(
     for t, o in zip(trials, outcomes, strict=True):
         if o.ok and not here:
             record, clip = o.result
-            save_npz(clip, out_dir / record["file"])
+            save_npz(clip, out_dir / record["file"], root=out_dir)
             summary.written.append(_relative(record, t, root, out_dir, skeletons))
         elif o.ok:
             summary.written.append(_relative(o.result, t, root, out_dir, skeletons))
@@ -250,7 +250,11 @@ def ingest_directory(
         "trials": summary.written,
         "skipped": summary.skipped,
     }
-    write_atomic(out_dir / "index.json", lambda f: f.write(json.dumps(index, indent=2).encode()))
+    write_atomic(
+        out_dir / "index.json",
+        lambda f: f.write(json.dumps(index, indent=2).encode()),
+        root=out_dir,
+    )
     return summary
 
 
@@ -265,7 +269,7 @@ def _relative(record: dict, trial: Trial, root, out_dir: Path, skeletons: dict) 
         rel = PurePosixPath(record["file"]).parent / (
             f"skeleton-{hashlib.sha1(data).hexdigest()[:8]}.asf"
         )
-        write_atomic(out_dir / rel, lambda f: f.write(data))
+        write_atomic(out_dir / rel, lambda f: f.write(data), root=out_dir)
         skeletons[key] = str(rel)
     try:
         amc = Path(trial.amc).relative_to(root).as_posix()
