@@ -1,8 +1,6 @@
 """Outputs written only inside the folder the user named, whole or not at all, and checked inputs
-(regular files only, of bounded size, read without blocking on a FIFO or device).
-
-Pure standard library (no numpy, no MuJoCo), so every room of ``sim`` and ``sidql`` can write its
-outputs through it.
+(regular files only, of bounded size, read without blocking on a FIFO or device). Pure standard
+library, so every room of ``sim`` and ``sidql`` writes through it.
 
 The one writer: every file the project writes goes through :func:`write_atomic` (or, for a file
 another program writes, :func:`written_by`; for the synth journal, :func:`open_append`). Each
@@ -54,8 +52,8 @@ def _describe(mode: int) -> str:
 
 
 def _open_folder(root: Path, parts: tuple[str, ...], *, create: bool) -> int | None:
-    """A descriptor of the folder ``root/parts...``, walked from ``root``'s descriptor one name at
-    a time without following links; missing folders are made (``create``) or give None."""
+    """A descriptor of ``root/parts...``, walked from ``root`` one name at a time without
+    following links; missing folders are made (``create``) or give None."""
     if create:
         try:
             os.makedirs(root, exist_ok=True)  # the folder the user named: their path as typed
@@ -272,6 +270,13 @@ def open_append(path: str | os.PathLike, *, root: str | os.PathLike | None = Non
     return os.fdopen(fd, "ab")
 
 
+def make_folders(root: str | os.PathLike, folders) -> None:
+    """Make each folder of ``folders`` (relative paths) below ``root`` as the writer walks to it
+    (no link followed): a batch checks its output folders before any work."""
+    for rel in folders:
+        os.close(_open_folder(Path(root), Path(rel).parts, create=True))
+
+
 def remove_written(path: str | os.PathLike, *, root: str | os.PathLike) -> bool:
     """Delete ``path``, a file the caller proves it wrote (its name is one the caller itself
     gives), if it is a regular file reached from ``root`` through no link; anything else
@@ -297,9 +302,7 @@ def remove_written(path: str | os.PathLike, *, root: str | os.PathLike) -> bool:
 def open_inside(path: str | os.PathLike, max_bytes: int, *, root: str | os.PathLike):
     """Open ``path``, a file of the run's own state below ``root`` (a journal), for binary
     reading as :func:`open_regular` does, reached through no link; None if it is absent.
-
-    Raises:
-        MotionDataError: a link on the way, not a regular file, or over ``max_bytes``."""
+    A link on the way, no regular file or one over ``max_bytes``: :class:`MotionDataError`."""
     root_dir, folders, name = _parts(Path(path), Path(root))
     try:
         dfd = _open_folder(root_dir, folders, create=False)
@@ -324,8 +327,7 @@ def open_inside(path: str | os.PathLike, max_bytes: int, *, root: str | os.PathL
 
 
 def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
+    os.umask(mask := os.umask(0))
     return mask
 
 

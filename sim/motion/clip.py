@@ -371,6 +371,9 @@ def load_npz(path: str | os.PathLike) -> Clip:
     fps, source_fps = float(a["fps"]), float(a["source_fps"])
     if not (0 < fps <= 1e4 and 0 < source_fps <= 1e4):
         raise MotionDataError(path, None, f"frame rates {fps:g}, {source_fps:g} out of (0, 1e4]")
+    for key in ("names", "joint_names"):  # printed in messages and pages: printable only
+        if not all(str(n).isprintable() for n in a[key]):
+            raise MotionDataError(path, None, f"{key}: a name that cannot be printed")
     start = int(a["start_frame"])
     if not 0 <= start <= 1 << 40:
         raise MotionDataError(path, None, f"start_frame {start} out of range")
@@ -379,7 +382,7 @@ def load_npz(path: str | os.PathLike) -> Clip:
             names=tuple(str(n) for n in a["names"]),
             joint_names=tuple(str(n) for n in a["joint_names"]),
             fps=fps,
-            source=str(a["source"]),
+            source="".join(ch if ch.isprintable() else "?" for ch in str(a["source"])),
             start_frame=start,
             source_fps=source_fps,
             **{k: a.get(k) for k in _OPTIONAL_KEYS},
