@@ -79,10 +79,17 @@ class UnknownNameError(SidqlError, KeyError, ValueError):
         known: the valid names, in their order.
     """
 
+    MAX_KNOWN = 300  # characters of the list of valid names
+
     def __init__(self, what: str, name, known: Iterable[str]):
         self.what, self.name, self.known = what, name, tuple(str(k) for k in known)
         shown = repr(name) if len(repr(name)) <= 200 else repr(name)[:200] + "..."
-        super().__init__(f"unknown {what} {shown}; known: {', '.join(self.known) or 'none'}")
+        listed = ", ".join(self.known) or "none"
+        if len(listed) > self.MAX_KNOWN:  # a 1,000-bone skeleton: the first names and a count
+            listed = (
+                listed[: self.MAX_KNOWN].rsplit(", ", 1)[0] + f", ... ({len(self.known)} in all)"
+            )
+        super().__init__(f"unknown {what} {shown}; known: {listed}")
 
     def __str__(self) -> str:  # KeyError would print the message quoted
         return str(self.args[0])

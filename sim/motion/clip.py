@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.lib import format as npformat
 
-from sim.errors import MotionDataError, UnknownNameError
+from sim.errors import MotionDataError, OutputError, UnknownNameError
 from sim.files import MAX_NPZ_BYTES, excerpt, open_regular, write_atomic
 from sim.zipcheck import check_zip
 
@@ -181,8 +181,29 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None, *, 
     if clash:
         raise ValueError(f"extra arrays {sorted(clash)} would overwrite clip keys")
     payload.update(extra or {})
-    write_atomic(path, lambda f: np.savez_compressed(f, **payload), root=root)
+    T, J = clip.positions.shape[:2]
+    for what, n, limit in (("frames", T, MAX_CLIP_FRAMES), ("points", J, MAX_POINTS),
+                           ("coordinates", max(clip.qpos.shape[1], clip.qvel.shape[1]),
+                            MAX_COORDINATES)):  # fmt: skip
+        if n > limit:  # the writer refuses what its reader (load_npz) would refuse
+            raise OutputError(str(path), None, f"a clip of {n:,} {what}; its reader takes at "
+                              f"most {limit:,}")  # fmt: skip
+    write_atomic(path, lambda f: _write_npz(f, payload, str(path)), root=root)
     return path
+
+
+def _write_npz(f, payload: dict, path: str) -> None:
+    """The arrays compressed, or stored where compression would inflate more than the reader
+    allows (:class:`NpzReader`: a clip of constant frames compresses ~1000x)."""
+    np.savez_compressed(f, **payload)
+    inflated = sum(np.asarray(v).nbytes + 256 for v in payload.values())
+    if inflated > min(MAX_NPZ_INFLATED, max(NPZ_INFLATION_FLOOR, NPZ_INFLATION * f.tell())):
+        f.seek(0)
+        f.truncate()
+        np.savez(f, **payload)
+    if f.tell() > MAX_NPZ_BYTES or inflated > MAX_NPZ_INFLATED:
+        raise OutputError(path, None, f"a clip file of {inflated:,} bytes of arrays; its reader "
+                          f"takes at most {min(MAX_NPZ_BYTES, MAX_NPZ_INFLATED):,}")  # fmt: skip
 
 
 #: Stated limits of a clip file (:func:`load_npz`), checked on the arrays' headers before any
