@@ -8,6 +8,11 @@
   for the trial).
 * :class:`UnknownNameError`: an unknown name of a method, reconstruction, kind, ...; the message
   lists the valid ones.
+* :class:`AllFailedError`: a batch job whose every item failed on bad input (each one listed);
+  a job that keeps any good result lists the bad items and does not raise.
+* :class:`UsageError`: an argument value outside what a function or command accepts (a keyframe
+  count W out of range, frame rates that do not divide); the message names the argument, what is
+  valid and the value given.
 
 The command line prints any :class:`SidqlError` as one line and exits 2; a batch job lists the
 item it failed on and keeps every good result. Errors that are not ``SidqlError`` are bugs (or
@@ -96,6 +101,17 @@ class UnknownNameError(SidqlError, KeyError, ValueError):
 
     def __reduce__(self):
         return (type(self), (self.what, self.name, self.known))
+
+
+class AllFailedError(SidqlError):
+    """A batch job whose every item failed on bad input: nothing to keep. The message lists each
+    item and its error (a job that keeps any good result lists the bad items and goes on)."""
+
+
+class UsageError(SidqlError, ValueError):
+    """An argument value a function or command does not accept (e.g. W outside [2, N], an output
+    rate that does not divide the source rate); the message names the argument, what would be
+    valid and the value given. A ``ValueError`` too, as for any bad argument value."""
 
 
 class MotionDataWarning(UserWarning):

@@ -22,7 +22,7 @@ from sidql.keyframes.spherical import (
     positions_from_chart,
     split_channels,
 )
-from sim.acclaim.reader import parse_asf
+from sim.acclaim.asf import parse_asf
 from sim.acclaim.writer import write_amc
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip, save_npz

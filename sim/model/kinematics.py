@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.acclaim.reader import Skeleton
+from sim.acclaim.records import Skeleton
 
 
 def point_names(skeleton: Skeleton) -> tuple[str, ...]:

@@ -13,8 +13,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc
-from sim.errors import MotionDataError, UnknownNameError
+from sim.acclaim.amc import parse_amc
+from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
@@ -43,12 +43,19 @@ ARRAY_BYTES_FLOOR = 256 << 20
 
 
 def resample_step(source_fps: float, fps: float) -> int:
-    """Frames of the source per output frame; the ratio must be a whole number."""
-    if fps <= 0 or source_fps <= 0:
-        raise ValueError(f"frame rates must be positive (source {source_fps}, output {fps})")
+    """Frames of the source per output frame; the ratio must be a whole number.
+
+    Raises:
+        UsageError: a rate that is not positive, or an output rate that does not divide the
+            source rate by a whole number.
+    """
+    if not (0 < fps < np.inf and 0 < source_fps < np.inf):
+        raise UsageError(
+            f"frame rates must be positive and finite (source {source_fps}, output {fps})"
+        )
     step = source_fps / fps
     if abs(step - round(step)) > 1e-9 or round(step) < 1:
-        raise ValueError(
+        raise UsageError(
             f"output rate {fps} fps must divide the source rate {source_fps} fps by a whole number"
         )
     return int(round(step))

@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.batch import iter_batch, ray_session, run_batch
 from sim.errors import MotionDataError, UnknownNameError
 from sim.files import remove_written, write_atomic
@@ -153,7 +154,7 @@ def synthesize(
     (also in ``index.json``).
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
-    another ``n``, else a ``ValueError``); its finished tasks are not simulated again.
+    another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
     """
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,

@@ -21,7 +21,7 @@ import math
 import os
 from pathlib import Path, PurePosixPath
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.files import excerpt, open_append, open_inside
 from sim.motion.clip import MAX_CLIP_FRAMES
 from sim.simulate.generate import SynthTask, task_dict
@@ -56,7 +56,7 @@ def read(out_dir: Path, params: dict, trials: list) -> dict[int, dict]:
     is gone counts as not done. ``trials``: the readable trials of the input folder.
 
     Raises:
-        ValueError: a run with other parameters than ``params`` (but ``n``).
+        UsageError: a run with other parameters than ``params`` (but ``n``).
         MotionDataError: a malformed journal or a link on the way to a clip (one line).
     """
     path = out_dir / JOURNAL
@@ -72,7 +72,7 @@ def read(out_dir: Path, params: dict, trials: list) -> dict[int, dict]:
         old = head.get("params") if isinstance(head, dict) else None
         same = lambda a: {k: v for k, v in a.items() if k != "n"}  # noqa: E731
         if not isinstance(old, dict) or same(old) != same(params):
-            raise ValueError(f"{path}: a run with other parameters ({excerpt(str(old), 300)}); "
+            raise UsageError(f"{path}: a run with other parameters ({excerpt(str(old), 300)}); "
                              "cannot resume")  # fmt: skip
         number = 1
         while (e := _line(f, path, number := number + 1)) is not None:

@@ -13,7 +13,8 @@ import os
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.motion.retarget import leg_length, motion_to_qpos
