@@ -212,18 +212,17 @@ def add_methods(
                             type=method_name, new="--methods NAME [NAME ...]", as_list=True)  # fmt: skip
 
 
-#: Old method names still taken on the command line -> their names now (kept in step with
-#: ``sidql.keyframes.methods.RENAMED``, which this light module does not import).
-OLD_METHOD_NAMES = {"xyz": "cartesian"}
-
-
 def method_name(text: str) -> str:
     """An argparse ``type`` for a method: its name now, with a one-line warning for an old one
-    (unknown names pass through: the command lists the known ones before any work starts)."""
-    if text in OLD_METHOD_NAMES:
-        new = OLD_METHOD_NAMES[text]
-        warnings.warn(UsageWarning(f"method {text}: an old name, use {new}"), stacklevel=2)
-        return new
+    (``sidql.keyframes.methods.RENAMED``; unknown names pass through: the command lists the
+    known ones before any work starts)."""
+    from sidql.keyframes.methods import RENAMED  # only commands that run methods parse one
+
+    if text in RENAMED:
+        warnings.warn(
+            UsageWarning(f"method {text}: an old name, use {RENAMED[text]}"), stacklevel=2
+        )
+        return RENAMED[text]
     return text
 
 
