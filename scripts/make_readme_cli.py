@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 
 from sidql.commands import main as cli  # noqa: E402
 from sidql.commands.usage import OldSpelling  # noqa: E402
-from sidql.keyframes.methods import RENAMED  # noqa: E402
+from sidql.keyframes.old_names import RENAMED  # noqa: E402
 
 BEGIN, END = "<!-- section:cli -->", "<!-- /section:cli -->"
 

@@ -25,6 +25,7 @@ import warnings
 from pathlib import Path
 
 from sidql.keyframes.counts import LEAST_W, check_counts
+from sidql.keyframes.old_names import RENAMED
 from sim.errors import MotionDataWarning, UsageError
 from sim.files import excerpt
 from sim.paths import DATA_ENV, data_dir
@@ -214,10 +215,8 @@ def add_methods(
 
 def method_name(text: str) -> str:
     """An argparse ``type`` for a method: its name now, with a one-line warning for an old one
-    (``sidql.keyframes.methods.RENAMED``; unknown names pass through: the command lists the
+    (:data:`sidql.keyframes.old_names.RENAMED`; unknown names pass through: the command lists the
     known ones before any work starts)."""
-    from sidql.keyframes.methods import RENAMED  # only commands that run methods parse one
-
     if text in RENAMED:
         warnings.warn(
             UsageWarning(f"method {text}: an old name, use {RENAMED[text]}"), stacklevel=2
