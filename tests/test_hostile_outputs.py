@@ -183,7 +183,7 @@ def test_a_file_another_program_writes_lands_whole_and_only_where_named(tmp_path
         Path(path).write_bytes(b"video")
     assert (out / "clip00_a.mp4").read_bytes() == b"video"
     assert sorted(p.name for p in out.iterdir()) == ["clip00_a.mp4"]
-    from sim.replay.render import write_video
+    from sim.replay.video import write_video
 
     (out / "clip01_a.mp4").symlink_to(victim)
     frames = (np.zeros((32, 32, 3), np.uint8) for _ in range(3))

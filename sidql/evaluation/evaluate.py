@@ -34,15 +34,17 @@ from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
+from sim.analysis.figures import HEIGHT_KEYS
+from sim.analysis.job import PhysicsJob
 from sim.batch import iter_batch, run_batch
 from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import dataset_clips, find_trials
 from sim.motion.ingest import load_clips
-from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob, support_verdict
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
+from sim.physics.support import support_verdict
 from sim.replay.checks import from_clip
 from sim.simulate.model import sim_model
 from sim.simulate.validate import SIMULATE_KEYS, ForwardValidation
@@ -265,7 +267,7 @@ def _simulate_means(rows: Sequence[dict]) -> dict:
 @dataclass(frozen=True)
 class TrialPhysics:
     """What the physics of one trial's clips share: the subject's
-    :class:`sim.physics.analysis.PhysicsJob` on the protocol points, the trial's ground, and the
+    :class:`sim.analysis.job.PhysicsJob` on the protocol points, the trial's ground, and the
     original's contacts labelled once over the whole trial (``start``: each clip's
     ``start_frame`` -> its first frame in ``contacts``; clip objects do not keep their identity
     on the way to worker processes or Ray)."""
@@ -283,11 +285,11 @@ class TrialPhysics:
 
     def noise_floor(self, clip: Clip, *, seed: int = 0) -> dict:
         """The original re-captured with marker noise, analysed against the original
-        (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`)."""
+        (:meth:`sim.analysis.job.PhysicsJob.noise_floor`)."""
         return self.job.noise_floor(clip, self.ground, contacts=self.clip_contacts(clip), seed=seed)
 
     def analyse(self, clip: Clip, rec=None) -> dict:
-        """:meth:`sim.physics.analysis.PhysicsJob.analyse` of the original (``rec`` None) or of a
+        """:meth:`sim.analysis.job.PhysicsJob.analyse` of the original (``rec`` None) or of a
         reconstruction (its points, velocities and accelerations)."""
         c = self.clip_contacts(clip)
         if rec is None:
@@ -302,7 +304,7 @@ class TrialPhysics:
 def physics_setup(cases: Sequence[Case]) -> dict:
     """Per trial (``clip.source``): its :class:`TrialPhysics` for :func:`score`: the ground and
     the original's contacts from all the trial's clips (in time order), one
-    :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
+    :class:`sim.analysis.job.PhysicsJob` per subject skeleton."""
 
     jobs, out = {}, {}
     by_trial: dict[str, list[Case]] = {}
@@ -456,7 +458,7 @@ NOISE_FLOOR = "noise floor"
 
 def noise_figures(noisy: dict, original: dict) -> dict:
     """A noise-floor row: per figure, how far the original re-captured with marker noise
-    (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`) departs from the original,
+    (:meth:`sim.analysis.job.PhysicsJob.noise_floor`) departs from the original,
     ``|noisy - original|`` (None where either lacks it)."""
     out = {}
     for k, v in noisy.items():
@@ -475,7 +477,7 @@ def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
     (``support_missing_share``), the share held by something else (``support_held_share``),
     the frames whose derivatives are not measured (``dynamics_unmeasured_n``, summed over the
     clips) and the verdict (``support_off_floor``, ``support_why``:
-    :func:`sim.physics.analysis.support_verdict`)."""
+    :func:`sim.physics.support.support_verdict`)."""
     out = []
     for src, tp in setup.items():
         row = {"source": src, **tp.ground.summary()}
