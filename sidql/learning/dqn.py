@@ -209,7 +209,9 @@ def _also_task(clip, entry: dict, folder) -> KeyframeTask:
         return clip_task(clip, subject=str(entry.get("subject", "")))
     except MotionDataError as e:
         name = excerpt(str(entry.get("file")), 100, quote=False)
-        raise MotionDataError(str(Path(folder) / "index.json"), None, f"{name}: {e.problem}") from None
+        raise MotionDataError(
+            str(Path(folder) / "index.json"), None, f"{name}: {e.problem}"
+        ) from None
 
 
 # --- baselines on cost matrices (for logging) ----------------------------------------------------
