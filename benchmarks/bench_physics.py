@@ -56,22 +56,18 @@ from pathlib import Path  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from sidql.evaluation.evaluate import make_case  # noqa: E402
+from sidql.evaluation.cases import make_case  # noqa: E402
 from sidql.evaluation.validation import physics_job, trial_ground  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402
+from sim.analysis.job import MAX_DERIVATIVE_NOISE
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.motion.ingest import load_clips  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
-from sim.physics.analysis import (  # noqa: E402
-    HELD_BW,
-    HELD_S,
-    MAX_DERIVATIVE_NOISE,
-    RESIDUAL_CAUSES,
-)
 from sim.physics.dynamics import InverseDynamics  # noqa: E402
 from sim.physics.ik import Fit, HumanoidIK  # noqa: E402
+from sim.physics.support import HELD_BW, HELD_S, RESIDUAL_CAUSES
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -314,8 +310,11 @@ def figures(data: Path) -> str:
     """``sidql eval --physics`` in process and the figures drawn from it."""
     from scipy.stats import spearmanr
 
-    from sidql.evaluation.evaluate import NOISE_FLOOR, evaluate, load_cases, physics_markdown
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.evaluate import evaluate
+    from sidql.evaluation.scoring import NOISE_FLOOR
     from sidql.evaluation.significance import bootstrap_mean_ci
+    from sidql.evaluation.tables import physics_markdown
 
     t0 = time.perf_counter()
     cases, _ = load_cases(data, progress=False)
@@ -417,7 +416,7 @@ def figures(data: Path) -> str:
 
 def residual_breakdown(rows: list[dict]) -> list[str]:
     """Where the original's residual force comes from over ``rows`` (its clips): per cause
-    (:func:`sim.physics.analysis.residual_causes`), its share of the mean over the measured
+    (:func:`sim.physics.support.residual_causes`), its share of the mean over the measured
     frames, and the frames left unmeasured with what they would have added."""
     n = np.array([r["dynamics_n"] for r in rows], dtype=float)
     un = np.array([r["dynamics_unmeasured_n"] for r in rows], dtype=float)

@@ -29,13 +29,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from results import write_results  # noqa: E402
 
-from sidql.evaluation.evaluate import (  # noqa: E402
-    _protocol_names,
-    evaluate,
-    load_cases,
-    physics_setup,
-    simulate_markdown,
-)
+from sidql.evaluation.cases import load_cases  # noqa: E402
+from sidql.evaluation.evaluate import evaluate  # noqa: E402
+from sidql.evaluation.tables import simulate_markdown  # noqa: E402
+from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.simulate.model import sim_model  # noqa: E402
@@ -151,7 +148,7 @@ def main() -> None:
                    simulate_samples=args.samples, workers=args.workers,
                    progress=False)  # fmt: skip
     trials = len({c.clip.source for c in cases})
-    sampled = f" --simulate-samples {args.samples}" if args.samples else ""
+    sampled = f" --samples {args.samples}" if args.samples else ""
     note = " (the sampling tracker, `sim.simulate.sampling`)" if args.samples else ""
     limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
     if args.max_clips:
