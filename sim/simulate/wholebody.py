@@ -101,6 +101,7 @@ class WholeBodyGains:
     placement: float = 0.0  # swing feet placed relative to the CoM (1) or the stance feet (0)
     placement_v: float = 0.0  # [s] a swing foot's target moves this far per m/s of CoM speed error
     inertia_power: float = 1.0  # hinge weights: (reflected inertia / mean) to this power
+    limit_horizon: float = 0.05  # [s] hinge accelerations keep the range this far ahead (0: off)
     corner_gap: float = 0.005  # [m] a touching sole's corners this close to its lowest carry force
 
 
@@ -215,6 +216,131 @@ def _touching(model, data, floor: int) -> set[int]:
     return set(g[g[:, 0] == floor, 1].tolist()) | set(g[g[:, 1] == floor, 0].tolist())
 
 
+def _support(model, data, gains: WholeBodyGains, scratch: dict):
+    """The support points and their edge matrices at ``data``'s state: ``points`` (C, 3), ``JE``
+    (nv, 4C) the generalised force of each pyramid edge's unit force, ``wrench`` (6, 4C) each
+    edge's force and moment about the CoM, and the set of geoms touching the floor."""
+    soles, toes = scratch["ids"]
+    E, jacp = scratch["E"], scratch["jacp"]
+    touching = _touching(model, data, scratch["floor"])
+    com = data.subtree_com[1]
+    points, bodies = [], []
+    for g in (*soles, *toes):
+        if g in touching:  # the box's bottom corners on the floor (within corner_gap)
+            corners = sole_corners(model, data, g)
+            on = corners[:, 2] <= corners[:, 2].min() + gains.corner_gap
+            points += list(corners[on])
+            bodies += [int(model.geom_bodyid[g])] * int(on.sum())
+    C = len(points)
+    JE = np.empty((model.nv, 4 * C))
+    wrench = np.zeros((6, 4 * C))
+    for c, (p, b) in enumerate(zip(points, bodies, strict=True)):
+        mujoco.mj_jac(model, data, jacp, None, p, b)
+        JE[:, 4 * c : 4 * c + 4] = jacp.T @ E
+        wrench[:3, 4 * c : 4 * c + 4] = E
+        wrench[3:, 4 * c : 4 * c + 4] = np.cross(p - com, E.T).T
+    return np.array(points).reshape(C, 3), JE, wrench, touching
+
+
+def _anchor(data, ref: WholeBodyReference, k: int, gains, touching, scratch) -> np.ndarray:
+    """(3,) the support offset: where the simulated stance feet stand minus where the
+    reference's do (horizontal), filtered (first order, ``anchor_tau``: no jump at a
+    touchdown); the balance and foot placement targets move with it, so the body keeps the
+    reference's relation to its own feet."""
+    soles = scratch["ids"][0]
+    shift = [data.geom_xpos[soles[s], :2] - ref.sole_pos[k, s, :2]
+             for s in range(2) if ref.stance[k, s] and soles[s] in touching]  # fmt: skip
+    delta = scratch.setdefault("delta", np.zeros(3))
+    if shift:
+        a = min(1.0, 1.0 / (gains.anchor_tau * CONTROL_HZ))
+        delta[:2] += a * (gains.anchor * np.mean(shift, axis=0) - delta[:2])
+    return delta
+
+
+def _body_tasks(model, data, ref, k, gains, n, wrench, delta, scratch, task) -> None:
+    """The hinge, root orientation, CoM and angular momentum tasks (module docstring)."""
+    nv, nu = model.nv, model.nu
+    kj, dj = gains.joint_omega**2, 2 * gains.joint_omega
+    qr, vr, ar = ref.qpos[k], ref.qvel[k], ref.qacc[k]
+    A = np.zeros((nu, n))
+    A[:, 6:nv] = np.eye(nu)
+    b = ar[6:] + kj * (qr[7:] - data.qpos[7:]) + dj * (vr[6:] - data.qvel[6:])
+    task(A, b, scratch["joint_w"])
+    kr, dr = gains.root_omega**2, 2 * gains.root_omega
+    rot = np.zeros(3)
+    mujoco.mju_subQuat(rot, qr[3:7], data.qpos[3:7])
+    A = np.zeros((3, n))
+    A[:, 3:6] = np.eye(3)
+    task(A, ar[3:6] + kr * rot + dr * (vr[3:6] - data.qvel[3:6]), gains.w_root)
+    if wrench.shape[1] == 0:  # in flight the forces are zero: momentum is not controllable
+        return
+    mass = total_mass(model)
+    com = data.subtree_com[1]
+    kc, dc = gains.com_omega**2, 2 * gains.com_omega
+    a_com = ref.com_acc[k] + kc * (ref.com[k] + delta - com)
+    a_com += dc * (ref.com_vel[k] - data.subtree_linvel[1])
+    A = np.zeros((3, n))
+    A[:, nv:] = wrench[:3] / mass
+    task(A, a_com + [0.0, 0.0, G], gains.w_com)
+    kdot = ref.angmom_rate[k] + gains.momentum_damping * (ref.angmom[k] - data.subtree_angmom[1])
+    A = np.zeros((3, n))
+    A[:, nv:] = wrench[3:] / mass
+    task(A, kdot / mass, gains.w_momentum)
+
+
+def _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task) -> None:
+    """Each foot: still and on the floor where the reference stands and the foot touches,
+    else to the reference's sole pose (swing)."""
+    jacp, jacr = scratch["jacp"], scratch["jacr"]
+    com = data.subtree_com[1]
+    for side, g in enumerate(scratch["ids"][0]):
+        p = data.geom_xpos[g]
+        mujoco.mj_jac(model, data, jacp, jacr, p, int(model.geom_bodyid[g]))
+        J = np.vstack([jacp, jacr])
+        vel = J @ data.qvel
+        A = np.zeros((6, n))
+        A[:, : model.nv] = J
+        q_sim, q_ref, err = np.zeros(4), np.zeros(4), np.zeros(3)
+        mujoco.mju_mat2Quat(q_sim, data.geom_xmat[g])
+        mujoco.mju_mat2Quat(q_ref, ref.sole_mat[k, side].ravel())
+        mujoco.mju_subQuat(err, q_ref, q_sim)
+        err = data.geom_xmat[g].reshape(3, 3) @ err  # world frame
+        if ref.stance[k, side] and g in touching:  # stays where it is, on the floor
+            low = sole_corners(model, data, g)[:, 2].min()
+            ks, ds = gains.stance_omega**2, 2 * gains.stance_omega
+            lin = -ds * vel[:3] - ks * np.array([0.0, 0.0, low])
+            # its orientation follows the reference's sole (flat, or rolling heel to toe)
+            task(A, np.concatenate([lin, ks * err - ds * vel[3:]]), gains.w_stance)
+            continue
+        target = ref.sole_pos[k, side] + delta
+        if gains.placement:  # foot placement relative to the body's own centre of mass
+            dv = (data.subtree_linvel[1] - ref.com_vel[k])[:2]
+            rel = com[:2] + ref.sole_pos[k, side, :2] - ref.com[k, :2] + gains.placement_v * dv
+            target = target.copy()
+            target[:2] = (1 - gains.placement) * target[:2] + gains.placement * rel
+        kf, df = gains.foot_omega**2, 2 * gains.foot_omega
+        lin = ref.sole_acc[k, side] + kf * (target - p) + df * (ref.sole_vel[k, side] - vel[:3])
+        task(A, np.concatenate([lin, kf * err - df * vel[3:]]), gains.w_swing)
+
+
+def _limits(model, data, gains, scratch, C: int, h, limit):
+    """DAQP's bounds (lower, upper) and senses: the hinges' accelerations that keep their
+    range ``limit_horizon`` ahead (MuJoCo's limit forces are not in the plan: better not to
+    meet them), the edge forces >= 0, the base's equations (equalities), the torque limits."""
+    nv, nu = model.nv, model.nu
+    qdd_lo, qdd_hi = np.full(nv, -BIG), np.full(nv, BIG)
+    if gains.limit_horizon > 0:
+        T = gains.limit_horizon
+        q, v, rng = data.qpos[7:], data.qvel[6:], scratch["range"]
+        qdd_lo[6:] = np.minimum(2 * (rng[:, 0] - q - v * T) / T**2, 0.0)
+        qdd_hi[6:] = np.maximum(2 * (rng[:, 1] - q - v * T) / T**2, 0.0)
+    upper = np.concatenate([qdd_hi, np.full(4 * C, BIG), -h[:6], limit - h[6:]])
+    lower = np.concatenate([qdd_lo, np.zeros(4 * C), -h[:6], -limit - h[6:]])
+    sense = np.zeros(nv + 4 * C + 6 + nu, dtype=np.int32)
+    sense[nv + 4 * C : nv + 4 * C + 6] = 5  # equality
+    return lower, upper, sense
+
+
 def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
             limit: np.ndarray, scratch: dict) -> QPResult:  # fmt: skip
     """Solve the whole-body QP (module docstring) at ``data``'s state (``mj_forward`` done)
@@ -224,47 +350,18 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
     if not scratch:
         inertia, _ = rest_inertia(model)
         share = (inertia / inertia.mean()) ** gains.inertia_power
-        scratch.update(joint_w=gains.w_joint * share, M=np.zeros((nv, nv)), jacp=np.zeros((3, nv)), jacr=np.zeros((3, nv)),
-                       E=_edges(gains.friction), ids=_sole_ids(model),
+        scratch.update(joint_w=gains.w_joint * share, M=np.zeros((nv, nv)),
+                       range=model.jnt_range[1:].copy(), jacp=np.zeros((3, nv)),
+                       jacr=np.zeros((3, nv)), E=_edges(gains.friction), ids=_sole_ids(model),
                        floor=model.geom("floor").id)  # fmt: skip
-    M, jacp, jacr, E = scratch["M"], scratch["jacp"], scratch["jacr"], scratch["E"]
-    soles, toes = scratch["ids"]
+    M = scratch["M"]
     mujoco.mj_fullM(model, data, M)
+    mujoco.mj_subtreeVel(model, data)
     h = data.qfrc_bias - data.qfrc_passive
-    touching = _touching(model, data, scratch["floor"])
-    mass = total_mass(model)
-    com = data.subtree_com[1].copy()
-    points, bodies = [], []
-    for side in range(2):
-        if soles[side] in touching:  # the corners on the floor (MuJoCo's contact: within it)
-            corners = sole_corners(model, data, soles[side])
-            on = corners[:, 2] <= corners[:, 2].min() + gains.corner_gap
-            points += list(corners[on])
-            bodies += [int(model.geom_bodyid[soles[side]])] * int(on.sum())
-        g = toes[side]
-        if g in touching:
-            corners = sole_corners(model, data, g)
-            on = corners[:, 2] <= corners[:, 2].min() + gains.corner_gap
-            points += list(corners[on])
-            bodies += [int(model.geom_bodyid[g])] * int(on.sum())
+    points, JE, wrench, touching = _support(model, data, gains, scratch)
     C = len(points)
     n = nv + 4 * C
-    JE = np.empty((nv, 4 * C))  # generalised force of each edge's unit force
-    wrench = np.zeros((6, 4 * C))  # each edge's force and moment about the CoM
-    for c, (p, b) in enumerate(zip(points, bodies, strict=True)):
-        mujoco.mj_jac(model, data, jacp, None, p, b)
-        JE[:, 4 * c : 4 * c + 4] = jacp.T @ E
-        wrench[:3, 4 * c : 4 * c + 4] = E
-        wrench[3:, 4 * c : 4 * c + 4] = np.cross(p - com, E.T).T
-    # the support offset: where the simulated stance feet stand minus where the reference's do
-    # (horizontal); the balance and foot placement targets move with it, so the body keeps the
-    # reference's relation to its own feet (a first-order filter: no jump at a touchdown)
-    shift = [data.geom_xpos[soles[s_], :2] - ref.sole_pos[k, s_, :2]
-             for s_ in range(2) if ref.stance[k, s_] and soles[s_] in touching]  # fmt: skip
-    delta = scratch.setdefault("delta", np.zeros(3))
-    if shift:
-        a = min(1.0, 1.0 / (gains.anchor_tau * CONTROL_HZ))
-        delta[:2] += a * (gains.anchor * np.mean(shift, axis=0) - delta[:2])
+    delta = _anchor(data, ref, k, gains, touching, scratch)
     rows, rhs, weights = [], [], []
 
     def task(A, b, w):
@@ -272,103 +369,25 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
         rhs.append(b)
         weights.append(np.broadcast_to(w, b.shape))
 
-    kj, dj = gains.joint_omega**2, 2 * gains.joint_omega
-    qr, vr, ar = ref.qpos[k], ref.qvel[k], ref.qacc[k]
-    A = np.zeros((nu, n))
-    A[:, 6:nv] = np.eye(nu)
-    task(
-        A,
-        ar[6:] + kj * (qr[7:] - data.qpos[7:]) + dj * (vr[6:] - data.qvel[6:]),
-        scratch["joint_w"],
-    )
-    kr, dr = gains.root_omega**2, 2 * gains.root_omega
-    rot = np.zeros(3)
-    mujoco.mju_subQuat(rot, qr[3:7], data.qpos[3:7])
-    A = np.zeros((3, n))
-    A[:, 3:6] = np.eye(3)
-    task(A, ar[3:6] + kr * rot + dr * (vr[3:6] - data.qvel[3:6]), gains.w_root)
-    if C:
-        mujoco.mj_subtreeVel(model, data)
-        kc, dc = gains.com_omega**2, 2 * gains.com_omega
-        a_com = (
-            ref.com_acc[k]
-            + kc * (ref.com[k] + delta - com)
-            + dc * (ref.com_vel[k] - data.subtree_linvel[1])
-        )
-        A = np.zeros((3, n))
-        A[:, nv:] = wrench[:3] / mass
-        task(A, a_com + [0.0, 0.0, G], gains.w_com)
-        kdot = ref.angmom_rate[k] + gains.momentum_damping * (
-            ref.angmom[k] - data.subtree_angmom[1]
-        )
-        A = np.zeros((3, n))
-        A[:, nv:] = wrench[3:] / mass
-        task(A, kdot / mass, gains.w_momentum)
-    kf, df = gains.foot_omega**2, 2 * gains.foot_omega
-    for side in range(2):
-        g = soles[side]
-        b = int(model.geom_bodyid[g])
-        p = data.geom_xpos[g]
-        mujoco.mj_jac(model, data, jacp, jacr, p, b)
-        J = np.vstack([jacp, jacr])
-        vel = J @ data.qvel
-        A = np.zeros((6, n))
-        A[:, :nv] = J
-        q_sim, q_ref, err = np.zeros(4), np.zeros(4), np.zeros(3)
-        mujoco.mju_mat2Quat(q_sim, data.geom_xmat[g])
-        mujoco.mju_mat2Quat(q_ref, ref.sole_mat[k, side].ravel())
-        mujoco.mju_subQuat(err, q_ref, q_sim)
-        err = data.geom_xmat[g].reshape(3, 3) @ err  # world frame
-        if ref.stance[k, side] and g in touching:  # stays where it is, flat on the floor
-            low = sole_corners(model, data, g)[:, 2].min()
-            ks, ds = gains.stance_omega**2, 2 * gains.stance_omega
-            lin = -ds * vel[:3] - ks * np.array([0.0, 0.0, low])
-            # its orientation follows the reference's sole (flat, or rolling heel to toe)
-            task(A, np.concatenate([lin, ks * err - ds * vel[3:]]), gains.w_stance)
-        else:  # swing, or a stance foot still in the air: to the reference's sole pose
-            target = ref.sole_pos[k, side] + delta
-            if gains.placement:  # foot placement relative to the body's own centre of mass
-                mujoco.mj_subtreeVel(model, data)
-                dv = (data.subtree_linvel[1] - ref.com_vel[k])[:2]
-                rel = com[:2] + ref.sole_pos[k, side, :2] - ref.com[k, :2] + gains.placement_v * dv
-                target = target.copy()
-                target[:2] = (1 - gains.placement) * target[:2] + gains.placement * rel
-            lin = ref.sole_acc[k, side] + kf * (target - p) + df * (ref.sole_vel[k, side] - vel[:3])
-            task(A, np.concatenate([lin, kf * err - df * vel[3:]]), gains.w_swing)
-    A = np.vstack(rows)
-    b = np.concatenate(rhs)
-    w = np.concatenate(weights)
-    Aw = A * w[:, None]
+    _body_tasks(model, data, ref, k, gains, n, wrench, delta, scratch, task)
+    _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task)
+    A, b = np.vstack(rows), np.concatenate(rhs)
+    Aw = A * np.concatenate(weights)[:, None]
     H = A.T @ Aw
-    f = -(Aw.T @ b)
     H[np.arange(nv), np.arange(nv)] += gains.w_reg
     H[np.arange(nv, n), np.arange(nv, n)] += gains.w_force
-    # constraints: bounds on lam (first n entries), then the base equations, then torque limits
-    Cm = np.zeros((6 + nu, n))
+    Cm = np.zeros((6 + nu, n))  # the base's equations, then the hinge torques
     Cm[:, :nv] = M[: 6 + nu]
     Cm[:, nv:] = -JE[: 6 + nu]
-    upper = np.concatenate([np.full(nv, BIG), np.full(4 * C, BIG), -h[:6], limit - h[6:]])
-    lower = np.concatenate([np.full(nv, -BIG), np.zeros(4 * C), -h[:6], -limit - h[6:]])
-    sense = np.zeros(n + 6 + nu, dtype=np.int32)
-    sense[n : n + 6] = 5  # equality
-    x, _, status, _ = daqp.solve(H, f, Cm, upper, lower, sense)
+    lower, upper, sense = _limits(model, data, gains, scratch, C, h, limit)
+    x, _, status, _ = daqp.solve(H, -(Aw.T @ b), Cm, upper, lower, sense)
     if status < 1:  # infeasible or not converged: the torques that keep the hinges passive
         x = np.zeros(n)
         x[:nv] = np.linalg.solve(M, -h)
     qdd, lam = x[:nv], x[nv:]
-    if scratch.get("debug") is not None:
-        r = A @ x - b
-        k0, out = 0, []
-        for rr in rhs:
-            out.append((float(np.linalg.norm(rr)), float(np.linalg.norm(r[k0 : k0 + len(rr)]))))
-            k0 += len(rr)
-        scratch["debug"].append(out)
-        if C:
-            scratch["debug"].append(("com", a_com + [0, 0, G], wrench[:3] @ lam / mass, C, qdd[:3]))
     tau = np.clip(M[6:] @ qdd + h[6:] - JE[6:] @ lam, -limit, limit)
-    forces = (E @ lam.reshape(C, 4).T).T if C else np.zeros((0, 3))
-    return QPResult(tau=tau, qdd=qdd, forces=forces, points=np.array(points).reshape(C, 3),
-                    status=int(status))  # fmt: skip
+    forces = (scratch["E"] @ lam.reshape(C, 4).T).T if C else np.zeros((0, 3))
+    return QPResult(tau=tau, qdd=qdd, forces=forces, points=points, status=int(status))
 
 
 def track_wholebody(
