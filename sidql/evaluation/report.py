@@ -34,8 +34,7 @@ from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
-from sim.simulate.model import sim_model
-from sim.simulate.validate import ForwardValidation
+from sim.simulate.validate import forward_validation
 
 
 def report_clips(
@@ -139,7 +138,7 @@ def report_trial(
     forward = None
     if simulate:
         names = from_clip(all_clips[0]).restrict(POINTS).names
-        forward = ForwardValidation(sim_model(skeleton), names)
+        forward = forward_validation(skeleton, names)
     return report_clips(
         [all_clips[c] for c in clips], out_dir, W=W, methods=methods, seed=seed,
         joint_ranges=joint_ranges(model), videos=videos, style=style,

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 
 from sim.simulate.controller import track
-from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS, total_mass
+from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
     contact_consistent,
@@ -37,17 +37,19 @@ from sim.simulate.wholebody import sole_corners, track_wholebody
 
 #: figures of :meth:`ForwardValidation.run`, in table order
 SIMULATE_KEYS = (
-    "sim_error_mm", "sim_error_original_mm", "sim_fell", "sim_fall_s", "sim_torque_rms_nm_kg",
-    "sim_torque_saturated",
+    "sim_error_mm", "sim_error_local_mm", "sim_error_original_mm", "sim_fell", "sim_fall_s",
+    "sim_torque_rms_nm_kg", "sim_torque_saturated",
 )  # fmt: skip
 #: further figures of :meth:`ForwardValidation.run` (not in the evaluation's tables)
 SIMULATE_EXTRA_KEYS = (
-    "sim_error_local_mm",
     "sim_skate_mm_s",
     "sim_skate_ref_mm_s",
     "sim_cpu_s_per_s",
 )
 CONTROLLERS = ("plain", "sampling", "wholebody")
+#: the controller of ``eval --physics --simulate`` and ``report --simulate`` without
+#: ``--samples`` (``docs/results/simulate_controllers.md`` measures the choice)
+DEFAULT_CONTROLLER = "wholebody"
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator)
 SKATE_CONTACT = 0.01
 
@@ -181,3 +183,15 @@ class ForwardValidation:
         speed = np.linalg.norm(np.gradient(low[..., :2], 1.0 / fps, axis=0), axis=-1)
         contact = low[..., 2] <= SKATE_CONTACT
         return 1e3 * float(speed[contact].mean()) if contact.any() else float("nan")
+
+
+def forward_validation(
+    skeleton, names, *, samples: int = 0, controller: str | None = None, **body
+) -> ForwardValidation:
+    """The :class:`ForwardValidation` of ``skeleton``'s simulated body (``sim_model(skeleton,
+    **body)`` with the actuators its controller needs) on points ``names``: ``samples`` > 0 the
+    sampling tracker, else ``controller`` (default :data:`DEFAULT_CONTROLLER`)."""
+    controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
+    actuators = "motor" if controller == "wholebody" else "position"
+    model = sim_model(skeleton, actuators=actuators, **body)
+    return ForwardValidation(model, names, samples=samples, controller=controller)

@@ -102,6 +102,8 @@ class WholeBodyGains:
     placement_v: float = 0.0  # [s] a swing foot's target moves this far per m/s of CoM speed error
     inertia_power: float = 1.0  # hinge weights: (reflected inertia / mean) to this power
     limit_horizon: float = 0.05  # [s] hinge accelerations keep the range this far ahead (0: off)
+    contact_damping: float = 20.0  # [1/s] a supporting point's velocity to zero
+    w_contact: float = 100.0
     corner_gap: float = 0.005  # [m] a touching sole's corners this close to its lowest carry force
 
 
@@ -225,21 +227,25 @@ def _support(model, data, gains: WholeBodyGains, scratch: dict):
     touching = _touching(model, data, scratch["floor"])
     com = data.subtree_com[1]
     points, bodies = [], []
-    for g in (*soles, *toes):
-        if g in touching:  # the box's bottom corners on the floor (within corner_gap)
-            corners = sole_corners(model, data, g)
-            on = corners[:, 2] <= corners[:, 2].min() + gains.corner_gap
-            points += list(corners[on])
-            bodies += [int(model.geom_bodyid[g])] * int(on.sum())
+    feet = {int(g) for g in (*soles, *toes)}
+    floor = scratch["floor"]
+    for i in range(data.ncon):  # MuJoCo's own contact points of the feet on the floor
+        g1, g2 = data.contact.geom[i]
+        g = g2 if g1 == floor else g1 if g2 == floor else -1
+        if g in feet:
+            points.append(data.contact.pos[i].copy())
+            bodies.append(int(model.geom_bodyid[g]))
     C = len(points)
     JE = np.empty((model.nv, 4 * C))
     wrench = np.zeros((6, 4 * C))
+    Jc = np.empty((3 * C, model.nv))  # the points' Jacobians: they do not move on the floor
     for c, (p, b) in enumerate(zip(points, bodies, strict=True)):
         mujoco.mj_jac(model, data, jacp, None, p, b)
+        Jc[3 * c : 3 * c + 3] = jacp
         JE[:, 4 * c : 4 * c + 4] = jacp.T @ E
         wrench[:3, 4 * c : 4 * c + 4] = E
         wrench[3:, 4 * c : 4 * c + 4] = np.cross(p - com, E.T).T
-    return np.array(points).reshape(C, 3), JE, wrench, touching
+    return np.array(points).reshape(C, 3), JE, wrench, Jc, touching
 
 
 def _anchor(data, ref: WholeBodyReference, k: int, gains, touching, scratch) -> np.ndarray:
@@ -305,12 +311,10 @@ def _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task) -
         mujoco.mju_mat2Quat(q_ref, ref.sole_mat[k, side].ravel())
         mujoco.mju_subQuat(err, q_ref, q_sim)
         err = data.geom_xmat[g].reshape(3, 3) @ err  # world frame
-        if ref.stance[k, side] and g in touching:  # stays where it is, on the floor
-            low = sole_corners(model, data, g)[:, 2].min()
-            ks, ds = gains.stance_omega**2, 2 * gains.stance_omega
-            lin = -ds * vel[:3] - ks * np.array([0.0, 0.0, low])
+        if ref.stance[k, side] and g in touching:  # its points keep still (see qp_tick);
             # its orientation follows the reference's sole (flat, or rolling heel to toe)
-            task(A, np.concatenate([lin, ks * err - ds * vel[3:]]), gains.w_stance)
+            ks, ds = gains.stance_omega**2, 2 * gains.stance_omega
+            task(A[3:], ks * err - ds * vel[3:], gains.w_stance)
             continue
         target = ref.sole_pos[k, side] + delta
         if gains.placement:  # foot placement relative to the body's own centre of mass
@@ -358,7 +362,7 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
     mujoco.mj_fullM(model, data, M)
     mujoco.mj_subtreeVel(model, data)
     h = data.qfrc_bias - data.qfrc_passive
-    points, JE, wrench, touching = _support(model, data, gains, scratch)
+    points, JE, wrench, Jc, touching = _support(model, data, gains, scratch)
     C = len(points)
     n = nv + 4 * C
     delta = _anchor(data, ref, k, gains, touching, scratch)
@@ -371,6 +375,10 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
 
     _body_tasks(model, data, ref, k, gains, n, wrench, delta, scratch, task)
     _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task)
+    if C:  # the supporting points keep still: no slip, no push into the floor
+        A = np.zeros((3 * C, n))
+        A[:, :nv] = Jc
+        task(A, -gains.contact_damping * (Jc @ data.qvel), gains.w_contact)
     A, b = np.vstack(rows), np.concatenate(rhs)
     Aw = A * np.concatenate(weights)[:, None]
     H = A.T @ Aw
