@@ -53,10 +53,10 @@ from sim.simulate.controller import (
     Weakening,
     _foot_forces,
     apply_pushes,
-    reference_derivatives,
     weakening_factor,
 )
 from sim.simulate.falls import fall_reference, has_fallen
+from sim.simulate.feedforward import reference_derivatives
 from sim.simulate.model import (
     CONTROL_HZ,
     SOLE_GEOMS,
