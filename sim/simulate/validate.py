@@ -33,7 +33,8 @@ from sim.simulate.reference import (
     time_warp,
 )
 from sim.simulate.sampling import sample_track
-from sim.simulate.wholebody import sole_corners, track_wholebody
+from sim.simulate.wholebody import track_wholebody
+from sim.simulate.wholebody_reference import sole_corners
 
 #: figures of :meth:`ForwardValidation.run`, in table order
 SIMULATE_KEYS = (

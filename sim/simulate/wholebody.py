@@ -7,14 +7,16 @@ and the floor's contact forces, and applies the joint torques it implies through
 actuators (``sim_model(actuators="motor")``), whose range is the human limit. No other force acts
 on the body: no root assistance, ever (pushes, when scripted, are the only external forces).
 
-Variables ``x = [qdd (nv), lam (4 C)]``: ``C`` support points (the four bottom corners of each
-sole box touching the floor, the lowest point of a touching toe capsule), each force a
+Variables ``x = [qdd (nv), lam (4 C)]``: ``C`` support points (MuJoCo's own contact points of
+the sole and toe boxes on the floor, so the planned forces act where the floor's do), each force a
 non-negative combination of the four edges of a linearised friction pyramid (coefficient
 :attr:`WholeBodyGains.friction`). Constraints:
 
 * the floating base's equations of motion (6 rows, exact): ``M_u qdd + h_u = J_u^T E lam``;
 * ``lam >= 0`` (the floor only pushes, inside the pyramid);
-* the hinge torques ``tau = M_a qdd + h_a - J_a^T E lam`` within the human limits.
+* the hinge torques ``tau = M_a qdd + h_a - J_a^T E lam`` within the human limits;
+* no hinge accelerated past its range within :attr:`WholeBodyGains.limit_horizon` (MuJoCo's
+  joint-limit forces are not in the plan).
 
 Costs (weighted least squares, :class:`WholeBodyGains`), each a PD on the reference plus its
 feed-forward acceleration:
@@ -24,17 +26,21 @@ feed-forward acceleration:
 * centre of mass: ``sum f / m = a_ref + kp (c_ref - c) + kd (cdot_ref - cdot) - g``, and the
   rate of centroidal angular momentum ``sum (p - c) x f`` towards the reference's: balance,
   through the contact forces (Macchietto 2009);
-* feet: a foot the reference has on the floor (its sole within :data:`STANCE_GAP`) and that
-  touches it keeps still (its sole's velocity damped to zero: no slip); every other foot
-  tracks the reference's sole pose (position and orientation, world frame): the reference's
-  foot placement;
+* feet: every support point keeps still (its velocity damped to zero: no slip, no push into
+  the floor); a foot the reference has on the floor (its sole within :data:`STANCE_GAP`) that
+  touches it turns to the reference sole's orientation (flat, or rolling heel to toe); every
+  other foot tracks the reference's sole pose (position and orientation, world frame, moved
+  with the support offset, :func:`_anchor`): the reference's foot placement;
 * a small regularisation of ``qdd`` and the forces (a unique solution).
 
 ``M`` (``mj_fullM``), ``h`` (``qfrc_bias - qfrc_passive``) and the point Jacobians (``mj_jac`` at
-the sole corners) come from MuJoCo at the current state; the QP is solved by DAQP (a dense
+the contact points) come from MuJoCo at the current state; the QP is solved by DAQP (a dense
 active-set solver). The torques are held for the tick's ``SUBSTEPS`` physics steps; MuJoCo's
 own contacts then decide what the floor does. Deterministic: the same reference gives the same
 simulation bit for bit.
+
+What it achieves and what was tried: ``docs/synthetic.md`` (the body still falls in most dynamic
+clips: a one-tick QP does not plan steps).
 """
 
 from __future__ import annotations
@@ -44,7 +50,6 @@ from dataclasses import dataclass
 import daqp
 import mujoco
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from sim.simulate.controller import (
     ActuatorEdits,
@@ -56,23 +61,20 @@ from sim.simulate.controller import (
     weakening_factor,
 )
 from sim.simulate.falls import fall_reference, has_fallen
-from sim.simulate.feedforward import reference_derivatives
 from sim.simulate.model import (
     CONTROL_HZ,
-    SOLE_GEOMS,
     SUBSTEPS,
-    TOE_GEOMS,
     G,
     rest_inertia,
     total_mass,
 )
+from sim.simulate.wholebody_reference import (
+    WholeBodyReference,
+    foot_box_ids,
+    wholebody_reference,
+)
 
-#: [m] a reference foot whose sole's lowest corner is at most this high stands on the floor
-STANCE_GAP = 0.03
 BIG = 1e30  # an unbounded side of a DAQP constraint
-#: [s] standard deviation of the Gaussian that smooths the reference's velocities before they
-#: are differentiated: a 30 fps clip resampled at 120 Hz has velocity steps at every frame
-SMOOTH_S = 0.025
 
 
 @dataclass(frozen=True)
@@ -104,91 +106,6 @@ class WholeBodyGains:
     limit_horizon: float = 0.05  # [s] hinge accelerations keep the range this far ahead (0: off)
     contact_damping: float = 20.0  # [1/s] a supporting point's velocity to zero
     w_contact: float = 100.0
-    corner_gap: float = 0.005  # [m] a touching sole's corners this close to its lowest carry force
-
-
-@dataclass
-class WholeBodyReference:
-    """What the QP tracks, per control tick (T ticks): ``qpos`` (T, nq), ``qvel``/``qacc``
-    (T, nv), centre of mass ``com``/``com_vel``/``com_acc`` (T, 3), centroidal angular momentum
-    ``angmom``/``angmom_rate`` (T, 3), per foot (left, right) the sole's centre ``sole_pos`` /
-    ``sole_vel`` / ``sole_acc`` (T, 2, 3), its orientation ``sole_mat`` (T, 2, 3, 3) and
-    ``stance`` (T, 2) (the sole within :data:`STANCE_GAP` of the floor)."""
-
-    qpos: np.ndarray
-    qvel: np.ndarray
-    qacc: np.ndarray
-    com: np.ndarray
-    com_vel: np.ndarray
-    com_acc: np.ndarray
-    angmom: np.ndarray
-    angmom_rate: np.ndarray
-    sole_pos: np.ndarray
-    sole_vel: np.ndarray
-    sole_acc: np.ndarray
-    sole_mat: np.ndarray
-    stance: np.ndarray
-
-
-def _sole_ids(model) -> tuple[np.ndarray, np.ndarray]:
-    soles = np.array([model.geom(n).id for n in SOLE_GEOMS])
-    toes = np.array([model.geom(n).id for n in TOE_GEOMS])
-    return soles, toes
-
-
-_BOTTOM = np.array([[i, j, -1.0] for i in (-1, 1) for j in (-1, 1)])
-
-
-def sole_corners(model, data, g: int) -> np.ndarray:
-    """(4, 3) the bottom corners [m] of sole box ``g`` (``sim.simulate.model.add_soles``)."""
-    R = data.geom_xmat[g].reshape(3, 3)
-    return data.geom_xpos[g] + (_BOTTOM * model.geom_size[g]) @ R.T
-
-
-def wholebody_reference(model, ref_qpos: np.ndarray) -> WholeBodyReference:
-    """The :class:`WholeBodyReference` of ``ref_qpos`` (T, nq at ``CONTROL_HZ``, floor z = 0)."""
-    qvel, _ = reference_derivatives(model, ref_qpos)
-    sigma = SMOOTH_S * CONTROL_HZ
-    if T_ok := len(ref_qpos) > 1:
-        qvel = gaussian_filter1d(qvel, sigma, axis=0, mode="nearest")
-    qacc = np.gradient(qvel, 1.0 / CONTROL_HZ, axis=0) if T_ok else np.zeros_like(qvel)
-    data = mujoco.MjData(model)
-    soles, _ = _sole_ids(model)
-    T = len(ref_qpos)
-    com, com_vel, angmom = np.empty((T, 3)), np.empty((T, 3)), np.empty((T, 3))
-    sole_pos, sole_mat = np.empty((T, 2, 3)), np.empty((T, 2, 3, 3))
-    low = np.empty((T, 2))
-    for t in range(T):
-        data.qpos[:], data.qvel[:] = ref_qpos[t], qvel[t]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        mujoco.mj_comVel(model, data)
-        mujoco.mj_subtreeVel(model, data)
-        com[t], com_vel[t], angmom[t] = (
-            data.subtree_com[1],
-            data.subtree_linvel[1],
-            data.subtree_angmom[1],
-        )
-        sole_pos[t] = data.geom_xpos[soles]
-        sole_mat[t] = data.geom_xmat[soles].reshape(2, 3, 3)
-        low[t] = [sole_corners(model, data, g)[:, 2].min() for g in soles]
-    dt = 1.0 / CONTROL_HZ
-
-    def d(x):  # a smoothed derivative: the reference is captured (noisy) or interpolated
-        if T < 2:
-            return np.zeros_like(x)
-        return gaussian_filter1d(np.gradient(x, dt, axis=0), sigma, axis=0, mode="nearest")
-
-    stance = low <= STANCE_GAP
-    # contact-consistent: a stance sole's target sits on the floor (its lowest corner at z = 0),
-    # whatever height the capture's floor estimate left it at
-    sole_pos[..., 2] -= np.where(stance, low, 0.0)
-    sole_vel = d(sole_pos)
-    return WholeBodyReference(
-        qpos=ref_qpos, qvel=qvel, qacc=qacc, com=com, com_vel=com_vel, com_acc=d(com_vel),
-        angmom=angmom, angmom_rate=d(angmom), sole_pos=sole_pos, sole_vel=sole_vel,
-        sole_acc=d(sole_vel), sole_mat=sole_mat, stance=stance,
-    )  # fmt: skip
 
 
 def _edges(mu: float) -> np.ndarray:
@@ -356,7 +273,7 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
         share = (inertia / inertia.mean()) ** gains.inertia_power
         scratch.update(joint_w=gains.w_joint * share, M=np.zeros((nv, nv)),
                        range=model.jnt_range[1:].copy(), jacp=np.zeros((3, nv)),
-                       jacr=np.zeros((3, nv)), E=_edges(gains.friction), ids=_sole_ids(model),
+                       jacr=np.zeros((3, nv)), E=_edges(gains.friction), ids=foot_box_ids(model),
                        floor=model.geom("floor").id)  # fmt: skip
     M = scratch["M"]
     mujoco.mj_fullM(model, data, M)
@@ -398,6 +315,28 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
     return QPResult(tau=tau, qdd=qdd, forces=forces, points=points, status=int(status))
 
 
+def _foot_sides(model) -> np.ndarray:
+    """(ngeom,) 0 for a geom of the left foot, 1 of the right, -1 for any other."""
+    side = np.full(model.ngeom, -1)
+    for name in ("lfoot", "ltoes", "lsole", "ltoesole", "rfoot", "rtoes", "rsole", "rtoesole"):
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        if g >= 0:
+            side[g] = 0 if name.startswith("l") else 1
+    return side
+
+
+def _penetration(data, floor: int) -> tuple[float, float]:
+    """The deepest floor contact and the deepest body-body contact [m] (>= 0) of ``data``."""
+    n = data.ncon
+    if not n:
+        return 0.0, 0.0
+    on_floor = (data.contact.geom[:n] == floor).any(axis=1)
+    depth = -data.contact.dist[:n]
+    fd = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
+    sd = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
+    return fd, sd
+
+
 def track_wholebody(
     model,
     ref_qpos: np.ndarray,
@@ -427,11 +366,7 @@ def track_wholebody(
     data.qpos[:], data.qvel[:] = ref_qpos[0], ref.qvel[0]
     mujoco.mj_forward(model, data)
     floor = model.geom("floor").id
-    side = np.full(model.ngeom, -1)
-    for name in ("lfoot", "ltoes", "lsole", "ltoesole", "rfoot", "rtoes", "rsole", "rtoesole"):
-        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
-        if g >= 0:
-            side[g] = 0 if name.startswith("l") else 1
+    side = _foot_sides(model)
     push_ids = [model.body(p.body).id for p in pushes]
     F = (T + record_every - 1) // record_every
     rec_q, rec_v = np.empty((F, model.nq)), np.empty((F, model.nv))
@@ -454,15 +389,10 @@ def track_wholebody(
             apply_pushes(data, pushes, push_ids, t)
             i, r = divmod(k, record_every)
             on_record = r == 0
-            n = data.ncon
-            if n:
-                on_floor = (data.contact.geom[:n] == floor).any(axis=1)
-                depth = -data.contact.dist[:n]
-                fd = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
-                sd = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
-                deepest, deepest_self = max(deepest, fd), max(deepest_self, sd)
-                if on_record:
-                    rec_p[i] = fd
+            fd, sd = _penetration(data, floor)
+            deepest, deepest_self = max(deepest, fd), max(deepest_self, sd)
+            if on_record:
+                rec_p[i] = fd
             if on_record:
                 rec_q[i], rec_v[i], rec_u[i] = data.qpos, data.qvel, data.ctrl
             mujoco.mj_step(model, data)
