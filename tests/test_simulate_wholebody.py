@@ -129,3 +129,21 @@ def test_torques_within_limits_and_same_reference_same_simulation(model, walk_re
 def test_it_needs_torque_actuators():
     with pytest.raises(ValueError, match="motor"):
         track_wholebody(sim_model(canonical_skeleton()), np.zeros((2, 63)))
+
+
+def test_forward_validation_builds_the_body_its_controller_needs():
+    from sim.simulate.validate import DEFAULT_CONTROLLER, ForwardValidation, forward_validation
+
+    skeleton = canonical_skeleton()
+    names = ("root", "lfoot", "head")
+    default = forward_validation(skeleton, names)
+    assert default.controller == DEFAULT_CONTROLLER
+    qp = forward_validation(skeleton, names, controller="wholebody")
+    assert not qp.model.actuator_biasprm[:, 1].any()  # torque actuators
+    sampled = forward_validation(skeleton, names, samples=8)
+    assert sampled.controller == "sampling" and sampled.samples == 8
+    assert sampled.model.actuator_biasprm[:, 1].any()  # position actuators
+    with pytest.raises(ValueError, match="motor"):
+        ForwardValidation(sampled.model, names, controller="wholebody")
+    with pytest.raises(ValueError, match="known"):
+        ForwardValidation(sampled.model, names, controller="pid")
