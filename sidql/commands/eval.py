@@ -21,16 +21,16 @@ from sidql.commands.usage import (
     data_folder,
     positive,
 )
-from sidql.evaluation.evaluate import (
-    evaluate,
+from sidql.evaluation.cases import load_cases
+from sidql.evaluation.evaluate import evaluate
+from sidql.evaluation.rate import rate_distortion, write_plot
+from sidql.evaluation.significance import comparisons_markdown
+from sidql.evaluation.tables import (
     floors_markdown,
-    load_cases,
     physics_markdown,
     simulate_markdown,
     table3_markdown,
 )
-from sidql.evaluation.rate import rate_distortion, write_plot
-from sidql.evaluation.significance import comparisons_markdown
 from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic

@@ -14,7 +14,8 @@ from sidql.commands.usage import (
     cmu_rate,
     positive,
 )
-from sidql.evaluation.evaluate import clip_seed, make_case, score
+from sidql.evaluation.cases import clip_seed, make_case
+from sidql.evaluation.scoring import score
 from sidql.keyframes.methods import get, select
 from sim.files import write_atomic
 from sim.motion.ingest import load_clips
