@@ -60,12 +60,8 @@ from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error  # n
 from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.segment_costs import segment_cost_matrix  # noqa: E402
-from sidql.keyframes.spherical import (  # noqa: E402
-    chart,
-    positions_from_chart,
-    protocol_indices,
-    split_channels,
-)
+from sidql.keyframes.spherical import chart, protocol_indices, split_channels  # noqa: E402
+from sidql.keyframes.unchart import positions_from_chart  # noqa: E402
 from sim.errors import UnmetTargetError  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 

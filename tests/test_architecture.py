@@ -249,17 +249,6 @@ OVERSIZED_ELSEWHERE = {
     "sim/simulate/controller.py:track",
     "sim/simulate/generate.py:generate",
     "sim/simulate/sampling.py:search_offsets",
-    # issue 25 section 4: being split now
-    "sim/model/humanoid.py:build_mjcf",
-    "sim/physics/contacts.py",
-    "sim/physics/ground.py:estimate_ground",
-    "sidql/codec/format.py:from_bytes",
-    "sidql/evaluation/validation.py:validate_clip",
-    "sidql/keyframes/spherical.py",
-    "sidql/learning/dqn.py",
-    "sidql/learning/dqn.py:train",
-    "sidql/learning/policy.py",
-    "sidql/learning/policy.py:_decide_clip",
 }
 
 
