@@ -18,7 +18,7 @@ from sidql.keyframes.spherical import SphericalSeries, chart, protocol_indices
 from sim.batch import run_batch
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip
-from sim.motion.dataset import find_trials, load_dataset_clips
+from sim.motion.dataset import dataset_clips, find_trials
 from sim.motion.ingest import load_clips
 
 
@@ -69,23 +69,23 @@ def load_cases(
     cases: list[Case] = []
     skipped: list[dict] = []
     if (Path(data_dir) / "index.json").is_file():
-        clips, subj, asfs = load_dataset_clips(data_dir, length, skeletons=True)
-        rates = sorted({c.fps for c in clips} - {float(fps)})
+        rows = dataset_clips(data_dir, length, skipped)  # each file read once, named as read
+        for s in skipped:
+            print(f"skipped {s['amc']}: {s['problem']}", file=sys.stderr)
+        rates = sorted({r[0].fps for r in rows} - {float(fps)})
         if rates:  # the clips are what they are: a different rate would be mislabelled
             raise MotionDataError(
                 str(Path(data_dir) / "index.json"), None,
                 f"clips at {', '.join(f'{r:g}' for r in rates)} fps, not {fps:g} (pass --fps)",
             )  # fmt: skip
-        keep = [
-            (c, a) for c, s, a in zip(clips, subj, asfs, strict=True)
-            if subjects is None or s in subjects
-        ]  # fmt: skip
         bad: dict[str, str] = {}
-        for c, a in keep:  # a clip without the protocol's bones is skipped, its file listed once
+        for c, s, a, file in rows:  # a clip without the protocol's bones: its file listed once
+            if subjects is not None and s not in subjects:
+                continue
             try:
                 cases.append(make_case(c, len(cases), a))
             except MotionDataError as e:
-                bad.setdefault(c.source, str(e))
+                bad.setdefault(str(file), f"{e.problem if e.path == c.source else e}")
         for source, problem in bad.items():
             skipped.append({"amc": source, "problem": problem})
             print(f"skipped {source}: {problem}", file=sys.stderr)

@@ -72,11 +72,13 @@ class MethodRun:
 
     @property
     def label(self) -> str:
-        return (
-            self.method
-            if self.reconstruction == "hermite"
-            else f"{self.method}+{self.reconstruction}"
-        )
+        """The method's name, with ``+reconstruction`` where that is not the one its name
+        implies: ``pitch`` (under the Hermite), ``pitch+slerp``; ``cartesian`` (under its own
+        Cartesian curves), ``cartesian+hermite``."""
+        implied = self.method if self.method in reconstructions.RECONSTRUCTIONS else "hermite"
+        if self.reconstruction == implied:
+            return self.method
+        return f"{self.method}+{self.reconstruction}"
 
 
 @dataclass
@@ -279,7 +281,7 @@ def _method_runs(out: ClipValidation, m: str, W: int, seed: int, full, kw: dict,
     shown = any(
         r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
     )
-    hermite = [] if own != "hermite" and shown else ["hermite"]  # e.g. xyz's = uniform's
+    hermite = [] if own != "hermite" and shown else ["hermite"]  # cartesian's = uniform's
     for name in hermite + ([own] if own != "hermite" else []):
         built = reconstructions.rebuild(name, clip, keys)
         rec = from_reconstruction(built, clip.fps)

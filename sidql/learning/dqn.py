@@ -14,7 +14,8 @@
 :func:`train` reads top to bottom, cleanrl style (setup, then one loop: act, step, store, learn,
 evaluate and checkpoint), with every piece it calls defined above it; :class:`Args` documents each
 knob. The paper's values are the defaults where it gives them (memory 10,000, minibatch 256,
-γ = 0.5 were its choices; the defaults here are the tuned ones, see ``docs/policy.md``).
+γ = 0.5 were its choices; the defaults here are the tuned ones: docs/policy.md lists what was
+kept and what changed, and why).
 A run writes ``OUT`` (the policy), ``OUT.ckpt`` (everything needed to resume, written atomically
 at every evaluation: :mod:`sidql.learning.checkpoint`), ``OUT.csv`` (the log) and ``OUT.png``
 (the learning curve: :mod:`sidql.learning.run_files`). Policy and checkpoint files hold tensors
@@ -65,6 +66,7 @@ from sidql.learning.tasks import (
     synthetic_tasks,
 )
 from sim.errors import ModelFileError, MotionDataError
+from sim.files import excerpt
 from sim.motion.dataset import dataset_entries, find_trials, origin_subject
 
 # --- data ----------------------------------------------------------------------------------------
@@ -124,8 +126,20 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
                 f"--train-also: left out {len(entries) - len(kept)} of {len(entries)} clips made "
                 f"from held-out subjects' trials ({', '.join(test_s)})", file=sys.stderr,
             )  # fmt: skip
-        train_tasks += [clip_task(c, subject=str(e.get("subject", ""))) for c, e in kept]
+        train_tasks += [_also_task(c, e, args.train_also) for c, e in kept]
     return train_tasks, test_tasks, {"train": train_s, "test": test_s}
+
+
+def _also_task(clip, entry: dict, folder) -> KeyframeTask:
+    """The task of a ``--train-also`` clip; one that cannot be a task is named by its index
+    file and entry (never by the path its ``source`` claims)."""
+    try:
+        return clip_task(clip, subject=str(entry.get("subject", "")))
+    except MotionDataError as e:
+        name = excerpt(str(entry.get("file")), 100, quote=False)
+        raise MotionDataError(
+            str(Path(folder) / "index.json"), None, f"{name}: {e.problem}"
+        ) from None
 
 
 # --- baselines on cost matrices (for logging) ----------------------------------------------------
