@@ -292,3 +292,16 @@ def test_size_check_counts_module_and_function_lines(tmp_path):
         "sim/big.py:long": MAX_FUNCTION_LINES + 1,
         "sidql/long.py": MAX_MODULE_LINES + 1,
     }
+
+
+def test_every_room_is_a_package():
+    """A folder of modules without ``__init__.py`` imports as a namespace package here but is
+    left out of the wheel and of the API reference."""
+    missing = sorted(
+        str(d.relative_to(REPO))
+        for top in PACKAGES
+        for d in [REPO / top, *(REPO / top).rglob("*")]
+        if d.is_dir() and d.name != "__pycache__" and any(d.glob("*.py"))
+        and not (d / "__init__.py").is_file()
+    )  # fmt: skip
+    assert not missing, "folders of modules without __init__.py: " + ", ".join(missing)
