@@ -375,7 +375,7 @@ def _array_mutation(a: dict, rng) -> str:
     elif op == "parents" and "parents" in a:
         p = a["parents"].copy()
         if p.size:
-            p[rng.randrange(p.size)] = _pick(rng, (-5, -1, 0, p.size, 10**9, 1))
+            p.flat[rng.randrange(p.size)] = _pick(rng, (-5, -1, 0, p.size, 10**9, 1))  # any shape
         a["parents"] = p
     elif op == "scalar":
         which = _pick(rng, ("fps", "source_fps", "start_frame"))
