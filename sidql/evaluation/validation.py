@@ -32,7 +32,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
 from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob
@@ -135,7 +135,7 @@ class DecodedStream:
         i1 = i0 + clip.n_frames
         rec = self.motion
         if abs(rec.fps - clip.fps) > 1e-9 or i1 > rec.n_frames:
-            raise ValueError(
+            raise UsageError(
                 f"{self.label}: the stream has {rec.n_frames} frames at {rec.fps:g} fps; clip "
                 f"frames {i0}..{i1 - 1} at {clip.fps:g} fps are not in it"
             )

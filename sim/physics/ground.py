@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.physics.feet import FOOT_POINTS, SIDES, Sole, foot_points, sole
 
 __all__ = ["FOOT_POINTS", "FLAT_TOLERANCE", "MAX_SLOPE", "Ground", "estimate_ground", "foot_points"]
@@ -269,11 +270,11 @@ def estimate_ground(
     names = tuple(names)
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (len(names), 3) or p.shape[0] < 1:
-        raise ValueError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
+        raise UsageError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
     if not np.all(np.isfinite(p)):
-        raise ValueError("positions must be finite")
+        raise UsageError("positions must be finite")
     if not foot_points(names):
-        raise ValueError(f"no foot point among {names}; need one of {FOOT_POINTS}")
+        raise UsageError(f"no foot point among {names}; need one of {FOOT_POINTS}")
     s = sole(p, names)
     low, idx = lowest_points(s)  # (T, F, 3), (T, F)
     T, F = low.shape[:2]

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.errors import UsageError
+
 
 @dataclass(frozen=True)
 class FootState:
@@ -34,6 +36,6 @@ class FootState:
         T = self.contact.shape[0]
         for a in (self.contact, self.rec_contact, self.floating, self.sinking, self.skating):
             if a.shape != (T, len(self.points)):
-                raise ValueError(
+                raise UsageError(
                     f"foot state arrays must be (T, {len(self.points)}); got {a.shape}"
                 )
