@@ -2,7 +2,8 @@
 
 * :class:`BadFileError`: a file that cannot be used; names the file, the line (when known) and
   the problem. Its kinds: :class:`MotionDataError` (ASF/AMC files, clips, ``.sidq`` streams,
-  dataset indexes) and :class:`ModelFileError` (policy and checkpoint files).
+  dataset indexes), :class:`ModelFileError` (policy and checkpoint files) and
+  :class:`OutputError` (an output that cannot go where it was asked for).
 * :class:`UnmetTargetError`: a request that cannot be met by any answer (e.g. a byte rate too low
   for the trial).
 * :class:`UnknownNameError`: an unknown name of a method, reconstruction, kind, ...; the message
@@ -64,6 +65,12 @@ class ModelFileError(BadFileError):
     settings."""
 
 
+class OutputError(BadFileError):
+    """An output that cannot be written where it was asked for: below the folder the user named
+    there is a symbolic link, or the target is a directory, FIFO, device or socket (outputs only
+    ever replace regular files), or a clip its own reader would refuse."""
+
+
 class UnmetTargetError(SidqlError, ValueError):
     """A target no answer meets, e.g. a byte rate too low for the trial's fewest keyframes."""
 
@@ -79,10 +86,17 @@ class UnknownNameError(SidqlError, KeyError, ValueError):
         known: the valid names, in their order.
     """
 
+    MAX_KNOWN = 300  # characters of the list of valid names
+
     def __init__(self, what: str, name, known: Iterable[str]):
         self.what, self.name, self.known = what, name, tuple(str(k) for k in known)
         shown = repr(name) if len(repr(name)) <= 200 else repr(name)[:200] + "..."
-        super().__init__(f"unknown {what} {shown}; known: {', '.join(self.known) or 'none'}")
+        listed = ", ".join(self.known) or "none"
+        if len(listed) > self.MAX_KNOWN:  # a 1,000-bone skeleton: the first names and a count
+            listed = (
+                listed[: self.MAX_KNOWN].rsplit(", ", 1)[0] + f", ... ({len(self.known)} in all)"
+            )
+        super().__init__(f"unknown {what} {shown}; known: {listed}")
 
     def __str__(self) -> str:  # KeyError would print the message quoted
         return str(self.args[0])

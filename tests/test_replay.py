@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sidql.evaluation.validation import validate_clip
-from sim.replay.capsules import adjacent_pairs, bone_poses, bones_of
+from sim.model.capsules import adjacent_pairs, bone_poses, bones_of
 from sim.replay.checks import (
     CollisionScene,
     PointMotion,

@@ -70,7 +70,6 @@ def run(args) -> int:
         print(f"no {args.length}-frame clips in {args.amc}")
     if args.out:
         path = Path(args.out)
-        path.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(path, lambda f: f.write(json.dumps({"clips": rows}, indent=1).encode()))
         print(f"wrote {path}")
     return 0

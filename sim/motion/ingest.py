@@ -32,6 +32,14 @@ from sim.motion.velocities import (
 
 SKELETONS = ("subject", "humanoid")
 CMU_FPS = 120.0
+#: Memory bound of :func:`load_motion`: the arrays it builds, about :data:`BYTES_PER_POINT_FRAME`
+#: per point and source frame (measured: ``benchmarks/fuzz_campaign.py``), at most
+#: :data:`ARRAY_BYTES_PER_INPUT_BYTE` times the AMC file's size or :data:`ARRAY_BYTES_FLOOR`
+#: (any trial of up to ~12,000 source frames), checked from the parsed frame count before any
+#: is built. A real CMU trial needs ~25x its size; a root-only AMC (20 bytes a frame) ~700x.
+BYTES_PER_POINT_FRAME = 700
+ARRAY_BYTES_PER_INPUT_BYTE = 128
+ARRAY_BYTES_FLOOR = 256 << 20
 
 
 def resample_step(source_fps: float, fps: float) -> int:
@@ -162,6 +170,7 @@ def load_motion(
     resample_step(source_fps, fps)  # refused before any file is read
     subject, model = subject_model(asf)
     motion = parse_amc(amc, subject)
+    _check_memory(amc, motion.n_frames, len(point_names(subject)))
     root_scale = 1.0
     target = subject
     if skeleton == "humanoid":
@@ -178,6 +187,19 @@ def load_motion(
         source=str(Path(amc)),
         derivatives=derivatives,
     )
+
+
+def _check_memory(amc, frames: int, points: int) -> None:
+    """Refuse a trial whose arrays would pass the stated bound (see :data:`ARRAY_BYTES_FLOOR`)."""
+    need = frames * points * BYTES_PER_POINT_FRAME
+    size = os.stat(amc).st_size
+    limit = max(ARRAY_BYTES_FLOOR, ARRAY_BYTES_PER_INPUT_BYTE * size)
+    if need > limit:
+        raise MotionDataError(
+            str(amc), None, f"{frames:,} frames of {points} points need ~{need >> 20:,} MB of "
+            f"arrays; at most {ARRAY_BYTES_PER_INPUT_BYTE}x the file's {size:,} bytes "
+            f"(or {ARRAY_BYTES_FLOOR >> 20} MB)",
+        )  # fmt: skip
 
 
 def load_clips(
