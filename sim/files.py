@@ -27,7 +27,7 @@ import shutil
 import stat
 from pathlib import Path
 
-from sim.errors import MotionDataError, OutputError
+from sim.errors import ArgumentTypeError, MotionDataError, OutputError
 
 _CLOEXEC = getattr(os, "O_CLOEXEC", 0)
 _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
@@ -191,7 +191,12 @@ def write_atomic(path: str | os.PathLike, write, *, root: str | os.PathLike | No
 
     Raises:
         OutputError: a link below ``root``, or a target that is not a regular file (one line).
+        ArgumentTypeError: ``write`` is not callable.
     """
+    if not callable(write):
+        raise ArgumentTypeError(
+            f"write must be callable (it is given the file); got {type(write).__name__}"
+        )
     root_dir, folders, name = _parts(Path(path), None if root is None else Path(root))
     dfd = _open_folder(root_dir, folders, create=True)
     try:

@@ -22,6 +22,7 @@ from sidql.keyframes.segment_costs import (
     segment_cost_matrix,
 )
 from sidql.keyframes.spherical import M_BONES, SphericalSeries
+from sim.errors import UsageError, require_type
 
 
 @numba.njit(cache=True)
@@ -75,7 +76,7 @@ class OptimalTable:
     def keyframes(self, W: int) -> np.ndarray:
         """(W,) sorted optimal keyframe indices, 0 and N-1 included."""
         if not 2 <= W < len(self.cost):
-            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+            raise UsageError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
         out = [self.n_frames - 1]
         for w in range(W, 1, -1):
             out.append(int(self.pointers[w, out[-1]]))
@@ -97,7 +98,7 @@ def solve(C: np.ndarray, n_bones: int, w_max: int | None = None) -> OptimalTable
     N = C.shape[0]
     w_max = N if w_max is None else int(w_max)
     if not 2 <= w_max <= N:
-        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+        raise UsageError(f"w_max must be in [2, {N}]; got {w_max}")
     D, P = _dp(C, w_max)
     return OptimalTable(cost=D[:, N - 1].copy(), pointers=P, n_frames=N, n_bones=n_bones)
 
@@ -121,6 +122,7 @@ def optimal_keyframes(
     series: SphericalSeries, W: int, reconstruction: str = "hermite"
 ) -> np.ndarray:
     """(W,) keyframes minimising Q exactly (eq. 19) under a separable reconstruction."""
+    require_type(series, SphericalSeries, "series")
     return optimal_table(series, reconstruction, w_max=W).keyframes(W)
 
 
@@ -180,7 +182,7 @@ class CatmullRomTable:
     def keyframes(self, W: int) -> np.ndarray:
         """(W,) sorted optimal keyframes, 0 and N-1 included."""
         if not 2 <= W < len(self.cost):
-            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+            raise UsageError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
         N = self.n_frames
         xi, y = int(self.last[W, 0]), int(self.last[W, 1])
         out = [N - 1, y]
@@ -207,7 +209,7 @@ def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
     """
     N = series.n_frames
     if not 2 <= w_max <= N:
-        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+        raise UsageError(f"w_max must be in [2, {N}]; got {w_max}")
     Q = catmull_rom_costs(series)
     best, last, back = _cr_dp(Q, w_max)
     return CatmullRomTable(best, last, back, N, series.n_bones)
