@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.physics.feet import SOLE_POINTS
+from sim.model.kinematics import SOLE_POINTS
 from sim.simulate.model import SOLE_GEOMS
 
 #: geoms that may always touch the floor: the feet
