@@ -80,6 +80,6 @@ def mpjpe_mm(true_pos: np.ndarray, rec_pos: np.ndarray) -> float:
     return float(1000.0 * np.linalg.norm(rec_pos - true_pos, axis=-1).mean())
 
 
-def velocity_error(true_vel: np.ndarray, rec_vel: np.ndarray) -> float:
-    """Mean per-joint velocity error [m/s] of (N, J, 3) velocities [m/s], root included."""
-    return float(np.linalg.norm(rec_vel - true_vel, axis=-1).mean())
+def velocity_error_mm_s(true_vel: np.ndarray, rec_vel: np.ndarray) -> float:
+    """Mean per-joint velocity error [mm/s] of (N, J, 3) velocities [m/s], root included."""
+    return float(1000.0 * np.linalg.norm(rec_vel - true_vel, axis=-1).mean())

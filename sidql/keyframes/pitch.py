@@ -28,10 +28,7 @@ import numba
 import numpy as np
 
 from sidql.keyframes.curves import validate_keyframes
-from sidql.keyframes.spherical import (
-    protocol_indices,
-    protocol_parents,
-)
+from sidql.keyframes.spherical import protocol_indices, protocol_parents
 from sim.errors import MotionDataError, UsageError
 from sim.model import quaternion as quat
 from sim.motion.clip import Clip

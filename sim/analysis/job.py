@@ -37,13 +37,8 @@ from sim.errors import UsageError
 from sim.model.capsules import bones_of
 from sim.model.kinematics import FOOT_POINTS, SOLE_POINTS
 from sim.motion.points import PointMotion
-from sim.physics.contacts import (
-    Contacts,
-    body_contacts,
-    lowest_body_point,
-    motion_contacts,
-    trial_contacts,
-)
+from sim.physics.contact_metrics import lowest_body_point
+from sim.physics.contacts import Contacts, body_contacts, motion_contacts, trial_contacts
 from sim.physics.dynamics import MU, InverseDynamics
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, HumanoidIK, hinge_names, limit_excess

@@ -1,9 +1,10 @@
 """Kinematic replay of a motion (original or reconstruction) in MuJoCo, and what a person would see.
 
-Each frame's points are mapped onto bone-aligned capsules on mocap bodies (:mod:`sim.model.capsules`);
-MuJoCo's collision detection then measures floor penetration and self-penetration between
-non-adjacent bones. Foot contact is the one definition of :mod:`sim.physics.contacts` (the sole's
-geometry against the trial's floor, rolling contact allowed). Together with bone-length drift,
+Each frame's points are mapped onto bone-aligned capsules on mocap bodies
+(:mod:`sim.model.capsules`); MuJoCo's collision detection then measures floor penetration and
+self-penetration between non-adjacent bones (touching bones). Foot-floor contact is read from
+:mod:`sim.physics.contacts` (the sole's geometry against the trial's floor, rolling contact
+allowed), as everywhere else. Together with bone-length drift,
 foot skating, joint-limit violations (where the motion carries joint angles), MPJPE and velocity
 error against the original, these are the per-frame :class:`FrameChecks`; :func:`summarise`
 condenses them per clip and :func:`excess` subtracts the original clip's own figures (the
@@ -284,7 +285,8 @@ def self_penetration_excess(
     penetration depth [m] (0 when apart): overlaps the original has too (the thick capsules of
     thorax, neck and head touch in every frame) cancel, new or deeper ones count. A pair the
     original has deeper than ``tol`` that the motion loses by more than ``tol`` (a real contact,
-    e.g. hand on arm, gone) is a *lost contact*, counted separately rather than as an improvement.
+    e.g. hand on arm, gone) is a *lost touching pair* (``lost_contacts``: bones that touched, not a
+    foot on the floor), counted separately rather than as an improvement.
 
     Args:
         checks, baseline: the motion's and the original's :class:`FrameChecks` (same frames, same

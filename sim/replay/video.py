@@ -41,7 +41,7 @@ def render_frames(
         keyframes: frame indices marked as they pass.
         method: name in the caption.
         frames: which frame indices to render (default all).
-        feet: foot contact and flags per frame (e.g. :func:`sim.physics.contacts.foot_states`).
+        feet: foot contact and flags per frame (e.g. :func:`sim.physics.foot_state.foot_states`).
         ground_z: height of the drawn floor [m].
         renderer: the clip's :class:`SkeletonRenderer` (same points, style and ground), reused
             and left open; one is made and closed here when None.
