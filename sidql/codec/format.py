@@ -34,7 +34,7 @@ from sidql.codec.entropy import decode_integers, encode_integers
 from sidql.codec.quantise import BITS, PositionQuantiser, Quantiser
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
@@ -146,22 +146,22 @@ def to_bytes(stream: Stream) -> bytes:
     """The whole container: header, records, CRC-32."""
     gaps = np.diff(stream.keyframes)
     if stream.keyframes[0] != 0 or len(stream.keyframes) < 2 or gaps.min() < 1:
-        raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
+        raise UsageError("keyframes must start at 0 and increase strictly (at least 2)")
     if gaps.max() > MAX_GAP:
-        raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
+        raise UsageError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
     if int(stream.keyframes[-1]) + 1 > frame_limit(len(stream.names)):
-        raise ValueError(
+        raise UsageError(
             f"{int(stream.keyframes[-1]) + 1} frames exceed the format's limit of "
             f"{frame_limit(len(stream.names))}"
         )
     if stream.coding == 2:
         if stream.reconstruction not in POSITION_RECONSTRUCTIONS:
-            raise ValueError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
+            raise UsageError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
         body = header_bytes(stream) + position_bytes(stream)
     elif stream.coding == 1:
         body = header_bytes(stream) + packed_bytes(stream)
     elif stream.quantiser.bits != 16:
-        raise ValueError("coding 0 carries 16-bit codes only")
+        raise UsageError("coding 0 carries 16-bit codes only")
     else:
         body = header_bytes(stream) + record_bytes(stream)
     return body + struct.pack("<I", zlib.crc32(body))

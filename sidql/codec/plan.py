@@ -32,7 +32,7 @@ import numpy as np
 
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.segment_costs import segment_weights
-from sim.errors import UnmetTargetError
+from sim.errors import UnmetTargetError, UsageError
 from sim.model.angles import wrap_angle
 
 #: Kernel mode of each curve: its index in CURVES (0 hermite, 1 linear, 2 catmull_rom).
@@ -185,7 +185,7 @@ def position_band_costs(
         lengths: (M,) bone lengths [m]; parents: (M + 1,) parent indices.
     """
     if max_gap < 1:
-        raise ValueError(f"max gap must be >= 1; got {max_gap}")
+        raise UsageError(f"max gap must be >= 1; got {max_gap}")
     X = np.ascontiguousarray(X, dtype=np.float64)
     Xq = np.ascontiguousarray(Xq, dtype=np.float64)
     Rq = X if Rq is None else np.ascontiguousarray(Rq, dtype=np.float64)
@@ -258,7 +258,7 @@ def band_costs(
         max_gap: G >= 1; reconstruction: "hermite", "linear" or "catmull_rom".
     """
     if max_gap < 1:
-        raise ValueError(f"max gap must be >= 1; got {max_gap}")
+        raise UsageError(f"max gap must be >= 1; got {max_gap}")
     X = np.ascontiguousarray(X, dtype=np.float64)
     Xq = np.ascontiguousarray(Xq, dtype=np.float64)
     Rq = X if Rq is None else np.ascontiguousarray(Rq, dtype=np.float64)

@@ -29,7 +29,9 @@ from sidql.evaluation.scoring import (
 from sidql.evaluation.significance import paired_comparisons
 from sidql.evaluation.trial_physics import physics_setup, simulate_setup
 from sidql.keyframes import methods
+from sidql.keyframes.counts import check_counts
 from sim.batch import iter_batch
+from sim.errors import UsageError
 from sim.simulate.validate import SIMULATE_KEYS
 
 
@@ -72,9 +74,10 @@ def evaluate(
         rollouts per window of its sampling tracker (0: the plain tracker).
     """
     if simulate and not physics:
-        raise ValueError("simulate needs physics (the IK fit it tracks)")
+        raise UsageError("simulate needs physics (the IK fit it tracks)")
     method_names = list(method_names)
     counts = list(keyframe_counts)
+    check_counts(counts, min((c.clip.n_frames for c in cases), default=2**31 - 1))
     for name in method_names:
         methods.get(name)  # fail early, listing the known methods
         if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file

@@ -43,6 +43,7 @@ from sidql.evaluation.metrics import (
 )
 from sidql.evaluation.plots import metrics_plot, summary_plot
 from sidql.evaluation.validation import ClipValidation, MethodRun, checks_document
+from sim.errors import UsageError
 from sim.files import write_atomic
 from sim.physics.foot_state import FootState, foot_states
 from sim.physics.ground import estimate_ground
@@ -231,7 +232,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     numbers = list(range(len(validations)) if clip_numbers is None else clip_numbers)
     if len(numbers) != len(validations):
-        raise ValueError(f"{len(numbers)} clip numbers for {len(validations)} clips")
+        raise UsageError(f"{len(numbers)} clip numbers for {len(validations)} clips")
     meta = dict(meta or {})
     doc = checks_document(validations, meta)
     for c, number in zip(doc["clips"], numbers, strict=True):

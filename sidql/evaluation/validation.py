@@ -35,7 +35,7 @@ from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS
 from sim.analysis.figures import HEIGHT_KEYS
 from sim.analysis.job import PhysicsJob
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.physics.contacts import trial_contacts
@@ -137,7 +137,7 @@ class DecodedStream:
         i1 = i0 + clip.n_frames
         rec = self.motion
         if abs(rec.fps - clip.fps) > 1e-9 or i1 > rec.n_frames:
-            raise ValueError(
+            raise UsageError(
                 f"{self.label}: the stream has {rec.n_frames} frames at {rec.fps:g} fps; clip "
                 f"frames {i0}..{i1 - 1} at {clip.fps:g} fps are not in it"
             )

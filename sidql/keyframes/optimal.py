@@ -22,6 +22,7 @@ from sidql.keyframes.segment_costs import (
     segment_cost_matrix,
 )
 from sidql.keyframes.spherical import M_BONES, SphericalSeries
+from sim.errors import UsageError, require_type
 
 
 @numba.njit(cache=True)
@@ -73,7 +74,7 @@ class KeyframeTable:
     def keyframes(self, W: int) -> np.ndarray:
         """(W,) sorted optimal keyframe indices, 0 and N-1 included."""
         if not 2 <= W < len(self.cost):
-            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+            raise UsageError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
         return self._backtrack(W)
 
     def _backtrack(self, W: int) -> np.ndarray:
@@ -112,7 +113,7 @@ def solve(C: np.ndarray, n_bones: int, w_max: int | None = None) -> OptimalTable
     N = C.shape[0]
     w_max = N if w_max is None else int(w_max)
     if not 2 <= w_max <= N:
-        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+        raise UsageError(f"w_max must be in [2, {N}]; got {w_max}")
     D, P = _dp(C, w_max)
     return OptimalTable(cost=D[:, N - 1].copy(), pointers=P, n_frames=N, n_bones=n_bones)
 
@@ -136,6 +137,7 @@ def optimal_keyframes(
     series: SphericalSeries, W: int, reconstruction: str = "hermite"
 ) -> np.ndarray:
     """(W,) keyframes minimising Q exactly (eq. 19) under a separable reconstruction."""
+    require_type(series, SphericalSeries, "series")
     return optimal_table(series, reconstruction, w_max=W).keyframes(W)
 
 
@@ -213,7 +215,7 @@ def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
     """
     N = series.n_frames
     if not 2 <= w_max <= N:
-        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+        raise UsageError(f"w_max must be in [2, {N}]; got {w_max}")
     Q = catmull_rom_costs(series)
     best, last, back = _cr_dp(Q, w_max)
     return CatmullRomTable(cost=best, n_frames=N, n_bones=series.n_bones, last=last, back=back)

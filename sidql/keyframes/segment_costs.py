@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from sidql.keyframes.spherical import SIN_EPS, SphericalSeries, _chart_kernel, chart_points_of
-from sim.errors import UnknownNameError
+from sim.errors import UnknownNameError, UsageError
 from sim.model.angles import wrap_angle
 
 #: The reconstructions (curves of :mod:`sidql.keyframes.curves`) whose Q separates over segments.
@@ -143,7 +143,7 @@ def greedy_keyframes(
     if reconstruction not in SEPARABLE:
         raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
     if not 2 <= W <= series.n_frames:
-        raise ValueError(f"W must be in [2, {series.n_frames}]; got {W}")
+        raise UsageError(f"W must be in [2, {series.n_frames}]; got {W}")
     X, R = stacked(series)
     return _greedy(X, R, W, reconstruction == "linear").astype(np.int64)
 

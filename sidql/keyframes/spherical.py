@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError, require_type
 from sim.files import excerpt
 from sim.model.angles import wrap_angle
 from sim.model.rotations import y_up_to_z_up, z_up_to_y_up
@@ -111,13 +111,13 @@ class SphericalSeries:
         N, M = self.theta.shape
         for name in ("phi", "dtheta", "dphi"):
             if getattr(self, name).shape != (N, M):
-                raise ValueError(f"{name} must be ({N}, {M}); got {getattr(self, name).shape}")
+                raise UsageError(f"{name} must be ({N}, {M}); got {getattr(self, name).shape}")
         if self.root_pos.shape != (N, 3) or self.root_vel.shape != (N, 3):
-            raise ValueError(f"root_pos and root_vel must be ({N}, 3)")
+            raise UsageError(f"root_pos and root_vel must be ({N}, 3)")
         if self.lengths.shape != (M,) or self.parents.shape != (M + 1,):
-            raise ValueError(f"lengths must be ({M},) and parents ({M + 1},)")
+            raise UsageError(f"lengths must be ({M},) and parents ({M + 1},)")
         if not self.dt > 0:
-            raise ValueError(f"dt must be positive; got {self.dt}")
+            raise UsageError(f"dt must be positive; got {self.dt}")
 
     @property
     def n_frames(self) -> int:
@@ -365,7 +365,9 @@ def chart(clip: Clip) -> SphericalSeries:
 
     Raises:
         MotionDataError: a protocol point is missing, or the data holds non-finite values.
+        ArgumentTypeError: ``clip`` is not a :class:`Clip`.
     """
+    require_type(clip, Clip, "clip")
     pos, vel, parents = chart_points_of(clip)
     return chart_arrays(pos, vel, parents, clip.dt)
 

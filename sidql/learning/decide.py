@@ -12,6 +12,7 @@ from torch import nn
 
 from sidql.learning.qnet import N_SCALARS, KeyframeQNet
 from sidql.learning.rollout import greedy_sequences, rollout_values_seq
+from sim.errors import ArgumentTypeError
 
 #: The modules of :class:`KeyframeQNet` the decision kernels know: the encoder's layers (mirrored
 #: in :func:`encode_clip`) and the head's linear layers (mirrored in :func:`decide_clip`). A
@@ -32,13 +33,13 @@ def head_weights(net: KeyframeQNet) -> tuple:
         (scal W (K, 11), scal b (K,), adv_hidden W (H, K), b (H,), adv_out w (H,), b float,
         value_hidden W (H, K), b (H,), value_out w (H,), b float).
     Raises:
-        TypeError: a layer was added, removed, renamed or changed (the kernel would silently
+        ArgumentTypeError: a layer was added, removed, renamed or changed (the kernel would silently
             compute something else).
     """
     h = int(net.config["hidden"])
     children = {name for name, _ in net.named_children()}
     if children != set(ENCODER_MODULES + HEAD_MODULES):
-        raise TypeError(
+        raise ArgumentTypeError(
             "the compiled decision kernel mirrors KeyframeQNet's modules "
             f"{sorted(ENCODER_MODULES + HEAD_MODULES)}; this network has {sorted(children)}"
         )
@@ -49,7 +50,7 @@ def head_weights(net: KeyframeQNet) -> tuple:
     for name, shape in shapes.items():
         m = getattr(net, name)
         if type(m) is not nn.Linear or tuple(m.weight.shape) != shape or m.bias is None:
-            raise TypeError(
+            raise ArgumentTypeError(
                 f"the compiled decision kernel needs net.{name} = Linear(in={shape[1]}, "
                 f"out={shape[0]}); got {m}"
             )
@@ -83,18 +84,18 @@ def encoder_weights(net: KeyframeQNet) -> tuple:
     f = lambda t: t.detach().numpy().astype(np.float64)  # noqa: E731
     inp = net.inp
     if type(inp) is not nn.Conv1d or tuple(inp.weight.shape) != (h, c + 1, 1) or inp.bias is None:
-        raise TypeError(f"the compiled decision kernel needs net.inp = Conv1d({c + 1}, {h}, 1); "
+        raise ArgumentTypeError(f"the compiled decision kernel needs net.inp = Conv1d({c + 1}, {h}, 1); "
                         f"got {inp}")  # fmt: skip
     for conv in net.convs:
         d = conv.dilation[0] if type(conv) is nn.Conv1d else None
         if (type(conv) is not nn.Conv1d or tuple(conv.weight.shape) != (h, h, 3)
                 or conv.padding != (d,) or conv.stride != (1,) or conv.bias is None):  # fmt: skip
-            raise TypeError(f"the compiled decision kernel needs Conv1d({h}, {h}, 3, padding=d, "
+            raise ArgumentTypeError(f"the compiled decision kernel needs Conv1d({h}, {h}, 3, padding=d, "
                             f"dilation=d) in net.convs; got {conv}")  # fmt: skip
     for name, shape in {"ctx": (h, h), "proj": (4 * h, h), "glob": (h, h)}.items():
         m = getattr(net, name)
         if type(m) is not nn.Linear or tuple(m.weight.shape) != shape or m.bias is None:
-            raise TypeError(f"the compiled decision kernel needs net.{name} = "
+            raise ArgumentTypeError(f"the compiled decision kernel needs net.{name} = "
                             f"Linear(in={shape[1]}, out={shape[0]}); got {m}")  # fmt: skip
     n_conv = len(net.convs)
     conv_w = np.zeros((n_conv, 3, h, h))

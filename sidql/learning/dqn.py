@@ -65,7 +65,7 @@ from sidql.learning.tasks import (
     load_tasks,
     synthetic_tasks,
 )
-from sim.errors import ModelFileError, MotionDataError
+from sim.errors import ModelFileError, MotionDataError, UsageError
 from sim.files import excerpt
 from sim.motion.dataset import dataset_entries, find_trials, origin_subject
 
@@ -79,7 +79,7 @@ def split_subjects(subjects, test_subjects=None, seed: int = 0) -> tuple[list[st
     test = sorted(test_subjects) if test_subjects else subjects[seed % 4 :: 4]
     train = [s for s in subjects if s not in test]
     if not train or not test:
-        raise ValueError(f"need training and held-out subjects; have {subjects}, test {test}")
+        raise UsageError(f"need training and held-out subjects; have {subjects}, test {test}")
     return train, test
 
 
@@ -376,7 +376,7 @@ def train(args: Args) -> dict:
     # setup: files, checkpoint (checked before any data is read), data, networks, memories
     problems = settings_problems(args)
     if problems:
-        raise ValueError(problems[0])
+        raise UsageError(problems[0])
     torch.set_num_threads(args.threads)
     files = RunFiles.beside(args.out)
     resume = args.resume and files.checkpoint.exists()

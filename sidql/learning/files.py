@@ -19,7 +19,7 @@ import zipfile
 
 import torch
 
-from sim.errors import ModelFileError, MotionDataError
+from sim.errors import ModelFileError, MotionDataError, UsageError
 from sim.files import MAX_CHECKPOINT_BYTES, excerpt, open_regular, write_atomic
 from sim.zipcheck import check_zip
 
@@ -73,7 +73,7 @@ def save_payload(path: str | os.PathLike, payload: dict) -> None:
     """Write ``payload`` (a dict with a ``"format"`` entry; tensors and plain values only)
     atomically to ``path``."""
     if "format" not in payload:
-        raise ValueError("a payload must name its format")
+        raise UsageError("a payload must name its format")
     buf = io.BytesIO()
     torch.save(payload, buf)
     write_atomic(path, lambda f: f.write(buf.getvalue()))

@@ -23,7 +23,7 @@ from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
 from sidql.learning.tasks import clip_features
-from sim.errors import ModelFileError
+from sim.errors import ModelFileError, UsageError
 from sim.files import MAX_POLICY_BYTES
 from sim.paths import package_file
 
@@ -90,13 +90,13 @@ class Policy:
         feats = np.ascontiguousarray(features, dtype=np.float32)
         c = self.net.config["n_features"]
         if feats.ndim != 3 or feats.shape[-1] != c:
-            raise ValueError(f"features must be (B, N, {c}); got {feats.shape}")
+            raise UsageError(f"features must be (B, N, {c}); got {feats.shape}")
         b, n, _ = feats.shape
         if not 2 <= W <= n:
-            raise ValueError(f"W must be in [2, {n}]; got {W}")
+            raise UsageError(f"W must be in [2, {n}]; got {W}")
         cost = np.ascontiguousarray(costs, dtype=np.float32)
         if cost.shape != (b, n, n):
-            raise ValueError(f"costs must be ({b}, {n}, {n}); got {cost.shape}")
+            raise UsageError(f"costs must be ({b}, {n}, {n}); got {cost.shape}")
         return feats, cost
 
     @torch.no_grad()
@@ -172,7 +172,8 @@ def check_config(cfg, state_dict) -> tuple:
     declares (built on torch's ``meta`` device, which allocates no memory).
 
     Raises:
-        ValueError: a value out of its limits or of the wrong type, or weights that do not fit.
+        ValueError: a value out of its limits or of the wrong type, or weights that do not fit
+            (the loader turns it into a ModelFileError naming the file).
     """
     if not isinstance(cfg, dict) or not isinstance(state_dict, dict):
         raise ValueError("config and state_dict must be dicts")

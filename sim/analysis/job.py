@@ -33,6 +33,7 @@ import mujoco
 import numpy as np
 
 from sim.analysis.figures import EXCESS_KEYS, MotionPhysics, figures
+from sim.errors import UsageError
 from sim.model.capsules import bones_of
 from sim.model.kinematics import FOOT_POINTS, SOLE_POINTS
 from sim.motion.points import PointMotion
@@ -278,7 +279,7 @@ class PhysicsJob:
         else:
             p = np.asarray(positions, dtype=np.float64)
             if p.shape != orig.positions.shape:
-                raise ValueError(f"positions must be {orig.positions.shape}; got {p.shape}")
+                raise UsageError(f"positions must be {orig.positions.shape}; got {p.shape}")
             ref = PointMotion(self.names, self.parents, orig.positions, self.fps)
             mp = self.motion_physics(
                 p, ref, ground, _q_init(clip, self.model), velocities=velocities,

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.physics.contacts import Contacts
 from sim.physics.feet import Sole
 from sim.physics.ground import Ground
@@ -47,7 +48,7 @@ def contact_metrics(reference: np.ndarray, motion: Contacts) -> dict[str, float]
     ref = np.asarray(reference, dtype=bool)
     own, h, v = motion.contact, motion.foot_gap, motion.foot_speed
     if not (ref.shape == own.shape == h.shape == v.shape):
-        raise ValueError("contact metrics need arrays of one shape (T, F)")
+        raise UsageError("contact metrics need arrays of one shape (T, F)")
     pen, n_pen = _mean(np.maximum(-h, 0.0).ravel())
     flo, n_flo = _mean(np.maximum(h[ref], 0.0))
     sk, n_sk = _mean(v[ref])

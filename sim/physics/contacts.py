@@ -35,6 +35,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.capsules import bones_of
 from sim.model.kinematics import FOOT_POINTS
 from sim.physics.feet import (
@@ -161,9 +162,9 @@ def label_contacts(
     """
     gap, hspeed = np.asarray(gap, dtype=np.float64), np.asarray(hspeed, dtype=np.float64)
     if gap.shape != hspeed.shape or gap.ndim != 2:
-        raise ValueError(f"gap and hspeed must both be (T, F); got {gap.shape}, {hspeed.shape}")
+        raise UsageError(f"gap and hspeed must both be (T, F); got {gap.shape}, {hspeed.shape}")
     if release < 0:
-        raise ValueError("release must be >= 0")
+        raise UsageError("release must be >= 0")
     vs = np.zeros_like(gap) if vspeed is None else np.abs(np.asarray(vspeed, dtype=np.float64))
     enter_all = (gap <= enter) & (hspeed < enter_speed)
     stay_all = gap <= enter + release

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.humanoid import capsule_radius
 from sim.model.kinematics import SIDES
 
@@ -144,7 +145,7 @@ def sole(positions: np.ndarray, names) -> Sole:
                 parts.append("toes")
                 bodies.append(s + "toes")
     if not centres:
-        raise ValueError(f"no foot with both ankle and ball among {names}; need e.g. ltibia, lfoot")
+        raise UsageError(f"no foot with both ankle and ball among {names}; need e.g. ltibia, lfoot")
     return Sole(
         np.stack(centres, axis=1), np.array(radius), tuple(sides), tuple(parts), tuple(bodies)
     )

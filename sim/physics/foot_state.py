@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.kinematics import foot_points
 from sim.motion.points import PointMotion
 from sim.physics.contacts import Contacts, motion_contacts
@@ -43,7 +44,7 @@ class FootState:
         T = self.contact.shape[0]
         for a in (self.contact, self.rec_contact, self.floating, self.sinking, self.skating):
             if a.shape != (T, len(self.points)):
-                raise ValueError(
+                raise UsageError(
                     f"foot state arrays must be (T, {len(self.points)}); got {a.shape}"
                 )
 

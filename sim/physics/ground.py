@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.kinematics import FOOT_POINTS, SIDES, foot_points
 from sim.physics.feet import Sole, sole
 
@@ -270,11 +271,11 @@ def estimate_ground(
     names = tuple(names)
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (len(names), 3) or p.shape[0] < 1:
-        raise ValueError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
+        raise UsageError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
     if not np.all(np.isfinite(p)):
-        raise ValueError("positions must be finite")
+        raise UsageError("positions must be finite")
     if not foot_points(names):
-        raise ValueError(f"no foot point among {names}; need one of {FOOT_POINTS}")
+        raise UsageError(f"no foot point among {names}; need one of {FOOT_POINTS}")
     s = sole(p, names)
     low, idx = lowest_points(s)  # (T, F, 3), (T, F)
     T, F = low.shape[:2]
