@@ -60,8 +60,11 @@ def controller_rows(cases, names: list[str], log=None) -> dict[str, list[dict]]:
                 skeleton = subject_model(c.asf)[0]
                 model = sim_model(skeleton, actuators=actuators)
                 bodies[c.asf, n] = ForwardValidation(model, _protocol_names(c.clip), **kw)
-            row = bodies[c.asf, n].run(qpos, c.clip.fps)
-            out[n].append({"clip": f"{c.clip.source}@{c.clip.start_frame}", **row})
+            t0 = time.process_time()
+            row = bodies[c.asf, n].run(qpos, c.clip.fps)  # the fits above are not timed
+            cpu = (time.process_time() - t0) / (c.clip.n_frames / c.clip.fps)
+            out[n].append({"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
+                           "sim_cpu_s_per_s": cpu})  # fmt: skip
             if log:
                 log(f"{i + 1}/{len(cases)} {n} {out[n][-1]}")
     return out
@@ -80,7 +83,7 @@ def controllers_markdown(rows: dict[str, list[dict]]) -> str:
     for n, rs in rows.items():
 
         def med(k, rs=rs):
-            v = np.array([r[k] for r in rs], dtype=float)
+            v = np.array([np.nan if r[k] is None else r[k] for r in rs], dtype=float)
             v = v[np.isfinite(v)]
             return float(np.median(v)) if v.size else float("nan")
 
