@@ -115,6 +115,7 @@ def _umask() -> int:
 #: A real CMU AMC is at most ~20 MB (5 minutes at 120 Hz); ASF skeletons are a few KB.
 MAX_ASF_BYTES = 1 << 20
 MAX_AMC_BYTES = 64 << 20
+MAX_BVH_BYTES = 64 << 20  # a BVH holds the skeleton and the motion: as large as an AMC
 MAX_SIDQ_BYTES = 64 << 20
 MAX_INDEX_BYTES = 64 << 20
 MAX_NPZ_BYTES = 256 << 20
