@@ -22,27 +22,10 @@ from sim.acclaim.records import Motion, Skeleton
 from sim.bvh.convert import UNITS, UPS
 from sim.errors import MotionDataError, UnknownNameError
 from sim.files import write_atomic
-from sim.model.rotations import Y_UP_TO_Z_UP, continuous_euler, euler_angles_deg, euler_matrix
+from sim.model.kinematics import local_rotations
+from sim.model.rotations import Y_UP_TO_Z_UP, continuous_euler, euler_angles_deg
 
 _ROTATIONS = "Zrotation Yrotation Xrotation"  # R = Rz Ry Rx: X applied first ("XYZ")
-
-
-def local_rotations(skeleton: Skeleton, motion: Motion) -> dict[str, np.ndarray]:
-    """(T, 3, 3) every bone's rotation relative to its parent in the rest frame (``C M C^-1``)
-    and the root's (``"root"``: ``C_o M C_o^-1``), file axes (y up)."""
-    T = motion.n_frames
-    C = {"root": euler_matrix(skeleton.root_orientation, skeleton.root_axis_order)}
-    C.update({b.name: euler_matrix(b.axis, b.axis_order) for b in skeleton.bones})
-    out = {
-        "root": C["root"] @ euler_matrix(motion.root[:, 3:], skeleton.root_axis_order) @ C["root"].T
-    }
-    for b in skeleton.bones:
-        if b.dofs:
-            M = euler_matrix(motion.angles[b.name], "".join(d[1] for d in b.dofs).upper())
-        else:
-            M = np.broadcast_to(np.eye(3), (T, 3, 3))
-        out[b.name] = C[b.name] @ M @ C[b.name].T
-    return out
 
 
 def bvh_text(

@@ -1,4 +1,4 @@
-"""Ingest: ASF + AMC -> a :class:`~sim.motion.clip.Clip` of positions and true velocities.
+"""Ingest: ASF + AMC (or a BVH) -> a :class:`~sim.motion.clip.Clip` of positions and true velocities.
 
 Parse, retarget to a humanoid (the subject's own or the shared one), differentiate ``qpos`` at the
 source rate, resample by taking every k-th frame, and read positions, velocities and orientations
@@ -18,7 +18,14 @@ from sim.errors import MotionDataError, UnknownNameError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
-from sim.motion.retarget import leg_length, local_rotations_from_world, motion_to_qpos
+from sim.motion.resample import grid_rate, resample_qpos
+from sim.motion.retarget import (
+    leg_length,
+    local_rotations_from_world,
+    motion_to_qpos,
+    retarget_rotations,
+)
+from sim.motion.trial import CMU_FPS, is_bvh, read_trial
 from sim.motion.velocities import (
     body_rotation_steps,
     derivative_noise,
@@ -31,7 +38,6 @@ from sim.motion.velocities import (
 )
 
 SKELETONS = ("subject", "humanoid")
-CMU_FPS = 120.0
 
 
 def resample_step(source_fps: float, fps: float) -> int:
@@ -128,22 +134,28 @@ def clip_from_qpos(
 
 def load_motion(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None = None,
     *,
     skeleton: str = "subject",
     fps: float = 30.0,
     source_fps: float = CMU_FPS,
     derivatives: bool = True,
+    unit: str | None = None,
+    up: str = "y",
 ) -> Clip:
     """A whole trial as one clip at ``fps``.
 
     Args:
-        asf, amc: the subject's skeleton and one of its motions.
+        asf, amc: the subject's skeleton and one of its motions; or a BVH file as ``asf`` (or
+            both): its skeleton and motion, at its own rate (:mod:`sim.bvh.convert`: ``unit``
+            None detects the length unit, ``up`` is its up axis).
         skeleton: ``"subject"`` (the subject's own generated model: exact ASF/AMC kinematics) or
             ``"humanoid"`` (the shared ``models/cmu_humanoid.xml``; angles copied, root translation
-            scaled by the leg-length ratio).
+            scaled by the leg-length ratio; a BVH's rotations are re-expressed in its bones'
+            frames, :func:`sim.motion.retarget.retarget_rotations`).
         fps: output rate; ``source_fps / fps`` must be a whole number (CMU: 120 -> 30 takes every
-            4th frame).
+            4th frame). A BVH whose rate it does not divide is first interpolated onto the least
+            whole multiple of ``fps`` above its rate (:mod:`sim.motion.resample`: 100 -> 120).
         derivatives: also the points' velocities and accelerations from every source frame
             (``source_velocities``, ``accelerations``; :func:`clip_from_qpos`).
 
@@ -152,14 +164,23 @@ def load_motion(
     """
     if skeleton not in SKELETONS:
         raise UnknownNameError("skeleton", skeleton, SKELETONS)
-    subject, model = subject_model(asf)
-    motion = parse_amc(amc, subject)
+    bvh = asf if is_bvh(asf) else amc if is_bvh(amc) else None
+    subject, model = subject_model(bvh or asf, unit=unit, up=up)
+    if bvh is None:
+        motion = parse_amc(amc, subject)
+    else:
+        _, motion, source_fps = read_trial(bvh, unit=unit, up=up)
     root_scale = 1.0
     target = subject
     if skeleton == "humanoid":
         target, model = humanoid_model()
+        if bvh is not None:
+            subject, motion = retarget_rotations(subject, motion, target)
         root_scale = leg_length(target) / leg_length(subject)
-    qpos = motion_to_qpos(subject, motion, model, root_scale=root_scale)
+    qpos = motion_to_qpos(subject if bvh is None else target, motion, model, root_scale=root_scale)
+    if bvh is not None and grid_rate(source_fps, fps) != source_fps:
+        qpos = resample_qpos(qpos, source_fps, grid_rate(source_fps, fps))
+        source_fps = grid_rate(source_fps, fps)
     return clip_from_qpos(
         model,
         point_names(target),
@@ -167,14 +188,14 @@ def load_motion(
         qpos,
         source_fps=source_fps,
         fps=fps,
-        source=str(Path(amc)),
+        source=str(Path(bvh or amc)),
         derivatives=derivatives,
     )
 
 
 def load_clips(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None = None,
     *,
     fps: float = 30.0,
     length: int = 60,

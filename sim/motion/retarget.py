@@ -9,6 +9,8 @@ Two targets:
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import mujoco
 import numpy as np
 
@@ -16,7 +18,14 @@ from sim.acclaim.records import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
 from sim.model.humanoid import bone_frames
-from sim.model.rotations import Y_UP_TO_Z_UP, continuous_euler, euler_matrix, y_up_to_z_up
+from sim.model.kinematics import local_rotations
+from sim.model.rotations import (
+    Y_UP_TO_Z_UP,
+    continuous_euler,
+    euler_angles_deg,
+    euler_matrix,
+    y_up_to_z_up,
+)
 
 
 def root_pose(skeleton: Skeleton, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
@@ -123,3 +132,63 @@ def local_rotations_from_world(xquat: np.ndarray, parents: np.ndarray) -> np.nda
     local = quat.mul(quat.conj(xquat[:, parent]), xquat)
     local[:, parents < 0] = xquat[:, parents < 0]
     return quat.canonical(local)
+
+
+#: CMU's BVH release (its joint names) -> the ASF bone whose segment starts at that joint.
+CMU_BVH_NAMES = {
+    "LHipJoint": "lhipjoint", "LeftUpLeg": "lfemur", "LeftLeg": "ltibia", "LeftFoot": "lfoot",
+    "LeftToeBase": "ltoes", "RHipJoint": "rhipjoint", "RightUpLeg": "rfemur",
+    "RightLeg": "rtibia", "RightFoot": "rfoot", "RightToeBase": "rtoes", "LowerBack": "lowerback",
+    "Spine": "upperback", "Spine1": "thorax", "Neck": "lowerneck", "Neck1": "upperneck",
+    "Head": "head", "LeftShoulder": "lclavicle", "LeftArm": "lhumerus",
+    "LeftForeArm": "lradius", "LeftHand": "lwrist", "LeftFingerBase": "lhand",
+    "LeftHandIndex1": "lfingers", "LThumb": "lthumb", "RightShoulder": "rclavicle",
+    "RightArm": "rhumerus", "RightForeArm": "rradius", "RightHand": "rwrist",
+    "RightFingerBase": "rhand", "RightHandIndex1": "rfingers", "RThumb": "rthumb",
+}  # fmt: skip
+
+
+def retarget_rotations(
+    source: Skeleton, motion: Motion, target: Skeleton
+) -> tuple[Skeleton, Motion]:
+    """``motion`` of ``source`` as angles of ``target``'s bones of the same name (a BVH's
+    skeleton, whose rotations turn about the file's axes, onto the shared humanoid's ASF bones).
+
+    Each bone's rotation in the rest frame, ``L = C_s M_s C_s^-1``
+    (:func:`sim.model.kinematics.local_rotations`), becomes ``M_t = C_t^-1 L C_t`` in the target
+    bone's ``axis`` frame, as Euler angles in its dof order (a bone of fewer dofs keeps the first
+    of the angles in the order its dofs, then the missing axes, give: exact when the rotation
+    turns about those dofs only); the root's likewise. Source bones named as in CMU's BVH
+    release (:data:`CMU_BVH_NAMES`) are renamed first, when that matches more target bones.
+    Target bones the source lacks stay at 0.
+
+    Returns:
+        The source skeleton under the target's names (for :func:`leg_length`) and the motion of
+        ``target`` (root translation [m] unchanged, angles [deg]).
+    """
+    names = {b.name: b.name for b in source.bones}
+    mapped = {b.name: CMU_BVH_NAMES.get(b.name, b.name) for b in source.bones}
+    if sum(target.has_bone(n) for n in mapped.values()) > sum(target.has_bone(n) for n in names):
+        names = mapped
+    names["root"] = "root"
+    bones = tuple(replace(b, name=names[b.name], parent=names[b.parent]) for b in source.bones)
+    renamed = replace(source, bones=bones, _index={})
+    L = {names[k]: v for k, v in local_rotations(source, motion).items()}
+    C = bone_frames(target)
+    T = motion.n_frames
+    angles = {}
+    for b in target.bones:
+        if not b.dofs:
+            continue
+        if b.name not in L:
+            angles[b.name] = np.zeros((T, len(b.dofs)))
+            continue
+        order = "".join(d[1] for d in b.dofs).upper()
+        order += "".join(a for a in "XYZ" if a not in order)
+        M = C[b.name].T @ L[b.name] @ C[b.name]
+        angles[b.name] = euler_angles_deg(M, order)[:, : len(b.dofs)]
+    M_root = C["root"].T @ L["root"] @ C["root"]
+    root = np.concatenate(
+        [motion.root[:, :3], euler_angles_deg(M_root, target.root_axis_order)], axis=1
+    )
+    return renamed, Motion(path=motion.path, root=root, angles=angles, notes=motion.notes)
