@@ -364,6 +364,10 @@ class _Hierarchy:
         for _ in range(int(count)):
             token, tln = self.next("a channel name")
             channel = _CHANNEL.get(token.lower())
+            if channel is None and token.upper() in ("JOINT", "END", "}", "OFFSET", "CHANNELS"):
+                raise MotionDataError(
+                    self.path, tln, f"CHANNELS {count} lists only {len(names)} channels"
+                )
             if channel is None:
                 raise MotionDataError(
                     self.path,
