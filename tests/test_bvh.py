@@ -10,9 +10,8 @@ from bvh_files import METRES, bvh_text, creature, forward_kinematics, motion
 from sim.bvh.convert import detect_unit, to_acclaim
 from sim.bvh.reader import parse_bvh
 from sim.bvh.writer import write_bvh
-from sim.model.humanoid import subject_model
 from sim.motion.ingest import load_motion
-from sim.motion.trial import read_trial
+from sim.motion.trial import read_trial, subject_model
 
 
 def write(tmp_path, name, text):

@@ -38,10 +38,10 @@ from sim.analysis.figures import HEIGHT_KEYS
 from sim.analysis.job import PhysicsJob
 from sim.batch import iter_batch, run_batch
 from sim.errors import MotionDataError
-from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.dataset import dataset_clips, find_trials
 from sim.motion.ingest import load_clips
+from sim.motion.trial import subject_model
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.support import support_verdict

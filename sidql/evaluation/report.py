@@ -29,9 +29,9 @@ from sidql.evaluation.validation import (
 from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
 from sim.errors import AllFailedError, MotionDataError, UsageError
-from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
+from sim.motion.trial import subject_model
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
 from sim.simulate.model import sim_model

@@ -30,11 +30,10 @@ import numpy as np
 from sim.acclaim.asf import check_bone_name, parse_asf
 from sim.acclaim.records import Skeleton
 from sim.errors import MotionDataError
-from sim.files import MAX_ASF_BYTES, MAX_BVH_BYTES, read_regular, write_atomic
+from sim.files import MAX_ASF_BYTES, read_regular, write_atomic
 from sim.model import quaternion as quat
 from sim.model.mass import DEFAULT_BODY_MASS_KG, body_masses, capsule_volume
 from sim.model.rotations import euler_matrix
-from sim.motion.trial import is_bvh, read_skeleton
 from sim.paths import package_file
 
 #: The canonical CMU skeleton (the mean of CMU's) and the shared humanoid generated from it,
@@ -196,8 +195,8 @@ def build_mjcf(
 
 
 @lru_cache(maxsize=64)
-def _model_for_file(path: str, digest: str, unit: str | None, up: str):
-    skeleton = read_skeleton(path, unit=unit, up=up)
+def _model_for_asf(path: str, digest: str):
+    skeleton = parse_asf(path)
     try:
         return skeleton, mujoco.MjModel.from_xml_string(build_mjcf(skeleton))
     except ValueError as e:  # MuJoCo's compiler; MotionDataError (also a ValueError) passes
@@ -206,11 +205,8 @@ def _model_for_file(path: str, digest: str, unit: str | None, up: str):
         raise MotionDataError(path, None, f"cannot build a model: {e}") from e
 
 
-def subject_model(asf_path: str | os.PathLike, *, unit: str | None = None, up: str = "y"):
+def subject_model(asf_path: str | os.PathLike):
     """(skeleton, MjModel) of a subject's own humanoid, cached per file content.
-
-    ``asf_path``: an ASF file, or a BVH file (its skeleton: :mod:`sim.bvh.convert`, with its
-    ``unit`` and ``up`` axis; the bones' lengths are its OFFSETs).
 
     The cache key is the file's path and a hash of its bytes (not its mtime, which has coarse
     resolution on some file systems, so a quick rewrite of the same size could hit a stale entry).
@@ -219,9 +215,8 @@ def subject_model(asf_path: str | os.PathLike, *, unit: str | None = None, up: s
         MotionDataError: unreadable or malformed ASF, or a skeleton MuJoCo refuses.
     """
     path = str(Path(asf_path).resolve())
-    limit = MAX_BVH_BYTES if is_bvh(asf_path) else MAX_ASF_BYTES
-    data = read_regular(asf_path, limit)  # a regular file of bounded size, never a device
-    return _model_for_file(path, hashlib.sha256(data).hexdigest(), unit, up)
+    data = read_regular(asf_path, MAX_ASF_BYTES)  # a regular file of bounded size, never a device
+    return _model_for_asf(path, hashlib.sha256(data).hexdigest())
 
 
 @lru_cache(maxsize=1)

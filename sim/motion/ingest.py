@@ -15,7 +15,7 @@ import numpy as np
 
 from sim.acclaim.amc import parse_amc
 from sim.errors import MotionDataError, UnknownNameError, UsageError
-from sim.model.humanoid import humanoid_model, subject_model
+from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
 from sim.motion.resample import grid_rate, resample_qpos
@@ -25,7 +25,7 @@ from sim.motion.retarget import (
     motion_to_qpos,
     retarget_rotations,
 )
-from sim.motion.trial import CMU_FPS, is_bvh, read_trial
+from sim.motion.trial import CMU_FPS, is_bvh, read_trial, subject_model
 from sim.motion.velocities import (
     body_rotation_steps,
     derivative_noise,

@@ -9,14 +9,21 @@ both (a :class:`~sim.motion.dataset.Trial` of a BVH has ``asf == amc``).
 
 from __future__ import annotations
 
+import hashlib
 import os
+from functools import lru_cache
 from pathlib import Path
+
+import mujoco
 
 from sim.acclaim.amc import parse_amc
 from sim.acclaim.asf import parse_asf
 from sim.acclaim.records import Motion, Skeleton
 from sim.bvh.convert import to_acclaim
 from sim.bvh.reader import parse_bvh
+from sim.errors import MotionDataError
+from sim.files import MAX_BVH_BYTES, read_regular
+from sim.model import humanoid
 
 CMU_FPS = 120.0  # an AMC file holds no rate: CMU's
 
@@ -57,3 +64,29 @@ def read_trial(
         return take.skeleton, take.motion, take.fps
     skeleton = parse_asf(asf)
     return skeleton, parse_amc(amc, skeleton), source_fps
+
+
+def subject_model(path: str | os.PathLike, *, unit: str | None = None, up: str = "y"):
+    """(skeleton, MjModel) of a subject's own humanoid: an ASF's
+    (:func:`sim.model.humanoid.subject_model`) or a BVH's (its skeleton, ``unit`` and ``up`` as
+    :func:`read_skeleton` takes them: every bone's length one of its OFFSETs), cached per file
+    content.
+
+    Raises:
+        MotionDataError: an unreadable or malformed file, or a skeleton MuJoCo refuses.
+    """
+    if not is_bvh(path):
+        return humanoid.subject_model(path)
+    data = read_regular(path, MAX_BVH_BYTES)  # a regular file of bounded size, never a device
+    return _bvh_model(str(Path(path).resolve()), hashlib.sha256(data).hexdigest(), unit, up)
+
+
+@lru_cache(maxsize=16)
+def _bvh_model(path: str, digest: str, unit: str | None, up: str):
+    skeleton = read_skeleton(path, unit=unit, up=up)
+    try:
+        return skeleton, mujoco.MjModel.from_xml_string(humanoid.build_mjcf(skeleton))
+    except ValueError as e:  # MuJoCo's compiler; MotionDataError (also a ValueError) passes
+        if isinstance(e, MotionDataError):
+            raise
+        raise MotionDataError(path, None, f"cannot build a model: {e}") from e
