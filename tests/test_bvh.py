@@ -139,13 +139,17 @@ def test_a_cmu_trial_written_as_bvh_reads_back_to_the_amcs_points(cmu_dir, tmp_p
     assert err < 1e-4, err  # the issue's 0.1 mm; measured ~2e-8 m
 
 
-def test_on_the_shared_humanoid_a_cmu_bvh_moves_as_its_amc_where_the_axes_agree(cmu_dir, tmp_path):
+@pytest.mark.parametrize("trial", ["02_01", "05_06"])
+def test_on_the_shared_humanoid_a_cmu_bvh_moves_as_its_amc_where_the_axes_agree(
+    cmu_dir, tmp_path, trial
+):
     """The AMC path copies each bone's angles; the BVH path keeps each bone's rotation in the rest
     frame (a BVH has no ASF axis frames): the same where the subject's frames are the canonical
-    skeleton's, as subject 02's are."""
-    asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
+    skeleton's, as subjects 02's and 05's are (05_06: a two-dof bone bent past 90 degrees in its
+    middle axis)."""
+    asf, amc = cmu_dir / trial[:2] / f"{trial[:2]}.asf", cmu_dir / trial[:2] / f"{trial}.amc"
     skeleton, take, fps = read_trial(asf, amc)
-    path = write_bvh(tmp_path / "02_01.bvh", skeleton, take, fps)
+    path = write_bvh(tmp_path / f"{trial}.bvh", skeleton, take, fps)
     a = load_motion(asf, amc, skeleton="humanoid")
     b = load_motion(path, skeleton="humanoid")
     assert np.linalg.norm(a.positions - b.positions, axis=-1).max() < 1e-4

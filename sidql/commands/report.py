@@ -7,6 +7,7 @@ from sidql.commands.usage import (
     add_methods,
     add_quiet,
     add_ray,
+    add_trial,
     add_workers,
     check_keyframes,
 )
@@ -28,8 +29,7 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", metavar="ASF", help="the subject's skeleton (.asf)")
-    p.add_argument("amc", metavar="AMC", help="one of its motions (.amc)")
+    add_trial(p)
     add_keyframes(p, "keyframes W per clip", default=10)
     add_methods(
         p, list(DEFAULT_METHODS),

@@ -264,6 +264,27 @@ def add_workers(parser: argparse.ArgumentParser, what: str) -> None:
     )  # fmt: skip
 
 
+def add_trial(parser: argparse.ArgumentParser) -> None:
+    """``ASF AMC`` or ``F.bvh``: one trial's files (a BVH holds its skeleton and its motion)."""
+    parser.add_argument(
+        "asf", metavar="ASF|BVH",
+        help="subject skeleton, e.g. ../shared/cmu/02/02.asf; or a .bvh file (skeleton and motion)",
+    )  # fmt: skip
+    parser.add_argument(
+        "amc", metavar="AMC", nargs="?", default=None,
+        help="motion, e.g. ../shared/cmu/02/02_01.amc (none after a .bvh)",
+    )  # fmt: skip
+
+
+def add_bvh_axes(parser: argparse.ArgumentParser) -> None:
+    """``--unit`` and ``--up``: a BVH file's length unit and up axis (``sim.bvh.convert``)."""
+    parser.add_argument(
+        "--unit", choices=("m", "cm", "mm", "in"), default=None,
+        help="a BVH's length unit (default: read from its skeleton's size; written BVH: cm)",
+    )  # fmt: skip
+    parser.add_argument("--up", choices=("y", "z"), default="y", help="a BVH's up axis")
+
+
 def add_skeleton(parser: argparse.ArgumentParser) -> None:
     """``--skeleton subject|humanoid``: the model a trial is retargeted onto."""
     parser.add_argument(

@@ -31,7 +31,7 @@ from sim.batch import run_batch
 from sim.errors import AllFailedError, MotionDataError, UsageError
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
-from sim.motion.trial import subject_model
+from sim.motion.trial import is_bvh, subject_model
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
 from sim.simulate.model import sim_model
@@ -96,7 +96,7 @@ def report_clips(
 
 def report_trial(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None,
     out_dir: str | os.PathLike,
     *,
     W: int,
@@ -115,7 +115,9 @@ def report_trial(
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
     ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods.
     ``simulate``: also track every motion in forward simulation (the subject's torque-limited
-    body, no assistance: :mod:`sim.simulate.validate`)."""
+    body, no assistance: :mod:`sim.simulate.validate`). A BVH file stands for both ``asf`` and
+    ``amc`` (``amc`` None)."""
+    amc = asf if amc is None and is_bvh(asf) else amc
     decoded = tuple(load_stream(p, asf) for p in streams)
     motion = load_motion(asf, amc, fps=30.0)
     for path, d in zip(streams, decoded, strict=True):

@@ -25,7 +25,7 @@ from sim.motion.retarget import (
     motion_to_qpos,
     retarget_rotations,
 )
-from sim.motion.trial import CMU_FPS, is_bvh, read_trial, subject_model
+from sim.motion.trial import CMU_FPS, read_trial, subject_model, trial_files
 from sim.motion.velocities import (
     body_rotation_steps,
     derivative_noise,
@@ -179,7 +179,7 @@ def load_motion(
     """
     if skeleton not in SKELETONS:
         raise UnknownNameError("skeleton", skeleton, SKELETONS)
-    bvh = asf if is_bvh(asf) else amc if is_bvh(amc) else None
+    bvh = trial_files(asf, amc)
     subject, model = subject_model(bvh or asf, unit=unit, up=up)
     if bvh is None:
         motion = parse_amc(amc, subject)

@@ -17,6 +17,7 @@ import numpy as np
 from sim.acclaim.records import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
+from sim.model.angles import wrap_angle
 from sim.model.humanoid import bone_frames
 from sim.model.kinematics import local_rotations
 from sim.model.rotations import (
@@ -24,6 +25,7 @@ from sim.model.rotations import (
     continuous_euler,
     euler_angles_deg,
     euler_matrix,
+    euler_twin,
     y_up_to_z_up,
 )
 
@@ -186,9 +188,21 @@ def retarget_rotations(
         order = "".join(d[1] for d in b.dofs).upper()
         order += "".join(a for a in "XYZ" if a not in order)
         M = C[b.name].T @ L[b.name] @ C[b.name]
-        angles[b.name] = euler_angles_deg(M, order)[:, : len(b.dofs)]
+        angles[b.name] = _dof_angles(M, order, len(b.dofs))
     M_root = C["root"].T @ L["root"] @ C["root"]
     root = np.concatenate(
         [motion.root[:, :3], euler_angles_deg(M_root, target.root_axis_order)], axis=1
     )
     return renamed, Motion(path=motion.path, root=root, angles=angles, notes=motion.notes)
+
+
+def _dof_angles(M: np.ndarray, order: str, k: int) -> np.ndarray:
+    """(T, k) the first ``k`` Euler angles [deg] of rotations ``M`` (T, 3, 3) in ``order``: of the
+    triple and its twin (the same rotation), per frame the one whose dropped angles are nearer
+    0 (a two-dof bone bent past 90 degrees in its middle axis stays exact)."""
+    a = np.deg2rad(euler_angles_deg(M, order))
+    if k == 3:
+        return np.rad2deg(a)
+    twin = wrap_angle(euler_twin(a))
+    pick = np.abs(twin[:, k:]).sum(axis=1) < np.abs(wrap_angle(a[:, k:])).sum(axis=1)
+    return np.rad2deg(np.where(pick[:, None], twin, a)[:, :k])

@@ -19,9 +19,11 @@ import mujoco
 from sim.acclaim.amc import parse_amc
 from sim.acclaim.asf import parse_asf
 from sim.acclaim.records import Motion, Skeleton
+from sim.acclaim.writer import write_amc, write_asf
 from sim.bvh.convert import to_acclaim
 from sim.bvh.reader import parse_bvh
-from sim.errors import MotionDataError
+from sim.bvh.writer import write_bvh
+from sim.errors import MotionDataError, UsageError
 from sim.files import MAX_BVH_BYTES, read_regular
 from sim.model import humanoid
 
@@ -44,6 +46,21 @@ def read_skeleton(path: str | os.PathLike, *, unit: str | None = None, up: str =
     return parse_asf(path)
 
 
+def trial_files(asf, amc) -> str | os.PathLike | None:
+    """The BVH file among a trial's arguments (None for an ASF + AMC pair).
+
+    Raises:
+        UsageError: an ASF without its AMC, or a BVH given with a second file.
+    """
+    if is_bvh(asf) or is_bvh(amc):
+        if amc is not None and asf is not None and amc != asf:
+            raise UsageError(f"a .bvh holds its skeleton and motion: give it alone, not with {amc}")
+        return asf if is_bvh(asf) else amc
+    if amc is None:
+        raise UsageError(f"{asf}: an ASF skeleton needs its AMC motion (or give one .bvh file)")
+    return None
+
+
 def read_trial(
     asf: str | os.PathLike,
     amc: str | os.PathLike | None = None,
@@ -58,7 +75,7 @@ def read_trial(
     Raises:
         MotionDataError: a malformed or unreadable file (one line naming file and line).
     """
-    bvh = asf if is_bvh(asf) else amc if is_bvh(amc) else None
+    bvh = trial_files(asf, amc)
     if bvh is not None:
         take = to_acclaim(parse_bvh(bvh), unit=unit, up=up)
         return take.skeleton, take.motion, take.fps
@@ -90,3 +107,33 @@ def _bvh_model(path: str, digest: str, unit: str | None, up: str):
         if isinstance(e, MotionDataError):
             raise
         raise MotionDataError(path, None, f"cannot build a model: {e}") from e
+
+
+def convert_trial(
+    asf: str | os.PathLike,
+    amc: str | os.PathLike | None,
+    out: str | os.PathLike,
+    *,
+    unit: str | None = None,
+    up: str = "y",
+) -> list[Path]:
+    """Write a trial in the other format: ASF + AMC -> ``out`` ``.bvh`` (in ``unit``, default
+    centimetres, ``up`` axis), or a BVH (read with ``unit`` and ``up``) -> ``out`` ``.amc`` and
+    its skeleton beside it (``out`` with ``.asf``). Written atomically; returns the paths.
+
+    Raises:
+        UsageError: an output that is neither ``.bvh`` nor ``.amc``, or the format of the input.
+        MotionDataError: a malformed input (one line naming file and line).
+    """
+    out = Path(out)
+    bvh = trial_files(asf, amc)
+    suffix = out.suffix.lower()
+    wanted = ".amc" if bvh is not None else ".bvh"
+    if suffix != wanted:
+        raise UsageError(f"{out}: a {'BVH' if bvh else 'ASF + AMC'} input converts to {wanted}")
+    if bvh is None:
+        skeleton, motion, fps = read_trial(asf, amc)
+        return [write_bvh(out, skeleton, motion, fps, unit=unit or "cm", up=up)]
+    skeleton, motion, fps = read_trial(bvh, unit=unit, up=up)
+    comment = f"converted from {Path(bvh).name}: {fps:g} fps"
+    return [write_asf(out.with_suffix(".asf"), skeleton), write_amc(out, skeleton, motion, comment)]
