@@ -1,4 +1,5 @@
-"""``sidql convert ASF AMC OUT.bvh`` / ``sidql convert F.bvh OUT.amc``: a trial in the other format."""
+"""``sidql convert ASF AMC OUT.bvh`` / ``F.bvh OUT.amc`` / ``CLIP.npz [SKELETON] OUT.bvh``: a
+trial in the other format, or a clip as BVH."""
 
 from __future__ import annotations
 
@@ -10,14 +11,16 @@ DESCRIPTION = (
     "Write a trial in the other format. ASF + AMC -> BVH (CMU's BVH layout: one joint per bone, "
     "opens in Blender and MotionBuilder; --unit, default cm, and --up of the file written). "
     "BVH -> AMC, with its ASF beside it (OUT with .asf; --unit and --up of the file read). "
-    "Every point of the result is the input's (docs/bvh.md)."
+    "A clip (.npz of ingest, synth or decode) -> BVH on the skeleton its qpos is of: give its ASF "
+    "or BVH after it (default: the shared humanoid, as synth's clips). Every point of the result "
+    "is the input's (docs/bvh.md)."
 )
 
 
 def register(p) -> None:
     p.add_argument(
         "files", nargs="+", metavar="IN... OUT",
-        help="ASF AMC OUT.bvh, or F.bvh OUT.amc",
+        help="ASF AMC OUT.bvh, F.bvh OUT.amc, or CLIP.npz [ASF|BVH] OUT.bvh",
     )  # fmt: skip
     add_bvh_axes(p)
     p.set_defaults(func=run)
@@ -26,7 +29,7 @@ def register(p) -> None:
 def run(args) -> int:
     *inputs, out = args.files
     if len(inputs) not in (1, 2):
-        raise UsageError("give ASF AMC OUT.bvh, or F.bvh OUT.amc")
+        raise UsageError("give ASF AMC OUT.bvh, F.bvh OUT.amc, or CLIP.npz [ASF|BVH] OUT.bvh")
     asf, amc = inputs if len(inputs) == 2 else (inputs[0], None)
     for path in convert_trial(asf, amc, out, unit=args.unit, up=args.up):
         print(f"wrote {path}")

@@ -27,6 +27,7 @@ from sim.model.rotations import (
     euler_matrix,
     euler_twin,
     y_up_to_z_up,
+    z_up_to_y_up,
 )
 
 
@@ -206,3 +207,45 @@ def _dof_angles(M: np.ndarray, order: str, k: int) -> np.ndarray:
     twin = wrap_angle(euler_twin(a))
     pick = np.abs(twin[:, k:]).sum(axis=1) < np.abs(wrap_angle(a[:, k:])).sum(axis=1)
     return np.rad2deg(np.where(pick[:, None], twin, a)[:, :k])
+
+
+def qpos_to_motion(skeleton: Skeleton, qpos: np.ndarray, joint_names) -> Motion:
+    """The inverse of :func:`motion_to_qpos` (root scale 1): the motion of ``skeleton`` whose
+    ``qpos`` (T, 7 + len(joint_names)) this is, on a model of free root then one hinge per name
+    ``<bone>_<dof>`` in ``qpos`` order (a clip's ``joint_names``).
+
+    Returns:
+        root (T, 6) as (tx, ty, tz [m], file axes y up; rx, ry, rz [deg] in the root's axis
+        order), angles bone -> (T, dofs) [deg] (dofs without a hinge: 0).
+
+    Raises:
+        MotionDataError: a hinge name that is no dof of ``skeleton``, or a ``qpos`` of another
+            width.
+    """
+    qpos = np.asarray(qpos, dtype=np.float64)
+    names = tuple(joint_names)
+    if qpos.ndim != 2 or qpos.shape[1] != 7 + len(names):
+        raise MotionDataError(
+            skeleton.path or None, None, f"qpos of shape {qpos.shape} for {len(names)} hinges"
+        )
+    column = {n: 7 + k for k, n in enumerate(names)}
+    known = {f"{b.name}_{d}" for b in skeleton.bones for d in b.dofs}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise MotionDataError(
+            skeleton.path or None, None, f"the skeleton has no hinge {unknown[0]!r}"
+        )
+    C_o = bone_frames(skeleton)["root"]
+    M = C_o.T @ Y_UP_TO_Z_UP.T @ quat.to_matrix(qpos[:, 3:7])
+    root = np.concatenate(
+        [z_up_to_y_up(qpos[:, :3]), euler_angles_deg(M, skeleton.root_axis_order)], axis=1
+    )
+    T = len(qpos)
+    angles = {
+        b.name: np.column_stack(
+            [np.rad2deg(qpos[:, column[f"{b.name}_{d}"]]) if f"{b.name}_{d}" in column
+             else np.zeros(T) for d in b.dofs]
+        )
+        for b in skeleton.bones if b.dofs
+    }  # fmt: skip
+    return Motion(path=skeleton.path, root=root, angles=angles)

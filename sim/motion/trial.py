@@ -26,6 +26,8 @@ from sim.bvh.writer import write_bvh
 from sim.errors import MotionDataError, UsageError
 from sim.files import MAX_BVH_BYTES, read_regular
 from sim.model import humanoid
+from sim.motion.clip import load_npz
+from sim.motion.retarget import qpos_to_motion
 
 CMU_FPS = 120.0  # an AMC file holds no rate: CMU's
 
@@ -119,13 +121,19 @@ def convert_trial(
 ) -> list[Path]:
     """Write a trial in the other format: ASF + AMC -> ``out`` ``.bvh`` (in ``unit``, default
     centimetres, ``up`` axis), or a BVH (read with ``unit`` and ``up``) -> ``out`` ``.amc`` and
-    its skeleton beside it (``out`` with ``.asf``). Written atomically; returns the paths.
+    its skeleton beside it (``out`` with ``.asf``); or a clip ``.npz`` (with its skeleton's ASF or
+    BVH as ``amc``, or none: the shared humanoid's) -> ``.bvh`` (:func:`export_clip`). Written
+    atomically; returns the paths.
 
     Raises:
         UsageError: an output that is neither ``.bvh`` nor ``.amc``, or the format of the input.
         MotionDataError: a malformed input (one line naming file and line).
     """
     out = Path(out)
+    if Path(asf).suffix.lower() == ".npz":
+        if out.suffix.lower() != ".bvh":
+            raise UsageError(f"{out}: a clip (.npz) converts to .bvh")
+        return [export_clip(asf, out, amc, unit=unit or "cm", up=up)]
     bvh = trial_files(asf, amc)
     suffix = out.suffix.lower()
     wanted = ".amc" if bvh is not None else ".bvh"
@@ -137,3 +145,26 @@ def convert_trial(
     skeleton, motion, fps = read_trial(bvh, unit=unit, up=up)
     comment = f"converted from {Path(bvh).name}: {fps:g} fps"
     return [write_asf(out.with_suffix(".asf"), skeleton), write_amc(out, skeleton, motion, comment)]
+
+
+def export_clip(
+    clip_path: str | os.PathLike,
+    out: str | os.PathLike,
+    skeleton_path: str | os.PathLike | None = None,
+    *,
+    unit: str = "cm",
+    up: str = "y",
+) -> Path:
+    """Write a clip file (``.npz`` of ``ingest``, ``synth``, ``decode``: its ``qpos`` and
+    ``joint_names``) as a BVH at ``out``, on the skeleton whose model the ``qpos`` is of: the ASF
+    or BVH ``skeleton_path``, by default the shared humanoid's (``synth``'s clips).
+
+    Raises:
+        MotionDataError: a bad clip, or one whose hinges are not the skeleton's.
+    """
+    clip = load_npz(clip_path)
+    skeleton = (
+        humanoid.canonical_skeleton() if skeleton_path is None else read_skeleton(skeleton_path)
+    )
+    motion = qpos_to_motion(skeleton, clip.qpos, clip.joint_names)
+    return write_bvh(out, skeleton, motion, clip.fps, unit=unit, up=up)
