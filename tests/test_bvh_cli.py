@@ -116,3 +116,21 @@ def test_folders_find_bvh_files_beside_cmus_layout_and_the_dataset_holds_both(
         clip = load_npz(out / entry["file"])
         model = subject_model(out / entry["asf"])[1]
         assert model.nq == clip.qpos.shape[1]
+
+
+def test_synths_reference_of_a_bvh_is_the_amcs_at_the_control_rate(cmu_bvh, tmp_path):
+    from dataclasses import replace
+
+    from sim.bvh.writer import write_bvh
+    from sim.motion.trial import read_trial
+    from sim.simulate.reference import trial_qpos
+
+    asf, amc, bvh = cmu_bvh
+    a = trial_qpos(asf, amc)
+    np.testing.assert_allclose(trial_qpos(bvh, bvh), a, atol=1e-6)
+    skeleton, take, _ = read_trial(asf, amc)  # every other frame, as a 60 fps file
+    half = replace(take, root=take.root[::2], angles={k: v[::2] for k, v in take.angles.items()})
+    sixty = write_bvh(tmp_path / "sixty.bvh", skeleton, half, 60.0)
+    b = trial_qpos(sixty, sixty)  # interpolated onto 120 Hz: the source frames kept exactly
+    assert len(b) == 2 * half.n_frames - 1
+    np.testing.assert_allclose(b[::2], a[::2][: len(b[::2])], atol=1e-6)

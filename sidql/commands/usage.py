@@ -125,7 +125,7 @@ class OldSpelling(argparse.Action):
 
 def add_data(
     parser: argparse.ArgumentParser,
-    help: str = "folder of CMU trials (SS/SS.asf, SS/SS_TT.amc)",
+    help: str = "folder of CMU trials (SS/SS.asf, SS/SS_TT.amc) and/or .bvh files",
     *,
     old_option: str | None = None,
     old_positional: bool = False,
