@@ -18,16 +18,16 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
+    p.add_argument("inputs", nargs="+", metavar="IN", help="ASF AMC, F.bvh, or CLIP.npz [ASF|BVH]")
     p.add_argument(
-        "files", nargs="+", metavar="IN... OUT",
-        help="ASF AMC OUT.bvh, F.bvh OUT.amc, or CLIP.npz [ASF|BVH] OUT.bvh",
-    )  # fmt: skip
+        "out", metavar="OUT", help="OUT.bvh (from ASF AMC or a clip), OUT.amc (from a BVH)"
+    )
     add_bvh_axes(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    *inputs, out = args.files
+    inputs, out = args.inputs, args.out
     if len(inputs) not in (1, 2):
         raise UsageError("give ASF AMC OUT.bvh, F.bvh OUT.amc, or CLIP.npz [ASF|BVH] OUT.bvh")
     asf, amc = inputs if len(inputs) == 2 else (inputs[0], None)

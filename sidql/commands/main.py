@@ -42,7 +42,8 @@ COMMANDS = {
     "encode": "encode a whole trial into a .sidq keyframe stream at a byte budget, a joint "
     "position error or an angle error",
     "decode": "decode a .sidq stream to points (.npz) or the source skeleton's angles (.amc, .bvh)",
-    "convert": "write a trial in the other format: ASF + AMC -> BVH, BVH -> ASF + AMC",
+    "convert": "write a trial in the other format (ASF + AMC -> BVH, BVH -> ASF + AMC) or a clip "
+    "(.npz) as BVH",
     "synth": "simulate clips (tracking with perturbations, falls, procedural) in the dataset "
     "format with learning labels; stored as they arrive, resumable",
 }
