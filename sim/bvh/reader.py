@@ -47,6 +47,7 @@ from sim.files import MAX_BVH_BYTES, excerpt, open_regular, text_lines
 NUMBER = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _NUMBER_RE = re.compile(NUMBER + r"\Z")
 _CHANNEL = {c.lower(): c for c in CHANNELS}
+_NUMBER_CHARS = str.maketrans("", "", "0123456789+-.eE \t")  # deleted: what numbers are made of
 MAX_HIERARCHY_CHARS = 1 << 20  # the hierarchy (before MOTION) is read whole; at most this long
 
 
@@ -89,8 +90,10 @@ def number(token: str, path: str, line: int, what: str, bound: float) -> float:
 
 class _BvhParser:
     """The file as a state machine fed a chunk of lines at a time: the hierarchy's tokens are
-    gathered until ``MOTION``, then the two header lines, then the frames (a chunk at a time
-    through numpy when every line is plainly numbers, else line by line, naming the line)."""
+    gathered until ``MOTION``, then the two header lines, then the frames: a chunk at a time
+    through numpy's C reader when it holds nothing but digits, signs, points, ``e``/``E`` and
+    blanks (numpy then refuses every token the strict grammar :data:`NUMBER` refuses, tested),
+    else line by line, each token matched against :data:`NUMBER`, naming the line."""
 
     def __init__(self, path: str, size: int, motion: bool):
         self.path, self.size, self.want_motion = path, size, motion
@@ -188,8 +191,6 @@ class _BvhParser:
             [MAX_OFFSET if c.endswith("position") else MAX_DEGREES
              for j in self.joints for c in j.channels]
         )  # fmt: skip
-        count = f"{{{C - 1}}}" if C else "{-1}"
-        self.row_re = re.compile(rf"[ \t]*{NUMBER}(?:[ \t]+{NUMBER}){count}[ \t]*\Z") if C else None
 
     # -- the frames ------------------------------------------------------------------------------
 
@@ -200,11 +201,18 @@ class _BvhParser:
         last = n
         while last > 0 and not lines[last - 1].strip():
             last -= 1  # trailing blank lines (the file's end, or the chunk's)
-        if self.row_re is not None and 0 < last and self.row + last <= N:
+        if 0 < last and self.row + last <= N:
             block = lines[:last]
-            if all(self.row_re.match(line) for line in block):
-                values = np.loadtxt(block, dtype=np.float64, ndmin=2, comments=None)
-                if values.shape == (last, self.values.shape[1]) and _within(values, self.bound):
+            if not "".join(block).translate(_NUMBER_CHARS):  # digits, signs, points, e, blanks
+                try:  # numpy's C reader: a ragged row or a malformed number raises
+                    values = np.loadtxt(block, dtype=np.float64, ndmin=2, comments=None)
+                except ValueError:
+                    values = None
+                if (
+                    values is not None
+                    and values.shape == (last, self.values.shape[1])
+                    and _within(values, self.bound)
+                ):
                     self.values[self.row : self.row + last] = values
                     self.row += last
                     return
