@@ -62,7 +62,7 @@ from sim.paths import default_data_dir  # noqa: E402
 
 #: Share of the inputs per file type.
 MIX = {"asf": 15, "amc": 20, "sidq": 15, "npz": 15, "index": 10, "policy": 12.5,
-       "checkpoint": 12.5}  # fmt: skip
+       "checkpoint": 12.5, "bvh": 10}  # fmt: skip
 FAILURES = ("foreign", "non-finite", "bad-error", "bad-name", "read-outside", "over-memory",
             "hang")  # fmt: skip
 TARGET_RSS_MB = 384  # any input file of at most 1 MB decodes or fails within this peak RSS
@@ -112,7 +112,7 @@ def _rss_mb() -> float:
 READER_MODULES = {
     "asf": "sim.motion.ingest", "amc": "sim.motion.ingest", "sidq": "sidql.codec.decode",
     "npz": "sim.motion.clip", "index": "sim.motion.dataset", "policy": "sidql.learning.policy",
-    "checkpoint": "sidql.learning.dqn",
+    "checkpoint": "sidql.learning.dqn", "bvh": "sim.motion.ingest",
 }  # fmt: skip
 
 
