@@ -138,6 +138,7 @@ def test_a_hierarchy_too_deep_or_too_wide_is_refused(tmp_path):
         ("JOINT LeftKnee", "JOINT Left:Thigh", "as the joint of line"),  # both become Left_Thigh
         ("JOINT LeftKnee", "JOINT root", ""),  # reserved: becomes root_, accepted below
         ("Frame Time: 0.03333333", "Frame Time: 0", "Frame Time 0 s"),
+        ("Frame Time: 0.03333333", "Frame Time: 5", "Frame Time 5 s; expected 0.001 to 1 s"),
         ("Frame Time: 0.03333333", "Frame Time: abc", "not a plain decimal"),
         ("ROOT mixamorig:Hips", "ROOT", "joint without a name"),
         ("}\nMOTION", "}\n}\nMOTION", "after the ROOT's closing brace"),

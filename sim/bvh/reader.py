@@ -36,6 +36,7 @@ from sim.bvh.records import (
     MAX_FRAMES,
     MAX_JOINTS,
     MAX_OFFSET,
+    MIN_FRAME_RATE,
     Bvh,
     Joint,
 )
@@ -164,19 +165,20 @@ class _BvhParser:
             if len(values) != 3:
                 raise MotionDataError(self.path, ln, "expected 'Frame Time: seconds'")
             t = number(values[2], self.path, ln, "Frame Time", 1e6)
-            if not t >= 1.0 / MAX_FRAME_RATE:
+            if not 1.0 / MAX_FRAME_RATE <= t <= 1.0 / MIN_FRAME_RATE:
                 raise MotionDataError(
-                    self.path, ln, f"Frame Time {t:g} s; expected at least {1 / MAX_FRAME_RATE:g} s"
-                )
+                    self.path, ln, f"Frame Time {t:g} s; expected {1 / MAX_FRAME_RATE:g} to "
+                    f"{1 / MIN_FRAME_RATE:g} s",
+                )  # fmt: skip
             self.frame_time = t
             self.state = "frames"
             if self.want_motion:
-                self._allocate(ln)
+                self._allocate()
         else:
             want = "'Frames: N'" if self.n_frames is None else "'Frame Time: seconds'"
             raise MotionDataError(self.path, ln, f"expected {want}, got {excerpt(text.strip())}")
 
-    def _allocate(self, ln: int) -> None:
+    def _allocate(self) -> None:
         """The (Frames, C) table, once the file is known to be able to hold it."""
         C = sum(len(j.channels) for j in self.joints)
         N = self.n_frames

@@ -17,6 +17,7 @@ MAX_FRAMES = 1 << 24
 MAX_OFFSET = 1e7  # bound on an OFFSET or position channel, in the file's units
 MAX_DEGREES = 1e5  # bound on a rotation channel [deg], as for AMC angles
 MAX_FRAME_RATE = 1000.0  # [frames per second]
+MIN_FRAME_RATE = 1.0  # [frames per second]: a slower file resampled to 120 Hz would swell 120x
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
-from sim.motion.resample import grid_rate, resample_qpos
+from sim.motion.resample import grid_rate, resample_qpos, resampled_frames
 from sim.motion.retarget import (
     leg_length,
     local_rotations_from_world,
@@ -185,7 +185,10 @@ def load_motion(
         motion = parse_amc(amc, subject)
     else:
         _, motion, source_fps = read_trial(bvh, unit=unit, up=up)
-    _check_memory(bvh or amc, motion.n_frames, len(point_names(subject)))
+    frames = motion.n_frames
+    if bvh is not None:  # a rate the clip rate does not divide: the frames once resampled
+        frames = resampled_frames(frames, source_fps, grid_rate(source_fps, fps))
+    check_memory(bvh or amc, frames, len(point_names(subject)))
     root_scale = 1.0
     target = subject
     if skeleton == "humanoid":
@@ -209,7 +212,7 @@ def load_motion(
     )
 
 
-def _check_memory(amc, frames: int, points: int) -> None:
+def check_memory(amc, frames: int, points: int) -> None:
     """Refuse a trial whose arrays would pass the stated bound (see :data:`ARRAY_BYTES_FLOOR`)."""
     need = frames * points * BYTES_PER_POINT_FRAME
     size = os.stat(amc).st_size

@@ -23,6 +23,11 @@ def grid_rate(source_fps: float, fps: float) -> float:
     return float(math.ceil(k) * fps)
 
 
+def resampled_frames(frames: int, source_fps: float, rate: float) -> int:
+    """How many frames :func:`resample_qpos` makes of ``frames`` at ``source_fps``."""
+    return int(math.floor((frames - 1) * rate / source_fps + 1e-9)) + 1 if frames else 0
+
+
 def resample_qpos(qpos: np.ndarray, source_fps: float, rate: float) -> np.ndarray:
     """(T', nq) ``qpos`` (T, nq) of a free-root model sampled at ``rate`` over the same span.
 
@@ -33,7 +38,7 @@ def resample_qpos(qpos: np.ndarray, source_fps: float, rate: float) -> np.ndarra
     """
     qpos = np.asarray(qpos, dtype=np.float64)
     T = qpos.shape[0]
-    n = int(math.floor((T - 1) * rate / source_fps + 1e-9)) + 1
+    n = resampled_frames(T, source_fps, rate)
     t = np.arange(n) * (source_fps / rate)  # source frame position of every output frame
     i = np.minimum(np.floor(t + 1e-9).astype(np.int64), T - 1)
     s = np.clip(t - i, 0.0, 1.0)

@@ -16,7 +16,8 @@ import numpy as np
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import SOLE_POINTS
-from sim.motion.resample import resample_qpos
+from sim.motion.ingest import check_memory
+from sim.motion.resample import resample_qpos, resampled_frames
 from sim.motion.retarget import leg_length, motion_to_qpos, retarget_rotations
 from sim.motion.trial import CMU_FPS, read_trial, trial_files
 from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS
@@ -37,7 +38,11 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
         raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
     target, model = humanoid_model()
     source = subject
-    if trial_files(asf, amc) is not None:  # a BVH: rotations re-expressed in the ASF bones' frames
+    bvh = trial_files(asf, amc)
+    if bvh is not None:
+        check_memory(
+            bvh, resampled_frames(motion.n_frames, fps, CMU_FPS), len(target.bones) + 1
+        )  # a BVH: rotations re-expressed in the ASF bones' frames
         subject, motion = retarget_rotations(subject, motion, target)
         source = target
     qpos = motion_to_qpos(
