@@ -134,3 +134,25 @@ def test_synths_reference_of_a_bvh_is_the_amcs_at_the_control_rate(cmu_bvh, tmp_
     b = trial_qpos(sixty, sixty)  # interpolated onto 120 Hz: the source frames kept exactly
     assert len(b) == 2 * half.n_frames - 1
     np.testing.assert_allclose(b[::2], a[::2][: len(b[::2])], atol=1e-6)
+
+
+def test_a_synthetic_clip_exports_as_bvh_with_its_points(tmp_path):
+    from sim.motion.clip import save_npz
+    from sim.motion.synthetic import synthetic_motion
+
+    clip = synthetic_motion(2.0, seed=3)
+    save_npz(clip, tmp_path / "s.npz")
+    assert cli.main(["convert", str(tmp_path / "s.npz"), str(tmp_path / "s.bvh")]) == 0
+    back = load_motion(tmp_path / "s.bvh", fps=clip.fps)
+    assert back.names == clip.names
+    assert np.abs(back.positions - clip.positions).max() < 1e-6
+
+
+def test_the_hierarchy_alone_reads_without_the_motion(tmp_path):
+    from sim.bvh.reader import parse_bvh
+
+    nodes = creature()
+    (tmp_path / "c.bvh").write_text(bvh_text(nodes, motion(nodes, 9, 30.0), 30.0))
+    whole, head = parse_bvh(tmp_path / "c.bvh"), parse_bvh(tmp_path / "c.bvh", motion=False)
+    assert head.values.shape == (0, whole.values.shape[1]) and head.fps == whole.fps == 30.0
+    assert [j.name for j in head.joints] == [j.name for j in whole.joints]
