@@ -40,10 +40,8 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
     target, model = humanoid_model()
     source = subject
     bvh = trial_files(asf, amc)
-    if bvh is not None:
-        check_memory(
-            bvh, resampled_frames(motion.n_frames, fps, CMU_FPS), len(target.bones) + 1
-        )  # a BVH: rotations re-expressed in the ASF bones' frames
+    if bvh is not None:  # a BVH: rotations re-expressed in the ASF bones' frames, 120 Hz
+        check_memory(bvh, resampled_frames(motion.n_frames, fps, CMU_FPS), len(target.bones) + 1)
         subject, motion = retarget_rotations(subject, motion, target)
         source = target
     qpos = motion_to_qpos(
