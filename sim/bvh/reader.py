@@ -2,7 +2,7 @@
 :class:`~sim.bvh.records.Bvh`, in the file's own units and axes.
 
 The same contract as the Acclaim readers: the file is opened through
-:func:`sim.files.open_regular` (a regular file of at most :data:`sim.files.MAX_BVH_BYTES`) and read
+:func:`sim.files.open_regular` (a regular file of at most :data:`sim.bvh.records.MAX_BVH_BYTES`) and read
 a chunk at a time (:func:`sim.files.text_lines`); every malformed file raises one
 :class:`~sim.errors.MotionDataError` naming the file, the line and the problem. Numbers are plain
 ASCII decimals (``-12.5``, ``3e-4``: no ``nan``, ``inf``, ``0x``, ``1_0`` or other digits), finite
@@ -30,6 +30,7 @@ import numpy as np
 
 from sim.bvh.records import (
     CHANNELS,
+    MAX_BVH_BYTES,
     MAX_DEGREES,
     MAX_DEPTH,
     MAX_FRAME_RATE,
@@ -41,7 +42,7 @@ from sim.bvh.records import (
     Joint,
 )
 from sim.errors import MotionDataError
-from sim.files import MAX_BVH_BYTES, excerpt, open_regular, text_lines
+from sim.files import excerpt, open_regular, text_lines
 
 #: One strict ASCII decimal number: optional sign, digits with an optional point (or a point and
 #: digits), an optional exponent.

@@ -11,6 +11,7 @@ import numpy as np
 
 #: The six BVH channels, as the reader spells them (it accepts any capitalisation).
 CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+MAX_BVH_BYTES = 64 << 20  # a BVH holds the skeleton and the motion: as large as an AMC
 MAX_JOINTS = 500  # ROOT, JOINTs and End Sites; each becomes at most two bones of the skeleton
 MAX_DEPTH = 100  # joints on the longest root-to-leaf chain
 MAX_FRAMES = 1 << 24

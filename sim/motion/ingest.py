@@ -180,6 +180,8 @@ def load_motion(
     if skeleton not in SKELETONS:
         raise UnknownNameError("skeleton", skeleton, SKELETONS)
     bvh = trial_files(asf, amc)
+    if bvh is None:  # a BVH's own rate is known once it is read
+        resample_step(source_fps, fps)  # refused before any file is read
     subject, model = subject_model(bvh or asf, unit=unit, up=up)
     if bvh is None:
         motion = parse_amc(amc, subject)
@@ -233,5 +235,11 @@ def load_clips(
     length: int = 60,
     skeleton: str = "subject",
 ) -> list[Clip]:
-    """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``."""
+    """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``.
+
+    Raises:
+        UsageError: ``length`` is not a whole number of frames >= 2 (and as :func:`load_motion`).
+    """
+    if isinstance(length, bool) or not isinstance(length, (int, np.integer)) or length < 2:
+        raise UsageError(f"clip length must be a whole number of frames >= 2; got {length!r}")
     return load_motion(asf, amc, skeleton=skeleton, fps=fps).split(length)

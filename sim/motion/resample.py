@@ -11,12 +11,19 @@ import math
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model import quaternion as quat
 
 
 def grid_rate(source_fps: float, fps: float) -> float:
     """The least whole multiple of ``fps`` at least ``source_fps`` [frames per second]: the
-    source rate itself when ``fps`` divides it."""
+    source rate itself when ``fps`` divides it.
+
+    Raises:
+        UsageError: a rate that is not positive.
+    """
+    if not (fps > 0 and source_fps > 0):
+        raise UsageError(f"frame rates must be positive (source {source_fps:g}, output {fps:g})")
     k = source_fps / fps
     if abs(k - round(k)) <= 1e-9 and round(k) >= 1:
         return float(source_fps)

@@ -22,9 +22,10 @@ from sim.acclaim.records import Motion, Skeleton
 from sim.acclaim.writer import write_amc, write_asf
 from sim.bvh.convert import to_acclaim
 from sim.bvh.reader import parse_bvh
+from sim.bvh.records import MAX_BVH_BYTES
 from sim.bvh.writer import write_bvh
 from sim.errors import MotionDataError, UsageError
-from sim.files import MAX_BVH_BYTES, read_regular
+from sim.files import read_regular
 from sim.model import humanoid
 from sim.motion.clip import load_npz
 from sim.motion.retarget import qpos_to_motion
