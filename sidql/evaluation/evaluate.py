@@ -239,12 +239,13 @@ def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list
 
 def _simulate_means(rows: Sequence[dict]) -> dict:
     """Mean over clips of each :data:`sim.simulate.validate.SIMULATE_KEYS` figure (the fall
-    time: over the clips that fell, None if none did)."""
+    time: over the clips that fell, None if none did), and its median (``<key>_median``)."""
     out = {}
     for k in SIMULATE_KEYS:
         v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
         v = v[np.isfinite(v)]
         out[k] = float(v.mean()) if v.size else None
+        out[f"{k}_median"] = float(np.median(v)) if v.size else None
     return out
 
 

@@ -36,8 +36,7 @@ from sim.motion.ingest import load_motion
 from sim.motion.trial import is_bvh, subject_model
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
-from sim.simulate.model import sim_model
-from sim.simulate.validate import ForwardValidation
+from sim.simulate.validate import forward_validation
 
 
 def report_clips(
@@ -153,7 +152,7 @@ def report_trial(
     forward = None
     if simulate:
         names = from_clip(all_clips[0]).restrict(POINTS).names
-        forward = ForwardValidation(sim_model(skeleton), names)
+        forward = forward_validation(skeleton, names)
     return report_clips(
         [all_clips[c] for c in clips], out_dir, W=W, methods=methods, seed=seed,
         joint_ranges=joint_ranges(model), videos=videos, style=style,

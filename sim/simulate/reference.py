@@ -21,7 +21,7 @@ from sim.motion.ingest import check_memory
 from sim.motion.resample import resample_qpos, resampled_frames
 from sim.motion.retarget import leg_length, motion_to_qpos, retarget_rotations
 from sim.motion.trial import CMU_FPS, read_trial, trial_files
-from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS
+from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -55,7 +55,7 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     each frame: the sole boxes where the model has them (``sim.simulate.model.add_soles``; the
     foot and toe capsules then touch the body only), else the foot and toe capsules."""
     data = mujoco.MjData(model)
-    names = SOLE_POINTS + SOLE_GEOMS
+    names = SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
     ids = [
         model.geom(n).id
         for n in names
