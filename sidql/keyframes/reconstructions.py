@@ -21,6 +21,10 @@ The registered reconstructions:
 ``cartesian``
     every point on its own cubic Hermite in xyz (bone lengths not kept): the worked example of
     adding one.
+``contacts``
+    ``hermite`` plus per-frame foot-contact bits (run-length coded side information, counted in
+    :attr:`Reconstruction.side_bytes`); the receiver pins each foot in contact where it touched
+    down by analytic two-bone IK (:mod:`sidql.keyframes.contact_pinning`).
 
 Adding a reconstruction = one function + one :func:`register` call + its test; :mod:`evaluate
 <sidql.evaluation.evaluate>`, :mod:`rate <sidql.evaluation.rate>` and :mod:`validation
@@ -39,7 +43,7 @@ from functools import partial
 
 import numpy as np
 
-from sidql.keyframes import pitch
+from sidql.keyframes import contact_pinning, pitch
 from sidql.keyframes.curves import check_curve, interpolate_derivatives, validate_keyframes
 from sidql.keyframes.optimal import catmull_rom_optimal, optimal_table
 from sidql.keyframes.segment_costs import segment_cost_matrix
@@ -82,6 +86,7 @@ class Reconstruction(PointMotion):
             themselves (:func:`~sidql.keyframes.curves.interpolate_derivatives`: at an inner
             keyframe the mean over the frame's interval); None where a reconstruction does not
             provide them.
+        side_bytes: bytes sent per clip beside the keyframes (``contacts``: its contact runs).
     """
 
     theta: np.ndarray
@@ -89,6 +94,7 @@ class Reconstruction(PointMotion):
     keyframes: np.ndarray
     reconstruction: str
     accelerations: np.ndarray | None = None
+    side_bytes: int = 0
 
     @property
     def dt(self) -> float:
@@ -104,6 +110,7 @@ def points_reconstruction(
     reconstruction: str,
     fps: float,
     accelerations: np.ndarray | None = None,
+    side_bytes: int = 0,
 ) -> Reconstruction:
     """A reconstruction rebuilt as points rather than in the chart (``slerp``, ``cartesian``):
     the 23 protocol points' positions (N, 23, 3) [m], velocities [m/s] and accelerations
@@ -123,6 +130,7 @@ def points_reconstruction(
         reconstruction=reconstruction,
         fps=fps,
         accelerations=accelerations,
+        side_bytes=side_bytes,
     )
 
 
@@ -170,13 +178,16 @@ Rebuild = Callable[..., Reconstruction]
 
 @dataclass(frozen=True)
 class ReconstructionSpec:
-    """What one registered reconstruction declares (see the module docstring)."""
+    """What one registered reconstruction declares (see the module docstring); ``exact_keyframes``:
+    every point of every keyframe is the original's (False: ``contacts``, whose pinned legs may
+    depart from later keyframes of a contact run)."""
 
     name: str
     rebuild: Rebuild
     payload_bytes: int
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None
     optimum: Callable[[SphericalSeries, int], object] | None = None
+    exact_keyframes: bool = True
 
 
 #: name -> :class:`ReconstructionSpec`, in registration order.
@@ -189,14 +200,16 @@ def register(
     payload_floats: int,
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None,
     optimum: Callable[[SphericalSeries, int], object] | None = None,
+    exact_keyframes: bool = True,
 ) -> Callable[[Rebuild], Rebuild]:
     """Decorator registering ``rebuild(clip, keyframes, series=None)`` as reconstruction ``name``
     whose keyframe carries ``payload_floats`` float32 values (plus the one-byte frame index)."""
 
     def deco(fn: Rebuild) -> Rebuild:
         RECONSTRUCTIONS[name] = ReconstructionSpec(
-            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum
-        )
+            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum,
+            exact_keyframes,
+        )  # fmt: skip
         return fn
 
     return deco
@@ -287,3 +300,20 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     P, V, A = interpolate_derivatives(pos, vel, k, clip.dt, "hermite")
     P, V, A = (x.reshape(N, len(POINTS), 3) for x in (P, V, A))
     return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps, A)
+
+
+@register("contacts", payload_floats=2 * POSE_FLOATS, exact_keyframes=False)
+def contacts(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
+    """``hermite`` with the sender's foot-contact bits (run-length coded, their bytes in
+    ``side_bytes``): each foot in contact pinned where it touched down by two-bone IK
+    (:mod:`sidql.keyframes.contact_pinning`); velocities and accelerations are the curve's plus
+    the pinning correction's central differences."""
+    base = hermite(clip, keyframes, series)
+    code = contact_pinning.encode_runs(contact_pinning.sender_contacts(clip))
+    bits = contact_pinning.decode_runs(code, clip.n_frames)  # what the receiver has
+    P = contact_pinning.pin_feet(base.positions, bits, base.keyframes, clip.fps)
+    dV, dA = contact_pinning.correction_derivatives(P - base.positions, clip.fps)
+    return points_reconstruction(
+        P, base.velocities + dV, base.parents, base.keyframes, "contacts", clip.fps,
+        base.accelerations + dA, side_bytes=len(code),
+    )  # fmt: skip

@@ -1,0 +1,303 @@
+"""The reconstruction that keeps contacts (``contacts``): foot-contact bits sent beside the
+keyframes, and the receiver pinning each foot in contact where it touched down.
+
+**The sender** labels every frame's foot contacts (:func:`sender_contacts`: the clip's own floor
+(:func:`sim.physics.ground.estimate_ground`) and the one definition of contact,
+:func:`sim.physics.contacts.motion_contacts`) and sends them run-length coded
+(:func:`encode_runs`: per foot one varint holding the number of runs and the first state, then
+one varint per run length but the last; a 60-frame clip costs 2 + the number of contact changes
+bytes, typically 6-10). Those bytes are the reconstruction's side information
+(:attr:`Reconstruction.side_bytes <sidql.keyframes.reconstructions.Reconstruction>`), counted
+with its keyframes in every byte figure.
+
+**The receiver** rebuilds the clip with the paper's Hermite (:mod:`sidql.keyframes.reconstructions`)
+and then, per foot and contact run (:func:`pin_feet`):
+
+* *where it touched down*: the foot's lowest sole point (:func:`sim.physics.feet.sole`: heel and
+  ball spheres of the ankle-ball capsule) at the first keyframe inside the run (an exact pose of
+  the original), or at the run's first frame when no keyframe falls inside it; its height is
+  the floor: the lowest sole point at that keyframe, else the median over the clip's keyframes
+  in contact (both feet), else the touch-down frame's;
+* *pinned*: an offset ``d(t)`` (3,) [m] keeps the lowest sole sphere from moving horizontally
+  (integrated frame to frame from the anchor, so a foot rolling heel to ball still rolls: the
+  contact point moves from sphere to sphere, no sphere slides) and puts the lowest point on the
+  floor's height;
+* *blended*: outside a run the offset fades to 0 over :data:`BLEND_S` by a smoothstep (between
+  two runs closer than twice that, the two fades are averaged), so the foot moves smoothly in and
+  out of its pin;
+* *by analytic two-bone IK* (:func:`two_bone_ik`): the hip stays, the ankle goes to its pinned
+  place (clamped inside the leg's reach), the knee bends in the plane the Hermite knee bent in,
+  and the foot bone (ankle to ball, the protocol's toe point) follows the ankle rigidly; thigh,
+  shin and foot keep their lengths exactly.
+
+Velocities and accelerations are the Hermite curve's plus the finite differences (central, 30
+fps) of the pinning's correction. A pinned foot does not reproduce later keyframes of the same
+contact run exactly (the original's foot slides there; the pin does not): the reconstruction's
+keyframes are exact except for the pinned legs' points.
+
+Pure numpy over arrays. Units: metres, seconds; positions (N, 23, 3) in world axes (z up).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sidql.keyframes.spherical import POINTS
+from sim.errors import MotionDataError
+from sim.motion.clip import Clip
+from sim.physics.contacts import motion_contacts
+from sim.physics.feet import SIDES, sole
+from sim.physics.ground import estimate_ground
+
+#: [s] how long a foot takes to blend into and out of its pin around a contact run.
+BLEND_S = 0.15
+#: Per foot (``l``, ``r``): indices into :data:`~sidql.keyframes.spherical.POINTS` of the hip,
+#: knee, ankle and ball (the ends of ``hipjoint``, ``femur``, ``tibia``, ``foot``).
+LEGS: tuple[tuple[int, int, int, int], ...] = tuple(
+    tuple(POINTS.index(s + b) for b in ("hipjoint", "femur", "tibia", "foot")) for s in SIDES
+)
+#: Fraction of the leg's full reach (thigh + shin) the ankle is allowed (a straight knee has no
+#: bending plane; the clamp keeps the knee's solution well defined).
+MAX_REACH = 0.9999
+
+
+def sender_contacts(clip: Clip) -> np.ndarray:
+    """(N, 2) bool foot-contact labels (``l``, ``r``) of a clip as its sender labels them: the
+    clip's own floor and :func:`sim.physics.contacts.motion_contacts` on all its points.
+
+    Raises:
+        MotionDataError: the clip has no foot (ankle and ball) to label.
+    """
+    names = tuple(clip.names)
+    try:
+        ground = estimate_ground(clip.positions, names, clip.fps)
+        c = motion_contacts(clip.positions, names, clip.fps, ground, velocities=clip.velocities)
+    except ValueError as e:
+        raise MotionDataError(clip.source or None, None, f"no foot contacts: {e}") from None
+    out = np.zeros((clip.n_frames, len(SIDES)), dtype=bool)
+    for f, s in enumerate(SIDES):
+        if s in c.sides:
+            out[:, f] = c.contact[:, c.sides.index(s)]
+    return out
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        b, n = n & 0x7F, n >> 7
+        out.append(b | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def _read_varint(data: bytes, pos: int) -> tuple[int, int]:
+    n = shift = 0
+    while True:
+        if pos >= len(data) or shift > 28:
+            raise MotionDataError(None, None, "contact runs: truncated or oversized varint")
+        b = data[pos]
+        pos += 1
+        n |= (b & 0x7F) << shift
+        shift += 7
+        if not b & 0x80:
+            return n, pos
+
+
+def encode_runs(bits: np.ndarray) -> bytes:
+    """Run-length code (N, F) bool labels: per foot ``varint(2 * runs + first state)`` then the
+    varint length of every run but the last (LEB128 varints)."""
+    b = np.asarray(bits, dtype=bool)
+    if b.ndim != 2 or b.shape[0] < 1:
+        raise ValueError(f"bits must be (N, F) with N >= 1; got {b.shape}")
+    out = bytearray()
+    for f in range(b.shape[1]):
+        change = np.flatnonzero(b[1:, f] != b[:-1, f]) + 1
+        edges = np.concatenate([[0], change, [len(b)]])
+        out += _varint(2 * (len(edges) - 1) + int(b[0, f]))
+        for length in np.diff(edges)[:-1]:
+            out += _varint(int(length))
+    return bytes(out)
+
+
+def decode_runs(data: bytes, n_frames: int, n_feet: int = len(SIDES)) -> np.ndarray:
+    """(n_frames, n_feet) bool labels from :func:`encode_runs`'s bytes (MotionDataError when they
+    do not describe exactly that many frames and feet)."""
+    out = np.zeros((n_frames, n_feet), dtype=bool)
+    pos = 0
+    for f in range(n_feet):
+        head, pos = _read_varint(data, pos)
+        n_runs, state = head >> 1, bool(head & 1)
+        if not 1 <= n_runs <= n_frames:
+            raise MotionDataError(
+                None, None, f"contact runs: foot {f} has {n_runs} runs in {n_frames} frames"
+            )
+        t = 0
+        for r in range(n_runs):
+            if r < n_runs - 1:
+                length, pos = _read_varint(data, pos)
+            else:
+                length = n_frames - t
+            if length < 1 or t + length > n_frames:
+                raise MotionDataError(
+                    None, None, f"contact runs: foot {f}'s runs overrun {n_frames} frames"
+                )
+            out[t : t + length, f] = state
+            t += length
+            state = not state
+    if pos != len(data):
+        raise MotionDataError(None, None, f"contact runs: {len(data) - pos} trailing bytes")
+    return out
+
+
+def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` of the True runs of a (N,) bool array (stop exclusive)."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    d = np.flatnonzero(m[1:] != m[:-1])
+    return list(zip(d[::2].tolist(), d[1::2].tolist(), strict=True))
+
+
+def two_bone_ik(leg: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Analytic two-bone IK: the new knee and ankle (T, 3) [m] of legs ``leg`` (T, 4, 3) =
+    ``[hip, knee, ankle, ball]`` [m] whose ankle goes to ``target`` (T, 3) [m].
+
+    The hip stays; thigh and shin keep their lengths in ``leg`` exactly; the knee bends in the
+    plane it bent in (towards the ball when the leg was straight). A target beyond
+    :data:`MAX_REACH` of the leg (or nearer the hip than its fold allows) is replaced by the
+    reachable point on the line from the hip towards it.
+    """
+    target = np.asarray(target, dtype=np.float64)
+    h_hip, h_knee, h_ankle, h_ball = (leg[:, k] for k in range(4))
+    l1 = np.linalg.norm(h_knee - h_hip, axis=-1)
+    l2 = np.linalg.norm(h_ankle - h_knee, axis=-1)
+    r = target - h_hip
+    d = np.linalg.norm(r, axis=-1)
+    u = r / np.maximum(d, 1e-12)[:, None]
+    dc = np.clip(d, np.abs(l1 - l2) / MAX_REACH + 1e-9, MAX_REACH * (l1 + l2))
+    a = (l1**2 - l2**2 + dc**2) / (2 * dc)
+    h = np.sqrt(np.maximum(l1**2 - a**2, 0.0))
+    pole = h_knee - h_hip
+    v = pole - np.sum(pole * u, axis=-1, keepdims=True) * u
+    fwd = h_ball - h_ankle
+    fwd = fwd - np.sum(fwd * u, axis=-1, keepdims=True) * u
+    small = np.linalg.norm(v, axis=-1) < 1e-6 * np.maximum(l1, 1e-9)
+    v[small] = fwd[small]
+    v /= np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+    return h_hip + a[:, None] * u + h[:, None] * v, h_hip + dc[:, None] * u
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def blend_offsets(offsets: np.ndarray, contact: np.ndarray, width: int) -> np.ndarray:
+    """(N, 3) offsets [m] defined on the contact frames of ``contact`` (N,) bool, faded to 0
+    outside over ``width`` frames by a smoothstep (weight ``1 - smoothstep(distance /
+    (width + 1))``); where the fades of two runs overlap their weighted sum is normalised by
+    ``max(1, w1 + w2)`` so the result stays continuous."""
+    out = np.where(contact[:, None], offsets, 0.0)
+    spans = runs_of(contact)
+    if not spans or width < 1:
+        return out
+    starts = np.array([a for a, _ in spans])
+    ends = np.array([e - 1 for _, e in spans])
+    for t in np.flatnonzero(~contact):
+        total, weight = np.zeros(3), 0.0
+        i = np.searchsorted(ends, t) - 1  # last run ending before t
+        if i >= 0:
+            w = 1.0 - _smoothstep((t - ends[i]) / (width + 1))
+            total += w * offsets[ends[i]]
+            weight += w
+        j = np.searchsorted(starts, t)  # first run starting after t
+        if j < len(starts):
+            w = 1.0 - _smoothstep((starts[j] - t) / (width + 1))
+            total += w * offsets[starts[j]]
+            weight += w
+        out[t] = total / max(1.0, weight)
+    return out
+
+
+def foot_offsets(
+    bottoms: np.ndarray, contact: np.ndarray, keyframes: np.ndarray, floor: float | None
+) -> np.ndarray:
+    """(N, 3) pin offsets [m] of one foot on its contact frames (0 elsewhere).
+
+    Args:
+        bottoms: (N, S, 3) the lowest surface points of the foot's sole spheres [m].
+        contact: (N,) bool contact labels; keyframes: (W,) indices.
+        floor: the clip's floor height [m] from its keyframes in contact (None: unknown).
+    """
+    N = len(contact)
+    low = bottoms[..., 2].argmin(axis=1)  # (N,) the lowest sphere per frame
+    z = bottoms[np.arange(N), low, 2]
+    out = np.zeros((N, 3))
+    keys = set(int(k) for k in keyframes)
+    for a, e in runs_of(contact):
+        inside = [t for t in range(a, e) if t in keys]
+        t0 = inside[0] if inside else a
+        height = z[t0] if inside else (z[a] if floor is None else floor)
+        for t in range(t0 + 1, e):  # the lowest sphere at t does not move from t - 1
+            out[t, :2] = out[t - 1, :2] - (bottoms[t, low[t], :2] - bottoms[t - 1, low[t], :2])
+        for t in range(t0 - 1, a - 1, -1):
+            out[t, :2] = out[t + 1, :2] + (bottoms[t + 1, low[t], :2] - bottoms[t, low[t], :2])
+        out[a:e, 2] = height - z[a:e]
+    return out
+
+
+def pin_feet(
+    positions: np.ndarray,
+    contact: np.ndarray,
+    keyframes,
+    fps: float,
+    *,
+    blend_s: float = BLEND_S,
+) -> np.ndarray:
+    """(N, 23, 3) ``positions`` [m] (the protocol points, world axes z up) with each foot pinned
+    on its contact frames (see the module docstring).
+
+    Args:
+        positions: (N, 23, 3) the receiver's reconstruction [m].
+        contact: (N, 2) bool foot-contact bits (``l``, ``r``).
+        keyframes: (W,) the keyframe indices (exact poses of the original).
+        fps: frame rate [1/s]; blend_s: blend time [s].
+    """
+    P = np.array(positions, dtype=np.float64)
+    c = np.asarray(contact, dtype=bool)
+    N = P.shape[0]
+    if P.shape != (N, len(POINTS), 3) or c.shape != (N, len(SIDES)):
+        raise ValueError(
+            f"positions must be (N, 23, 3) and contact (N, 2); got {P.shape}, {c.shape}"
+        )
+    k = np.asarray(keyframes, dtype=np.int64)
+    s = sole(P, POINTS)
+    b = s.bottoms
+    feet = [b[:, s.of(x)] for x in SIDES]
+    low_at_keys = [float(feet[f][t, :, 2].min()) for f in range(2) for t in k if c[t, f]]
+    floor = float(np.median(low_at_keys)) if low_at_keys else None
+    width = int(round(blend_s * fps))
+    out = P.copy()
+    for f, (hip, knee, ankle, ball) in enumerate(LEGS):
+        off = blend_offsets(foot_offsets(feet[f], c[:, f], k, floor), c[:, f], width)
+        moved = np.flatnonzero(np.abs(off).max(axis=1) > 0)
+        if not len(moved):
+            continue
+        leg = P[moved][:, [hip, knee, ankle, ball]]
+        new_knee, new_ankle = two_bone_ik(leg, leg[:, 2] + off[moved])
+        out[moved, knee] = new_knee
+        out[moved, ankle] = new_ankle
+        out[moved, ball] = leg[:, 3] + (new_ankle - leg[:, 2])
+    return out
+
+
+def correction_derivatives(delta: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """First and second time derivatives [m/s, m/s^2] of a correction ``delta`` (N, ...) [m] by
+    central differences (one-sided first difference at the ends, second difference copied from
+    the neighbour; zeros for N < 3)."""
+    d = np.asarray(delta, dtype=np.float64)
+    if len(d) < 3:
+        return np.zeros_like(d), np.zeros_like(d)
+    v = np.gradient(d, 1.0 / fps, axis=0)
+    a = np.zeros_like(d)
+    a[1:-1] = (d[2:] - 2 * d[1:-1] + d[:-2]) * fps**2
+    a[0], a[-1] = a[1], a[-2]
+    return v, a
