@@ -201,8 +201,8 @@ def test_floor_report_says_where_each_trials_support_was_found():
     from types import SimpleNamespace
 
     from sidql.evaluation.evaluate import floor_report, floors_markdown
-    from sim.physics.analysis import support_verdict
     from sim.physics.ground import Ground
+    from sim.physics.support import support_verdict
 
     setup = {s: SimpleNamespace(ground=Ground(0.0)) for s in ("x/climb.amc", "x/walk.amc")}
     climb = {"source": "x/climb.amc", "dynamics_n": 60, "residual_force_bw": 0.5,

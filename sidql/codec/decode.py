@@ -159,7 +159,6 @@ def decode_file(
         )
     rec = reconstruct_stream(stream)
     motion = fit_motion(skeleton, rec.positions, rec.names)
-    out.parent.mkdir(parents=True, exist_ok=True)
     write_amc(
         out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
     )

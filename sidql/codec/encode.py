@@ -670,6 +670,5 @@ def encode_files(
     except ValueError as e:  # e.g. an output rate that does not divide the source rate
         raise MotionDataError(str(amc), None, str(e)) from None
     enc = encode_clip(clip, skel_hash=skel, **kwargs)
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
     write_atomic(Path(out), lambda f: f.write(enc.data))
     return enc

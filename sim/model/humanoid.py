@@ -235,6 +235,5 @@ def write_humanoid_xml(path: str | os.PathLike = HUMANOID_XML) -> Path:
     """Regenerate the shared humanoid (:data:`HUMANOID_XML`) from the canonical skeleton."""
     text = build_mjcf(canonical_skeleton(), model_name="cmu_humanoid")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda f: f.write(text.encode()))
     return path
