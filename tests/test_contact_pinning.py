@@ -164,3 +164,18 @@ def test_contacts_reconstruction_counts_its_bits_and_keeps_bone_lengths():
     legs = [j for leg in LEGS for j in leg[1:]]
     rest = np.setdiff1d(np.arange(len(POINTS)), legs)
     assert np.array_equal(rec.positions[:, rest], base.positions[:, rest])
+
+
+def test_evaluate_rebuilds_any_method_with_the_named_reconstruction():
+    from sidql.evaluation.evaluate import evaluate, make_case
+
+    cases = [make_case(smooth_clip(60, 30.0, seed=40 + i), i) for i in range(2)]
+    own = evaluate(cases, ["uniform"], [5], progress=False)
+    pinned = evaluate(cases, ["uniform"], [5], progress=False, reconstruction="contacts")
+    for a, b in zip(own["per_clip"], pinned["per_clip"], strict=True):
+        assert a["indices"] == b["indices"]  # the same choice, rebuilt two ways
+        assert a["reconstruction"] == "hermite" and b["reconstruction"] == "contacts"
+        assert a["side_bytes"] == 0 and b["side_bytes"] >= 2
+        assert b["q_hermite"] == a["q"]
+    with pytest.raises(ValueError, match="unknown reconstruction"):
+        evaluate(cases, ["uniform"], [5], progress=False, reconstruction="nope")

@@ -12,6 +12,7 @@ from sidql.commands.usage import (
     add_methods,
     add_quiet,
     add_ray,
+    add_reconstruction,
     add_samples,
     add_skeleton,
     add_test_subjects,
@@ -91,6 +92,7 @@ def register(p) -> None:
         "--max-clips", type=positive(int), default=None, metavar="N",
         help="evaluate only the first N clips (e.g. to bound a --simulate run)",
     )  # fmt: skip
+    add_reconstruction(p)
     add_quiet(p)
     add_workers(p, "loading trials and evaluating clips (methods, physics, simulation)")
     add_ray(p, "the trials' loading and the clips' evaluation")
@@ -129,6 +131,7 @@ def _run(args) -> int:
         cases, args.methods, counts, seed=args.seed, progress=not args.quiet,
         physics=args.physics, simulate=args.simulate,
         simulate_samples=args.samples or 0, workers=args.workers, ray=args.ray,
+        reconstruction=args.reconstruction,
     )  # fmt: skip
     out["skipped"] = skipped
     out["protocol"] = {
@@ -142,6 +145,7 @@ def _run(args) -> int:
         "simulate": bool(args.simulate),
         "simulate_samples": args.samples or 0,
         "max_clips": args.max_clips,
+        "reconstruction": args.reconstruction,
     }
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -7,6 +7,7 @@ from sidql.commands.usage import (
     add_methods,
     add_quiet,
     add_ray,
+    add_reconstruction,
     add_workers,
     check_keyframes,
 )
@@ -52,6 +53,7 @@ def register(p) -> None:
         "with the subject's human-strength body and no assistance: tracking error, falls and "
         "torque per method (could a body perform this motion?)",
     )  # fmt: skip
+    add_reconstruction(p)
     add_workers(p, "validating clips")
     add_ray(p, "the clips' validation")
     add_quiet(p)
@@ -68,7 +70,7 @@ def run(args) -> int:
         args.asf, args.amc, args.out, W=args.W, methods=methods, streams=streams,
         clips=args.clips, seed=args.seed, videos=not args.no_video,
         style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
-        progress=not args.quiet, simulate=args.simulate,
+        progress=not args.quiet, simulate=args.simulate, reconstruction=args.reconstruction,
     )  # fmt: skip
     print(f"report: {page}")
     return 0

@@ -284,6 +284,18 @@ def add_ray(parser: argparse.ArgumentParser, what: str = "the tasks") -> None:
     )  # fmt: skip
 
 
+def add_reconstruction(parser: argparse.ArgumentParser) -> None:
+    """``--reconstruction NAME``: rebuild every method's keyframes with this registered
+    reconstruction (:mod:`sidql.keyframes.reconstructions`) instead of the method's own."""
+    from sidql.keyframes.reconstructions import RECONSTRUCTIONS
+
+    parser.add_argument(
+        "--reconstruction", default=None, choices=list(RECONSTRUCTIONS), metavar="NAME",
+        help="rebuild every method's keyframes with this reconstruction instead of its own "
+        f"(selection and reconstruction measured apart): {', '.join(RECONSTRUCTIONS)}",
+    )  # fmt: skip
+
+
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``-q/--quiet``: no progress bars."""
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")

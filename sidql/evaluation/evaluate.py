@@ -165,7 +165,13 @@ def clip_seed(seed: int, index: int, W: int) -> int:
 
 
 def score(
-    case: Case, keyframes: np.ndarray, method: str, physics=None, simulate=None, original_qpos=None
+    case: Case,
+    keyframes: np.ndarray,
+    method: str,
+    physics=None,
+    simulate=None,
+    original_qpos=None,
+    reconstruction: str | None = None,
 ) -> dict:
     """Every error measure of one clip rebuilt from ``keyframes`` with the reconstruction
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
@@ -176,9 +182,11 @@ def score(
     labelled over the whole trial); ``simulate`` (a
     :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its forward
     simulation's figures (the IK fit tracked without assistance; ``original_qpos``: the
-    original's fit, computed here when None)."""
+    original's fit, computed here when None). ``reconstruction``: rebuild with this registered
+    reconstruction instead of the method's own (its name and ``side_bytes`` join the row)."""
     s = case.series
-    rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
+    name = reconstruction or methods.reconstruction_of(method)
+    rec = reconstructions.rebuild(name, case.clip, keyframes, s)
     phys = {}
     if physics:
         analysis = physics.analyse(case.clip, rec)
@@ -189,6 +197,8 @@ def score(
             phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original_qpos))
     return {
         **phys,
+        "reconstruction": name,
+        "side_bytes": rec.side_bytes,
         "q": q_from_angles(s, rec.theta, rec.phi),
         "q_hermite": q_error(s, keyframes, "hermite"),
         "geodesic_deg": geodesic_deg(case.pos, rec.positions, rec.parents),
@@ -364,8 +374,10 @@ def evaluate(
     workers: int = 1,
     ray: str | None = None,
     chunk: int = 4,
+    reconstruction: str | None = None,
 ) -> dict:
-    """Run every method at every W on every case.
+    """Run every method at every W on every case (``reconstruction``: rebuild every method's
+    keyframes with this registered reconstruction instead of its own).
 
     The per-clip work (each method's choice and reconstruction, the physics of the original and
     of every reconstruction, the forward simulations) runs through ``sim.batch.iter_batch``:
@@ -399,8 +411,10 @@ def evaluate(
     for group in _trial_chunks(cases, chunk):
         source = cases[group[0]].clip.source
         items.append(([(i, cases[i]) for i in group], setup.get(source), bodies.get(source)))
+    if reconstruction is not None:
+        reconstructions.get(reconstruction)  # fail early, listing the known ones
     task = partial(_evaluate_chunk, method_names=tuple(method_names), counts=tuple(counts),
-                   seed=seed)  # fmt: skip
+                   seed=seed, reconstruction=reconstruction)  # fmt: skip
     by_case: dict[int, list[dict]] = {}
     for _, o in iter_batch(task, items, workers=workers, ray=ray, desc="evaluate",
                            progress=progress, total=len(items)):  # fmt: skip
@@ -441,6 +455,8 @@ def evaluate(
                     "mean_velocity_error": float(np.mean([r["velocity_error"] for r in rows])),
                     "mean_li_error_mm": float(np.mean([r["li_error_mm"] for r in rows])),
                     "median_decision_ms": float(np.median([r["decision_ms"] for r in rows])),
+                    "reconstruction": rows[0]["reconstruction"],
+                    "mean_side_bytes": float(np.mean([r["side_bytes"] for r in rows])),
                     **(_physics_means(rows) if physics else {}),
                     **(_simulate_means(rows) if simulate else {}),
                 }
@@ -562,7 +578,9 @@ def _trial_chunks(cases: Sequence[Case], size: int) -> list[list[int]]:
     return out
 
 
-def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list[dict]]]:
+def _evaluate_chunk(
+    item, *, method_names, counts, seed, reconstruction=None
+) -> list[tuple[int, list[dict]]]:
     """One task of :func:`evaluate`: per case of ``item = ([(position, case)...], physics set-up
     or None, simulated body or None)``, its position and rows: the original's (with physics),
     then each method at each W."""
@@ -596,7 +614,7 @@ def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list
                         "method": name,
                         "keyframes": W,
                         "indices": k.tolist(),
-                        **score(case, k, name, phys, body, original_qpos),
+                        **score(case, k, name, phys, body, original_qpos, reconstruction),
                         "decision_ms": ms,
                     }
                 )

@@ -192,6 +192,7 @@ def validate_clip(
     ground=None,
     simulate=None,
     contacts=None,
+    reconstruction: str | None = None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -210,6 +211,8 @@ def validate_clip(
             run in ``mj_step`` without assistance; its figures join ``physics``.
         contacts: the original's foot contacts labelled over the whole trial, by the clip's
             ``start_frame`` (:func:`trial_contacts`); default: labelled on the clip.
+        reconstruction: rebuild every method's keyframes with this one alone (default: Hermite,
+            and the method's own where it differs).
     """
     if physics is not None and ground is None:
         ground = estimate_ground(clip.positions, clip.names, clip.fps)
@@ -250,7 +253,8 @@ def validate_clip(
             r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
         )
         hermite = [] if own != "hermite" and shown else ["hermite"]  # cartesian's = uniform's
-        for name in hermite + ([own] if own != "hermite" else []):
+        names = hermite + ([own] if own != "hermite" else [])
+        for name in [reconstruction] if reconstruction else names:
             built = reconstructions.rebuild(name, clip, keys)
             rec = from_reconstruction(built, clip.fps)
             checks = replay(rec, full, **kw)
