@@ -61,16 +61,18 @@ LEGS: tuple[tuple[int, int, int, int], ...] = tuple(
 MAX_REACH = 0.9999
 
 
-def sender_contacts(clip: Clip) -> np.ndarray:
-    """(N, 2) bool foot-contact labels (``l``, ``r``) of a clip as its sender labels them: the
-    clip's own floor and :func:`sim.physics.contacts.motion_contacts` on all its points.
+def sender_contacts(clip: Clip, ground=None) -> np.ndarray:
+    """(N, 2) bool foot-contact labels (``l``, ``r``) of a clip as its sender labels them:
+    :func:`sim.physics.contacts.motion_contacts` on all its points, on ``ground`` (a
+    :class:`sim.physics.ground.Ground`; default the clip's own floor, :func:`estimate_ground`).
 
     Raises:
         MotionDataError: the clip has no foot (ankle and ball) to label.
     """
     names = tuple(clip.names)
     try:
-        ground = estimate_ground(clip.positions, names, clip.fps)
+        if ground is None:
+            ground = estimate_ground(clip.positions, names, clip.fps)
         c = motion_contacts(clip.positions, names, clip.fps, ground, velocities=clip.velocities)
     except ValueError as e:
         raise MotionDataError(clip.source or None, None, f"no foot contacts: {e}") from None
