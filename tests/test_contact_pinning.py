@@ -126,6 +126,22 @@ def test_pinned_foot_stays_where_it_was_at_its_keyframe_and_bones_keep_lengths()
     assert np.array_equal(out[far], P[far])  # unchanged away from the contact and its blends
 
 
+def test_keyframes_stay_exact_and_the_pin_slides_linearly_between_two_of_them():
+    P = _walker()
+    c = np.zeros((60, 2), bool)
+    c[10:41, 0] = True
+    keys = np.array([0, 8, 15, 35, 59])  # 8: just before the run, its fade must end there
+    out = pin_feet(P, c, keys, FPS)
+    assert np.array_equal(out[keys], P[keys])
+    ankle = LEGS[0][2]
+    s = (np.arange(15, 36) - 15) / 20.0
+    line = (1 - s)[:, None] * P[15, ankle] + s[:, None] * P[35, ankle]
+    assert np.allclose(out[15:36, ankle], line, atol=1e-9)  # the original's net slide, no more
+    assert np.allclose(out[10:16, ankle], P[15, ankle], atol=1e-9)  # still before the first
+    assert np.allclose(out[35:41, ankle], P[35, ankle], atol=1e-9)  # and after the last
+    assert np.allclose(_lengths(out), _lengths(P), atol=1e-12)
+
+
 def test_no_contact_changes_nothing():
     P = _walker()
     out = pin_feet(P, np.zeros((60, 2), bool), np.array([0, 30, 59]), FPS)

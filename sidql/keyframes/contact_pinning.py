@@ -14,26 +14,25 @@ with its keyframes in every byte figure.
 and then, per foot and contact run (:func:`pin_feet`):
 
 * *where it touched down*: the foot's lowest sole point (:func:`sim.physics.feet.sole`: heel and
-  ball spheres of the ankle-ball capsule) at the first keyframe inside the run (an exact pose of
-  the original), or at the run's first frame when no keyframe falls inside it; its height is
-  the floor: the lowest sole point at that keyframe, else the median over the clip's keyframes
-  in contact (both feet), else the touch-down frame's;
+  ball spheres of the ankle-ball capsule) at the keyframes inside the run (exact poses of the
+  original), or at the run's first frame when no keyframe falls inside it, its height then the
+  floor's: the median lowest sole point over the clip's keyframes in contact (both feet), else
+  the touch-down frame's;
 * *pinned*: an offset ``d(t)`` (3,) [m] keeps the lowest sole sphere from moving horizontally
   (integrated frame to frame from the anchor, so a foot rolling heel to ball still rolls: the
-  contact point moves from sphere to sphere, no sphere slides) and puts the lowest point on the
-  floor's height;
-* *blended*: outside a run the offset fades to 0 over :data:`BLEND_S` by a smoothstep (between
-  two runs closer than twice that, the two fades are averaged), so the foot moves smoothly in and
-  out of its pin;
+  contact point moves from sphere to sphere, no sphere slides) and puts the lowest point at the
+  anchor's height; between two keyframes of one run the pin slides linearly from one to the
+  other (the original's own net displacement: every keyframe stays exact);
+* *blended*: outside a run the offset fades to 0 over :data:`BLEND_S` by a smoothstep, ending
+  sooner where a keyframe comes first (between two runs closer than twice that, the two fades
+  are averaged), so the foot moves smoothly in and out of its pin;
 * *by analytic two-bone IK* (:func:`two_bone_ik`): the hip stays, the ankle goes to its pinned
   place (clamped inside the leg's reach), the knee bends in the plane the Hermite knee bent in,
   and the foot bone (ankle to ball, the protocol's toe point) follows the ankle rigidly; thigh,
   shin and foot keep their lengths exactly.
 
 Velocities and accelerations are the Hermite curve's plus the finite differences (central, 30
-fps) of the pinning's correction. A pinned foot does not reproduce later keyframes of the same
-contact run exactly (the original's foot slides there; the pin does not): the reconstruction's
-keyframes are exact except for the pinned legs' points.
+fps) of the pinning's correction. Keyframes are reproduced exactly: their offset is 0.
 
 Pure numpy over arrays. Units: metres, seconds; positions (N, 23, 3) in world axes (z up).
 """
@@ -192,30 +191,49 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
-def blend_offsets(offsets: np.ndarray, contact: np.ndarray, width: int) -> np.ndarray:
+def blend_offsets(offsets: np.ndarray, contact: np.ndarray, width: int, keyframes=()) -> np.ndarray:
     """(N, 3) offsets [m] defined on the contact frames of ``contact`` (N,) bool, faded to 0
-    outside over ``width`` frames by a smoothstep (weight ``1 - smoothstep(distance /
-    (width + 1))``); where the fades of two runs overlap their weighted sum is normalised by
+    outside over ``width`` frames by a smoothstep (weight ``1 - smoothstep(distance / (w + 1))``,
+    ``w`` the width, shortened so that the fade ends before any of ``keyframes`` (W,): keyframes
+    keep offset 0); where the fades of two runs overlap their weighted sum is normalised by
     ``max(1, w1 + w2)`` so the result stays continuous."""
     out = np.where(contact[:, None], offsets, 0.0)
     spans = runs_of(contact)
     if not spans or width < 1:
         return out
+    keys = np.asarray(keyframes, dtype=np.int64)
     starts = np.array([a for a, _ in spans])
     ends = np.array([e - 1 for _, e in spans])
     for t in np.flatnonzero(~contact):
         total, weight = np.zeros(3), 0.0
         i = np.searchsorted(ends, t) - 1  # last run ending before t
         if i >= 0:
-            w = 1.0 - _smoothstep((t - ends[i]) / (width + 1))
-            total += w * offsets[ends[i]]
-            weight += w
+            after = keys[keys > ends[i]]
+            w = min(width, int(after[0] - ends[i]) - 1) if len(after) else width
+            x = 1.0 - _smoothstep((t - ends[i]) / (w + 1))
+            total += x * offsets[ends[i]]
+            weight += x
         j = np.searchsorted(starts, t)  # first run starting after t
         if j < len(starts):
-            w = 1.0 - _smoothstep((starts[j] - t) / (width + 1))
-            total += w * offsets[starts[j]]
-            weight += w
+            before = keys[keys < starts[j]]
+            w = min(width, int(starts[j] - before[-1]) - 1) if len(before) else width
+            x = 1.0 - _smoothstep((starts[j] - t) / (w + 1))
+            total += x * offsets[starts[j]]
+            weight += x
         out[t] = total / max(1.0, weight)
+    return out
+
+
+def _rolled(bottoms: np.ndarray, low: np.ndarray, a: int, e: int, t0: int) -> np.ndarray:
+    """(e - a, 2) horizontal offsets [m] over frames ``[a, e)`` that keep the foot's lowest sole
+    sphere (``low`` (N,) its index per frame) from moving horizontally, 0 at frame ``t0``."""
+    out = np.zeros((e - a, 2))
+    for t in range(t0 + 1, e):  # the sphere lowest at t does not move from t - 1
+        step = bottoms[t, low[t], :2] - bottoms[t - 1, low[t], :2]
+        out[t - a] = out[t - 1 - a] - step
+    for t in range(t0 - 1, a - 1, -1):
+        step = bottoms[t + 1, low[t], :2] - bottoms[t, low[t], :2]
+        out[t - a] = out[t + 1 - a] + step
     return out
 
 
@@ -223,6 +241,13 @@ def foot_offsets(
     bottoms: np.ndarray, contact: np.ndarray, keyframes: np.ndarray, floor: float | None
 ) -> np.ndarray:
     """(N, 3) pin offsets [m] of one foot on its contact frames (0 elsewhere).
+
+    A run holding no keyframe is pinned where the foot touched down (its first frame), its
+    lowest point at ``floor``; a run holding keyframes is pinned at each of them exactly (offset
+    0 there: keyframes are the original's poses): before the first and after the last the foot
+    stays where it was at that keyframe, between two of them the pin slides linearly from one
+    to the next (the original's net displacement, its height likewise), the rolling of the foot
+    (which sphere is lowest) kept.
 
     Args:
         bottoms: (N, S, 3) the lowest surface points of the foot's sole spheres [m].
@@ -233,16 +258,24 @@ def foot_offsets(
     low = bottoms[..., 2].argmin(axis=1)  # (N,) the lowest sphere per frame
     z = bottoms[np.arange(N), low, 2]
     out = np.zeros((N, 3))
-    keys = set(int(k) for k in keyframes)
+    keys = np.asarray(keyframes, dtype=np.int64)
     for a, e in runs_of(contact):
-        inside = [t for t in range(a, e) if t in keys]
-        t0 = inside[0] if inside else a
-        height = z[t0] if inside else (z[a] if floor is None else floor)
-        for t in range(t0 + 1, e):  # the lowest sphere at t does not move from t - 1
-            out[t, :2] = out[t - 1, :2] - (bottoms[t, low[t], :2] - bottoms[t - 1, low[t], :2])
-        for t in range(t0 - 1, a - 1, -1):
-            out[t, :2] = out[t + 1, :2] + (bottoms[t + 1, low[t], :2] - bottoms[t, low[t], :2])
+        inside = keys[(keys >= a) & (keys < e)]
+        if not len(inside):
+            out[a:e, :2] = _rolled(bottoms, low, a, e, a)
+            out[a:e, 2] = (z[a] if floor is None else floor) - z[a:e]
+            continue
+        anchors = [_rolled(bottoms, low, a, e, int(k)) for k in inside]
+        height = np.interp(np.arange(a, e), inside, z[inside])
         out[a:e, 2] = height - z[a:e]
+        t = np.arange(a, e)
+        pos = np.clip(np.searchsorted(inside, t, side="right") - 1, 0, len(inside) - 1)
+        nxt = np.minimum(pos + 1, len(inside) - 1)
+        span = np.maximum(inside[nxt] - inside[pos], 1)
+        s = np.clip((t - inside[pos]) / span, 0.0, 1.0)[:, None]
+        s[t < inside[0]] = 0.0
+        A = np.stack(anchors)  # (K, e - a, 2)
+        out[a:e, :2] = (1 - s) * A[pos, t - a] + s * A[nxt, t - a]
     return out
 
 
@@ -279,7 +312,7 @@ def pin_feet(
     width = int(round(blend_s * fps))
     out = P.copy()
     for f, (hip, knee, ankle, ball) in enumerate(LEGS):
-        off = blend_offsets(foot_offsets(feet[f], c[:, f], k, floor), c[:, f], width)
+        off = blend_offsets(foot_offsets(feet[f], c[:, f], k, floor), c[:, f], width, k)
         moved = np.flatnonzero(np.abs(off).max(axis=1) > 0)
         if not len(moved):
             continue

@@ -178,16 +178,13 @@ Rebuild = Callable[..., Reconstruction]
 
 @dataclass(frozen=True)
 class ReconstructionSpec:
-    """What one registered reconstruction declares (see the module docstring); ``exact_keyframes``:
-    every point of every keyframe is the original's (False: ``contacts``, whose pinned legs may
-    depart from later keyframes of a contact run)."""
+    """What one registered reconstruction declares (see the module docstring)."""
 
     name: str
     rebuild: Rebuild
     payload_bytes: int
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None
     optimum: Callable[[SphericalSeries, int], object] | None = None
-    exact_keyframes: bool = True
 
 
 #: name -> :class:`ReconstructionSpec`, in registration order.
@@ -200,16 +197,14 @@ def register(
     payload_floats: int,
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None,
     optimum: Callable[[SphericalSeries, int], object] | None = None,
-    exact_keyframes: bool = True,
 ) -> Callable[[Rebuild], Rebuild]:
     """Decorator registering ``rebuild(clip, keyframes, series=None)`` as reconstruction ``name``
     whose keyframe carries ``payload_floats`` float32 values (plus the one-byte frame index)."""
 
     def deco(fn: Rebuild) -> Rebuild:
         RECONSTRUCTIONS[name] = ReconstructionSpec(
-            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum,
-            exact_keyframes,
-        )  # fmt: skip
+            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum
+        )
         return fn
 
     return deco
@@ -302,7 +297,7 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps, A)
 
 
-@register("contacts", payload_floats=2 * POSE_FLOATS, exact_keyframes=False)
+@register("contacts", payload_floats=2 * POSE_FLOATS)
 def contacts(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
     """``hermite`` with the sender's foot-contact bits (run-length coded, their bytes in
     ``side_bytes``): each foot in contact pinned where it touched down by two-bone IK
