@@ -105,6 +105,76 @@ def curve_markdown(curves, counts, weights) -> tuple[str, float]:
     return "\n".join(lines), max(ok) if ok else 0.0
 
 
+#: The measured figures whose excess over the original the targets bound, with their units.
+EXCESS = (("residual_force_bw", "residual force (BW)", ".3f"),
+          ("skate_mm_s", "skating in contact (mm/s)", ".0f"),
+          ("penetration_mm", "penetration (mm)", ".2f"))  # fmt: skip
+#: The eval runs the comparison reads: (label, methods, reconstruction override).
+RUNS = (("Q-optimum", ("optimal",), None), ("physics-aware", ("physics",), None),
+        ("Q-optimum + contacts", ("optimal",), "contacts"))  # fmt: skip
+
+
+def supported_sources(out: dict) -> set[str]:
+    """Trials whose floor fits and whose support is found on it (``eval --physics`` floors)."""
+    return {f["source"] for f in out["floors"] if f["floor_fits"] and not f["support_off_floor"]}
+
+
+def excess_rows(outs: dict, counts, sources=None) -> list[dict]:
+    """Per (label, W): mean Q, and per figure of :data:`EXCESS` the mean over clips of (method -
+    original) with the clips counted, and the noise floor's mean (over ``sources`` only, if
+    given)."""
+    rows = []
+    for label, (method, out) in outs.items():
+        per = [r for r in out["per_clip"] if sources is None or r["source"] in sources]
+        key = lambda r: (r["source"], r["start_frame"])  # noqa: E731
+        orig = {key(r): r for r in per if r["method"] == "original"}
+        noise = [r for r in per if r["method"] == "noise floor"]
+        for W in counts:
+            mine = [r for r in per if r["method"] == method and r["keyframes"] == W]
+            row = {"label": label, "W": W, "clips": len(mine),
+                   "q": float(np.mean([r["q"] for r in mine]))}  # fmt: skip
+            for k, _, _ in EXCESS:
+                d = [r[k] - orig[key(r)][k] for r in mine
+                     if r.get(k) is not None and orig[key(r)].get(k) is not None]  # fmt: skip
+                row[k] = float(np.mean(d)) if d else float("nan")
+                row[f"{k}_n"] = len(d)
+                nf = [r[k] for r in noise if r.get(k) is not None]
+                row[f"{k}_noise"] = float(np.mean(nf)) if nf else float("nan")
+            rows.append(row)
+    return rows
+
+
+def excess_markdown(rows, counts) -> str:
+    """The targets' table: excess per figure and its ratio to the Q-optimum's, Q ratio."""
+    head = " | ".join(f"{t} excess | x Q-opt" for _, t, _ in EXCESS)
+    lines = [f"| method | W | clips | mean Q | Q / Q-opt | {head} |",
+             "|---|---:|---:|---:|---:|" + "---:|---:|" * len(EXCESS)]  # fmt: skip
+    base = {r["W"]: r for r in rows if r["label"] == "Q-optimum"}
+    for r in rows:
+        b = base[r["W"]]
+        cells = [f"{r['q']:.4f}", f"{r['q'] / b['q']:.3f}"]
+        for k, _, f in EXCESS:
+            ratio = r[k] / b[k] if b[k] > 0 else float("nan")
+            cells += [format(r[k], f), f"{ratio:.2f}"]
+        lines.append(f"| {r['label']} | {r['W']} | {r['clips']} | " + " | ".join(cells) + " |")
+    noise = rows[0]
+    lines.append("")
+    lines.append("Noise floor (1.5 mm of marker noise on the original, mean |noisy - original|): "
+                 + ", ".join(f"{t} {format(noise[f'{k}_noise'], f)}" for k, t, f in EXCESS) + ".")  # fmt: skip
+    return "\n".join(lines)
+
+
+def run_evals(cases, counts, workers: int) -> dict:
+    """``{label: (method, evaluate(...) output)}`` of :data:`RUNS` with the physics."""
+    from sidql.evaluation.evaluate import evaluate
+
+    return {
+        label: (names[0], evaluate(cases, names, counts, physics=True, progress=False,
+                                   workers=workers, reconstruction=rec))
+        for label, names, rec in RUNS
+    }  # fmt: skip
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=default_data_dir())
@@ -112,12 +182,34 @@ def main(argv=None) -> int:
     ap.add_argument("--weights", type=float, nargs="+", default=list(WEIGHTS))
     ap.add_argument("--subjects", nargs="+", default=None)
     ap.add_argument("--write", action="store_true", help="write docs/results/physics_keyframes.md")
+    ap.add_argument(
+        "--eval", action="store_true",
+        help="also run eval --physics for the Q-optimum, physics-aware and the Q-optimum rebuilt "
+        "with contacts, and tabulate the targets (slow: minutes per run)",
+    )  # fmt: skip
+    ap.add_argument("--workers", type=int, default=1, help="processes of the --eval runs")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     cases, _ = load_cases(a.data, fps=30.0, length=60, progress=False, subjects=a.subjects)
     curves = [clip_curve(c, a.keyframes, a.weights) for c in cases]
     table, chosen = curve_markdown(curves, a.keyframes, a.weights)
     ms = decision_ms(cases, 5)
+    measured = ""
+    if a.eval:
+        outs = run_evals(cases, a.keyframes, a.workers)
+        ok = supported_sources(outs["Q-optimum"][1])
+        measured = (
+            "\n\n## Measured (`eval --physics`): excess over the original\n\n"
+            "Means over clips of (method - original) on the same clip; *x Q-opt*: that excess "
+            "over the Q-optimum's (target <= 0.5, or within the noise floor). Physics-aware is "
+            "rebuilt with `contacts` (its own); *Q-optimum + contacts* is the Q-optimum's "
+            "keyframes rebuilt with `contacts` (`--reconstruction contacts`), which separates the "
+            "choice from the reconstruction.\n\n### All clips\n\n"
+            + excess_markdown(excess_rows(outs, a.keyframes), a.keyframes)
+            + "\n\n### Clips whose floor fits and whose support is found on it "
+            f"({len(ok)} trials)\n\n"
+            + excess_markdown(excess_rows(outs, a.keyframes, ok), a.keyframes)
+        )
     took = time.perf_counter() - t0
     body = (
         f"{len(cases)} clips of {a.data.name}, 60 frames at 30 fps. Per inner frame, means over "
@@ -129,13 +221,14 @@ def main(argv=None) -> int:
         f"at every W: **{chosen:g}** (the method uses `PHYSICS_WEIGHT` = {PHYSICS_WEIGHT:g}).\n\n"
         f"Decision per clip (median, W = 5, everything included): physics {ms['physics']:.1f} ms, "
         f"the Q-optimum {ms['optimal']:.1f} ms (target: <= 50 ms).\n\n"
-        f"{took:.0f} s, load average {os.getloadavg()[0]:.1f}."
+        f"{measured}\n\n{took:.0f} s, load average {os.getloadavg()[0]:.1f}."
     )
     print(body)
     if a.write:
         from results import write_results
 
-        cmd = "python benchmarks/bench_physics_keyframes.py --write"
+        cmd = "python benchmarks/bench_physics_keyframes.py" + (" --eval" if a.eval else "")
+        cmd += " --write"
         print(
             write_results(
                 "physics_keyframes", "Physics-aware keyframes: Q against physics", body, cmd
