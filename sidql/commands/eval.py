@@ -32,6 +32,7 @@ from sidql.evaluation.evaluate import (
 )
 from sidql.evaluation.rate import rate_distortion, write_plot
 from sidql.evaluation.significance import comparisons_markdown
+from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic
@@ -107,6 +108,8 @@ def run(args) -> int:
 def _run(args) -> int:
     for name in args.methods:  # unknown names fail before the (slow) ingest
         get(name)
+    if args.reconstruction is not None:
+        reconstructions.get(args.reconstruction)
     counts = check_keyframes(args, args.length)
     if args.samples and not args.simulate:
         raise UsageError("--samples needs --simulate")

@@ -12,6 +12,7 @@ from sidql.commands.usage import (
     check_keyframes,
 )
 from sidql.evaluation.report import report_trial
+from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import get
 from sim.replay.render import RenderStyle
 
@@ -65,6 +66,8 @@ def run(args) -> int:
     methods = [m for m in args.methods if not m.endswith(".sidq")]
     for name in methods:  # unknown names fail before the (slow) ingest
         get(name)
+    if args.reconstruction is not None:
+        reconstructions.get(args.reconstruction)
     check_keyframes(args, 60)
     page = report_trial(
         args.asf, args.amc, args.out, W=args.W, methods=methods, streams=streams,

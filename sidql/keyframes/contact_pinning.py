@@ -41,7 +41,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sidql.keyframes.spherical import POINTS
+from sidql.keyframes.reconstructions import Reconstruction, hermite, points_reconstruction
+from sidql.keyframes.spherical import POINTS, SphericalSeries
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip
 from sim.physics.contacts import motion_contacts
@@ -336,3 +337,20 @@ def correction_derivatives(delta: np.ndarray, fps: float) -> tuple[np.ndarray, n
     a[1:-1] = (d[2:] - 2 * d[1:-1] + d[:-2]) * fps**2
     a[0], a[-1] = a[1], a[-2]
     return v, a
+
+
+def rebuild(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
+    """The ``contacts`` reconstruction of ``clip`` from ``keyframes`` (W,): ``hermite``, then the
+    sender's contact bits (:func:`sender_contacts`, run-length coded: their bytes in
+    ``side_bytes``) decoded as the receiver has them and each foot pinned (:func:`pin_feet`);
+    velocities [m/s] and accelerations [m/s^2] are the curve's plus the central differences of
+    the pinning's correction (:func:`correction_derivatives`)."""
+    base = hermite(clip, keyframes, series)
+    code = encode_runs(sender_contacts(clip))
+    bits = decode_runs(code, clip.n_frames)  # what the receiver has
+    P = pin_feet(base.positions, bits, base.keyframes, clip.fps)
+    dV, dA = correction_derivatives(P - base.positions, clip.fps)
+    return points_reconstruction(
+        P, base.velocities + dV, base.parents, base.keyframes, "contacts", clip.fps,
+        base.accelerations + dA, side_bytes=len(code),
+    )  # fmt: skip

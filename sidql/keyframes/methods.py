@@ -33,7 +33,6 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.counts import check_counts
 from sidql.keyframes.metrics import q_error
 from sidql.keyframes.optimal import clip_optimal_table
-from sidql.keyframes.physical_costs import physics_table
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
 from sidql.keyframes.segment_costs import SEPARABLE, greedy_keyframes
 from sidql.keyframes.spherical import chart
@@ -50,7 +49,10 @@ RECONSTRUCTION: dict[str, str] = {}
 
 #: name -> module that registers it when imported (for methods with heavy dependencies).
 #: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
-LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
+LAZY_METHODS: dict[str, str] = {
+    "dqn": "sidql.learning.policy:dqn",
+    "physics": "sidql.keyframes.physical_costs",  # registers itself (rebuilt with contacts)
+}
 
 #: old method name -> its name now; the old one still works and warns (``FutureWarning``).
 RENAMED: dict[str, str] = {"xyz": "cartesian"}
@@ -262,15 +264,3 @@ def pitch(clip: Clip, W: int, *, seed: int = 0, memo=None) -> np.ndarray:
     else:
         D = memo["pitch_distances"]
     return keyframes_for_count(D, W)[0]
-
-
-@register("physics", reconstruction="contacts")
-def physics(clip: Clip, W: int, *, seed: int = 0, memo=None) -> np.ndarray:
-    """Physics-aware: the exact minimiser of Q plus the weighted physical cost of each segment
-    (:mod:`sidql.keyframes.physical_costs`), rebuilt with ``contacts``. With a ``memo`` one table
-    serves every W up to ``memo["w_max"]``."""
-    if memo is None:
-        return physics_table(clip, w_max=W).keyframes(W)
-    if "physics" not in memo or len(memo["physics"].cost) <= W:
-        memo["physics"] = physics_table(clip, w_max=max(W, memo.get("w_max", W)))
-    return memo["physics"].keyframes(W)

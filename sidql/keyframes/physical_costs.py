@@ -42,6 +42,7 @@ import numba
 import numpy as np
 
 from sidql.keyframes.contact_pinning import sender_contacts
+from sidql.keyframes.methods import register
 from sidql.keyframes.optimal import OptimalTable, solve
 from sidql.keyframes.segment_costs import clip_cost_matrix
 from sidql.keyframes.spherical import M_BONES, POINTS, protocol_indices, protocol_parent_indices
@@ -248,3 +249,15 @@ def physics_table(
         terms = physical_costs(segment_inputs(clip))
     C = clip_cost_matrix(clip, "hermite") + weight * scaled(terms)
     return solve(C, M_BONES, w_max)
+
+
+@register("physics", reconstruction="contacts")
+def physics(clip: Clip, W: int, *, seed: int = 0, memo=None) -> np.ndarray:
+    """Physics-aware keyframes: the exact minimiser of Q plus :data:`PHYSICS_WEIGHT` times the
+    physical cost (:func:`physics_table`), meant for ``contacts``. With a ``memo`` one table
+    serves every W up to ``memo["w_max"]``."""
+    if memo is None:
+        return physics_table(clip, w_max=W).keyframes(W)
+    if "physics" not in memo or len(memo["physics"].cost) <= W:
+        memo["physics"] = physics_table(clip, w_max=max(W, memo.get("w_max", W)))
+    return memo["physics"].keyframes(W)

@@ -37,13 +37,14 @@ Pure numpy. Units: metres, seconds, radians; positions in world axes (z up).
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
-from sidql.keyframes import contact_pinning, pitch
+from sidql.keyframes import pitch
 from sidql.keyframes.curves import check_curve, interpolate_derivatives, validate_keyframes
 from sidql.keyframes.optimal import catmull_rom_optimal, optimal_table
 from sidql.keyframes.segment_costs import segment_cost_matrix
@@ -301,14 +302,8 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
 def contacts(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
     """``hermite`` with the sender's foot-contact bits (run-length coded, their bytes in
     ``side_bytes``): each foot in contact pinned where it touched down by two-bone IK
-    (:mod:`sidql.keyframes.contact_pinning`); velocities and accelerations are the curve's plus
-    the pinning correction's central differences."""
-    base = hermite(clip, keyframes, series)
-    code = contact_pinning.encode_runs(contact_pinning.sender_contacts(clip))
-    bits = contact_pinning.decode_runs(code, clip.n_frames)  # what the receiver has
-    P = contact_pinning.pin_feet(base.positions, bits, base.keyframes, clip.fps)
-    dV, dA = contact_pinning.correction_derivatives(P - base.positions, clip.fps)
-    return points_reconstruction(
-        P, base.velocities + dV, base.parents, base.keyframes, "contacts", clip.fps,
-        base.accelerations + dA, side_bytes=len(code),
-    )  # fmt: skip
+    (:func:`sidql.keyframes.contact_pinning.rebuild`)."""
+    # imported on first use: the sender's contact labels stand on sim.physics (MuJoCo)
+    return importlib.import_module("sidql.keyframes.contact_pinning").rebuild(
+        clip, keyframes, series
+    )
