@@ -8,13 +8,17 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.contact_pinning import (
     BLEND_S,
     LEGS,
+    decode_floor,
     decode_runs,
+    encode_floor,
     encode_runs,
     pin_feet,
     two_bone_ik,
 )
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError
+from sim.physics.feet import sole
+from sim.physics.ground import Ground
 
 FPS = 30.0
 PARENTS = protocol_parent_indices()
@@ -31,6 +35,19 @@ def test_contact_runs_round_trip_and_cost_one_byte_per_change():
         # one header byte per foot, one byte per run but the last (runs < 128 frames)
         if N < 128:
             assert len(code) == 2 + changes
+
+
+def test_the_floor_travels_in_20_bytes():
+    g = Ground(0.03, ("l", "r"), np.array([0.004, 0.0]), slope=(0.002, -0.001), origin=(1.0, 2.0))
+    code = encode_floor(g)
+    floor = decode_floor(code)
+    assert len(code) == 20
+    xy = np.array([[0.5, -3.0], [4.0, 7.0]])
+    level = g.level(xy)  # the ground's own plane, at two points far apart
+    assert np.allclose(floor[0] + xy @ floor[1:3], level, atol=1e-6)
+    assert np.allclose(floor[3:], [0.004, 0.0], atol=1e-9)
+    with pytest.raises(MotionDataError):
+        decode_floor(code[:-1])
 
 
 def test_contact_runs_reject_bytes_that_do_not_describe_the_clip():
@@ -88,9 +105,10 @@ def test_two_bone_ik_bends_the_knee_in_its_own_plane():
     assert np.all(np.sum(side(knee) * side(leg[:, 1]), axis=-1) > 0)
 
 
-def _walker(N=60, speed=0.3):
+def _walker(N=60, speed=0.3, raised=None):
     """(N, 23, 3) a standing body sliding forward at ``speed`` [m/s] and bobbing 1 cm: every foot
-    skates, nothing rotates."""
+    skates, nothing rotates; the foot ``raised`` ("l" or "r") is held 3 cm higher (in the air,
+    never under the floor the other shows)."""
     base = np.zeros((len(POINTS), 3))
     place = {
         "root": (0, 0, 0.95), "lhipjoint": (0, 0.09, 0.9), "lfemur": (0.1, 0.09, 0.5),
@@ -99,9 +117,19 @@ def _walker(N=60, speed=0.3):
     }  # fmt: skip
     for k, n in enumerate(POINTS):
         base[k] = place.get(n, (0.0, 0.02 * k, 1.0 + 0.03 * k))
+    if raised:
+        base[[POINTS.index(raised + "tibia"), POINTS.index(raised + "foot")], 2] += 0.03
     t = np.arange(N) / FPS
     shift = np.stack([speed * t, 0 * t, 0.01 * np.sin(2 * np.pi * t)], axis=1)
     return base[None] + shift[:, None]
+
+
+def _flat(P, t, foot=0):
+    """(5,) a horizontal floor at the height of foot ``foot``'s lowest sole point in frame ``t``
+    (the sole geometry of sim.physics.feet)."""
+    s = sole(P[t : t + 1], POINTS)
+    z = float(s.bottoms[0, s.of("lr"[foot]), 2].min())
+    return np.array([z, 0.0, 0.0, 0.0, 0.0])
 
 
 def _lengths(P):
@@ -109,11 +137,11 @@ def _lengths(P):
 
 
 def test_pinned_foot_stays_where_it_was_at_its_keyframe_and_bones_keep_lengths():
-    P = _walker()
+    P = _walker(raised="r")
     c = np.zeros((60, 2), bool)
     c[10:31, 0] = True  # left foot down over frames 10-30, keyframe 20 inside
     keys = np.array([0, 20, 59])
-    out = pin_feet(P, c, keys, FPS)
+    out = pin_feet(P, c, keys, FPS, floor=_flat(P, 20))
     assert np.allclose(_lengths(out), _lengths(P), atol=1e-12)
     _, knee, ankle, ball = LEGS[0]
     for j in (ankle, ball):
@@ -123,23 +151,47 @@ def test_pinned_foot_stays_where_it_was_at_its_keyframe_and_bones_keep_lengths()
     assert set(np.flatnonzero(moved)) == {knee, ankle, ball}  # only the pinned leg moves
     w = int(round(BLEND_S * FPS))
     far = np.r_[0 : 10 - w, 31 + w : 60]
+    far = far[P[far, ankle, 2] > P[20, ankle, 2] + 1e-9]  # (lower, it is lifted onto the floor)
+    assert len(far) > 10
     assert np.array_equal(out[far], P[far])  # unchanged away from the contact and its blends
 
 
 def test_keyframes_stay_exact_and_the_pin_slides_linearly_between_two_of_them():
-    P = _walker()
+    P = _walker(raised="r")
     c = np.zeros((60, 2), bool)
     c[10:41, 0] = True
     keys = np.array([0, 8, 15, 35, 59])  # 8: just before the run, its fade must end there
-    out = pin_feet(P, c, keys, FPS)
+    out = pin_feet(P, c, keys, FPS, floor=_flat(P, 15))
     assert np.array_equal(out[keys], P[keys])
     ankle = LEGS[0][2]
     s = (np.arange(15, 36) - 15) / 20.0
     line = (1 - s)[:, None] * P[15, ankle] + s[:, None] * P[35, ankle]
-    assert np.allclose(out[15:36, ankle], line, atol=1e-9)  # the original's net slide, no more
-    assert np.allclose(out[10:16, ankle], P[15, ankle], atol=1e-9)  # still before the first
-    assert np.allclose(out[35:41, ankle], P[35, ankle], atol=1e-9)  # and after the last
+    xy = (slice(None), ankle, slice(0, 2))
+    assert np.allclose(out[15:36][xy], line[:, :2], atol=1e-9)  # the original's net slide only
+    assert np.allclose(out[10:16][xy], P[15, ankle, :2], atol=1e-9)  # still before the first
+    assert np.allclose(out[35:41][xy], P[35, ankle, :2], atol=1e-9)  # and after the last
+    # on the floor away from the keyframes (the walker bobs: the floor is frame 15's), at the
+    # keyframe's own height on it
+    floor = P[15, ankle, 2]  # the ankle's height when the lowest sole point is on the floor
+    w = int(round(BLEND_S * FPS))
+    away = np.r_[10 : 15 - w, 16 + w : 35 - w]
+    assert np.allclose(out[away, ankle, 2], floor, atol=1e-9)
     assert np.allclose(_lengths(out), _lengths(P), atol=1e-12)
+
+
+def test_a_foot_in_the_air_is_lifted_onto_the_floor_but_keyframes_stay():
+    P = _walker()
+    c = np.zeros((60, 2), bool)
+    c[:, 0] = True  # the left foot stands; the right one bobs 1 cm under its floor half the time
+    keys = np.array([0, 30, 59])
+    out = pin_feet(P, c, keys, FPS, floor=_flat(P, 30))
+    floor = P[30, LEGS[0][2], 2]  # both feet alike: the ankle's height on that floor
+    r_ankle = LEGS[1][2]
+    inner = np.setdiff1d(np.arange(60), keys)
+    assert np.all(out[inner, r_ankle, 2] >= floor - 1e-9)
+    assert np.array_equal(out[keys], P[keys])  # a keyframe is the original's, even under it
+    above = P[:, r_ankle, 2] >= floor
+    assert np.array_equal(out[above, r_ankle], P[above, r_ankle])  # already above: untouched
 
 
 def test_no_contact_changes_nothing():
@@ -149,7 +201,7 @@ def test_no_contact_changes_nothing():
 
 
 def test_blends_in_and_out_smoothly():
-    P = _walker(speed=0.6)
+    P = _walker(speed=0.6, raised="l")
     c = np.zeros((60, 2), bool)
     c[20:35, 1] = True
     out = pin_feet(P, c, np.array([0, 27, 59]), FPS)

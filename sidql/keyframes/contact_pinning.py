@@ -6,23 +6,25 @@ keyframes, and the receiver pinning each foot in contact where it touched down.
 :func:`sim.physics.contacts.motion_contacts`) and sends them run-length coded
 (:func:`encode_runs`: per foot one varint holding the number of runs and the first state, then
 one varint per run length but the last; a 60-frame clip costs 2 + the number of contact changes
-bytes, typically 6-10). Those bytes are the reconstruction's side information
-(:attr:`Reconstruction.side_bytes <sidql.keyframes.reconstructions.Reconstruction>`), counted
-with its keyframes in every byte figure.
+bytes, typically 6-10), and the floor it labelled them on (:func:`encode_floor`: a plane and
+each foot's stance offset, 5 float32, 20 bytes). Those bytes are the reconstruction's side
+information (:attr:`Reconstruction.side_bytes <sidql.keyframes.reconstructions.Reconstruction>`),
+counted with its keyframes in every byte figure.
 
 **The receiver** rebuilds the clip with the paper's Hermite (:mod:`sidql.keyframes.reconstructions`)
 and then, per foot and contact run (:func:`pin_feet`):
 
 * *where it touched down*: the foot's lowest sole point (:func:`sim.physics.feet.sole`: heel and
   ball spheres of the ankle-ball capsule) at the keyframes inside the run (exact poses of the
-  original), or at the run's first frame when no keyframe falls inside it, its height then the
-  floor's: the median lowest sole point over the clip's keyframes in contact (both feet), else
-  the touch-down frame's;
+  original), or at the run's first frame when no keyframe falls inside it;
 * *pinned*: an offset ``d(t)`` (3,) [m] keeps the lowest sole sphere from moving horizontally
   (integrated frame to frame from the anchor, so a foot rolling heel to ball still rolls: the
-  contact point moves from sphere to sphere, no sphere slides) and puts the lowest point at the
-  anchor's height; between two keyframes of one run the pin slides linearly from one to the
-  other (the original's own net displacement: every keyframe stays exact);
+  contact point moves from sphere to sphere, no sphere slides); between two keyframes of one
+  run the pin slides linearly from one to the other (the original's own net displacement:
+  every keyframe stays exact); the lowest point rests on the floor, rising to a keyframe's own
+  height around it (a heel lifting at push-off) by a smoothstep over :data:`BLEND_S`;
+* *kept above the floor*: in the air too, a foot whose lowest sole point would pass under the
+  floor (a long cubic through a swing) is lifted onto it, except at keyframes;
 * *blended*: outside a run the offset fades to 0 over :data:`BLEND_S` by a smoothstep, ending
   sooner where a keyframe comes first (between two runs closer than twice that, the two fades
   are averaged), so the foot moves smoothly in and out of its pin;
@@ -61,6 +63,19 @@ LEGS: tuple[tuple[int, int, int, int], ...] = tuple(
 MAX_REACH = 0.9999
 
 
+def sender_ground(clip: Clip):
+    """The clip's own floor as its sender estimates it (:func:`sim.physics.ground.estimate_ground`
+    on all its points).
+
+    Raises:
+        MotionDataError: the clip has no foot (ankle and ball).
+    """
+    try:
+        return estimate_ground(clip.positions, tuple(clip.names), clip.fps)
+    except ValueError as e:
+        raise MotionDataError(clip.source or None, None, f"no floor: {e}") from None
+
+
 def sender_contacts(clip: Clip, ground=None) -> np.ndarray:
     """(N, 2) bool foot-contact labels (``l``, ``r``) of a clip as its sender labels them:
     :func:`sim.physics.contacts.motion_contacts` on all its points, on ``ground`` (a
@@ -70,9 +85,9 @@ def sender_contacts(clip: Clip, ground=None) -> np.ndarray:
         MotionDataError: the clip has no foot (ankle and ball) to label.
     """
     names = tuple(clip.names)
+    if ground is None:
+        ground = sender_ground(clip)
     try:
-        if ground is None:
-            ground = estimate_ground(clip.positions, names, clip.fps)
         c = motion_contacts(clip.positions, names, clip.fps, ground, velocities=clip.velocities)
     except ValueError as e:
         raise MotionDataError(clip.source or None, None, f"no foot contacts: {e}") from None
@@ -238,22 +253,40 @@ def _rolled(bottoms: np.ndarray, low: np.ndarray, a: int, e: int, t0: int) -> np
     return out
 
 
+def keyframe_bumps(t: np.ndarray, keys: np.ndarray, width: int) -> np.ndarray:
+    """(n, K) weights of keyframes ``keys`` (K,) at frames ``t`` (n,): 1 at the keyframe, fading
+    by a smoothstep to 0 over ``width`` frames, or sooner so that each is 0 at every other."""
+    gaps = np.diff(keys)
+    near = np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf])  # (K,) to the nearest other
+    w = np.minimum(width, near - 1)
+    d = np.abs(t[:, None] - keys[None, :])
+    return 1.0 - _smoothstep(d / (w[None, :] + 1))
+
+
 def foot_offsets(
-    bottoms: np.ndarray, contact: np.ndarray, keyframes: np.ndarray, floor: float | None
+    bottoms: np.ndarray,
+    contact: np.ndarray,
+    keyframes: np.ndarray,
+    floor: np.ndarray | None,
+    width: int = 0,
 ) -> np.ndarray:
     """(N, 3) pin offsets [m] of one foot on its contact frames (0 elsewhere).
 
-    A run holding no keyframe is pinned where the foot touched down (its first frame), its
-    lowest point at ``floor``; a run holding keyframes is pinned at each of them exactly (offset
-    0 there: keyframes are the original's poses): before the first and after the last the foot
-    stays where it was at that keyframe, between two of them the pin slides linearly from one
-    to the next (the original's net displacement, its height likewise), the rolling of the foot
-    (which sphere is lowest) kept.
+    Horizontally, a run holding no keyframe is pinned where the foot touched down (its first
+    frame); a run holding keyframes is pinned at each of them exactly: before the first and
+    after the last the foot stays where it was at that keyframe, between two of them the pin
+    slides linearly from one to the next (the original's net displacement); the rolling of the
+    foot (which sphere is lowest) is kept. Vertically the lowest sole point rests at ``floor``,
+    except around a keyframe of the run, where it rises or sinks to the keyframe's own height
+    by a smoothstep over ``width`` frames (offset 0 at every keyframe: the original's poses);
+    with no ``floor`` known, the keyframes' heights are interpolated linearly (a run without
+    keyframes: the touch-down height).
 
     Args:
         bottoms: (N, S, 3) the lowest surface points of the foot's sole spheres [m].
         contact: (N,) bool contact labels; keyframes: (W,) indices.
-        floor: the clip's floor height [m] from its keyframes in contact (None: unknown).
+        floor: (N,) the floor's height under the foot [m] (None: unknown).
+        width: frames of a keyframe's height bump.
     """
     N = len(contact)
     low = bottoms[..., 2].argmin(axis=1)  # (N,) the lowest sphere per frame
@@ -262,14 +295,17 @@ def foot_offsets(
     keys = np.asarray(keyframes, dtype=np.int64)
     for a, e in runs_of(contact):
         inside = keys[(keys >= a) & (keys < e)]
+        t = np.arange(a, e)
         if not len(inside):
             out[a:e, :2] = _rolled(bottoms, low, a, e, a)
-            out[a:e, 2] = (z[a] if floor is None else floor) - z[a:e]
+            out[a:e, 2] = (z[a] if floor is None else floor[a:e]) - z[a:e]
             continue
-        anchors = [_rolled(bottoms, low, a, e, int(k)) for k in inside]
-        height = np.interp(np.arange(a, e), inside, z[inside])
+        if floor is None:
+            height = np.interp(t, inside, z[inside])
+        else:
+            height = floor[t] + keyframe_bumps(t, inside, width) @ (z[inside] - floor[inside])
         out[a:e, 2] = height - z[a:e]
-        t = np.arange(a, e)
+        anchors = [_rolled(bottoms, low, a, e, int(k)) for k in inside]
         pos = np.clip(np.searchsorted(inside, t, side="right") - 1, 0, len(inside) - 1)
         nxt = np.minimum(pos + 1, len(inside) - 1)
         span = np.maximum(inside[nxt] - inside[pos], 1)
@@ -280,12 +316,19 @@ def foot_offsets(
     return out
 
 
+def lift_above(lowest: np.ndarray, floor: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """(N,) how far [m] a foot whose lowest sole point is at ``lowest`` (N,) [m] must rise to
+    stay on or above ``floor`` (N,) [m]; 0 on the frames ``keep`` (N,) bool (keyframes)."""
+    return np.where(keep, 0.0, np.maximum(floor - lowest, 0.0))
+
+
 def pin_feet(
     positions: np.ndarray,
     contact: np.ndarray,
     keyframes,
     fps: float,
     *,
+    floor: np.ndarray | None = None,
     blend_s: float = BLEND_S,
 ) -> np.ndarray:
     """(N, 23, 3) ``positions`` [m] (the protocol points, world axes z up) with each foot pinned
@@ -296,6 +339,8 @@ def pin_feet(
         contact: (N, 2) bool foot-contact bits (``l``, ``r``).
         keyframes: (W,) the keyframe indices (exact poses of the original).
         fps: frame rate [1/s]; blend_s: blend time [s].
+        floor: (5,) the sender's floor (:func:`decode_floor`); None: unknown (runs keep their
+            keyframes' or touch-down heights, nothing is lifted).
     """
     P = np.array(positions, dtype=np.float64)
     c = np.asarray(contact, dtype=bool)
@@ -307,13 +352,18 @@ def pin_feet(
     k = np.asarray(keyframes, dtype=np.int64)
     s = sole(P, POINTS)
     b = s.bottoms
-    feet = [b[:, s.of(x)] for x in SIDES]
-    low_at_keys = [float(feet[f][t, :, 2].min()) for f in range(2) for t in k if c[t, f]]
-    floor = float(np.median(low_at_keys)) if low_at_keys else None
     width = int(round(blend_s * fps))
     out = P.copy()
+    is_key = np.zeros(N, dtype=bool)
+    is_key[k] = True
     for f, (hip, knee, ankle, ball) in enumerate(LEGS):
-        off = blend_offsets(foot_offsets(feet[f], c[:, f], k, floor), c[:, f], width, k)
+        foot = b[:, s.of(SIDES[f])]
+        lowest = foot[np.arange(N), foot[..., 2].argmin(axis=1)]  # (N, 3)
+        under = None if floor is None else floor_heights(floor, lowest[:, :2], f)
+        off = foot_offsets(foot, c[:, f], k, under, width)
+        off = blend_offsets(off, c[:, f], width, k)
+        if under is not None:  # no foot under the floor, in the air either
+            off[:, 2] += lift_above(lowest[:, 2] + off[:, 2], under, is_key)
         moved = np.flatnonzero(np.abs(off).max(axis=1) > 0)
         if not len(moved):
             continue
@@ -323,6 +373,31 @@ def pin_feet(
         out[moved, ankle] = new_ankle
         out[moved, ball] = leg[:, 3] + (new_ankle - leg[:, 2])
     return out
+
+
+def encode_floor(ground) -> bytes:
+    """The sender's floor (a :class:`sim.physics.ground.Ground`) as 5 float32 (20 bytes): its
+    height at the world origin [m], its slopes dz/dx, dz/dy, and each foot's stance offset [m]."""
+    sx, sy = ground.slope
+    z0 = ground.z - sx * ground.origin[0] - sy * ground.origin[1]
+    values = [z0, sx, sy, *(ground.offset_of(x) for x in SIDES)]
+    return np.asarray(values, dtype="<f4").tobytes()
+
+
+def decode_floor(data: bytes) -> np.ndarray:
+    """(5,) float64 floor parameters from :func:`encode_floor`'s 20 bytes."""
+    if len(data) != 5 * 4:
+        raise MotionDataError(None, None, f"floor: {len(data)} bytes, expected 20")
+    v = np.frombuffer(data, dtype="<f4").astype(np.float64)
+    if not np.all(np.isfinite(v)):
+        raise MotionDataError(None, None, "floor: non-finite values")
+    return v
+
+
+def floor_heights(floor: np.ndarray, xy: np.ndarray, foot: int) -> np.ndarray:
+    """(N,) height [m] of the floor ``floor`` (5,) under points ``xy`` (N, 2) [m], where foot
+    ``foot`` (0: ``l``, 1: ``r``) stands (its stance offset included)."""
+    return floor[0] + xy[:, 0] * floor[1] + xy[:, 1] * floor[2] + floor[3 + foot]
 
 
 def correction_derivatives(delta: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
@@ -341,16 +416,18 @@ def correction_derivatives(delta: np.ndarray, fps: float) -> tuple[np.ndarray, n
 
 def rebuild(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
     """The ``contacts`` reconstruction of ``clip`` from ``keyframes`` (W,): ``hermite``, then the
-    sender's contact bits (:func:`sender_contacts`, run-length coded: their bytes in
-    ``side_bytes``) decoded as the receiver has them and each foot pinned (:func:`pin_feet`);
-    velocities [m/s] and accelerations [m/s^2] are the curve's plus the central differences of
-    the pinning's correction (:func:`correction_derivatives`)."""
+    sender's side information (its contact bits, :func:`sender_contacts`, run-length coded, and
+    its floor, :func:`encode_floor`: their bytes in ``side_bytes``) decoded as the receiver has
+    it, and each foot pinned (:func:`pin_feet`); velocities [m/s] and accelerations [m/s^2] are
+    the curve's plus the central differences of the pinning's correction
+    (:func:`correction_derivatives`)."""
     base = hermite(clip, keyframes, series)
-    code = encode_runs(sender_contacts(clip))
-    bits = decode_runs(code, clip.n_frames)  # what the receiver has
-    P = pin_feet(base.positions, bits, base.keyframes, clip.fps)
+    ground = sender_ground(clip)
+    runs, plane = encode_runs(sender_contacts(clip, ground)), encode_floor(ground)
+    bits, floor = decode_runs(runs, clip.n_frames), decode_floor(plane)  # what the receiver has
+    P = pin_feet(base.positions, bits, base.keyframes, clip.fps, floor=floor)
     dV, dA = correction_derivatives(P - base.positions, clip.fps)
     return points_reconstruction(
         P, base.velocities + dV, base.parents, base.keyframes, "contacts", clip.fps,
-        base.accelerations + dA, side_bytes=len(code),
+        base.accelerations + dA, side_bytes=len(runs) + len(plane),
     )  # fmt: skip
