@@ -21,8 +21,9 @@ and then, per foot and contact run (:func:`pin_feet`):
   (integrated frame to frame from the anchor, so a foot rolling heel to ball still rolls: the
   contact point moves from sphere to sphere, no sphere slides); between two keyframes of one
   run the pin slides linearly from one to the other (the original's own net displacement:
-  every keyframe stays exact); the lowest point rests on the floor, rising to a keyframe's own
-  height around it (a heel lifting at push-off) by a smoothstep over :data:`BLEND_S`;
+  every keyframe stays exact); its height goes linearly from one keyframe's to the next (the
+  original's own: a heel lifting at push-off lifts), never under the floor; a run without
+  keyframes rests on the floor;
 * *kept above the floor*: in the air too, a foot whose lowest sole point would pass under the
   floor (a long cubic through a swing) is lifted onto it, except at keyframes;
 * *blended*: outside a run the offset fades to 0 over :data:`BLEND_S` by a smoothstep, ending
@@ -253,22 +254,11 @@ def _rolled(bottoms: np.ndarray, low: np.ndarray, a: int, e: int, t0: int) -> np
     return out
 
 
-def keyframe_bumps(t: np.ndarray, keys: np.ndarray, width: int) -> np.ndarray:
-    """(n, K) weights of keyframes ``keys`` (K,) at frames ``t`` (n,): 1 at the keyframe, fading
-    by a smoothstep to 0 over ``width`` frames, or sooner so that each is 0 at every other."""
-    gaps = np.diff(keys)
-    near = np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf])  # (K,) to the nearest other
-    w = np.minimum(width, near - 1)
-    d = np.abs(t[:, None] - keys[None, :])
-    return 1.0 - _smoothstep(d / (w[None, :] + 1))
-
-
 def foot_offsets(
     bottoms: np.ndarray,
     contact: np.ndarray,
     keyframes: np.ndarray,
     floor: np.ndarray | None,
-    width: int = 0,
 ) -> np.ndarray:
     """(N, 3) pin offsets [m] of one foot on its contact frames (0 elsewhere).
 
@@ -276,17 +266,15 @@ def foot_offsets(
     frame); a run holding keyframes is pinned at each of them exactly: before the first and
     after the last the foot stays where it was at that keyframe, between two of them the pin
     slides linearly from one to the next (the original's net displacement); the rolling of the
-    foot (which sphere is lowest) is kept. Vertically the lowest sole point rests at ``floor``,
-    except around a keyframe of the run, where it rises or sinks to the keyframe's own height
-    by a smoothstep over ``width`` frames (offset 0 at every keyframe: the original's poses);
-    with no ``floor`` known, the keyframes' heights are interpolated linearly (a run without
-    keyframes: the touch-down height).
+    foot (which sphere is lowest) is kept. Vertically the lowest sole point goes linearly from
+    one keyframe's height to the next (the original's own heights: a heel lifting at push-off
+    lifts), never under ``floor`` between them; a run without keyframes rests on ``floor`` (on
+    the touch-down height when no floor is known).
 
     Args:
         bottoms: (N, S, 3) the lowest surface points of the foot's sole spheres [m].
         contact: (N,) bool contact labels; keyframes: (W,) indices.
         floor: (N,) the floor's height under the foot [m] (None: unknown).
-        width: frames of a keyframe's height bump.
     """
     N = len(contact)
     low = bottoms[..., 2].argmin(axis=1)  # (N,) the lowest sphere per frame
@@ -300,10 +288,9 @@ def foot_offsets(
             out[a:e, :2] = _rolled(bottoms, low, a, e, a)
             out[a:e, 2] = (z[a] if floor is None else floor[a:e]) - z[a:e]
             continue
-        if floor is None:
-            height = np.interp(t, inside, z[inside])
-        else:
-            height = floor[t] + keyframe_bumps(t, inside, width) @ (z[inside] - floor[inside])
+        height = np.interp(t, inside, z[inside])
+        if floor is not None:  # never under the floor, keyframes excepted
+            height = np.where(np.isin(t, inside), height, np.maximum(height, floor[t]))
         out[a:e, 2] = height - z[a:e]
         anchors = [_rolled(bottoms, low, a, e, int(k)) for k in inside]
         pos = np.clip(np.searchsorted(inside, t, side="right") - 1, 0, len(inside) - 1)
@@ -360,7 +347,7 @@ def pin_feet(
         foot = b[:, s.of(SIDES[f])]
         lowest = foot[np.arange(N), foot[..., 2].argmin(axis=1)]  # (N, 3)
         under = None if floor is None else floor_heights(floor, lowest[:, :2], f)
-        off = foot_offsets(foot, c[:, f], k, under, width)
+        off = foot_offsets(foot, c[:, f], k, under)
         off = blend_offsets(off, c[:, f], width, k)
         if under is not None:  # no foot under the floor, in the air either
             off[:, 2] += lift_above(lowest[:, 2] + off[:, 2], under, is_key)
