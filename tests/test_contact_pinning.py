@@ -151,8 +151,9 @@ def test_pinned_foot_stays_where_it_was_at_its_keyframe_and_bones_keep_lengths()
     assert set(np.flatnonzero(moved)) == {knee, ankle, ball}  # only the pinned leg moves
     w = int(round(BLEND_S * FPS))
     far = np.r_[0 : 10 - w, 31 + w : 60]
-    far = far[P[far, ankle, 2] > P[20, ankle, 2] + 1e-9]  # (lower, it is lifted onto the floor)
-    assert len(far) > 10
+    clear = [np.all(P[max(0, t - w) : t + w + 1, ankle, 2] > P[20, ankle, 2] + 1e-9) for t in far]
+    far = far[clear]  # (nearer a dip under the floor, the foot is lifted onto it)
+    assert len(far) > 5
     assert np.array_equal(out[far], P[far])  # unchanged away from the contact and its blends
 
 
@@ -170,11 +171,11 @@ def test_keyframes_stay_exact_and_the_pin_slides_linearly_between_two_of_them():
     assert np.allclose(out[15:36][xy], line[:, :2], atol=1e-9)  # the original's net slide only
     assert np.allclose(out[10:16][xy], P[15, ankle, :2], atol=1e-9)  # still before the first
     assert np.allclose(out[35:41][xy], P[35, ankle, :2], atol=1e-9)  # and after the last
-    # the height goes linearly from one keyframe's to the next, never under the floor (the
-    # walker bobs: the floor is frame 15's, the lower of the two)
+    # the height goes linearly from one keyframe's to the next (the walker bobs: the floor is
+    # frame 15's, the lower of the two, so nothing is lifted)
     floor = P[15, ankle, 2]  # the ankle's height when the lowest sole point is on the floor
     assert P[35, ankle, 2] > floor
-    assert np.allclose(out[15:36, ankle, 2], np.maximum(line[:, 2], floor), atol=1e-9)
+    assert np.allclose(out[15:36, ankle, 2], line[:, 2], atol=1e-9)
     assert np.allclose(out[10:16, ankle, 2], floor, atol=1e-9)
     assert np.allclose(_lengths(out), _lengths(P), atol=1e-12)
 
@@ -187,11 +188,20 @@ def test_a_foot_in_the_air_is_lifted_onto_the_floor_but_keyframes_stay():
     out = pin_feet(P, c, keys, FPS, floor=_flat(P, 30))
     floor = P[30, LEGS[0][2], 2]  # both feet alike: the ankle's height on that floor
     r_ankle = LEGS[1][2]
-    inner = np.setdiff1d(np.arange(60), keys)
-    assert np.all(out[inner, r_ankle, 2] >= floor - 1e-9)
+    w = int(round(BLEND_S * FPS))
+    clear = np.array([t for t in range(60) if np.abs(keys - t).min() > w])  # full-width bumps
+    assert np.all(out[clear, r_ankle, 2] >= floor - 1e-9)
     assert np.array_equal(out[keys], P[keys])  # a keyframe is the original's, even under it
-    above = P[:, r_ankle, 2] >= floor
-    assert np.array_equal(out[above, r_ankle], P[above, r_ankle])  # already above: untouched
+    # lifted smoothly: the lift changes by at most 1.5 x the deepest dip / (w + 1) per frame
+    lift = out[:, r_ankle, 2] - P[:, r_ankle, 2]
+    deepest = np.maximum(floor - P[:, r_ankle, 2], 0).max()
+    assert deepest > 0.005 and lift.min() >= -1e-12
+    step = np.abs(np.diff(lift))[clear[:-1][np.diff(clear) == 1]]  # (near a keyframe under the
+    assert step.max() <= 1.5 * deepest / (w + 1) + 1e-9  # floor, as here, bumps narrow)
+    far = np.array(
+        [t for t in range(60) if np.all(P[max(0, t - w) : t + w + 1, r_ankle, 2] >= floor)]
+    )
+    assert len(far) and np.array_equal(out[far, r_ankle], P[far, r_ankle])  # no dip near: untouched
 
 
 def test_no_contact_changes_nothing():

@@ -22,10 +22,11 @@ and then, per foot and contact run (:func:`pin_feet`):
   contact point moves from sphere to sphere, no sphere slides); between two keyframes of one
   run the pin slides linearly from one to the other (the original's own net displacement:
   every keyframe stays exact); its height goes linearly from one keyframe's to the next (the
-  original's own: a heel lifting at push-off lifts), never under the floor; a run without
-  keyframes rests on the floor;
-* *kept above the floor*: in the air too, a foot whose lowest sole point would pass under the
-  floor (a long cubic through a swing) is lifted onto it, except at keyframes;
+  original's own: a heel lifting at push-off lifts); a run without keyframes rests on the floor;
+* *kept above the floor*: in contact or in the air (a long cubic through a swing), a foot whose
+  lowest sole point would pass under the floor is lifted onto it by smooth bumps (a smoothstep
+  envelope over :data:`BLEND_S`, never at a keyframe), not clamped (a clamp's kink is an
+  impulse in the acceleration the dynamics read);
 * *blended*: outside a run the offset fades to 0 over :data:`BLEND_S` by a smoothstep, ending
   sooner where a keyframe comes first (between two runs closer than twice that, the two fades
   are averaged), so the foot moves smoothly in and out of its pin;
@@ -268,8 +269,8 @@ def foot_offsets(
     slides linearly from one to the next (the original's net displacement); the rolling of the
     foot (which sphere is lowest) is kept. Vertically the lowest sole point goes linearly from
     one keyframe's height to the next (the original's own heights: a heel lifting at push-off
-    lifts), never under ``floor`` between them; a run without keyframes rests on ``floor`` (on
-    the touch-down height when no floor is known).
+    lifts); a run without keyframes rests on ``floor`` (on the touch-down height when no floor
+    is known). :func:`lift_above` keeps it off the floor's underside afterwards.
 
     Args:
         bottoms: (N, S, 3) the lowest surface points of the foot's sole spheres [m].
@@ -288,10 +289,7 @@ def foot_offsets(
             out[a:e, :2] = _rolled(bottoms, low, a, e, a)
             out[a:e, 2] = (z[a] if floor is None else floor[a:e]) - z[a:e]
             continue
-        height = np.interp(t, inside, z[inside])
-        if floor is not None:  # never under the floor, keyframes excepted
-            height = np.where(np.isin(t, inside), height, np.maximum(height, floor[t]))
-        out[a:e, 2] = height - z[a:e]
+        out[a:e, 2] = np.interp(t, inside, z[inside]) - z[a:e]
         anchors = [_rolled(bottoms, low, a, e, int(k)) for k in inside]
         pos = np.clip(np.searchsorted(inside, t, side="right") - 1, 0, len(inside) - 1)
         nxt = np.minimum(pos + 1, len(inside) - 1)
@@ -303,10 +301,25 @@ def foot_offsets(
     return out
 
 
-def lift_above(lowest: np.ndarray, floor: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """(N,) how far [m] a foot whose lowest sole point is at ``lowest`` (N,) [m] must rise to
-    stay on or above ``floor`` (N,) [m]; 0 on the frames ``keep`` (N,) bool (keyframes)."""
-    return np.where(keep, 0.0, np.maximum(floor - lowest, 0.0))
+def lift_above(lowest: np.ndarray, floor: np.ndarray, keyframes, width: int) -> np.ndarray:
+    """(N,) how far [m] a foot whose lowest sole point is at ``lowest`` (N,) [m] is lifted to
+    stay on or above ``floor`` (N,) [m], smoothly: the upper envelope of smoothstep bumps, one
+    per frame under the floor, as high as its depth there and ``width`` frames wide (narrower
+    near a keyframe, so that keyframes (W,) are not lifted). A pointwise clamp would put a kink
+    in the foot's path, an impulse into its acceleration."""
+    depth = np.maximum(floor - lowest, 0.0)
+    keys = np.asarray(keyframes, dtype=np.int64)
+    depth[keys] = 0.0
+    N = len(depth)
+    out = np.zeros(N)
+    for s in np.flatnonzero(depth > 0):
+        w = width
+        if len(keys):
+            w = min(w, int(np.abs(keys - s).min()) - 1)
+        t = np.arange(max(0, s - w), min(N, s + w + 1))
+        bump = depth[s] * (1.0 - _smoothstep(np.abs(t - s) / (w + 1)))
+        out[t] = np.maximum(out[t], bump)
+    return out
 
 
 def pin_feet(
@@ -341,16 +354,14 @@ def pin_feet(
     b = s.bottoms
     width = int(round(blend_s * fps))
     out = P.copy()
-    is_key = np.zeros(N, dtype=bool)
-    is_key[k] = True
     for f, (hip, knee, ankle, ball) in enumerate(LEGS):
         foot = b[:, s.of(SIDES[f])]
         lowest = foot[np.arange(N), foot[..., 2].argmin(axis=1)]  # (N, 3)
         under = None if floor is None else floor_heights(floor, lowest[:, :2], f)
         off = foot_offsets(foot, c[:, f], k, under)
         off = blend_offsets(off, c[:, f], width, k)
-        if under is not None:  # no foot under the floor, in the air either
-            off[:, 2] += lift_above(lowest[:, 2] + off[:, 2], under, is_key)
+        if under is not None:  # no foot under the floor, in contact or in the air
+            off[:, 2] += lift_above(lowest[:, 2] + off[:, 2], under, k, width)
         moved = np.flatnonzero(np.abs(off).max(axis=1) > 0)
         if not len(moved):
             continue
