@@ -161,9 +161,9 @@ def test_keyframes_stay_exact_and_the_pin_slides_linearly_between_two_of_them():
     P = _walker(raised="r")
     c = np.zeros((60, 2), bool)
     c[10:41, 0] = True
-    keys = np.array([0, 8, 15, 35, 59])  # 8: just before the run, its fade must end there
+    keys = np.array([0, 15, 35, 59])
     out = pin_feet(P, c, keys, FPS, floor=_flat(P, 15))
-    assert np.array_equal(out[keys], P[keys])
+    assert np.array_equal(out[[15, 35]], P[[15, 35]])  # the run's keyframes are exact
     ankle = LEGS[0][2]
     s = (np.arange(15, 36) - 15) / 20.0
     line = (1 - s)[:, None] * P[15, ankle] + s[:, None] * P[35, ankle]
@@ -180,7 +180,7 @@ def test_keyframes_stay_exact_and_the_pin_slides_linearly_between_two_of_them():
     assert np.allclose(_lengths(out), _lengths(P), atol=1e-12)
 
 
-def test_a_foot_in_the_air_is_lifted_onto_the_floor_but_keyframes_stay():
+def test_a_foot_under_the_floor_is_lifted_onto_it_smoothly():
     P = _walker()
     c = np.zeros((60, 2), bool)
     c[:, 0] = True  # the left foot stands; the right one bobs 1 cm under its floor half the time
@@ -188,20 +188,15 @@ def test_a_foot_in_the_air_is_lifted_onto_the_floor_but_keyframes_stay():
     out = pin_feet(P, c, keys, FPS, floor=_flat(P, 30))
     floor = P[30, LEGS[0][2], 2]  # both feet alike: the ankle's height on that floor
     r_ankle = LEGS[1][2]
-    w = int(round(BLEND_S * FPS))
-    clear = np.array([t for t in range(60) if np.abs(keys - t).min() > w])  # full-width bumps
-    assert np.all(out[clear, r_ankle, 2] >= floor - 1e-9)
-    assert np.array_equal(out[keys], P[keys])  # a keyframe is the original's, even under it
+    assert np.all(out[:, r_ankle, 2] >= floor - 1e-9)
     # lifted smoothly: the lift changes by at most 1.5 x the deepest dip / (w + 1) per frame
+    w = int(round(BLEND_S * FPS))
     lift = out[:, r_ankle, 2] - P[:, r_ankle, 2]
     deepest = np.maximum(floor - P[:, r_ankle, 2], 0).max()
     assert deepest > 0.005 and lift.min() >= -1e-12
-    step = np.abs(np.diff(lift))[clear[:-1][np.diff(clear) == 1]]  # (near a keyframe under the
-    assert step.max() <= 1.5 * deepest / (w + 1) + 1e-9  # floor, as here, bumps narrow)
-    far = np.array(
-        [t for t in range(60) if np.all(P[max(0, t - w) : t + w + 1, r_ankle, 2] >= floor)]
-    )
-    assert len(far) and np.array_equal(out[far, r_ankle], P[far, r_ankle])  # no dip near: untouched
+    assert np.abs(np.diff(lift)).max() <= 1.5 * deepest / (w + 1) + 1e-9
+    far = [t for t in range(60) if np.all(P[max(0, t - w) : t + w + 1, r_ankle, 2] >= floor)]
+    assert len(far) and np.array_equal(out[far, r_ankle], P[far, r_ankle])  # no dip near
 
 
 def test_no_contact_changes_nothing():

@@ -179,13 +179,16 @@ Rebuild = Callable[..., Reconstruction]
 
 @dataclass(frozen=True)
 class ReconstructionSpec:
-    """What one registered reconstruction declares (see the module docstring)."""
+    """What one registered reconstruction declares (see the module docstring); ``exact_keyframes``:
+    every point of every keyframe is the original's (False: ``contacts``, whose fades and lifts
+    may move a leg at a keyframe near a contact change)."""
 
     name: str
     rebuild: Rebuild
     payload_bytes: int
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None
     optimum: Callable[[SphericalSeries, int], object] | None = None
+    exact_keyframes: bool = True
 
 
 #: name -> :class:`ReconstructionSpec`, in registration order.
@@ -198,14 +201,16 @@ def register(
     payload_floats: int,
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None,
     optimum: Callable[[SphericalSeries, int], object] | None = None,
+    exact_keyframes: bool = True,
 ) -> Callable[[Rebuild], Rebuild]:
     """Decorator registering ``rebuild(clip, keyframes, series=None)`` as reconstruction ``name``
     whose keyframe carries ``payload_floats`` float32 values (plus the one-byte frame index)."""
 
     def deco(fn: Rebuild) -> Rebuild:
         RECONSTRUCTIONS[name] = ReconstructionSpec(
-            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum
-        )
+            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum,
+            exact_keyframes,
+        )  # fmt: skip
         return fn
 
     return deco
@@ -298,7 +303,7 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps, A)
 
 
-@register("contacts", payload_floats=2 * POSE_FLOATS)
+@register("contacts", payload_floats=2 * POSE_FLOATS, exact_keyframes=False)
 def contacts(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
     """``hermite`` with the sender's foot-contact bits (run-length coded, their bytes in
     ``side_bytes``): each foot in contact pinned where it touched down by two-bone IK
