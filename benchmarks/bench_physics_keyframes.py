@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from sidql.evaluation.evaluate import load_cases  # noqa: E402
+from sidql.evaluation.cases import load_cases  # noqa: E402
 from sidql.keyframes import methods, reconstructions  # noqa: E402
 from sidql.keyframes.metrics import q_from_angles  # noqa: E402
 from sidql.keyframes.optimal import solve  # noqa: E402

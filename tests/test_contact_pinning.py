@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 from keyframe_synth import smooth_clip
 
+from sidql.evaluation.cases import make_case
+from sidql.evaluation.evaluate import evaluate
 from sidql.keyframes import reconstructions
 from sidql.keyframes.contact_pinning import (
     BLEND_S,
@@ -240,8 +242,6 @@ def test_contacts_reconstruction_counts_its_bits_and_keeps_bone_lengths():
 
 
 def test_evaluate_rebuilds_any_method_with_the_named_reconstruction():
-    from sidql.evaluation.evaluate import evaluate, make_case
-
     cases = [make_case(smooth_clip(60, 30.0, seed=40 + i), i) for i in range(2)]
     own = evaluate(cases, ["uniform"], [5], progress=False)
     pinned = evaluate(cases, ["uniform"], [5], progress=False, reconstruction="contacts")

@@ -23,8 +23,9 @@ Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
    ``ROOT_TORQUE_LEVER`` (torque); its 6-d wrench is recorded every tick: the honest label of
    how much help the motion needed.
 
-4. **A fall stays down.** Once the root drops below half its reference height, the assistance
-   stops for good and the joints hold the pose of the fall at :data:`FALLEN_TONE` of their
+4. **A fall stays down.** Once the body has fallen (``sim.simulate.falls``: a part other than
+   the feet on the floor where the reference has none, or the head below half the
+   reference's), the assistance stops for good and the joints hold the pose of the fall at :data:`FALLEN_TONE` of their
    stiffness and strength, without feed-forward: the body settles on the floor (a get-up is
    not generated).
 
@@ -44,6 +45,7 @@ from scipy.optimize import nnls
 
 from sim.model.kinematics import SOLE_POINTS
 from sim.motion.velocities import qvel_from_qpos
+from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.model import (
     CONTROL_HZ,
     FLOOR_BITS,
@@ -106,7 +108,7 @@ class Tracking:
             on the assistance is off and the joints hold the pose of the fall at
             :data:`FALLEN_TONE` of their stiffness and strength (no tracking, no feed-forward):
             the body stays down (no get-up is generated).
-        fell: whether the root dropped below half its reference height (see :func:`track`).
+        fell: whether the body fell (``sim.simulate.falls``; see :func:`track`).
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
         penetration: deepest floor contact penetration [m] seen at the control ticks (>= 0).
@@ -399,8 +401,8 @@ def track(
 
     The simulation starts in the reference's first pose and velocity. ``model`` must come from
     ``sim.simulate.model.sim_model`` (its actuators' gains are read; a weakening changes them and
-    they are restored on return, or on an exception). A fall is the root below half its
-    reference height while the reference root is above 0.5 m.
+    they are restored on return, or on an exception). A fall is ``sim.simulate.falls``'s,
+    checked every control tick; ``fall_frame`` is the first recorded frame at or after it.
 
     Args:
         gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
@@ -419,6 +421,7 @@ def track(
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
     ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     root_inertia = _root_inertia(model, ref_qpos[0], data)
+    fall_ref = fall_reference(model, ref_qpos)
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
     data.qvel[:] = ref_qvel[0]
@@ -500,9 +503,9 @@ def track(
                 rec_q[i] = data.qpos
                 rec_v[i] = data.qvel
                 rec_u[i] = data.ctrl
-                if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2] and not fell:
-                    fell, fall_frame = True, i
-                    fallen_pose = data.qpos[7:].copy()
+            if not fell and has_fallen(model, data, fall_ref, k):
+                fell, fall_frame = True, min(F - 1, -(-k // record_every))
+                fallen_pose = data.qpos[7:].copy()
             n = data.ncon
             if n:
                 on_floor = (data.contact.geom[:n] == floor).any(axis=1)

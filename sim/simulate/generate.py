@@ -52,7 +52,7 @@ LABELS = {
     "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor",
     "sim_foot_force": "(F, 2, 3) floor contact force [N, world frame] on the left, right foot",
     "sim_contact_penetration": "(F,) deepest floor contact penetration [m], 0 without contact",
-    "sim_fallen": "(F,) bool: the figure has fallen (root below half its reference height)",
+    "sim_fallen": "(F,) bool: the figure has fallen (sim.simulate.falls: a part other than the feet on the floor where the reference has none, or the head below half the reference's)",
 }
 ALL_KINDS = (*KINDS, "follow")
 # root assistance bound [body weight]; procedural motion is not physically plausible (its feet
