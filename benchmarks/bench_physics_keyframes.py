@@ -43,7 +43,7 @@ from sidql.keyframes.spherical import M_BONES  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 
 #: The weights of the curve [rad of Q per unit of the physical cost].
-WEIGHTS = (0.0, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
+WEIGHTS = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 #: The rule: the largest weight whose mean Q is within this factor of the Q-optimum's at every W
 #: (the target itself).
 Q_BUDGET = 1.15

@@ -57,7 +57,7 @@ SKATE_SCALE, HEIGHT_SCALE, RESIDUAL_SCALE = 0.1, 0.01, 0.1
 MU, GRAVITY = 0.8, 9.81
 #: The one weight of the physical cost (rad of Q per unit of P): the rule that chose it and the
 #: Q / physics curve it was read from are in docs/keyframes.md (``benchmarks/bench_physics_keyframes.py``).
-PHYSICS_WEIGHT = 0.2
+PHYSICS_WEIGHT = 0.05
 
 
 def point_masses() -> np.ndarray:
