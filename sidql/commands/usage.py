@@ -303,6 +303,17 @@ def add_ray(parser: argparse.ArgumentParser, what: str = "the tasks") -> None:
     )  # fmt: skip
 
 
+def add_reconstruction(parser: argparse.ArgumentParser) -> None:
+    """``--reconstruction NAME``: rebuild every method's keyframes with this registered
+    reconstruction (:mod:`sidql.keyframes.reconstructions`) instead of the method's own (an
+    unknown name is refused, listing the known ones, before any work starts)."""
+    parser.add_argument(
+        "--reconstruction", default=None, metavar="NAME",
+        help="rebuild every method's keyframes with this reconstruction instead of its own "
+        "(selection and reconstruction measured apart), e.g. hermite, linear, slerp, contacts",
+    )  # fmt: skip
+
+
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     """``-q/--quiet``: no progress bars."""
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
