@@ -17,11 +17,15 @@ import numba
 import numpy as np
 
 from sidql.keyframes.segment_costs import (
+    SEPARABLE,
+    _fill_costs,
+    _stacked_chart,
     catmull_rom_costs,
     clip_cost_matrix,
     segment_cost_matrix,
 )
-from sidql.keyframes.spherical import M_BONES, SphericalSeries
+from sidql.keyframes.spherical import M_BONES, SIN_EPS, SphericalSeries, chart_points_of
+from sim.errors import UnknownNameError
 
 
 @numba.njit(cache=True)
@@ -115,6 +119,52 @@ def clip_optimal_table(
     """:func:`optimal_table` of a clip's chart, chart and costs in one compiled pass
     (:func:`sidql.keyframes.segment_costs.clip_cost_matrix`); the same optima."""
     return solve(clip_cost_matrix(clip, reconstruction), M_BONES, w_max)
+
+
+def clip_optimal_keyframes(clip, W: int, reconstruction: str = "hermite") -> np.ndarray:
+    """(W,) the same keyframes as ``clip_optimal_table(clip, reconstruction, W).keyframes(W)``,
+    from :func:`optimum_cost_matrix` (only the segments that can be in the optimum): a fraction
+    of the work."""
+    return solve(optimum_cost_matrix(clip, W, reconstruction), M_BONES, W).keyframes(W)
+
+
+def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.ndarray:
+    """The (N, N) segment costs of ``clip`` (:func:`sidql.keyframes.segment_costs.clip_cost_matrix`)
+    that the optimum for exactly W keyframes can use; the others are inf.
+
+    Every segment of the optimum costs at most the optimum's total, and that is at most U, the
+    optimum over segments of at most ``ceil(1.5 (N - 1) / (W - 1))`` frames (a band of the
+    matrix, computed first, with its own programme). Every longer segment is summed frame by
+    frame and abandoned, set to inf, once it exceeds U (1 + 1e-9); the entries kept are the
+    numbers of ``clip_cost_matrix``. A path through an inf entry costs more than U, so this
+    matrix's W-keyframe optimum, tie-breaking included, is the full matrix's; its optima for
+    fewer keyframes are not (their segments may cost more than U).
+
+    Raises:
+        MotionDataError: as :func:`sidql.keyframes.spherical.chart`. ValueError: W out of range.
+    """
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
+    P, V, parents = chart_points_of(clip)
+    if not 2 <= W <= P.shape[0]:
+        raise ValueError(f"W must be in [2, {P.shape[0]}]; got {W}")
+    X, R = _stacked_chart(P, V, parents, float(clip.dt), SIN_EPS)
+    return _optimum_costs(X, R, reconstruction == "linear", int(W))
+
+
+@numba.njit(cache=True)
+def _optimum_costs(X, R, linear, W):
+    """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame]."""
+    N = X.shape[0]
+    band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
+    C = np.zeros((N, N))
+    _fill_costs(X, R, linear, C, 2, band, np.inf)
+    for i in range(N):
+        for j in range(i + band, N):
+            C[i, j] = np.inf
+    D, _ = _dp(C, W)  # feasible: (band - 1) (W - 1) >= N - 1
+    _fill_costs(X, R, linear, C, band, N, D[W, N - 1] * (1.0 + 1e-9))
+    return C
 
 
 def optimal_keyframes(

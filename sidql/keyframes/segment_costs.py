@@ -41,25 +41,51 @@ def _cost_matrix(X, R, linear):
     The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01); the wrap
     (:func:`sim.model.angles.wrap_angle`) is branch-free, so the inner loop vectorises.
     """
-    N, D = X.shape
+    N = X.shape[0]
     C = np.zeros((N, N))
+    _fill_costs(X, R, linear, C, 2, N, np.inf)
+    return C
+
+
+#: fastmath without "no infinities / no NaNs" (the bound of :func:`_fill_costs` may be inf):
+#: reassociation is what lets the sums over channels vectorise.
+_FAST = {"reassoc", "contract", "nsz", "arcp", "afn"}
+
+
+@numba.njit(cache=True, fastmath=_FAST)
+def _fill_costs(X, R, linear, C, lo, hi, bound):
+    """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``;
+    one whose running sum (frame by frame) exceeds ``bound`` is abandoned and set to inf (the
+    others are the same numbers whatever the bound: the same arithmetic in the same order)."""
+    N, D = X.shape
     dX = np.empty(D)
     for i in range(N):
-        for j in range(i + 2, N):
+        for j in range(i + max(lo, 2), min(i + hi, N)):
             for d in range(D):
                 dX[d] = X[j, d] - X[i, d]
             L = j - i
+            if bound < np.inf and L > 2 and _frame_cost(X, R, dX, i, j, i + L // 2, linear) > bound:
+                C[i, j] = np.inf  # one middle frame alone costs more than the bound
+                continue
             total = 0.0
             for n in range(i + 1, j):
-                h01, h10, h11 = _weights(n, i, L, linear)
-                acc = 0.0
-                for d in range(D):
-                    v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
-                    v = wrap_angle(v)
-                    acc += abs(v)
-                total += acc
+                total += _frame_cost(X, R, dX, i, j, n, linear)
+                if total > bound:
+                    total = np.inf
+                    break
             C[i, j] = total
-    return C
+
+
+@numba.njit(cache=True, fastmath=_FAST, inline="always")
+def _frame_cost(X, R, dX, i, j, n, linear):
+    """Summed |angle error| [rad] of frame n of segment (i, j); ``dX = X[j] - X[i]``."""
+    h01, h10, h11 = _weights(n, i, j - i, linear)
+    acc = 0.0
+    for d in range(X.shape[1]):
+        v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
+        v = wrap_angle(v)
+        acc += abs(v)
+    return acc
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
@@ -234,6 +260,13 @@ def _chart_and_costs(P, V, parents, dt, sin_eps, linear):
     """The chart (:func:`sidql.keyframes.spherical._chart_kernel`) and the (N, N) segment costs
     (:func:`_cost_matrix`) of (N, J, 3) world-axes points in one compiled call: the same
     arithmetic as ``segment_cost_matrix(chart_arrays(P, V, parents, dt))``."""
+    X, R = _stacked_chart(P, V, parents, dt, sin_eps)
+    return _cost_matrix(X, R, linear)
+
+
+@numba.njit(cache=True)
+def _stacked_chart(P, V, parents, dt, sin_eps):
+    """:func:`stacked` of the chart of (N, J, 3) world-axes points, in compiled code."""
     theta, phi, dtheta, dphi, _ = _chart_kernel(P, V, parents, sin_eps)
     N, M = theta.shape
     X = np.empty((N, 2 * M))
@@ -244,7 +277,7 @@ def _chart_and_costs(P, V, parents, dt, sin_eps, linear):
             X[n, M + m] = phi[n, m]
             R[n, m] = dtheta[n, m] * dt
             R[n, M + m] = dphi[n, m] * dt
-    return _cost_matrix(X, R, linear)
+    return X, R
 
 
 def clip_cost_matrix(clip, reconstruction: str = "hermite") -> np.ndarray:
