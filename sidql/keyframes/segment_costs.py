@@ -291,3 +291,20 @@ def clip_cost_matrix(clip, reconstruction: str = "hermite") -> np.ndarray:
         raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
     P, V, parents = chart_points_of(clip)
     return _chart_and_costs(P, V, parents, float(clip.dt), SIN_EPS, reconstruction == "linear")
+
+
+def clip_stacked_costs(
+    clip, reconstruction: str = "hermite"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The chart of ``clip`` as :func:`stacked` lays it out, (N, 2M) angles [rad] and rates
+    times dt [rad/frame], and its (N, N) segment costs [rad] (:func:`clip_cost_matrix`'s
+    numbers), in one compiled pass: what a learned policy needs (features and costs).
+
+    Raises:
+        MotionDataError: as :func:`sidql.keyframes.spherical.chart`.
+    """
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
+    P, V, parents = chart_points_of(clip)
+    X, R = _stacked_chart(P, V, parents, float(clip.dt), SIN_EPS)
+    return X, R, _cost_matrix(X, R, reconstruction == "linear")

@@ -18,12 +18,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from sidql.keyframes.segment_costs import segment_cost_matrix
-from sidql.keyframes.spherical import chart
+from sidql.keyframes.segment_costs import clip_stacked_costs
 from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import N_SCALARS, PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import greedy_sequences, rollout_values_batch, rollout_values_seq
-from sidql.learning.tasks import clip_features
+from sidql.learning.tasks import stacked_features
 from sim.errors import ModelFileError
 from sim.files import MAX_POLICY_BYTES
 from sim.paths import package_file
@@ -304,16 +303,16 @@ class Policy:
         return np.nonzero(mask.numpy())[1].reshape(b, W).astype(np.int64)
 
     def select(self, clip, W: int) -> np.ndarray:
-        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart, features, costs, :meth:`decide`)."""
-        series = chart(clip)
-        features = clip_features(series)
+        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart and costs in one compiled
+        pass, features, :meth:`decide`)."""
+        angles, rates, cost = clip_stacked_costs(clip, "hermite")
+        features = stacked_features(angles, rates)
         c = int(self.net.config["n_features"])
         if features.shape[-1] != c:  # a policy trained on clips of another skeleton
             raise ModelFileError(
                 self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
-                f"of {series.theta.shape[1]} bones give {features.shape[-1]}",
+                f"of {angles.shape[1] // 2} bones give {features.shape[-1]}",
             )  # fmt: skip
-        cost = segment_cost_matrix(series, "hermite")
         return self.decide(features[None], cost[None], W)[0]
 
 
