@@ -17,8 +17,10 @@ import numba
 import numpy as np
 
 from sidql.keyframes.segment_costs import (
+    _FAST,
     SEPARABLE,
     _fill_costs,
+    _frame_cost,
     _stacked_chart,
     catmull_rom_costs,
     clip_cost_matrix,
@@ -132,13 +134,15 @@ def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.nda
     """The (N, N) segment costs of ``clip`` (:func:`sidql.keyframes.segment_costs.clip_cost_matrix`)
     that the optimum for exactly W keyframes can use; the others are inf.
 
-    Every segment of the optimum costs at most the optimum's total, and that is at most U, the
-    optimum over segments of at most ``ceil(1.5 (N - 1) / (W - 1))`` frames (a band of the
-    matrix, computed first, with its own programme). Every longer segment is summed frame by
-    frame and abandoned, set to inf, once it exceeds U (1 + 1e-9); the entries kept are the
-    numbers of ``clip_cost_matrix``. A path through an inf entry costs more than U, so this
-    matrix's W-keyframe optimum, tie-breaking included, is the full matrix's; its optima for
-    fewer keyframes are not (their segments may cost more than U).
+    The optimum's total is at most U, the optimum over segments of at most
+    ``ceil(1.5 (N - 1) / (W - 1))`` frames (a band of the matrix, computed first, with its own
+    programme). A longer segment (i, j) can be in it only if its cost plus the least the rest
+    of the clip can cost around it (programmes over lower bounds of every entry: the band's
+    exact costs, one middle frame's cost outside it) is at most U (1 + 1e-9); it is summed
+    frame by frame and abandoned, set to inf, once that fails. The entries kept are the numbers
+    of ``clip_cost_matrix``. A path through an inf entry costs more than U, so this matrix's
+    W-keyframe optimum, tie-breaking included, is the full matrix's; its optima for fewer
+    keyframes are not.
 
     Raises:
         MotionDataError: as :func:`sidql.keyframes.spherical.chart`. ValueError: W out of range.
@@ -152,18 +156,33 @@ def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.nda
     return _optimum_costs(X, R, reconstruction == "linear", int(W))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=_FAST)  # the flags of the kernels it shares
 def _optimum_costs(X, R, linear, W):
     """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame]."""
-    N = X.shape[0]
+    N, D = X.shape
     band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
     C = np.zeros((N, N))
-    _fill_costs(X, R, linear, C, 2, band, np.inf)
+    bounds = np.full((N, N), np.inf)
+    _fill_costs(X, R, linear, C, 2, band, bounds)
+    Cb = C.copy()  # the band alone: its optimum U bounds the true one
+    lb = C.copy()  # a lower bound of every entry: exact in the band, one middle frame outside
+    dX = np.empty(D)
     for i in range(N):
         for j in range(i + band, N):
-            C[i, j] = np.inf
-    D, _ = _dp(C, W)  # feasible: (band - 1) (W - 1) >= N - 1
-    _fill_costs(X, R, linear, C, band, N, D[W, N - 1] * (1.0 + 1e-9))
+            Cb[i, j] = np.inf
+            for d in range(D):
+                dX[d] = X[j, d] - X[i, d]
+            lb[i, j] = _frame_cost(X, R, dX, i, j, i + (j - i) // 2, linear)
+    U = _dp(Cb, W)[0][W, N - 1] * (1.0 + 1e-9)  # feasible: (band - 1) (W - 1) >= N - 1
+    head = _dp(lb, W)[0]  # head[w, i] <= least cost of frames 0..i, w keyframes, the last i
+    tail = _dp(lb[::-1, ::-1].T.copy(), W)[0]  # the same for frames j..N-1 from the end
+    for i in range(N):
+        for j in range(i + band, N):
+            rest = np.inf  # the least the rest of the clip can cost around segment (i, j)
+            for w in range(1, W):
+                rest = min(rest, head[w, i] + tail[W - w, N - 1 - j])
+            bounds[i, j] = U - rest
+    _fill_costs(X, R, linear, C, band, N, bounds)
     return C
 
 

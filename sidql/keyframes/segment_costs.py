@@ -43,7 +43,7 @@ def _cost_matrix(X, R, linear):
     """
     N = X.shape[0]
     C = np.zeros((N, N))
-    _fill_costs(X, R, linear, C, 2, N, np.inf)
+    _fill_costs(X, R, linear, C, 2, N, np.full((N, N), np.inf))
     return C
 
 
@@ -53,27 +53,39 @@ _FAST = {"reassoc", "contract", "nsz", "arcp", "afn"}
 
 
 @numba.njit(cache=True, fastmath=_FAST)
-def _fill_costs(X, R, linear, C, lo, hi, bound):
-    """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``;
-    one whose running sum (frame by frame) exceeds ``bound`` is abandoned and set to inf (the
-    others are the same numbers whatever the bound: the same arithmetic in the same order)."""
+def _fill_costs(X, R, linear, C, lo, hi, bounds):
+    """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``
+    (:func:`_entry_cost` with bound ``bounds[i, j]``; every caller passes an (N, N) array, so
+    all run one compiled loop and keep the same numbers)."""
     N, D = X.shape
     dX = np.empty(D)
     for i in range(N):
         for j in range(i + max(lo, 2), min(i + hi, N)):
-            for d in range(D):
-                dX[d] = X[j, d] - X[i, d]
-            L = j - i
-            if bound < np.inf and L > 2 and _frame_cost(X, R, dX, i, j, i + L // 2, linear) > bound:
-                C[i, j] = np.inf  # one middle frame alone costs more than the bound
-                continue
-            total = 0.0
-            for n in range(i + 1, j):
-                total += _frame_cost(X, R, dX, i, j, n, linear)
-                if total > bound:
-                    total = np.inf
-                    break
-            C[i, j] = total
+            C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j])
+
+
+@numba.njit(cache=True, fastmath=_FAST, inline="always")
+def _entry_cost(X, R, dX, i, j, linear, bound):
+    """``C[i, j]`` of :func:`_cost_matrix` (``dX``: (D,) scratch), or inf if it exceeds
+    ``bound``: with a finite bound the frames are first summed from the middle out (where a
+    segment's error is largest), stopping once over it; an entry kept is then summed again in
+    frame order, so it is the same number whatever the bound."""
+    for d in range(X.shape[1]):
+        dX[d] = X[j, d] - X[i, d]
+    L = j - i
+    if bound < np.inf:  # any frames' sum is a lower bound: the middle ones first (the largest)
+        part = 0.0
+        for t in range(L - 1):
+            n = i + L // 2 + ((t + 1) // 2 if t % 2 else -((t + 1) // 2))
+            part += _frame_cost(X, R, dX, i, j, n, linear)
+            if part > bound:
+                return np.inf
+    total = 0.0
+    for n in range(i + 1, j):
+        total += _frame_cost(X, R, dX, i, j, n, linear)
+        if total > bound:
+            return np.inf
+    return total
 
 
 @numba.njit(cache=True, fastmath=_FAST, inline="always")
