@@ -260,7 +260,7 @@ class Shared:
         if not _SENDING_TO_RAY:
             return Shared, (self.value,)
         if self._ref is None:
-            import ray
+            import ray  # lazy: an optional extra, and slow to import
 
             self._ref = ray.put(self.value)
         return _shared_from_ref, ([self._ref],)  # nested in a list: Ray does not fetch it
@@ -283,7 +283,7 @@ def _shared_from_ref(box) -> Shared:
     key = ref.hex()
     out = _WORKER_SHARED.pop(key, None)
     if out is None:
-        import ray
+        import ray  # lazy: an optional extra, and slow to import
 
         out = Shared(ray.get(ref))
         while len(_WORKER_SHARED) >= SHARED_CACHE:

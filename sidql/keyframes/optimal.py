@@ -158,7 +158,11 @@ def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.nda
 
 @numba.njit(cache=True, fastmath=_FAST)  # the flags of the kernels it shares
 def _optimum_costs(X, R, linear, W):
-    """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame]."""
+    """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame].
+
+    Its disk cache does not notice a change in segment_costs.py's kernels: clear
+    ``sidql/keyframes/__pycache__/*.nb*`` after one (tests/test_keyframes_fused.py checks the
+    numbers against the full matrix)."""
     N, D = X.shape
     band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
     C = np.zeros((N, N))
