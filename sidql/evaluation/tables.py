@@ -42,14 +42,14 @@ def table3_markdown(results: Sequence[dict]) -> str:
     lines.append("")
     lines.append(
         "| method | W | clips | Q | Q of its keyframes, Hermite | geodesic (deg) | MPJPE (mm) "
-        "| velocity error (m/s) | Li error (mm) | median decision (ms) |"
+        "| velocity error (mm/s) | Li error (mm) | median decision (ms) |"
     )
     lines.append("|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         lines.append(
             f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['mean_q']:.4f} "
             f"| {r['mean_q_hermite']:.4f} | {r['mean_geodesic_deg']:.2f} | {r['mpjpe_mm']:.1f} "
-            f"| {r['mean_velocity_error']:.3f} | {r['mean_li_error_mm']:.1f} "
+            f"| {r['velocity_error_mm_s']:.0f} | {r['mean_li_error_mm']:.1f} "
             f"| {r['median_decision_ms']:.2f} |"
         )
     return "\n".join(lines)
@@ -71,7 +71,8 @@ def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
         ("PhysDiff float (mm)", "physdiff_float_mm", ".1f"),
         ("PhysDiff skate", "physdiff_skate", ".3f"),
         ("self-pen. excess (mm)", "self_pen_excess_mm", ".2f"),
-        ("lost contacts", "lost_contacts", ".1f"), ("limit excess (deg)", "limit_excess_deg", ".2f"),
+        ("lost touching bones", "lost_contacts", ".1f"),
+        ("limit excess (deg)", "limit_excess_deg", ".2f"),
         ("residual force (BW)", "residual_force_bw", ".3f"),
         ("residual force p95 (BW)", "residual_force_bw_p95", ".2f"),
         ("residual torque (N m/kg)", "residual_torque_nm_kg", ".3f"),
@@ -102,15 +103,20 @@ def simulate_markdown(results: Sequence[dict]) -> str:
     rows = [r for r in results if r.get("sim_error_mm") is not None]
     rows.sort(key=lambda r: r["method"] != "original")
     lines = [
-        "| method | W | clips | error vs tracked (mm) | error vs original (mm) | fell (share) "
-        "| fall time (s) | joint torque RMS (N m/kg) | torque at limit (share) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| method | W | clips | error vs tracked (mm), mean / median | root-relative (mm), mean "
+        "/ median | error vs original (mm) | fell (share) | fall time (s) | joint torque RMS "
+        "(N m/kg) | torque at limit (share) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         fall = "-" if r["sim_fall_s"] is None else f"{r['sim_fall_s']:.2f}"
+        local = r.get("sim_error_local_mm")
+        local = "-" if local is None else f"{local:.1f} / {r['sim_error_local_mm_median']:.1f}"
+        median = r.get("sim_error_mm_median")
+        median = "" if median is None else f" / {median:.1f}"
         lines.append(
-            f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['sim_error_mm']:.1f} "
-            f"| {r['sim_error_original_mm']:.1f} | {r['sim_fell']:.2f} | {fall} "
+            f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['sim_error_mm']:.1f}{median} "
+            f"| {local} | {r['sim_error_original_mm']:.1f} | {r['sim_fell']:.2f} | {fall} "
             f"| {r['sim_torque_rms_nm_kg']:.3f} | {r['sim_torque_saturated']:.3f} |"
         )
     return "\n".join(lines)

@@ -20,7 +20,7 @@ from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import SOLE_POINTS
 from sim.motion.retarget import leg_length, motion_to_qpos
-from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS
+from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -47,7 +47,7 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     each frame: the sole boxes where the model has them (``sim.simulate.model.add_soles``; the
     foot and toe capsules then touch the body only), else the foot and toe capsules."""
     data = mujoco.MjData(model)
-    names = SOLE_POINTS + SOLE_GEOMS
+    names = SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
     ids = [
         model.geom(n).id
         for n in names
