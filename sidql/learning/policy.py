@@ -152,9 +152,11 @@ def load_policy(path: str | os.PathLike | None = None) -> Policy:
             weights that do not fit the network it declares); one line naming the file.
     """
     path = Path(path or os.environ.get("SIDQL_POLICY") or DEFAULT_POLICY)
-    if not path.exists():
-        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`")
-    return _load(str(path.resolve()), path.stat().st_mtime_ns)
+    try:  # one system call per decision (the dqn method calls this every time)
+        st = path.stat()
+    except OSError:
+        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`") from None
+    return _load(os.path.abspath(path), st.st_mtime_ns, st.st_ino)
 
 
 #: Stated limits of a policy file's network config: width, input channels, temporal layers and
@@ -211,7 +213,7 @@ def check_config(cfg, state_dict) -> tuple:
 
 
 @lru_cache(maxsize=4)
-def _load(path: str, _mtime: int) -> Policy:
+def _load(path: str, _mtime: int, _inode: int = 0) -> Policy:
     payload = load_payload(path, POLICY_FORMAT, MAX_POLICY_BYTES)
     try:
         cfg = payload["config"]
