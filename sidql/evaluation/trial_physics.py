@@ -17,8 +17,8 @@ from sidql.evaluation.cases import Case
 from sidql.keyframes.spherical import POINTS
 from sim.analysis.job import PhysicsJob
 from sim.errors import MotionDataError
-from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
+from sim.motion.trial import subject_model
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip

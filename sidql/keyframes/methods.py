@@ -50,7 +50,10 @@ RECONSTRUCTION: dict[str, str] = {}
 
 #: name -> module that registers it when imported (for methods with heavy dependencies).
 #: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
-LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
+LAZY_METHODS: dict[str, str] = {
+    "dqn": "sidql.learning.policy:dqn",
+    "physics": "sidql.keyframes.physical_costs",  # registers itself (rebuilt with contacts)
+}
 
 _OPTIONS = ("reconstruction", "memo")
 _TAKES: dict[str, tuple[str, ...]] = {}
