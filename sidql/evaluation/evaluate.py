@@ -30,7 +30,7 @@ from sidql.evaluation.significance import paired_comparisons
 from sidql.evaluation.trial_physics import physics_setup, simulate_setup
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.counts import check_counts
-from sim.batch import iter_batch
+from sim.batch import Shared, iter_batch, shared_value
 from sim.errors import UsageError
 from sim.simulate.validate import SIMULATE_KEYS
 
@@ -181,11 +181,15 @@ def _method_result(name: str, W: int, rows: Sequence[dict], physics: bool, simul
 
 def _tasks(cases: Sequence[Case], chunk: int, setup: dict, bodies: dict) -> list[tuple]:
     """The tasks of :func:`evaluate`: ``([(position, case)...], physics set-up or None, simulated
-    body or None)`` per chunk of up to ``chunk`` consecutive cases of one trial."""
+    body or None)`` per chunk of up to ``chunk`` consecutive cases of one trial, the last two
+    wrapped in :class:`sim.batch.Shared` (one per trial: Ray ships each to a worker once)."""
+    shared = {}  # one handle per trial: on Ray its set-up reaches each worker once
     items = []
     for group in _trial_chunks(cases, chunk):
         source = cases[group[0]].clip.source
-        items.append(([(i, cases[i]) for i in group], setup.get(source), bodies.get(source)))
+        if source not in shared:
+            shared[source] = (Shared(setup.get(source)), Shared(bodies.get(source)))
+        items.append(([(i, cases[i]) for i in group], *shared[source]))
     return items
 
 
@@ -207,7 +211,7 @@ def _evaluate_chunk(
     """One task of :func:`evaluate`: per case of ``item = ([(position, case)...], physics set-up
     or None, simulated body or None)``, its position and rows: the original's (with physics),
     then each method at each W."""
-    cases, phys, body = item
+    cases, phys, body = item[0], shared_value(item[1]), shared_value(item[2])
     out = []
     for position, case in cases:
         rows, original_qpos = [], None
