@@ -127,17 +127,27 @@ def scaled_skeleton(skeleton: Skeleton, scale: float) -> Skeleton:
     return replace(skeleton, bones=bones)
 
 
-def sim_model(
+def sim_model(skeleton: Skeleton, **kwargs) -> mujoco.MjModel:
+    """The actuated humanoid of ``skeleton`` (see the module docstring): :func:`sim_spec`
+    compiled (same keyword arguments)."""
+    return sim_spec(skeleton, **kwargs).compile()
+
+
+def sim_spec(
     skeleton: Skeleton,
     *,
     body_mass_kg: float = DEFAULT_BODY_MASS_KG,
     gains: Gains | None = None,
     soles: bool = False,
     stance_ankles: bool = False,
-) -> mujoco.MjModel:
-    """The actuated humanoid of ``skeleton`` (see the module docstring).
+) -> mujoco.MjSpec:
+    """The ``MjSpec`` of :func:`sim_model` (``spec.to_xml()``: the MJCF a dataset stores).
 
-    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``). ``soles``: each foot
+    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``); its control (the PD
+    target [rad], the feed-forward folded in as ``ff / kp``) is limited to the joint's range
+    widened by ``limit / kp`` either side (``ctrllimited``): a target further out asks for more
+    than the joint's peak torque anywhere in its range, so the bound costs no torque there, and
+    actions stay in a fixed box. ``soles``: each foot
     touches the floor through a flat sole box reaching behind the ankle (:func:`add_soles`)
     instead of its capsule. ``stance_ankles``: the ankle hinges (``foot_rx``, ``foot_rz``) at
     least :func:`stance_stiffness` (capped by the torque limit like every joint).
@@ -179,11 +189,14 @@ def sim_model(
         a.set_to_position(kp=kp, kv=kv)
         a.forcelimited = True
         a.forcerange = [-limit, limit]
+        lo, hi = plain.jnt_range[j]
+        a.ctrllimited = True
+        a.ctrlrange = [lo - limit / kp, hi + limit / kp]
         # a light segment between two stiff joints (the spine) makes a mode of inertia ~ its own;
         # armature >= kp h^2 keeps every actuator mode below 1 / h (explicit-spring stability)
         joint = spec.joint(name)
         joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
-    return spec.compile()
+    return spec
 
 
 ANKLE_JOINTS = ("foot_rx", "foot_rz")  # the ankle (plantar/dorsiflexion) and subtalar hinges
