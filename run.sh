@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set-up and the two entry points of the project.
-#   ./run.sh demo   create .venv if needed, install, run the main job on the embedded default
+#   ./run.sh demo   create .venv if needed, install, run the main job (CMU trial 02_01, or
+#                   motion generated on the humanoid when the data folder lacks it)
 #   ./run.sh test   create .venv if needed, install, run the whole test suite
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -41,7 +42,8 @@ python_env() {
     if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$want" ]; then return 0; fi
     [ -x "$VENV/bin/python" ] || "$PY" -m venv "$VENV"
     quiet "$VENV/bin/python" -m pip install -q --upgrade pip
-    # The CPU build of torch first: a bare 'torch' requirement would pull a multi-GB CUDA build.
+    # torch pinned first, from pip's configured index: where that holds a CPU wheel,
+    # the CPU build; from PyPI on Linux, the CUDA build. README, 'Install elsewhere': the CPU index.
     quiet "$VENV/bin/python" -m pip install -q "torch==2.13.0"
     quiet "$VENV/bin/python" -m pip install -q -e ".[test,ray,bench]"
     echo "$want" >"$STAMP"

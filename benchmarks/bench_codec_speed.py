@@ -43,7 +43,9 @@ def default_data() -> Path:
 
 def five_minute_take(data: Path, out: Path) -> tuple[Path, Path, str]:
     """Write a 36,920-frame AMC of the longest trial of ``data`` played forwards and backwards."""
-    from sim.acclaim.reader import Motion, parse_amc, parse_asf
+    from sim.acclaim.amc import parse_amc
+    from sim.acclaim.asf import parse_asf
+    from sim.acclaim.records import Motion
     from sim.acclaim.writer import write_amc
     from sim.motion.dataset import find_trials
 

@@ -21,7 +21,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-import sim.acclaim.reader as acclaim  # noqa: E402
+import sim.acclaim.amc as amc  # noqa: E402
+from sim.acclaim.asf import parse_asf  # noqa: E402
+from sim.errors import MotionDataWarning  # noqa: E402
 from sim.motion.dataset import find_trials  # noqa: E402
 from sim.motion.ingest import load_motion  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
@@ -48,21 +50,21 @@ def main() -> None:
     ap.add_argument("--write", action="store_true", help="write docs/results/ingest.md")
     args = ap.parse_args()
     trials = find_trials(args.data)
-    warnings.simplefilter("ignore", acclaim.MotionDataWarning)
+    warnings.simplefilter("ignore", MotionDataWarning)
     for t in trials:  # build (and cache) every subject's model outside the timing
         load_motion(t.asf, t.amc)
-        _source_frames[t.amc] = acclaim.parse_amc(t.amc, acclaim.parse_asf(t.asf)).n_frames
+        _source_frames[t.amc] = amc.parse_amc(t.amc, parse_asf(t.asf)).n_frames
     fast, info = run(trials)
-    original = acclaim._AmcParser._fast
-    acclaim._AmcParser._fast = lambda self, lines, start, stop: start  # all to the checked path
+    original = amc._AmcParser._fast
+    amc._AmcParser._fast = lambda self, lines, start, stop: start  # all to the checked path
     try:
         slow, _ = run(trials, repeats=1)
     finally:
-        acclaim._AmcParser._fast = original
+        amc._AmcParser._fast = original
 
     t0 = time.process_time()
     for t in trials:
-        acclaim.parse_amc(t.amc, acclaim.parse_asf(t.asf))
+        amc.parse_amc(t.amc, parse_asf(t.asf))
     parse_only = info["frames"] / (time.process_time() - t0)
     text = (
         f"{len(trials)} trials, {info['frames']:,} source frames (120 Hz), one process; per core "

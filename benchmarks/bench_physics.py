@@ -61,17 +61,13 @@ from sidql.evaluation.validation import physics_job, trial_ground  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402
+from sim.analysis.job import MAX_DERIVATIVE_NOISE
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.motion.ingest import load_clips  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
-from sim.physics.analysis import (  # noqa: E402
-    HELD_BW,
-    HELD_S,
-    MAX_DERIVATIVE_NOISE,
-    RESIDUAL_CAUSES,
-)
 from sim.physics.dynamics import InverseDynamics  # noqa: E402
 from sim.physics.ik import Fit, HumanoidIK  # noqa: E402
+from sim.physics.support import HELD_BW, HELD_S, RESIDUAL_CAUSES
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -417,7 +413,7 @@ def figures(data: Path) -> str:
 
 def residual_breakdown(rows: list[dict]) -> list[str]:
     """Where the original's residual force comes from over ``rows`` (its clips): per cause
-    (:func:`sim.physics.analysis.residual_causes`), its share of the mean over the measured
+    (:func:`sim.physics.support.residual_causes`), its share of the mean over the measured
     frames, and the frames left unmeasured with what they would have added."""
     n = np.array([r["dynamics_n"] for r in rows], dtype=float)
     un = np.array([r["dynamics_unmeasured_n"] for r in rows], dtype=float)

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from sim.acclaim.reader import parse_amc  # noqa: E402
+from sim.acclaim.amc import parse_amc  # noqa: E402
 from sim.errors import MotionDataError  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.model.kinematics import point_names  # noqa: E402

@@ -32,8 +32,10 @@ from busy import busy  # noqa: E402
 from results import write_results  # noqa: E402
 
 from sim.motion.synthetic import synthetic_motion
+from sim.replay.annotate import annotate
 from sim.replay.checks import PointMotion, from_clip
-from sim.replay.render import RenderStyle, SkeletonRenderer, annotate, camera_path, write_video
+from sim.replay.render import RenderStyle, SkeletonRenderer, camera_path
+from sim.replay.video import write_video
 
 MUJOCO_DEFAULTS = RenderStyle(shadows=True, reflections=True, multisample=4, slices=28, stacks=16)
 OURS = RenderStyle()

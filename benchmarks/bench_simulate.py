@@ -64,7 +64,7 @@ def main() -> None:
                    simulate_samples=args.samples, workers=args.workers,
                    progress=False)  # fmt: skip
     trials = len({c.clip.source for c in cases})
-    sampled = f" --simulate-samples {args.samples}" if args.samples else ""
+    sampled = f" --samples {args.samples}" if args.samples else ""
     note = " (the sampling tracker, `sim.simulate.sampling`)" if args.samples else ""
     limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
     if args.max_clips:

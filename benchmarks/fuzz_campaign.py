@@ -303,7 +303,8 @@ def run_all(jobs, seeds_path: str, args, progress: bool):
 def _amc_peaks(paths: list[str], asf: str, out) -> None:
     """In a small fresh process: for each AMC, fork a child that reads it; send (extra peak
     RSS over the child's RSS at the fork [KB], frames, CPU s) per file."""
-    from sim.acclaim.reader import parse_amc, parse_asf
+    from sim.acclaim.amc import parse_amc
+    from sim.acclaim.asf import parse_asf
 
     skeleton = parse_asf(asf)
     rows = []
@@ -332,7 +333,7 @@ def amc_memory(cmu: Path, work: Path) -> list[dict]:
     """Peak RSS of reading AMCs of ~20 MB (a real trial repeated; hostile layouts) in a fresh
     process, less its RSS before reading, over the file's size."""
     sys.path.insert(0, str(REPO))
-    from sim.acclaim.reader import parse_asf
+    from sim.acclaim.asf import parse_asf
 
     asf = cmu / "01" / "01.asf"
     bones = [(b.name, len(b.dofs)) for b in parse_asf(asf).bones if b.dofs]

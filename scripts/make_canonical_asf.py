@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.reader import parse_asf
+from sim.acclaim.asf import parse_asf
 from sim.model.humanoid import write_humanoid_xml
 
 

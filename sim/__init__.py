@@ -34,10 +34,10 @@ _API = {
     "from_clip": "sim.replay.checks",
     "replay": "sim.replay.checks",
     "summarise": "sim.replay.checks",
-    "render_frames": "sim.replay.render",
-    "write_video": "sim.replay.render",
+    "render_frames": "sim.replay.video",
+    "write_video": "sim.replay.video",
     "estimate_ground": "sim.physics.ground",
-    "PhysicsJob": "sim.physics.analysis",
+    "PhysicsJob": "sim.analysis.job",
     "synthesize": "sim.simulate.dataset",
     "run_batch": "sim.batch",
 }

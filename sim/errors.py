@@ -2,11 +2,17 @@
 
 * :class:`BadFileError`: a file that cannot be used; names the file, the line (when known) and
   the problem. Its kinds: :class:`MotionDataError` (ASF/AMC files, clips, ``.sidq`` streams,
-  dataset indexes) and :class:`ModelFileError` (policy and checkpoint files).
+  dataset indexes), :class:`ModelFileError` (policy and checkpoint files) and
+  :class:`OutputError` (an output that cannot go where it was asked for).
 * :class:`UnmetTargetError`: a request that cannot be met by any answer (e.g. a byte rate too low
   for the trial).
 * :class:`UnknownNameError`: an unknown name of a method, reconstruction, kind, ...; the message
   lists the valid ones.
+* :class:`AllFailedError`: a batch job whose every item failed on bad input (each one listed);
+  a job that keeps any good result lists the bad items and does not raise.
+* :class:`UsageError`: an argument value outside what a function or command accepts (a keyframe
+  count W out of range, frame rates that do not divide); the message names the argument, what is
+  valid and the value given.
 
 The command line prints any :class:`SidqlError` as one line and exits 2; a batch job lists the
 item it failed on and keeps every good result. Errors that are not ``SidqlError`` are bugs (or
@@ -57,6 +63,12 @@ class ModelFileError(BadFileError):
     settings."""
 
 
+class OutputError(BadFileError):
+    """An output that cannot be written where it was asked for: below the folder the user named
+    there is a symbolic link, or the target is a directory, FIFO, device or socket (outputs only
+    ever replace regular files), or a clip its own reader would refuse."""
+
+
 class UnmetTargetError(SidqlError, ValueError):
     """A target no answer meets, e.g. a byte rate too low for the trial's fewest keyframes."""
 
@@ -72,16 +84,34 @@ class UnknownNameError(SidqlError, KeyError, ValueError):
         known: the valid names, in their order.
     """
 
+    MAX_KNOWN = 300  # characters of the list of valid names
+
     def __init__(self, what: str, name, known: Iterable[str]):
         self.what, self.name, self.known = what, name, tuple(str(k) for k in known)
         shown = repr(name) if len(repr(name)) <= 200 else repr(name)[:200] + "..."
-        super().__init__(f"unknown {what} {shown}; known: {', '.join(self.known) or 'none'}")
+        listed = ", ".join(self.known) or "none"
+        if len(listed) > self.MAX_KNOWN:  # a 1,000-bone skeleton: the first names and a count
+            listed = (
+                listed[: self.MAX_KNOWN].rsplit(", ", 1)[0] + f", ... ({len(self.known)} in all)"
+            )
+        super().__init__(f"unknown {what} {shown}; known: {listed}")
 
     def __str__(self) -> str:  # KeyError would print the message quoted
         return str(self.args[0])
 
     def __reduce__(self):
         return (type(self), (self.what, self.name, self.known))
+
+
+class AllFailedError(SidqlError):
+    """A batch job whose every item failed on bad input: nothing to keep. The message lists each
+    item and its error (a job that keeps any good result lists the bad items and goes on)."""
+
+
+class UsageError(SidqlError, ValueError):
+    """An argument value a function or command does not accept (e.g. W outside [2, N], an output
+    rate that does not divide the source rate); the message names the argument, what would be
+    valid and the value given. A ``ValueError`` too, as for any bad argument value."""
 
 
 class MotionDataWarning(UserWarning):

@@ -1,113 +1,333 @@
-"""Atomic outputs (a file is either wholly written or not there at all) and checked inputs
-(regular files only, of bounded size, read without blocking on a FIFO or device).
+"""Outputs written only inside the folder the user named, whole or not at all, and checked inputs
+(regular files only, of bounded size, read without blocking on a FIFO or device). Pure standard
+library, so every room of ``sim`` and ``sidql`` writes through it.
 
-Pure standard library (no numpy, no MuJoCo), so every room of ``sim`` and ``sidql`` can write its
-outputs through it.
+The one writer: every file the project writes goes through :func:`write_atomic` (or, for a file
+another program writes, :func:`written_by`; for the synth journal, :func:`open_append`). Each
+takes the target and ``root``, the folder the user named (default: the target's own folder). The
+writer opens ``root`` (following any link in the path the user typed), then walks to the target's
+folder one name at a time from the parent's descriptor with ``O_NOFOLLOW`` (``openat``), creating
+missing folders with ``mkdirat``: a symbolic link anywhere below ``root`` is refused, never
+followed. The target must be absent or a regular file (never a link, directory, FIFO, device or
+socket: :class:`~sim.errors.OutputError`, one line). Data go to a temporary file in the target's
+folder (``O_TMPFILE``; elsewhere a fresh random name made with ``O_CREAT | O_EXCL |
+O_NOFOLLOW``, as ``mkstemp`` makes it) and are renamed over the target (``renameat`` between
+folder descriptors). Nothing is deleted but files the caller proves it wrote
+(:func:`remove_written`).
 """
 
 from __future__ import annotations
 
 import codecs
+import contextlib
+import errno
 import os
 import secrets
 import shutil
 import stat
-import tempfile
-import zipfile
 from pathlib import Path
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, OutputError
+
+_CLOEXEC = getattr(os, "O_CLOEXEC", 0)
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+_DIRECTORY = getattr(os, "O_DIRECTORY", 0)
 
 
-def write_atomic(path: str | os.PathLike, write) -> None:
-    """Call ``write(fileobj)`` on a temporary file beside ``path``, then rename it into place.
-
-    A crash never leaves a half-written ``path`` behind. Where the system offers unnamed
-    temporary files (Linux ``O_TMPFILE``), the data are written to a file with no name at all,
-    which is linked in only once complete: a process killed while writing (SIGKILL included)
-    leaves nothing behind. Elsewhere the temporary file is named ``.<name>.<random>.tmp`` and
-    removed on any exception.
-    """
+def _parts(path: Path, root: Path | None) -> tuple[Path, tuple[str, ...], str]:
+    """``(root, folders below root, file name)`` of the target ``path``; it must lie below
+    ``root`` as written (no ``..``: a walk never climbs)."""
     path = Path(path)
-    fd = _unnamed_file(path.parent)
-    if fd is None:
-        _write_named(path, write)
-        return
-    with os.fdopen(fd, "w+b") as f:
-        write(f)
-        f.flush()
-        os.fsync(f.fileno())
-        os.fchmod(f.fileno(), 0o666 & ~_umask())
+    root = path.parent if root is None else Path(root)
+    rest = path.parts[len(root.parts) :]
+    if path.parts[: len(root.parts)] != root.parts or not rest or ".." in rest:
+        raise OutputError(str(path), None, f"an output outside its folder {root}; refused")
+    return root, rest[:-1], rest[-1]
+
+
+def _describe(mode: int) -> str:
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    return next((w for test, w in _KINDS if test(mode)), "not a regular file")
+
+
+def _open_folder(root: Path, parts: tuple[str, ...], *, create: bool) -> int | None:
+    """A descriptor of ``root/parts...``, walked from ``root`` one name at a time without
+    following links; missing folders are made (``create``) or give None."""
+    if create:
         try:
-            tmp = _link_unnamed(f.fileno(), path)
-        except OSError:  # /proc lacks the link (a sandbox): copy into a named temporary file
-            f.seek(0)
-            _write_named(path, lambda g: shutil.copyfileobj(f, g))
-            return
+            os.makedirs(root, exist_ok=True)  # the folder the user named: their path as typed
+        except OSError as e:
+            raise OutputError(
+                str(root), None, f"cannot make the output folder: {e.strerror}"
+            ) from None
     try:
-        os.replace(tmp, path)
+        fd = os.open(root, os.O_RDONLY | _DIRECTORY | _CLOEXEC)
+    except OSError as e:
+        if not create and e.errno == errno.ENOENT:
+            return None
+        raise OutputError(str(root), None, f"cannot open the output folder: {e.strerror}") from None
+    where = root
+    try:
+        for part in parts:
+            where = where / part
+            if create:
+                with contextlib.suppress(FileExistsError):
+                    os.mkdir(part, 0o777, dir_fd=fd)
+            try:
+                child = os.open(part, os.O_RDONLY | _DIRECTORY | _NOFOLLOW | _CLOEXEC, dir_fd=fd)
+            except OSError as e:
+                if not create and e.errno == errno.ENOENT:
+                    os.close(fd)
+                    return None
+                try:
+                    what = _describe(os.stat(part, dir_fd=fd, follow_symlinks=False).st_mode)
+                except OSError:
+                    what = e.strerror or "unusable"
+                raise OutputError(
+                    str(where), None, f"{what}, not a folder; outputs never go through one"
+                ) from None
+            os.close(fd)
+            fd = child
     except BaseException:
-        _unlink(tmp)
+        os.close(fd)
         raise
+    return fd
 
 
-def _unnamed_file(folder: Path) -> int | None:
-    """A descriptor of an unnamed, writable file in ``folder`` (``O_TMPFILE``), or None where the
-    system or file system has none (then :func:`write_atomic` uses a named temporary file)."""
+def _check_target(dfd: int, name: str, shown) -> bool:
+    """Whether the target exists; refuses one that is not a regular file (a link included)."""
+    try:
+        mode = os.stat(name, dir_fd=dfd, follow_symlinks=False).st_mode
+    except FileNotFoundError:
+        return False
+    if not stat.S_ISREG(mode):
+        raise OutputError(
+            str(shown), None, f"{_describe(mode)}; an output replaces regular files only"
+        )
+    return True
+
+
+def _named_temp(dfd: int, name: str) -> tuple[int, str]:
+    """A fresh file ``.<name>.<random>.tmp`` in the folder ``dfd``, as ``mkstemp`` makes one."""
+    for _ in range(100):
+        tmp = f".{name[:200]}.{secrets.token_hex(6)}.tmp"
+        try:
+            flags = os.O_CREAT | os.O_EXCL | os.O_RDWR | _NOFOLLOW | _CLOEXEC
+            return os.open(tmp, flags, 0o600, dir_fd=dfd), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name beside {name}")
+
+
+def _unnamed_temp(dfd: int) -> int | None:
+    """An unnamed writable file in the folder ``dfd`` (``O_TMPFILE``), or None where the system
+    or file system has none."""
     flag = getattr(os, "O_TMPFILE", 0)
     if not flag or not os.path.isdir("/proc/self/fd"):
         return None
     try:
-        return os.open(folder, flag | os.O_RDWR | getattr(os, "O_CLOEXEC", 0), 0o600)
-    except FileNotFoundError:
-        raise
+        return os.open(".", flag | os.O_RDWR | _CLOEXEC, 0o600, dir_fd=dfd)
     except OSError:  # EOPNOTSUPP, EISDIR (old kernels), EINVAL: the file system lacks it
         return None
 
 
-def _link_unnamed(fd: int, path: Path) -> Path:
-    """Give the unnamed file ``fd`` a fresh hidden name beside ``path``; returns that name.
-
-    ``linkat(/proc/self/fd/N, AT_SYMLINK_FOLLOW)`` (``os.link`` calls plain ``link`` unless given
-    a directory descriptor, and ``link`` would not follow the descriptor's link)."""
-    proc = os.open("/proc/self/fd", os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+def _link_unnamed(fd: int, dfd: int, name: str) -> str | None:
+    """Give the unnamed file ``fd`` a fresh hidden name in the folder ``dfd`` (``linkat`` of
+    ``/proc/self/fd/N`` with ``AT_SYMLINK_FOLLOW``); None where ``/proc`` lacks the link."""
+    proc = os.open("/proc/self/fd", os.O_RDONLY | _DIRECTORY | _CLOEXEC)
     try:
         for _ in range(100):
-            tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
+            tmp = f".{name[:200]}.{secrets.token_hex(6)}.tmp"
             try:
-                os.link(str(fd), tmp, src_dir_fd=proc, follow_symlinks=True)
+                os.link(str(fd), tmp, src_dir_fd=proc, dst_dir_fd=dfd, follow_symlinks=True)
                 return tmp
             except FileExistsError:
                 continue
-        raise FileExistsError(f"no free temporary name beside {path}")
+            except OSError:
+                return None
+        raise FileExistsError(f"no free temporary name beside {name}")
     finally:
         os.close(proc)
 
 
-def _write_named(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+def _temp_file(dfd: int, name: str, write) -> str:
+    """Write a temporary file in the folder ``dfd`` with ``write(fileobj)``; returns its name."""
+    fd = _unnamed_temp(dfd)
+    tmp = None
+    if fd is None:
+        fd, tmp = _named_temp(dfd, name)
     try:
         with os.fdopen(fd, "w+b") as f:
             write(f)
             f.flush()
+            os.fchmod(f.fileno(), 0o666 & ~_umask())
             os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
-        os.replace(tmp, path)
+            if tmp is None:
+                tmp = _link_unnamed(f.fileno(), dfd, name)
+                if tmp is None:  # a sandbox without the /proc link: copy into a named file
+                    f.seek(0)
+                    tmp = _temp_file(dfd, name, lambda g: shutil.copyfileobj(f, g))
     except BaseException:
-        _unlink(tmp)
+        if tmp is not None:
+            _unlink_at(dfd, tmp)
         raise
+    return tmp
 
 
-def _unlink(path) -> None:
+def _unlink_at(dfd: int, name: str) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(name, dir_fd=dfd)
+
+
+def write_atomic(path: str | os.PathLike, write, *, root: str | os.PathLike | None = None) -> None:
+    """Call ``write(fileobj)`` on a temporary file in ``path``'s folder, then rename it over
+    ``path``: the file is either wholly written or not there at all.
+
+    ``root``: the output folder the user named (default: ``path``'s folder); ``path`` lies below
+    it, and no symbolic link below ``root`` is followed (see the module docstring). A process
+    killed while writing (SIGKILL included) leaves no half file, and where the system offers
+    ``O_TMPFILE`` no temporary file either.
+
+    Raises:
+        OutputError: a link below ``root``, or a target that is not a regular file (one line).
+    """
+    root_dir, folders, name = _parts(Path(path), None if root is None else Path(root))
+    dfd = _open_folder(root_dir, folders, create=True)
     try:
-        os.unlink(path)
+        _check_target(dfd, name, path)
+        tmp = _temp_file(dfd, name, write)
+        try:
+            _check_target(dfd, name, path)
+            os.rename(tmp, name, src_dir_fd=dfd, dst_dir_fd=dfd)
+        except BaseException:
+            _unlink_at(dfd, tmp)
+            raise
+    finally:
+        os.close(dfd)
+
+
+@contextlib.contextmanager
+def written_by(path: str | os.PathLike, *, root: str | os.PathLike | None = None, suffix=""):
+    """For a file another program writes to a path of its own (ffmpeg's videos): yield a path
+    in a private folder (``0700``, a fresh random name in ``path``'s folder) to write to; once
+    the block ends without error, the file is renamed over ``path`` (checked as in
+    :func:`write_atomic`); the private folder is removed either way.
+
+    The path yielded is ``/proc/<pid>/fd/<N>/out<suffix>``, pinned to the private folder's
+    descriptor (where ``/proc`` is there), so no link swapped in meanwhile redirects it."""
+    root_dir, folders, name = _parts(Path(path), None if root is None else Path(root))
+    dfd = _open_folder(root_dir, folders, create=True)
+    pfd = private = None
+    try:
+        _check_target(dfd, name, path)
+        for _ in range(100):
+            private = f".{name[:200]}.{secrets.token_hex(6)}.tmp"
+            try:
+                os.mkdir(private, 0o700, dir_fd=dfd)
+                break
+            except FileExistsError:
+                continue
+        pfd = os.open(private, os.O_RDONLY | _DIRECTORY | _NOFOLLOW | _CLOEXEC, dir_fd=dfd)
+        inner = f"out{suffix}"
+        proc = f"/proc/{os.getpid()}/fd/{pfd}"
+        yield f"{proc}/{inner}" if os.path.isdir(proc) else str(Path(path).parent / private / inner)
+        _check_target(pfd, inner, path)
+        _check_target(dfd, name, path)
+        os.rename(inner, name, src_dir_fd=pfd, dst_dir_fd=dfd)
+    finally:
+        if pfd is not None:
+            for left in os.listdir(pfd):  # what the other program left (only it writes there)
+                _unlink_at(pfd, left)
+            os.close(pfd)
+        if private is not None:
+            with contextlib.suppress(OSError):
+                os.rmdir(private, dir_fd=dfd)
+        os.close(dfd)
+
+
+def open_append(path: str | os.PathLike, *, root: str | os.PathLike | None = None, fresh: bool):
+    """``path`` opened for appending (binary), inside ``root`` as :func:`write_atomic` writes:
+    ``fresh``: a new empty file, put in place atomically (over any old regular file); else the
+    existing regular file, created if missing. Never a link, FIFO, device or socket."""
+    root_dir, folders, name = _parts(Path(path), None if root is None else Path(root))
+    dfd = _open_folder(root_dir, folders, create=True)
+    try:
+        _check_target(dfd, name, path)
+        if fresh:
+            tmp = _temp_file(dfd, name, lambda f: None)
+            fd = os.open(tmp, os.O_WRONLY | os.O_APPEND | _NOFOLLOW | _CLOEXEC, dir_fd=dfd)
+            os.rename(tmp, name, src_dir_fd=dfd, dst_dir_fd=dfd)
+        else:
+            flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW | _CLOEXEC
+            fd = os.open(name, flags | getattr(os, "O_NONBLOCK", 0), 0o666, dir_fd=dfd)
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                os.close(fd)
+                _check_target(dfd, name, path)  # swapped in meanwhile: refused as such
+            os.set_blocking(fd, True)
+    finally:
+        os.close(dfd)
+    return os.fdopen(fd, "ab")
+
+
+def make_folders(root: str | os.PathLike, folders) -> None:
+    """Make each folder of ``folders`` (relative paths) below ``root`` as the writer walks to it
+    (no link followed): a batch checks its output folders before any work."""
+    for rel in folders:
+        os.close(_open_folder(Path(root), Path(rel).parts, create=True))
+
+
+def remove_written(path: str | os.PathLike, *, root: str | os.PathLike) -> bool:
+    """Delete ``path``, a file the caller proves it wrote (its name is one the caller itself
+    gives), if it is a regular file reached from ``root`` through no link; anything else
+    (a link, a folder, a device) is left alone. Returns whether a file was deleted."""
+    root_dir, folders, name = _parts(Path(path), Path(root))
+    try:
+        dfd = _open_folder(root_dir, folders, create=False)
+    except OutputError:
+        return False
+    if dfd is None:
+        return False
+    try:
+        if not stat.S_ISREG(os.stat(name, dir_fd=dfd, follow_symlinks=False).st_mode):
+            return False
+        os.unlink(name, dir_fd=dfd)
+        return True
     except FileNotFoundError:
-        pass
+        return False
+    finally:
+        os.close(dfd)
+
+
+def open_inside(path: str | os.PathLike, max_bytes: int, *, root: str | os.PathLike):
+    """Open ``path``, a file of the run's own state below ``root`` (a journal), for binary
+    reading as :func:`open_regular` does, reached through no link; None if it is absent.
+    A link on the way, no regular file or one over ``max_bytes``: :class:`MotionDataError`."""
+    root_dir, folders, name = _parts(Path(path), Path(root))
+    try:
+        dfd = _open_folder(root_dir, folders, create=False)
+    except OutputError as e:
+        raise MotionDataError(e.path, None, e.problem) from None
+    if dfd is None:
+        return None
+    try:
+        flags = os.O_RDONLY | _NOFOLLOW | getattr(os, "O_NONBLOCK", 0) | _CLOEXEC
+        fd = os.open(name, flags, dir_fd=dfd)
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        try:
+            what = _describe(os.stat(name, dir_fd=dfd, follow_symlinks=False).st_mode)
+        except OSError:
+            what = e.strerror or "unreadable"
+        raise MotionDataError(str(path), None, f"cannot read: {what}") from None
+    finally:
+        os.close(dfd)
+    return _checked(fd, str(path), max_bytes)
 
 
 def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
+    os.umask(mask := os.umask(0))
     return mask
 
 
@@ -145,19 +365,25 @@ def open_regular(path: str | os.PathLike, max_bytes: int):
             file larger than ``max_bytes`` (one line naming the file).
     """
     name = os.fspath(path)
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | _CLOEXEC
     try:
         fd = os.open(name, flags)
     except OSError as e:
         raise MotionDataError(str(name), None, f"cannot read file: {e.strerror or e}") from None
+    return _checked(fd, str(name), max_bytes)
+
+
+def _checked(fd: int, name: str, max_bytes: int):
+    """The descriptor ``fd`` as a blocking binary file object if it is a regular file of at most
+    ``max_bytes`` bytes; else it is closed and a :class:`MotionDataError` raised."""
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             kind = next((w for test, w in _KINDS if test(st.st_mode)), "not a regular file")
-            raise MotionDataError(str(name), None, f"not a regular file ({kind})")
+            raise MotionDataError(name, None, f"not a regular file ({kind})")
         if st.st_size > max_bytes:
             raise MotionDataError(
-                str(name), None, f"file of {st.st_size:,} bytes exceeds the limit of {max_bytes:,}"
+                name, None, f"file of {st.st_size:,} bytes exceeds the limit of {max_bytes:,}"
             )
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
@@ -270,45 +496,3 @@ def text_lines(f, path: str, max_bytes: int):
         carry = data[end + 1 :]
         yield line, lines
         line += len(lines)
-
-
-def check_zip(zf, size: int, path: str, *, max_members: int, max_inflated: int, stored_only: bool):
-    """Check the directory of the opened ``zipfile.ZipFile`` ``zf`` (a file of ``size`` bytes)
-    before any member is read, and return its members.
-
-    Refused: more than ``max_members`` members, repeated names, encrypted members, a compression
-    other than none (or deflate, unless ``stored_only``), members whose data overlap or run past
-    the end of the file (the overlapping-member zip bomb) and members inflating to more than
-    ``max_inflated`` bytes in all (the deflate bomb).
-
-    Raises:
-        MotionDataError: one line naming the file and the problem.
-    """
-    infos = zf.infolist()
-    if len(infos) > max_members:
-        raise MotionDataError(path, None, f"{len(infos):,} zip members; at most {max_members:,}")
-    if len({i.filename for i in infos}) != len(infos):
-        raise MotionDataError(path, None, "repeated zip member names")
-    methods = (zipfile.ZIP_STORED,) if stored_only else (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED)
-    inflated = 0
-    for info in infos:
-        if info.flag_bits & 0x1:
-            raise MotionDataError(path, None, f"zip member {excerpt(info.filename)} is encrypted")
-        if info.compress_type not in methods:
-            kind = "stored (uncompressed)" if stored_only else "stored or deflated"
-            raise MotionDataError(path, None, f"zip member {excerpt(info.filename)} is not {kind}")
-        if info.compress_type == zipfile.ZIP_STORED and info.compress_size != info.file_size:
-            raise MotionDataError(path, None, f"zip member {excerpt(info.filename)}: bad size")
-        inflated += info.file_size
-    if inflated > max_inflated:
-        raise MotionDataError(
-            path, None, f"zip members inflate to {inflated:,} bytes; at most {max_inflated:,}"
-        )
-    end = 0
-    for info in sorted(infos, key=lambda i: i.header_offset):
-        if info.header_offset < end:
-            raise MotionDataError(path, None, "zip members overlap")
-        end = info.header_offset + 30 + len(info.filename.encode()) + info.compress_size
-        if end > size:
-            raise MotionDataError(path, None, "zip member runs past the end of the file")
-    return infos

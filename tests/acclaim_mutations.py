@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.reader import Motion, Skeleton, check_bone_name, parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import check_bone_name, parse_asf
+from sim.acclaim.records import Motion, Skeleton
 from sim.errors import MotionDataError, MotionDataWarning
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion

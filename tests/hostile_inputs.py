@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from acclaim_mutations import Breach, line_count, mutate, non_finite, read_all, seed_amc
 
-from sim.acclaim.reader import check_bone_name
+from sim.acclaim.asf import check_bone_name
 from sim.errors import BadFileError
 
 KINDS = ("asf", "amc", "sidq", "npz", "index", "policy", "checkpoint")
@@ -843,7 +843,7 @@ def _read_npz(path: Path, folder: Path, _args) -> list:
 
 
 def _read_index(path: Path, folder: Path, _args) -> list:
-    from sim.acclaim.reader import parse_asf
+    from sim.acclaim.asf import parse_asf
     from sim.motion.dataset import load_dataset_clips
 
     clips, _, asfs = load_dataset_clips(path, skeletons=True)

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError, MotionDataWarning
 
 
@@ -341,7 +342,7 @@ def test_limits_on_one_line_and_limits_after_each_dof_count(tmp_path):
 
 
 def test_deep_or_huge_skeletons_are_refused_before_building_a_model(tmp_path):
-    from sim.acclaim.reader import MAX_DEPTH
+    from sim.acclaim.records import MAX_DEPTH
 
     n = MAX_DEPTH + 1
     blocks = "".join(
@@ -360,7 +361,7 @@ def test_deep_or_huge_skeletons_are_refused_before_building_a_model(tmp_path):
 def test_a_chain_at_the_depth_limit_builds_a_mujoco_model(tmp_path):
     import mujoco
 
-    from sim.acclaim.reader import MAX_DEPTH
+    from sim.acclaim.records import MAX_DEPTH
     from sim.model.humanoid import build_mjcf
 
     n = MAX_DEPTH
@@ -468,7 +469,7 @@ def test_unicode_or_signed_frame_numbers_mid_file_are_refused_on_their_line(tmp_
 
 
 def test_too_many_bones_are_refused_at_the_first_extra_bone(tmp_path):
-    from sim.acclaim.reader import MAX_BONES
+    from sim.acclaim.records import MAX_BONES
 
     blocks = "".join(
         f"  begin\n     name b{i}\n     direction 0 -1 0\n     length 0.1\n  end\n"

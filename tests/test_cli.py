@@ -155,3 +155,41 @@ def test_report_on_a_skeleton_without_the_protocol_bones_exits_2(cmu_dir, tmp_pa
     line = one_error_line(capsys, "report")
     assert "02_01.amc" in line and "lacks protocol point(s) lhumerus" in line
     assert not out.exists()
+
+
+def test_a_source_rate_the_output_rate_does_not_divide_exits_2_with_one_line(
+    trial, tmp_path, capsys
+):
+    """ingest --source-fps 7 was a 19-line ValueError traceback with exit 1; the library raises
+    a UsageError where the rates meet (sim.motion.ingest.resample_step)."""
+    asf, amc = trial
+    out = tmp_path / "x.npz"
+    assert cli.main(["ingest", asf, amc, "--out", str(out), "--source-fps", "7"]) == 2
+    line = one_error_line(capsys, "ingest")
+    assert "output rate 30.0 fps must divide the source rate 7.0 fps" in line
+    with pytest.raises(SystemExit) as e:
+        cli.main(["ingest", asf, amc, "--out", str(out), "--source-fps", "0"])
+    assert e.value.code == 2 and "must be positive" in one_error_line(capsys, "ingest")
+    assert not out.exists()
+
+
+def test_a_resample_step_refuses_bad_rates_with_a_usage_error():
+    from sim.errors import UsageError
+    from sim.motion.ingest import resample_step
+
+    assert resample_step(120.0, 30.0) == 4
+    for source, fps in ((7.0, 30.0), (0.0, 30.0), (120.0, -1.0), (float("inf"), 30.0),
+                        (float("nan"), 30.0)):  # fmt: skip
+        with pytest.raises(UsageError):
+            resample_step(source, fps)
+
+
+def test_report_clip_numbers_out_of_range_exit_2_naming_them(trial, tmp_path, capsys):
+    """The catch-all ``except ValueError`` of the report command is gone: the library raises a
+    UsageError for clip numbers the trial does not have."""
+    asf, amc = trial
+    out = tmp_path / "rep"
+    argv = ["report", asf, amc, "--methods", "uniform", "--clips", "999", "--no-video"]
+    assert cli.main([*argv, "--out", str(out), "--quiet"]) == 2
+    assert "clip numbers [999] out of range" in one_error_line(capsys, "report")
+    assert not out.exists()

@@ -22,6 +22,7 @@ FOLDER = {"dataset", "demo", "eval", "synth", "train"}
 KEYFRAMES = {"demo": False, "report": False, "extract": True, "eval": True, "train": True}
 METHODS = {"demo", "report", "extract", "eval"}
 PROGRESS = {"dataset", "demo", "report", "eval", "synth", "train"}
+WORKERS = {"dataset", "report", "eval", "synth"}
 
 
 def commands() -> dict[str, argparse.ArgumentParser]:
@@ -46,7 +47,10 @@ def test_one_spelling_per_idea_in_every_command():
             assert (opts["-W"].nargs == "+") == KEYFRAMES[name], name
         assert ("--methods" in opts) == (name in METHODS), name
         assert ("--quiet" in opts) == (name in PROGRESS), name
-        assert not {"--from", "--method", "--dir"} & set(opts), name  # old spellings: hidden
+        assert not {"--from", "--method", "--dir", "--subjects", "--simulate-samples"} & set(opts)
+        assert ("--workers" in opts) == (name in WORKERS), name
+        if name in WORKERS:  # one declaration: one default, one metavar
+            assert (opts["--workers"].default, opts["--workers"].metavar) == (1, "N"), name
 
 
 def test_help_shows_no_empty_defaults_and_train_explains_every_setting():
@@ -79,6 +83,10 @@ def test_version(capsys):
         (["synth", "--from", "D", "--n", "1", "--out", "o"], "data", "D", "--data DIR"),
         (["extract", "a.asf", "b.amc", "-W", "5", "--method", "greedy"], "methods", ["greedy"],
          "--methods"),
+        (["eval", "--subjects", "01", "07"], "test_subjects", ["01", "07"], "--test-subjects"),
+        (["eval", "--simulate", "--simulate-samples", "8"], "samples", 8, "--samples N"),
+        (["eval", "--methods", "uniform", "xyz"], "methods", ["uniform", "cartesian"],
+         "use cartesian"),
     ],
 )  # fmt: skip
 def test_old_spellings_still_work_and_warn(argv, dest, value, new):
@@ -87,7 +95,7 @@ def test_old_spellings_still_work_and_warn(argv, dest, value, new):
         args = cli.build_parser().parse_args(argv)
     assert getattr(args, dest) == value
     (w,) = [c for c in caught if issubclass(c.category, UsageWarning)]
-    assert "old spelling" in str(w.message) and new in str(w.message)
+    assert "old " in str(w.message) and new in str(w.message)
 
 
 def test_new_spellings_do_not_warn():
@@ -96,7 +104,12 @@ def test_new_spellings_do_not_warn():
         args = cli.build_parser().parse_args(["dataset", "--data", "D", "--out", "o"])
         assert args.data == "D"
         args = cli.build_parser().parse_args(["extract", "a", "b", "-W", "4", "6"])
-        assert args.keyframes == [4, 6] and args.methods == ["optimal"]
+        assert args.W == [4, 6] and args.methods == ["optimal"]
+        args = cli.build_parser().parse_args(["eval", "--test-subjects", "01", "--samples", "8"])
+        assert args.test_subjects == ["01"] and args.samples == 8
+        args = cli.build_parser().parse_args(["report", "a", "b", "--methods", "cartesian",
+                                              "--out", "o"])  # fmt: skip
+        assert args.methods == ["cartesian"]
 
 
 def test_an_old_spelling_through_the_cli_is_one_warning_line(cmu_dir, tmp_path, capsys):
@@ -128,3 +141,35 @@ def test_the_data_folder_comes_from_the_environment_or_is_asked_for(monkeypatch,
     assert cli.main(["eval", "--out", str(tmp_path / "r.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "pass --data DIR or set SIDQL_DATA" in err
+
+
+def test_each_command_summary_is_kept_once_in_main():
+    """``sidql --help`` and each command's own parser show the one summary of
+    ``main.COMMANDS``; a command module holds its description and options, no summary."""
+    import importlib
+    import inspect
+
+    top = cli.build_parser().format_help()
+    for name, summary in cli.COMMANDS.items():
+        assert " ".join(summary.split()[:4]) in " ".join(top.split()), name
+        module = importlib.import_module(f"sidql.commands.{name}")
+        assert "add_parser" not in inspect.getsource(module), name
+        assert module.DESCRIPTION.strip(), name
+    assert set(commands()) == set(cli.COMMANDS)
+
+
+def test_the_least_w_is_one_rule(cmu_dir, trial_files, capsys):
+    """W counts both end frames: 2 for every method; 3 for training (one decision to learn)."""
+    from sidql.keyframes.counts import LEAST_LEARNED_W, LEAST_W
+
+    assert (LEAST_W, LEAST_LEARNED_W) == (2, 3)
+    asf, amc = trial_files
+    assert cli.main(["extract", asf, amc, "-W", "1"]) == 2
+    assert "--keyframes must be in [2, 60]; got 1" in capsys.readouterr().err
+    assert cli.main(["train", "--data", str(cmu_dir), "-W", "2", "5"]) == 2
+    assert "--keyframes must be in [3, 60]; got [2, 5]" in capsys.readouterr().err
+
+
+@pytest.fixture
+def trial_files(cmu_dir):
+    return str(cmu_dir / "02" / "02.asf"), str(cmu_dir / "02" / "02_01.amc")

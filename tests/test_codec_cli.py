@@ -13,7 +13,8 @@ from sidql.codec.decode import decode_to_reconstruction
 from sidql.codec.skeleton import fit_motion, skeleton_hash
 from sidql.commands.main import main
 from sidql.keyframes.spherical import POINTS, protocol_indices
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.acclaim.writer import write_amc
 from sim.model.kinematics import point_names
 from sim.motion.clip import load_npz

@@ -177,7 +177,7 @@ def test_the_shortest_trials_encode_within_their_budget(series, n):
     budget = 5000.0 * n * series.dt
     enc = encode_series(sub, rate=5000.0)
     assert len(enc.data) <= budget and enc.stream.n_frames == n
-    assert encode_series(sub, max_error=1.0).mean_error_mm <= 1.0
+    assert encode_series(sub, max_error=1.0).mean_error_mm <= 1.0 + 1e-9
 
 
 def test_an_unreachable_error_says_what_can_be_reached(series):

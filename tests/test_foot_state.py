@@ -10,8 +10,8 @@ import pytest
 from sim.motion.points import PointMotion
 from sim.physics.contacts import foot_states
 from sim.physics.feet import sole
+from sim.physics.foot_state import FootState
 from sim.physics.ground import estimate_ground
-from sim.replay.foot_state import FootState
 
 NAMES = ("root", "ltibia", "lfoot", "rtibia", "rfoot")
 PARENTS = np.array([-1, 0, 1, 0, 3])

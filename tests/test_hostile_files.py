@@ -29,7 +29,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import sim.files
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError
 from sim.files import excerpt, text_lines, write_atomic
 from sim.motion.clip import load_npz, save_npz

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from acclaim_fk import acclaim_points
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataWarning
 from sim.model.humanoid import HUMANOID_XML, build_mjcf, canonical_skeleton
 from sim.model.kinematics import point_names

@@ -8,6 +8,7 @@ from keyframe_synth import smooth_clip
 
 from sidql.keyframes import methods
 from sidql.keyframes.spherical import chart
+from sim.errors import UsageError
 
 
 @pytest.fixture(scope="module")
@@ -77,8 +78,21 @@ def test_unknown_names_and_bad_counts_are_clear_errors(clip):
     with pytest.raises(KeyError, match="known: .*greedy"):
         methods.select("nope", clip, 5)
     for W in (1, 61):
-        with pytest.raises(ValueError, match="W must be"):
+        with pytest.raises(UsageError, match=r"W must be in \[2, 60\]"):
             methods.select("uniform", clip, W)
+
+
+def test_the_cartesian_baseline_is_named_cartesian_and_its_old_name_warns(clip):
+    """Method ``cartesian`` (uniform keyframes for the ``cartesian`` reconstruction); its old
+    name ``xyz`` still selects it, with a FutureWarning naming the new one."""
+    assert "cartesian" in methods.available() and "xyz" not in methods.available()
+    assert methods.reconstruction_of("cartesian") == "cartesian"
+    keys = methods.select("cartesian", clip, 5)
+    assert keys.tolist() == methods.select("uniform", clip, 5).tolist()
+    with pytest.warns(FutureWarning, match="'xyz' is an old name; use 'cartesian'"):
+        assert methods.select("xyz", clip, 5).tolist() == keys.tolist()
+    with pytest.warns(FutureWarning):
+        assert methods.reconstruction_of("xyz") == "cartesian"
 
 
 def test_lazy_greedy_equals_greedy_over_the_full_cost_matrix():

@@ -9,11 +9,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from sim.analysis.job import PhysicsJob
 from sim.model import quaternion as quat
 from sim.model.angles import wrap_angle
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.rotations import Y_UP_TO_Z_UP
-from sim.physics.analysis import PhysicsJob
 from sim.physics.dynamics import InverseDynamics, derivatives, pyramid, residual_wrench
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import HumanoidIK, anatomical_ranges, hinge_names, limit_excess
@@ -367,7 +367,7 @@ def test_held_frames_need_a_sustained_horizontal_force_no_contact_supplies():
     """A sideways residual over 0.15 BW for 0.2 s or longer is held by something else; an impact
     the source filter spreads over 5 frames, a vertical residual, a weaker force and a run an
     unmeasured frame breaks are not."""
-    from sim.physics.analysis import HELD_BW, held_frames
+    from sim.physics.support import HELD_BW, held_frames
 
     W, fps = 700.0, 30.0
     r = np.zeros((90, 3))
@@ -387,7 +387,7 @@ def test_held_frames_need_a_sustained_horizontal_force_no_contact_supplies():
 
 
 def test_residual_causes_and_the_support_verdict_for_held_trials():
-    from sim.physics.analysis import RESIDUAL_CAUSES, residual_causes, support_verdict
+    from sim.physics.support import RESIDUAL_CAUSES, residual_causes, support_verdict
 
     F = np.array([[0.0, 0.0, 700.0], [900.0, 0.0, 700.0], [0.0, 100.0, -50.0], [10.0, 0, 0.0],
                   [400.0, 400.0, 700.0], [500.0, 0.0, 700.0]])  # fmt: skip
@@ -413,8 +413,7 @@ def test_residual_causes_and_the_support_verdict_for_held_trials():
 
 
 def test_dynamics_figures_are_over_the_measured_frames_and_say_how_many_are_not():
-    from sim.physics.analysis import summarise_dynamics
-    from sim.physics.dynamics import Dynamics
+    from sim.physics.dynamics import Dynamics, summarise_dynamics
 
     T = 6
     rf = np.zeros((T, 3))

@@ -22,12 +22,12 @@ import numpy as np
 import pytest
 
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
+from sim.analysis.job import PhysicsJob
 from sim.model import quaternion as quat
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import point_names, point_parents
 from sim.model.rotations import Y_UP_TO_Z_UP
 from sim.motion.ingest import clip_from_qpos
-from sim.physics.analysis import PhysicsJob
 from sim.physics.ground import Ground
 
 SIM_HZ, DENSE_HZ, FPS = 1200, 120, 30
@@ -278,7 +278,7 @@ def test_a_sustained_pull_is_held_by_something_else_an_impact_and_a_landing_are_
     120 Hz): the frames of the pull are held by something else (:func:`held_frames`), the free
     flight more than 2 frames from it is not; a 10 ms kick of 4 kN on a foot (spread by the filter) is not, and
     neither is a landing on the floor."""
-    from sim.physics.analysis import held_frames
+    from sim.physics.support import held_frames
 
     W = 75.0 * 9.81
     pull = np.array([0.4 * W, 0.0, 0.0])

@@ -10,19 +10,11 @@ import pytest
 from PIL import Image
 
 from sim.motion.synthetic import synthetic_motion
+from sim.replay.annotate import annotate, caption
 from sim.replay.checks import PointMotion, from_clip
-from sim.replay.render import (
-    RenderStyle,
-    SkeletonRenderer,
-    annotate,
-    camera_path,
-    caption,
-    contact_sheet,
-    keyframe_sheet,
-    render_frames,
-    worst_frames,
-    write_video,
-)
+from sim.replay.render import RenderStyle, SkeletonRenderer, camera_path
+from sim.replay.sheets import contact_sheet, keyframe_sheet, worst_frames
+from sim.replay.video import render_frames, write_video
 
 SMALL = RenderStyle(width=192, height=144)  # multiples of 16: no resizing by the encoder
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sidql.evaluation.validation import validate_clip
-from sim.replay.capsules import adjacent_pairs, bone_poses, bones_of
+from sim.model.capsules import adjacent_pairs, bone_poses, bones_of
 from sim.replay.checks import (
     CollisionScene,
     PointMotion,
@@ -264,17 +264,17 @@ def test_one_scene_per_clip_gives_the_figures_of_a_fresh_scene_per_replay():
 
 
 def test_the_cartesian_baseline_stretches_bones_that_the_chart_keeps(walk_clip):
-    """The ``xyz`` method (uniform keyframes, points interpolated in xyz) is the one the bone-drift
-    check exists for: under its own reconstruction bones change length by millimetres, under the
-    spherical Hermite (same keyframes) they do not."""
-    v = validate_clip(walk_clip.slice(0, 60), ["xyz"], 5)
+    """The ``cartesian`` method (uniform keyframes, points interpolated in xyz) is the one the
+    bone-drift check exists for: under its own reconstruction bones change length by millimetres,
+    under the spherical Hermite (same keyframes) they do not."""
+    v = validate_clip(walk_clip.slice(0, 60), ["cartesian"], 5)
     runs = {r.label: r for r in v.runs}
-    assert set(runs) == {"xyz", "xyz+cartesian"}
-    assert runs["xyz"].summary["bone_drift_max_mm"] < 1e-6
-    assert runs["xyz+cartesian"].summary["bone_drift_max_mm"] > 5.0
-    np.testing.assert_array_equal(runs["xyz"].keyframes, [0, 15, 30, 44, 59])
+    assert set(runs) == {"cartesian+hermite", "cartesian"}
+    assert runs["cartesian+hermite"].summary["bone_drift_max_mm"] < 1e-6
+    assert runs["cartesian"].summary["bone_drift_max_mm"] > 5.0
+    np.testing.assert_array_equal(runs["cartesian"].keyframes, [0, 15, 30, 44, 59])
 
 
 def test_a_hermite_row_another_method_already_shows_is_not_repeated(walk_clip):
-    v = validate_clip(walk_clip.slice(0, 60), ["uniform", "xyz", "pitch"], 5)
-    assert [r.label for r in v.runs] == ["uniform", "xyz+cartesian", "pitch", "pitch+slerp"]
+    v = validate_clip(walk_clip.slice(0, 60), ["uniform", "cartesian", "pitch"], 5)
+    assert [r.label for r in v.runs] == ["uniform", "cartesian", "pitch", "pitch+slerp"]

@@ -86,17 +86,18 @@ def test_forward_validation_carries_its_sampling_to_other_processes(model):
     assert pickle.loads(pickle.dumps(ForwardValidation(model, ("root",)))).samples == 0
 
 
-def test_eval_simulate_samples_needs_simulate_and_a_positive_count(tmp_path, capsys):
+def test_eval_samples_needs_simulate_and_a_positive_count(tmp_path, capsys):
     from sidql.commands import main as cli
 
     out = str(tmp_path / "r.json")
-    argv = ["eval", "--data", str(tmp_path), "--physics", "--simulate-samples", "8", "--out", out]
+    argv = ["eval", "--data", str(tmp_path), "--physics", "--samples", "8", "--out", out]
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["sidql eval: error: --simulate-samples needs --simulate"]
-    with pytest.raises(SystemExit) as e:
-        cli.main(["eval", "--data", str(tmp_path), "--simulate-samples", "0", "--out", out])
-    assert e.value.code == 2
+    assert err == ["sidql eval: error: --samples needs --simulate"]
+    for old in ("--samples", "--simulate-samples"):  # the old spelling is checked the same way
+        with pytest.raises(SystemExit) as e:
+            cli.main(["eval", "--data", str(tmp_path), old, "0", "--out", out])
+        assert e.value.code == 2
 
 
 def test_synth_with_samples_tracks_real_kinds_without_any_help(cmu_dir):

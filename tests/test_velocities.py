@@ -90,7 +90,8 @@ def test_euler_flips_in_an_amc_file_change_no_point_and_no_velocity(cmu_dir, tmp
     and whole turns added (every bone) ingests to the same qpos, points and velocities."""
     from dataclasses import replace
 
-    from sim.acclaim.reader import parse_amc, parse_asf
+    from sim.acclaim.amc import parse_amc
+    from sim.acclaim.asf import parse_asf
     from sim.acclaim.writer import write_amc
     from sim.model.rotations import euler_twin
     from sim.motion.ingest import load_motion
@@ -220,7 +221,8 @@ def test_edge_windows_differentiate_a_quartic_exactly_and_say_how_much_noise_the
     assert gain[0, 0] == pytest.approx(5.33, abs=0.01)  # read at the window's first sample
     assert gain[-1, 0] == pytest.approx(gain[0, 0])  # and at its last
     assert gain[1, 0] == pytest.approx(3.93, abs=0.01)
-    assert gain[3, 0] <= 1.0 and gain[4, 0] == pytest.approx(1.0)  # four samples in: as centred
+    # four samples in: as centred (the two windows' sums agree to rounding, not bit for bit)
+    assert gain[3, 0] <= 1.0 + 1e-9 and gain[4, 0] == pytest.approx(1.0)
     # the ratio is what noise does: seeded white noise through both windows
     rng = np.random.default_rng(3)
     noise = rng.normal(0.0, 1e-3, (4000, T, 1, 3))

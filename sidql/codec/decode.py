@@ -22,7 +22,7 @@ from sidql.keyframes.spherical import (
     positions_from_chart,
     split_channels,
 )
-from sim.acclaim.reader import parse_asf
+from sim.acclaim.asf import parse_asf
 from sim.acclaim.writer import write_amc
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip, save_npz
@@ -159,7 +159,6 @@ def decode_file(
         )
     rec = reconstruct_stream(stream)
     motion = fit_motion(skeleton, rec.positions, rec.names)
-    out.parent.mkdir(parents=True, exist_ok=True)
     write_amc(
         out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
     )

@@ -53,7 +53,7 @@ from sidql.codec.stream import horizon, stream_for_budget, stream_for_quality
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, split_channels
-from sim.acclaim.reader import parse_asf
+from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError
 from sim.files import write_atomic
 from sim.motion.clip import Clip
@@ -670,6 +670,5 @@ def encode_files(
     except ValueError as e:  # e.g. an output rate that does not divide the source rate
         raise MotionDataError(str(amc), None, str(e)) from None
     enc = encode_clip(clip, skel_hash=skel, **kwargs)
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
     write_atomic(Path(out), lambda f: f.write(enc.data))
     return enc

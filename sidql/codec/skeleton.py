@@ -19,7 +19,7 @@ import hashlib
 
 import numpy as np
 
-from sim.acclaim.reader import Motion, Skeleton
+from sim.acclaim.records import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model.humanoid import bone_frames
 from sim.model.rotations import Y_UP_TO_Z_UP, axis_rotation, euler_angles_deg

@@ -3,40 +3,31 @@
 from __future__ import annotations
 
 from sidql.commands.usage import (
-    HelpFormatter,
     add_data,
     add_quiet,
     add_ray,
     add_skeleton,
+    add_workers,
     cmu_rate,
     data_folder,
-    positive,
 )
 from sim.motion.dataset import ingest_directory
 
+DESCRIPTION = (
+    "Ingest every SS_TT.amc (with SS.asf beside it) under --data, in worker processes with "
+    "--workers: one .npz per trial under OUT/<subject>/, plus OUT/index.json. Bad files are "
+    "skipped and listed; every good result is kept; every file is written atomically. Output "
+    "names are made safe (never outside OUT) and unique (same-named trials from different folders "
+    "get a hash suffix; index.json maps each file to its input)."
+)
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "dataset",
-        help="ingest every trial under a folder of CMU files",
-        description="Ingest every SS_TT.amc (with SS.asf beside it) under --data in parallel worker "
-        "processes: one .npz per trial under OUT/<subject>/, plus OUT/index.json. Bad files are "
-        "skipped and listed; every good result is kept; every file is written atomically. Output "
-        "names are made safe (never outside OUT) and unique (same-named trials from different "
-        "folders get a hash suffix; index.json maps each file to its input).",
-        formatter_class=HelpFormatter,
-    )
+
+def register(p) -> None:
     add_data(p, old_positional=True)
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_skeleton(p)
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
-    p.add_argument(
-        "--workers",
-        type=positive(int),
-        default=None,
-        metavar="N",
-        help="worker processes (default: cores)",
-    )
+    add_workers(p, "the trials")
     add_ray(p, "the trials")
     add_quiet(p)
     p.set_defaults(func=run)

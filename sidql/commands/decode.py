@@ -3,23 +3,21 @@
 from __future__ import annotations
 
 from sidql.codec.decode import decode_file
-from sidql.commands.usage import HelpFormatter
+
+DESCRIPTION = (
+    "Rebuild every frame of the trial at the stream's rate from its keyframes. .npz: the 23 "
+    "protocol points in the 'sidql ingest' format (names, parents, positions, velocities, fps, "
+    "...). .amc: angles of the source skeleton (give its ASF with --asf; its hash must match the "
+    "stream's) fitted to the decoded points, one AMC frame per stream frame."
+)
 
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "decode",
-        help="decode a .sidq stream into an .npz clip or an .amc motion",
-        description="Rebuild every frame of the trial at the stream's rate from its keyframes. "
-        ".npz: the 23 protocol points in the 'sidql ingest' format (names, parents, positions, "
-        "velocities, fps, ...). .amc: angles of the source skeleton (give its ASF with --asf; "
-        "its hash must match the stream's) fitted to the decoded points, one AMC frame per "
-        "stream frame.",
-        formatter_class=HelpFormatter,
+def register(p) -> None:
+    p.add_argument("stream", metavar="F.sidq", help="input stream")
+    p.add_argument(
+        "--out", required=True, metavar="OUT.npz|OUT.amc", help="output points or angles"
     )
-    p.add_argument("stream", help="input .sidq file")
-    p.add_argument("--out", required=True, help="output .npz or .amc")
-    p.add_argument("--asf", help="source skeleton (needed for .amc output)")
+    p.add_argument("--asf", metavar="ASF", help="source skeleton (needed for .amc output)")
     p.set_defaults(func=run)
 
 

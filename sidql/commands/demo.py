@@ -1,4 +1,5 @@
-"""``sidql demo``: the main job on an embedded default (what ``./run.sh demo`` runs)."""
+"""``sidql demo``: the main job on CMU trial 02_01, or on motion generated on the humanoid when the
+data folder lacks it (what ``./run.sh demo`` runs)."""
 
 from __future__ import annotations
 
@@ -7,11 +8,11 @@ from pathlib import Path
 
 from sidql.commands.ingest import describe
 from sidql.commands.usage import (
-    HelpFormatter,
     add_data,
     add_keyframes,
     add_methods,
     add_quiet,
+    check_keyframes,
     data_folder,
 )
 from sidql.evaluation.report import report_clips
@@ -24,20 +25,20 @@ from sim.motion.synthetic import synthetic_motion
 
 DEFAULT_TRIAL = ("02", "02_01")
 
+DESCRIPTION = (
+    "Ingest CMU trial 02_01 from the data folder and print its summary; without it (no folder, or "
+    "no 02/02.asf and 02/02_01.amc in it), generate 8 s of motion on the shared humanoid instead "
+    "(every hinge a sum of sinusoids inside its joint limits, the root travelling and turning: "
+    "sim.motion.synthetic, seed 0). Then choose keyframes of the first 60-frame clip with every "
+    "method, reconstruct, replay in MuJoCo, fit the humanoid for the contact and dynamics checks, "
+    "render and write the HTML report (OUT/report/index.html)."
+)
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "demo",
-        help="run the main job on the embedded default",
-        description="Ingest a real CMU trial (02_01 from the data folder when present, else a "
-        "motion generated on the humanoid) and print its summary; then choose keyframes of its first "
-        "60-frame clip with every method, reconstruct, replay in MuJoCo, render and write the "
-        "HTML report (OUT/report/index.html).",
-        formatter_class=HelpFormatter,
-    )
+
+def register(p) -> None:
     add_data(p, "folder of CMU trials holding 02/02.asf and 02/02_01.amc")
-    p.add_argument("--out", default="out/demo", help="output folder")
-    add_keyframes(p, "keyframes of the report's clip", default=10)
+    p.add_argument("--out", default="out/demo", metavar="DIR", help="output folder")
+    add_keyframes(p, "keyframes W of the report's clip", default=10)
     add_methods(p, None, "keyframe methods (default: every registered one)")
     p.add_argument("--no-report", action="store_true", help="stop after ingesting")
     add_quiet(p)
@@ -58,6 +59,7 @@ def default_clip(data: str | Path | None):
 
 
 def run(args) -> int:
+    check_keyframes(args, 60)
     args.data = data_folder(args, required=False)
     clip = default_clip(args.data)
     print(describe(clip))
@@ -76,7 +78,7 @@ def report_step(clip, args) -> int:
     methods = args.methods or available()
     first = clip.slice(0, min(60, clip.n_frames))
     page = report_clips(
-        [first], Path(args.out) / "report", W=args.keyframes, methods=methods,
+        [first], Path(args.out) / "report", W=args.W, methods=methods,
         joint_ranges=joint_ranges(model), title=f"Replay checks: {Path(clip.source).name or 'synthetic'}",
         meta={"source": clip.source or "synthetic motion", "clip": "frames 0-59 at 30 fps"},
         model=model, progress=not args.quiet,

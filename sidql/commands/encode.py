@@ -4,33 +4,36 @@ from __future__ import annotations
 
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
-from sidql.commands.usage import HelpFormatter, positive
+from sidql.commands.usage import positive
+
+DESCRIPTION = (
+    "Chart the trial's 22 bones and root at --fps, choose keyframes over the whole trial by "
+    "dynamic programming (max gap --max-gap, distortion + lambda x bytes, lambda by bisection) and "
+    "write the .sidq container (format: docs/codec.md). --rate and --max-error (offline, linear "
+    "or catmull_rom): keyframes and bits where they lower the mean joint position error most "
+    "(each value's step by its effect on positions, predicted along the keyframes, range-coded). "
+    "--max-q, hermite or --latency: the angle-error coding (offline: 9 to 16 bits per channel, "
+    "LZMA-packed; with --latency: fixed 16-bit records a live sender emits one by one, decided "
+    "with at most L frames of look-ahead, so a decoder outputs every frame within L frames)."
+)
 
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "encode",
-        help="encode one CMU trial (ASF + AMC) into a .sidq keyframe stream",
-        description="Chart the trial's 22 bones and root at --fps, choose keyframes over the whole "
-        "trial by dynamic programming (max gap --max-gap, distortion + lambda x bytes, lambda by "
-        "bisection) and write the .sidq container (format: docs/codec.md). --rate and --max-error "
-        "(offline, linear or catmull_rom): keyframes and bits where they lower the mean joint "
-        "position error most (each value's step by its effect on positions, predicted along the "
-        "keyframes, range-coded). --max-q, hermite or --latency: the angle-error coding "
-        "(offline: 9 to 16 bits per channel, LZMA-packed; with --latency: fixed 16-bit records a "
-        "live sender emits one by one, decided with at most L frames of look-ahead, so a decoder "
-        "outputs every frame within L frames).",
-        formatter_class=HelpFormatter,
-    )
-    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
-    p.add_argument("--out", required=True, help="output .sidq file")
+def register(p) -> None:
+    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    p.add_argument("--out", required=True, metavar="F.sidq", help="output stream")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument(
-        "--rate", type=positive(float), help="byte budget [bytes per second], whole file"
+        "--rate",
+        type=positive(float),
+        metavar="B/S",
+        help="byte budget [bytes per second], whole file",
     )
     target.add_argument(
-        "--max-q", type=positive(float), help="largest mean angle error Q (eq. 18) [rad]"
+        "--max-q",
+        type=positive(float),
+        metavar="Q",
+        help="largest mean angle error Q (eq. 18) [rad]",
     )
     target.add_argument(
         "--max-error",
@@ -48,9 +51,12 @@ def register(sub) -> None:
         "--latency",
         type=int,
         default=0,
+        metavar="L",
         help="look-ahead in frames for live streaming (0: offline, the whole trial)",
     )
-    p.add_argument("--max-gap", type=int, default=DEFAULT_MAX_GAP, help="largest keyframe gap G")
+    p.add_argument(
+        "--max-gap", type=int, default=DEFAULT_MAX_GAP, metavar="G", help="largest keyframe gap G"
+    )
     p.add_argument("--fps", type=positive(float), default=30.0, help="stream rate (divides 120)")
     p.set_defaults(func=run, parser=p)
 

@@ -6,14 +6,17 @@ import json
 from pathlib import Path
 
 from sidql.commands.usage import (
-    HelpFormatter,
     UsageError,
     add_data,
     add_keyframes,
     add_methods,
     add_quiet,
     add_ray,
+    add_samples,
     add_skeleton,
+    add_test_subjects,
+    add_workers,
+    check_keyframes,
     cmu_rate,
     data_folder,
     positive,
@@ -32,37 +35,41 @@ from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic
 
+DESCRIPTION = (
+    "Cut every trial under --data into 60-frame clips at 30 fps, choose W keyframes per clip with "
+    "each method, rebuild the clip with the method's reconstruction (spherical Hermite; pitch: "
+    "slerp; cartesian: points in xyz) and report the paper's Q (eq. 18) beside its Table 3, plus "
+    "geodesic, MPJPE, velocity and Li et al. errors and decision times. Optionally write the "
+    "rate/distortion plot."
+)
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "eval",
-        help="evaluate keyframe methods on a folder of CMU trials (the paper's Table 3)",
-        description="Cut every trial under --data into 60-frame clips at 30 fps, choose W "
-        "keyframes per clip with each method, rebuild the clip (spherical Hermite; pitch: slerp) "
-        "and report the paper's Q (eq. 18) beside its Table 3, plus geodesic, MPJPE, velocity and "
-        "Li et al. errors and decision times. Optionally write the rate/distortion plot.",
-        formatter_class=HelpFormatter,
-    )
+
+def register(p) -> None:
     add_data(p)
     add_keyframes(p, "values of W (keyframes per clip)", default=[5, 10, 15], many=True)
     add_methods(
         p, ["random", "uniform", "greedy", "optimal", "pitch"],
-        "methods to run (registered in sidql.keyframes.methods; e.g. dqn once trained)",
+        "methods to run (registered in sidql.keyframes.methods; e.g. dqn, the shipped policy, "
+        "or cartesian)",
     )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of the random method")
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
-    p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
+    p.add_argument("--length", type=positive(int), default=60, metavar="N", help="frames per clip")
     add_skeleton(p)
-    p.add_argument("--out", default="results.json", help="JSON of results and per-clip rows")
+    p.add_argument(
+        "--out", default="results.json", metavar="F.json",
+        help="JSON of results and per-clip rows",
+    )  # fmt: skip
     p.add_argument(
         "--rate-plot",
         default=None,
         metavar="PNG",
         help="also sweep W and write the rate/distortion plot here (and its data beside it)",
     )
-    p.add_argument(
-        "--subjects", nargs="+", default=None, help="only these subject ids, e.g. 01 07 18 61"
-    )
+    add_test_subjects(
+        p, "evaluate only these subjects, e.g. 01 07 18 61 (a policy's held-out ones: "
+        "train --test-subjects)", old_option="--subjects",
+    )  # fmt: skip
     p.add_argument(
         "--physics",
         action="store_true",
@@ -79,21 +86,13 @@ def register(sub) -> None:
         "MuJoCo's forward simulation with the human-strength controller and no assistance; "
         "adds tracking errors, falls and torque per method (sim.simulate.validate)",
     )
-    p.add_argument(
-        "--simulate-samples", type=positive(int), default=0, metavar="N",
-        help="with --simulate: track with the sampling controller (sim.simulate.sampling), N "
-        "rollouts per 0.1 s window, each judged 0.4 s on (64: about 6 s per simulated second "
-        "on one core, some 200 times the plain tracker's time); without it the plain tracker",
-    )  # fmt: skip
+    add_samples(p, "with --simulate: track", old_option="--simulate-samples")
     p.add_argument(
         "--max-clips", type=positive(int), default=None, metavar="N",
         help="evaluate only the first N clips (e.g. to bound a --simulate run)",
     )  # fmt: skip
     add_quiet(p)
-    p.add_argument(
-        "--workers", type=positive(int), default=1,
-        help="processes loading trials and evaluating clips (methods, physics, simulation)",
-    )  # fmt: skip
+    add_workers(p, "loading trials and evaluating clips (methods, physics, simulation)")
     add_ray(p, "the trials' loading and the clips' evaluation")
     p.set_defaults(func=run)
 
@@ -106,11 +105,9 @@ def run(args) -> int:
 def _run(args) -> int:
     for name in args.methods:  # unknown names fail before the (slow) ingest
         get(name)
-    for W in args.keyframes:
-        if not 2 <= W <= args.length:
-            raise UsageError(f"--keyframes values must be in [2, {args.length}]; got {W}")
-    if args.simulate_samples and not args.simulate:
-        raise UsageError("--simulate-samples needs --simulate")
+    counts = check_keyframes(args, args.length)
+    if args.samples and not args.simulate:
+        raise UsageError("--samples needs --simulate")
     args.data = data_folder(args)
     cases, skipped = load_cases(
         args.data,
@@ -118,7 +115,7 @@ def _run(args) -> int:
         length=args.length,
         skeleton=args.skeleton,
         progress=not args.quiet,
-        subjects=args.subjects,
+        subjects=args.test_subjects,
         workers=args.workers,
         ray=args.ray,
     )
@@ -128,14 +125,11 @@ def _run(args) -> int:
         cases = cases[: args.max_clips]
     if not cases:
         raise UsageError(f"{args.data}: no {args.length}-frame clips (skipped {len(skipped)} bad)")
-    try:
-        out = evaluate(
-            cases, args.methods, args.keyframes, seed=args.seed, progress=not args.quiet,
-            physics=args.physics, simulate=args.simulate,
-            simulate_samples=args.simulate_samples, workers=args.workers, ray=args.ray,
-        )  # fmt: skip
-    except FileNotFoundError as e:  # e.g. a learned method whose weights are missing
-        raise UsageError(str(e)) from None
+    out = evaluate(
+        cases, args.methods, counts, seed=args.seed, progress=not args.quiet,
+        physics=args.physics, simulate=args.simulate,
+        simulate_samples=args.samples or 0, workers=args.workers, ray=args.ray,
+    )  # fmt: skip
     out["skipped"] = skipped
     out["protocol"] = {
         "data": str(args.data),
@@ -146,7 +140,7 @@ def _run(args) -> int:
         "clips": len(cases),
         "physics": bool(args.physics),
         "simulate": bool(args.simulate),
-        "simulate_samples": args.simulate_samples,
+        "simulate_samples": args.samples or 0,
         "max_clips": args.max_clips,
     }
     path = Path(args.out)

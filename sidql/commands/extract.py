@@ -7,11 +7,10 @@ import json
 from pathlib import Path
 
 from sidql.commands.usage import (
-    HelpFormatter,
-    UsageError,
     add_keyframes,
     add_methods,
     add_skeleton,
+    check_keyframes,
     cmu_rate,
     positive,
 )
@@ -20,40 +19,36 @@ from sidql.keyframes.methods import get, select
 from sim.files import write_atomic
 from sim.motion.ingest import load_clips
 
+DESCRIPTION = (
+    "Ingest one trial at 30 fps, cut it into 60-frame clips and choose W keyframes per clip (first "
+    "and last frame included) with each method and each W; print them with the paper's Q (eq. 18) "
+    "of the Hermite reconstruction, and optionally write JSON."
+)
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "extract",
-        help="choose keyframes for every 60-frame clip of one CMU trial",
-        description="Ingest one trial at 30 fps, cut it into 60-frame clips and choose W keyframes "
-        "per clip (first and last frame included) with each method and each W; print them with "
-        "the paper's Q (eq. 18) of the Hermite reconstruction, and optionally write JSON.",
-        formatter_class=HelpFormatter,
-    )
-    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+
+def register(p) -> None:
+    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
     add_keyframes(p, "keyframes W per clip (several: each in turn)", many=True)
     add_methods(p, ["optimal"], old_option="--method")
     p.add_argument("--seed", type=int, default=0, help="seed of randomised methods")
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip frame rate (divides 120)")
-    p.add_argument("--length", type=positive(int), default=60, help="frames per clip")
+    p.add_argument("--length", type=positive(int), default=60, metavar="N", help="frames per clip")
     add_skeleton(p)
-    p.add_argument("--out", default=None, help="write the keyframes here as JSON")
+    p.add_argument("--out", default=None, metavar="F.json", help="write the keyframes here as JSON")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     for name in args.methods:  # an unknown name fails before the (slow) ingest
         get(name)
-    for W in args.keyframes:
-        if not 2 <= W <= args.length:
-            raise UsageError(f"--keyframes must be in [2, {args.length}]; got {W}")
+    counts = check_keyframes(args, args.length)
     clips = load_clips(args.asf, args.amc, fps=args.fps, length=args.length, skeleton=args.skeleton)
     rows = []
     for i, clip in enumerate(clips):
         case = make_case(clip, i)
         for method in args.methods:
-            for W in args.keyframes:
+            for W in counts:
                 k = select(method, clip, W, seed=clip_seed(args.seed, i, W))
                 s = score(case, k, method)
                 rows.append(
@@ -75,7 +70,6 @@ def run(args) -> int:
         print(f"no {args.length}-frame clips in {args.amc}")
     if args.out:
         path = Path(args.out)
-        path.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(path, lambda f: f.write(json.dumps({"clips": rows}, indent=1).encode()))
         print(f"wrote {path}")
     return 0

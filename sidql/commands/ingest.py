@@ -4,25 +4,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from sidql.commands.usage import HelpFormatter, add_skeleton, cmu_rate
+from sidql.commands.usage import add_skeleton, cmu_rate, positive
 from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 
+DESCRIPTION = (
+    "Parse an ASF skeleton and AMC motion, retarget onto a MuJoCo humanoid, and write positions "
+    "(T, J, 3) [m, z up], true velocities [m/s], qpos, qvel at the output rate."
+)
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "ingest",
-        help="ingest one CMU trial (ASF + AMC) into an .npz clip",
-        description="Parse an ASF skeleton and AMC motion, retarget onto a MuJoCo humanoid, and "
-        "write positions (T, J, 3) [m, z up], true velocities [m/s], qpos, qvel at the output rate.",
-        formatter_class=HelpFormatter,
-    )
-    p.add_argument("asf", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+
+def register(p) -> None:
+    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
+    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
     add_skeleton(p)
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
-    p.add_argument("--source-fps", type=float, default=120.0, help="frame rate of the AMC file")
-    p.add_argument("--out", required=True, help="output .npz")
+    p.add_argument(
+        "--source-fps", type=positive(float), default=120.0, metavar="FPS",
+        help="frame rate of the AMC file (a whole multiple of --fps)",
+    )  # fmt: skip
+    p.add_argument("--out", required=True, metavar="F.npz", help="output clip file")
     p.set_defaults(func=run)
 
 

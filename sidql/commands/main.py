@@ -1,9 +1,11 @@
 """The ``sidql`` command line: a thin layer over library functions.
 
-Each subcommand lives in its own module under ``sidql.commands`` and exposes
-``register(subparsers)``, which adds its parser and sets ``func`` to a callable taking the parsed
-arguments and returning an exit code. Adding a command = one module + one line in
-:data:`COMMAND_MODULES` + its one-line summary in :data:`SUMMARIES`.
+Each command lives in its own module ``sidql.commands.<name>``, which holds its
+``DESCRIPTION`` (the paragraph of ``sidql <name> --help``) and ``register(parser)``: it adds the
+command's options and sets ``func`` to a callable taking the parsed arguments and returning an
+exit code. The one-line summary of each command is kept once, in :data:`COMMANDS` (``sidql
+--help`` and the README's table read it). Adding a command = one module + one line in
+:data:`COMMANDS`.
 
 Start-up stays short: only the module of the command being run is imported (its libraries, e.g.
 MuJoCo, torch or numba, load with it); ``sidql --help`` and an unknown command import none.
@@ -17,36 +19,35 @@ import sys
 import warnings
 
 from sidql import __version__
-from sidql.commands.usage import ArgumentParser, one_line_warning
+from sidql.commands.usage import ArgumentParser, HelpFormatter, one_line_warning
 from sim.errors import SidqlError
 
-COMMAND_MODULES = (
-    "sidql.commands.ingest",
-    "sidql.commands.dataset",
-    "sidql.commands.demo",
-    "sidql.commands.report",
-    "sidql.commands.eval",
-    "sidql.commands.extract",
-    "sidql.commands.train",
-    "sidql.commands.encode",
-    "sidql.commands.decode",
-    "sidql.commands.synth",
-)
-
-
-#: each command's line in ``sidql --help`` (the command module's own parser has the details).
-SUMMARIES = {
-    "ingest": "read one CMU trial (ASF + AMC) into a clip file (.npz)",
-    "dataset": "ingest a folder of CMU trials into clip files with an index",
-    "demo": "run the main job on the embedded default motion",
-    "report": "replay, check and render reconstructions of one trial as a report",
-    "eval": "evaluate keyframe methods on a folder of trials",
-    "extract": "choose keyframes of one trial with one method",
-    "train": "train the DQN keyframe policy",
-    "encode": "encode one CMU trial (ASF + AMC) into a .sidq keyframe stream",
+#: Every command, in the order ``sidql --help`` lists them, with its one-line summary.
+COMMANDS = {
+    "ingest": "read one CMU trial (ASF + AMC) into a clip file (.npz): positions, true "
+    "velocities, qpos, qvel",
+    "dataset": "ingest every trial under a folder in parallel, with an index; bad files skipped "
+    "and listed",
+    "demo": "ingest CMU trial 02_01 (without data: motion generated on the humanoid) and report "
+    "its first clip: every method, replayed, checked and rendered (what ./run.sh demo runs)",
+    "report": "replay, check (IK, contacts, dynamics; --simulate: forward simulation) and render "
+    "reconstructions of one trial into one HTML page; .sidq streams are reported like methods",
+    "eval": "the paper's Table 3: every method on every 60-frame clip of a folder of trials; "
+    "--physics adds contacts and dynamics with noise floors and paired comparisons, --simulate "
+    "forward simulation without assistance",
+    "extract": "choose the keyframes of every 60-frame clip of one trial, per method and W, with "
+    "their Q",
+    "train": "train the DQN keyframe policy, split by subject: held-out evaluation, CSV log, "
+    "learning curve, checkpoints",
+    "encode": "encode a whole trial into a .sidq keyframe stream at a byte budget, a joint "
+    "position error or an angle error",
     "decode": "decode a .sidq stream to points (.npz) or the source skeleton's angles (.amc)",
-    "synth": "generate simulated, velocity-rich motion clips",
+    "synth": "simulate clips (tracking with perturbations, falls, procedural) in the dataset "
+    "format with learning labels; stored as they arrive, resumable",
 }
+
+#: The module of each command (kept for callers that list them).
+COMMAND_MODULES = tuple(f"sidql.commands.{name}" for name in COMMANDS)
 
 
 def _command_in(argv: list[str]) -> str | None:
@@ -66,12 +67,15 @@ def build_parser(only: str | None = None) -> ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in COMMAND_MODULES:
-        name = module.rsplit(".", 1)[1]
+    for name, summary in COMMANDS.items():
         if only is None or only == name:
-            importlib.import_module(module).register(sub)
+            module = importlib.import_module(f"sidql.commands.{name}")
+            p = sub.add_parser(
+                name, help=summary, description=module.DESCRIPTION, formatter_class=HelpFormatter
+            )
+            module.register(p)
         else:
-            sub.add_parser(name, help=SUMMARIES.get(name, ""))
+            sub.add_parser(name, help=summary)
     return parser
 
 
@@ -84,8 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         warnings.showwarning = one_line_warning
         argv = sys.argv[1:] if argv is None else list(argv)
         name = _command_in(argv)
-        known = {m.rsplit(".", 1)[1] for m in COMMAND_MODULES}
-        args = build_parser(only=name if name in known else "").parse_args(argv)
+        args = build_parser(only=name if name in COMMANDS else "").parse_args(argv)
         try:
             return int(args.func(args) or 0)
         except SidqlError as e:  # bad input, a bad file, an unmet target, an unknown name

@@ -3,44 +3,44 @@
 from __future__ import annotations
 
 from sidql.commands.usage import (
-    HelpFormatter,
-    UsageError,
     add_keyframes,
     add_methods,
     add_quiet,
     add_ray,
-    positive,
+    add_workers,
+    check_keyframes,
 )
 from sidql.evaluation.report import report_trial
 from sidql.keyframes.methods import get
-from sim.errors import SidqlError
 from sim.replay.render import RenderStyle
 
 DEFAULT_METHODS = ("random", "uniform", "greedy", "optimal", "pitch")
 
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "report",
-        help="replay, check and render reconstructions of a trial into an HTML report",
-        description="Cut a CMU trial into 60-frame clips at 30 fps; for the chosen clips, choose W "
-        "keyframes with each method, reconstruct (spherical Hermite; the pitch method also with its "
-        "own slerp), replay original and reconstructions kinematically in MuJoCo, measure bone-length "
-        "drift, floor and self-penetration, foot skating, joint limits, MPJPE and velocity error, "
-        "and write DIR/index.html, DIR/checks.json, one mp4 and PNGs per method.",
-        formatter_class=HelpFormatter,
-    )
-    p.add_argument("asf", help="the subject's skeleton (.asf)")
-    p.add_argument("amc", help="one of its motions (.amc)")
+DESCRIPTION = (
+    "Cut a CMU trial into 60-frame clips at 30 fps; for the chosen clips, choose W keyframes with "
+    "each method, reconstruct (spherical Hermite; a method meant for another reconstruction, e.g. "
+    "pitch or cartesian, also with its own), replay original and reconstructions kinematically in "
+    "MuJoCo, measure bone-length drift, floor and self-penetration, foot skating, joint limits, "
+    "MPJPE and velocity error, fit the subject's humanoid for contacts and dynamics, and write "
+    "DIR/index.html, DIR/checks.json, one mp4 and PNGs per method."
+)
+
+
+def register(p) -> None:
+    p.add_argument("asf", metavar="ASF", help="the subject's skeleton (.asf)")
+    p.add_argument("amc", metavar="AMC", help="one of its motions (.amc)")
     add_keyframes(p, "keyframes W per clip", default=10)
     add_methods(
         p, list(DEFAULT_METHODS),
         "methods, and/or .sidq files encoded from this trial (sidql encode): a decoded "
         "stream is checked and rendered like a method",
     )  # fmt: skip
-    p.add_argument("--clips", type=int, nargs="+", default=[0], help="60-frame clip numbers")
+    p.add_argument(
+        "--clips", type=int, nargs="+", default=[0], metavar="N", help="60-frame clip numbers"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of random methods")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--no-video", action="store_true", help="skip the mp4 videos (faster)")
     p.add_argument(
         "--layout", choices=("overlay", "side"), default="overlay",
@@ -52,7 +52,7 @@ def register(sub) -> None:
         "with the subject's human-strength body and no assistance: tracking error, falls and "
         "torque per method (could a body perform this motion?)",
     )  # fmt: skip
-    p.add_argument("--workers", type=positive(int), default=1, help="processes validating clips")
+    add_workers(p, "validating clips")
     add_ray(p, "the clips' validation")
     add_quiet(p)
     p.set_defaults(func=run)
@@ -63,18 +63,12 @@ def run(args) -> int:
     methods = [m for m in args.methods if not m.endswith(".sidq")]
     for name in methods:  # unknown names fail before the (slow) ingest
         get(name)
-    if not 2 <= args.keyframes <= 60:
-        raise UsageError(f"--keyframes must be in [2, 60]; got {args.keyframes}")
-    try:
-        page = report_trial(
-            args.asf, args.amc, args.out, W=args.keyframes, methods=methods, streams=streams,
-            clips=args.clips, seed=args.seed, videos=not args.no_video,
-            style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
-            progress=not args.quiet, simulate=args.simulate,
-        )  # fmt: skip
-    except ValueError as e:  # a clip number out of range (a SidqlError passes through)
-        if isinstance(e, SidqlError):
-            raise
-        raise UsageError(str(e)) from None
+    check_keyframes(args, 60)
+    page = report_trial(
+        args.asf, args.amc, args.out, W=args.W, methods=methods, streams=streams,
+        clips=args.clips, seed=args.seed, videos=not args.no_video,
+        style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
+        progress=not args.quiet, simulate=args.simulate,
+    )  # fmt: skip
     print(f"report: {page}")
     return 0

@@ -3,49 +3,48 @@
 from __future__ import annotations
 
 from sidql.commands.usage import (
-    HelpFormatter,
     UsageError,
     add_data,
     add_quiet,
     add_ray,
+    add_samples,
+    add_workers,
     cmu_rate,
     data_folder,
     positive,
 )
-from sim.errors import SidqlError
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import DATASET_ID, DEFAULT_ID, export_minari
 from sim.simulate.generate import ALL_KINDS, KINDS
 
+DESCRIPTION = (
+    "Track real trials under --data with a controller in MuJoCo's forward simulation (time warps, "
+    "body scaling, gain changes, pushes), make the figure fall and recover, or track procedural "
+    "motion; write OUT/<kind>/<kind>_NNNNN.npz in the `sidql dataset` format plus OUT/index.json "
+    "recording every clip's parameters, seed, per-frame root assistance and tracking error. "
+    "Positions and velocities are the simulator's state. The same --seed gives the same clips bit "
+    "for bit. Bad input is skipped and listed."
+)
 
-def register(sub) -> None:
-    p = sub.add_parser(
-        "synth",
-        help="simulate synthetic clips (tracking, pushes, falls, procedural) in the dataset format",
-        description="Track real trials under --data with a controller in MuJoCo's forward "
-        "simulation (time warps, body scaling, gain changes, pushes), make the figure fall and "
-        "recover, or track procedural motion; write OUT/<kind>/<kind>_NNNNN.npz in the `sidql "
-        "dataset` format plus OUT/index.json recording every clip's parameters, seed, per-frame "
-        "root assistance and tracking error. Positions and velocities are the simulator's state. "
-        "The same --seed gives the same clips bit for bit. Bad input is skipped and listed.",
-        formatter_class=HelpFormatter,
-    )
+
+def register(p) -> None:
     add_data(p, "folder of CMU trials to track (kinds other than procedural)", old_option="--from")
     p.add_argument("--n", type=positive(int), required=True, help="number of clips")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
     p.add_argument(
         "--kinds",
         nargs="+",
         choices=ALL_KINDS,
         default=list(KINDS),
-        help="clip kinds (follow: unperturbed tracking, the baseline)",
+        metavar="KIND",
+        help=f"clip kinds, of {', '.join(ALL_KINDS)} (follow: unperturbed tracking, the baseline)",
     )
-    p.add_argument("--seconds", type=positive(float), default=4.0, help="clip length [s]")
-    p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
     p.add_argument(
-        "--workers", type=positive(int), default=None, help="worker processes (default: cores)"
+        "--seconds", type=positive(float), default=4.0, metavar="S", help="clip length [s]"
     )
+    p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
+    add_workers(p, "the simulations")
     add_ray(p, "the simulations")
     p.add_argument(
         "--max-assistance", type=float, default=None, metavar="BW",
@@ -53,13 +52,7 @@ def register(sub) -> None:
         "torque (x 1 m) (0.05: the physical clips); others are dropped and more simulated (up "
         "to 20x --n tasks)",
     )  # fmt: skip
-    p.add_argument(
-        "--samples", type=positive(int), default=None, metavar="N",
-        help="track real trials with the sampling tracker (N rollouts per 0.1 s window) and no "
-        "assistance at all: every such clip is physical, and a figure that cannot keep up "
-        "falls and is labelled so (about 2.5 s per simulated second at N=64 on one core; "
-        "procedural clips keep the plain tracker)",
-    )  # fmt: skip
+    add_samples(p, "track real trials (not procedural clips)")
     p.add_argument(
         "--resume", action="store_true",
         help="continue the run whose journal (OUT/journal.jsonl) is in --out: clips are stored "
@@ -88,17 +81,12 @@ def run(args) -> int:
     if args.export_minari and not DATASET_ID.match(args.minari_id):
         raise UsageError(f"--minari-id {args.minari_id!r}: expected (namespace/)name-v<version>")
     data = data_folder(args, required=any(k != "procedural" for k in args.kinds))
-    try:
-        s = synthesize(
-            data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
-            seconds=args.seconds, fps=args.fps, samples=args.samples or 0,
-            workers=args.workers, ray=args.ray,
-            progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
-        )  # fmt: skip
-    except ValueError as e:  # --resume of a run with other parameters
-        if isinstance(e, SidqlError):
-            raise
-        raise UsageError(str(e)) from None
+    s = synthesize(
+        data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
+        seconds=args.seconds, fps=args.fps, samples=args.samples or 0,
+        workers=args.workers, ray=args.ray,
+        progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
+    )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "
           f"{args.out}/index.json")  # fmt: skip

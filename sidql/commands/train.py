@@ -6,42 +6,37 @@ import argparse
 import dataclasses
 
 from sidql.commands.usage import (
-    HelpFormatter,
     UsageError,
     add_data,
     add_keyframes,
     add_quiet,
+    add_test_subjects,
     data_folder,
 )
 from sidql.learning.settings import Args, field_docs, settings_problems
 
+DESCRIPTION = (
+    "Train the SIDQL Deep Q-Network through the sidql/Keyframe-v0 environment on 60-frame clips "
+    "of the training subjects, evaluating every --eval-every steps on the held-out subjects' clips "
+    "against greedy and the exact optimum. Writes OUT (the policy), OUT.ckpt (resumable state, "
+    "atomically at every evaluation), OUT with .csv (log) and .png (learning curve). A killed run "
+    "continues from its last checkpoint with --resume, which refuses a checkpoint written with "
+    "other settings (only --steps, --out, --cache-dir, --eval-every, --threads, --data and --quiet "
+    "may change). Policy and checkpoint files are read as tensors and plain values only (torch "
+    "weights_only=True); anything else is refused with exit status 2."
+)
 
-def register(sub) -> None:
+
+def register(p) -> None:
     d = Args()
     docs = {k: v.replace("%", "%%") for k, v in field_docs().items()}  # help is %-formatted
-    p = sub.add_parser(
-        "train",
-        help="train the DQN keyframe policy (held-out subjects, CSV log, learning curve)",
-        description="Train the SIDQL Deep Q-Network through the sidql/Keyframe-v0 environment on "
-        "60-frame clips of the training subjects, evaluating every --eval-every steps on the "
-        "held-out subjects' clips against greedy and the exact optimum. Writes OUT (the policy), "
-        "OUT.ckpt (resumable state, atomically at every evaluation), OUT with .csv (log) and "
-        ".png (learning curve). A killed run continues from its last checkpoint with --resume, "
-        "which refuses a checkpoint written with other settings (only --steps, --out, "
-        "--cache-dir, --eval-every, --threads, --data and --quiet may change). Policy and "
-        "checkpoint files are read as tensors and plain values only (torch weights_only=True); "
-        "anything else is refused with exit status 2.",
-        formatter_class=HelpFormatter,
-    )
     add_data(p)
     add_keyframes(p, docs["keyframes"], default=list(d.keyframes), many=True)
-    p.add_argument("--steps", type=int, default=d.steps, help=docs["steps"])
-    p.add_argument("--out", default=d.out, help=docs["out"])
+    p.add_argument("--steps", type=int, default=d.steps, metavar="N", help=docs["steps"])
+    p.add_argument("--out", default=d.out, metavar="F.pt", help=docs["out"])
     p.add_argument("--resume", action="store_true", help=docs["resume"])
     p.add_argument("--seed", type=int, default=d.seed, help=docs["seed"])
-    p.add_argument(
-        "--test-subjects", nargs="+", default=None, metavar="SS", help=docs["test_subjects"]
-    )
+    add_test_subjects(p, docs["test_subjects"])
     p.add_argument("--cache-dir", default=None, metavar="DIR", help=docs["cache_dir"])
     p.add_argument("--train-also", default=None, metavar="DIR", help=docs["train_also"])
     add_quiet(p)
@@ -68,14 +63,11 @@ def _bool(text: str) -> bool:
 
 
 def run(args) -> int:
-    bad = [w for w in args.keyframes if not 3 <= w <= 60]
-    if bad:
-        raise UsageError(f"--keyframes values must be in [3, 60]; got {bad}")
     values = {
         f.name: getattr(args, f.name) for f in dataclasses.fields(Args) if hasattr(args, f.name)
     }
     values["data"] = str(data_folder(args))
-    values["keyframes"] = tuple(args.keyframes)
+    values["keyframes"] = tuple(args.W)  # checked with the rest (settings_problems)
     values["test_subjects"] = tuple(args.test_subjects) if args.test_subjects else None
     values["progress"] = not args.quiet
     problems = settings_problems(Args(**values))
@@ -87,7 +79,7 @@ def run(args) -> int:
     print(f"held-out subjects: {', '.join(result['split']['test'])}")
     print("| W | dqn | greedy | optimal | dqn / optimal |")
     print("|---|---|---|---|---|")
-    for w in args.keyframes:
+    for w in args.W:
         q, g, o = result["dqn"][w], result["greedy"][w], result["optimal"][w]
         print(f"| {w} | {q:.4f} | {g:.4f} | {o:.4f} | {q / o:.3f} |")
     return 0

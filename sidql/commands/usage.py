@@ -1,11 +1,14 @@
 """What every command shares: one vocabulary of options, one-line errors and warnings.
 
 Options: every command declares the options it shares with others through the helpers below, so
-one idea has one spelling everywhere: ``--data DIR`` (the folder of CMU trials, :func:`add_data`),
-``-W/--keyframes`` (:func:`add_keyframes`), ``--methods`` (:func:`add_methods`), ``--quiet``
-(:func:`add_quiet`). Old spellings (``dataset DIR``, ``synth --from``, ``extract --method``) still
-work and warn (:class:`OldSpelling`). ``--help`` shows a default only where there is one
-(:class:`HelpFormatter`).
+one idea has one spelling (and one default) everywhere: ``--data DIR`` (the folder of CMU trials,
+:func:`add_data`), ``-W/--keyframes`` (the keyframe count W, :func:`add_keyframes`, checked by
+:func:`check_keyframes`), ``--methods`` (:func:`add_methods`), ``--test-subjects``
+(:func:`add_test_subjects`), ``--samples`` (the sampling tracker, :func:`add_samples`),
+``--workers`` (:func:`add_workers`), ``--ray`` (:func:`add_ray`), ``--quiet`` (:func:`add_quiet`).
+Old spellings (``dataset DIR``, ``synth --from``, ``extract --method``, ``eval --subjects``,
+``eval --simulate-samples``, method ``xyz``) still work and warn (:class:`OldSpelling`,
+:func:`method_name`). ``--help`` shows a default only where there is one (:class:`HelpFormatter`).
 
 Every bad input exits 2 with one line on stderr: ``sidql COMMAND: error: PROBLEM``, for any
 :class:`sim.errors.SidqlError` (PROBLEM names the file and line when there is one). Warnings print as
@@ -21,13 +24,12 @@ import sys
 import warnings
 from pathlib import Path
 
-from sim.errors import MotionDataWarning, SidqlError
+from sidql.keyframes.counts import LEAST_W, check_counts
+from sim.errors import MotionDataWarning, UsageError
 from sim.files import excerpt
 from sim.paths import DATA_ENV, data_dir
 
-
-class UsageError(SidqlError):
-    """A bad command-line value (e.g. W out of range); exits 2 with one line."""
+# UsageError lives in sim.errors (the one hierarchy); commands import it from here too.
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -165,11 +167,13 @@ def add_keyframes(
     default=None,
     many: bool = False,
 ) -> None:
-    """``-W/--keyframes W``; several values (``many``) where a command sweeps W. Required when
+    """``-W/--keyframes W``, the keyframe count, stored as ``args.W`` (check it with
+    :func:`check_keyframes`); several values (``many``) where a command sweeps W. Required when
     there is no ``default``."""
     parser.add_argument(
         "-W",
         "--keyframes",
+        dest="W",
         type=int,
         nargs="+" if many else None,
         default=default,
@@ -179,6 +183,18 @@ def add_keyframes(
     )
 
 
+def check_keyframes(args: argparse.Namespace, n_frames: int, *, least: int = LEAST_W) -> list[int]:
+    """``args.W`` as a list, each checked against the one rule (:mod:`sidql.keyframes.counts`):
+    ``least <= W <= n_frames``.
+
+    Raises:
+        UsageError: a value out of range (the message names ``--keyframes``).
+    """
+    counts = list(args.W) if isinstance(args.W, list | tuple) else [args.W]
+    check_counts(counts, n_frames, least=least, name="--keyframes")
+    return counts
+
+
 def add_methods(
     parser: argparse.ArgumentParser,
     default,
@@ -186,11 +202,66 @@ def add_methods(
     *,
     old_option: str | None = None,
 ) -> None:
-    """``--methods NAME [NAME ...]``; optionally an old single-valued spelling (``--method``)."""
-    parser.add_argument("--methods", nargs="+", default=default, metavar="NAME", help=help)
+    """``--methods NAME [NAME ...]`` (an old method name is taken and warns:
+    :func:`method_name`); optionally an old single-valued spelling (``--method``)."""
+    parser.add_argument(
+        "--methods", nargs="+", type=method_name, default=default, metavar="NAME", help=help
+    )
     if old_option:
         parser.add_argument(old_option, dest="methods", metavar="NAME", action=OldSpelling,
-                            new="--methods NAME [NAME ...]", as_list=True)  # fmt: skip
+                            type=method_name, new="--methods NAME [NAME ...]", as_list=True)  # fmt: skip
+
+
+#: Old method names still taken on the command line -> their names now (kept in step with
+#: ``sidql.keyframes.methods.RENAMED``, which this light module does not import).
+OLD_METHOD_NAMES = {"xyz": "cartesian"}
+
+
+def method_name(text: str) -> str:
+    """An argparse ``type`` for a method: its name now, with a one-line warning for an old one
+    (unknown names pass through: the command lists the known ones before any work starts)."""
+    if text in OLD_METHOD_NAMES:
+        new = OLD_METHOD_NAMES[text]
+        warnings.warn(UsageWarning(f"method {text}: an old name, use {new}"), stacklevel=2)
+        return new
+    return text
+
+
+def add_test_subjects(
+    parser: argparse.ArgumentParser, help: str, *, old_option: str | None = None
+) -> None:
+    """``--test-subjects SS [SS ...]``: the subjects a command evaluates on (``eval``: only these;
+    ``train``: held out from training); optionally an old spelling (``--subjects``)."""
+    parser.add_argument("--test-subjects", nargs="+", default=None, metavar="SS", help=help)
+    if old_option:
+        parser.add_argument(old_option, dest="test_subjects", nargs="+", metavar="SS",
+                            action=OldSpelling, new="--test-subjects SS [SS ...]")  # fmt: skip
+
+
+def add_samples(
+    parser: argparse.ArgumentParser, lead: str, *, old_option: str | None = None
+) -> None:
+    """``--samples N``: track with the sampling tracker (``sim.simulate.sampling``), N rollouts per
+    window; without it the plain tracker. ``lead`` begins the help (what is tracked, and when);
+    optionally an old spelling (``eval --simulate-samples``)."""
+    parser.add_argument(
+        "--samples", type=positive(int), default=None, metavar="N",
+        help=f"{lead} with the sampling tracker (sim/simulate/sampling.py): N rollouts per 0.1 s "
+        "window, each judged 0.4 s on, and no assistance at all; without it the plain tracker. "
+        "Its cost per simulated second: docs/results/synth_sampled.md",
+    )  # fmt: skip
+    if old_option:
+        parser.add_argument(old_option, dest="samples", type=positive(int), metavar="N",
+                            action=OldSpelling, new="--samples N")  # fmt: skip
+
+
+def add_workers(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--workers N``: ``what`` in N worker processes; 1, the default everywhere, runs them in
+    this process (no pool: predictable memory and undisturbed timings)."""
+    parser.add_argument(
+        "--workers", type=positive(int), default=1, metavar="N",
+        help=f"worker processes for {what}; 1 runs them in this process",
+    )  # fmt: skip
 
 
 def add_skeleton(parser: argparse.ArgumentParser) -> None:

@@ -34,15 +34,17 @@ from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
 from sidql.keyframes.pitch import pitch_error
 from sidql.keyframes.spherical import POINTS, SphericalSeries, chart, protocol_indices
+from sim.analysis.figures import HEIGHT_KEYS
+from sim.analysis.job import PhysicsJob
 from sim.batch import iter_batch, run_batch
 from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
-from sim.motion.dataset import find_trials, load_dataset_clips
+from sim.motion.dataset import dataset_clips, find_trials
 from sim.motion.ingest import load_clips
-from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob, support_verdict
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
+from sim.physics.support import support_verdict
 from sim.replay.checks import from_clip
 from sim.simulate.model import sim_model
 from sim.simulate.validate import SIMULATE_KEYS, ForwardValidation
@@ -106,23 +108,23 @@ def load_cases(
     cases: list[Case] = []
     skipped: list[dict] = []
     if (Path(data_dir) / "index.json").is_file():
-        clips, subj, asfs = load_dataset_clips(data_dir, length, skeletons=True)
-        rates = sorted({c.fps for c in clips} - {float(fps)})
+        rows = dataset_clips(data_dir, length, skipped)  # each file read once, named as read
+        for s in skipped:
+            print(f"skipped {s['amc']}: {s['problem']}", file=sys.stderr)
+        rates = sorted({r[0].fps for r in rows} - {float(fps)})
         if rates:  # the clips are what they are: a different rate would be mislabelled
             raise MotionDataError(
                 str(Path(data_dir) / "index.json"), None,
                 f"clips at {', '.join(f'{r:g}' for r in rates)} fps, not {fps:g} (pass --fps)",
             )  # fmt: skip
-        keep = [
-            (c, a) for c, s, a in zip(clips, subj, asfs, strict=True)
-            if subjects is None or s in subjects
-        ]  # fmt: skip
         bad: dict[str, str] = {}
-        for c, a in keep:  # a clip without the protocol's bones is skipped, its file listed once
+        for c, s, a, file in rows:  # a clip without the protocol's bones: its file listed once
+            if subjects is not None and s not in subjects:
+                continue
             try:
                 cases.append(make_case(c, len(cases), a))
             except MotionDataError as e:
-                bad.setdefault(c.source, str(e))
+                bad.setdefault(str(file), f"{e.problem if e.path == c.source else e}")
         for source, problem in bad.items():
             skipped.append({"amc": source, "problem": problem})
             print(f"skipped {source}: {problem}", file=sys.stderr)
@@ -265,7 +267,7 @@ def _simulate_means(rows: Sequence[dict]) -> dict:
 @dataclass(frozen=True)
 class TrialPhysics:
     """What the physics of one trial's clips share: the subject's
-    :class:`sim.physics.analysis.PhysicsJob` on the protocol points, the trial's ground, and the
+    :class:`sim.analysis.job.PhysicsJob` on the protocol points, the trial's ground, and the
     original's contacts labelled once over the whole trial (``start``: each clip's
     ``start_frame`` -> its first frame in ``contacts``; clip objects do not keep their identity
     on the way to worker processes or Ray)."""
@@ -283,11 +285,11 @@ class TrialPhysics:
 
     def noise_floor(self, clip: Clip, *, seed: int = 0) -> dict:
         """The original re-captured with marker noise, analysed against the original
-        (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`)."""
+        (:meth:`sim.analysis.job.PhysicsJob.noise_floor`)."""
         return self.job.noise_floor(clip, self.ground, contacts=self.clip_contacts(clip), seed=seed)
 
     def analyse(self, clip: Clip, rec=None) -> dict:
-        """:meth:`sim.physics.analysis.PhysicsJob.analyse` of the original (``rec`` None) or of a
+        """:meth:`sim.analysis.job.PhysicsJob.analyse` of the original (``rec`` None) or of a
         reconstruction (its points, velocities and accelerations)."""
         c = self.clip_contacts(clip)
         if rec is None:
@@ -302,7 +304,7 @@ class TrialPhysics:
 def physics_setup(cases: Sequence[Case]) -> dict:
     """Per trial (``clip.source``): its :class:`TrialPhysics` for :func:`score`: the ground and
     the original's contacts from all the trial's clips (in time order), one
-    :class:`sim.physics.analysis.PhysicsJob` per subject skeleton."""
+    :class:`sim.analysis.job.PhysicsJob` per subject skeleton."""
 
     jobs, out = {}, {}
     by_trial: dict[str, list[Case]] = {}
@@ -456,7 +458,7 @@ NOISE_FLOOR = "noise floor"
 
 def noise_figures(noisy: dict, original: dict) -> dict:
     """A noise-floor row: per figure, how far the original re-captured with marker noise
-    (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`) departs from the original,
+    (:meth:`sim.analysis.job.PhysicsJob.noise_floor`) departs from the original,
     ``|noisy - original|`` (None where either lacks it)."""
     out = {}
     for k, v in noisy.items():
@@ -475,7 +477,7 @@ def floor_report(setup: dict, originals: Sequence[dict] = ()) -> list[dict]:
     (``support_missing_share``), the share held by something else (``support_held_share``),
     the frames whose derivatives are not measured (``dynamics_unmeasured_n``, summed over the
     clips) and the verdict (``support_off_floor``, ``support_why``:
-    :func:`sim.physics.analysis.support_verdict`)."""
+    :func:`sim.physics.support.support_verdict`)."""
     out = []
     for src, tp in setup.items():
         row = {"source": src, **tp.ground.summary()}

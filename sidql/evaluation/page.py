@@ -45,17 +45,12 @@ from sidql.evaluation.plots import metrics_plot, summary_plot
 from sidql.evaluation.validation import ClipValidation, MethodRun, checks_document
 from sim.files import write_atomic
 from sim.physics.contacts import foot_states
+from sim.physics.foot_state import FootState
 from sim.physics.ground import estimate_ground
 from sim.physics.noise import NOISE_MM
-from sim.replay.foot_state import FootState
-from sim.replay.render import (
-    DEFAULT_STYLE,
-    RenderStyle,
-    SkeletonRenderer,
-    keyframe_sheet,
-    render_frames,
-    write_video,
-)
+from sim.replay.render import DEFAULT_STYLE, RenderStyle, SkeletonRenderer
+from sim.replay.sheets import keyframe_sheet
+from sim.replay.video import render_frames, write_video
 
 #: Method colours shared by plots, table swatches and video cards.
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",

@@ -28,7 +28,7 @@ from sidql.evaluation.validation import (
 )
 from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
-from sim.errors import MotionDataError
+from sim.errors import AllFailedError, MotionDataError, UsageError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
@@ -82,7 +82,8 @@ def report_clips(
     kept = [n for n, o in zip(numbers, outcomes, strict=True) if o.ok]
     failed = [f"clip {n}: {o.error}" for n, o in zip(numbers, outcomes, strict=True) if not o.ok]
     if not vals:
-        raise ValueError("every clip failed: " + "; ".join(failed))
+        kind = AllFailedError if all(o.bad_input for o in outcomes) else RuntimeError  # a bug
+        raise kind("every clip failed: " + "; ".join(failed))
     shown = [*methods, *(s.label for s in streams)]
     meta = {"keyframes": W, "methods": " ".join(shown), "seed": seed, **(meta or {})}
     if failed:
@@ -132,7 +133,7 @@ def report_trial(
     protocol_indices(all_clips[0])  # a skeleton without the protocol's bones: one clean error
     bad = [c for c in clips if not 0 <= c < len(all_clips)]
     if bad:
-        raise ValueError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")
+        raise UsageError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")
     skeleton, model = subject_model(asf)
     ground = trial_ground(all_clips)
     forward = None

@@ -2,7 +2,7 @@
 
 :func:`validate_clip` chooses keyframes with each method (:mod:`sidql.keyframes.methods`),
 reconstructs (:mod:`sidql.keyframes.reconstructions`), replays the original and every
-reconstruction (:mod:`sim.replay.checks`) and, given a :class:`sim.physics.analysis.PhysicsJob`,
+reconstruction (:mod:`sim.replay.checks`) and, given a :class:`sim.analysis.job.PhysicsJob`,
 fits the humanoid to each and adds the physics figures (contacts, dynamics, optionally forward
 simulation): a :class:`ClipValidation` with each method's excess over the original. Decoded
 ``.sidq`` streams (:class:`DecodedStream`) are validated beside the methods.
@@ -32,10 +32,11 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select
 from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS
+from sim.analysis.figures import HEIGHT_KEYS
+from sim.analysis.job import PhysicsJob
 from sim.errors import MotionDataError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
-from sim.physics.analysis import HEIGHT_KEYS, PhysicsJob
 from sim.physics.contacts import trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import (
@@ -70,11 +71,13 @@ class MethodRun:
 
     @property
     def label(self) -> str:
-        return (
-            self.method
-            if self.reconstruction == "hermite"
-            else f"{self.method}+{self.reconstruction}"
-        )
+        """The method's name, with ``+reconstruction`` where that is not the one its name
+        implies: ``pitch`` (under the Hermite), ``pitch+slerp``; ``cartesian`` (under its own
+        Cartesian curves), ``cartesian+hermite``."""
+        implied = self.method if self.method in reconstructions.RECONSTRUCTIONS else "hermite"
+        if self.reconstruction == implied:
+            return self.method
+        return f"{self.method}+{self.reconstruction}"
 
 
 @dataclass
@@ -94,7 +97,7 @@ class ClipValidation:
     @property
     def noise_floor(self) -> dict:
         """Per figure, how far the original re-captured with marker noise
-        (:meth:`sim.physics.analysis.PhysicsJob.noise_floor`) departs from the original: a
+        (:meth:`sim.analysis.job.PhysicsJob.noise_floor`) departs from the original: a
         difference between methods smaller than this is capture noise."""
         out = {}
         for k, v in with_physics({}, self.noise).items():
@@ -198,7 +201,7 @@ def validate_clip(
         W: keyframes per clip, both ends included.
         joint_ranges: hinge ranges [rad] for the joint-limit check of motions with joint angles.
         streams: decoded ``.sidq`` streams of the clip's trial, shown after the methods.
-        physics: a :class:`sim.physics.analysis.PhysicsJob` on the protocol points: adds
+        physics: a :class:`sim.analysis.job.PhysicsJob` on the protocol points: adds
             :mod:`sim.physics` figures (``physics``) for the original and every run.
         ground: the trial's :class:`sim.physics.ground.Ground`; its ``floor_z`` replaces
             ``floor_z`` (default: estimated from the clip when ``physics`` is given).
@@ -246,7 +249,7 @@ def validate_clip(
         shown = any(
             r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
         )
-        hermite = [] if own != "hermite" and shown else ["hermite"]  # e.g. xyz's = uniform's
+        hermite = [] if own != "hermite" and shown else ["hermite"]  # cartesian's = uniform's
         for name in hermite + ([own] if own != "hermite" else []):
             built = reconstructions.rebuild(name, clip, keys)
             rec = from_reconstruction(built, clip.fps)
@@ -276,7 +279,7 @@ def validate_clip(
 
 
 def physics_job(model, clip: Clip):
-    """A :class:`sim.physics.analysis.PhysicsJob` for the protocol points of ``clip``'s subject."""
+    """A :class:`sim.analysis.job.PhysicsJob` for the protocol points of ``clip``'s subject."""
     orig = from_clip(clip).restrict(POINTS)
     return PhysicsJob(model, orig.names, orig.parents, clip.fps)
 

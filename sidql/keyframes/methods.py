@@ -24,11 +24,13 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import warnings
 from collections.abc import Callable
 
 import numpy as np
 
 from sidql.keyframes import reconstructions
+from sidql.keyframes.counts import check_counts
 from sidql.keyframes.metrics import q_error
 from sidql.keyframes.optimal import clip_optimal_table
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
@@ -49,6 +51,9 @@ RECONSTRUCTION: dict[str, str] = {}
 #: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
 LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
 
+#: old method name -> its name now; the old one still works and warns (``FutureWarning``).
+RENAMED: dict[str, str] = {"xyz": "cartesian"}
+
 _OPTIONS = ("reconstruction", "memo")
 _TAKES: dict[str, tuple[str, ...]] = {}
 
@@ -67,8 +72,19 @@ def register(name: str, reconstruction: str = "hermite") -> Callable[[MethodFn],
     return deco
 
 
+def current_name(name: str) -> str:
+    """``name``, or its name now if it is an old one (:data:`RENAMED`; warns)."""
+    if name in RENAMED:
+        warnings.warn(
+            f"method {name!r} is an old name; use {RENAMED[name]!r}", FutureWarning, stacklevel=3
+        )
+        return RENAMED[name]
+    return name
+
+
 def reconstruction_of(name: str) -> str:
     """The reconstruction method ``name`` is meant for (importing it if lazy)."""
+    name = current_name(name)
     get(name)
     return RECONSTRUCTION.get(name, "hermite")
 
@@ -79,7 +95,12 @@ def available() -> list[str]:
 
 
 def get(name: str) -> MethodFn:
-    """The method registered as ``name`` (importing its module if lazy); KeyError lists choices."""
+    """The method registered as ``name`` (importing its module if lazy; an old name warns).
+
+    Raises:
+        UnknownNameError: (a KeyError) no such method; the message lists the known ones.
+    """
+    name = current_name(name)
     if name not in METHODS and name in LAZY_METHODS:
         module, _, function = LAZY_METHODS[name].partition(":")
         loaded = importlib.import_module(module)
@@ -105,7 +126,7 @@ def select(
     Args:
         name: a registered method (see :func:`available`).
         clip: the motion (N frames).
-        W: keyframe count, both ends included, 2 <= W <= N.
+        W: keyframe count, both ends included, 2 <= W <= N (:mod:`sidql.keyframes.counts`).
         seed: seed of any randomness the method uses.
         reconstruction: the reconstruction the keyframes will be rebuilt with, for methods whose
             choice depends on it (default: the method's own, :func:`reconstruction_of`).
@@ -114,10 +135,13 @@ def select(
 
     Returns:
         (W,) sorted unique int64 indices with first 0 and last N - 1.
+
+    Raises:
+        UnknownNameError: an unknown method. UsageError: W out of range.
     """
+    name = current_name(name)
     N = clip.n_frames
-    if not 2 <= W <= N:
-        raise ValueError(f"W must be in [2, {N}] for a {N}-frame clip; got {W}")
+    check_counts([W], N)
     fn = get(name)
     options = {"reconstruction": reconstruction or RECONSTRUCTION[name], "memo": memo}
     kw = {p: options[p] for p in _TAKES.get(name, ())}
@@ -154,10 +178,10 @@ def uniform_choice(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
     return uniform_indices(clip.n_frames, W)
 
 
-@register("xyz", reconstruction="cartesian")
-def xyz_uniform(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
-    """The Cartesian baseline many keyframe systems use: W evenly spaced frames, every point
-    interpolated in xyz between them (cubic Hermite with the keyframes' point velocities), so bone
+@register("cartesian", reconstruction="cartesian")
+def cartesian_uniform(clip: Clip, W: int, *, seed: int = 0) -> np.ndarray:
+    """The Cartesian baseline many keyframe systems use (once named ``xyz``): W evenly spaced
+    frames, every point interpolated in xyz between them (cubic Hermite with the keyframes' point velocities), so bone
     lengths are not kept - the motion the bone-length and IK checks exist for."""
     return uniform_indices(clip.n_frames, W)
 

@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from sim.errors import MotionDataError
+from sim.files import excerpt
 from sim.model import quaternion as quat
 from sim.model.angles import wrap_angle
 from sim.model.rotations import y_up_to_z_up, z_up_to_y_up
@@ -322,7 +323,8 @@ def protocol_indices(clip: Clip) -> np.ndarray:
         raise MotionDataError(
             clip.source or None,
             None,
-            f"clip lacks protocol point(s) {', '.join(missing)}; known: {', '.join(clip.names)}",
+            f"clip lacks protocol point(s) {', '.join(missing)}; known: "
+            f"{excerpt(', '.join(clip.names), 300, quote=False)}",
         )
     return np.array([clip.names.index(p) for p in POINTS], dtype=np.int64)
 

@@ -14,7 +14,8 @@
 :func:`train` reads top to bottom, cleanrl style (setup, then one loop: act, step, store, learn,
 evaluate and checkpoint), with every piece it calls defined above it; :class:`Args` documents each
 knob. The paper's values are the defaults where it gives them (memory 10,000, minibatch 256,
-γ = 0.5 were its choices; the defaults here are the tuned ones, see the README's tuning table).
+γ = 0.5 were its choices; the defaults here are the tuned ones: docs/policy.md lists what was
+kept and what changed, and why).
 A run writes ``OUT`` (the policy), ``OUT.ckpt`` (everything needed to resume, written atomically
 at every evaluation), ``OUT.csv`` (the log) and ``OUT.png`` (the learning curve). Policy and
 checkpoint files hold tensors and plain values only and are read with ``weights_only=True``

@@ -31,6 +31,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from sidql.keyframes.counts import LEAST_LEARNED_W, check_counts
 from sidql.learning.tasks import (
     KeyframeTask,
     insertion_gain,
@@ -123,7 +124,7 @@ class KeyframeEnv(gym.Env):
         tasks: the clips to draw from (all with the same N and C). ``None`` builds a small
             deterministic synthetic set (:func:`sidql.learning.tasks.synthetic_tasks`) so that
             ``gymnasium.make(ENV_ID)`` works without data.
-        keyframes: the keyframe counts W an episode may ask for (each 3 <= W <= N); one is drawn
+        keyframes: the keyframe counts W an episode may ask for (each 3 <= W <= N: :data:`sidql.keyframes.counts.LEAST_LEARNED_W`); one is drawn
             per episode with ``self.np_random``.
         feature_stats: (mean, std), each (C,), for the observation's standardisation (e.g. the
             training environment's, for an evaluation environment); None: from ``tasks``.
@@ -148,9 +149,7 @@ class KeyframeEnv(gym.Env):
             if t.features.shape != (n, c):
                 raise ValueError(f"all tasks must have features ({n}, {c}); got {t.features.shape}")
         self.keyframe_counts = tuple(as_index(w, "keyframes") for w in keyframes)
-        bad = [w for w in self.keyframe_counts if not 3 <= w <= n]
-        if not self.keyframe_counts or bad:
-            raise ValueError(f"keyframe counts must lie in [3, N={n}]; got {self.keyframe_counts}")
+        check_counts(self.keyframe_counts, n, least=LEAST_LEARNED_W, name="keyframe counts")
         self.n_frames = n
         if feature_stats is None:
             flat = np.concatenate([t.features for t in self.tasks]).astype(np.float64)
@@ -232,8 +231,7 @@ class KeyframeEnv(gym.Env):
         if w is None:
             w = self.keyframe_counts[int(self.np_random.integers(len(self.keyframe_counts)))]
         w = as_index(w, "options['keyframes']")
-        if not 3 <= w <= self.n_frames:
-            raise ValueError(f"keyframes must lie in [3, {self.n_frames}]; got {w}")
+        check_counts([w], self.n_frames, least=LEAST_LEARNED_W, name="options['keyframes']")
         self._task_index = i
         self._task = self.tasks[i]
         self._scaled = self.scaled(self._task)

@@ -20,7 +20,8 @@ import zipfile
 import torch
 
 from sim.errors import ModelFileError, MotionDataError
-from sim.files import MAX_CHECKPOINT_BYTES, check_zip, excerpt, open_regular, write_atomic
+from sim.files import MAX_CHECKPOINT_BYTES, excerpt, open_regular, write_atomic
+from sim.zipcheck import check_zip
 
 #: Kind and version of a trained policy file (``sidql train``'s OUT, ``sidql/data/policy.pt``).
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,

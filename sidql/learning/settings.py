@@ -9,6 +9,9 @@ import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
+from sidql.keyframes.counts import LEAST_LEARNED_W, check_counts
+from sim.errors import UsageError
+
 #: Args that may differ between a checkpoint and the run that resumes it (everything else must
 #: match: the network, the replay memories and the data split are built from it).
 RESUME_MAY_CHANGE = ("steps", "resume", "out", "cache_dir", "progress", "threads", "eval_every",
@@ -152,6 +155,8 @@ def settings_problems(args: Args) -> list[str]:
         finite = not isinstance(v, float) or math.isfinite(v)
         if isinstance(v, bool) or not isinstance(v, int | float) or not finite or not ok(v):
             out.append(f"--{name.replace('_', '-')} must be {what}; got {v}")
-    if not args.keyframes or any(not 3 <= w <= 60 for w in args.keyframes):
-        out.append(f"--keyframes values must be in [3, 60]; got {list(args.keyframes)}")
+    try:
+        check_counts(args.keyframes, 60, least=LEAST_LEARNED_W, name="--keyframes")
+    except UsageError as e:
+        out.append(str(e))
     return out

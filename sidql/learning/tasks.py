@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, OutputError
 from sim.files import write_atomic
 from sim.motion.clip import read_arrays
 from sim.motion.dataset import find_trials
@@ -277,15 +277,15 @@ def trial_tasks(
     )
     if path is not None:
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
             write_atomic(
                 path,
                 lambda f: np.savez(
                     f, features=out.features, costs=out.costs, starts=starts, n_bones=out.n_bones
                 ),
             )
-        except OSError as e:  # a cache that cannot be written only costs time
-            print(f"warning: {path}: task cache not written: {e.strerror or e}", file=sys.stderr)
+        except (OSError, OutputError) as e:  # a cache that cannot be written only costs time
+            why = e.problem if isinstance(e, OutputError) else e.strerror or e
+            print(f"warning: {path}: task cache not written: {why}", file=sys.stderr)
     return out
 
 

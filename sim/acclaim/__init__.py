@@ -1,1 +1,2 @@
-"""Acclaim (ASF skeleton + AMC motion) files: reading (and, for the codec, writing)."""
+"""Acclaim (ASF skeleton + AMC motion) files: reading (``asf``, ``amc``; the values they give in
+``records``) and, for the codec, writing (``writer``)."""

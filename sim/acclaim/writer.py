@@ -1,4 +1,4 @@
-"""Write an Acclaim AMC motion (the inverse of :func:`sim.acclaim.reader.parse_amc`).
+"""Write an Acclaim AMC motion (the inverse of :func:`sim.acclaim.amc.parse_amc`).
 
 The file is ``:FULLY-SPECIFIED`` and ``:DEGREES``, frames numbered from ``motion.first_frame``,
 the root's channels in the skeleton's ``root_order`` with translations in the skeleton's length
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.reader import ROOT_CHANNELS, Motion, Skeleton
+from sim.acclaim.records import ROOT_CHANNELS, Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.files import write_atomic
 

@@ -11,7 +11,7 @@ file's axes is the bone's axis frame ``C_b``, so relative to its parent the body
 applied first); MuJoCo composes a body's hinges left to right, so hinges are listed in reverse
 dof order. The free joint's orientation carries the y-up to z-up turn of the whole figure.
 
-Names in the XML: bone names must pass :func:`sim.acclaim.reader.check_bone_name` (the reader
+Names in the XML: bone names must pass :func:`sim.acclaim.asf.check_bone_name` (the reader
 refuses others with the line; :func:`build_mjcf` re-checks skeletons built in memory), so they need
 no escaping; the free-text model name (the ASF's ``:name``) is XML-escaped.
 """
@@ -27,7 +27,8 @@ from xml.sax.saxutils import quoteattr
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import Skeleton, check_bone_name, parse_asf
+from sim.acclaim.asf import check_bone_name, parse_asf
+from sim.acclaim.records import Skeleton
 from sim.errors import MotionDataError
 from sim.files import MAX_ASF_BYTES, read_regular, write_atomic
 from sim.model import quaternion as quat
@@ -234,6 +235,5 @@ def write_humanoid_xml(path: str | os.PathLike = HUMANOID_XML) -> Path:
     """Regenerate the shared humanoid (:data:`HUMANOID_XML`) from the canonical skeleton."""
     text = build_mjcf(canonical_skeleton(), model_name="cmu_humanoid")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda f: f.write(text.encode()))
     return path

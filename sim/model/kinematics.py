@@ -1,4 +1,5 @@
-"""The points of a skeleton: the root, then every ASF bone's end, with their parents.
+"""The points of a skeleton: the root, then every ASF bone's end, with their parents; which of
+them stand for the feet.
 
 (The independent forward kinematics that checks retargeting lives with the tests,
 ``tests/acclaim_fk.py``: it shares no code with the model builder.)
@@ -8,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.acclaim.reader import Skeleton
+from sim.acclaim.records import Skeleton
 
 
 def point_names(skeleton: Skeleton) -> tuple[str, ...]:
@@ -21,3 +22,23 @@ def point_parents(skeleton: Skeleton) -> np.ndarray:
     names = point_names(skeleton)
     index = {n: i for i, n in enumerate(names)}
     return np.array([-1] + [index[b.parent] for b in skeleton.bones], dtype=np.int64)
+
+
+#: Foot points, in the order metrics use them: (ankle, ball, toes) per side. Each names the bone
+#: whose *end* is the point: ``ltibia`` ends at the ankle, ``lfoot`` at the ball (toe base),
+#: ``ltoes`` at the toe tip.
+FOOT_POINTS: tuple[str, ...] = ("ltibia", "lfoot", "ltoes", "rtibia", "rfoot", "rtoes")
+#: The sole's points (balls, then toes), which rest on the floor in flat stance; the bones whose
+#: capsules are the humanoid's foot geoms (the simulator's feet, :mod:`sim.simulate`).
+SOLE_POINTS: tuple[str, ...] = ("lfoot", "rfoot", "ltoes", "rtoes")
+SIDES: tuple[str, ...] = ("l", "r")
+
+
+def side(point: str) -> str:
+    """``"l"`` or ``"r"``: the foot a foot point belongs to."""
+    return point[0]
+
+
+def foot_points(names) -> tuple[str, ...]:
+    """The foot points among ``names``, in :data:`FOOT_POINTS` order."""
+    return tuple(n for n in FOOT_POINTS if n in names)

@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 from numpy.lib import format as npformat
 
-from sim.errors import MotionDataError, UnknownNameError
-from sim.files import MAX_NPZ_BYTES, check_zip, excerpt, open_regular, write_atomic
+from sim.errors import MotionDataError, OutputError, UnknownNameError
+from sim.files import MAX_NPZ_BYTES, excerpt, open_regular, write_atomic
+from sim.zipcheck import check_zip
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ _ARRAY_KEYS = ("parents", "positions", "velocities", "qpos", "qvel", "rotations"
 _OPTIONAL_KEYS = ("angular_velocities", "source_velocities", "accelerations", "derivative_noise")
 
 
-def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> Path:
+def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None, *, root=None) -> Path:
     """Write ``clip`` to ``path`` atomically (temporary file in the same folder, then rename).
 
     Keys: names, parents, positions, velocities, qpos, qvel, rotations, fps, source, start_frame,
@@ -164,7 +165,6 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> 
     :func:`load_extra` reads them).
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {k: getattr(clip, k) for k in _ARRAY_KEYS}
     for name in _OPTIONAL_KEYS:
         if getattr(clip, name) is not None:
@@ -181,8 +181,29 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None) -> 
     if clash:
         raise ValueError(f"extra arrays {sorted(clash)} would overwrite clip keys")
     payload.update(extra or {})
-    write_atomic(path, lambda f: np.savez_compressed(f, **payload))
+    T, J = clip.positions.shape[:2]
+    for what, n, limit in (("frames", T, MAX_CLIP_FRAMES), ("points", J, MAX_POINTS),
+                           ("coordinates", max(clip.qpos.shape[1], clip.qvel.shape[1]),
+                            MAX_COORDINATES)):  # fmt: skip
+        if n > limit:  # the writer refuses what its reader (load_npz) would refuse
+            raise OutputError(str(path), None, f"a clip of {n:,} {what}; its reader takes at "
+                              f"most {limit:,}")  # fmt: skip
+    write_atomic(path, lambda f: _write_npz(f, payload, str(path)), root=root)
     return path
+
+
+def _write_npz(f, payload: dict, path: str) -> None:
+    """The arrays compressed, or stored where compression would inflate more than the reader
+    allows (:class:`NpzReader`: a clip of constant frames compresses ~1000x)."""
+    np.savez_compressed(f, **payload)
+    inflated = sum(np.asarray(v).nbytes + 256 for v in payload.values())
+    if inflated > min(MAX_NPZ_INFLATED, max(NPZ_INFLATION_FLOOR, NPZ_INFLATION * f.tell())):
+        f.seek(0)
+        f.truncate()
+        np.savez(f, **payload)
+    if f.tell() > MAX_NPZ_BYTES or inflated > MAX_NPZ_INFLATED:
+        raise OutputError(path, None, f"a clip file of {inflated:,} bytes of arrays; its reader "
+                          f"takes at most {min(MAX_NPZ_BYTES, MAX_NPZ_INFLATED):,}")  # fmt: skip
 
 
 #: Stated limits of a clip file (:func:`load_npz`), checked on the arrays' headers before any
@@ -205,7 +226,7 @@ _KINDS = {"f": "floating-point", "i": "integer", "u": "unsigned integer", "b": "
 
 class NpzReader:
     """A ``.npz`` file opened for bounded reading: a regular file of at most ``max_bytes``, its
-    zip directory checked (:func:`sim.files.check_zip`), every member an ``.npy`` array whose
+    zip directory checked (:func:`sim.zipcheck.check_zip`), every member an ``.npy`` array whose
     header (shape, dtype) is read and checked against its member's size before any array is
     read. Arrays of numbers, booleans and text only (never objects: nothing is unpickled).
 
@@ -371,6 +392,9 @@ def load_npz(path: str | os.PathLike) -> Clip:
     fps, source_fps = float(a["fps"]), float(a["source_fps"])
     if not (0 < fps <= 1e4 and 0 < source_fps <= 1e4):
         raise MotionDataError(path, None, f"frame rates {fps:g}, {source_fps:g} out of (0, 1e4]")
+    for key in ("names", "joint_names"):  # printed in messages and pages: printable only
+        if not all(str(n).isprintable() for n in a[key]):
+            raise MotionDataError(path, None, f"{key}: a name that cannot be printed")
     start = int(a["start_frame"])
     if not 0 <= start <= 1 << 40:
         raise MotionDataError(path, None, f"start_frame {start} out of range")
@@ -379,7 +403,7 @@ def load_npz(path: str | os.PathLike) -> Clip:
             names=tuple(str(n) for n in a["names"]),
             joint_names=tuple(str(n) for n in a["joint_names"]),
             fps=fps,
-            source=str(a["source"]),
+            source="".join(ch if ch.isprintable() else "?" for ch in str(a["source"])),
             start_frame=start,
             source_fps=source_fps,
             **{k: a.get(k) for k in _OPTIONAL_KEYS},

@@ -22,7 +22,16 @@ from pathlib import Path, PurePosixPath
 
 from sim.batch import WRITE_LOCK, run_batch
 from sim.errors import MotionDataError, MotionDataWarning
-from sim.files import MAX_ASF_BYTES, MAX_INDEX_BYTES, excerpt, inside, read_regular, write_atomic
+from sim.files import (
+    MAX_ASF_BYTES,
+    MAX_INDEX_BYTES,
+    excerpt,
+    inside,
+    make_folders,
+    read_regular,
+    write_atomic,
+)
+from sim.folders import MAX_DEPTH, walk
 from sim.motion.clip import load_npz, save_npz
 from sim.motion.ingest import load_motion
 
@@ -77,7 +86,14 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
                             "asf": excerpt(str(asf), 300, quote=False), "error": problem})  # fmt: skip
 
     trials = []
-    named = sorted(p for p in root.rglob("*") if p.suffix.lower() == ".amc" and not p.is_dir())
+    try:
+        entries, too_deep = walk(root)  # iterative, depth-limited: no RecursionError
+    except OverflowError as e:
+        raise MotionDataError(str(root), None, f"{e}; not searched") from None
+    for folder in too_deep[:20]:
+        skip(folder, "", f"{excerpt(str(folder), 300, quote=False)}: nested over {MAX_DEPTH} "
+             "folders deep; not searched")  # fmt: skip
+    named = [p for p in entries if p.suffix.lower() == ".amc"]
     for amc in named:
         if not str(amc.relative_to(root)).isprintable():  # control characters: not echoed
             skip(amc, "", f"{excerpt(str(amc))}: a name that cannot be printed; skipped")
@@ -185,7 +201,7 @@ def _ingest_one(
         raise MotionDataError(str(trial.amc), None, f"unsafe output path {rel}")
     if write:
         with WRITE_LOCK:  # a worker whose parent died exits only between writes
-            save_npz(clip, out)
+            save_npz(clip, out, root=out_dir)
     record = {
         "subject": trial.subject,
         "trial": trial.name,
@@ -221,7 +237,8 @@ def ingest_directory(
     outside: list[dict] = []  # symbolic links leaving root: listed, never read
     trials = find_trials(root, outside)
     rels = [str(p) for p in output_paths(trials, root)]
-    out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
+    # after the input checks (bad input leaves nothing), before any work: no link below out_dir
+    make_folders(out_dir, sorted({str(PurePosixPath(r).parent) for r in rels}))
     summary = DatasetSummary(skipped=outside)
     here = ray is None  # Ray workers may run on other machines: their clips come back to be written
     items = [
@@ -234,7 +251,7 @@ def ingest_directory(
     for t, o in zip(trials, outcomes, strict=True):
         if o.ok and not here:
             record, clip = o.result
-            save_npz(clip, out_dir / record["file"])
+            save_npz(clip, out_dir / record["file"], root=out_dir)
             summary.written.append(_relative(record, t, root, out_dir, skeletons))
         elif o.ok:
             summary.written.append(_relative(o.result, t, root, out_dir, skeletons))
@@ -250,7 +267,11 @@ def ingest_directory(
         "trials": summary.written,
         "skipped": summary.skipped,
     }
-    write_atomic(out_dir / "index.json", lambda f: f.write(json.dumps(index, indent=2).encode()))
+    write_atomic(
+        out_dir / "index.json",
+        lambda f: f.write(json.dumps(index, indent=2).encode()),
+        root=out_dir,
+    )
     return summary
 
 
@@ -265,7 +286,7 @@ def _relative(record: dict, trial: Trial, root, out_dir: Path, skeletons: dict) 
         rel = PurePosixPath(record["file"]).parent / (
             f"skeleton-{hashlib.sha1(data).hexdigest()[:8]}.asf"
         )
-        write_atomic(out_dir / rel, lambda f: f.write(data))
+        write_atomic(out_dir / rel, lambda f: f.write(data), root=out_dir)
         skeletons[key] = str(rel)
     try:
         amc = Path(trial.amc).relative_to(root).as_posix()
@@ -283,24 +304,33 @@ def load_dataset_clips(out_dir: str | os.PathLike, length: int = 60, *, skeleton
     ``sidql dataset`` or ``sidql synth`` (its ``index.json``); returns (clips, subjects), and with
     ``skeletons`` a third list: each clip's subject ASF when the clips are on the subject's own
     skeleton (a ``sidql dataset --skeleton subject`` folder), else ``""``."""
-    index, entries = _read_dataset(out_dir, length)
+    rows = dataset_clips(out_dir, length)
+    clips, subjects, asfs = ([r[i] for r in rows] for i in range(3))
+    return (clips, subjects, asfs) if skeletons else (clips, subjects)
+
+
+def dataset_clips(out_dir, length: int = 60, skipped: list | None = None) -> list[tuple]:
+    """``(clip, subject, asf, file)`` for every ``length``-frame clip of a dataset/synth folder
+    (see :func:`load_dataset_clips`; ``file``: the clip file read). Each file is read once: an
+    entry naming a file listed before (hard links included) is left out and, with ``skipped``,
+    listed there as ``{"amc", "problem"}``."""
+    index, entries = _read_dataset(out_dir, length, skipped)
     own = index.get("skeleton") == "subject"
-    clips, subjects, asfs = [], [], []
     out_dir = Path(out_dir)
-    for i, (c, entry) in enumerate(entries):
-        clips.append(c)
-        subjects.append(str(entry.get("subject", "")))
+    rows = []
+    for i, (c, entry, file) in enumerate(entries):
         asf = entry.get("asf")
         if own and isinstance(asf, str):  # a copy inside the folder (ingest_directory)
             asf = str(confined(out_dir, asf, f"clip {i} asf", out_dir / "index.json"))
-        asfs.append(asf if own and isinstance(asf, str) else "")
-    return (clips, subjects, asfs) if skeletons else (clips, subjects)
+        subject = excerpt(str(entry.get("subject", "")), 100, quote=False)
+        rows.append((c, subject, asf if own and isinstance(asf, str) else "", file))
+    return rows
 
 
 def dataset_entries(out_dir: str | os.PathLike, length: int = 60) -> list[tuple]:
     """``(clip, index entry)`` for every ``length``-frame clip of a dataset/synth folder (see
-    :func:`load_dataset_clips`)."""
-    return _read_dataset(out_dir, length)[1]
+    :func:`load_dataset_clips`; each file read once, as :func:`dataset_clips`)."""
+    return [(c, e) for c, e, _ in _read_dataset(out_dir, length)[1]]
 
 
 #: Bound [bytes] on what parsing an ``index.json`` may allocate, estimated from its bytes before
@@ -343,14 +373,26 @@ def read_index(path: str | os.PathLike) -> dict:
     return index
 
 
-def _read_dataset(out_dir, length) -> tuple[dict, list[tuple]]:
+def _read_dataset(out_dir, length, skipped=None) -> tuple[dict, list[tuple]]:
+    """The index and ``(clip, entry, file)`` per clip; one file at a time, each file once."""
     out_dir = Path(out_dir)
     path = out_dir / "index.json"
     index = read_index(path)
-    trials = index.get("trials", [])
-    out = []
-    for i, entry in enumerate(trials):
-        out += [(c, entry) for c in load_npz(entry_file(out_dir, index, i)).split(length)]
+    out, seen = [], {}
+    for i, entry in enumerate(index.get("trials", [])):
+        file = entry_file(out_dir, index, i)
+        try:
+            st = os.stat(file)
+            key = (st.st_dev, st.st_ino)
+        except OSError:
+            key = None  # load_npz names the problem
+        if key in seen:
+            if skipped is not None:
+                skipped.append({"amc": str(file), "problem": f"listed again in {path} (trials["
+                                f"{seen[key]}] and [{i}]); read once"})  # fmt: skip
+            continue
+        seen[key] = i
+        out += [(c, entry, file) for c in load_npz(file).split(length)]
     return index, out
 
 

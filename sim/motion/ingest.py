@@ -13,8 +13,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc
-from sim.errors import MotionDataError, UnknownNameError
+from sim.acclaim.amc import parse_amc
+from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
@@ -32,15 +32,30 @@ from sim.motion.velocities import (
 
 SKELETONS = ("subject", "humanoid")
 CMU_FPS = 120.0
+#: Memory bound of :func:`load_motion`: the arrays it builds, about :data:`BYTES_PER_POINT_FRAME`
+#: per point and source frame (measured: ``benchmarks/fuzz_campaign.py``), at most
+#: :data:`ARRAY_BYTES_PER_INPUT_BYTE` times the AMC file's size or :data:`ARRAY_BYTES_FLOOR`
+#: (any trial of up to ~12,000 source frames), checked from the parsed frame count before any
+#: is built. A real CMU trial needs ~25x its size; a root-only AMC (20 bytes a frame) ~700x.
+BYTES_PER_POINT_FRAME = 700
+ARRAY_BYTES_PER_INPUT_BYTE = 128
+ARRAY_BYTES_FLOOR = 256 << 20
 
 
 def resample_step(source_fps: float, fps: float) -> int:
-    """Frames of the source per output frame; the ratio must be a whole number."""
-    if fps <= 0 or source_fps <= 0:
-        raise ValueError(f"frame rates must be positive (source {source_fps}, output {fps})")
+    """Frames of the source per output frame; the ratio must be a whole number.
+
+    Raises:
+        UsageError: a rate that is not positive, or an output rate that does not divide the
+            source rate by a whole number.
+    """
+    if not (0 < fps < np.inf and 0 < source_fps < np.inf):
+        raise UsageError(
+            f"frame rates must be positive and finite (source {source_fps}, output {fps})"
+        )
     step = source_fps / fps
     if abs(step - round(step)) > 1e-9 or round(step) < 1:
-        raise ValueError(
+        raise UsageError(
             f"output rate {fps} fps must divide the source rate {source_fps} fps by a whole number"
         )
     return int(round(step))
@@ -154,6 +169,7 @@ def load_motion(
         raise UnknownNameError("skeleton", skeleton, SKELETONS)
     subject, model = subject_model(asf)
     motion = parse_amc(amc, subject)
+    _check_memory(amc, motion.n_frames, len(point_names(subject)))
     root_scale = 1.0
     target = subject
     if skeleton == "humanoid":
@@ -170,6 +186,19 @@ def load_motion(
         source=str(Path(amc)),
         derivatives=derivatives,
     )
+
+
+def _check_memory(amc, frames: int, points: int) -> None:
+    """Refuse a trial whose arrays would pass the stated bound (see :data:`ARRAY_BYTES_FLOOR`)."""
+    need = frames * points * BYTES_PER_POINT_FRAME
+    size = os.stat(amc).st_size
+    limit = max(ARRAY_BYTES_FLOOR, ARRAY_BYTES_PER_INPUT_BYTE * size)
+    if need > limit:
+        raise MotionDataError(
+            str(amc), None, f"{frames:,} frames of {points} points need ~{need >> 20:,} MB of "
+            f"arrays; at most {ARRAY_BYTES_PER_INPUT_BYTE}x the file's {size:,} bytes "
+            f"(or {ARRAY_BYTES_FLOOR >> 20} MB)",
+        )  # fmt: skip
 
 
 def load_clips(

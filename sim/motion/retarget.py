@@ -12,7 +12,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import Motion, Skeleton
+from sim.acclaim.records import Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.model import quaternion as quat
 from sim.model.humanoid import bone_frames

@@ -14,11 +14,10 @@ import numpy as np
 
 from sim.model import quaternion as quat
 from sim.model.humanoid import humanoid_model
-from sim.model.kinematics import point_names, point_parents
+from sim.model.kinematics import SOLE_POINTS, point_names, point_parents
 from sim.model.rotations import Y_UP_TO_Z_UP, axis_rotation
 from sim.motion.clip import Clip
 from sim.motion.ingest import CMU_FPS, clip_from_qpos
-from sim.physics.feet import SOLE_POINTS
 
 
 def synthetic_qpos(

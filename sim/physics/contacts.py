@@ -31,7 +31,7 @@ sample count:
 
 PhysDiff's definitions (Yuan et al., ICCV 2023, after UHC's evaluation; :func:`physdiff_metrics`),
 named as such so our numbers can sit beside published tables: per frame the lowest point of the
-whole body's surface (the sole spheres and every bone's capsule of :mod:`sim.replay.capsules`)
+whole body's surface (the sole spheres and every bone's capsule of :mod:`sim.model.capsules`)
 against the floor, ``physdiff_penetrate_mm`` its depth below, ``physdiff_float_mm`` its height
 above beyond a 5 mm tolerance, means over frames; ``physdiff_skate`` the share of frames in which
 a foot in contact in both that frame and the previous one moves more than 2.5 cm horizontally.
@@ -45,12 +45,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sim.model.capsules import bones_of
+from sim.model.kinematics import FOOT_POINTS, foot_points
 from sim.motion.points import PointMotion
 from sim.physics.feet import (
     CONTACT_GAP,
     ENTER_SPEED,
     FOOT_PART,
-    FOOT_POINTS,
     HOLD_GAP,
     HOLD_SPEED,
     ROLL_BACK,
@@ -62,12 +63,10 @@ from sim.physics.feet import (
     STILL_TIME,
     SUPPORT_GAP,
     Sole,
-    foot_points,
     sole,
 )
+from sim.physics.foot_state import FootState
 from sim.physics.ground import Ground, horizontal_speed, runs, speed
-from sim.replay.capsules import bones_of
-from sim.replay.foot_state import FootState
 
 #: PhysDiff's float tolerance [m] and skate threshold [m of horizontal travel between frames].
 PHYSDIFF_FLOAT_TOL, PHYSDIFF_SKATE_M = 0.005, 0.025
@@ -356,7 +355,7 @@ def body_contacts(
     """Which body points other than the feet rest on the floor (T frames).
 
     Every point but the feet's (ankle, ball, toe tip: the sole's) is a sphere as wide as the
-    widest bone capsule meeting there (:func:`sim.replay.capsules.bones_of`): knees, hips and
+    widest bone capsule meeting there (:func:`sim.model.capsules.bones_of`): knees, hips and
     pelvis, spine, shoulders, elbows, wrists, hands, head. A point enters contact as a foot does:
     when its sphere comes within ``enter`` (:func:`enter_gap`) of the floor during the frame while
     it moves slower than :data:`~sim.physics.feet.ENTER_SPEED` horizontally (a hand swept past

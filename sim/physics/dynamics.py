@@ -3,7 +3,7 @@
 Pipeline per motion (``qpos`` (T, nq) on a model from :func:`sim.model.humanoid.build_mjcf`):
 
 1. **Derivatives**, from where they are known: :meth:`InverseDynamics.run` takes the motion's
-   ``qvel``/``qacc`` where the caller has them (:class:`sim.physics.analysis.PhysicsJob` maps the
+   ``qvel``/``qacc`` where the caller has them (:class:`sim.analysis.job.PhysicsJob` maps the
    original's source-frame point derivatives and a reconstruction's curve derivatives through
    the fitted humanoid's Jacobians, :meth:`sim.physics.ik.HumanoidIK.rates`). Otherwise (frames
    at the analysis rate only) :func:`derivatives` differences consecutive samples on the
@@ -252,3 +252,37 @@ class InverseDynamics:
             qvel, qacc, out["com"], out["F"], out["tau"], out["rF"], out["rtau"], out["cF"], jt,
             self.mass, self.weight,
         )  # fmt: skip
+
+
+def summarise_dynamics(
+    dyn: Dynamics, anatomical: np.ndarray, measured: np.ndarray | None = None
+) -> dict:
+    """Per-frame dynamics figures (T,) and their clip summary (key ``"summary"``) over the
+    ``measured`` frames (T,) bool (default all; none measured: the figures are nan), with
+    ``dynamics_n`` and ``dynamics_unmeasured_n`` frames and ``residual_force_bw_unmeasured``
+    (mean over the unmeasured frames, None if none)."""
+    rf = np.linalg.norm(dyn.residual_force, axis=1) / dyn.weight
+    rt = np.linalg.norm(dyn.residual_torque, axis=1) / dyn.mass
+    tau = dyn.joint_torque[:, anatomical]
+    jt = np.sqrt(np.mean(tau**2, axis=1)) / dyn.mass if tau.shape[1] else np.zeros(len(rf))
+    m = np.ones(len(rf), dtype=bool) if measured is None else np.asarray(measured, dtype=bool)
+    some = bool(m.any())
+    nan = float("nan")
+    return {
+        "residual_force_bw": rf,
+        "residual_torque_nm_kg": rt,
+        "joint_torque_rms_nm_kg": jt,
+        "summary": {
+            "residual_force_bw": float(rf[m].mean()) if some else nan,
+            "residual_force_bw_p95": float(np.percentile(rf[m], 95)) if some else nan,
+            "residual_torque_nm_kg": float(rt[m].mean()) if some else nan,
+            "joint_torque_rms_nm_kg": (
+                float(np.sqrt(np.mean(tau[m] ** 2)) / dyn.mass) if tau.shape[1] else 0.0
+            )
+            if some
+            else nan,
+            "dynamics_n": int(m.sum()),
+            "dynamics_unmeasured_n": int((~m).sum()),
+            "residual_force_bw_unmeasured": float(rf[~m].mean()) if (~m).any() else None,
+        },
+    }

@@ -1,10 +1,10 @@
-"""The foot: which points stand for it, its sole's geometry, and when it touches the floor.
+"""The foot: its sole's geometry, and the thresholds of when it touches the floor.
 
-The one definition of foot points, sole geometry and contact thresholds: :mod:`sim.physics.ground`
-(the floor), :mod:`sim.physics.contacts` (labels and metrics), :mod:`sim.physics.analysis` (where
-ground forces act), :mod:`sim.replay.checks` (the kinematic replay's foot contacts), and the
-simulator's and synthetic motion's feet (:mod:`sim.simulate`, :mod:`sim.motion.synthetic`) all
-read it.
+The one definition of the sole and of the foot-floor contact thresholds (which points stand for
+the feet: :mod:`sim.model.kinematics`): :mod:`sim.physics.ground` (the floor),
+:mod:`sim.physics.contacts` (labels and metrics), :mod:`sim.analysis.job` (where ground forces
+act), :mod:`sim.replay.checks` (the kinematic replay's foot contacts) and the simulator's feet
+(:mod:`sim.simulate`) all read it.
 
 The sole is the humanoid's own foot geometry (:func:`sim.model.humanoid.build_mjcf`, the body the
 dynamics and the simulator use): the foot bone's capsule from the ankle to the ball, shortened by
@@ -24,21 +24,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.model.humanoid import capsule_radius
+from sim.model.kinematics import SIDES
 
-#: Foot points, in the order metrics use them: (ankle, ball, toes) per side. Each names the bone
-#: whose *end* is the point: ``ltibia`` ends at the ankle, ``lfoot`` at the ball (toe base),
-#: ``ltoes`` at the toe tip.
-FOOT_POINTS: tuple[str, ...] = ("ltibia", "lfoot", "ltoes", "rtibia", "rfoot", "rtoes")
 #: Foot point -> the part of the sole nearest it (what the renderer's foot balls stand for).
 FOOT_PART = {
     "ltibia": "l_heel", "lfoot": "l_ball", "ltoes": "l_toes",
     "rtibia": "r_heel", "rfoot": "r_ball", "rtoes": "r_toes",
 }  # fmt: skip
-#: The sole's points (balls, then toes), which rest on the floor in flat stance; the bones whose
-#: capsules are the humanoid's foot geoms (the simulator's feet, :mod:`sim.simulate`).
-SOLE_POINTS: tuple[str, ...] = ("lfoot", "rfoot", "ltoes", "rtoes")
-SIDES: tuple[str, ...] = ("l", "r")
-
 #: [m] a foot enters contact when its lowest sole point comes within ``max(CONTACT_GAP, 2 x the
 #: floor's spread)`` of the floor during the frame, and leaves it once that point is a further
 #: floor spread up (hysteresis against marker noise; none on a noise-free floor).
@@ -66,16 +58,6 @@ STILL_SPEED, STILL_TIME = 0.1, 0.1
 #: [m] the sole spheres of a foot in contact that are at most this far above the floor bear
 #: ground forces (the heel of a foot standing on its toes does not).
 SUPPORT_GAP = 0.03
-
-
-def side(point: str) -> str:
-    """``"l"`` or ``"r"``: the foot a foot point belongs to."""
-    return point[0]
-
-
-def foot_points(names) -> tuple[str, ...]:
-    """The foot points among ``names``, in :data:`FOOT_POINTS` order."""
-    return tuple(n for n in FOOT_POINTS if n in names)
 
 
 @dataclass(frozen=True)

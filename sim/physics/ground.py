@@ -35,7 +35,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from sim.physics.feet import FOOT_POINTS, SIDES, Sole, foot_points, sole
+from sim.model.kinematics import FOOT_POINTS, SIDES, foot_points
+from sim.physics.feet import Sole, sole
 
 __all__ = ["FOOT_POINTS", "FLAT_TOLERANCE", "MAX_SLOPE", "Ground", "estimate_ground", "foot_points"]
 

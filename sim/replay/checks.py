@@ -1,6 +1,6 @@
 """Kinematic replay of a motion (original or reconstruction) in MuJoCo, and what a person would see.
 
-Each frame's points are mapped onto bone-aligned capsules on mocap bodies (:mod:`sim.replay.capsules`);
+Each frame's points are mapped onto bone-aligned capsules on mocap bodies (:mod:`sim.model.capsules`);
 MuJoCo's collision detection then measures floor penetration and self-penetration between
 non-adjacent bones. Foot contact is the one definition of :mod:`sim.physics.contacts` (the sole's
 geometry against the trial's floor, rolling contact allowed). Together with bone-length drift,
@@ -25,11 +25,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim.model.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
+from sim.model.kinematics import SIDES
 from sim.motion.points import PointMotion, finite_velocity  # noqa: F401 (re-exported)
 from sim.physics.contacts import motion_contacts
-from sim.physics.feet import SIDES
 from sim.physics.ground import Ground
-from sim.replay.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
 
 
 def from_clip(clip) -> PointMotion:

@@ -2,7 +2,7 @@
 
 A simulated clip's external forces are the floor's contact forces, the controller's root
 assistance (recorded every frame, :func:`sim.simulate.controller.track`) and the pushes (recorded
-with the generation parameters). :class:`sim.physics.analysis.PhysicsJob` sees only the clip's
+with the generation parameters). :class:`sim.analysis.job.PhysicsJob` sees only the clip's
 points: it fits the humanoid to them, differentiates, and explains the required external force by
 ground forces at the foot points it labels in contact; what is left is the residual. So, per
 frame, the residual must stay near zero where no help was recorded, and cannot exceed the
@@ -22,10 +22,11 @@ import mujoco
 import numpy as np
 from scipy.signal import savgol_filter
 
+from sim.analysis.job import PhysicsJob
 from sim.model.humanoid import build_mjcf, canonical_skeleton
+from sim.model.kinematics import FOOT_POINTS
 from sim.model.mass import DEFAULT_BODY_MASS_KG
-from sim.physics.analysis import PhysicsJob
-from sim.physics.ground import FOOT_POINTS, Ground, estimate_ground
+from sim.physics.ground import Ground, estimate_ground
 from sim.simulate.model import G, scaled_skeleton
 
 QUIET_BW = 0.02  # [body weight] recorded help below this: a frame "without assistance"

@@ -44,8 +44,8 @@ import mujoco
 import numpy as np
 from scipy.optimize import nnls
 
+from sim.model.kinematics import SOLE_POINTS
 from sim.motion.velocities import qvel_from_qpos
-from sim.physics.feet import SOLE_POINTS
 from sim.simulate.model import (
     CONTROL_HZ,
     FLOOR_BITS,

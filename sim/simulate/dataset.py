@@ -27,15 +27,16 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.batch import iter_batch, ray_session, run_batch
 from sim.errors import MotionDataError, UnknownNameError
-from sim.files import write_atomic
+from sim.files import remove_written, write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
 from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_dict
-
-JOURNAL = "journal.jsonl"
+from sim.simulate.journal import JOURNAL, clip_name, open_journal  # noqa: F401 (JOURNAL: its name)
+from sim.simulate.journal import read as read_journal
 
 
 def readable_trials(
@@ -153,7 +154,7 @@ def synthesize(
     (also in ``index.json``).
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
-    another ``n``, else a ``ValueError``); its finished tasks are not simulated again.
+    another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
     """
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,
@@ -172,7 +173,7 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, r
         **({"samples": samples} if samples else {}),  # an older run's journal has none
     }  # fmt: skip
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
-    done = _read_journal(out_dir / JOURNAL, params) if resume else {}
+    done = read_journal(out_dir, params, trials) if resume else {}  # checked before any write
     limit = n if max_assistance is None else max_tries * n
     kept = {i for i, e in done.items() if "kept" in e}
     summary = DatasetSummary(skipped=list(skipped_inputs))
@@ -190,11 +191,7 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, r
             if task.index not in done:
                 yield task
 
-    mode = "a" if resume and done else "w"
-    with open(out_dir / JOURNAL, mode) as journal:
-        if mode == "w":
-            journal.write(json.dumps({"params": params}) + "\n")
-            journal.flush()
+    with open_journal(out_dir, params, fresh=not (resume and done)) as journal:
         for _, o in iter_batch(
             simulate_file, pending_tasks(), workers=workers, ray=ray, desc="synth",
             progress=progress, total=n if max_assistance is None else None,
@@ -208,14 +205,13 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, r
                 if max_assistance is not None and level > max_assistance:
                     entry = {"rejected": task.kind}
                 else:
-                    name = f"{task.kind}_{task.index:05d}"
-                    path = out_dir / task.kind / f"{name}.npz"
-                    path.parent.mkdir(exist_ok=True)
-                    write_atomic(path, lambda f, data=data: f.write(data))  # whole or absent
+                    name = clip_name(task.kind, task.index)
+                    path = out_dir / name
+                    write_atomic(path, lambda f, data=data: f.write(data), root=out_dir)
                     entry = {"kept": _index_entry(task, name, path, out_dir, record)}
                     kept.add(task.index)
             done[task.index] = entry
-            journal.write(json.dumps({"index": task.index, **entry}) + "\n")
+            journal.write((json.dumps({"index": task.index, **entry}) + "\n").encode())
             journal.flush()  # a crash after this line loses nothing it names
     return _finish(out_dir, done, n, params, summary, start)
 
@@ -224,10 +220,10 @@ def _index_entry(task, name, path, out_dir, record) -> dict:
     record = dict(record)
     return {
         "subject": task.kind,
-        "trial": name,
+        "trial": name.stem,
         "asf": task.asf,
         "amc": task.amc,
-        "file": str(path.relative_to(out_dir)),
+        "file": str(name),
         "frames": record.pop("frames"),
         "fps": record.pop("fps"),
         "notes": [],
@@ -236,39 +232,15 @@ def _index_entry(task, name, path, out_dir, record) -> dict:
     }
 
 
-def _read_journal(path: Path, params: dict) -> dict[int, dict]:
-    """Finished tasks of the run journalled at ``path`` (task index -> its entry); a kept clip
-    whose file is gone counts as not done. Raises ``ValueError`` if the run had other
-    parameters than ``params`` (the number of clips may differ: the plan is the same)."""
-    if not path.is_file():
-        return {}
-    done: dict[int, dict] = {}
-    with open(path) as f:
-        lines = iter(f)
-        head = json.loads(next(lines, "{}") or "{}").get("params")
-        same = lambda a: {k: v for k, v in (a or {}).items() if k != "n"}  # noqa: E731
-        if same(head) != same(params):
-            raise ValueError(f"{path}: a run with other parameters ({head}); cannot resume")
-        for line in lines:
-            try:
-                e = json.loads(line)
-            except ValueError:  # a line cut short by the crash: that task is redone
-                continue
-            i = int(e.pop("index"))
-            if "kept" in e and not (path.parent / e["kept"]["file"]).is_file():
-                continue
-            done[i] = e
-    return done
-
-
 def _finish(out_dir: Path, done: dict, n: int, params: dict, summary, start) -> DatasetSummary:
     """Write ``index.json``: the first ``n`` kept clips in plan order; files of clips kept past
     them (tasks that were already running) are removed, so the folder does not depend on the
     order tasks finished in."""
     kept = sorted(i for i, e in done.items() if "kept" in e)
     last = kept[n - 1] if len(kept) >= n else max(done, default=-1)
-    for i in kept[n:]:
-        (out_dir / done[i]["kept"]["file"]).unlink(missing_ok=True)
+    kinds = params["kinds"]
+    for i in kept[n:]:  # only the names this run gives its clips (journal.read checked them)
+        remove_written(out_dir / clip_name(kinds[i % len(kinds)], i), root=out_dir)
     rejected: dict[str, int] = {}
     for i in sorted(done):
         if i > last:
@@ -294,5 +266,6 @@ def _finish(out_dir: Path, done: dict, n: int, params: dict, summary, start) -> 
         "trials": summary.written,
         "skipped": summary.skipped,
     }  # fmt: skip
-    write_atomic(out_dir / "index.json", lambda f: f.write(json.dumps(index, indent=1).encode()))
+    text = json.dumps(index, indent=1).encode()
+    write_atomic(out_dir / "index.json", lambda f: f.write(text), root=out_dir)
     return summary

@@ -44,7 +44,7 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import Skeleton
+from sim.acclaim.records import Skeleton
 from sim.model.humanoid import build_mjcf
 from sim.model.mass import DEFAULT_BODY_MASS_KG
 

@@ -13,11 +13,12 @@ import os
 import mujoco
 import numpy as np
 
-from sim.acclaim.reader import parse_amc, parse_asf
+from sim.acclaim.amc import parse_amc
+from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
+from sim.model.kinematics import SOLE_POINTS
 from sim.motion.retarget import leg_length, motion_to_qpos
-from sim.physics.feet import SOLE_POINTS
 from sim.simulate.model import SOLE_GEOMS
 
 

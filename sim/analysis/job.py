@@ -1,44 +1,13 @@
-"""Physics of one motion against its original: contacts, self-penetration, joint limits, dynamics.
+"""The physics of one motion against its original, one job per subject and point set.
 
 :class:`PhysicsJob` owns everything MuJoCo for one subject and one point set (the IK model and data,
-the inverse-dynamics model and data, the capsule collision scene), made once and reused for the
-original and every reconstruction of every clip. :meth:`PhysicsJob.analyse` (or the one-shot
-:func:`analyse`) returns, for the original (``positions=None``) or a reconstruction's points:
-
-* ``ground_z_m`` and the floor's fit (``floor_deviation_mm``, ``floor_fits``, ... of
-  :meth:`sim.physics.ground.Ground.summary`): the trial's floor (:mod:`sim.physics.ground`);
-  where it does not fit, float and penetration are measured against a floor the feet do not
-  follow;
-* ``penetration_mm``, ``float_mm``, ``skate_mm_s``, ``contact_precision``, ``contact_recall``
-  against the original's contacts (:mod:`sim.physics.contacts`), each with ``*_n`` samples, and
-  PhysDiff's ``physdiff_penetrate_mm``, ``physdiff_float_mm``, ``physdiff_skate``;
-* ``self_pen_excess_mm``, ``lost_contacts``: self-penetration beyond the original's, pair by pair
-  (:func:`sim.replay.checks.self_penetration_excess`);
-* ``limit_excess_deg``: mean over frames of the worst wrapped anatomical hinge angle beyond its
-  ASF range, on the humanoid fitted to the points (:mod:`sim.physics.ik`), ``limit_excess_max_deg``;
-  only hinges the points observe count (a forearm's twist, say, is invisible without the hand);
-* ``residual_force_bw`` (mean) and ``residual_force_bw_p95``: the force no ground contact can
-  supply / body weight; ``residual_torque_nm_kg``: mean |residual torque| / body mass, the torque
-  the ground forces that supply the force leave (:func:`sim.physics.dynamics.residual_wrench`);
-  ``joint_torque_rms_nm_kg``: RMS anatomical joint torque / body mass, with ``dynamics_n``
-  frames and ``derivatives`` (where the velocities and accelerations came from); all over the
-  frames whose derivatives are measured: ``dynamics_unmeasured_n`` frames of the original
-  (and so of every reconstruction of it) are not, where its source window is shifted against
-  the take's ends or a pose jump (:data:`MAX_DERIVATIVE_NOISE`), and
-  ``residual_force_bw_unmeasured`` is what they would have added (mean over them, None if
-  none); ``residual_force_bw_by_cause``: the residual force's mean over the measured frames
-  split by why no ground force supplies it (:func:`residual_causes`);
-* ``ik_error_mm``: mean RMS distance of the fitted humanoid's points to the motion's (large when
-  a reconstruction stretches bones);
-* ``ground_parts``: per body point other than the feet that rests on the floor (a hand, a knee),
-  the share of frames it does (:func:`sim.physics.contacts.body_contacts`); ``unsupported_share``
-  the frames with nothing on the floor, ``support_missing_share`` those of them needing more than
-  :data:`SUPPORT_MISSING_BW` from outside, ``support_above_floor_share`` those with the lower
-  foot standing still above the floor (``support_above_floor_mm``: how high, median),
-  ``support_held_share`` the frames needing a sustained horizontal force no contact supplies
-  (:func:`held_frames`; :func:`support_verdict` reads them for a trial);
-* ``<key>_excess``: the figure minus the original's, for the dynamics, contact and limit figures;
-* ``per_frame``: arrays for plots (see :meth:`PhysicsJob.analyse`).
+the inverse-dynamics model and data, the capsule collision scene of the kinematic replay), made
+once and reused for the original and every reconstruction of every clip.
+:meth:`PhysicsJob.analyse` (or the one-shot :func:`analyse`) fits the humanoid to the points
+(:mod:`sim.physics.ik`), labels the ground contacts (:mod:`sim.physics.contacts`), replays the
+points (:mod:`sim.replay.checks`) and runs the inverse dynamics (:mod:`sim.physics.dynamics`);
+:mod:`sim.analysis.figures` lists the figures it returns for the original (``positions=None``) or
+a reconstruction's points.
 
 Derivatives come from where they are known, as point velocities and accelerations mapped onto
 the fitted humanoid through its Jacobians (:meth:`sim.physics.ik.HumanoidIK.rates`). The
@@ -58,57 +27,27 @@ starting from the original's state at frame 0. Both use :mod:`sim.physics.contac
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import mujoco
 import numpy as np
 
+from sim.analysis.figures import EXCESS_KEYS, MotionPhysics, figures
+from sim.model.capsules import bones_of
+from sim.model.kinematics import FOOT_POINTS, SOLE_POINTS
+from sim.motion.points import PointMotion
 from sim.physics.contacts import (
     Contacts,
     body_contacts,
-    contact_metrics,
     lowest_body_point,
     motion_contacts,
-    physdiff_metrics,
     trial_contacts,
 )
-from sim.physics.dynamics import MU, PYRAMID_EDGES, Dynamics, InverseDynamics
-from sim.physics.feet import FOOT_POINTS, HOLD_GAP, SOLE_POINTS
+from sim.physics.dynamics import MU, InverseDynamics
 from sim.physics.ground import Ground, estimate_ground
-from sim.physics.ik import NON_ANATOMICAL, Fit, HumanoidIK, hinge_names, limit_excess
+from sim.physics.ik import NON_ANATOMICAL, HumanoidIK, hinge_names, limit_excess
 from sim.physics.noise import NOISE_MM, noisy_original
-from sim.replay.capsules import bones_of
-from sim.replay.checks import (
-    CollisionScene,
-    FrameChecks,
-    PointMotion,
-    _lengths,
-    replay,
-    self_penetration_excess,
-)
-
-#: Figures whose excess over the original is reported as ``<key>_excess``.
-EXCESS_KEYS = (
-    "penetration_mm", "float_mm", "skate_mm_s", "limit_excess_deg", "residual_force_bw",
-    "residual_force_bw_p95", "residual_torque_nm_kg", "joint_torque_rms_nm_kg",
-    "physdiff_penetrate_mm", "physdiff_float_mm", "physdiff_skate",
-)  # fmt: skip
-
-
-#: Heights above the floor: meaningless where the trial's floor does not fit
-#: (:attr:`sim.physics.ground.Ground.fits`), so not scored there (eval and the report say so).
-HEIGHT_KEYS = ("penetration_mm", "float_mm", "physdiff_penetrate_mm", "physdiff_float_mm")
-
-
-#: A frame whose motion needs this much external force [body weights] with nothing on the floor
-#: lacks support the labels found (a jump's flight needs none: it falls freely).
-SUPPORT_MISSING_BW = 0.5
-#: A trial whose original lacks found support in more than this share of frames is flagged.
-SUPPORT_FLAG_SHARE = 0.05
-#: [m/s] the lower foot slower than this horizontally, higher than HOLD_GAP above the floor,
-#: while support is missing, stands on something above the floor (a box, a climbing frame).
-PLANTED_SPEED = 0.25
-
+from sim.replay.checks import CollisionScene, FrameChecks, _lengths, replay
 
 #: A frame's dynamics is measured when none of its points' accelerations lets through more than
 #: this many times the sample noise of the centred source window
@@ -116,115 +55,9 @@ PLANTED_SPEED = 0.25
 #: marker jitter becomes ~6 m/s^2, up to 2 BW in CMU walks) and frames beside a pose jump are
 #: not; the second frame of a take (1.0x at 30 of 120 fps) is.
 MAX_DERIVATIVE_NOISE = 2.0
-#: [BW] a horizontal residual force this large, for at least HELD_S [s], is held by something
-#: else: the floor cannot push sideways beyond friction nor at all without contact, and the
-#: source filter spreads an impact over +-2 frames at 30 fps (5 frames, 0.17 s), shorter than
-#: HELD_S. 0.15 BW is 20x the residual's noise floor (0.007 BW at 1.5 mm of marker noise); the
-#: CMU captures' own jitter in flight reaches it in single frames, never for HELD_S. On
-#: ../shared/cmu no trial whose support is found holds a run of it; 61_01 (salsa) is held in
-#: 6.7 % of its frames (3.9 % at 0.25 BW; at 0.27 s instead of 0.2 s, 1.5 %: its partner's pulls
-#: last 0.2-0.25 s).
-HELD_BW, HELD_S = 0.15, 0.2
-#: A trial whose original is held in more than this share of its measured frames is flagged.
-HELD_FLAG_SHARE = 0.02
-
-
-def held_frames(
-    residual_force: np.ndarray, weight: float, fps: float, measured: np.ndarray | None = None
-) -> np.ndarray:
-    """(T,) bool: frames in runs of at least :data:`HELD_S` seconds of consecutive measured
-    frames whose residual force ``residual_force`` (T, 3) [N] has a horizontal part over
-    :data:`HELD_BW` body weights (``weight`` [N]): a sustained sideways pull or push no floor
-    contact can supply (a partner, a prop, a rail). An impact's force spread by the derivative
-    filter lasts less; so do single bad frames."""
-    r = np.asarray(residual_force, dtype=np.float64)
-    on = np.linalg.norm(r[:, :2], axis=1) > HELD_BW * weight
-    if measured is not None:
-        on &= np.asarray(measured, dtype=bool)
-    need = int(np.ceil(HELD_S * fps - 1e-9))
-    out = np.zeros(len(on), dtype=bool)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(np.int8), [0]])))
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
-        if b - a >= need:
-            out[a:b] = True
-    return out
-
-
-#: The causes of :func:`residual_causes`, in order.
-RESIDUAL_CAUSES = ("no contact", "pulling", "outside the friction cone")
-
-
-def residual_causes(
-    force: np.ndarray, supported: np.ndarray, mu: float = MU, edges: int = PYRAMID_EDGES
-) -> np.ndarray:
-    """(T,) int index into :data:`RESIDUAL_CAUSES` of why a frame's required force ``force``
-    (T, 3) [N] is not all supplied by the floor: 0 nothing on the floor where ground forces may
-    act (``supported`` (T,) False), 1 it needs pulling down (F_z < 0), 2 it is too horizontal
-    for friction (outside the ``edges``-edge pyramid of coefficient ``mu`` that
-    :func:`sim.physics.dynamics.residual_wrench` fits: for 4 edges |F_x| + |F_y| > mu F_z),
-    -1 none (inside it: the contacts supply it all)."""
-    F = np.asarray(force, dtype=np.float64)
-    out = np.full(len(F), -1)
-    # the pyramid's faces: outward normals between its edges, at mu F_z cos(pi / edges)
-    a = 2 * np.pi * (np.arange(edges) + 0.5) / edges
-    reach = (F[:, :2] @ np.stack([np.cos(a), np.sin(a)])).max(axis=1)
-    out[reach > mu * np.cos(np.pi / edges) * F[:, 2] + 1e-9 * np.abs(F).max(initial=1.0)] = 2
-    out[F[:, 2] < 0] = 1
-    out[~np.asarray(supported, dtype=bool)] = 0
-    return out
-
-
-def support_verdict(
-    missing: float,
-    above: float,
-    floor_fits: bool,
-    above_mm: float | None = None,
-    held: float = 0.0,
-) -> tuple[bool, str]:
-    """Whether a trial's support is off the floor, and why, from the shares of its original's
-    frames with support missing (``missing``), of them with it missing while a foot stands
-    still above the floor (``above``; ``above_mm`` how high, median), and with a sustained
-    horizontal force no contact supplies (``held``, :func:`held_frames`)."""
-    if not (missing > SUPPORT_FLAG_SHARE or held > HELD_FLAG_SHARE):
-        return False, ""
-    if not missing > SUPPORT_FLAG_SHARE:
-        share = (
-            f"{100 * held:.0f} % of frames need a horizontal force over {HELD_BW:g} BW for "
-            f"{HELD_S:g} s or longer that no floor contact supplies"
-        )
-        if not floor_fits:
-            return True, f"{share}; the floor does not fit"
-        return True, f"{share}; held by something else (a partner, a prop)"
-    share = f"{100 * missing:.0f} % of frames need support found nowhere on the floor"
-    if above >= missing / 2:
-        high = "" if above_mm is None else f" about {above_mm / 10:.0f} cm"
-        return True, (
-            f"{share}; the lower foot stands still{high} above it then (a box, a climbing frame, "
-            "or a sole unlike the humanoid's)"
-        )
-    if not floor_fits:
-        return True, f"{share}; the floor does not fit"
-    return True, f"{share}; held by something else (a partner, a prop) or touching unseen"
-
 
 #: Originals a job keeps (a few hundred kB each): ``sidql eval`` revisits every clip per method and W.
 ORIGINALS_CACHED = 1024
-
-
-@dataclass(frozen=True)
-class MotionPhysics:
-    """Everything computed for one motion (T frames, F feet)."""
-
-    positions: np.ndarray  # (T, P, 3) [m]
-    fit: Fit
-    dynamics: Dynamics
-    contacts: Contacts
-    checks: FrameChecks
-    limit: np.ndarray  # (T,) [deg]
-    lowest: np.ndarray  # (T,) [m] lowest body surface point above the floor
-    derivatives: str  # where qvel/qacc came from
-    measured: np.ndarray  # (T,) bool: the frame's derivatives are measured (MAX_DERIVATIVE_NOISE)
-    force_points: np.ndarray  # (T,) int: points where ground forces may act
 
 
 class PhysicsJob:
@@ -458,62 +291,15 @@ class PhysicsJob:
                 initial=orig.contacts.contact[0], initial_body=_initial_body(orig, self.names),
                 measured=orig.measured,
             )  # fmt: skip
-        out = {"ground_z_m": ground.z, **ground.summary()}
-        out.update(contact_metrics(orig.contacts.contact, mp.contacts))
-        out.update(physdiff_metrics(mp.lowest, mp.contacts, self.fps))
-        out.update(self_penetration_excess(mp.checks, orig.checks))
-        measured = mp.measured
-        frames = summarise_dynamics(mp.dynamics, self._anatomical, measured)
-        out.update(frames.pop("summary"))
-        causes = residual_causes(mp.dynamics.force, mp.force_points > 0, self.inv.mu)
-        rf, n = frames["residual_force_bw"], max(int(measured.sum()), 1)
-        out["residual_force_bw_by_cause"] = {
-            c: float(rf[measured & (causes == k)].sum() / n) for k, c in enumerate(RESIDUAL_CAUSES)
-        }
-        held = held_frames(mp.dynamics.residual_force, mp.dynamics.weight, self.fps, measured)
-        out["derivatives"] = mp.derivatives
-        out["limit_excess_deg"] = float(mp.limit.mean())
-        out["limit_excess_max_deg"] = float(mp.limit.max(initial=0.0))
-        out["limit_excess_n"] = int(len(mp.limit))
-        out["ik_error_mm"] = 1e3 * float(mp.fit.error.mean())
-        body = mp.contacts.body
-        out["ground_parts"] = {} if body is None else body.shares()
-        unsupported = ~mp.contacts.supported
-        missing = unsupported & measured & (frames["residual_force_bw"] > SUPPORT_MISSING_BW)
-        c = mp.contacts
-        low = np.argmin(c.foot_gap, axis=1)  # the lower foot, the one that could bear the body
-        t = np.arange(len(low))
-        gap_low, speed_low = c.foot_gap[t, low], c.foot_speed[t, low]
-        above = missing & (gap_low > HOLD_GAP) & (speed_low < PLANTED_SPEED)
-        height = gap_low[above]
-        out["unsupported_share"] = float(unsupported.mean())
-        out["support_missing_share"] = float(missing.sum() / n)
-        out["support_above_floor_share"] = float(above.sum() / n)
-        out["support_held_share"] = float(held.sum() / n)
-        out["support_above_floor_mm"] = 1e3 * float(np.median(height)) if above.any() else None
+        out = figures(mp, orig, ground, self.fps, self._anatomical, self.inv.mu)
+        per_frame = out.pop("per_frame")
         if positions is None:
             base = out
         else:
             base = self.analyse(clip, None, ground, contacts=contacts)
         for k in EXCESS_KEYS:
             out[f"{k}_excess"] = out[k] - base[k]
-        out["per_frame"] = {
-            "foot_names": list(mp.contacts.sides),
-            "contact": mp.contacts.contact.astype(int),
-            "foot_height_mm": 1e3 * mp.contacts.foot_gap,
-            "foot_speed_mm_s": 1e3 * mp.contacts.foot_speed,
-            **frames,
-            "dynamics_measured": measured.astype(int),
-            "support_held": held.astype(int),
-            "limit_excess_deg": mp.limit,
-            "ik_error_mm": 1e3 * mp.fit.error,
-            "lowest_mm": 1e3 * mp.lowest,
-            "body_points": [] if body is None else list(body.names),
-            "body_contact": np.zeros((len(mp.lowest), 0), int)
-            if body is None
-            else body.contact.astype(int),
-            "qpos": mp.fit.qpos,  # (T, nq) the fitted configurations (forward simulation's input)
-        }
+        out["per_frame"] = per_frame
         return out
 
     def noise_floor(
@@ -539,40 +325,6 @@ class PhysicsJob:
             pos, vel, acc, clip.fps, clip.source_fps, sigma_mm=sigma_mm, seed=seed
         )
         return self.analyse(clip, p, ground, contacts=contacts, velocities=v, accelerations=a)
-
-
-def summarise_dynamics(
-    dyn: Dynamics, anatomical: np.ndarray, measured: np.ndarray | None = None
-) -> dict:
-    """Per-frame dynamics figures (T,) and their clip summary (key ``"summary"``) over the
-    ``measured`` frames (T,) bool (default all; none measured: the figures are nan), with
-    ``dynamics_n`` and ``dynamics_unmeasured_n`` frames and ``residual_force_bw_unmeasured``
-    (mean over the unmeasured frames, None if none)."""
-    rf = np.linalg.norm(dyn.residual_force, axis=1) / dyn.weight
-    rt = np.linalg.norm(dyn.residual_torque, axis=1) / dyn.mass
-    tau = dyn.joint_torque[:, anatomical]
-    jt = np.sqrt(np.mean(tau**2, axis=1)) / dyn.mass if tau.shape[1] else np.zeros(len(rf))
-    m = np.ones(len(rf), dtype=bool) if measured is None else np.asarray(measured, dtype=bool)
-    some = bool(m.any())
-    nan = float("nan")
-    return {
-        "residual_force_bw": rf,
-        "residual_torque_nm_kg": rt,
-        "joint_torque_rms_nm_kg": jt,
-        "summary": {
-            "residual_force_bw": float(rf[m].mean()) if some else nan,
-            "residual_force_bw_p95": float(np.percentile(rf[m], 95)) if some else nan,
-            "residual_torque_nm_kg": float(rt[m].mean()) if some else nan,
-            "joint_torque_rms_nm_kg": (
-                float(np.sqrt(np.mean(tau[m] ** 2)) / dyn.mass) if tau.shape[1] else 0.0
-            )
-            if some
-            else nan,
-            "dynamics_n": int(m.sum()),
-            "dynamics_unmeasured_n": int((~m).sum()),
-            "residual_force_bw_unmeasured": float(rf[~m].mean()) if (~m).any() else None,
-        },
-    }
 
 
 def _q_init(clip, model) -> np.ndarray | None:
