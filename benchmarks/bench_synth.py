@@ -10,10 +10,12 @@ clips of the default mix into a temporary folder (or ``--synth DIR`` reads a fol
 ``sidql synth``); per kind the tracking error, falls, root height after a fall, self- and floor
 penetration and the share of *physical* clips (mean root assistance, force and torque, within
 ``PHYSICAL_BUDGET``); point and hinge speed percentiles of the real trials (on the shared
-humanoid, 30 fps) and of the synthetic clips, all, per kind and physical only, with their p95
-ratio to the real trials'; foot skating in contact, the same estimator (``sim.physics``: ground
-and contact labels from the points) on real and synthetic clips. Written to
-``docs/results/synth.md`` (and with ``--plot`` the speed distributions).
+humanoid, 30 fps) and of the synthetic clips, all, per kind, not fallen and physical only, with
+their p95 ratio to the real trials'; foot skating in contact, the same estimator
+(``sim.physics``: ground and contact labels from the points) on real and synthetic clips; the
+targets among the clips that do not fall (p95 point speed >= 1.5x the real trials', skating no
+worse); and how many clips' episodes replay bit for bit (``sim.simulate.episode.replay``).
+Written to ``docs/results/synth.md`` (and with ``--plot`` the speed distributions).
 
 Speed (ratios against baselines measured in the same run): the control loop alone (a 4 s real
 reference, torque limits and self-collision on, its inverse dynamics included) in simulated
