@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from busy import busy  # noqa: E402
 
-from sidql.evaluation.evaluate import evaluate, load_cases  # noqa: E402
+from sidql.evaluation.cases import load_cases  # noqa: E402
+from sidql.evaluation.evaluate import evaluate  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 
 COUNTS = (5, 10, 15)

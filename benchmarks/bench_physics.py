@@ -56,7 +56,7 @@ from pathlib import Path  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from sidql.evaluation.evaluate import make_case  # noqa: E402
+from sidql.evaluation.cases import make_case  # noqa: E402
 from sidql.evaluation.validation import physics_job, trial_ground  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
@@ -310,8 +310,11 @@ def figures(data: Path) -> str:
     """``sidql eval --physics`` in process and the figures drawn from it."""
     from scipy.stats import spearmanr
 
-    from sidql.evaluation.evaluate import NOISE_FLOOR, evaluate, load_cases, physics_markdown
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.evaluate import evaluate
+    from sidql.evaluation.scoring import NOISE_FLOOR
     from sidql.evaluation.significance import bootstrap_mean_ci
+    from sidql.evaluation.tables import physics_markdown
 
     t0 = time.perf_counter()
     cases, _ = load_cases(data, progress=False)

@@ -27,7 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from results import write_results  # noqa: E402
 
-from sidql.evaluation.evaluate import evaluate, load_cases, simulate_markdown  # noqa: E402
+from sidql.evaluation.cases import load_cases  # noqa: E402
+from sidql.evaluation.evaluate import evaluate  # noqa: E402
+from sidql.evaluation.tables import simulate_markdown  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 
 

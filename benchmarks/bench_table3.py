@@ -32,13 +32,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sidql.evaluation.evaluate import (  # noqa: E402
-    PAPER_NAMES,
-    PAPER_TABLE3,
-    evaluate,
-    load_cases,
-    table3_markdown,
-)
+from sidql.evaluation.cases import load_cases
+from sidql.evaluation.evaluate import evaluate
+from sidql.evaluation.tables import PAPER_NAMES, PAPER_TABLE3, table3_markdown
 from sidql.keyframes import reconstructions  # noqa: E402
 from sidql.keyframes.methods import select  # noqa: E402
 from sidql.keyframes.spherical import POINTS  # noqa: E402

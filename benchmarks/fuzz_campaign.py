@@ -26,8 +26,18 @@ other exception), ``non-finite``, ``bad-error``, ``bad-name``, ``read-outside``,
 384 MB or more than 5 s of CPU) are counted. Failing inputs are saved under ``<out>.repro/``.
 Exit status 1 on any failure or any input over the targets.
 
+The output side (kind ``output``, ``tests/hostile_outputs.py``): an out folder with a planted
+symbolic link (to a folder or file outside, ``/dev/null``, broken, a loop), FIFO, character
+device, socket, folder or hard link where an output goes or at the folder before it, then one
+writer run as a command runs it (a single file, a file in a subfolder, a clip, a video-style
+file another program writes, a fresh ``synth``, ``synth --resume`` with a crafted journal, the
+removal of a clip the run names). Its failures: ``write-outside``, ``delete-outside`` (any
+change to a folder beside the out folder or to ``/dev/null``) and ``leftover`` (a temporary
+file left in the out folder), besides ``foreign`` and ``bad-error``.
+
 A second table measures the AMC reader's peak memory against the file's size (target: at most
-5x) on real trials repeated to ~20 MB and on hostile layouts of the same size.
+5x) on real trials repeated to ~20 MB and on hostile layouts of the same size; a third the
+stated memory bound of ``ingest`` and of reading a dataset index (``benchmarks/memory_bounds.py``).
 
 Counts go to ``docs/results/fuzz_campaign.md`` (``benchmarks/results.py``) unless
 ``--no-results``.
@@ -56,15 +66,16 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO), str(REPO / "tests"), str(REPO / "benchmarks")]
 
+import memory_bounds  # noqa: E402
 from results import write_results  # noqa: E402
 
 from sim.paths import default_data_dir  # noqa: E402
 
 #: Share of the inputs per file type.
 MIX = {"asf": 15, "amc": 20, "sidq": 15, "npz": 15, "index": 10, "policy": 12.5,
-       "checkpoint": 12.5}  # fmt: skip
+       "checkpoint": 12.5, "output": 15}  # fmt: skip
 FAILURES = ("foreign", "non-finite", "bad-error", "bad-name", "read-outside", "over-memory",
-            "hang")  # fmt: skip
+            "hang", "write-outside", "delete-outside", "leftover")  # fmt: skip
 TARGET_RSS_MB = 384  # any input file of at most 1 MB decodes or fails within this peak RSS
 TARGET_CPU_S = 5.0  # ... and this much time
 AMC_TARGET_RATIO = 5.0
@@ -81,11 +92,18 @@ def kind_of(seed: int, i: int) -> str:
     return kind
 
 
-def make_input(seeds, seed: int, i: int):
-    import hostile_inputs as H
+def cases(kind: str):
+    """The module making and running inputs of ``kind``: ``hostile_outputs`` for the output
+    side (planted links, devices, FIFOs, crafted journals), ``hostile_inputs`` for the rest."""
+    import hostile_inputs
+    import hostile_outputs
 
+    return hostile_outputs if kind == "output" else hostile_inputs
+
+
+def make_input(seeds, seed: int, i: int):
     kind = kind_of(seed, i)
-    return H.make_case(kind, seeds, random.Random(f"{seed}:{kind}:{i}"))
+    return cases(kind).make_case(kind, seeds, random.Random(f"{seed}:{kind}:{i}"))
 
 
 # ------------------------------------------------------------------------------ the warm parents
@@ -112,7 +130,7 @@ def _rss_mb() -> float:
 READER_MODULES = {
     "asf": "sim.motion.ingest", "amc": "sim.motion.ingest", "sidq": "sidql.codec.decode",
     "npz": "sim.motion.clip", "index": "sim.motion.dataset", "policy": "sidql.learning.policy",
-    "checkpoint": "sidql.learning.dqn",
+    "checkpoint": "sidql.learning.dqn", "output": "sim.simulate.dataset",
 }  # fmt: skip
 
 
@@ -124,7 +142,7 @@ def zygote(conn, kind: str, seeds_path: str, memory_limit: int, timeout: float) 
 
     importlib.import_module(READER_MODULES[kind])
     imported = _rss_mb()
-    import hostile_inputs as H
+    H = cases(kind)
 
     seeds = pickle.loads(Path(seeds_path).read_bytes())
     scratch = Path(tempfile.mkdtemp(prefix=f"sidql-fuzz-{kind}-"))
@@ -156,7 +174,7 @@ def _size(case) -> int:
 
 
 def _run_child(case, folder: Path, seeds, memory_limit: int, timeout: float) -> dict:
-    import hostile_inputs as H
+    H = cases(case.kind)
 
     read_fd, write_fd = os.pipe()
     baseline = _rss_mb()
@@ -431,6 +449,7 @@ def main(argv=None) -> int:
         seeds_path.write_bytes(pickle.dumps(seeds))
         print(f"seeds built in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
         amc_rows = amc_memory(cmu, work)
+        bound_rows = memory_bounds.measure(cmu, work)
         counts: dict[str, Counter] = defaultdict(Counter)
         peaks: dict[str, list] = defaultdict(list)
         over: dict[str, Counter] = defaultdict(Counter)
@@ -462,16 +481,17 @@ def main(argv=None) -> int:
                                  "detail": r["detail"].splitlines()[0] if r["detail"] else ""})  # fmt: skip
                 folder = repro / str(i)
                 folder.mkdir(parents=True, exist_ok=True)
-                H.materialise(case, folder / "case")
+                cases(kind).materialise(case, folder / "case")
                 (folder / "outcome.json").write_text(json.dumps({**failures[-1], **r}, indent=2))
         seconds = time.perf_counter() - start
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
     summary = _summary(args, counts, peaks, over, ops, failures, amc_rows, seconds)
+    summary["memory_bounds"] = bound_rows
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=2))
-    table = _tables(summary)
+    table = _tables(summary) + "\n\n" + memory_bounds.table(bound_rows)
     print(table)
     if failures:
         print(f"\nreproductions: {repro}/<index>/", file=sys.stderr)
@@ -483,6 +503,7 @@ def main(argv=None) -> int:
         write_results("fuzz_campaign", "Hostile input campaign: every file type", table,
                       command=command.strip())  # fmt: skip
     bad = failures or any(r["ratio"] > AMC_TARGET_RATIO for r in amc_rows)
+    bad = bad or not all(r["within"] for r in bound_rows)
     return 1 if bad else 0
 
 
@@ -525,10 +546,11 @@ def _tables(s: dict) -> str:
         f"{s['workers']} at a time: {s['seconds'] / 60:.0f} minutes.",
         "",
         "| file type | inputs | clean error | read ok | foreign | non-finite | bad error "
-        "| bad name | read outside | over memory | hang | peak RSS max (import baseline) MB "
+        "| bad name | read outside | over memory | hang | written outside | deleted outside "
+        "| temporary left | peak RSS max (import baseline) MB "
         f"| CPU max (median) s | over {s['targets']['peak_rss_mb']} MB / "
         f"{s['targets']['cpu_s']:g} s |",
-        "|---" * 14 + "|",
+        "|---" * 17 + "|",
     ]
     total = Counter()
     for k, v in s["per_kind"].items():

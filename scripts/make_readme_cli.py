@@ -21,7 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from sidql.commands import main as cli  # noqa: E402
-from sidql.commands.usage import OLD_METHOD_NAMES, OldSpelling  # noqa: E402
+from sidql.commands.usage import OldSpelling  # noqa: E402
+from sidql.keyframes.old_names import RENAMED  # noqa: E402
 
 BEGIN, END = "<!-- section:cli -->", "<!-- /section:cli -->"
 
@@ -133,7 +134,7 @@ def old_spellings(parsers: dict[str, argparse.ArgumentParser]) -> list[str]:
             if isinstance(a, OldSpelling):
                 old = a.option_strings[0] if a.option_strings else (a.metavar or a.dest.upper())
                 out.append(f"`{name} {old}` (now `{a.new.split()[0]}`)")
-    out += [f"method `{old}` (now `{new}`)" for old, new in OLD_METHOD_NAMES.items()]
+    out += [f"method `{old}` (now `{new}`)" for old, new in RENAMED.items()]
     return out
 
 

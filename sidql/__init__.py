@@ -40,7 +40,7 @@ _API = {
     "optimal_table": "sidql.keyframes.optimal",
     "optimal_keyframes": "sidql.keyframes.optimal",
     "KeyframeEnv": "sidql.learning.env",
-    "load_cases": "sidql.evaluation.evaluate",
+    "load_cases": "sidql.evaluation.cases",
     "evaluate": "sidql.evaluation.evaluate",
     "validate_clip": "sidql.evaluation.validation",
     "report_clips": "sidql.evaluation.report",

@@ -18,6 +18,8 @@ _API = {
     "ModelFileError": "sim.errors",
     "UnmetTargetError": "sim.errors",
     "UnknownNameError": "sim.errors",
+    "UsageError": "sim.errors",
+    "AllFailedError": "sim.errors",
     "MotionDataWarning": "sim.errors",
     "Clip": "sim.motion.clip",
     "load_npz": "sim.motion.clip",

@@ -15,7 +15,8 @@ from keyframe_synth import smooth_clip
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decoded_chart, reconstruct_stream
-from sidql.codec.encode import _measure, encode_series
+from sidql.codec.encode import encode_series
+from sidql.codec.encoded import measure
 from sidql.codec.plan import band_costs, plan
 from sidql.codec.quantise import PHI_STEP, THETA_STEP, fit_quantiser
 from sidql.codec.stream import frame_delays, horizon, plan_stream
@@ -131,7 +132,7 @@ def test_programme_distortion_is_the_decoded_error(series, reconstruction):
     dist = sum(C[a, b - a] for a, b in itertools.pairwise(k))
     at_keys = np.abs(wrap_angle(Xq[k, : 2 * M] - v[k, : 2 * M])).sum()  # quantisation at keyframes
     want = (dist + at_keys) / (series.n_frames * M)
-    assert _measure(series, s) == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert measure(series, s) == pytest.approx(want, rel=1e-9, abs=1e-12)
 
 
 def test_rate_control_meets_the_budget_and_error_falls_with_rate(series):

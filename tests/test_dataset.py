@@ -362,7 +362,8 @@ def test_on_ray_the_driver_writes_the_outputs(cmu_dir, tmp_path, monkeypatch):
 def test_index_names_inputs_that_resolve_from_any_working_folder(cmu_dir, tmp_path, monkeypatch):
     """'sidql dataset ../shared/cmu --out D' recorded ASF paths relative to the folder it ran in;
     'sidql eval --data D --physics' from anywhere else could not read the skeletons."""
-    from sidql.evaluation.evaluate import load_cases, physics_setup
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.trial_physics import physics_setup
 
     src = tmp_path / "cmu" / "02"
     src.mkdir(parents=True)

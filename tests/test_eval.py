@@ -8,7 +8,9 @@ import pytest
 from keyframe_synth import smooth_clip
 
 from sidql.commands import main as cli
-from sidql.evaluation.evaluate import PAPER_TABLE3, evaluate, make_case, table3_markdown
+from sidql.evaluation import evaluate as evaluate_module
+from sidql.evaluation.cases import make_case
+from sidql.evaluation.evaluate import evaluate
 from sidql.evaluation.rate import (
     CURVES,
     bytes_per_second,
@@ -16,8 +18,10 @@ from sidql.evaluation.rate import (
     raw_bytes_per_second,
     write_plot,
 )
+from sidql.evaluation.tables import PAPER_TABLE3, table3_markdown
 from sidql.keyframes.metrics import q_error
 from sidql.keyframes.reconstructions import RECONSTRUCTIONS
+from sim.errors import MotionDataError
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +55,37 @@ def test_evaluate_rows_are_consistent_with_per_clip_scores(cases):
             assert per[("optimal", W, src, i)] <= qv + 1e-12
     table = table3_markdown(out["results"])
     assert "random (RC)" in table and "optimal" in table and "| pitch | 6 |" in table
+
+
+def test_a_failed_task_is_reported_and_skipped_and_the_good_results_are_kept(
+    cases, monkeypatch, capsys
+):
+    full = evaluate(cases, ["uniform", "greedy"], [3, 5], progress=False, chunk=1)
+    assert full["failed"] == []
+    real_score = evaluate_module.score
+
+    def score_failing_on_clip_1(case, *a, **k):
+        if case.index == 1:
+            raise MotionDataError(case.clip.source, 7, "bad frame")
+        return real_score(case, *a, **k)
+
+    monkeypatch.setattr(evaluate_module, "score", score_failing_on_clip_1)
+    out = evaluate(cases, ["uniform", "greedy"], [3, 5], progress=False, chunk=1)
+    assert len(out["failed"]) == 1
+    failure = out["failed"][0]
+    assert failure["source"] == cases[1].clip.source
+    assert failure["start_frames"] == [cases[1].clip.start_frame]
+    assert "bad frame" in failure["problem"] and "bad frame" in capsys.readouterr().err
+
+    def timeless(rows):
+        return [{k: v for k, v in r.items() if k != "decision_ms"} for r in rows]
+
+    kept = [p for i, p in enumerate(full["per_clip"]) if i % 3 != 1]  # clips 0 and 2 of 3
+    assert timeless(out["per_clip"]) == timeless(kept)
+    for r in out["results"]:
+        assert r["clips"] == 2
+        rows = [p for p in kept if (p["method"], p["keyframes"]) == (r["method"], r["keyframes"])]
+        assert r["mean_q"] == pytest.approx(np.mean([p["q"] for p in rows]))
 
 
 def test_random_method_is_seeded_per_clip(cases):
@@ -179,7 +214,7 @@ def test_unknown_method_is_reported_with_choices(cmu_dir, tmp_path, capsys):
 
 
 def test_load_cases_keeps_only_the_named_subjects(cmu_dir):
-    from sidql.evaluation.evaluate import load_cases
+    from sidql.evaluation.cases import load_cases
 
     cases, skipped = load_cases(cmu_dir, subjects=["02", "35"], progress=False)
     sources = {c.clip.source.replace("\\", "/").split("/")[-2] for c in cases}
@@ -189,7 +224,7 @@ def test_load_cases_keeps_only_the_named_subjects(cmu_dir):
 def test_case_indices_count_clips_across_trials_with_several_clips(cmu_dir):
     """The index seeds the random method: one per clip, in order, also inside trials of several
     clips (a skipped number would change Table 3's random row)."""
-    from sidql.evaluation.evaluate import load_cases
+    from sidql.evaluation.cases import load_cases
 
     cases, _ = load_cases(cmu_dir, subjects=["05"], progress=False)
     assert len(cases) > len({c.clip.source for c in cases})
@@ -199,7 +234,7 @@ def test_case_indices_count_clips_across_trials_with_several_clips(cmu_dir):
 def test_a_dataset_folder_at_another_rate_is_refused_not_mislabelled(walk_clip, tmp_path):
     """load_cases read a dataset folder's clips at their own rate whatever --fps said, and
     results.json recorded the --fps value as the protocol's."""
-    from sidql.evaluation.evaluate import load_cases
+    from sidql.evaluation.cases import load_cases
     from sim.errors import MotionDataError
     from sim.motion.clip import save_npz
 
@@ -216,7 +251,7 @@ def test_a_dataset_folder_at_another_rate_is_refused_not_mislabelled(walk_clip, 
 def test_a_trial_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_path):
     """A well-formed trial whose skeleton names its bones otherwise (no 'lhumerus') made the
     driver's make_case raise, and the whole evaluation exited 2, every good trial lost."""
-    from sidql.evaluation.evaluate import load_cases
+    from sidql.evaluation.cases import load_cases
 
     for s, trial in (("02", "02_01"), ("07", "07_01")):
         (tmp_path / s).mkdir()
@@ -232,7 +267,7 @@ def test_a_trial_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_pa
 
 
 def test_a_dataset_clip_without_the_protocol_bones_is_skipped_not_fatal(cmu_dir, tmp_path):
-    from sidql.evaluation.evaluate import load_cases
+    from sidql.evaluation.cases import load_cases
     from sim.motion.dataset import ingest_directory
 
     src = tmp_path / "cmu"

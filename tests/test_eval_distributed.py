@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from sidql.evaluation.evaluate import evaluate, load_cases
+from sidql.evaluation.cases import load_cases
+from sidql.evaluation.evaluate import evaluate
 
 
 def _without_times(out: dict) -> dict:

@@ -183,10 +183,12 @@ def test_a_file_another_program_writes_lands_whole_and_only_where_named(tmp_path
         Path(path).write_bytes(b"video")
     assert (out / "clip00_a.mp4").read_bytes() == b"video"
     assert sorted(p.name for p in out.iterdir()) == ["clip00_a.mp4"]
+    from sim.replay.video import write_video
+
     (out / "clip01_a.mp4").symlink_to(victim)
+    frames = (np.zeros((32, 32, 3), np.uint8) for _ in range(3))
     with pytest.raises(OutputError, match="a symbolic link; an output replaces regular files"):
-        with written_by(out / "clip01_a.mp4", root=out, suffix=".mp4") as path:
-            Path(path).write_bytes(b"video")
+        write_video(frames, out / "clip01_a.mp4", 30.0)
     assert victim.read_bytes() == b"keep me"
     assert sorted(p.name for p in out.iterdir()) == ["clip00_a.mp4", "clip01_a.mp4"]
 
@@ -329,3 +331,33 @@ def test_an_atomic_write_never_goes_through_a_link_below_its_root(tmp_path):
         write_atomic(tmp_path / "out" / "a" / "b" / "f", lambda f: f.write(b"x"),
                      root=tmp_path / "out")  # fmt: skip
     assert list((tmp_path / "elsewhere").iterdir()) == []
+
+
+# 10. decode --out x.amc of a 280-byte stream of 32,768 still frames ran past 60 s
+def test_the_skeleton_fit_fits_each_distinct_pose_once(cmu_dir, walk_clip, monkeypatch):
+    import sidql.codec.skeleton as fit_module
+    from sim.acclaim.asf import parse_asf
+
+    skeleton = parse_asf(cmu_dir / "02" / "02.asf")
+    poses = walk_clip.positions[[0, 1]]
+    fitted = []
+    real = fit_module._fit_poses
+    monkeypatch.setattr(fit_module, "_fit_poses",
+                        lambda s, P, n: fitted.append(len(P)) or real(s, P, n))  # fmt: skip
+    once = fit_module.fit_motion(skeleton, poses, walk_clip.names)
+    many = fit_module.fit_motion(skeleton, poses[[0, 1, 1, 0, 1] * 200], walk_clip.names)
+    assert fitted == [2, 2]
+    assert np.array_equal(many.root, once.root[[0, 1, 1, 0, 1] * 200])
+    for k, v in once.angles.items():
+        assert np.array_equal(many.angles[k], v[[0, 1, 1, 0, 1] * 200])
+
+
+@pytest.mark.parametrize("token", ["1_0_8", "\u0661\u0660\u0668", "\uff11", "0x1f", "1e5e5"])
+def test_acclaim_numbers_are_ascii_decimals_only(cmu_dir, tmp_path, token):
+    from sim.acclaim.amc import parse_amc
+    from sim.acclaim.asf import parse_asf
+
+    skeleton = parse_asf(cmu_dir / "02" / "02.asf")
+    (tmp_path / "x.amc").write_text(f":DEGREES\n1\nroot 0 0 {token} 0 0 0\n", encoding="utf-8")
+    with pytest.raises(MotionDataError, match=r"x.amc:3: non-numeric value '[^']*' in bone"):
+        parse_amc(tmp_path / "x.amc", skeleton)

@@ -63,7 +63,7 @@ def test_ik_recovers_the_originals_points_and_observed_angles(walk):
 def test_ik_limit_penalty_keeps_a_straightening_knee_on_its_branch(cmu_dir):
     """Regression: optimal W=10 on 07_01 straightens the left knee around frame 30; without the
     penalty the fit turned the thigh ~180 deg and bent the knee backwards (60 deg beyond limits)."""
-    from sidql.evaluation.evaluate import make_case
+    from sidql.evaluation.cases import make_case
     from sidql.keyframes.methods import select
     from sidql.keyframes.reconstructions import reconstruct_series
     from sim.motion.ingest import load_clips

@@ -18,16 +18,11 @@ KEYS = (
 
 
 def test_eval_physics_adds_figures_an_original_row_a_noise_floor_and_comparisons(cmu_dir):
-    from sidql.evaluation.evaluate import (
-        NOISE_FLOOR,
-        PHYSICS_KEYS,
-        evaluate,
-        floors_markdown,
-        load_cases,
-        physics_markdown,
-        table3_markdown,
-    )
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.evaluate import evaluate
+    from sidql.evaluation.scoring import NOISE_FLOOR, PHYSICS_KEYS
     from sidql.evaluation.significance import comparisons_markdown
+    from sidql.evaluation.tables import floors_markdown, physics_markdown, table3_markdown
 
     cases, _ = load_cases(cmu_dir, subjects=["02"], progress=False)
     cases = cases[:2]
@@ -200,7 +195,8 @@ def test_floor_report_says_where_each_trials_support_was_found():
     of its frames need support found nowhere on the floor, the flag and why."""
     from types import SimpleNamespace
 
-    from sidql.evaluation.evaluate import floor_report, floors_markdown
+    from sidql.evaluation.floors import floor_report
+    from sidql.evaluation.tables import floors_markdown
     from sim.physics.ground import Ground
     from sim.physics.support import support_verdict
 
@@ -230,7 +226,9 @@ def test_the_held_verdict_flags_the_salsa_partner_and_no_clean_trial(cmu_dir):
     """One rule for every trial: 61_01 (salsa; its partner is subject 60) needs a sideways force
     no floor contact supplies for 0.2 s and longer in more than 2 % of its frames; the walks,
     the forward jumps (impacts) and the boxing (hops) never do."""
-    from sidql.evaluation.evaluate import floor_report, load_cases, physics_setup
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.floors import floor_report
+    from sidql.evaluation.trial_physics import physics_setup
 
     cases, _ = load_cases(cmu_dir, subjects=["01", "02", "07", "17", "61"], progress=False)
     keep = {"01_01", "02_01", "07_04", "17_10", "61_01"}

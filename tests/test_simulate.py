@@ -242,17 +242,18 @@ def test_floor_contact_parameters_are_the_floors_and_feet_stay_within_softness(t
     r = track(model, trial_on_floor(model, "02_01")[:240], assist_limit=0.5)
     # the floor's solref is used as is, not averaged with the body geoms' (MuJoCo's mixing)
     data = mujoco.MjData(model)
-    data.qpos[:] = r.qpos[int(np.argmax(r.contact_penetration > 0))]
+    data.qpos[:] = r.qpos[int(np.argmax(r.contact_penetration))]  # the deepest contact
     mujoco.mj_forward(model, data)
     floor = (data.contact.geom[: data.ncon] == model.geom("floor").id).any(axis=1)
     assert floor.any()
     assert np.allclose(data.contact.solref[: data.ncon][floor], [FLOOR_TIMECONST, 1.0])
     assert np.allclose(data.contact.solimp[: data.ncon][floor], FLOOR_SOLIMP)
-    # a walking stance foot settles within a millimetre or two; landings stay under 1 cm
+    # a walking stance foot settles within a millimetre or two; landings stay under 1.5 cm (a
+    # sole box landing on a corner: measured 12.7 mm on this walk, the capsule feet 8-10)
     touching = r.contact_penetration > 0
     assert touching.mean() > 0.8
     assert np.median(r.contact_penetration[touching]) < 2e-3
-    assert r.penetration < 0.01
+    assert r.penetration < 0.015
 
 
 def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(trial_on_floor):
@@ -261,13 +262,14 @@ def test_residual_appears_only_where_assistance_was_recorded_and_recovers_it(tri
     assistance, its residual is that assistance frame by frame."""
     from sim.simulate.audit import assistance_audit, floor_ground
     from sim.simulate.generate import simulated_clip
-    from sim.simulate.model import Gains
 
     skeleton = canonical_skeleton()
-    # 4x human strength: at human strength the legs hanging in the air saturate their torque
-    # limits and swing at frequencies that 30 fps second differences do not resolve (measured
-    # 0.10 BW mean residual-help gap, 0.015 at 4x): this test is about the audit, not the body
-    model = sim_model(skeleton, gains=Gains(strength=4.0))
+    # 4x human strength, set here on purpose (no model parameter scales the human limits): at
+    # human strength the legs hanging in the air saturate their torque limits and swing at
+    # frequencies that 30 fps second differences do not resolve (measured 0.10 BW mean
+    # residual-help gap, 0.015 at 4x): this test is about the audit, not the body
+    model = sim_model(skeleton, soles=False)
+    model.actuator_forcerange[:] *= 4.0
     ref = trial_on_floor(model, "02_01")[:180]  # 1.5 s: the unassisted walk has not fallen yet
     plain = {"generation": {"scale": 1.0, "pushes": []}}
 

@@ -14,6 +14,7 @@ from sim.simulate.model import (
     HUMAN_PEAK_TORQUE,
     MIN_DEFLECTION,
     SUBSTEPS,
+    Gains,
     human_torque_limit,
     sim_model,
 )
@@ -48,6 +49,44 @@ def test_limits_are_the_human_table_scaled_by_mass():
         > human_torque_limit("lradius_rx")
         > human_torque_limit("lfingers_rx")
     )
+
+
+@pytest.mark.parametrize("factor", [0.6, 1.0, 1.5, 4.0])
+def test_torque_limits_are_the_human_table_whatever_the_gain(factor):
+    """A stiffer or softer controller is no stronger or weaker body: with the hinge gains scaled
+    by ``factor`` (synth's ``gain``) the limits are the human table's, the stiffness changes,
+    and the torque applied when driven far past the limit stays within it."""
+    plain = sim_model(canonical_skeleton())
+    scaled = sim_model(canonical_skeleton(), gains=Gains().scaled(factor))
+    table = np.array([human_torque_limit(scaled.actuator(i).name) for i in range(scaled.nu)])
+    np.testing.assert_array_equal(scaled.actuator_forcerange[:, 1], table)
+    np.testing.assert_array_equal(scaled.actuator_forcerange[:, 0], -table)
+    if factor != 1.0:
+        assert not np.allclose(scaled.actuator_gainprm[:, 0], plain.actuator_gainprm[:, 0])
+    data = mujoco.MjData(scaled)
+    data.qpos[2] = 2.0
+    kp = scaled.actuator_gainprm[:, 0]
+    for _ in range(20):
+        data.ctrl[:] = data.qpos[7:] + 3.0 + 10 * table / kp
+        mujoco.mj_step(scaled, data)
+        assert np.all(np.abs(data.actuator_force) <= table * (1 + 1e-12))
+    assert np.abs(data.actuator_force).max() > 0.999 * table.min()
+
+
+def test_motor_actuators_clamp_torque_to_the_human_limit():
+    """``actuators="motor"``: ``ctrl`` is the torque, clamped to the same human limits."""
+    motor = sim_model(canonical_skeleton(), actuators="motor")
+    table = np.array([human_torque_limit(motor.actuator(i).name) for i in range(motor.nu)])
+    np.testing.assert_array_equal(motor.actuator_ctrlrange[:, 1], table)
+    data = mujoco.MjData(motor)
+    data.qpos[2] = 2.0
+    for sign in (1.0, -1.0):
+        data.ctrl[:] = sign * 5 * table
+        mujoco.mj_step(motor, data)
+        np.testing.assert_allclose(data.actuator_force, sign * table)
+    data.ctrl[:] = 0.3 * table
+    mujoco.mj_step(motor, data)
+    np.testing.assert_allclose(data.actuator_force, 0.3 * table)
 
 
 def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(model):
@@ -131,12 +170,15 @@ def test_no_assistance_without_floor_contact(model, walk_ref):
     assert held.assistance.mean() > 0.5
 
 
-def test_foot_forces_and_assistance_carry_the_body_weight(model, trial_on_floor):
+def test_foot_forces_and_assistance_carry_the_body_weight(trial_on_floor):
     """Momentum balance over a 2 s walk: the mean vertical floor force on the feet plus the
     vertical assistance equals the body weight (the body's vertical momentum returns near its
-    start); contact labels are where the force is."""
+    start); contact labels are where the force is. On capsule feet: the sole boxes' landings
+    are spikier than every 4th tick's first step samples (measured on this walk: 0.58 body
+    weight sampled, 0.70 over every physics step), which this test is not about."""
     from sim.simulate.model import total_mass
 
+    model = sim_model(canonical_skeleton(), soles=False)
     r = track(model, trial_on_floor(model, "02_01")[:240], assist_limit=0.5)
     weight = total_mass(model) * 9.81
     assert not r.fell

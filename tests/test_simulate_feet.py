@@ -1,4 +1,4 @@
-"""Feet the simulated body can stand on (opt-in: ``sim_model(soles=True, stance_ankles=True)``):
+"""Feet the simulated body can stand on (soles by default; ``stance_ankles=True`` opt-in):
 a sole box from behind the ankle to the ball, ankles stiff enough for a standing body, soles
 laid flat in the reference, a floor support whose centre of pressure balances the body."""
 
@@ -54,14 +54,16 @@ def test_the_sole_reaches_behind_the_ankle_and_alone_touches_the_floor(model):
         floor = model.geom("floor")
         touches = (capsule.contype & floor.conaffinity) | (floor.contype & capsule.conaffinity)
         assert not touches[0]  # the sole stands in for the foot capsule on the floor
-    plain = sim_model(canonical_skeleton())
-    assert mujoco.mj_name2id(plain, mujoco.mjtObj.mjOBJ_GEOM, "lsole") < 0  # opt-in
+    default = sim_model(canonical_skeleton())
+    assert mujoco.mj_name2id(default, mujoco.mjtObj.mjOBJ_GEOM, "lsole") >= 0  # the default body
+    capsules = sim_model(canonical_skeleton(), soles=False)
+    assert mujoco.mj_name2id(capsules, mujoco.mjtObj.mjOBJ_GEOM, "lsole") < 0
 
 
 def test_ankles_are_as_stiff_as_a_standing_body_needs_within_the_human_limit(model):
     mgh = stance_stiffness(model) / STANCE_MARGIN
     assert 550 < mgh < 750  # 75 kg, centre of mass ~0.9 m above the ankles
-    plain = sim_model(canonical_skeleton())
+    plain = sim_model(canonical_skeleton())  # stance_ankles off
     for joint in ("lfoot_rx", "rfoot_rx", "lfoot_rz"):
         kp = model.actuator_gainprm[model.actuator(joint).id, 0]
         cap = human_torque_limit(joint) / MIN_DEFLECTION
@@ -89,5 +91,5 @@ def test_flat_soles_lay_a_standing_foot_flat_and_the_support_balances_it(model, 
 def test_a_still_standing_pose_held_2s_stays_up_only_on_flat_soles(model, still_pose):
     assert not track(model, flat_soles(model, still_pose), assist_limit=0.0).fell
     assert track(model, still_pose, assist_limit=0.0).fell  # on the heels: it topples
-    plain = sim_model(canonical_skeleton())  # capsule feet, ankles sized by the foot
+    plain = sim_model(canonical_skeleton(), soles=False)  # capsule feet, ankles sized by the foot
     assert track(plain, on_floor(plain, still_pose[:1].repeat(240, 0)), assist_limit=0.0).fell

@@ -205,6 +205,18 @@ def fit_motion(skeleton: Skeleton, positions: np.ndarray, names) -> Motion:
     names = tuple(names)
     P = np.asarray(positions, dtype=np.float64) @ Y_UP_TO_Z_UP  # world z up -> file axes y up
     T = P.shape[0]
+    poses, inverse = np.unique(P.reshape(T, -1), axis=0, return_inverse=True)
+    if 0 < len(poses) < T:  # each distinct pose fitted once (32,768 still frames: one fit)
+        m = _fit_poses(skeleton, poses.reshape(len(poses), *P.shape[1:]), names)
+        inverse = inverse.reshape(-1)
+        return Motion(path="", root=m.root[inverse], first_frame=1,
+                      angles={k: v[inverse] for k, v in m.angles.items()})  # fmt: skip
+    return _fit_poses(skeleton, P, names)
+
+
+def _fit_poses(skeleton: Skeleton, P: np.ndarray, names: tuple) -> Motion:
+    """:func:`fit_motion` of (T, J, 3) points ``P`` in the file's axes (y up)."""
+    T = P.shape[0]
     index = {n: i for i, n in enumerate(names)}
     bones = {b.name: b for b in skeleton.bones}
     if "root" not in index:

@@ -17,7 +17,7 @@ from sidql.commands.usage import (
 )
 from sidql.evaluation.report import report_clips
 from sidql.evaluation.validation import joint_ranges
-from sidql.keyframes.methods import available
+from sidql.keyframes.methods import available, reconstruction_of
 from sim.model.humanoid import humanoid_model, subject_model
 from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
@@ -75,7 +75,9 @@ def report_step(clip, args) -> int:
     subject, _ = DEFAULT_TRIAL
     asf = Path(args.data or ".") / subject / f"{subject}.asf"
     model = subject_model(asf)[1] if clip.source and asf.exists() else humanoid_model()[1]
-    methods = args.methods or available()
+    # Hermite methods first: a method meant for another reconstruction is then shown under the
+    # Hermite only where no earlier method already shows its keyframes (cartesian's = uniform's).
+    methods = args.methods or sorted(available(), key=lambda m: reconstruction_of(m) != "hermite")
     first = clip.slice(0, min(60, clip.n_frames))
     page = report_clips(
         [first], Path(args.out) / "report", W=args.W, methods=methods,

@@ -21,23 +21,23 @@ from sidql.commands.usage import (
     data_folder,
     positive,
 )
-from sidql.evaluation.evaluate import (
-    evaluate,
+from sidql.evaluation.cases import load_cases
+from sidql.evaluation.evaluate import evaluate
+from sidql.evaluation.rate import rate_distortion, write_plot
+from sidql.evaluation.significance import comparisons_markdown
+from sidql.evaluation.tables import (
     floors_markdown,
-    load_cases,
     physics_markdown,
     simulate_markdown,
     table3_markdown,
 )
-from sidql.evaluation.rate import rate_distortion, write_plot
-from sidql.evaluation.significance import comparisons_markdown
 from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic
 
 DESCRIPTION = (
-    "Cut every trial under --data into 60-frame clips at 30 fps, choose W keyframes per clip with "
-    "each method, rebuild the clip with the method's reconstruction (spherical Hermite; pitch: "
+    "Cut every trial under --data into clips of --length frames at --fps (60 frames at 30 fps by "
+    "default), choose W keyframes per clip with each method, rebuild the clip with the method's reconstruction (spherical Hermite; pitch: "
     "slerp; cartesian: points in xyz) and report the paper's Q (eq. 18) beside its Table 3, plus "
     "geodesic, MPJPE, velocity and Li et al. errors and decision times. Optionally write the "
     "rate/distortion plot."

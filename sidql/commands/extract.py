@@ -14,14 +14,15 @@ from sidql.commands.usage import (
     cmu_rate,
     positive,
 )
-from sidql.evaluation.evaluate import clip_seed, make_case, score
+from sidql.evaluation.cases import clip_seed, make_case
+from sidql.evaluation.scoring import score
 from sidql.keyframes.methods import get, select
 from sim.files import write_atomic
 from sim.motion.ingest import load_clips
 
 DESCRIPTION = (
-    "Ingest one trial at 30 fps, cut it into 60-frame clips and choose W keyframes per clip (first "
-    "and last frame included) with each method and each W; print them with the paper's Q (eq. 18) "
+    "Ingest one trial at --fps, cut it into clips of --length frames (30 fps, 60 frames by default) "
+    "and choose W keyframes per clip (first and last frame included) with each method and each W; print them with the paper's Q (eq. 18) "
     "of the Hermite reconstruction, and optionally write JSON."
 )
 

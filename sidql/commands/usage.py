@@ -25,6 +25,7 @@ import warnings
 from pathlib import Path
 
 from sidql.keyframes.counts import LEAST_W, check_counts
+from sidql.keyframes.old_names import RENAMED
 from sim.errors import MotionDataWarning, UsageError
 from sim.files import excerpt
 from sim.paths import DATA_ENV, data_dir
@@ -212,18 +213,15 @@ def add_methods(
                             type=method_name, new="--methods NAME [NAME ...]", as_list=True)  # fmt: skip
 
 
-#: Old method names still taken on the command line -> their names now (kept in step with
-#: ``sidql.keyframes.methods.RENAMED``, which this light module does not import).
-OLD_METHOD_NAMES = {"xyz": "cartesian"}
-
-
 def method_name(text: str) -> str:
     """An argparse ``type`` for a method: its name now, with a one-line warning for an old one
-    (unknown names pass through: the command lists the known ones before any work starts)."""
-    if text in OLD_METHOD_NAMES:
-        new = OLD_METHOD_NAMES[text]
-        warnings.warn(UsageWarning(f"method {text}: an old name, use {new}"), stacklevel=2)
-        return new
+    (:data:`sidql.keyframes.old_names.RENAMED`; unknown names pass through: the command lists the
+    known ones before any work starts)."""
+    if text in RENAMED:
+        warnings.warn(
+            UsageWarning(f"method {text}: an old name, use {RENAMED[text]}"), stacklevel=2
+        )
+        return RENAMED[text]
     return text
 
 

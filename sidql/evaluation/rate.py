@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 from tqdm import tqdm
 
-from sidql.evaluation.evaluate import Case, clip_seed
+from sidql.evaluation.cases import Case, clip_seed
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import select
 from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error

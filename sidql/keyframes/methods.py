@@ -32,6 +32,7 @@ import numpy as np
 from sidql.keyframes import reconstructions
 from sidql.keyframes.counts import check_counts
 from sidql.keyframes.metrics import q_error
+from sidql.keyframes.old_names import RENAMED
 from sidql.keyframes.optimal import clip_optimal_table
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
 from sidql.keyframes.segment_costs import SEPARABLE, greedy_keyframes
@@ -50,9 +51,6 @@ RECONSTRUCTION: dict[str, str] = {}
 #: name -> module that registers it when imported (for methods with heavy dependencies).
 #: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
 LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
-
-#: old method name -> its name now; the old one still works and warns (``FutureWarning``).
-RENAMED: dict[str, str] = {"xyz": "cartesian"}
 
 _OPTIONS = ("reconstruction", "memo")
 _TAKES: dict[str, tuple[str, ...]] = {}

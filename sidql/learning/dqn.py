@@ -198,8 +198,20 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
                 f"--train-also: left out {len(entries) - len(kept)} of {len(entries)} clips made "
                 f"from held-out subjects' trials ({', '.join(test_s)})", file=sys.stderr,
             )  # fmt: skip
-        train_tasks += [clip_task(c, subject=str(e.get("subject", ""))) for c, e in kept]
+        train_tasks += [_also_task(c, e, args.train_also) for c, e in kept]
     return train_tasks, test_tasks, {"train": train_s, "test": test_s}
+
+
+def _also_task(clip, entry: dict, folder) -> KeyframeTask:
+    """The task of a ``--train-also`` clip; one that cannot be a task is named by its index
+    file and entry (never by the path its ``source`` claims)."""
+    try:
+        return clip_task(clip, subject=str(entry.get("subject", "")))
+    except MotionDataError as e:
+        name = excerpt(str(entry.get("file")), 100, quote=False)
+        raise MotionDataError(
+            str(Path(folder) / "index.json"), None, f"{name}: {e.problem}"
+        ) from None
 
 
 # --- baselines on cost matrices (for logging) ----------------------------------------------------

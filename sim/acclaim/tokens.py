@@ -4,6 +4,7 @@ readers share."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -24,16 +25,20 @@ def known_names(names, chars: int = 300) -> str:
     return ", ".join(shown)
 
 
+#: A number as Acclaim files spell them: ASCII decimal digits, an optional sign, point and
+#: exponent (Python's float() would also take ``1_0_8``, non-ASCII digits, ``0x``-less words).
+_NUMBER_RE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\Z")
+
+
 def float_list(
     tokens: list[str], path: str, line: int, what: str, bound: float | list | None = None
 ) -> list[float]:
-    """Finite numbers of ``tokens``, each at most ``bound`` (one for all, or one per token) in
-    magnitude. Plain Python: this runs once per line on the checked AMC path."""
-    try:
-        values = [float(t) for t in tokens]
-    except ValueError:
-        bad = next(t for t in tokens if not is_float(t))
-        raise MotionDataError(path, line, f"non-numeric value {excerpt(bad)} in {what}") from None
+    """Finite numbers of ``tokens``, each ASCII decimal (:data:`_NUMBER_RE`) and at most
+    ``bound`` (one for all, or one per token) in magnitude. Plain Python: this runs once per line on the checked AMC path."""
+    bad = next((t for t in tokens if not _NUMBER_RE.match(t)), None)
+    if bad is not None and not (is_float(bad) and not math.isfinite(float(bad))):
+        raise MotionDataError(path, line, f"non-numeric value {excerpt(bad)} in {what}")
+    values = [float(t) for t in tokens]  # nan and inf: refused below as non-finite
     bounds = [bound] * len(values) if bound is None or isinstance(bound, (int, float)) else bound
     for t, v, b in zip(tokens, values, bounds, strict=True):
         if not math.isfinite(v):

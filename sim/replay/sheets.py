@@ -36,7 +36,6 @@ def contact_sheet(images, labels, path: str | os.PathLike, *, cols: int = 4) -> 
         g.rectangle([x, y + H - 30, x + g.textlength(lab, font=font) + 12, y + H], fill=(0, 0, 0))
         g.text((x + 6, y + H - 27), lab, fill=(255, 255, 255), font=font)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda f: sheet.save(f, format="PNG", optimize=True))
     return path
 
@@ -113,6 +112,5 @@ def keyframe_sheet(
             label = f"frame {t}: {1e3 * err[t]:.0f} mm"
             tile(t, rec.positions[t], i * tw + tw // 2, top + th, label, (190, 90, 20))
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda f: sheet.save(f, format="PNG", optimize=True))
     return path

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from sim.files import written_by
 from sim.motion.points import PointMotion
 from sim.physics.foot_state import FootState
 from sim.replay.annotate import annotate, caption, foot_frame
@@ -85,14 +86,14 @@ def render_frames(
 X264_PRESET = "veryfast"
 
 
-def write_video(frames, path: str | os.PathLike, fps: float) -> Path:
-    """Encode (H, W, 3) uint8 frames as an H.264 mp4 (yuv420p, fast start) atomically."""
+def write_video(frames, path: str | os.PathLike, fps: float, *, root=None) -> Path:
+    """Encode (H, W, 3) uint8 frames as an H.264 mp4 (yuv420p, fast start) atomically: ffmpeg
+    writes into a private folder beside ``path``, then the file is renamed into place
+    (:func:`sim.files.written_by`; ``root``: the output folder, no link below it followed)."""
     import imageio.v2 as imageio  # lazy: heavy optional video dependency, only to write an mp4
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.mp4")
-    try:
+    with written_by(path, root=root, suffix=".mp4") as tmp:
         w = imageio.get_writer(
             tmp, fps=fps, codec="libx264", quality=7, pixelformat="yuv420p", macro_block_size=16,
             ffmpeg_log_level="error",
@@ -101,8 +102,4 @@ def write_video(frames, path: str | os.PathLike, fps: float) -> Path:
         with w:
             for f in frames:
                 w.append_data(f)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path

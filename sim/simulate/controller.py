@@ -23,9 +23,11 @@ Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
    ``ROOT_TORQUE_LEVER`` (torque); its 6-d wrench is recorded every tick: the honest label of
    how much help the motion needed.
 
-4. **A fall stays down.** Once the root drops below half its reference height, the assistance
-   stops for good and the joints hold the pose of the fall at :data:`FALLEN_TONE` of their
-   effort, without feed-forward: the body settles on the floor (a get-up is not generated).
+4. **A fall stays down.** Once the body has fallen (``sim.simulate.falls``: a part other than
+   the feet on the floor where the reference has none, or the head below half the
+   reference's), the assistance stops for good and the joints hold the pose of the fall at
+   :data:`FALLEN_TONE` of their effort, without feed-forward: the body settles on the floor (a
+   get-up is not generated).
 
 External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (its effort
 and the assistance scaled down for a while: :func:`effort_target`) perturb the motion. The model
@@ -46,6 +48,7 @@ from scipy.optimize import nnls
 
 from sim.model.kinematics import SOLE_POINTS
 from sim.motion.velocities import qvel_from_qpos
+from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.model import (
     CONTROL_HZ,
     FLOOR_BITS,
@@ -108,7 +111,8 @@ class Tracking:
             on the assistance is off and the joints hold the pose of the fall at
             :data:`FALLEN_TONE` of their stiffness and strength (no tracking, no feed-forward):
             the body stays down (no get-up is generated).
-        fell: whether the root dropped below half its reference height (see :func:`track`).
+        fell: whether the body fell (``sim.simulate.falls``; see :func:`track`).
+        fall_tick: the control tick whose state was found fallen first, -1 if none.
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
         penetration: deepest floor contact penetration [m] seen at the control ticks (>= 0).
@@ -135,6 +139,7 @@ class Tracking:
     foot_force: np.ndarray | None = None
     fall_frame: int = -1
     self_penetration: float = 0.0
+    fall_tick: int = -1
 
 
 class ActuatorEdits:
@@ -398,9 +403,9 @@ def track(
     """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
 
     The simulation starts in the reference's first pose and velocity. ``model`` must come from
-    ``sim.simulate.model.sim_model`` (its actuators' gains are read; a weakening changes them and
-    they are restored on return, or on an exception). A fall is the root below half its
-    reference height while the reference root is above 0.5 m.
+    ``sim.simulate.model.sim_model`` (its actuators' gains are read; it is not edited). A fall is
+    ``sim.simulate.falls``'s, checked every control tick; ``fall_frame`` is the first recorded
+    frame at or after it.
 
     Args:
         gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
@@ -422,6 +427,7 @@ def track(
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
     ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     root_inertia = _root_inertia(model, ref_qpos[0], data)
+    fall_ref = fall_reference(model, ref_qpos)
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
     data.qvel[:] = ref_qvel[0]
@@ -450,7 +456,7 @@ def track(
     rec_u = np.empty((F, model.nu))
     rec_tau = np.empty((F, model.nu))
     rec_f = np.zeros((F, 2, 3))
-    fall_frame = -1
+    fall_frame = fall_tick = -1
     all_assist = np.empty(T)
     all_wrench = np.empty((T, 6))
     fell = False
@@ -502,9 +508,10 @@ def track(
             rec_q[i] = data.qpos
             rec_v[i] = data.qvel
             rec_u[i] = data.ctrl
-            if q_ref[2] > 0.5 and data.qpos[2] < 0.5 * q_ref[2] and not fell:
-                fell, fall_frame = True, i
-                fallen_pose = data.qpos[7:].copy()
+        if not fell and has_fallen(model, data, fall_ref, k):
+            fell, fall_tick = True, k
+            fall_frame = min(F - 1, -(-k // record_every))
+            fallen_pose = data.qpos[7:].copy()
         n = data.ncon
         if n:
             on_floor = (data.contact.geom[:n] == floor).any(axis=1)
@@ -549,4 +556,5 @@ def track(
         joint_torque=rec_tau,
         foot_force=rec_f,
         fall_frame=fall_frame,
+        fall_tick=fall_tick,
     )

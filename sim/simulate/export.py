@@ -122,7 +122,8 @@ def export_minari(
 ) -> int:
     """Write the clips of the ``synth`` folder ``dataset_dir`` (its ``index.json`` and clip
     files with their ``sim_`` labels) as the Minari dataset ``dataset_id`` under ``root``
-    (layout: module docstring); each file atomically, ``metadata.json`` last.
+    (layout: module docstring); each file atomically through ``sim.files.write_atomic`` (no
+    link below ``root`` followed), ``metadata.json`` last.
 
     Args:
         physical_only: only the clips whose index entry says ``physical``.
@@ -133,6 +134,7 @@ def export_minari(
     Raises:
         MotionDataError: the index or a clip file is unreadable, a clip has no episode labels,
             or ``dataset_id`` is not a Minari id (``name-v0``, ``namespace/name-v0``).
+        OutputError: a link below ``root``, or a target that is not a regular file.
     """
     if not DATASET_ID.match(dataset_id):
         raise MotionDataError(
@@ -144,8 +146,8 @@ def export_minari(
     if not chosen:
         raise MotionDataError(str(src), None, "no clip to export")
     files = [(index["trials"][i], entry_file(src, index, i)) for i in chosen]  # inside src
-    out = Path(root) / dataset_id / "data"
-    out.mkdir(parents=True, exist_ok=True)
+    root = Path(root)
+    out = root / dataset_id / "data"  # made by the writer below root, through no link
     steps, ranges = [], []
 
     def write(f) -> None:
@@ -155,7 +157,7 @@ def export_minari(
                 steps.append(n)
                 ranges.append(rng)
 
-    write_atomic(out / "main_data.hdf5", write)
+    write_atomic(out / "main_data.hdf5", write, root=root)
     labels = load_extra(files[0][1], "sim_")
     ranges = np.stack(ranges)
     model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0)
@@ -182,5 +184,5 @@ def export_minari(
         "torque_limit": torque_limits(model).tolist(),
     }
     text = json.dumps(metadata, indent=1).encode()
-    write_atomic(out / "metadata.json", lambda f: f.write(text))
+    write_atomic(out / "metadata.json", lambda f: f.write(text), root=root)
     return len(files)

@@ -74,7 +74,7 @@ LABELS = {
     "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor",
     "sim_foot_force": "(F, 2, 3) floor contact force [N, world frame] on the left, right foot",
     "sim_contact_penetration": "(F,) deepest floor contact penetration [m], 0 without contact",
-    "sim_fallen": "(F,) bool: the figure has fallen (root below half its reference height)",
+    "sim_fallen": "(F,) bool: the figure has fallen (sim.simulate.falls: a part other than the feet on the floor where the reference has none, or the head below half the reference's)",
 }
 ALL_KINDS = (*KINDS, "follow")
 # root assistance bound [body weight]; procedural motion is not physically plausible (its feet
@@ -260,7 +260,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     if result.fall_frame >= 0:
         fallen[result.fall_frame :] = True
     episode = tracking["recorder"].episode()
-    fall_tick = result.fall_frame * tracking["record_every"] if result.fall_frame >= 0 else -1
+    fall_tick = result.fall_tick
     record = {
         "generation": p,
         "mean_assistance": float(result.assistance.mean()),
@@ -301,7 +301,7 @@ def episode_model(skeleton, scale: float, gain: float) -> tuple[mujoco.MjModel, 
     the torque limits are the human ones, never scaled, rounded down to the 6 digits an MJCF
     keeps); the model compiled from its MJCF (the model simulated, so the MJCF rebuilds it
     exactly), the MJCF itself and the gains."""
-    gains = Gains(omega=Gains().omega * np.sqrt(gain))
+    gains = Gains().scaled(gain)
     spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains)
     for a in spec.actuators:  # the MJCF keeps 6 digits: round the limits down, never up
         a.forcerange = [-_down6(a.forcerange[1]), _down6(a.forcerange[1])]

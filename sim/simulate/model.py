@@ -12,7 +12,9 @@ module edits its output through ``mujoco.MjSpec``:
 * each actuator's whole output (PD and feed-forward: the controller passes the feed-forward
   through ``ctrl``) is clamped by MuJoCo to the joint's torque limit (``forcelimited``): the
   peak isometric torque of an adult man per joint (:data:`HUMAN_PEAK_TORQUE`), scaled by the
-  body mass over 75 kg and by ``Gains.strength``;
+  body mass over 75 kg and by nothing else: strength is anatomy, not a controller setting, so no
+  gain changes it (``actuators="motor"``: torque actuators whose control range is that limit,
+  for controllers that compute torques themselves, ``sim.simulate.wholebody``);
 * each hinge's armature (rotor inertia) at least ``kp h^2`` for the step ``h``, so the stiff spine
   chain stays stable;
 * a stiff floor: contact time constant 0.005 s (MuJoCo's default 0.02 s; the floor is stiffer
@@ -28,11 +30,11 @@ module edits its output through ``mujoco.MjSpec``:
 * self-collision: body geoms collide with each other except bodies within two joints of each
   other and pairs overlapping in the rest pose (:func:`self_collision_exclusions`), so a
   falling body's limbs cannot pass through each other or through its trunk;
-* opt-in (``soles=True``, ``stance_ankles=True``; off by default, measured no better): a flat
-  sole box under each foot from :data:`SOLE_HEEL` behind the ankle to the ball
-  (:func:`add_soles`; the foot capsule then touches the body only; ``sim.physics.feet``'s sole
-  points, the physics analysis's, stay the capsules) and ankles at least as stiff as the
-  standing body's toppling stiffness (:func:`stance_stiffness`);
+* feet that can stand (``soles=True``, the default): a flat sole box under each foot from
+  :data:`SOLE_HEEL` behind the ankle to the ball, heel and toe (:func:`add_soles`; the foot
+  capsule then touches the body only; ``sim.physics.feet``'s sole points, the physics
+  analysis's, stay the capsules); opt-in (``stance_ankles=True``) ankles at least as stiff as
+  the standing body's toppling stiffness (:func:`stance_stiffness`);
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
   integrator is ``implicitfast`` so the actuators' damping is integrated implicitly.
 """
@@ -105,18 +107,19 @@ FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's default impedance
 
 @dataclass(frozen=True)
 class Gains:
-    """Tracking gains: hinge bandwidth ``omega`` [rad/s] and damping ratio; root ones likewise;
-    ``strength``: multiplier of the human peak joint torques (:data:`HUMAN_PEAK_TORQUE`)."""
+    """Tracking gains of the position actuators' feedback: hinge bandwidth ``omega`` [rad/s] and
+    damping ratio; root ones likewise. Feedback gains belong to the controller; the torque
+    limits (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them."""
 
     omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
-    strength: float = 1.0
     root_omega: float = 2 * np.pi * 2.0
     root_zeta: float = 1.0
 
     def scaled(self, factor: float) -> Gains:
-        """Stiffness scaled by ``factor`` (bandwidth by its square root), limits by ``factor``."""
-        return replace(self, omega=self.omega * np.sqrt(factor), strength=self.strength * factor)
+        """Stiffness scaled by ``factor`` (bandwidth by its square root); the torque limits stay
+        the human ones (a stiffer controller is no stronger body)."""
+        return replace(self, omega=self.omega * np.sqrt(factor))
 
 
 def scaled_skeleton(skeleton: Skeleton, scale: float) -> Skeleton:
@@ -138,20 +141,26 @@ def sim_spec(
     *,
     body_mass_kg: float = DEFAULT_BODY_MASS_KG,
     gains: Gains | None = None,
-    soles: bool = False,
+    soles: bool = True,
     stance_ankles: bool = False,
+    actuators: str = "position",
 ) -> mujoco.MjSpec:
     """The ``MjSpec`` of :func:`sim_model` (``spec.to_xml()``: the MJCF a dataset stores).
 
-    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``); its control (the PD
-    target [rad], the feed-forward folded in as ``ff / kp``) is limited to the joint's range
-    widened by ``limit / kp`` either side (``ctrllimited``): a target further out asks for more
-    than the joint's peak torque anywhere in its range, so the bound costs no torque there, and
-    actions stay in a fixed box. ``soles``: each foot
+    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``); a position actuator's
+    control (the PD target [rad], the feed-forward folded in as ``ff / kp``) is limited to the
+    joint's range widened by ``limit / kp`` either side (``ctrllimited``): a target further out
+    asks for more than the joint's peak torque anywhere in its range, so the bound costs no
+    torque there, and actions stay in a fixed box. ``soles``: each foot
     touches the floor through a flat sole box reaching behind the ankle (:func:`add_soles`)
-    instead of its capsule. ``stance_ankles``: the ankle hinges (``foot_rx``, ``foot_rz``) at
-    least :func:`stance_stiffness` (capped by the torque limit like every joint).
+    instead of its capsule (False: the capsule feet of motion capture). ``stance_ankles``: the
+    ankle hinges (``foot_rx``, ``foot_rz``) at least :func:`stance_stiffness` (capped by the
+    torque limit like every joint). ``actuators``: ``"position"`` (PD servos with ``gains``,
+    output clamped to the human limit) or ``"motor"`` (``ctrl`` is the torque [N m], clamped to
+    the human limit); the armature is the same in both, so both are one body.
     """
+    if actuators not in ("position", "motor"):
+        raise ValueError(f"unknown actuators {actuators!r}; known: 'position', 'motor'")
     gains = gains or Gains()
     spec = mujoco.MjSpec.from_string(build_mjcf(skeleton, body_mass_kg=body_mass_kg))
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)
@@ -179,19 +188,24 @@ def sim_spec(
         a.name = name
         a.target = name
         a.trntype = mujoco.mjtTrn.mjTRN_JOINT
-        limit = gains.strength * human_torque_limit(name, body_mass_kg)
+        limit = human_torque_limit(name, body_mass_kg)  # the body's: no gain scales it
         kp = gains.omega**2 * inertia[j - 1]
         raised = max(1.0, stance / kp) if name[1:] in ANKLE_JOINTS else 1.0
         kp *= raised
         cap = min(1.0, limit / MIN_DEFLECTION / kp)  # human stiffness; damping ratio kept
         kp *= cap
         kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(raised * cap)
-        a.set_to_position(kp=kp, kv=kv)
+        if actuators == "motor":
+            a.set_to_motor()
+            a.ctrllimited = True
+            a.ctrlrange = [-limit, limit]
+        else:
+            a.set_to_position(kp=kp, kv=kv)
+            lo, hi = plain.jnt_range[j]
+            a.ctrllimited = True
+            a.ctrlrange = [lo - limit / kp, hi + limit / kp]
         a.forcelimited = True
         a.forcerange = [-limit, limit]
-        lo, hi = plain.jnt_range[j]
-        a.ctrllimited = True
-        a.ctrlrange = [lo - limit / kp, hi + limit / kp]
         # a light segment between two stiff joints (the spine) makes a mode of inertia ~ its own;
         # armature >= kp h^2 keeps every actuator mode below 1 / h (explicit-spring stability)
         joint = spec.joint(name)
@@ -240,7 +254,7 @@ def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
 
     The box's bottom face is the sole: normal to :data:`STANCE_UP`, through the lowest point of
     the foot capsule and the toes in that direction, from :data:`SOLE_HEEL` behind the ankle
-    joint to the front of the foot capsule (the ball of the foot), :data:`SOLE_HALF_WIDTH`
+    joint to the tip of the toes (the front of the foot capsule where there are none), :data:`SOLE_HALF_WIDTH`
     either side. ``model``: the humanoid of ``build_mjcf`` (capsule feet, sphere or capsule
     toes), its joints at zero."""
     data = mujoco.MjData(model)
@@ -267,6 +281,11 @@ def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         forward /= length
         lateral = np.cross(n, forward)
         heel, front = -SOLE_HEEL, length + 0.5 * radius
+        if toes >= 0:  # on to the tip of the toes: one rigid sole, heel to toe
+            t_axis = R_foot.T @ data.geom_xmat[toes].reshape(3, 3)[:, 2]
+            t_half = model.geom_size[toes, 1] if model.geom_type[toes] == 3 else 0.0
+            tip = np.max((toe_centre + np.outer([t_half, -t_half], t_axis)) @ forward)
+            front = max(front, float(tip) + model.geom_size[toes, 0])
         centre = 0.5 * (heel + front) * forward - (depth - SOLE_HALF_THICKNESS) * n
         q = np.zeros(4)
         mujoco.mju_mat2Quat(q, np.column_stack([forward, lateral, n]).ravel())
@@ -276,9 +295,10 @@ def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
 
 
 def add_soles(spec) -> None:
-    """Give each foot of ``spec`` a massless sole box (:func:`sole_boxes`) that alone touches the
-    floor for it: a foot then stands on a flat sole, not on the point or edge where a capsule
-    meets a plane. The foot capsule keeps colliding with the other body geoms."""
+    """Give each foot of ``spec`` a massless sole box (:func:`sole_boxes`, heel to toe tip) that
+    alone touches the floor for it: a foot then stands on a flat sole, not on the point or edge
+    where a capsule meets a plane, nor on a toe capsule that the captured toe angle holds below
+    the sole. The foot and toe capsules keep colliding with the other body geoms."""
     boxes = sole_boxes(spec.compile())
     for body, (pos, quat, size) in boxes.items():
         b = spec.body(body)
@@ -293,8 +313,10 @@ def add_soles(spec) -> None:
         g.contype, g.conaffinity = SOLE_BITS
         g.group = 3
         g.solref = [SELF_TIMECONST, 1.0]
-        capsule = spec.geom(body)
-        capsule.contype, capsule.conaffinity = SELF_BITS
+        for name in (body, body[0] + "toes"):
+            capsule = spec.geom(name)
+            if capsule is not None:
+                capsule.contype, capsule.conaffinity = SELF_BITS
 
 
 # contype, conaffinity: the floor touches every body geom; body geoms touch each other (bit 4)

@@ -19,7 +19,7 @@ from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import SOLE_POINTS
 from sim.motion.retarget import leg_length, motion_to_qpos
-from sim.simulate.model import SOLE_GEOMS
+from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -42,14 +42,16 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
 
 
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
-    """(T,) height [m] of the lowest surface point of the foot and toe capsules and the sole
-    boxes (``sim.simulate.model.add_soles``, where the model has them) in each frame."""
+    """(T,) height [m] of the lowest surface point of the feet's geoms that touch the floor in
+    each frame: the sole boxes where the model has them (``sim.simulate.model.add_soles``; the
+    foot and toe capsules then touch the body only), else the foot and toe capsules."""
     data = mujoco.MjData(model)
     names = SOLE_POINTS + SOLE_GEOMS
     ids = [
         model.geom(n).id
         for n in names
         if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) >= 0
+        and int(model.geom(n).conaffinity[0]) & FLOOR_BITS[0]
     ]
     low = np.empty(len(qpos))
     for t, q in enumerate(qpos):
@@ -135,7 +137,8 @@ def time_warp(model, qpos: np.ndarray, rate: float, speed: float, out_rate: floa
 #: [m] a sole whose lowest corner is this high or lower is laid flat on the floor in full; from
 #: there to FLAT_TO it is turned less and less, and above it not at all
 FLAT_FROM, FLAT_TO = 0.02, 0.05
-FLAT_ITERATIONS = 3
+FLAT_ITERATIONS = 5
+FLAT_MAX_STEP = 0.2  # [rad] per Gauss-Newton iteration
 
 
 def flat_soles(model, qpos: np.ndarray) -> np.ndarray:
@@ -174,7 +177,8 @@ def flat_soles(model, qpos: np.ndarray) -> np.ndarray:
                 continue
             q0 = out[t, adr].copy()
             q = q0.copy()
-            for _ in range(FLAT_ITERATIONS):  # Gauss-Newton on the normal's tilt
+            f0 = f = sole(g)[0]
+            for _ in range(FLAT_ITERATIONS):  # damped Gauss-Newton on the normal's tilt
                 data.qpos[adr] = q
                 mujoco.mj_kinematics(model, data)
                 f, _ = sole(g)
@@ -184,6 +188,41 @@ def flat_soles(model, qpos: np.ndarray) -> np.ndarray:
                     mujoco.mj_kinematics(model, data)
                     J[:, k] = (sole(g)[0] - f) / 1e-4
                     data.qpos[adr[k]] = q[k]
-                q = np.clip(q - np.linalg.lstsq(J, f, rcond=None)[0], lo, hi)
+                step = np.linalg.lstsq(J, f, rcond=1e-3)[0]
+                step *= min(1.0, FLAT_MAX_STEP / max(np.linalg.norm(step), 1e-12))
+                q = np.clip(q - step, lo, hi)
+            data.qpos[adr] = q
+            mujoco.mj_kinematics(model, data)
+            if np.linalg.norm(sole(g)[0]) >= np.linalg.norm(f0):
+                continue  # no flatter within the ankle's range: the captured foot stays
             out[t, adr] = q0 + w * (q - q0)
+    return out
+
+
+#: [m] a sole whose lowest corner is at most this high (after the floor shift) is in stance
+STANCE_GAP = 0.03
+#: [s] the vertical correction of :func:`contact_consistent` is smoothed over this scale
+CONSISTENT_SMOOTH_S = 0.05
+
+
+def contact_consistent(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
+    """A copy of ``qpos`` (T, nq, its floor near z = 0, e.g. from :func:`on_floor` with no lift)
+    shifted vertically frame by frame so that in stance the lower sole (its lowest surface
+    point, :func:`lowest_foot_point`) touches the floor at z = 0: feet meet the floor where
+    the reference stands on it, instead of hovering or sinking by the floor estimate's error.
+    A frame is in stance when its lowest sole point is within :data:`STANCE_GAP`; between
+    stance frames (flight) the shift is interpolated; the shift is then smoothed by a Gaussian
+    of :data:`CONSISTENT_SMOOTH_S` (no jumps). A motion that never stands comes back as is."""
+    from scipy.ndimage import gaussian_filter1d
+
+    low = lowest_foot_point(model, qpos)
+    stance = low <= STANCE_GAP
+    out = qpos.copy()
+    if not stance.any():
+        return out
+    t = np.arange(len(qpos))
+    shift = np.interp(t, t[stance], low[stance])
+    if len(qpos) > 1:
+        shift = gaussian_filter1d(shift, CONSISTENT_SMOOTH_S * rate, mode="nearest")
+    out[:, 2] -= shift
     return out

@@ -83,7 +83,8 @@ class ForwardValidation:
         * ``sim_error_original_mm``: the same against ``original_qpos`` (the motion itself when
           None);
         * ``sim_fell`` (0/1) and ``sim_fall_s``: the time of the fall [s] (None: no fall), a fall
-          being the root below half its reference height;
+          as ``sim.simulate.falls`` defines it (a part other than the feet on the floor where
+          the reference has none, or the head below half the reference's);
         * ``sim_torque_rms_nm_kg``: RMS joint torque [N m / kg] applied;
         * ``sim_torque_saturated``: share of (frame, joint) samples at their torque limit.
         """
@@ -92,6 +93,7 @@ class ForwardValidation:
         floor = self.floor_of(orig)
         ref = self.reference(qpos, fps, floor)
         orig[:, 2] -= floor - FLOOR_LIFT
+        orig = flat_soles(self.model, orig)  # the same feet as the tracked reference's
         every = int(round(CONTROL_HZ / fps))
         if self.samples:
             r = sample_track(self.model, ref, samples=self.samples, record_every=every)

@@ -1,0 +1,132 @@
+"""When the simulated body has fallen: the one definition every simulation room reads.
+
+A simulated body **has fallen** at an instant when either
+
+* it touches the floor with a part other than its feet (sole boxes, foot and toe capsules), and
+  the reference does not have that same part on the floor at that moment (within
+  :data:`REFERENCE_GAP`): hands and knees in a crawl, the seat of a sitting motion are support,
+  a shoulder or a back that the reference holds up is a fall; or
+* its head is below :data:`HEAD_SHARE` of the reference's head height at that moment (a body
+  upside down, or folded over with its root still high, has fallen too).
+
+Root height alone does not decide it: a body lying on its side with the pelvis propped up, or
+standing on its head, has fallen whatever the root does.
+
+Units: metres, z up, the floor at z = 0 (a reference lifted by ``sim.simulate.reference``'s
+``FLOOR_LIFT`` counts its parts within :data:`REFERENCE_GAP` of that).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim.model.kinematics import SOLE_POINTS
+from sim.simulate.model import SOLE_GEOMS
+
+#: geoms that may always touch the floor: the feet
+FOOT_GEOMS = SOLE_POINTS + SOLE_GEOMS
+#: [m] a reference part whose lowest surface point is at most this high is on the floor (a hand
+#: planted on the floor in motion capture hovers 1-3 cm: marker offsets, floor drift)
+REFERENCE_GAP = 0.05
+#: the head below this share of the reference's head height is down
+HEAD_SHARE = 0.5
+HEAD_GEOM = "head"
+
+
+def geom_bottoms(model, data) -> np.ndarray:
+    """(ngeom,) the lowest surface point [m] of every geom of ``data`` (kinematics done): a
+    capsule's lower end sphere, a box's lowest corner, a sphere's bottom; the floor plane gets
+    +inf."""
+    out = np.full(model.ngeom, np.inf)
+    for g in range(model.ngeom):
+        t, c, R = model.geom_type[g], data.geom_xpos[g, 2], data.geom_xmat[g, 6:9]
+        size = model.geom_size[g]
+        if t == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            out[g] = c - size[1] * abs(R[2]) - size[0]
+        elif t == mujoco.mjtGeom.mjGEOM_BOX:
+            out[g] = c - np.abs(R) @ size
+        elif t == mujoco.mjtGeom.mjGEOM_SPHERE:
+            out[g] = c - size[0]
+        elif t == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            out[g] = c - size[1] * abs(R[2]) - size[0] * np.sqrt(max(0.0, 1 - R[2] ** 2))
+    return out
+
+
+@dataclass(frozen=True)
+class FallReference:
+    """What a fall is judged against, per control tick of a reference (T ticks).
+
+    Attributes:
+        head_z: (T,) height [m] of the reference's head (centre of its head geom).
+        on_floor: (T, ngeom) the reference's geom is on the floor (:data:`REFERENCE_GAP`); the
+            feet are always allowed.
+    """
+
+    head_z: np.ndarray
+    on_floor: np.ndarray
+
+
+def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
+    """The :class:`FallReference` of ``ref_qpos`` (T, nq) on ``model`` (a ``sim_model``)."""
+    data = mujoco.MjData(model)
+    head = model.geom(HEAD_GEOM).id
+    allowed = _foot_mask(model)
+    head_z = np.empty(len(ref_qpos))
+    on_floor = np.empty((len(ref_qpos), model.ngeom), bool)
+    for t, q in enumerate(ref_qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        head_z[t] = data.geom_xpos[head, 2]
+        on_floor[t] = (geom_bottoms(model, data) <= REFERENCE_GAP) | allowed
+    return FallReference(head_z=head_z, on_floor=on_floor)
+
+
+def _foot_mask(model) -> np.ndarray:
+    mask = np.zeros(model.ngeom, bool)
+    for n in FOOT_GEOMS:
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)
+        if g >= 0:
+            mask[g] = True
+    return mask
+
+
+def fall_cause(model, data, ref: FallReference, k: int) -> str | None:
+    """Why ``data``'s body has fallen at reference tick ``k``, None if it has not:
+    ``"contact:<geom>"`` (a part the reference does not have on the floor touches it, among
+    ``data``'s contacts of its last step) or ``"head"`` (head below :data:`HEAD_SHARE` of the
+    reference's head height; ``data``'s kinematics must be current)."""
+    floor = model.geom("floor").id
+    allowed = ref.on_floor[k]
+    n = data.ncon
+    if n:
+        geoms = data.contact.geom[:n]
+        for g1, g2 in geoms:
+            if g1 == floor and not allowed[g2]:
+                return f"contact:{model.geom(g2).name}"
+            if g2 == floor and not allowed[g1]:
+                return f"contact:{model.geom(g1).name}"
+    if data.geom_xpos[model.geom(HEAD_GEOM).id, 2] < HEAD_SHARE * ref.head_z[k]:
+        return "head"
+    return None
+
+
+def has_fallen(model, data, ref: FallReference, k: int) -> bool:
+    """Whether ``data``'s body has fallen at reference tick ``k`` (:func:`fall_cause`)."""
+    return fall_cause(model, data, ref, k) is not None
+
+
+def first_fall(model, qpos: np.ndarray, ref_qpos: np.ndarray) -> int:
+    """The first frame of a recorded motion ``qpos`` (F, nq) that has fallen against the
+    reference ``ref_qpos`` (F, nq, same frames), -1 if none. Contacts are MuJoCo's collision
+    detection at each frame's pose (``mj_forward``)."""
+    ref = fall_reference(model, ref_qpos)
+    data = mujoco.MjData(model)
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_forward(model, data)
+        if has_fallen(model, data, ref, t):
+            return t
+    return -1

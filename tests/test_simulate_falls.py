@@ -1,0 +1,97 @@
+"""The fall definition (``sim.simulate.falls``): a part other than the feet on the floor where the
+reference has none, or the head below half the reference's; never root height alone."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim.model.humanoid import canonical_skeleton
+from sim.simulate.controller import track
+from sim.simulate.falls import fall_cause, fall_reference, first_fall, geom_bottoms
+from sim.simulate.model import sim_model
+
+
+@pytest.fixture(scope="module")
+def model():
+    return sim_model(canonical_skeleton())
+
+
+def _quat(axis, angle):
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * np.asarray(axis, float)])
+
+
+def _mul(a, b):
+    out = np.zeros(4)
+    mujoco.mju_mulQuat(out, a, b)
+    return out
+
+
+UPRIGHT = _quat([1, 0, 0], np.pi / 2)  # the skeleton's y up turned to z up
+
+
+def _pose(model, turn, lowest=-0.002):
+    """The rest pose turned by ``turn`` (quaternion, world frame) after standing it upright,
+    lowered so its lowest geom is at ``lowest`` [m] (slightly into the floor: touching)."""
+    data = mujoco.MjData(model)
+    q = model.qpos0.copy()
+    q[3:7] = _mul(turn, UPRIGHT)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    q[2] += lowest - geom_bottoms(model, data).min()
+    return q
+
+
+def _state(model, q):
+    data = mujoco.MjData(model)
+    data.qpos[:] = q
+    mujoco.mj_forward(model, data)  # contacts at this pose
+    return data
+
+
+def test_standing_on_the_feet_is_not_a_fall(model):
+    stand = _pose(model, _quat([0, 0, 1], 0.0))
+    ref = fall_reference(model, stand[None])
+    data = _state(model, stand)
+    assert data.ncon > 0  # the soles touch the floor
+    assert fall_cause(model, data, ref, 0) is None
+
+
+def test_upside_down_is_a_fall_though_the_root_stays_high(model):
+    stand = _pose(model, _quat([0, 0, 1], 0.0))
+    ref = fall_reference(model, stand[None])
+    upside = _pose(model, _quat([0, 1, 0], np.pi))  # on its head
+    assert upside[2] > 0.5 * stand[2]  # the root-height rule would not have seen it
+    data = _state(model, upside)
+    assert fall_cause(model, data, ref, 0).startswith("contact:")
+    lifted = upside.copy()
+    lifted[2] += 0.3  # held upside down in the air: no contact, the head rule alone
+    data = _state(model, lifted)
+    assert data.ncon == 0 or not (data.contact.geom[: data.ncon] == 0).any()
+    assert fall_cause(model, data, ref, 0) == "head"
+
+
+def test_lying_down_is_a_fall_unless_the_reference_lies_too(model):
+    stand = _pose(model, _quat([0, 0, 1], 0.0))
+    lying = _pose(model, _quat([0, 1, 0], np.pi / 2))  # on its side
+    data = _state(model, lying)
+    cause = fall_cause(model, data, fall_reference(model, stand[None]), 0)
+    assert cause is not None and cause != "contact:lsole" and cause != "contact:rsole"
+    # the reference lies there itself (a motion performed on the floor): the same parts touch,
+    # the head is as low as the reference's: not a fall
+    assert fall_cause(model, data, fall_reference(model, lying[None]), 0) is None
+
+
+def test_a_body_without_strength_collapses_and_is_seen_falling(model):
+    """A simulated clip: the standing pose tracked with every torque limit at zero (set here on
+    purpose) collapses; the fall is found, in the controller and from the recorded motion."""
+    stand = _pose(model, _quat([0, 0, 1], 0.0), lowest=0.0)
+    ref = np.repeat(stand[None], 240, axis=0)
+    weak = sim_model(canonical_skeleton())
+    weak.actuator_forcerange[:] = 0.0
+    r = track(weak, ref, assist_limit=0.0)
+    assert r.fell and 0 < r.fall_frame < len(r.qpos) - 1
+    assert first_fall(weak, r.qpos, ref[::4]) >= 0
+    strong = track(model, ref, assist_limit=0.0)
+    assert first_fall(model, strong.qpos[:10], ref[::4][:10]) == -1
