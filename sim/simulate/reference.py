@@ -12,6 +12,7 @@ import os
 
 import mujoco
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from sim.acclaim.amc import parse_amc
 from sim.acclaim.asf import parse_asf
@@ -213,8 +214,6 @@ def contact_consistent(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarr
     A frame is in stance when its lowest sole point is within :data:`STANCE_GAP`; between
     stance frames (flight) the shift is interpolated; the shift is then smoothed by a Gaussian
     of :data:`CONSISTENT_SMOOTH_S` (no jumps). A motion that never stands comes back as is."""
-    from scipy.ndimage import gaussian_filter1d
-
     low = lowest_foot_point(model, qpos)
     stance = low <= STANCE_GAP
     out = qpos.copy()
