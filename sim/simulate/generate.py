@@ -50,8 +50,8 @@ PHYSICAL_BUDGET = 0.05
 # actuators (one per hinge, the order of the clip's ``joint_names``), B bodies, S state size
 EPISODE_LABELS = {
     "sim_actions": "(T, U) actuator controls at each control tick: PD target [rad], the "
-    "feed-forward folded in, inside each actuator's control range (the joint range widened by "
-    "its torque limit over its stiffness)",
+    "feed-forward folded in, inside each actuator's control range (the joint range widened: "
+    "sim.simulate.model.sim_spec)",
     "sim_xfrc_applied": "(T, B, 6) applied body wrenches at each tick (pushes): force [N], "
     "torque [N m], world frame",
     "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance)",

@@ -54,6 +54,10 @@ CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
 MIN_DEFLECTION = 0.25  # [rad] the smallest angle error that asks for a joint's peak torque
+# [rad/s] a position actuator's control range is its joint's range widened by (limit + kv *
+# TARGET_SPEED) / kp: a target that far out asks for the peak torque from anywhere in the range
+# while the joint moves towards it at up to this speed (faster, the damping takes a share)
+TARGET_SPEED = 30.0
 REFERENCE_MASS_KG = 75.0  # [kg] body mass of the peak torques below
 
 # Peak isometric joint torque [N m] of an adult man (about 75 kg), per joint and ASF axis (rx:
@@ -149,9 +153,10 @@ def sim_spec(
 
     Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``); a position actuator's
     control (the PD target [rad], the feed-forward folded in as ``ff / kp``) is limited to the
-    joint's range widened by ``limit / kp`` either side (``ctrllimited``): a target further out
-    asks for more than the joint's peak torque anywhere in its range, so the bound costs no
-    torque there, and actions stay in a fixed box. ``soles``: each foot
+    joint's range widened by ``(limit + kv TARGET_SPEED) / kp`` either side (``ctrllimited``): a
+    target further out asks for more than the joint's peak torque anywhere in its range (while
+    the joint moves towards it at up to :data:`TARGET_SPEED`), so the bound costs no torque
+    there, and actions stay in a fixed box. ``soles``: each foot
     touches the floor through a flat sole box reaching behind the ankle (:func:`add_soles`)
     instead of its capsule (False: the capsule feet of motion capture). ``stance_ankles``: the
     ankle hinges (``foot_rx``, ``foot_rz``) at least :func:`stance_stiffness` (capped by the
@@ -203,7 +208,8 @@ def sim_spec(
             a.set_to_position(kp=kp, kv=kv)
             lo, hi = plain.jnt_range[j]
             a.ctrllimited = True
-            a.ctrlrange = [lo - limit / kp, hi + limit / kp]
+            reach = (limit + kv * TARGET_SPEED) / kp
+            a.ctrlrange = [lo - reach, hi + reach]
         a.forcelimited = True
         a.forcerange = [-limit, limit]
         # a light segment between two stiff joints (the spine) makes a mode of inertia ~ its own;
