@@ -5,7 +5,7 @@
 Every trial of ``--data`` is loaded at 30 fps on its own skeleton and cut to a whole number of
 60-frame clips (so every scheme covers the same frames; trials shorter than 60 frames are left
 out). Errors are averaged over all frames of all trials (frame-weighted): Q (eq. 18, mean
-|angle error| [rad]), MPJPE [mm] and mean velocity error [m/s] over the 23 protocol points.
+|angle error| [rad]), MPJPE [mm] and mean velocity error [mm/s] over the 23 protocol points.
 
 (a) **paper**: Hermite with transmitted rates, W keyframes per 60-frame clip, float32 pose and
     rates plus an index byte (``sidql.evaluation.rate``'s convention, 377 B per keyframe),
@@ -56,16 +56,12 @@ from sidql.codec.decode import reconstruct_stream  # noqa: E402
 from sidql.codec.encode import encode_series  # noqa: E402
 from sidql.codec.quantise import fit_quantiser  # noqa: E402
 from sidql.evaluation.rate import bytes_per_second, write_rd_figure  # noqa: E402
-from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error  # noqa: E402
+from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error_mm_s  # noqa: E402
 from sidql.keyframes.optimal import solve  # noqa: E402
 from sidql.keyframes.reconstructions import reconstruct_series  # noqa: E402
 from sidql.keyframes.segment_costs import segment_cost_matrix  # noqa: E402
-from sidql.keyframes.spherical import (  # noqa: E402
-    chart,
-    positions_from_chart,
-    protocol_indices,
-    split_channels,
-)
+from sidql.keyframes.spherical import chart, protocol_indices, split_channels  # noqa: E402
+from sidql.keyframes.unchart import positions_from_chart  # noqa: E402
 from sim.errors import UnmetTargetError  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 
@@ -107,7 +103,7 @@ class Acc:
             t.n,
             enc.q,
             mpjpe_mm(t.pos, rec.positions),
-            velocity_error(t.vel, rec.velocities),
+            velocity_error_mm_s(t.vel, rec.velocities),
             len(enc.data),
             t.n / 30.0,
         )
@@ -118,7 +114,7 @@ class Acc:
             "bytes_per_second": self.bytes / self.seconds,
             "mean_q": self.q / f,
             "mpjpe_mm": self.mm / f,
-            "velocity_error": self.v / f,
+            "velocity_error_mm_s": self.v / f,
         }
 
 
@@ -141,7 +137,7 @@ def paper(trials, counts):
                         60,
                         q_from_angles(s, rec.theta, rec.phi),
                         mpjpe_mm(t.pos[c0 : c0 + 60], rec.positions),
-                        velocity_error(t.vel[c0 : c0 + 60], rec.velocities),
+                        velocity_error_mm_s(t.vel[c0 : c0 + 60], rec.velocities),
                         bytes_per_second("hermite", W) * 2.0,
                         2.0,
                     )
@@ -205,7 +201,7 @@ def raw_lzma(trials, bits_list):
                 t.n,
                 q_from_angles(s, theta, phi),
                 mpjpe_mm(t.pos, P),
-                velocity_error(t.vel, V),
+                velocity_error_mm_s(t.vel, V),
                 size,
                 t.n / 30.0,
             )
@@ -336,8 +332,8 @@ def _main(argv=None) -> int:
 
     print("\n(a) paper vs (b) codec at equal bytes/s (codec: whole .sidq files)")
     print(
-        f"{'W/clip':>6} {'B/s':>7} | {'paper opt Q':>11} {'mm':>6} {'m/s':>6} | {'paper uni Q':>11} | "
-        f"{'codec B/s':>9} {'Q':>8} {'mm':>6} {'m/s':>6} | {'Q ratio':>7} | codec-hermite Q"
+        f"{'W/clip':>6} {'B/s':>7} | {'paper opt Q':>11} {'mm':>6} {'mm/s':>6} | {'paper uni Q':>11} | "
+        f"{'codec B/s':>9} {'Q':>8} {'mm':>6} {'mm/s':>6} | {'Q ratio':>7} | codec-hermite Q"
     )
     for i, W in enumerate(COUNTS):
         po, pu = res["paper"]["optimal"][i], res["paper"]["uniform"][i]
@@ -345,17 +341,17 @@ def _main(argv=None) -> int:
         cq = c.get("mean_q", np.nan)
         print(
             f"{W:>6} {rates[i]:>7.1f} | {po['mean_q']:>11.4f} {po['mpjpe_mm']:>6.1f} "
-            f"{po['velocity_error']:>6.3f} | {pu['mean_q']:>11.4f} | "
+            f"{po['velocity_error_mm_s']:>6.0f} | {pu['mean_q']:>11.4f} | "
             f"{c.get('bytes_per_second', np.nan):>9.1f} {cq:>8.4f} {c.get('mpjpe_mm', np.nan):>6.1f} "
-            f"{c.get('velocity_error', np.nan):>6.3f} | {cq / po['mean_q']:>7.3f} | "
+            f"{c.get('velocity_error_mm_s', np.nan):>6.0f} | {cq / po['mean_q']:>7.3f} | "
             f"{h.get('mean_q', np.nan):.4f} ({h['trials_failed']} trials failed)"
         )
     print("\n(c) raw 30-fps pose stream, b bits per channel + lzma")
-    print(f"{'bits':>4} {'B/s':>8} {'Q':>9} {'mm':>7} {'m/s':>7}")
+    print(f"{'bits':>4} {'B/s':>8} {'Q':>9} {'mm':>7} {'mm/s':>7}")
     for r in res["raw_lzma"]:
         print(
             f"{r['bits']:>4} {r['bytes_per_second']:>8.1f} {r['mean_q']:>9.5f} "
-            f"{r['mpjpe_mm']:>7.2f} {r['velocity_error']:>7.3f}"
+            f"{r['mpjpe_mm']:>7.2f} {r['velocity_error_mm_s']:>7.0f}"
         )
     # the codec at the raw stream's errors: --max-q equal to raw's Q
     eq = []

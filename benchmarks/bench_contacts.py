@@ -7,7 +7,7 @@ Part 1, per trial (whole take at 30 fps, labelled once): the fitted floor
 (:mod:`sim.physics.ground`: a robust tilted plane through the footprints of the soles' lowest
 points) - its slope, how far the planted feet sit from it (spread, drift, depth below), whether it
 fits (deviation within ``FLAT_TOLERANCE``) - and the original's own mean float and penetration
-against it (:func:`sim.physics.contacts.contact_metrics` of the original against its own labels),
+against it (:func:`sim.physics.contact_metrics.contact_metrics` of the original against its own labels),
 the share of frames with no foot in contact, beside the same figures on a horizontal floor (the
 plane may not tilt) as the baseline. Target: float and penetration <= 10 mm, or the trial flagged.
 
@@ -34,7 +34,8 @@ import numpy as np  # noqa: E402
 
 from sim.motion.ingest import load_motion  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
-from sim.physics.contacts import contact_metrics, trial_contacts  # noqa: E402
+from sim.physics.contact_metrics import contact_metrics  # noqa: E402
+from sim.physics.contacts import trial_contacts  # noqa: E402
 from sim.physics.ground import FLAT_TOLERANCE, estimate_ground  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]

@@ -177,7 +177,7 @@ def rate_part(data: Path, write: bool) -> str:
         c = curve[("optimal", scheme)]
         i = c["keyframes"].index(W)
         return (f"W = {W}: Q {c['mean_q'][i]:.4f}, {c['mpjpe_mm'][i]:.1f} mm, "
-                f"{c['velocity_error'][i]:.3f} m/s")  # fmt: skip
+                f"{c['velocity_error_mm_s'][i]:.0f} mm/s")  # fmt: skip
 
     def bytes_per_second(scheme: str, W: int) -> float:
         c = curve[("optimal", scheme)]

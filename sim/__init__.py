@@ -19,6 +19,7 @@ _API = {
     "UnmetTargetError": "sim.errors",
     "UnknownNameError": "sim.errors",
     "UsageError": "sim.errors",
+    "ArgumentTypeError": "sim.errors",
     "AllFailedError": "sim.errors",
     "MotionDataWarning": "sim.errors",
     "Clip": "sim.motion.clip",

@@ -29,7 +29,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from sim.errors import SidqlError
+from sim.errors import ArgumentTypeError, SidqlError, UsageError
 
 PARENT_POLL_S = 0.2  # how often a pool worker checks that its parent is alive
 #: Held by a task while it writes a file; a worker whose parent died waits for it before exiting,
@@ -111,6 +111,16 @@ def _watch_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="watch-parent", daemon=True).start()
 
 
+def check_batch_arguments(fn, workers) -> None:
+    """A callable ``fn`` and ``workers`` None or a whole number >= 1, else a UsageError kind."""
+    if not callable(fn):
+        raise ArgumentTypeError(f"fn must be callable; got {type(fn).__name__}")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+    ):
+        raise UsageError(f"workers must be a whole number >= 1; got {workers!r}")
+
+
 def run_batch(
     fn: Callable,
     items: Sequence,
@@ -131,6 +141,7 @@ def run_batch(
             local runtime's CPU count (ignored for a cluster, which has its own).
         ray: None (process pool), ``"local"`` or a cluster address.
     """
+    check_batch_arguments(fn, workers)
     items = list(items)
     out: list[Outcome | None] = [None] * len(items)
     for i, outcome in iter_batch(
@@ -163,6 +174,7 @@ def iter_batch(
         total: number of items, for the progress bar (None: unknown).
         others: as :func:`run_batch`.
     """
+    check_batch_arguments(fn, workers)
     bar = tqdm(total=total, desc=desc, unit="task", disable=not progress)
     try:
         if ray is not None:

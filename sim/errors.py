@@ -12,11 +12,13 @@
   a job that keeps any good result lists the bad items and does not raise.
 * :class:`UsageError`: an argument value outside what a function or command accepts (a keyframe
   count W out of range, frame rates that do not divide); the message names the argument, what is
-  valid and the value given.
+  valid and the value given: also an array of the wrong shape or a value that is not finite. Its
+  kind :class:`ArgumentTypeError` is an argument of the wrong type.
 
 The command line prints any :class:`SidqlError` as one line and exits 2; a batch job lists the
-item it failed on and keeps every good result. Errors that are not ``SidqlError`` are bugs (or
-misuse of a function, e.g. an array of the wrong shape: ``ValueError``).
+item it failed on and keeps every good result. Every error a public function raises on purpose
+is one of these (``tests/test_errors.py`` calls each public function with bad arguments); any
+other exception is a bug.
 """
 
 from __future__ import annotations
@@ -114,5 +116,31 @@ class UsageError(SidqlError, ValueError):
     valid and the value given. A ``ValueError`` too, as for any bad argument value."""
 
 
+class ArgumentTypeError(UsageError, TypeError):
+    """An argument of the wrong kind (e.g. a float where a frame count is an integer); a
+    ``TypeError`` too, as Python's own for a wrong type."""
+
+
 class MotionDataWarning(UserWarning):
     """Input that was repaired rather than rejected (e.g. an incomplete final AMC frame dropped)."""
+
+
+def require_type(value, kind: type | tuple[type, ...], what: str):
+    """``value`` itself if it is an instance of ``kind``; otherwise an :class:`ArgumentTypeError`
+    naming the argument, the kind it must be and the kind given."""
+    if not isinstance(value, kind):
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        want = " or ".join(k.__name__ for k in kinds)
+        raise ArgumentTypeError(f"{what} must be a {want}; got {type(value).__name__}")
+    return value
+
+
+def require_positive(value, what: str) -> float:
+    """``value`` as a float if it is finite and > 0; otherwise a :class:`UsageError`."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ArgumentTypeError(f"{what} must be a number; got {type(value).__name__}") from None
+    if not (v > 0 and v < float("inf")):
+        raise UsageError(f"{what} must be positive and finite; got {value!r}")
+    return v

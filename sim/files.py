@@ -27,7 +27,7 @@ import shutil
 import stat
 from pathlib import Path
 
-from sim.errors import MotionDataError, OutputError
+from sim.errors import ArgumentTypeError, MotionDataError, OutputError
 
 _CLOEXEC = getattr(os, "O_CLOEXEC", 0)
 _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
@@ -185,13 +185,15 @@ def write_atomic(path: str | os.PathLike, write, *, root: str | os.PathLike | No
     ``path``: the file is either wholly written or not there at all.
 
     ``root``: the output folder the user named (default: ``path``'s folder); ``path`` lies below
-    it, and no symbolic link below ``root`` is followed (see the module docstring). A process
-    killed while writing (SIGKILL included) leaves no half file, and where the system offers
-    ``O_TMPFILE`` no temporary file either.
+    it, and no symbolic link below ``root`` is followed (see the module docstring; killed while
+    writing, SIGKILL included, it leaves no half file).
 
     Raises:
         OutputError: a link below ``root``, or a target that is not a regular file (one line).
+        ArgumentTypeError: ``write`` is not callable.
     """
+    if not callable(write):  # a bad argument, before any folder is made
+        raise ArgumentTypeError(f"write must be callable; got {type(write).__name__}")
     root_dir, folders, name = _parts(Path(path), None if root is None else Path(root))
     dfd = _open_folder(root_dir, folders, create=True)
     try:

@@ -375,7 +375,7 @@ def _array_mutation(a: dict, rng) -> str:
     elif op == "parents" and "parents" in a:
         p = a["parents"].copy()
         if p.size:
-            p[rng.randrange(p.size)] = _pick(rng, (-5, -1, 0, p.size, 10**9, 1))
+            p.flat[rng.randrange(p.size)] = _pick(rng, (-5, -1, 0, p.size, 10**9, 1))  # any shape
         a["parents"] = p
     elif op == "scalar":
         which = _pick(rng, ("fps", "source_fps", "start_frame"))
@@ -878,14 +878,14 @@ def _read_checkpoint(path: Path, folder: Path, args_dict) -> list:
     run's objects, restore them, sample a minibatch and compute the TD loss."""
     import torch
 
-    from sidql.learning import dqn
+    from sidql.learning import checkpoint, dqn, replay
     from sidql.learning.files import ModelFileError
     from sidql.learning.settings import Args
 
     args = Args(**{**args_dict, "out": str(folder / "run" / "p.pt"), "resume": True})
     if not path.exists():  # as train() does: no checkpoint (a dangling link), a fresh start
         return []
-    ck = dqn.load_checkpoint(path, args)
+    ck = checkpoint.load_checkpoint(path, args)
     train_tasks, _, split = dqn.make_tasks(args)
     if ck.get("split") != split or ck.get("n_tasks") != len(train_tasks):  # as train() does
         raise ModelFileError(str(path), None, "written for another data split")
@@ -893,10 +893,10 @@ def _read_checkpoint(path: Path, folder: Path, args_dict) -> list:
     feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
     costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
     net, target, opt = dqn.make_networks(args, feats)
-    memory = dqn.ReplayMemory(args.buffer_size, n)
-    demos = dqn.ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
+    memory = replay.ReplayMemory(args.buffer_size, n)
+    demos = replay.ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
     rng = np.random.default_rng(args.seed)
-    counters, log = dqn.restore(
+    counters, log = checkpoint.restore(
         ck, net, target, opt, memory, demos, rng, path=str(path), keyframes=args.keyframes,
         n_tasks=len(train_tasks),
     )  # fmt: skip

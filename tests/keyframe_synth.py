@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from sidql.keyframes.curves import interpolate
-from sidql.keyframes.spherical import M_BONES, clip_from_chart, split_channels
+from sidql.keyframes.spherical import M_BONES, split_channels
+from sidql.keyframes.unchart import clip_from_chart
 
 
 def smooth_chart(N: int, fps: float, seed: int, *, M: int = M_BONES):

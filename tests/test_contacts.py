@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sim.physics.contact_metrics import contact_metrics
 from sim.physics.contacts import (
     body_contacts,
-    contact_metrics,
     interval_gap,
     label_contacts,
     motion_contacts,

@@ -18,7 +18,8 @@ import pytest
 
 from sidql.keyframes import pitch, reconstructions
 from sidql.keyframes.curves import interpolate_derivatives
-from sidql.keyframes.spherical import M_BONES, clip_from_chart
+from sidql.keyframes.spherical import M_BONES
+from sidql.keyframes.unchart import clip_from_chart
 
 FPS, N, M = 30.0, 31, 20
 KEYS = np.array([0, 7, 16, 22, 30])

@@ -39,7 +39,7 @@ def test_catmull_rom_is_exact_on_motion_linear_in_the_chart():
     rng = np.random.default_rng(5)
     a, b = rng.uniform(-0.4, 0.4, (2, M))
     theta, phi = 1.3 + a * t, rng.uniform(-3, 3, M) + b * t
-    from sidql.keyframes.spherical import clip_from_chart
+    from sidql.keyframes.unchart import clip_from_chart
 
     root = 0.5 * t * np.ones(3)
     clip = clip_from_chart(

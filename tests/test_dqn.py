@@ -15,20 +15,15 @@ import pytest
 import torch
 
 from sidql.keyframes.methods import greedy_from_costs
-from sidql.learning.dqn import (
-    Args,
-    NStep,
-    ReplayMemory,
-    load_checkpoint,
-    make_tasks,
-    save_checkpoint,
-    save_policy,
-    train,
-)
+from sidql.learning.checkpoint import CHECKPOINT_FORMAT, load_checkpoint, save_checkpoint
+from sidql.learning.dqn import make_tasks, train
 from sidql.learning.env import KeyframeEnv
-from sidql.learning.files import CHECKPOINT_FORMAT, POLICY_FORMAT
+from sidql.learning.files import POLICY_FORMAT
 from sidql.learning.policy import DEFAULT_POLICY, Policy, load_policy
 from sidql.learning.qnet import KeyframeQNet, current_error, gain_features
+from sidql.learning.replay import NStep, ReplayMemory
+from sidql.learning.run_files import save_policy
+from sidql.learning.settings import Args
 from sidql.learning.tasks import insertion_gain, keyframe_error_sum, synthetic_tasks
 from sim.errors import ModelFileError, MotionDataError
 
@@ -498,7 +493,7 @@ def test_compiled_decisions_equal_the_torch_network_on_real_clips(cmu_dir):
     torch network's decisions on real clips, and its encoder's projections match torch's."""
     from sidql.keyframes.segment_costs import segment_cost_matrix
     from sidql.keyframes.spherical import chart
-    from sidql.learning.policy import _encode_clip
+    from sidql.learning.decide import encode_clip
     from sidql.learning.tasks import clip_features
     from sim.motion.ingest import load_clips
 
@@ -521,6 +516,6 @@ def test_compiled_decisions_equal_the_torch_network_on_real_clips(cmu_dir):
         enc = policy.net.encode(torch.as_tensor(feats))
         proj, glob = policy.net.proj(enc).numpy(), policy.net.glob(enc.mean(1)).numpy()
     for i in range(len(feats)):
-        p, g = _encode_clip(feats[i], *enc_w)
+        p, g = encode_clip(feats[i], *enc_w)
         np.testing.assert_allclose(p, proj[i], rtol=1e-4, atol=1e-5)
         np.testing.assert_allclose(g, glob[i], rtol=1e-4, atol=1e-5)

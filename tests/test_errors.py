@@ -129,8 +129,9 @@ def test_the_cli_prints_any_sidql_error_as_one_line_and_exits_2(monkeypatch, cap
         assert len(err) == 1 and err[0].startswith("sidql decode: error: ") and expected in err[0]
 
 
-def test_a_bug_is_not_a_sidql_error():
+def test_a_bug_is_not_a_sidql_error_but_misuse_is():
     assert not issubclass(ZeroDivisionError, SidqlError)
-    with pytest.raises(ValueError) as e:  # misuse of a function: a plain ValueError
+    assert not issubclass(AttributeError, SidqlError)
+    with pytest.raises(UsageError) as e:  # misuse of a function: a UsageError, also a ValueError
         reconstructions.rebuild("hermite", synthetic_motion(1.0, seed=0), np.array([3, 1]))
-    assert not isinstance(e.value, SidqlError)
+    assert isinstance(e.value, SidqlError) and isinstance(e.value, ValueError)

@@ -1,4 +1,4 @@
-"""Foot states drawn by the renderer (sim.physics.contacts.foot_states): the original's feet in
+"""Foot states drawn by the renderer (sim.physics.foot_state.foot_states): the original's feet in
 contact from the sole's geometry, and the reconstruction's float, sink and skate flags, against
 motions built so the answer is known frame by frame."""
 
@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from sim.motion.points import PointMotion
-from sim.physics.contacts import foot_states
 from sim.physics.feet import sole
-from sim.physics.foot_state import FootState
+from sim.physics.foot_state import FootState, foot_states
 from sim.physics.ground import estimate_ground
 
 NAMES = ("root", "ltibia", "lfoot", "rtibia", "rfoot")

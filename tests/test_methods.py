@@ -51,7 +51,7 @@ def test_register_adds_a_method_and_select_checks_its_output(clip):
 
     try:
         assert "every_other_test" in methods.available()
-        with pytest.raises(RuntimeError, match="bad keyframes"):
+        with pytest.raises(UsageError, match="bad keyframes"):
             methods.select("every_other_test", clip, 4)
     finally:
         del methods.METHODS["every_other_test"]

@@ -12,9 +12,9 @@ from sidql.keyframes.spherical import (
     angles_and_rates,
     chart,
     chart_to_world,
-    clip_from_chart,
     world_to_chart,
 )
+from sidql.keyframes.unchart import clip_from_chart
 from sim.errors import MotionDataError
 from sim.model.angles import wrap_angle
 

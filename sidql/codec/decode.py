@@ -15,13 +15,8 @@ from sidql.codec import format as sidq
 from sidql.codec.skeleton import fit_motion, skeleton_hash
 from sidql.keyframes.curves import interpolate_derivatives
 from sidql.keyframes.reconstructions import Reconstruction
-from sidql.keyframes.spherical import (
-    POINTS,
-    accelerations_from_chart,
-    clip_from_chart,
-    positions_from_chart,
-    split_channels,
-)
+from sidql.keyframes.spherical import POINTS, split_channels
+from sidql.keyframes.unchart import accelerations_from_chart, clip_from_chart, positions_from_chart
 from sim.acclaim.asf import parse_asf
 from sim.acclaim.writer import write_amc
 from sim.errors import MotionDataError

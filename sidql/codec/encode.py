@@ -30,7 +30,7 @@ from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import SphericalSeries, chart
 from sim.acclaim.asf import parse_asf
-from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError
+from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError, UsageError
 from sim.files import write_atomic
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
@@ -81,7 +81,7 @@ def encode_series(
         objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
     )
     if max_error is not None and not position:
-        raise ValueError("max_error needs an offline stream (latency 0), linear or catmull_rom")
+        raise UsageError("max_error needs an offline stream (latency 0), linear or catmull_rom")
     if position:
         names = sidq.POSITION_RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
     else:
@@ -108,19 +108,19 @@ def _check_arguments(
 ):
     """The checks of :func:`encode_series`' arguments (see its Raises)."""
     if objective not in ("position", "angle"):
-        raise ValueError(f"objective must be 'position' or 'angle'; got {objective!r}")
+        raise UsageError(f"objective must be 'position' or 'angle'; got {objective!r}")
     if sum(x is not None for x in (rate, max_q, max_error)) != 1:
-        raise ValueError("give exactly one of rate, max_q and max_error")
+        raise UsageError("give exactly one of rate, max_q and max_error")
     if rate is not None and not rate > 0:
-        raise ValueError(f"rate must be positive; got {rate}")
+        raise UsageError(f"rate must be positive; got {rate}")
     if max_q is not None and not max_q >= 0:
-        raise ValueError(f"max_q must be >= 0; got {max_q}")
+        raise UsageError(f"max_q must be >= 0; got {max_q}")
     if max_error is not None and not max_error > 0:
-        raise ValueError(f"max_error must be positive; got {max_error}")
+        raise UsageError(f"max_error must be positive; got {max_error}")
     if reconstruction not in CHOICES:
         raise UnknownNameError("reconstruction", reconstruction, CHOICES)
     if not (0 <= latency <= 65535 and max_gap >= 1):
-        raise ValueError("latency must be in 0..65535 and max_gap >= 1")
+        raise UsageError("latency must be in 0..65535 and max_gap >= 1")
     if series.n_frames < 2:
         raise MotionDataError(where or None, None, "a trial needs at least 2 frames")
     fps = 1.0 / series.dt

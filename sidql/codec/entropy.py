@@ -24,6 +24,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from sim.errors import UsageError
+
 #: largest bit length of a residual's magnitude (|r| < 2^MAX_CLASS).
 MAX_CLASS = 30
 _PROB_BITS = 11
@@ -245,7 +247,7 @@ def _groups(group, W: int) -> tuple[np.ndarray, int]:
         return np.zeros(W, dtype=np.int64), 1
     g = np.ascontiguousarray(group, dtype=np.int64)
     if g.shape != (W,) or (W and g.min() < 0):
-        raise ValueError("group must be (W,) non-negative integers")
+        raise UsageError("group must be (W,) non-negative integers")
     return g, int(g.max()) + 1 if W else 1
 
 
@@ -259,9 +261,9 @@ def encode_integers(values: np.ndarray, group: np.ndarray | None = None) -> byte
     """
     v = np.ascontiguousarray(values, dtype=np.int64)
     if v.ndim != 2:
-        raise ValueError(f"values must be (channels, count); got shape {v.shape}")
+        raise UsageError(f"values must be (channels, count); got shape {v.shape}")
     if v.size and np.abs(v).max() >= (1 << MAX_CLASS):
-        raise ValueError(f"residual beyond 2^{MAX_CLASS}")
+        raise UsageError(f"residual beyond 2^{MAX_CLASS}")
     g, n = _groups(group, v.shape[1])
     return bytes(_encode_kernel(v, g, n, _PRIOR))
 

@@ -34,7 +34,7 @@ from sidql.codec.entropy import decode_integers, encode_integers
 from sidql.codec.quantise import BITS, PositionQuantiser, Quantiser
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
@@ -146,22 +146,22 @@ def to_bytes(stream: Stream) -> bytes:
     """The whole container: header, records, CRC-32."""
     gaps = np.diff(stream.keyframes)
     if stream.keyframes[0] != 0 or len(stream.keyframes) < 2 or gaps.min() < 1:
-        raise ValueError("keyframes must start at 0 and increase strictly (at least 2)")
+        raise UsageError("keyframes must start at 0 and increase strictly (at least 2)")
     if gaps.max() > MAX_GAP:
-        raise ValueError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
+        raise UsageError(f"gap {int(gaps.max())} exceeds the format's {MAX_GAP}")
     if int(stream.keyframes[-1]) + 1 > frame_limit(len(stream.names)):
-        raise ValueError(
+        raise UsageError(
             f"{int(stream.keyframes[-1]) + 1} frames exceed the format's limit of "
             f"{frame_limit(len(stream.names))}"
         )
     if stream.coding == 2:
         if stream.reconstruction not in POSITION_RECONSTRUCTIONS:
-            raise ValueError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
+            raise UsageError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
         body = header_bytes(stream) + position_bytes(stream)
     elif stream.coding == 1:
         body = header_bytes(stream) + packed_bytes(stream)
     elif stream.quantiser.bits != 16:
-        raise ValueError("coding 0 carries 16-bit codes only")
+        raise UsageError("coding 0 carries 16-bit codes only")
     else:
         body = header_bytes(stream) + record_bytes(stream)
     return body + struct.pack("<I", zlib.crc32(body))
@@ -286,7 +286,46 @@ class _Reader:
 
 def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     """Parse a container (see the module docstring); MotionDataError on any defect."""
-    data = bytes(data)
+    body, r, recon, coding, bits, latency, fps = _header(bytes(data), where)
+    skel = r.take(8, "skeleton hash")
+    names, parents = _points(r, where)
+    J = len(names)
+    M = J - 1
+    D = 2 * M + 3
+    if coding == 2:
+        (exponent,) = struct.unpack("<b", r.take(1, "length unit"))
+        codes = np.frombuffer(r.take(2 * M, "bone lengths"), dtype="<u2")
+        lengths = lengths_from_codes(exponent, codes)
+        return _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths)
+    lengths = _floats(r, M, "bone lengths", 0.0, MAX_METRES)
+    origin = _floats(r, 3, "root origin", -MAX_METRES, MAX_METRES)
+    step = _floats(r, 3, "root step", -MAX_STEP, MAX_STEP)
+    rate_step = _floats(r, D, "rate steps", -MAX_STEP, MAX_STEP) if recon == "hermite" else None
+    if coding == 0:
+        gaps, pose, rate = _fixed_records(r, body, recon, M, fps)
+    else:
+        gaps, pose, rate = _packed_records(r, body, recon, M, fps, bits)
+    if gaps[0] != 0 or np.any(gaps[1:] == 0):
+        raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
+    return Stream(
+        reconstruction=recon,
+        latency=int(latency),
+        fps=float(fps),
+        skeleton_hash=skel,
+        names=tuple(names),
+        parents=parents,
+        lengths=lengths.astype(np.float64),
+        quantiser=Quantiser(M, origin, step, rate_step, bits),
+        keyframes=np.cumsum(gaps),
+        pose_codes=pose,
+        rate_codes=rate,
+        coding=coding,
+    )
+
+
+def _header(data: bytes, where: str):
+    """The checked magic, version, checksum and header fields of a container: (body, a reader
+    past the header, reconstruction, coding, bits, latency, fps)."""
     if len(data) < 4 or data[:4] != MAGIC:
         raise MotionDataError(where, None, "not a .sidq stream (bad magic)")
     if len(data) < 8:
@@ -313,7 +352,11 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
     if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
         raise MotionDataError(where, None, f"frame rate {fps:g} outside (0, {MAX_FPS:g}]")
-    skel = r.take(8, "skeleton hash")
+    return body, r, recon, coding, bits, latency, fps
+
+
+def _points(r: _Reader, where: str) -> tuple[list[str], np.ndarray]:
+    """The point names and parents (J,) of a container (0 points: the protocol's)."""
     (J,) = r.take(1, "point count")
     if J == 1:
         raise MotionDataError(where, None, f"bad point count {J}")
@@ -331,81 +374,68 @@ def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
         parents = np.frombuffer(r.take(J, "parents"), dtype=np.int8).astype(np.int64)
     if parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, J)):
         raise MotionDataError(where, None, "bad parent list (each parent must precede its child)")
-    M = J - 1
-    D = 2 * M + 3
+    return names, parents
 
-    def floats(n, what, low, high):
-        v = np.frombuffer(r.take(4 * n, what), dtype="<f4").astype(np.float32)
-        if not (np.isfinite(v).all() and (v >= low).all() and (v <= high).all()):
-            raise MotionDataError(where, None, f"{what} outside [{low:g}, {high:g}]")
-        return v
 
-    if coding == 2:
-        (exponent,) = struct.unpack("<b", r.take(1, "length unit"))
-        codes = np.frombuffer(r.take(2 * M, "bone lengths"), dtype="<u2")
-        lengths = lengths_from_codes(exponent, codes)
-        return _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths)
-    lengths = floats(M, "bone lengths", 0.0, MAX_METRES)
-    origin = floats(3, "root origin", -MAX_METRES, MAX_METRES)
-    step = floats(3, "root step", -MAX_STEP, MAX_STEP)
-    rate_step = floats(D, "rate steps", -MAX_STEP, MAX_STEP) if recon == "hermite" else None
+def _floats(r: _Reader, n: int, what: str, low: float, high: float) -> np.ndarray:
+    """``n`` float32 values, each finite and within [low, high]."""
+    v = np.frombuffer(r.take(4 * n, what), dtype="<f4").astype(np.float32)
+    if not (np.isfinite(v).all() and (v >= low).all() and (v <= high).all()):
+        raise MotionDataError(r.where, None, f"{what} outside [{low:g}, {high:g}]")
+    return v
+
+
+def _fixed_records(r: _Reader, body: bytes, recon: str, M: int, fps: float):
+    """Coding 0's records: (gaps (W,), pose codes (W, D), rate codes (W, D) or None)."""
+    where, J, D = r.where, M + 1, 2 * M + 3
     size = record_size(recon, M)
-    if coding == 0:
-        rest = len(body) - r.pos
-        if rest % size or rest // size < 2:
-            raise MotionDataError(
-                where, None, f"body of {rest} bytes is not >= 2 records of {size} bytes"
-            )
-        fields = [("gap", "u1"), ("pose", "<u2", (D,))]
-        if recon == "hermite":
-            fields.append(("rate", "<i2", (D,)))
-        rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
-        _check_gaps(rec["gap"], fps, J, where)
-        gaps = rec["gap"].astype(np.int64)
-        pose = np.array(rec["pose"])
-        rate = np.array(rec["rate"]) if recon == "hermite" else None
-    else:
-        (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
-        if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
-            raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
-        want = W * size
-        dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE, memlimit=LZMA_MEMLIMIT)
-        try:  # incremental, capped: the gaps first, checked, then the codes they vouch for
-            raw = dec.decompress(body[r.pos :], max_length=W)
-            if len(raw) == W:
-                _check_gaps(np.frombuffer(raw, dtype=np.uint8), fps, J, where)
-                raw += dec.decompress(b"", max_length=want - W)
-        except lzma.LZMAError as e:
-            raise MotionDataError(where, None, f"corrupt packed keyframes: {e}") from None
-        if len(raw) != want:
-            raise MotionDataError(
-                where, None, f"packed keyframes inflate to {len(raw)} bytes, not {want}"
-            )
-        gaps = np.frombuffer(raw, dtype=np.uint8, count=W).astype(np.int64)
-        delta = np.frombuffer(raw, dtype="<u2", count=W * D, offset=W).reshape(D, W).T
-        pose = np.cumsum(delta, axis=0, dtype=np.uint16)  # wraps: modulo 2^16
-        rate = None
-        if recon == "hermite":
-            rate = np.frombuffer(raw, dtype="<i2", count=W * D, offset=W + 2 * W * D)
-            rate = rate.reshape(D, W).T.copy()
-        if np.any(pose[:, :M] >= (1 << bits)) or np.any(pose[:, 2 * M :] >= (1 << bits)):
-            raise MotionDataError(where, None, f"pose code beyond {bits} bits")
-    if gaps[0] != 0 or np.any(gaps[1:] == 0):
-        raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others >= 1)")
-    return Stream(
-        reconstruction=recon,
-        latency=int(latency),
-        fps=float(fps),
-        skeleton_hash=skel,
-        names=tuple(names),
-        parents=parents,
-        lengths=lengths.astype(np.float64),
-        quantiser=Quantiser(M, origin, step, rate_step, bits),
-        keyframes=np.cumsum(gaps),
-        pose_codes=pose,
-        rate_codes=rate,
-        coding=coding,
-    )
+    rest = len(body) - r.pos
+    if rest % size or rest // size < 2:
+        raise MotionDataError(
+            where, None, f"body of {rest} bytes is not >= 2 records of {size} bytes"
+        )
+    fields = [("gap", "u1"), ("pose", "<u2", (D,))]
+    if recon == "hermite":
+        fields.append(("rate", "<i2", (D,)))
+    rec = np.frombuffer(body, dtype=np.dtype(fields), offset=r.pos)
+    _check_gaps(rec["gap"], fps, J, where)
+    gaps = rec["gap"].astype(np.int64)
+    pose = np.array(rec["pose"])
+    rate = np.array(rec["rate"]) if recon == "hermite" else None
+    return gaps, pose, rate
+
+
+def _packed_records(r: _Reader, body: bytes, recon: str, M: int, fps: float, bits: int):
+    """Coding 1's delta + LZMA records, inflated incrementally and capped: (gaps (W,), pose
+    codes (W, D), rate codes (W, D) or None)."""
+    where, J, D = r.where, M + 1, 2 * M + 3
+    size = record_size(recon, M)
+    (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
+    if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
+        raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
+    want = W * size
+    dec = lzma.LZMADecompressor(format=lzma.FORMAT_ALONE, memlimit=LZMA_MEMLIMIT)
+    try:  # incremental, capped: the gaps first, checked, then the codes they vouch for
+        raw = dec.decompress(body[r.pos :], max_length=W)
+        if len(raw) == W:
+            _check_gaps(np.frombuffer(raw, dtype=np.uint8), fps, J, where)
+            raw += dec.decompress(b"", max_length=want - W)
+    except lzma.LZMAError as e:
+        raise MotionDataError(where, None, f"corrupt packed keyframes: {e}") from None
+    if len(raw) != want:
+        raise MotionDataError(
+            where, None, f"packed keyframes inflate to {len(raw)} bytes, not {want}"
+        )
+    gaps = np.frombuffer(raw, dtype=np.uint8, count=W).astype(np.int64)
+    delta = np.frombuffer(raw, dtype="<u2", count=W * D, offset=W).reshape(D, W).T
+    pose = np.cumsum(delta, axis=0, dtype=np.uint16)  # wraps: modulo 2^16
+    rate = None
+    if recon == "hermite":
+        rate = np.frombuffer(raw, dtype="<i2", count=W * D, offset=W + 2 * W * D)
+        rate = rate.reshape(D, W).T.copy()
+    if np.any(pose[:, :M] >= (1 << bits)) or np.any(pose[:, 2 * M :] >= (1 << bits)):
+        raise MotionDataError(where, None, f"pose code beyond {bits} bits")
+    return gaps, pose, rate
 
 
 def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, lengths):

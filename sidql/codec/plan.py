@@ -31,7 +31,8 @@ import numba
 import numpy as np
 
 from sidql.keyframes.curves import CURVES
-from sim.errors import UnmetTargetError
+from sidql.keyframes.segment_costs import segment_weights
+from sim.errors import UnmetTargetError, UsageError
 from sim.model.angles import wrap_angle
 
 #: Kernel mode of each curve: its index in CURVES (0 hermite, 1 linear, 2 catmull_rom).
@@ -59,16 +60,46 @@ def _end_rates(Xq, Rq, i, j, g, mode, ma, mb):
             mb[d] = (Xq[hi_b, d] - Xq[lo_b, d]) / (hi_b - lo_b)
 
 
-@numba.njit(cache=True, inline="always")
-def _basis(n, i, g, mode):
-    """(h01, h10, h11) of frame n in segment (i, i + g): the curve is
-    ``x_i + h01 (x_j - x_i) + h10 m_a + h11 m_b`` (straight for linear, cubic Hermite else)."""
-    s = (n - i) / g
-    if mode == 1:
-        return s, 0.0, 0.0
-    s2 = s * s
-    s3 = s2 * s
-    return -2.0 * s3 + 3.0 * s2, (s3 - 2.0 * s2 + s) * g, (s3 - s2) * g
+@numba.njit(cache=True, fastmath=True, inline="always")
+def _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weight, cap, position):
+    """Row ``i`` of a banded cost table ``C`` (N, G + 1): entry [i, g] for the segment
+    (i, i + g); ``ma``, ``mb``, ``e``: (D,) scratch. Each inner frame adds its summed
+    |wrapped angle error| or, with ``position``, its first-order point displacement (see
+    :func:`_position_band_costs`), which also ends the row at ``cap``."""
+    N, D = X.shape
+    M = (D - 3) // 2
+    C[i, 0] = 0.0
+    for g in range(1, G + 1):
+        j = i + g
+        if j >= N:
+            break
+        _end_rates(Xq, Rq, i, j, g, mode, ma, mb)
+        total = 0.0
+        for n in range(i + 1, j):
+            h01, h10, h11 = segment_weights(n, i, g, mode == 1)
+            acc = 0.0
+            if position:
+                for d in range(D):
+                    e[d] = (
+                        Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
+                    )
+                for b in range(M):
+                    et = wrap_angle(e[b])
+                    ep = wrap_angle(e[M + b]) * sin_theta[n, b]
+                    acc += weight[b] * np.sqrt(et * et + ep * ep)
+                r0 = e[2 * M]
+                r1 = e[2 * M + 1]
+                r2 = e[2 * M + 2]
+                acc += root_weight * np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            else:
+                for d in range(D):
+                    v = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
+                    v = wrap_angle(v)
+                    acc += abs(v)
+            total += acc
+        C[i, g] = total
+        if position and total > cap * (g - 1):
+            break
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -83,23 +114,10 @@ def _band_costs(X, Xq, Rq, G, mode):
     C = np.full((N, G + 1), np.inf)
     ma = np.zeros(D)  # zeros: "linear" multiplies the end rates by 0 (0 x stale NaN is NaN)
     mb = np.zeros(D)
+    e = np.zeros(D)
+    none = np.zeros(0)
     for i in range(N):
-        C[i, 0] = 0.0
-        for g in range(1, G + 1):
-            j = i + g
-            if j >= N:
-                break
-            _end_rates(Xq, Rq, i, j, g, mode, ma, mb)
-            total = 0.0
-            for n in range(i + 1, j):
-                h01, h10, h11 = _basis(n, i, g, mode)
-                acc = 0.0
-                for d in range(D):
-                    v = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
-                    v = wrap_angle(v)
-                    acc += abs(v)
-                total += acc
-            C[i, g] = total
+        _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, none, X, 0.0, 0.0, False)
     return C
 
 
@@ -115,7 +133,6 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap
     number of points at or below the bone [m]; sin_theta: (N, M) of the true angles.
     """
     N, D = X.shape
-    M = (D - 3) // 2
     C = np.full((N, G + 1), np.inf)
     for i in numba.prange(N):
         # zeros, not empty: "linear" (mode 1) multiplies the end rates by 0, and 0 x a stale
@@ -123,32 +140,7 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap
         ma = np.zeros(D)
         mb = np.zeros(D)
         e = np.zeros(D)
-        C[i, 0] = 0.0
-        for g in range(1, G + 1):
-            j = i + g
-            if j >= N:
-                break
-            _end_rates(Xq, Rq, i, j, g, mode, ma, mb)
-            total = 0.0
-            for n in range(i + 1, j):
-                h01, h10, h11 = _basis(n, i, g, mode)
-                for d in range(D):
-                    e[d] = (
-                        Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
-                    )
-                acc = 0.0
-                for b in range(M):
-                    et = wrap_angle(e[b])
-                    ep = wrap_angle(e[M + b]) * sin_theta[n, b]
-                    acc += weight[b] * np.sqrt(et * et + ep * ep)
-                r0 = e[2 * M]
-                r1 = e[2 * M + 1]
-                r2 = e[2 * M + 2]
-                acc += root_weight * np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-                total += acc
-            C[i, g] = total
-            if total > cap * (g - 1):
-                break
+        _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weight, cap, True)
     return C
 
 
@@ -193,7 +185,7 @@ def position_band_costs(
         lengths: (M,) bone lengths [m]; parents: (M + 1,) parent indices.
     """
     if max_gap < 1:
-        raise ValueError(f"max gap must be >= 1; got {max_gap}")
+        raise UsageError(f"max gap must be >= 1; got {max_gap}")
     X = np.ascontiguousarray(X, dtype=np.float64)
     Xq = np.ascontiguousarray(Xq, dtype=np.float64)
     Rq = X if Rq is None else np.ascontiguousarray(Rq, dtype=np.float64)
@@ -266,7 +258,7 @@ def band_costs(
         max_gap: G >= 1; reconstruction: "hermite", "linear" or "catmull_rom".
     """
     if max_gap < 1:
-        raise ValueError(f"max gap must be >= 1; got {max_gap}")
+        raise UsageError(f"max gap must be >= 1; got {max_gap}")
     X = np.ascontiguousarray(X, dtype=np.float64)
     Xq = np.ascontiguousarray(Xq, dtype=np.float64)
     Rq = X if Rq is None else np.ascontiguousarray(Rq, dtype=np.float64)

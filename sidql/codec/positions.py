@@ -13,6 +13,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from sidql.keyframes.segment_costs import hermite_basis
+
 _MODES = {"linear": 1, "catmull_rom": 2}
 
 
@@ -45,12 +47,7 @@ def _errors(P, keys, kv, mode, lengths, parents, out):
             for d in range(D):
                 x[d] = kv[seg, d] + s * (kv[seg + 1, d] - kv[seg, d])
         else:
-            s2 = s * s
-            s3 = s2 * s
-            h00 = 2 * s3 - 3 * s2 + 1
-            h10 = s3 - 2 * s2 + s
-            h01 = -2 * s3 + 3 * s2
-            h11 = s3 - s2
+            h00, h01, h10, h11 = hermite_basis(s)
             for d in range(D):
                 x[d] = (
                     h00 * kv[seg, d]

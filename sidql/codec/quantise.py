@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from sidql.codec.plan import subtree_sizes
+from sim.errors import UsageError
 
 THETA_STEP = np.pi / 65535.0  # at 16 bits
 PHI_STEP = 2.0 * np.pi / 65536.0  # at 16 bits
@@ -140,7 +141,7 @@ def fit_quantiser(
         n_bones: M; bits: bits per pose channel (8..16).
     """
     if bits not in BITS:
-        raise ValueError(f"bits must be in 8..16; got {bits}")
+        raise UsageError(f"bits must be in 8..16; got {bits}")
     root = np.asarray(values, dtype=np.float64)[:, 2 * n_bones :]
     lo = root.min(axis=0).astype(np.float32)
     span = root.max(axis=0) - lo.astype(np.float64)

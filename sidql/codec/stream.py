@@ -20,12 +20,13 @@ import numba
 import numpy as np
 
 from sidql.codec.plan import sparsest_within
+from sim.errors import UsageError
 
 
 def horizon(latency: int, reconstruction: str) -> int:
     """Window length H [frames] for a latency of ``latency`` frames (see the module docstring)."""
     if latency < 1:
-        raise ValueError(f"latency must be >= 1 frame; got {latency}")
+        raise UsageError(f"latency must be >= 1 frame; got {latency}")
     return max(1, latency // 2) if reconstruction == "catmull_rom" else int(latency)
 
 

@@ -29,7 +29,9 @@ from sidql.evaluation.scoring import (
 from sidql.evaluation.significance import paired_comparisons
 from sidql.evaluation.trial_physics import physics_setup, simulate_setup
 from sidql.keyframes import methods
+from sidql.keyframes.counts import check_counts
 from sim.batch import iter_batch
+from sim.errors import UsageError
 from sim.simulate.validate import SIMULATE_KEYS
 
 
@@ -61,7 +63,7 @@ def evaluate(
         is reported on stderr and listed in ``failed`` (``source``, ``start_frames`` of its
         clips, ``problem``), its clips left out of every row: the others are kept. A result row
         holds method, keyframes, clips, mean_q, mean_q_hermite, mean_geodesic_deg, mpjpe_mm,
-        mean_velocity_error, mean_li_error_mm, median_decision_ms; a per-clip row holds source,
+        velocity_error_mm_s, mean_li_error_mm, median_decision_ms; a per-clip row holds source,
         start_frame, method, keyframes, indices, q and the other scores. With ``physics`` every
         row also carries the
         :mod:`sim.physics` figures (result rows: means over clips, :data:`sidql.evaluation.scoring.PHYSICS_KEYS`), and one
@@ -72,9 +74,10 @@ def evaluate(
         rollouts per window of its sampling tracker (0: the plain tracker).
     """
     if simulate and not physics:
-        raise ValueError("simulate needs physics (the IK fit it tracks)")
+        raise UsageError("simulate needs physics (the IK fit it tracks)")
     method_names = list(method_names)
     counts = list(keyframe_counts)
+    check_counts(counts, min((c.clip.n_frames for c in cases), default=2**31 - 1))
     for name in method_names:
         methods.get(name)  # fail early, listing the known methods
         if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file
@@ -143,7 +146,7 @@ def _failure(chunk: list, error: str) -> dict:
 def _baseline_result(name: str, n_frames: int, rows: Sequence[dict], simulate: bool) -> dict:
     """The result row of the original (every frame kept) or of its noise floor: errors 0, the
     physics means (and the simulation's, with ``simulate``) over ``rows``."""
-    zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "mean_velocity_error")
+    zero = ("mean_q", "mean_q_hermite", "mean_geodesic_deg", "mpjpe_mm", "velocity_error_mm_s")
     return {
         "method": name, "keyframes": n_frames, "clips": len(rows),
         **dict.fromkeys(zero, 0.0), "mean_li_error_mm": 0.0,
@@ -162,7 +165,7 @@ def _method_result(name: str, W: int, rows: Sequence[dict], physics: bool, simul
         "mean_q_hermite": float(np.mean([r["q_hermite"] for r in rows])),
         "mean_geodesic_deg": float(np.mean([r["geodesic_deg"] for r in rows])),
         "mpjpe_mm": float(np.mean([r["mpjpe_mm"] for r in rows])),
-        "mean_velocity_error": float(np.mean([r["velocity_error"] for r in rows])),
+        "velocity_error_mm_s": float(np.mean([r["velocity_error_mm_s"] for r in rows])),
         "mean_li_error_mm": float(np.mean([r["li_error_mm"] for r in rows])),
         "median_decision_ms": float(np.median([r["decision_ms"] for r in rows])),
         **(_physics_means(rows) if physics else {}),

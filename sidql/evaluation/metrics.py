@@ -57,37 +57,38 @@ METRICS: tuple[Metric, ...] = (
     Metric("bone_drift_max_mm", "bone drift", "mm", "lower",
            "largest change of a bone's length against the original", "{:.2g}",
            resolution=0.01),
-    # physics: filled by sim.physics where it runs (contacts, penetration, joint limits of the
-    # fitted humanoid, dynamics); the kinematic replay's own floor, skating and joint-limit figures
-    # are in checks.json only, so each idea has one column
+    # physics: filled by sim.physics where it runs (foot-floor contact and penetration; the
+    # body's touching bones and the fitted humanoid's joint limits; dynamics); the kinematic
+    # replay's own floor, skating and joint-limit figures are in checks.json only, so each idea
+    # has one column
     Metric("penetration_mm", "penetration", "mm", "lower",
-           "mean depth of a foot's lowest sole point below the floor", "{:.1f}", group="contacts"),
+           "mean depth of a foot's lowest sole point below the floor", "{:.1f}", group="floor"),
     Metric("float_mm", "float", "mm", "lower",
            "mean height of a foot's lowest sole point while the original's foot is in contact",
-           "{:.1f}", group="contacts"),
+           "{:.1f}", group="floor"),
     Metric("skate_mm_s", "skate (contact)", "mm/s", "lower",
            "mean horizontal speed of a foot's lowest sole point while the original's foot is in "
-           "contact", "{:.0f}", group="contacts"),
+           "contact", "{:.0f}", group="floor"),
     Metric("contact_precision", "contact precision", "", "higher",
-           "share of the reconstruction's contacts that the original also has", "{:.2f}", group="contacts"),
+           "share of the reconstruction's contacts that the original also has", "{:.2f}", group="floor"),
     Metric("contact_recall", "contact recall", "", "higher",
-           "share of the original's contacts that the reconstruction keeps", "{:.2f}", group="contacts"),
+           "share of the original's contacts that the reconstruction keeps", "{:.2f}", group="floor"),
     Metric("physdiff_penetrate_mm", "PhysDiff penetrate", "mm", "lower",
            "PhysDiff (Yuan et al. 2023): mean depth of the body surface's lowest point below the "
-           "floor", "{:.1f}", group="contacts"),
+           "floor", "{:.1f}", group="floor"),
     Metric("physdiff_float_mm", "PhysDiff float", "mm", "lower",
            "PhysDiff: mean height of the body surface's lowest point above the floor, beyond 5 mm",
-           "{:.1f}", group="contacts"),
+           "{:.1f}", group="floor"),
     Metric("physdiff_skate", "PhysDiff skate", "", "lower",
            "PhysDiff-style skate: share of frames in which a foot in contact in it and the "
-           "previous frame moves more than 2.5 cm horizontally", "{:.2f}", group="contacts"),
+           "previous frame moves more than 2.5 cm horizontally", "{:.2f}", group="floor"),
     Metric("self_pen_excess_mm", "self-pen. excess", "mm", "lower",
-           "mean per-pair overlap beyond the original's in the same frame", "{:.1f}", group="contacts"),
-    Metric("lost_contacts", "lost contacts", "", "lower",
-           "touching bone pairs of the original that the reconstruction separates", "{:d}", group="contacts"),
+           "mean per-pair overlap beyond the original's in the same frame", "{:.1f}", group="body"),
+    Metric("lost_contacts", "lost touching bones", "", "lower",
+           "touching bone pairs of the original that the reconstruction separates", "{:d}", group="body"),
     Metric("limit_excess_deg", "limit excess", "deg", "lower",
            "worst anatomical hinge angle of the fitted humanoid past its ASF limit", "{:.1f}",
-           group="contacts"),
+           group="body"),
     Metric("residual_force_bw", "residual force", "BW", "lower",
            "mean external force no ground contact can supply (force alone), in body weights",
            "{:.2f}", group="dynamics"),
@@ -123,8 +124,13 @@ METRICS: tuple[Metric, ...] = (
 GROUPS = (
     ("accuracy", "Accuracy and geometry"),
     (
-        "contacts",
-        "Contacts, penetration and joint limits (sim.physics; against the original's contacts)",
+        "floor",
+        "Feet on the floor: foot-floor contact and penetration (sim.physics; against the "
+        "original's contacts)",
+    ),
+    (
+        "body",
+        "The body itself: touching bones and joint limits (sim.physics, on the fitted humanoid)",
     ),
     (
         "dynamics",

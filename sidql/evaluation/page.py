@@ -43,9 +43,9 @@ from sidql.evaluation.metrics import (
 )
 from sidql.evaluation.plots import metrics_plot, summary_plot
 from sidql.evaluation.validation import ClipValidation, MethodRun, checks_document
+from sim.errors import UsageError
 from sim.files import write_atomic
-from sim.physics.contacts import foot_states
-from sim.physics.foot_state import FootState
+from sim.physics.foot_state import FootState, foot_states
 from sim.physics.ground import estimate_ground
 from sim.physics.noise import NOISE_MM
 from sim.replay.render import DEFAULT_STYLE, RenderStyle, SkeletonRenderer
@@ -195,7 +195,7 @@ def trial_floor(v: ClipValidation):
 
 def ground_and_feet(v: ClipValidation, run: MethodRun) -> tuple[float, FootState]:
     """Floor height [m] and foot states drawn for one method's video: :func:`trial_floor` and the
-    contact labels and flags of :func:`sim.physics.contacts.foot_states`."""
+    contact labels and flags of :func:`sim.physics.foot_state.foot_states`."""
     ground = trial_floor(v)
     return ground.floor_z, foot_states(v.original, run.motion, ground)
 
@@ -232,7 +232,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     numbers = list(range(len(validations)) if clip_numbers is None else clip_numbers)
     if len(numbers) != len(validations):
-        raise ValueError(f"{len(numbers)} clip numbers for {len(validations)} clips")
+        raise UsageError(f"{len(numbers)} clip numbers for {len(validations)} clips")
     meta = dict(meta or {})
     doc = checks_document(validations, meta)
     for c, number in zip(doc["clips"], numbers, strict=True):

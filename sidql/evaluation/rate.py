@@ -28,7 +28,7 @@ from tqdm import tqdm
 from sidql.evaluation.cases import Case, clip_seed
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import select
-from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error
+from sidql.keyframes.metrics import mpjpe_mm, q_from_angles, velocity_error_mm_s
 from sidql.keyframes.reconstructions import FLOAT_BYTES, POSE_FLOATS
 from sim.files import write_atomic
 
@@ -67,12 +67,12 @@ def rate_distortion(
     seed: int = 0,
     progress: bool = True,
 ) -> dict:
-    """Mean Q [rad], MPJPE [mm] and velocity error [m/s] against bytes per second for every
+    """Mean Q [rad], MPJPE [mm] and velocity error [mm/s] against bytes per second for every
     curve of :data:`CURVES`.
 
     Returns:
         ``{"raw_bytes_per_second", "clips", "curves": [{"method", "scheme", "keyframes",
-        "bytes_per_second", "mean_q", "mpjpe_mm", "velocity_error"}]}``.
+        "bytes_per_second", "mean_q", "mpjpe_mm", "velocity_error_mm_s"}]}``.
     """
     counts = sorted(counts)
     q = {c: np.zeros(len(counts)) for c in CURVES}
@@ -94,7 +94,7 @@ def rate_distortion(
                 rec = reconstructions.rebuild(scheme, case.clip, k, s)
                 q[(method, scheme)][i] += q_from_angles(s, rec.theta, rec.phi)
                 e[(method, scheme)][i] += mpjpe_mm(case.pos, rec.positions)
-                v[(method, scheme)][i] += velocity_error(case.vel, rec.velocities)
+                v[(method, scheme)][i] += velocity_error_mm_s(case.vel, rec.velocities)
     n = max(len(cases), 1)
     N = cases[0].series.n_frames if cases else 60
     fps = 1.0 / cases[0].series.dt if cases else 30.0
@@ -106,7 +106,7 @@ def rate_distortion(
             "bytes_per_second": [bytes_per_second(scheme, W, N, fps) for W in counts],
             "mean_q": (q[(method, scheme)] / n).tolist(),
             "mpjpe_mm": (e[(method, scheme)] / n).tolist(),
-            "velocity_error": (v[(method, scheme)] / n).tolist(),
+            "velocity_error_mm_s": (v[(method, scheme)] / n).tolist(),
         }
         for method, scheme in CURVES
     ]
@@ -131,7 +131,7 @@ _COLOR = {"optimal": "C0", "greedy": "C1", "uniform": "C2", "random": "C3", "pit
 PANELS: tuple[tuple[str, str], ...] = (
     ("mean_q", "mean Q, eq. 18 [rad]"),
     ("mpjpe_mm", "MPJPE [mm]"),
-    ("velocity_error", "mean velocity error [m/s]"),
+    ("velocity_error_mm_s", "mean velocity error [mm/s]"),
 )
 
 

@@ -26,9 +26,11 @@ from sidql.evaluation.validation import (
     trial_ground,
     validate_clip,
 )
+from sidql.keyframes import methods as keyframe_methods
+from sidql.keyframes.counts import check_counts
 from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
-from sim.errors import AllFailedError, MotionDataError, UsageError
+from sim.errors import AllFailedError, MotionDataError, UsageError, require_type
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
@@ -67,7 +69,17 @@ def report_clips(
     original's ``contacts`` labelled over the trial (:func:`trial_contacts_by_clip`), and with
     ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`) the forward simulation's. Clips are
     validated through ``sim.batch.run_batch`` (``workers`` processes or Ray); a clip that fails is
-    listed in the report's ``failed`` field."""
+    listed in the report's ``failed`` field.
+
+    Raises:
+        UnknownNameError: an unknown method. UsageError: W out of range for a clip (both before
+            any clip is validated).
+    """
+    methods = list(methods)
+    for name in methods:
+        keyframe_methods.get(keyframe_methods.current_name(name))
+    for clip in clips:
+        check_counts([W], require_type(clip, Clip, "clip").n_frames)
     numbers = list(range(len(clips)) if clip_numbers is None else clip_numbers)
     job = physics_job(model, clips[0]) if model is not None and clips else None
     validate = partial(

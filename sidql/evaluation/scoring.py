@@ -9,7 +9,7 @@ A clip is rebuilt with the reconstruction its method declares
   for methods that declare Hermite: it separates the choice of keyframes from the way they are interpolated);
 * ``geodesic_deg``: mean angle between true and rebuilt bone directions [deg];
 * ``mpjpe_mm``: mean joint position error over the 23 points [mm];
-* ``velocity_error``: mean joint velocity error over the 23 points [m/s];
+* ``velocity_error_mm_s``: mean joint velocity error over the 23 points [mm/s];
 * ``li_error_mm``: Li et al. 2015's error as we read it (:func:`sidql.keyframes.pitch.pitch_error`) [mm];
 * ``decision_ms`` (measured by :func:`sidql.evaluation.evaluate.evaluate`): wall time of the
   method's choice, chart included [ms].
@@ -26,7 +26,13 @@ import numpy as np
 from sidql.evaluation.cases import Case
 from sidql.evaluation.significance import CLOSENESS
 from sidql.keyframes import methods, reconstructions
-from sidql.keyframes.metrics import geodesic_deg, mpjpe_mm, q_error, q_from_angles, velocity_error
+from sidql.keyframes.metrics import (
+    geodesic_deg,
+    mpjpe_mm,
+    q_error,
+    q_from_angles,
+    velocity_error_mm_s,
+)
 from sidql.keyframes.pitch import pitch_error
 from sim.analysis.figures import HEIGHT_KEYS
 
@@ -60,7 +66,7 @@ def score(
         "q_hermite": q_error(s, keyframes, "hermite"),
         "geodesic_deg": geodesic_deg(case.pos, rec.positions, rec.parents),
         "mpjpe_mm": mpjpe_mm(case.pos, rec.positions),
-        "velocity_error": velocity_error(case.vel, rec.velocities),
+        "velocity_error_mm_s": velocity_error_mm_s(case.vel, rec.velocities),
         "li_error_mm": 1000.0 * pitch_error(case.pos, rec.positions),
     }
 

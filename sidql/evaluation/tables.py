@@ -42,14 +42,14 @@ def table3_markdown(results: Sequence[dict]) -> str:
     lines.append("")
     lines.append(
         "| method | W | clips | Q | Q of its keyframes, Hermite | geodesic (deg) | MPJPE (mm) "
-        "| velocity error (m/s) | Li error (mm) | median decision (ms) |"
+        "| velocity error (mm/s) | Li error (mm) | median decision (ms) |"
     )
     lines.append("|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         lines.append(
             f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['mean_q']:.4f} "
             f"| {r['mean_q_hermite']:.4f} | {r['mean_geodesic_deg']:.2f} | {r['mpjpe_mm']:.1f} "
-            f"| {r['mean_velocity_error']:.3f} | {r['mean_li_error_mm']:.1f} "
+            f"| {r['velocity_error_mm_s']:.0f} | {r['mean_li_error_mm']:.1f} "
             f"| {r['median_decision_ms']:.2f} |"
         )
     return "\n".join(lines)
@@ -71,7 +71,8 @@ def physics_markdown(results: Sequence[dict], stat: str = "mean") -> str:
         ("PhysDiff float (mm)", "physdiff_float_mm", ".1f"),
         ("PhysDiff skate", "physdiff_skate", ".3f"),
         ("self-pen. excess (mm)", "self_pen_excess_mm", ".2f"),
-        ("lost contacts", "lost_contacts", ".1f"), ("limit excess (deg)", "limit_excess_deg", ".2f"),
+        ("lost touching bones", "lost_contacts", ".1f"),
+        ("limit excess (deg)", "limit_excess_deg", ".2f"),
         ("residual force (BW)", "residual_force_bw", ".3f"),
         ("residual force p95 (BW)", "residual_force_bw_p95", ".2f"),
         ("residual torque (N m/kg)", "residual_torque_nm_kg", ".3f"),

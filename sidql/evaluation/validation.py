@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS
 from sim.analysis.figures import HEIGHT_KEYS
 from sim.analysis.job import PhysicsJob
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.physics.contacts import trial_contacts
@@ -136,7 +137,7 @@ class DecodedStream:
         i1 = i0 + clip.n_frames
         rec = self.motion
         if abs(rec.fps - clip.fps) > 1e-9 or i1 > rec.n_frames:
-            raise ValueError(
+            raise UsageError(
                 f"{self.label}: the stream has {rec.n_frames} frames at {rec.fps:g} fps; clip "
                 f"frames {i0}..{i1 - 1} at {clip.fps:g} fps are not in it"
             )
@@ -223,42 +224,15 @@ def validate_clip(
     base_checks = replay(orig, full, **kw)
     out = ClipValidation(clip, W, orig, base_checks, summarise(base_checks), ground=ground)
     trial_labels = (contacts or {}).get(clip.start_frame)
-
-    def analyse(rec, acc=None):  # a reconstruction's physics: its points and curve's derivatives
-        r = rec.restrict(orig.names)
-        ix = [rec.names.index(n) for n in orig.names]
-        acc = getattr(rec, "accelerations", None) if acc is None else acc
-        figures = physics.analyse(
-            clip, r.positions, ground, contacts=trial_labels,
-            velocities=None if acc is None else np.asarray(rec.velocity())[:, ix],
-            accelerations=None if acc is None else np.asarray(acc)[:, ix],
-        )  # fmt: skip
-        if simulate is not None:  # the forward simulation's figures join the physics
-            original_qpos = out.physics["per_frame"]["qpos"]
-            figures.update(simulate.run(figures["per_frame"]["qpos"], clip.fps, original_qpos))
-        return figures
-
+    analyse = None
     if physics is not None:
         out.physics = physics.analyse(clip, None, ground, contacts=trial_labels)
         out.noise = physics.noise_floor(clip, ground, contacts=trial_labels, seed=seed)
         if simulate is not None:
             out.physics.update(simulate.run(out.physics["per_frame"]["qpos"], clip.fps))
+        analyse = partial(_run_physics, out, physics, simulate, ground, trial_labels)
     for m in methods:
-        keys = np.asarray(select(m, clip, W, seed=seed))
-        own = reconstruction_of(m)  # every method under Hermite, and under its own if other
-        shown = any(
-            r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
-        )
-        hermite = [] if own != "hermite" and shown else ["hermite"]  # cartesian's = uniform's
-        for name in hermite + ([own] if own != "hermite" else []):
-            built = reconstructions.rebuild(name, clip, keys)
-            rec = from_reconstruction(built, clip.fps)
-            checks = replay(rec, full, **kw)
-            s = summarise(checks)
-            run = MethodRun(m, name, keys, rec, checks, s, excess(s, out.baseline))
-            if physics is not None:
-                run.physics = analyse(built)
-            out.runs.append(run)
+        out.runs += _method_runs(out, m, W, seed, full, kw, analyse)
     for stream in streams:
         keys, rec = stream.clip_part(clip)
         checks = replay(rec, full, **kw)
@@ -272,10 +246,52 @@ def validate_clip(
             s,
             excess(s, out.baseline),
         )
-        if physics is not None:
+        if analyse is not None:
             run.physics = analyse(rec, stream.accelerations(clip))
         out.runs.append(run)
     return out
+
+
+def _run_physics(out: ClipValidation, physics, simulate, ground, trial_labels, rec, acc=None):
+    """A reconstruction's physics figures (:meth:`sim.analysis.job.PhysicsJob.analyse`: its
+    points and its curve's derivatives ``acc``, default its own), with the forward simulation's
+    when ``simulate`` is given."""
+    clip, names = out.clip, out.original.names
+    r = rec.restrict(names)
+    ix = [rec.names.index(n) for n in names]
+    acc = getattr(rec, "accelerations", None) if acc is None else acc
+    figures = physics.analyse(
+        clip, r.positions, ground, contacts=trial_labels,
+        velocities=None if acc is None else np.asarray(rec.velocity())[:, ix],
+        accelerations=None if acc is None else np.asarray(acc)[:, ix],
+    )  # fmt: skip
+    if simulate is not None:  # the forward simulation's figures join the physics
+        original_qpos = out.physics["per_frame"]["qpos"]
+        figures.update(simulate.run(figures["per_frame"]["qpos"], clip.fps, original_qpos))
+    return figures
+
+
+def _method_runs(out: ClipValidation, m: str, W: int, seed: int, full, kw: dict, analyse):
+    """Method ``m``'s runs on ``out.clip``: its keyframes under the Hermite (unless another
+    method already shows the same keyframes so) and under its own reconstruction if another."""
+    clip = out.clip
+    runs = []
+    keys = np.asarray(select(m, clip, W, seed=seed))
+    own = reconstruction_of(m)  # every method under Hermite, and under its own if other
+    shown = any(
+        r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
+    )
+    hermite = [] if own != "hermite" and shown else ["hermite"]  # cartesian's = uniform's
+    for name in hermite + ([own] if own != "hermite" else []):
+        built = reconstructions.rebuild(name, clip, keys)
+        rec = from_reconstruction(built, clip.fps)
+        checks = replay(rec, full, **kw)
+        s = summarise(checks)
+        run = MethodRun(m, name, keys, rec, checks, s, excess(s, out.baseline))
+        if analyse is not None:
+            run.physics = analyse(built)
+        runs.append(run)
+    return runs
 
 
 def physics_job(model, clip: Clip):

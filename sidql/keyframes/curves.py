@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.errors import UnknownNameError
+from sim.errors import UnknownNameError, UsageError
 
 #: The curves, by name. A curve's index here is its code in a ``.sidq`` stream (header byte 5,
 #: :mod:`sidql.codec.format`) and its mode in the codec's kernels: append, never reorder.
@@ -35,10 +35,10 @@ def validate_keyframes(keyframes, n_frames: int) -> np.ndarray:
     increasing, start at 0, end at ``n_frames - 1`` and W >= 2."""
     k = np.asarray(keyframes)
     if k.ndim != 1 or k.size < 2 or not np.issubdtype(k.dtype, np.integer):
-        raise ValueError(f"keyframes must be >= 2 integer indices; got {keyframes!r}")
+        raise UsageError(f"keyframes must be >= 2 integer indices; got {keyframes!r}")
     k = k.astype(np.int64)
     if k[0] != 0 or k[-1] != n_frames - 1 or np.any(np.diff(k) <= 0):
-        raise ValueError(
+        raise UsageError(
             f"keyframes must increase strictly from 0 to {n_frames - 1}; got {k.tolist()}"
         )
     return k
@@ -110,7 +110,7 @@ def _segment_polynomials(values, rates, k, dt, curve):
         return c
     if curve == "hermite":
         if rates is None:
-            raise ValueError("the hermite curve needs rates")
+            raise UsageError("the hermite curve needs rates")
         m = rates[k]
     else:
         m = keyframe_rates(values, k, dt)

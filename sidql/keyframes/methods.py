@@ -37,7 +37,7 @@ from sidql.keyframes.optimal import clip_optimal_table
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
 from sidql.keyframes.segment_costs import SEPARABLE, greedy_keyframes
 from sidql.keyframes.spherical import chart
-from sim.errors import UnknownNameError
+from sim.errors import UnknownNameError, UsageError, require_type
 from sim.motion.clip import Clip
 
 MethodFn = Callable[..., np.ndarray]
@@ -58,7 +58,14 @@ _TAKES: dict[str, tuple[str, ...]] = {}
 
 def register(name: str, reconstruction: str = "hermite") -> Callable[[MethodFn], MethodFn]:
     """Decorator registering ``fn(clip, W, *, seed=0) -> indices`` under ``name``, meant for
-    ``reconstruction``."""
+    ``reconstruction``.
+
+    Raises:
+        UsageError: an empty name. UnknownNameError: an unknown reconstruction.
+    """
+    if not isinstance(name, str) or not name.isidentifier():
+        raise UsageError(f"a method name must be a word (letters, digits, _); got {name!r}")
+    reconstructions.get(reconstruction)
 
     def deco(fn: MethodFn) -> MethodFn:
         METHODS[name] = fn
@@ -138,6 +145,7 @@ def select(
         UnknownNameError: an unknown method. UsageError: W out of range.
     """
     name = current_name(name)
+    require_type(clip, Clip, "clip")
     N = clip.n_frames
     check_counts([W], N)
     fn = get(name)
@@ -145,7 +153,7 @@ def select(
     kw = {p: options[p] for p in _TAKES.get(name, ())}
     k = np.asarray(fn(clip, W, seed=seed, **kw), dtype=np.int64)
     if k.shape != (W,) or k[0] != 0 or k[-1] != N - 1 or np.any(np.diff(k) <= 0):
-        raise RuntimeError(f"method {name!r} returned bad keyframes {k.tolist()} for W={W}")
+        raise UsageError(f"method {name!r} returned bad keyframes {k.tolist()} for W={W}")
     return k
 
 
@@ -223,7 +231,7 @@ def greedy(
     """Greedy (paper): repeatedly add the frame whose addition lowers Q (eq. 18) the most, Q of
     ``reconstruction`` (one with a segment-cost kernel)."""
     if reconstructions.get(reconstruction).cost_matrix is None:
-        raise ValueError(
+        raise UsageError(
             f"greedy needs a reconstruction with a segment-cost kernel; got {reconstruction!r}"
         )
     return greedy_keyframes(_memo_chart(clip, memo), W, reconstruction)
@@ -237,7 +245,7 @@ def optimal(
     registered optimum). With a ``memo`` one table serves every W up to ``memo["w_max"]``."""
     optimum = reconstructions.get(reconstruction).optimum
     if optimum is None:
-        raise ValueError(f"reconstruction {reconstruction!r} has no registered optimum")
+        raise UsageError(f"reconstruction {reconstruction!r} has no registered optimum")
     if memo is None and reconstruction in SEPARABLE:  # chart + costs in one pass
         return clip_optimal_table(clip, reconstruction, w_max=W).keyframes(W)
     series = _memo_chart(clip, memo)

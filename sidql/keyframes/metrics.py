@@ -10,6 +10,7 @@ import numpy as np
 
 from sidql.keyframes.curves import interpolate, validate_keyframes
 from sidql.keyframes.spherical import SphericalSeries
+from sim.errors import UsageError
 from sim.model.angles import wrap_angle
 
 
@@ -71,9 +72,14 @@ def geodesic_deg(true_pos: np.ndarray, rec_pos: np.ndarray, parents: np.ndarray)
 
 def mpjpe_mm(true_pos: np.ndarray, rec_pos: np.ndarray) -> float:
     """Mean per-joint position error [mm] of (N, J, 3) positions [m], root included."""
+    true_pos, rec_pos = np.asarray(true_pos), np.asarray(rec_pos)
+    if true_pos.shape != rec_pos.shape or true_pos.ndim != 3 or true_pos.shape[-1] != 3:
+        raise UsageError(
+            f"positions must be two (N, J, 3) arrays; got {true_pos.shape}, {rec_pos.shape}"
+        )
     return float(1000.0 * np.linalg.norm(rec_pos - true_pos, axis=-1).mean())
 
 
-def velocity_error(true_vel: np.ndarray, rec_vel: np.ndarray) -> float:
-    """Mean per-joint velocity error [m/s] of (N, J, 3) velocities [m/s], root included."""
-    return float(np.linalg.norm(rec_vel - true_vel, axis=-1).mean())
+def velocity_error_mm_s(true_vel: np.ndarray, rec_vel: np.ndarray) -> float:
+    """Mean per-joint velocity error [mm/s] of (N, J, 3) velocities [m/s], root included."""
+    return float(1000.0 * np.linalg.norm(rec_vel - true_vel, axis=-1).mean())

@@ -22,6 +22,7 @@ from sidql.keyframes.segment_costs import (
     segment_cost_matrix,
 )
 from sidql.keyframes.spherical import M_BONES, SphericalSeries
+from sim.errors import UsageError, require_type
 
 
 @numba.njit(cache=True)
@@ -58,24 +59,43 @@ def _backtrack_all(P, n_frames):
 
 
 @dataclass(frozen=True)
-class OptimalTable:
-    """Exact optima of a segment-cost matrix for every keyframe count.
+class KeyframeTable:
+    """Exact optima of Q for every keyframe count W = 2..w_max: what both programmes give.
 
     Attributes:
         cost: (w_max + 1,) least total segment cost [rad] for W keyframes (inf for W < 2).
-        pointers: (w_max + 1, N) predecessor of keyframe j in the best W-keyframe cover of 0..j.
         n_frames: N; n_bones: M (the normaliser of Q is N * M).
     """
 
     cost: np.ndarray
-    pointers: np.ndarray
     n_frames: int
     n_bones: int
 
     def keyframes(self, W: int) -> np.ndarray:
         """(W,) sorted optimal keyframe indices, 0 and N-1 included."""
         if not 2 <= W < len(self.cost):
-            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+            raise UsageError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+        return self._backtrack(W)
+
+    def _backtrack(self, W: int) -> np.ndarray:
+        raise NotImplementedError  # each programme keeps its own back pointers
+
+    def q(self, W: int) -> float:
+        """The optimal Q [rad] for W keyframes."""
+        return float(self.cost[W] / (self.n_frames * self.n_bones))
+
+
+@dataclass(frozen=True, kw_only=True)
+class OptimalTable(KeyframeTable):
+    """Exact optima of a segment-cost matrix for every keyframe count (:class:`KeyframeTable`).
+
+    Attributes:
+        pointers: (w_max + 1, N) predecessor of keyframe j in the best W-keyframe cover of 0..j.
+    """
+
+    pointers: np.ndarray
+
+    def _backtrack(self, W: int) -> np.ndarray:
         out = [self.n_frames - 1]
         for w in range(W, 1, -1):
             out.append(int(self.pointers[w, out[-1]]))
@@ -86,10 +106,6 @@ class OptimalTable:
         (-1 after them; rows 0 and 1 are all -1)."""
         return _backtrack_all(self.pointers, self.n_frames)
 
-    def q(self, W: int) -> float:
-        """The optimal Q [rad] for W keyframes."""
-        return float(self.cost[W] / (self.n_frames * self.n_bones))
-
 
 def solve(C: np.ndarray, n_bones: int, w_max: int | None = None) -> OptimalTable:
     """Exact optima of an (N, N) segment-cost matrix for all W from 2 to ``w_max`` (default N)."""
@@ -97,7 +113,7 @@ def solve(C: np.ndarray, n_bones: int, w_max: int | None = None) -> OptimalTable
     N = C.shape[0]
     w_max = N if w_max is None else int(w_max)
     if not 2 <= w_max <= N:
-        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+        raise UsageError(f"w_max must be in [2, {N}]; got {w_max}")
     D, P = _dp(C, w_max)
     return OptimalTable(cost=D[:, N - 1].copy(), pointers=P, n_frames=N, n_bones=n_bones)
 
@@ -121,6 +137,7 @@ def optimal_keyframes(
     series: SphericalSeries, W: int, reconstruction: str = "hermite"
 ) -> np.ndarray:
     """(W,) keyframes minimising Q exactly (eq. 19) under a separable reconstruction."""
+    require_type(series, SphericalSeries, "series")
     return optimal_table(series, reconstruction, w_max=W).keyframes(W)
 
 
@@ -163,24 +180,19 @@ def _cr_dp(Q, w_max):
     return best, last, back
 
 
-@dataclass(frozen=True)
-class CatmullRomTable:
-    """Exact optima of Q under Catmull-Rom reconstruction for W = 2..w_max.
+@dataclass(frozen=True, kw_only=True)
+class CatmullRomTable(KeyframeTable):
+    """Exact optima of Q under Catmull-Rom reconstruction for W = 2..w_max
+    (:class:`KeyframeTable`).
 
     Attributes:
-        cost: (w_max + 1,) least total cost [rad] (inf for W < 2); n_frames, n_bones: N, M.
+        last: (w_max + 1, 2) the best final state (x + 1, y) per W; back: the DP's back pointers.
     """
 
-    cost: np.ndarray
     last: np.ndarray
     back: np.ndarray
-    n_frames: int
-    n_bones: int
 
-    def keyframes(self, W: int) -> np.ndarray:
-        """(W,) sorted optimal keyframes, 0 and N-1 included."""
-        if not 2 <= W < len(self.cost):
-            raise ValueError(f"W must be in [2, {len(self.cost) - 1}]; got {W}")
+    def _backtrack(self, W: int) -> np.ndarray:
         N = self.n_frames
         xi, y = int(self.last[W, 0]), int(self.last[W, 1])
         out = [N - 1, y]
@@ -193,10 +205,6 @@ class CatmullRomTable:
             w -= 1
         return np.array(sorted(out), dtype=np.int64)
 
-    def q(self, W: int) -> float:
-        """The optimal Q [rad] for W keyframes."""
-        return float(self.cost[W] / (self.n_frames * self.n_bones))
-
 
 def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
     """Exact minima of Q under the Catmull-Rom reconstruction for every W from 2 to ``w_max``.
@@ -207,7 +215,7 @@ def catmull_rom_optimal(series: SphericalSeries, w_max: int) -> CatmullRomTable:
     """
     N = series.n_frames
     if not 2 <= w_max <= N:
-        raise ValueError(f"w_max must be in [2, {N}]; got {w_max}")
+        raise UsageError(f"w_max must be in [2, {N}]; got {w_max}")
     Q = catmull_rom_costs(series)
     best, last, back = _cr_dp(Q, w_max)
-    return CatmullRomTable(best, last, back, N, series.n_bones)
+    return CatmullRomTable(cost=best, n_frames=N, n_bones=series.n_bones, last=last, back=back)

@@ -28,11 +28,8 @@ import numba
 import numpy as np
 
 from sidql.keyframes.curves import validate_keyframes
-from sidql.keyframes.spherical import (
-    protocol_indices,
-    protocol_parents,
-)
-from sim.errors import MotionDataError
+from sidql.keyframes.spherical import protocol_indices, protocol_parents
+from sim.errors import MotionDataError, UsageError
 from sim.model import quaternion as quat
 from sim.motion.clip import Clip
 
@@ -171,7 +168,7 @@ def keyframes_for_count(D: np.ndarray, W: int) -> tuple[np.ndarray, float]:
     D = np.ascontiguousarray(D, dtype=np.float64)
     N = D.shape[0]
     if not 2 <= W <= N:
-        raise ValueError(f"W must be in [2, {N}]; got {W}")
+        raise UsageError(f"W must be in [2, {N}]; got {W}")
     cand = np.unique(D[np.triu_indices(N, 1)])
     taus = np.concatenate([[-1.0], cand])  # -1: every frame is a keyframe
     counts = _counts(D, taus)

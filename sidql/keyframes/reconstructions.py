@@ -47,15 +47,14 @@ from sidql.keyframes.spherical import (
     M_BONES,
     POINTS,
     SphericalSeries,
-    accelerations_from_chart,
     angles_and_rates,
     chart,
-    positions_from_chart,
     protocol_indices,
     protocol_parent_indices,
     split_channels,
     world_to_chart,
 )
+from sidql.keyframes.unchart import accelerations_from_chart, positions_from_chart
 from sim.errors import UnknownNameError
 from sim.motion.clip import Clip
 from sim.motion.points import PointMotion

@@ -21,13 +21,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sidql.keyframes.spherical import (
-    SIN_EPS,
-    SphericalSeries,
-    _chart_kernel,
-    chart_points_of,
-)
-from sim.errors import UnknownNameError
+from sidql.keyframes.spherical import SIN_EPS, SphericalSeries, _chart_kernel, chart_points_of
+from sim.errors import UnknownNameError, UsageError
 from sim.model.angles import wrap_angle
 
 #: The reconstructions (curves of :mod:`sidql.keyframes.curves`) whose Q separates over segments.
@@ -51,7 +46,7 @@ def _cost_matrix(X, R, linear):
             L = j - i
             total = 0.0
             for n in range(i + 1, j):
-                h01, h10, h11 = _weights(n, i, L, linear)
+                h01, h10, h11 = segment_weights(n, i, L, linear)
                 acc = 0.0
                 for d in range(D):
                     v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
@@ -63,14 +58,24 @@ def _cost_matrix(X, R, linear):
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
-def _weights(n, i, L, linear):
-    """Hermite weights (h01, h10 * L, h11 * L) of frame n in segment [i, i + L] (linear: s, 0, 0)."""
+def hermite_basis(s):
+    """(h00, h01, h10, h11) of the cubic Hermite at ``s`` in [0, 1]: the curve is
+    ``h00 x_a + h01 x_b + h10 m_a + h11 m_b`` for end values x and end rates m per unit of s
+    (the one definition every compiled kernel reads)."""
+    s2 = s * s
+    s3 = s2 * s
+    return 2.0 * s3 - 3.0 * s2 + 1.0, -2.0 * s3 + 3.0 * s2, s3 - 2.0 * s2 + s, s3 - s2
+
+
+@numba.njit(cache=True, fastmath=True, inline="always")
+def segment_weights(n, i, L, linear):
+    """Weights (h01, h10 * L, h11 * L) of frame n in segment [i, i + L] (linear: s, 0, 0): the
+    curve is ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` for rates r per frame."""
     s = (n - i) / L
     if linear:
         return s, 0.0, 0.0
-    s2 = s * s
-    s3 = s2 * s
-    return -2.0 * s3 + 3.0 * s2, (s3 - 2.0 * s2 + s) * L, (s3 - s2) * L
+    _, h01, h10, h11 = hermite_basis(s)
+    return h01, h10 * L, h11 * L
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -80,7 +85,7 @@ def _segment_cost(X, R, i, j, linear):
     L = j - i
     total = 0.0
     for n in range(i + 1, j):
-        h01, h10, h11 = _weights(n, i, L, linear)
+        h01, h10, h11 = segment_weights(n, i, L, linear)
         acc = 0.0
         for d in range(D):
             v = (X[i, d] - X[n, d]) + h01 * (X[j, d] - X[i, d]) + h10 * R[i, d] + h11 * R[j, d]
@@ -138,7 +143,7 @@ def greedy_keyframes(
     if reconstruction not in SEPARABLE:
         raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
     if not 2 <= W <= series.n_frames:
-        raise ValueError(f"W must be in [2, {series.n_frames}]; got {W}")
+        raise UsageError(f"W must be in [2, {series.n_frames}]; got {W}")
     X, R = stacked(series)
     return _greedy(X, R, W, reconstruction == "linear").astype(np.int64)
 
@@ -185,13 +190,9 @@ def _catmull_rom_costs(X):
         for z in range(y + 1, N):
             L = z - y
             for f in range(y + 1, z):
-                s = (f - y) / L
-                s2 = s * s
-                s3 = s2 * s
-                h00 = 2.0 * s3 - 3.0 * s2 + 1.0
-                h01 = -2.0 * s3 + 3.0 * s2
-                ha[f] = (s3 - 2.0 * s2 + s) * L
-                hb[f] = (s3 - s2) * L
+                h00, h01, h10, h11 = hermite_basis((f - y) / L)
+                ha[f] = h10 * L
+                hb[f] = h11 * L
                 for d in range(D):
                     A[f, d] = h00 * X[y, d] + h01 * X[z, d] - X[f, d]
             x_lo, x_hi = (-1, 0) if y == 0 else (0, y)

@@ -33,9 +33,8 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError, require_type
 from sim.files import excerpt
-from sim.model import quaternion as quat
 from sim.model.angles import wrap_angle
 from sim.model.rotations import y_up_to_z_up, z_up_to_y_up
 from sim.motion.clip import Clip
@@ -112,13 +111,13 @@ class SphericalSeries:
         N, M = self.theta.shape
         for name in ("phi", "dtheta", "dphi"):
             if getattr(self, name).shape != (N, M):
-                raise ValueError(f"{name} must be ({N}, {M}); got {getattr(self, name).shape}")
+                raise UsageError(f"{name} must be ({N}, {M}); got {getattr(self, name).shape}")
         if self.root_pos.shape != (N, 3) or self.root_vel.shape != (N, 3):
-            raise ValueError(f"root_pos and root_vel must be ({N}, 3)")
+            raise UsageError(f"root_pos and root_vel must be ({N}, 3)")
         if self.lengths.shape != (M,) or self.parents.shape != (M + 1,):
-            raise ValueError(f"lengths must be ({M},) and parents ({M + 1},)")
+            raise UsageError(f"lengths must be ({M},) and parents ({M + 1},)")
         if not self.dt > 0:
-            raise ValueError(f"dt must be positive; got {self.dt}")
+            raise UsageError(f"dt must be positive; got {self.dt}")
 
     @property
     def n_frames(self) -> int:
@@ -366,83 +365,11 @@ def chart(clip: Clip) -> SphericalSeries:
 
     Raises:
         MotionDataError: a protocol point is missing, or the data holds non-finite values.
+        ArgumentTypeError: ``clip`` is not a :class:`Clip`.
     """
+    require_type(clip, Clip, "clip")
     pos, vel, parents = chart_points_of(clip)
     return chart_arrays(pos, vel, parents, clip.dt)
-
-
-def positions_from_chart(
-    root_pos_c: np.ndarray,
-    root_vel_c: np.ndarray,
-    theta: np.ndarray,
-    phi: np.ndarray,
-    dtheta: np.ndarray,
-    dphi: np.ndarray,
-    lengths: np.ndarray,
-    parents: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and velocities of the M+1 points rebuilt down the tree from bone angles.
-
-    Args:
-        root_pos_c, root_vel_c: (N, 3) root position [m] / velocity [m/s], CMU axes.
-        theta, phi, dtheta, dphi: (N, M) bone angles [rad] and rates [rad/s].
-        lengths: (M,) bone lengths [m]; parents: (M+1,) parents, every parent before its child.
-
-    Returns:
-        (N, M+1, 3) positions [m] and (N, M+1, 3) velocities [m/s], world axes (z up). Every
-        bone has exactly its given length.
-    """
-    N, M = theta.shape
-    u = directions(theta, phi) * lengths[None, :, None]
-    du = direction_rates(theta, phi, dtheta, dphi) * lengths[None, :, None]
-    P = np.empty((N, M + 1, 3))
-    V = np.empty((N, M + 1, 3))
-    P[:, 0], V[:, 0] = root_pos_c, root_vel_c
-    for j in range(1, M + 1):
-        P[:, j] = P[:, parents[j]] + u[:, j - 1]
-        V[:, j] = V[:, parents[j]] + du[:, j - 1]
-    return chart_to_world(P), chart_to_world(V)
-
-
-def direction_accelerations(theta, phi, dtheta, dphi, ddtheta, ddphi) -> np.ndarray:
-    """(..., 3) second time derivative [1/s^2] of :func:`directions` given angle rates [rad/s]
-    and their rates [rad/s^2]."""
-    st, ct = np.sin(theta), np.cos(theta)
-    sp, cp = np.sin(phi), np.cos(phi)
-    d_t = np.stack([ct * cp, ct * sp, -st], axis=-1)  # d/d theta
-    d_p = np.stack([-st * sp, st * cp, np.zeros_like(st)], axis=-1)  # d/d phi
-    d_tt = -np.stack([st * cp, st * sp, ct], axis=-1)
-    d_tp = np.stack([-ct * sp, ct * cp, np.zeros_like(st)], axis=-1)
-    d_pp = np.stack([-st * cp, -st * sp, np.zeros_like(st)], axis=-1)
-    tt, pp = dtheta[..., None], dphi[..., None]
-    return (
-        d_tt * tt**2 + 2 * d_tp * tt * pp + d_pp * pp**2
-        + d_t * ddtheta[..., None] + d_p * ddphi[..., None]
-    )  # fmt: skip
-
-
-def accelerations_from_chart(
-    root_acc_c: np.ndarray,
-    theta: np.ndarray,
-    phi: np.ndarray,
-    dtheta: np.ndarray,
-    dphi: np.ndarray,
-    ddtheta: np.ndarray,
-    ddphi: np.ndarray,
-    lengths: np.ndarray,
-    parents: np.ndarray,
-) -> np.ndarray:
-    """(N, M+1, 3) point accelerations [m/s^2], world axes (z up), of the points
-    :func:`positions_from_chart` rebuilds, from the root's acceleration (N, 3) [m/s^2] in CMU
-    axes and the bone angles, rates and their rates (N, M) [rad, rad/s, rad/s^2]."""
-    N, M = theta.shape
-    ddu = direction_accelerations(theta, phi, dtheta, dphi, ddtheta, ddphi)
-    ddu = ddu * lengths[None, :, None]
-    A = np.empty((N, M + 1, 3))
-    A[:, 0] = root_acc_c
-    for j in range(1, M + 1):
-        A[:, j] = A[:, parents[j]] + ddu[:, j - 1]
-    return chart_to_world(A)
 
 
 def protocol_parent_indices() -> np.ndarray:
@@ -474,62 +401,3 @@ _CMU_PARENT = {
     "rradius": "rhumerus",
     "rwrist": "rradius",
 }
-
-
-def clip_from_chart(
-    theta: np.ndarray,
-    phi: np.ndarray,
-    dtheta: np.ndarray,
-    dphi: np.ndarray,
-    root_pos_c: np.ndarray,
-    root_vel_c: np.ndarray,
-    lengths: np.ndarray,
-    fps: float,
-    source: str = "",
-) -> Clip:
-    """A 23-point clip (the CMU protocol tree) whose chart is the given one: the inverse of
-    :func:`chart`, for synthetic motion and tests.
-
-    Args:
-        theta, phi, dtheta, dphi: (N, 22) bone angles [rad] and their exact rates [rad/s].
-        root_pos_c, root_vel_c: (N, 3) root position [m] / velocity [m/s] in CMU axes.
-        lengths: (22,) bone lengths [m]; fps: frame rate [1/s].
-
-    Returns:
-        A Clip with names :data:`POINTS`, positions/velocities in world axes, and local rotations
-        consistent with them: the world rotation of bone m's body is ``A Rz(phi) Ry(theta) A^T``
-        (A = :data:`sim.model.rotations.Y_UP_TO_Z_UP`), so the bone is that rotation applied to ``(0, -r_m, 0)``
-        (the CMU z axis in world axes); the root's orientation is the identity.
-    """
-    parents = protocol_parent_indices()
-    lengths = np.asarray(lengths, dtype=float)
-    P, V = positions_from_chart(
-        np.asarray(root_pos_c, float),
-        np.asarray(root_vel_c, float),
-        theta,
-        phi,
-        dtheta,
-        dphi,
-        lengths,
-        parents,
-    )
-    N = theta.shape[0]
-    q_a = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])  # rotation taking chart->world
-    q_c = quat.mul(quat.rot_z(phi), quat.rot_y(theta))  # (N, M, 4) in chart axes
-    q_w = quat.mul(quat.mul(q_a, q_c), quat.conj(q_a))
-    world = np.concatenate([np.tile([1.0, 0.0, 0.0, 0.0], (N, 1, 1)), q_w], axis=1)
-    local = world.copy()
-    local[:, 1:] = quat.mul(quat.conj(world[:, parents[1:]]), world[:, 1:])
-    qpos = np.concatenate([P[:, 0], np.tile([1.0, 0.0, 0.0, 0.0], (N, 1))], axis=1)
-    qvel = np.concatenate([V[:, 0], np.zeros((N, 3))], axis=1)
-    return Clip(
-        names=POINTS,
-        parents=parents,
-        positions=P,
-        velocities=V,
-        qpos=qpos,
-        qvel=qvel,
-        rotations=local,
-        fps=float(fps),
-        source=source,
-    )

@@ -1,28 +1,109 @@
-"""What a training checkpoint must hold before ``--resume`` loads any of it.
+"""Training checkpoints (OUT.ckpt): everything needed to resume a run, written and read here.
 
-A checkpoint (:data:`sidql.learning.files.CHECKPOINT_FORMAT`) is tensors and plain values, read
-with ``torch.load(weights_only=True)``; its settings are compared with the run's by
-:func:`sidql.learning.dqn.load_checkpoint`. A file whose settings match can still be tampered
-with or damaged: :func:`checkpoint_problem` checks every entry against the objects of the run
-that would take it (the networks' and optimiser's tensors by name, shape, type and finiteness,
-the replay memories' arrays by shape and value range, counters, log rows and random states), so
-that a bad file is refused in one line instead of failing deep inside torch or numpy, or
-corrupting the run later.
+A checkpoint (:data:`CHECKPOINT_FORMAT`) is tensors and plain values
+(:func:`training_state`), written atomically with the run's settings (:func:`save_checkpoint`)
+and read with ``torch.load(weights_only=True)`` (:mod:`sidql.learning.files`); its settings are
+compared with the run's by :func:`load_checkpoint`. A file whose settings match can still be
+tampered with or damaged: :func:`checkpoint_problem` checks every entry against the objects of
+the run that would take it (the networks' and optimiser's tensors by name, shape, type and
+finiteness, the replay memories' arrays by shape and value range, counters, log rows and random
+states), so that a bad file is refused in one line instead of failing deep inside torch or
+numpy, or corrupting the run later; :func:`restore` then loads it into those objects.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 import torch
 
+from sidql.learning.files import load_payload, save_payload
+from sidql.learning.settings import RESUME_MAY_CHANGE, Args
+from sim.errors import ModelFileError
 from sim.files import excerpt
+
+#: Kind and version of a training checkpoint (OUT.ckpt); replay memories are stored as tensors.
+CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
 
 #: Largest counter (steps, updates, episodes) and log length a checkpoint may hold.
 MAX_COUNT = 1 << 53
 MAX_LOG_ROWS = 1 << 20
 _COUNTERS = ("step", "updates", "episodes")
+
+
+def save_checkpoint(path: Path, state: dict, args: Args) -> None:
+    """Write everything needed to resume (``state``: networks, optimiser, memories, counters,
+    random states, log, split) with the run's settings, atomically."""
+    save_payload(path, {"format": CHECKPOINT_FORMAT, "args": asdict(args), **state})
+
+
+def load_checkpoint(path: Path, args: Args) -> dict:
+    """The checkpoint at ``path`` (tensors and plain values only), after checking it was written
+    with the same settings as ``args`` (all but :data:`RESUME_MAY_CHANGE`).
+
+    Raises:
+        ModelFileError: refused file, other format, or other settings (one line naming the file,
+            the setting and both values).
+    """
+    ck = load_payload(path, CHECKPOINT_FORMAT)
+    stored, now = ck.get("args"), asdict(args)
+    if not isinstance(stored, dict):
+        raise ModelFileError(str(path), None, "holds no training settings")
+    for key, value in now.items():
+        if key in RESUME_MAY_CHANGE:
+            continue
+        old = stored.get(key)
+        if isinstance(value, tuple) and isinstance(old, list | tuple):
+            old = tuple(old)
+        if old != value:
+            flag = "--" + key.replace("_", "-")
+            raise ModelFileError(
+                str(path), None, f"written with {flag} {_show(old)}, this run has {flag} "
+                f"{_show(value)}; resume with the same settings or choose another --out",
+            )  # fmt: skip
+    return ck
+
+
+def training_state(net, target, opt, memory, demos, counters, log_rows, rng, split, n_tasks):
+    """Everything :func:`restore` needs, as tensors and plain values (for :func:`save_checkpoint`)."""
+    return {
+        **counters, "net": net.state_dict(), "target": target.state_dict(),
+        "opt": opt.state_dict(), "memory": memory.state_dict(), "demos": demos.state_dict(),
+        "log": list(log_rows), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+        "split": split, "n_tasks": n_tasks,
+    }  # fmt: skip
+
+
+def restore(ck: dict, net, target, opt, memory, demos, rng, *, path: str = "",
+            keyframes=(), n_tasks: int = 0) -> tuple[dict, list[dict]]:  # fmt: skip
+    """Load a checkpoint's state into the run's objects; returns (counters, log rows).
+
+    Every entry is checked against those objects first (:func:`checkpoint_problem`), so a file
+    whose settings match but whose contents do not is refused before anything is loaded.
+
+    Raises:
+        ModelFileError: one line naming ``path`` and the entry that does not fit.
+    """
+    problem = checkpoint_problem(
+        ck, net=net, opt=opt, memory=memory, demos=demos, keyframes=keyframes, n_tasks=n_tasks
+    )
+    if problem:
+        raise ModelFileError(path or None, None, f"cannot resume from it: {problem}")
+    try:
+        net.load_state_dict(ck["net"])
+        target.load_state_dict(ck["target"])
+        opt.load_state_dict(ck["opt"])
+        memory.load_state_dict(ck["memory"])
+        demos.load_state_dict(ck["demos"])
+        rng.bit_generator.state = ck["rng"]
+        torch.set_rng_state(ck["torch_rng"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as e:  # a second line of defence
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ModelFileError(path or None, None, f"cannot resume from it: {first}") from None
+    return {k: int(ck[k]) for k in ("step", "updates", "episodes")}, list(ck["log"])
 
 
 def checkpoint_problem(ck: dict, *, net, opt, memory, demos, keyframes, n_tasks: int) -> str | None:
@@ -31,13 +112,13 @@ def checkpoint_problem(ck: dict, *, net, opt, memory, demos, keyframes, n_tasks:
     Args:
         ck: the loaded checkpoint (settings already matched).
         net: the run's Q-network (the target network has the same layout); opt: its optimiser;
-            memory, demos: its replay memories (:class:`sidql.learning.dqn.ReplayMemory`);
+            memory, demos: its replay memories (:class:`sidql.learning.replay.ReplayMemory`);
         keyframes: the run's W values (the log's columns); n_tasks: its training tasks.
     """
     for key in _COUNTERS:
         v = ck.get(key)
         if type(v) is not int or not 0 <= v <= MAX_COUNT:
-            return f"{key} {_show(v)} is not a count"
+            return f"{key} {_show(v, 40)} is not a count"
     weights = net.state_dict()
     for key in ("net", "target"):
         problem = _tensors_problem(ck.get(key), weights, key)
@@ -70,8 +151,10 @@ def checkpoint_problem(ck: dict, *, net, opt, memory, demos, keyframes, n_tasks:
     return None
 
 
-def _show(v) -> str:
-    return excerpt(str(v), 40, quote=False)
+def _show(value, limit: int = 80) -> str:
+    """A setting as the command line spells it, cut short (a checkpoint may hold anything)."""
+    text = " ".join(map(str, value)) if isinstance(value, list | tuple) else str(value)
+    return excerpt(text, limit, quote=False)
 
 
 def _tensors_problem(found, expected: dict, what: str) -> str | None:
@@ -120,9 +203,9 @@ def _memory_problem(found, memory, what: str, max_w: int, n_tasks: int) -> str |
     if not isinstance(found, dict) or set(found) != set(own):
         return f"{what}: not a replay memory of this run"
     if found["size"] != memory.size or type(found["size"]) is not int:
-        return f"{what}: size {_show(found['size'])}, this run's is {memory.size}"
+        return f"{what}: size {_show(found['size'], 40)}, this run's is {memory.size}"
     if type(found["pos"]) is not int or not 0 <= found["pos"] < memory.size:
-        return f"{what}: position {_show(found['pos'])} outside [0, {memory.size})"
+        return f"{what}: position {_show(found['pos'], 40)} outside [0, {memory.size})"
     if type(found["full"]) is not bool:
         return f"{what}: 'full' is not true or false"
     n_frames = memory.mask.shape[1]

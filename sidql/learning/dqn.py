@@ -17,9 +17,11 @@ knob. The paper's values are the defaults where it gives them (memory 10,000, mi
 γ = 0.5 were its choices; the defaults here are the tuned ones: docs/policy.md lists what was
 kept and what changed, and why).
 A run writes ``OUT`` (the policy), ``OUT.ckpt`` (everything needed to resume, written atomically
-at every evaluation), ``OUT.csv`` (the log) and ``OUT.png`` (the learning curve). Policy and
-checkpoint files hold tensors and plain values only and are read with ``weights_only=True``
-(:mod:`sidql.learning.files`); ``--resume`` refuses a checkpoint whose settings differ.
+at every evaluation: :mod:`sidql.learning.checkpoint`), ``OUT.csv`` (the log) and ``OUT.png``
+(the learning curve: :mod:`sidql.learning.run_files`). Policy and checkpoint files hold tensors
+and plain values only and are read with ``weights_only=True`` (:mod:`sidql.learning.files`);
+``--resume`` refuses a checkpoint whose settings differ. The replay memory:
+:mod:`sidql.learning.replay`.
 
 The network reads the raw task arrays (``env.tasks[info["task_index"]]``: radians, its own input
 standardisation), not the environment's unit-scale observations; the mask and the keyframes still
@@ -28,12 +30,10 @@ to choose come from the observation.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -43,18 +43,20 @@ from tqdm import tqdm
 
 from sidql.keyframes.methods import greedy_from_costs
 from sidql.keyframes.optimal import solve
-from sidql.learning.checkpoint import checkpoint_problem
-from sidql.learning.env import KeyframeEnv
-from sidql.learning.files import (
-    CHECKPOINT_FORMAT,
-    POLICY_FORMAT,
-    load_payload,
-    save_payload,
+from sidql.learning.checkpoint import (
+    _show,
+    load_checkpoint,
+    restore,
+    save_checkpoint,
+    training_state,
 )
+from sidql.learning.env import KeyframeEnv
 from sidql.learning.policy import Policy
 from sidql.learning.qnet import KeyframeQNet, masked_q
+from sidql.learning.replay import NStep, ReplayMemory
 from sidql.learning.rollout import rollout_values_batch
-from sidql.learning.settings import RESUME_MAY_CHANGE, Args, settings_problems
+from sidql.learning.run_files import RunFiles, log_row, record, save_policy
+from sidql.learning.settings import Args, settings_problems
 from sidql.learning.tasks import (
     KeyframeTask,
     clip_task,
@@ -63,83 +65,9 @@ from sidql.learning.tasks import (
     load_tasks,
     synthetic_tasks,
 )
-from sim.errors import ModelFileError, MotionDataError
-from sim.files import excerpt, write_atomic
+from sim.errors import ModelFileError, MotionDataError, UsageError
+from sim.files import excerpt
 from sim.motion.dataset import dataset_entries, find_trials, origin_subject
-
-# --- replay memory -------------------------------------------------------------------------------
-
-
-class ReplayMemory:
-    """Fixed-size ring of n-step transitions; states are (task index, keyframe mask, remaining)."""
-
-    def __init__(self, size: int, n_frames: int):
-        self.size, self.pos, self.full = size, 0, False
-        self.task = np.zeros(size, np.int64)
-        self.mask = np.zeros((size, n_frames), bool)
-        self.rem = np.zeros(size, np.int64)
-        self.action = np.zeros(size, np.int64)
-        self.ret = np.zeros(size, np.float32)
-        self.next_mask = np.zeros((size, n_frames), bool)
-        self.next_rem = np.zeros(size, np.int64)
-        self.done = np.zeros(size, np.float32)
-        self.disc = np.zeros(size, np.float32)
-        self.expert = np.zeros((size, n_frames), bool)  # demonstrations: optimal frames still free
-
-    def __len__(self):
-        return self.size if self.full else self.pos
-
-    def add(self, task, mask, rem, action, ret, next_mask, next_rem, done, disc, expert=None):
-        i = self.pos
-        self.expert[i] = False if expert is None else expert
-        self.task[i], self.mask[i], self.rem[i], self.action[i] = task, mask, rem, action
-        self.ret[i], self.next_mask[i], self.next_rem[i] = ret, next_mask, next_rem
-        self.done[i], self.disc[i] = done, disc
-        self.pos = (i + 1) % self.size
-        self.full = self.full or self.pos == 0
-
-    def sample(self, rng: np.random.Generator, k: int) -> np.ndarray:
-        return rng.integers(len(self), size=k)
-
-    def state_dict(self) -> dict:
-        """Tensors and plain values only (a checkpoint is loaded with ``weights_only=True``)."""
-        return {k: torch.from_numpy(v.copy()) if isinstance(v, np.ndarray) else v
-                for k, v in vars(self).items()}  # fmt: skip
-
-    def load_state_dict(self, d: dict) -> None:
-        arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray)}
-        for k, v in d.items():
-            if k in arrays:
-                v = np.asarray(v.numpy(), dtype=arrays[k].dtype)
-                if v.shape != arrays[k].shape:
-                    raise ValueError(f"replay memory {k}: shape {v.shape} != {arrays[k].shape}")
-            setattr(self, k, v)
-
-
-class NStep:
-    """Turns one episode's steps into n-step transitions (returns discounted by γ)."""
-
-    def __init__(self, n: int, gamma: float):
-        self.n, self.gamma, self.steps = n, gamma, []
-
-    def push(self, memory, task, mask, rem, action, reward, next_mask, next_rem, done, expert=None):
-        self.steps.append((task, mask, rem, action, reward, expert))
-        if done:
-            while self.steps:
-                self._emit(memory, next_mask, next_rem, True)
-        elif len(self.steps) == self.n:
-            self._emit(memory, next_mask, next_rem, False)
-
-    def _emit(self, memory, next_mask, next_rem, done):
-        task, mask, rem, action, _, expert = self.steps[0]
-        ret = sum(self.gamma**k * s[4] for k, s in enumerate(self.steps))
-        disc = self.gamma ** len(self.steps)
-        memory.add(task, mask, rem, action, ret, next_mask, next_rem, done, disc, expert)
-        self.steps.pop(0)
-
-    def clear(self):
-        self.steps = []
-
 
 # --- data ----------------------------------------------------------------------------------------
 
@@ -151,7 +79,7 @@ def split_subjects(subjects, test_subjects=None, seed: int = 0) -> tuple[list[st
     test = sorted(test_subjects) if test_subjects else subjects[seed % 4 :: 4]
     train = [s for s in subjects if s not in test]
     if not train or not test:
-        raise ValueError(f"need training and held-out subjects; have {subjects}, test {test}")
+        raise UsageError(f"need training and held-out subjects; have {subjects}, test {test}")
     return train, test
 
 
@@ -365,135 +293,6 @@ def sample_batch(memory: ReplayMemory, demos: ReplayMemory, rng, args: Args):
     return tuple(torch.cat([x, y]) for x, y in zip(batch, demo, strict=True)), demo
 
 
-# --- files: checkpoint, policy, log, plot --------------------------------------------------------
-
-
-def save_checkpoint(path: Path, state: dict, args: Args) -> None:
-    """Write everything needed to resume (``state``: networks, optimiser, memories, counters,
-    random states, log, split) with the run's settings, atomically."""
-    save_payload(path, {"format": CHECKPOINT_FORMAT, "args": asdict(args), **state})
-
-
-def load_checkpoint(path: Path, args: Args) -> dict:
-    """The checkpoint at ``path`` (tensors and plain values only), after checking it was written
-    with the same settings as ``args`` (all but :data:`RESUME_MAY_CHANGE`).
-
-    Raises:
-        ModelFileError: refused file, other format, or other settings (one line naming the file,
-            the setting and both values).
-    """
-    ck = load_payload(path, CHECKPOINT_FORMAT)
-    stored, now = ck.get("args"), asdict(args)
-    if not isinstance(stored, dict):
-        raise ModelFileError(str(path), None, "holds no training settings")
-    for key, value in now.items():
-        if key in RESUME_MAY_CHANGE:
-            continue
-        old = stored.get(key)
-        if isinstance(value, tuple) and isinstance(old, list | tuple):
-            old = tuple(old)
-        if old != value:
-            flag = "--" + key.replace("_", "-")
-            raise ModelFileError(
-                str(path), None, f"written with {flag} {_show(old)}, this run has {flag} "
-                f"{_show(value)}; resume with the same settings or choose another --out",
-            )  # fmt: skip
-    return ck
-
-
-def _show(value, limit: int = 80) -> str:
-    """A setting as the command line spells it, cut short (a checkpoint may hold anything)."""
-    text = " ".join(map(str, value)) if isinstance(value, list | tuple) else str(value)
-    return excerpt(text, limit, quote=False)
-
-
-def save_policy(net, path, args, split, final, baselines) -> None:
-    """Write the policy (weights, network config, training args, held-out figures) atomically."""
-    payload = {
-        "format": POLICY_FORMAT,
-        "config": dict(net.config),
-        "state_dict": {k: v.clone() for k, v in net.state_dict().items()},
-        "keyframes": list(args.keyframes),
-        "args": {k: v for k, v in asdict(args).items() if k != "extra"},
-        "split": split,
-        "heldout": {"dqn": final, **baselines},
-    }
-    save_payload(path, payload)
-
-
-def write_log(rows: list[dict], path: Path) -> None:
-    """The evaluation log as CSV, atomically."""
-
-    def write(f):
-        text = io.StringIO()
-        w = csv.DictWriter(text, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-        f.write(text.getvalue().encode())
-
-    write_atomic(path, write)
-
-
-def plot_curve(rows: list[dict], keyframes, path: Path) -> None:
-    """Held-out mean Q / optimal per W over the run (dashed: greedy), as PNG."""
-    import matplotlib  # lazy: heavy and only needed here
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # lazy, after choosing the headless backend
-
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    steps = [r["step"] for r in rows]
-    for w, color in zip(keyframes, ("C0", "C1", "C2", "C3", "C4", "C5"), strict=False):
-        opt = rows[-1][f"optimal_W{w}"]
-        ax.plot(steps, [r[f"dqn_W{w}"] / opt for r in rows], color=color, label=f"dqn W={w}")
-        ax.axhline(rows[-1][f"greedy_W{w}"] / opt, color=color, ls="--", lw=0.8)
-    ax.axhline(1.0, color="k", lw=0.8)
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("held-out mean Q / optimal")
-    ax.set_title("DQN learning curve (dashed: greedy)")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    write_atomic(path, lambda f: fig.savefig(f, format="png", dpi=110))
-    plt.close(fig)
-
-
-def log_row(counters: dict, seconds: float, epsilon: float, loss: float, q_mean: float,
-            heldout: dict[int, float], base: dict, keyframes) -> dict:  # fmt: skip
-    """One line of the log: counters, time, ε, mean loss and Q since the last line, and the
-    held-out mean Q of the network, greedy and the optimum for every W."""
-    row = {**counters, "seconds": round(seconds, 1), "epsilon": round(epsilon, 4), "loss": loss,
-           "q_mean": q_mean}  # fmt: skip
-    for w in keyframes:
-        row[f"dqn_W{w}"] = heldout[w]
-        row[f"greedy_W{w}"] = base["greedy"][w]
-        row[f"optimal_W{w}"] = base["optimal"][w]
-    return row
-
-
-@dataclass(frozen=True)
-class RunFiles:
-    """What a run writes: ``policy`` (OUT), ``checkpoint`` (OUT.ckpt), ``log`` (.csv), ``curve``
-    (.png)."""
-
-    policy: Path
-    checkpoint: Path
-    log: Path
-    curve: Path
-
-    @classmethod
-    def beside(cls, out: str | Path) -> RunFiles:
-        out = Path(out)
-        return cls(out, out.with_name(out.name + ".ckpt"), out.with_suffix(".csv"),
-                   out.with_suffix(".png"))  # fmt: skip
-
-
-def record(files: RunFiles, log_rows: list[dict], row: dict, keyframes) -> None:
-    """Append ``row`` to the log and rewrite the CSV and the learning curve."""
-    log_rows.append(row)
-    write_log(log_rows, files.log)
-    plot_curve(log_rows, keyframes, files.curve)
-
-
 def make_networks(args: Args, feats: torch.Tensor):
     """(Q-network, target network, Adam optimiser) for (K, N, C) training features: the network
     standardises its inputs with their per-channel mean and standard deviation."""
@@ -506,46 +305,61 @@ def make_networks(args: Args, feats: torch.Tensor):
     return net, target, torch.optim.Adam(net.parameters(), lr=args.learning_rate)
 
 
-def training_state(net, target, opt, memory, demos, counters, log_rows, rng, split, n_tasks):
-    """Everything :func:`restore` needs, as tensors and plain values (for :func:`save_checkpoint`)."""
-    return {
-        **counters, "net": net.state_dict(), "target": target.state_dict(),
-        "opt": opt.state_dict(), "memory": memory.state_dict(), "demos": demos.state_dict(),
-        "log": list(log_rows), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
-        "split": split, "n_tasks": n_tasks,
-    }  # fmt: skip
-
-
-def restore(ck: dict, net, target, opt, memory, demos, rng, *, path: str = "",
-            keyframes=(), n_tasks: int = 0) -> tuple[dict, list[dict]]:  # fmt: skip
-    """Load a checkpoint's state into the run's objects; returns (counters, log rows).
-
-    Every entry is checked against those objects first (:func:`checkpoint_problem`), so a file
-    whose settings match but whose contents do not is refused before anything is loaded.
-
-    Raises:
-        ModelFileError: one line naming ``path`` and the entry that does not fit.
-    """
-    problem = checkpoint_problem(
-        ck, net=net, opt=opt, memory=memory, demos=demos, keyframes=keyframes, n_tasks=n_tasks
-    )
-    if problem:
-        raise ModelFileError(path or None, None, f"cannot resume from it: {problem}")
-    try:
-        net.load_state_dict(ck["net"])
-        target.load_state_dict(ck["target"])
-        opt.load_state_dict(ck["opt"])
-        memory.load_state_dict(ck["memory"])
-        demos.load_state_dict(ck["demos"])
-        rng.bit_generator.state = ck["rng"]
-        torch.set_rng_state(ck["torch_rng"])
-    except (KeyError, TypeError, ValueError, RuntimeError) as e:  # a second line of defence
-        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
-        raise ModelFileError(path or None, None, f"cannot resume from it: {first}") from None
-    return {k: int(ck[k]) for k in ("step", "updates", "episodes")}, list(ck["log"])
-
-
 # --- the algorithm -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrainingData:
+    """The run's tasks and what the networks read of them.
+
+    Attributes:
+        train, test: the training and held-out tasks; split: their subjects.
+        feats: (K, N, C) training features; costs_np: (K, N, N) float64 segment costs, and
+            costs: the same as a float32 tensor; base: held-out mean Q of greedy and the optimum
+            per W (:func:`baselines`).
+    """
+
+    train: list
+    test: list
+    split: dict
+    feats: torch.Tensor
+    costs_np: np.ndarray
+    costs: torch.Tensor
+    base: dict
+
+
+def training_data(args: Args, ck: dict | None, checkpoint: Path) -> TrainingData:
+    """The run's tasks (:func:`make_tasks`) as arrays; a checkpoint ``ck`` written for another
+    split is refused (:class:`sim.errors.ModelFileError` naming ``checkpoint``)."""
+    train_tasks, test_tasks, split = make_tasks(args)
+    if ck is not None and (ck.get("split") != split or ck.get("n_tasks") != len(train_tasks)):
+        raise ModelFileError(
+            str(checkpoint), None, f"written for another data split ({_show(ck.get('n_tasks'))} "
+            f"training clips, {_show(ck.get('split'))}); this run has {len(train_tasks)}, "
+            f"{_show(split)}",
+        )  # fmt: skip
+    feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
+    costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
+    costs = torch.as_tensor(costs_np.astype(np.float32))
+    base = baselines(test_tasks, args.keyframes)
+    return TrainingData(train_tasks, test_tasks, split, feats, costs_np, costs, base)
+
+
+def gradient_step(net, target, opt, memory, demos, data: TrainingData, rng, args: Args):
+    """One minibatch (:func:`sample_batch`), its TD loss plus the demonstrations' margin loss,
+    and one clipped Adam step; returns (loss, mean Q(s, a)) as floats."""
+    feats, costs, costs_np = data.feats, data.costs, data.costs_np
+    batch, demo_batch = sample_batch(memory, demos, rng, args)
+    loss, qm = td_loss(net, target, feats, costs, costs_np, batch, args)
+    if demo_batch is not None and args.margin_weight > 0:
+        loss = loss + args.margin_weight * margin_loss(
+            net, feats, costs, costs_np, demo_batch, args
+        )
+    opt.zero_grad()
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(net.parameters(), args.grad_clip)
+    opt.step()
+    return float(loss.detach()), float(qm)
 
 
 def train(args: Args) -> dict:
@@ -559,10 +373,10 @@ def train(args: Args) -> dict:
         ModelFileError: a checkpoint that ``--resume`` refuses (unsafe file, other format or
             other settings).
     """
-    # setup: files, checkpoint (checked before any data is read), data, networks, environments
+    # setup: files, checkpoint (checked before any data is read), data, networks, memories
     problems = settings_problems(args)
     if problems:
-        raise ValueError(problems[0])
+        raise UsageError(problems[0])
     torch.set_num_threads(args.threads)
     files = RunFiles.beside(args.out)
     resume = args.resume and files.checkpoint.exists()
@@ -570,35 +384,37 @@ def train(args: Args) -> dict:
     files.policy.parent.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(args.seed)
     torch.manual_seed(args.seed)
-
-    train_tasks, test_tasks, split = make_tasks(args)
-    if ck is not None and (ck.get("split") != split or ck.get("n_tasks") != len(train_tasks)):
-        raise ModelFileError(
-            str(files.checkpoint), None, f"written for another data split ({_show(ck.get('n_tasks'))} "
-            f"training clips, {_show(ck.get('split'))}); this run has {len(train_tasks)}, "
-            f"{_show(split)}",
-        )  # fmt: skip
-    n = train_tasks[0].n_frames
-    feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
-    costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
-    costs = torch.as_tensor(costs_np.astype(np.float32))
-    base = baselines(test_tasks, args.keyframes)
-
-    net, target, opt = make_networks(args, feats)
-    envs = [KeyframeEnv(train_tasks, args.keyframes) for _ in range(args.n_envs)]
+    data = training_data(args, ck, files.checkpoint)
+    n = data.train[0].n_frames
+    net, target, opt = make_networks(args, data.feats)
+    envs = [KeyframeEnv(data.train, args.keyframes) for _ in range(args.n_envs)]
     memory = ReplayMemory(args.buffer_size, n)
     demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
     if ck is not None:
         counters, log_rows = restore(
             ck, net, target, opt, memory, demos, rng, path=str(files.checkpoint),
-            keyframes=args.keyframes, n_tasks=len(train_tasks),
+            keyframes=args.keyframes, n_tasks=len(data.train),
         )  # fmt: skip
         seeds = [args.seed + 1000 * (counters["step"] + 1) + i for i in range(len(envs))]
     else:
         counters, log_rows = {"step": 0, "updates": 0, "episodes": 0}, []
         if args.demo_episodes:
-            play_demonstrations(KeyframeEnv(train_tasks, args.keyframes), demos, args, rng)
+            play_demonstrations(KeyframeEnv(data.train, args.keyframes), demos, args, rng)
         seeds = [args.seed + i for i in range(len(envs))]
+    step = run_loop(args, data, files, (net, target, opt), (memory, demos), envs, seeds,
+                    counters, log_rows, rng)  # fmt: skip
+    final = {w: log_rows[-1][f"dqn_W{w}"] for w in args.keyframes}
+    save_policy(net, files.policy, args, data.split, final, data.base)
+    return {"dqn": final, **data.base, "split": data.split, "steps": step}
+
+
+def run_loop(args, data, files, nets, memories, envs, seeds, counters, log_rows, rng) -> int:
+    """The training loop from ``counters`` to ``args.steps``: act in every environment
+    (ε-greedy), store n-step transitions, learn every ``train_frequency`` steps, evaluate, log
+    and checkpoint every ``eval_every``; returns the last step."""
+    net, target, opt = nets
+    memory, demos = memories
+    feats, costs, costs_np = data.feats, data.costs, data.costs_np
     step, updates, episodes = counters["step"], counters["updates"], counters["episodes"]
     started = [env.reset(seed=s) for env, s in zip(envs, seeds, strict=True)]
     obs, infos = [o for o, _ in started], [i for _, i in started]
@@ -608,9 +424,9 @@ def train(args: Args) -> dict:
     losses, q_mean = [], math.nan
     eps_steps = args.eps_fraction * args.steps
     if not log_rows:  # step 0: the untrained network = its prior (greedy, or the greedy rollout)
-        heldout = evaluate(net, test_tasks, args.keyframes)
+        heldout = evaluate(net, data.test, args.keyframes)
         row = log_row({"step": 0, "updates": 0, "episodes": 0}, 0.0, args.eps_start, math.nan,
-                      math.nan, heldout, base, args.keyframes)  # fmt: skip
+                      math.nan, heldout, data.base, args.keyframes)  # fmt: skip
         record(files, log_rows, row, args.keyframes)
 
     bar = tqdm(total=args.steps, initial=step, desc="train", disable=not args.progress)
@@ -639,44 +455,30 @@ def train(args: Args) -> dict:
             bar.update(1)
             # learn: one gradient step every train_frequency steps; hard target updates
             if step >= args.learning_starts and step % args.train_frequency == 0 and len(memory):
-                batch, demo_batch = sample_batch(memory, demos, rng, args)
-                loss, qm = td_loss(net, target, feats, costs, costs_np, batch, args)
-                if demo_batch is not None and args.margin_weight > 0:
-                    loss = loss + args.margin_weight * margin_loss(
-                        net, feats, costs, costs_np, demo_batch, args
-                    )
-                opt.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(net.parameters(), args.grad_clip)
-                opt.step()
+                loss, q_mean = gradient_step(net, target, opt, memory, demos, data, rng, args)
                 updates += 1
-                losses.append(float(loss.detach()))
-                q_mean = float(qm)
+                losses.append(loss)
                 if updates % args.target_update == 0:
                     target.load_state_dict(net.state_dict())
             # evaluate on the held-out clips, log, checkpoint
             if step % args.eval_every == 0 or step == args.steps:
-                heldout = evaluate(net, test_tasks, args.keyframes)
+                heldout = evaluate(net, data.test, args.keyframes)
                 counters = {"step": step, "updates": updates, "episodes": episodes}
                 row = log_row(
                     counters, elapsed0 + time.perf_counter() - t0,
                     linear_schedule(args.eps_start, args.eps_end, eps_steps, step),
-                    float(np.mean(losses)) if losses else math.nan, q_mean, heldout, base,
+                    float(np.mean(losses)) if losses else math.nan, q_mean, heldout, data.base,
                     args.keyframes,
                 )  # fmt: skip
                 losses = []
                 record(files, log_rows, row, args.keyframes)
-                state = training_state(
-                    net, target, opt, memory, demos, counters, log_rows, rng, split,
-                    len(train_tasks),
-                )  # fmt: skip
+                state = training_state(net, target, opt, memory, demos, counters, log_rows, rng,
+                                       data.split, len(data.train))  # fmt: skip
                 save_checkpoint(files.checkpoint, state, args)
                 bar.set_postfix(
-                    {f"W{w}": f"{heldout[w] / base['optimal'][w]:.3f}" for w in heldout}
+                    {f"W{w}": f"{heldout[w] / data.base['optimal'][w]:.3f}" for w in heldout}
                 )
             if step >= args.steps:
                 break
     bar.close()
-    final = {w: log_rows[-1][f"dqn_W{w}"] for w in args.keyframes}
-    save_policy(net, files.policy, args, split, final, base)
-    return {"dqn": final, **base, "split": split, "steps": step}
+    return step

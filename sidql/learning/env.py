@@ -40,6 +40,7 @@ from sidql.learning.tasks import (
     neighbours,
     synthetic_tasks,
 )
+from sim.errors import ArgumentTypeError, UsageError
 
 __all__ = [
     "ENV_ID", "FEATURE_CLIP", "RESET_OPTIONS", "InvalidActionError", "KeyframeActions",
@@ -87,7 +88,9 @@ def as_index(value, what: str) -> int:
     if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "iu":
         value = value.reshape(()).item()
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{what} must be an integer; got {value!r} ({type(value).__name__})")
+        raise ArgumentTypeError(
+            f"{what} must be an integer; got {value!r} ({type(value).__name__})"
+        )
     return operator.index(value)
 
 
@@ -143,11 +146,11 @@ class KeyframeEnv(gym.Env):
     ):
         self.tasks = list(synthetic_tasks(8, seed=0) if tasks is None else tasks)
         if not self.tasks:
-            raise ValueError("KeyframeEnv needs at least one task")
+            raise UsageError("KeyframeEnv needs at least one task")
         n, c = self.tasks[0].features.shape
         for t in self.tasks:
             if t.features.shape != (n, c):
-                raise ValueError(f"all tasks must have features ({n}, {c}); got {t.features.shape}")
+                raise UsageError(f"all tasks must have features ({n}, {c}); got {t.features.shape}")
         self.keyframe_counts = tuple(as_index(w, "keyframes") for w in keyframes)
         check_counts(self.keyframe_counts, n, least=LEAST_LEARNED_W, name="keyframe counts")
         self.n_frames = n
@@ -217,7 +220,7 @@ class KeyframeEnv(gym.Env):
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS), key=str)
         if unknown:
-            raise ValueError(
+            raise UsageError(
                 f"unknown reset option(s) {', '.join(map(repr, unknown))}; "
                 f"known: {', '.join(RESET_OPTIONS)}"
             )
@@ -226,7 +229,7 @@ class KeyframeEnv(gym.Env):
             i = int(self.np_random.integers(len(self.tasks)))
         i = as_index(i, "options['task']")
         if not 0 <= i < len(self.tasks):
-            raise ValueError(f"task index {i} out of range [0, {len(self.tasks)})")
+            raise UsageError(f"task index {i} out of range [0, {len(self.tasks)})")
         w = options.get("keyframes")
         if w is None:
             w = self.keyframe_counts[int(self.np_random.integers(len(self.keyframe_counts)))]

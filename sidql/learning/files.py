@@ -1,10 +1,10 @@
 """Policy and checkpoint files: tensors and plain values only, with a format version.
 
 A file is one ``torch.save`` of a dict whose ``"format"`` entry names its kind and version
-(:data:`POLICY_FORMAT`, :data:`CHECKPOINT_FORMAT`). Loading uses ``torch.load(weights_only=True)``,
-which rebuilds only tensors and plain Python values (dict, list, tuple, str, int, float, bool,
-None) and refuses any other pickled object *before* constructing it, so a crafted file cannot run
-code. Anything refused, unreadable or of another format raises
+(:data:`POLICY_FORMAT`, :data:`sidql.learning.checkpoint.CHECKPOINT_FORMAT`). Loading uses
+``torch.load(weights_only=True)``, which rebuilds only tensors and plain Python values (dict,
+list, tuple, str, int, float, bool, None) and refuses any other pickled object *before*
+constructing it, so a crafted file cannot run code. Anything refused, unreadable or of another format raises
 :class:`sim.errors.ModelFileError` (the CLI prints one line and exits 2).
 """
 
@@ -19,7 +19,7 @@ import zipfile
 
 import torch
 
-from sim.errors import ModelFileError, MotionDataError
+from sim.errors import ModelFileError, MotionDataError, UsageError
 from sim.files import MAX_CHECKPOINT_BYTES, excerpt, open_regular, write_atomic
 from sim.zipcheck import check_zip
 
@@ -27,9 +27,7 @@ from sim.zipcheck import check_zip
 #: Version 2: the head's layers are named modules (``adv_hidden``, ``adv_out``, ``value_hidden``,
 #: ``value_out``).
 POLICY_FORMAT = "sidql-dqn-policy/2"
-#: Kind and version of a training checkpoint (OUT.ckpt); replay memories are stored as tensors.
-CHECKPOINT_FORMAT = "sidql-dqn-checkpoint/2"
-
+#:
 
 #: Stated limits of a policy or checkpoint archive, checked on its zip directory before
 #: ``torch.load`` reads anything: members (one per tensor storage, plus a few) and the size of
@@ -75,7 +73,7 @@ def save_payload(path: str | os.PathLike, payload: dict) -> None:
     """Write ``payload`` (a dict with a ``"format"`` entry; tensors and plain values only)
     atomically to ``path``."""
     if "format" not in payload:
-        raise ValueError("a payload must name its format")
+        raise UsageError("a payload must name its format")
     buf = io.BytesIO()
     torch.save(payload, buf)
     write_atomic(path, lambda f: f.write(buf.getvalue()))

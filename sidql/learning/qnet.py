@@ -43,7 +43,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from sim.errors import UnknownNameError
+from sim.errors import UnknownNameError, UsageError
 
 #: What the learned part starts from: "greedy" (an untrained network ranks like greedy) or
 #: "rollout" (it ranks by the exact value of finishing greedily, :mod:`sidql.learning.rollout`).
@@ -162,7 +162,7 @@ class KeyframeQNet(nn.Module):
         more = (remaining > 1).to(enc.dtype)[:, None]
         if self.config["prior"] == "rollout":
             if prior is None:
-                raise ValueError("this network needs the rollout prior (sidql.learning.rollout)")
+                raise UsageError("this network needs the rollout prior (sidql.learning.rollout)")
             share = (prior.to(enc.dtype) / e_after.clamp(min=1e-9)).clamp(1e-4, 1 - 1e-4)
             logit = logit + torch.log(share / (1 - share))
         return g1 + more * e_after * torch.sigmoid(logit)

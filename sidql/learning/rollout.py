@@ -63,11 +63,12 @@ def greedy_sequences(cost, kmax):
 
 
 @numba.njit(cache=True)
-def _merge_sum(seqs, lens, count, k):
-    """Sum of the first ``k`` values of the head-merge of ``count`` sequences."""
+def _merge(seqs, lens, count, k, out):
+    """The first ``k`` values (at most) of the head-merge of ``count`` descending sequences
+    ``seqs`` (rows, ``lens`` long) into ``out``; returns how many."""
     pos = np.zeros(count, np.int64)
-    total = 0.0
-    for _ in range(k):
+    t = 0
+    while t < k:
         best = -np.inf
         bi = -1
         for i in range(count):
@@ -76,8 +77,19 @@ def _merge_sum(seqs, lens, count, k):
                 bi = i
         if bi < 0:
             break
-        total += best
+        out[t] = best
         pos[bi] += 1
+        t += 1
+    return t
+
+
+@numba.njit(cache=True)
+def _merge_sum(seqs, lens, count, k, buf):
+    """Sum of the first ``k`` values of the head-merge of ``count`` sequences (``buf``: scratch
+    of at least ``k``)."""
+    total = 0.0
+    for i in range(_merge(seqs, lens, count, k, buf)):
+        total += buf[i]
     return total
 
 
@@ -105,23 +117,10 @@ def rollout_values_seq(cost, mask, rem, seq, length):
                 buf[c] = seq[keys[i], keys[i + 1]]
                 blen[c] = length[keys[i], keys[i + 1]]
                 c += 1
-        pos = np.zeros(c, np.int64)
-        t = 0
-        while t < k:
-            best = -np.inf
-            bi = -1
-            for i in range(c):
-                if pos[i] < blen[i] and buf[i, pos[i]] > best:
-                    best = buf[i, pos[i]]
-                    bi = i
-            if bi < 0:
-                break
-            others[j, t] = best
-            pos[bi] += 1
-            t += 1
-        others_len[j] = t
+        others_len[j] = _merge(buf, blen, c, k, others[j])
     three = np.zeros((3, kmax))
     lens = np.zeros(3, np.int64)
+    scratch = np.zeros(k)
     for j in range(nk - 1):
         l0 = keys[j]
         r0 = keys[j + 1]
@@ -132,7 +131,7 @@ def rollout_values_seq(cost, mask, rem, seq, length):
             lens[1] = length[l0, a]
             three[2] = seq[a, r0]
             lens[2] = length[a, r0]
-            out[a] = _merge_sum(three, lens, 3, k) / s0
+            out[a] = _merge_sum(three, lens, 3, k, scratch) / s0
     return out
 
 

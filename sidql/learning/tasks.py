@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
-from sim.errors import MotionDataError, OutputError
+from sim.errors import MotionDataError, OutputError, UsageError
 from sim.files import write_atomic
 from sim.motion.clip import read_arrays
 from sim.motion.dataset import find_trials
@@ -63,11 +63,11 @@ class KeyframeTask:
     def __post_init__(self):
         n = self.features.shape[0]
         if self.features.ndim != 2 or n < 3:
-            raise ValueError(f"features must be (N >= 3, C); got {self.features.shape}")
+            raise UsageError(f"features must be (N >= 3, C); got {self.features.shape}")
         if self.cost.shape != (n, n):
-            raise ValueError(f"cost must be (N, N) = ({n}, {n}); got {self.cost.shape}")
+            raise UsageError(f"cost must be (N, N) = ({n}, {n}); got {self.cost.shape}")
         if self.n_bones < 1:
-            raise ValueError(f"n_bones must be positive; got {self.n_bones}")
+            raise UsageError(f"n_bones must be positive; got {self.n_bones}")
 
     @property
     def n_frames(self) -> int:

@@ -45,7 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.physics.contacts import Contacts, contact_metrics, physdiff_metrics
+from sim.physics.contact_metrics import contact_metrics, physdiff_metrics
+from sim.physics.contacts import Contacts
 from sim.physics.dynamics import Dynamics, summarise_dynamics
 from sim.physics.feet import HOLD_GAP
 from sim.physics.ground import Ground

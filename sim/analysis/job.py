@@ -33,16 +33,12 @@ import mujoco
 import numpy as np
 
 from sim.analysis.figures import EXCESS_KEYS, MotionPhysics, figures
+from sim.errors import UsageError
 from sim.model.capsules import bones_of
 from sim.model.kinematics import FOOT_POINTS, SOLE_POINTS
 from sim.motion.points import PointMotion
-from sim.physics.contacts import (
-    Contacts,
-    body_contacts,
-    lowest_body_point,
-    motion_contacts,
-    trial_contacts,
-)
+from sim.physics.contact_metrics import lowest_body_point
+from sim.physics.contacts import Contacts, body_contacts, motion_contacts, trial_contacts
 from sim.physics.dynamics import MU, InverseDynamics
 from sim.physics.ground import Ground, estimate_ground
 from sim.physics.ik import NON_ANATOMICAL, HumanoidIK, hinge_names, limit_excess
@@ -283,7 +279,7 @@ class PhysicsJob:
         else:
             p = np.asarray(positions, dtype=np.float64)
             if p.shape != orig.positions.shape:
-                raise ValueError(f"positions must be {orig.positions.shape}; got {p.shape}")
+                raise UsageError(f"positions must be {orig.positions.shape}; got {p.shape}")
             ref = PointMotion(self.names, self.parents, orig.positions, self.fps)
             mp = self.motion_physics(
                 p, ref, ground, _q_init(clip, self.model), velocities=velocities,

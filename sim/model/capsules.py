@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.humanoid import capsule_radius
 
 FLOOR = "floor"
@@ -55,12 +56,12 @@ def bones_of(names, parents, lengths=None) -> Bones:
     names = tuple(str(n) for n in names)
     parents = np.asarray(parents, dtype=np.int64)
     if parents.shape != (len(names),):
-        raise ValueError(f"parents must have {len(names)} entries; got shape {parents.shape}")
+        raise UsageError(f"parents must have {len(names)} entries; got shape {parents.shape}")
     if len(set(names)) != len(names):
-        raise ValueError(f"point names must be unique; got {names}")
+        raise UsageError(f"point names must be unique; got {names}")
     child = np.flatnonzero(parents >= 0)
     if np.any(parents[child] >= len(names)):
-        raise ValueError(f"parent index out of range in {parents.tolist()}")
+        raise UsageError(f"parent index out of range in {parents.tolist()}")
     L = np.full(len(names), 0.3) if lengths is None else np.asarray(lengths, dtype=np.float64)
     radius = np.array(
         [RADIUS_OVERRIDES.get(names[j], capsule_radius(names[j], float(L[j]))) for j in child]
@@ -149,7 +150,7 @@ def scene_xml(
     w.append("  </worldbody>")
     if collision_pairs is not None:
         if len(skeletons) != 1:
-            raise ValueError("collision pairs need exactly one skeleton")
+            raise UsageError("collision pairs need exactly one skeleton")
         prefix = skeletons[0][0]
         gname = [prefix + bones.names[j] for j in bones.child]
         w.append("  <contact>")

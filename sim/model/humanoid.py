@@ -112,6 +112,23 @@ def build_mjcf(
     Raises:
         MotionDataError: a bone name outside the grammar (or reserved), or a repeated bone name.
     """
+    _check_names(skeleton)
+    C = bone_frames(skeleton)
+    ends = bone_end_offsets(skeleton)
+    mass = body_masses(geom_volumes(skeleton), body_mass_kg)
+    children: dict[str, list] = {}
+    for b in skeleton.bones:
+        children.setdefault(b.parent, []).append(b)
+    name = model_name or f"cmu_humanoid_{skeleton.name or 'skeleton'}"
+    out = _HEAD.format(name=quoteattr(name), root_mass=f"{mass['root']:.6g}").split("\n")
+    for b in children.get("root", []):
+        _body_xml(b, 3, np.zeros(3), C, ends, mass, children, out)
+    out += _TAIL
+    return "\n".join(out) + "\n"
+
+
+def _check_names(skeleton: Skeleton) -> None:
+    """Every bone name within the grammar (:func:`sim.acclaim.asf.check_bone_name`), none twice."""
     seen = set()
     for b in skeleton.bones:
         problem = check_bone_name(b.name) or (
@@ -120,78 +137,66 @@ def build_mjcf(
         if problem:
             raise MotionDataError(skeleton.path or None, b.line, problem)
         seen.add(b.name)
-    C = bone_frames(skeleton)
-    ends = bone_end_offsets(skeleton)
-    mass = body_masses(geom_volumes(skeleton), body_mass_kg)
-    children: dict[str, list] = {}
-    for b in skeleton.bones:
-        children.setdefault(b.parent, []).append(b)
-    name = model_name or f"cmu_humanoid_{skeleton.name or 'skeleton'}"
 
-    out: list[str] = []
+
+#: The model's lines before the root's child bodies (``{name}``: the quoted model name,
+#: ``{root_mass}``: the pelvis' mass) and after them.
+_HEAD = """<mujoco model={name}>
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="0.002" gravity="0 0 -9.81"/>
+  <visual>
+    <global offwidth="1280" offheight="720" elevation="-15"/>
+    <quality shadowsize="0"/>
+    <headlight ambient="0.35 0.35 0.35" diffuse="0.6 0.6 0.6" specular="0.1 0.1 0.1"/>
+  </visual>
+  <asset>
+    <texture name="grid" type="2d" builtin="checker" width="256" height="256" \
+rgb1="0.82 0.84 0.86" rgb2="0.7 0.73 0.76" mark="edge" markrgb="0.55 0.58 0.62"/>
+    <material name="grid" texture="grid" texrepeat="1 1" texuniform="true" reflectance="0"/>
+    <material name="body" rgba="0.85 0.55 0.3 1"/>
+  </asset>
+  <default>
+    <joint type="hinge" damping="0.5" armature="0.01"/>
+    <geom type="capsule" material="body" contype="1" conaffinity="1" density="1000"/>
+    <site size="0.012" rgba="0.2 0.3 0.9 1" group="3"/>
+  </default>
+  <worldbody>
+    <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="false"/>
+    <geom name="floor" type="plane" size="0 0 0.05" material="grid"/>
+    <body name="root" pos="0 0 1">
+      <freejoint name="root"/>
+      <camera name="follow" mode="trackcom" pos="0 -3.6 0.4" xyaxes="1 0 0 0 0.15 1"/>
+      <camera name="side" mode="trackcom" pos="3.6 0 0.4" xyaxes="0 1 0 -0.15 0 1"/>
+      <geom name="root" type="sphere" size="{ROOT_RADIUS}" mass="{root_mass}"/>
+      <site name="root_end" pos="0 0 0"/>""".replace("{ROOT_RADIUS}", str(ROOT_RADIUS))
+_TAIL = ["    </body>", "  </worldbody>", "</mujoco>"]
+
+
+def _body_xml(b, depth: int, pos: np.ndarray, C, ends, mass, children, out: list[str]) -> None:
+    """Append the lines of bone ``b``'s body (its hinges, geom and end site) and, nested in it,
+    its children's to ``out``; ``pos``: its origin in its parent's frame [m]."""
     w = out.append
-
-    def body(b, depth: int, pos: np.ndarray):
-        ind = "  " * depth
-        q = quat.from_matrix(C[b.parent].T @ C[b.name])
-        w(f'{ind}<body name="{b.name}" pos="{_fmt(pos)}" quat="{_fmt(q)}">')
-        for dof, (lo, hi) in reversed(list(zip(b.dofs, b.limits, strict=True))):
-            axis = {"rx": "1 0 0", "ry": "0 1 0", "rz": "0 0 1"}[dof]
-            rng = _fmt(np.deg2rad([lo, hi]))
-            w(f'{ind}  <joint name="{b.name}_{dof}" axis="{axis}" range="{rng}"/>')
-        end = ends[b.name]
-        r = capsule_radius(b.name, b.length)
-        if b.length > 2 * r:
-            # Shorten the capsule by its radius at both ends so neighbours touch, not overlap.
-            u = end / b.length
-            w(f'{ind}  <geom name="{b.name}" fromto="{_fmt(u * r * 0.5)} {_fmt(end - u * r * 0.5)}"'
-              f' size="{r:.4g}" mass="{mass[b.name]:.6g}"/>')  # fmt: skip
-        else:
-            w(f'{ind}  <geom name="{b.name}" type="sphere" pos="{_fmt(end / 2)}" size="{r:.4g}"'
-              f' mass="{mass[b.name]:.6g}"/>')  # fmt: skip
-        w(f'{ind}  <site name="{b.name}_end" pos="{_fmt(end)}"/>')
-        for c in children.get(b.name, []):
-            body(c, depth + 1, end)
-        w(f"{ind}</body>")
-
-    w(f"<mujoco model={quoteattr(name)}>")
-    w('  <compiler angle="radian" autolimits="true"/>')
-    w('  <option timestep="0.002" gravity="0 0 -9.81"/>')
-    w("  <visual>")
-    w('    <global offwidth="1280" offheight="720" elevation="-15"/>')
-    w('    <quality shadowsize="0"/>')
-    w('    <headlight ambient="0.35 0.35 0.35" diffuse="0.6 0.6 0.6" specular="0.1 0.1 0.1"/>')
-    w("  </visual>")
-    w("  <asset>")
-    w(
-        '    <texture name="grid" type="2d" builtin="checker" width="256" height="256"'
-        ' rgb1="0.82 0.84 0.86" rgb2="0.7 0.73 0.76" mark="edge" markrgb="0.55 0.58 0.62"/>'
-    )
-    w(
-        '    <material name="grid" texture="grid" texrepeat="1 1" texuniform="true" reflectance="0"/>'
-    )
-    w('    <material name="body" rgba="0.85 0.55 0.3 1"/>')
-    w("  </asset>")
-    w("  <default>")
-    w('    <joint type="hinge" damping="0.5" armature="0.01"/>')
-    w('    <geom type="capsule" material="body" contype="1" conaffinity="1" density="1000"/>')
-    w('    <site size="0.012" rgba="0.2 0.3 0.9 1" group="3"/>')
-    w("  </default>")
-    w("  <worldbody>")
-    w('    <light name="sun" directional="true" pos="0 0 5" dir="-0.3 0.3 -1" castshadow="false"/>')
-    w('    <geom name="floor" type="plane" size="0 0 0.05" material="grid"/>')
-    w('    <body name="root" pos="0 0 1">')
-    w('      <freejoint name="root"/>')
-    w('      <camera name="follow" mode="trackcom" pos="0 -3.6 0.4" xyaxes="1 0 0 0 0.15 1"/>')
-    w('      <camera name="side" mode="trackcom" pos="3.6 0 0.4" xyaxes="0 1 0 -0.15 0 1"/>')
-    w(f'      <geom name="root" type="sphere" size="{ROOT_RADIUS}" mass="{mass["root"]:.6g}"/>')
-    w('      <site name="root_end" pos="0 0 0"/>')
-    for b in children.get("root", []):
-        body(b, 3, np.zeros(3))
-    w("    </body>")
-    w("  </worldbody>")
-    w("</mujoco>")
-    return "\n".join(out) + "\n"
+    ind = "  " * depth
+    q = quat.from_matrix(C[b.parent].T @ C[b.name])
+    w(f'{ind}<body name="{b.name}" pos="{_fmt(pos)}" quat="{_fmt(q)}">')
+    for dof, (lo, hi) in reversed(list(zip(b.dofs, b.limits, strict=True))):
+        axis = {"rx": "1 0 0", "ry": "0 1 0", "rz": "0 0 1"}[dof]
+        rng = _fmt(np.deg2rad([lo, hi]))
+        w(f'{ind}  <joint name="{b.name}_{dof}" axis="{axis}" range="{rng}"/>')
+    end = ends[b.name]
+    r = capsule_radius(b.name, b.length)
+    if b.length > 2 * r:
+        # Shorten the capsule by its radius at both ends so neighbours touch, not overlap.
+        u = end / b.length
+        w(f'{ind}  <geom name="{b.name}" fromto="{_fmt(u * r * 0.5)} {_fmt(end - u * r * 0.5)}"'
+          f' size="{r:.4g}" mass="{mass[b.name]:.6g}"/>')  # fmt: skip
+    else:
+        w(f'{ind}  <geom name="{b.name}" type="sphere" pos="{_fmt(end / 2)}" size="{r:.4g}"'
+          f' mass="{mass[b.name]:.6g}"/>')  # fmt: skip
+    w(f'{ind}  <site name="{b.name}_end" pos="{_fmt(end)}"/>')
+    for c in children.get(b.name, []):
+        _body_xml(c, depth + 1, end, C, ends, mass, children, out)
+    w(f"{ind}</body>")
 
 
 @lru_cache(maxsize=64)

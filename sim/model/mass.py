@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from sim.errors import UnknownNameError
+from sim.errors import UnknownNameError, UsageError
 
 DEFAULT_BODY_MASS_KG = 75.0
 
@@ -82,7 +82,7 @@ def body_masses(
         body name -> mass [kg]; the masses sum to ``total_kg``.
     """
     if not (math.isfinite(total_kg) and total_kg > 0):
-        raise ValueError(f"total body mass must be positive and finite, got {total_kg!r}")
+        raise UsageError(f"total body mass must be positive and finite, got {total_kg!r}")
     fractions = segment_fractions(sex)
     segment_of = {b: CMU_SEGMENT[b] for b in volumes if b in CMU_SEGMENT}
     present = set(segment_of.values())

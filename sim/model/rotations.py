@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.angles import wrap_angle
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
@@ -105,7 +106,7 @@ def continuous_euler(angles: np.ndarray, order: str) -> np.ndarray:
     """
     a = np.asarray(angles, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != len(order):
-        raise ValueError(f"angles must be (T, {len(order)}); got {a.shape}")
+        raise UsageError(f"angles must be (T, {len(order)}); got {a.shape}")
     T, k = a.shape
     if T < 2:
         return a.copy()

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.lib import format as npformat
 
-from sim.errors import MotionDataError, OutputError, UnknownNameError
+from sim.errors import MotionDataError, OutputError, UnknownNameError, UsageError, require_type
 from sim.files import MAX_NPZ_BYTES, excerpt, open_regular, write_atomic
 from sim.zipcheck import check_zip
 
@@ -73,28 +73,28 @@ class Clip:
     def __post_init__(self):
         T, J = self.positions.shape[:2]
         if self.positions.shape != (T, J, 3) or self.velocities.shape != (T, J, 3):
-            raise ValueError(
+            raise UsageError(
                 f"positions/velocities must be (T, J, 3); got {self.positions.shape} "
                 f"and {self.velocities.shape}"
             )
         if len(self.names) != J or self.parents.shape != (J,):
-            raise ValueError(f"names and parents must have J={J} entries")
+            raise UsageError(f"names and parents must have J={J} entries")
         if self.rotations.shape != (T, J, 4):
-            raise ValueError(f"rotations must be (T, J, 4); got {self.rotations.shape}")
+            raise UsageError(f"rotations must be (T, J, 4); got {self.rotations.shape}")
         if self.qpos.shape[0] != T or self.qvel.shape[0] != T:
-            raise ValueError("qpos and qvel must have T rows")
+            raise UsageError("qpos and qvel must have T rows")
         if self.angular_velocities is not None and self.angular_velocities.shape != (T, J, 3):
-            raise ValueError(
+            raise UsageError(
                 f"angular_velocities must be (T, J, 3); got {self.angular_velocities.shape}"
             )
         for name in ("source_velocities", "accelerations"):
             a = getattr(self, name)
             if a is not None and a.shape != (T, J, 3):
-                raise ValueError(f"{name} must be (T, J, 3); got {a.shape}")
+                raise UsageError(f"{name} must be (T, J, 3); got {a.shape}")
         if self.derivative_noise is not None and self.derivative_noise.shape != (T, J):
-            raise ValueError(f"derivative_noise must be (T, J); got {self.derivative_noise.shape}")
+            raise UsageError(f"derivative_noise must be (T, J); got {self.derivative_noise.shape}")
         if self.fps <= 0:
-            raise ValueError(f"fps must be positive; got {self.fps}")
+            raise UsageError(f"fps must be positive; got {self.fps}")
 
     @property
     def n_frames(self) -> int:
@@ -124,7 +124,7 @@ class Clip:
     def slice(self, start: int, stop: int) -> Clip:
         """Frames ``[start, stop)`` of this clip, with ``start_frame`` kept in source frames."""
         if not 0 <= start < stop <= self.n_frames:
-            raise ValueError(f"bad slice [{start}, {stop}) of a {self.n_frames}-frame clip")
+            raise UsageError(f"bad slice [{start}, {stop}) of a {self.n_frames}-frame clip")
         step = self.source_fps / self.fps
         return replace(
             self,
@@ -164,6 +164,7 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None, *, 
     under their own names (per-frame labels of simulated clips: :func:`load_npz` ignores them,
     :func:`load_extra` reads them).
     """
+    require_type(clip, Clip, "clip")
     path = Path(path)
     payload = {k: getattr(clip, k) for k in _ARRAY_KEYS}
     for name in _OPTIONAL_KEYS:
@@ -179,7 +180,7 @@ def save_npz(clip: Clip, path: str | os.PathLike, extra: dict | None = None, *, 
     )
     clash = set(extra or {}) & (set(payload) | set(_OPTIONAL_KEYS))
     if clash:
-        raise ValueError(f"extra arrays {sorted(clash)} would overwrite clip keys")
+        raise UsageError(f"extra arrays {sorted(clash)} would overwrite clip keys")
     payload.update(extra or {})
     T, J = clip.positions.shape[:2]
     for what, n, limit in (("frames", T, MAX_CLIP_FRAMES), ("points", J, MAX_POINTS),

@@ -167,6 +167,7 @@ def load_motion(
     """
     if skeleton not in SKELETONS:
         raise UnknownNameError("skeleton", skeleton, SKELETONS)
+    resample_step(source_fps, fps)  # refused before any file is read
     subject, model = subject_model(asf)
     motion = parse_amc(amc, subject)
     _check_memory(amc, motion.n_frames, len(point_names(subject)))
@@ -209,5 +210,11 @@ def load_clips(
     length: int = 60,
     skeleton: str = "subject",
 ) -> list[Clip]:
-    """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``."""
+    """Non-overlapping ``length``-frame clips from frame 0 of a trial at ``fps``.
+
+    Raises:
+        UsageError: ``length`` is not a whole number of frames >= 2 (and as :func:`load_motion`).
+    """
+    if isinstance(length, bool) or not isinstance(length, (int, np.integer)) or length < 2:
+        raise UsageError(f"clip length must be a whole number of frames >= 2; got {length!r}")
     return load_motion(asf, amc, skeleton=skeleton, fps=fps).split(length)

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.errors import UnknownNameError
+from sim.errors import UnknownNameError, UsageError
 
 
 def finite_velocity(positions: np.ndarray, fps: float) -> np.ndarray:
@@ -47,19 +47,19 @@ class PointMotion:
     def __post_init__(self):
         T, P = self.positions.shape[:2]
         if self.positions.shape != (T, P, 3):
-            raise ValueError(f"positions must be (T, P, 3); got {self.positions.shape}")
+            raise UsageError(f"positions must be (T, P, 3); got {self.positions.shape}")
         if len(self.names) != P or np.shape(self.parents) != (P,):
-            raise ValueError(f"names and parents must have P={P} entries")
+            raise UsageError(f"names and parents must have P={P} entries")
         if self.velocities is not None and self.velocities.shape != (T, P, 3):
-            raise ValueError(f"velocities must be {(T, P, 3)}; got {self.velocities.shape}")
+            raise UsageError(f"velocities must be {(T, P, 3)}; got {self.velocities.shape}")
         if self.qpos is not None and (
             self.qpos.shape[0] != T or self.qpos.shape[1] != 7 + len(self.joint_names)
         ):
-            raise ValueError(
+            raise UsageError(
                 f"qpos must be (T, 7 + {len(self.joint_names)}); got {self.qpos.shape}"
             )
         if self.fps <= 0:
-            raise ValueError(f"fps must be positive; got {self.fps}")
+            raise UsageError(f"fps must be positive; got {self.fps}")
 
     @property
     def n_frames(self) -> int:

@@ -12,12 +12,13 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from sim.errors import require_positive
 from sim.model import quaternion as quat
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import SOLE_POINTS, point_names, point_parents
 from sim.model.rotations import Y_UP_TO_Z_UP, axis_rotation
 from sim.motion.clip import Clip
-from sim.motion.ingest import CMU_FPS, clip_from_qpos
+from sim.motion.ingest import CMU_FPS, clip_from_qpos, resample_step
 
 
 def synthetic_qpos(
@@ -88,7 +89,12 @@ def synthetic_motion(seconds: float = 4.0, *, seed: int = 0, fps: float = 30.0) 
     """A synthetic clip on the shared humanoid at ``fps`` (sampled at 120 Hz underneath).
 
     Points and parents follow the canonical CMU skeleton (root + 30 bones).
+
+    Raises:
+        UsageError: ``seconds`` or ``fps`` not positive, or ``fps`` not dividing 120.
     """
+    require_positive(seconds, "seconds")
+    resample_step(CMU_FPS, fps)
     skeleton, model = humanoid_model()
     data = mujoco.MjData(model)  # the job's MuJoCo state, shared by both passes
     qpos, _ = synthetic_qpos(model, seconds, seed=seed, data=data)

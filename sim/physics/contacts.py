@@ -1,4 +1,6 @@
-"""Foot contacts from the sole's geometry, and contact metrics of a motion against the original's.
+"""Foot-floor contact: which feet (and other body points) rest on the floor, labelled from the
+sole's geometry against the trial's floor. (Not the touching of two bones: that is
+:func:`sim.replay.checks.self_penetration_excess`'s.)
 
 Labels (:func:`label_contacts`): a foot is in contact while the lowest of its sole spheres
 (:mod:`sim.physics.feet`) is on the floor. "On the floor" is judged over the frame's own time
@@ -21,22 +23,10 @@ forces may act too. The labels of a whole trial are made once
 (:func:`trial_contacts`); a clip's are a slice of them, and a reconstruction's own labels start
 from the original's state at its first frame (keyframe 0 is the original's frame).
 
-Metrics of a motion against the original's contacts, per (frame, foot), each a mean with its
-sample count:
+Metrics of a motion against the original's contacts: :mod:`sim.physics.contact_metrics`;
+what the renderer draws at the feet: :mod:`sim.physics.foot_state`.
 
-* ``penetration_mm``: depth of the foot's lowest sole point below the floor, over every sample;
-* ``float_mm``: its height above the floor where the *original's* foot is in contact;
-* ``skate_mm_s``: the horizontal speed of that point over the same samples;
-* ``contact_precision``/``contact_recall``: the motion's own labels against the original's.
-
-PhysDiff's definitions (Yuan et al., ICCV 2023, after UHC's evaluation; :func:`physdiff_metrics`),
-named as such so our numbers can sit beside published tables: per frame the lowest point of the
-whole body's surface (the sole spheres and every bone's capsule of :mod:`sim.model.capsules`)
-against the floor, ``physdiff_penetrate_mm`` its depth below, ``physdiff_float_mm`` its height
-above beyond a 5 mm tolerance, means over frames; ``physdiff_skate`` the share of frames in which
-a foot in contact in both that frame and the previous one moves more than 2.5 cm horizontally.
-
-Units: metres and m/s in, millimetres and mm/s out.
+Units: metres, seconds, metres per second.
 """
 
 from __future__ import annotations
@@ -45,13 +35,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.capsules import bones_of
-from sim.model.kinematics import FOOT_POINTS, foot_points
-from sim.motion.points import PointMotion
+from sim.model.kinematics import FOOT_POINTS
 from sim.physics.feet import (
     CONTACT_GAP,
     ENTER_SPEED,
-    FOOT_PART,
     HOLD_GAP,
     HOLD_SPEED,
     ROLL_BACK,
@@ -65,11 +54,7 @@ from sim.physics.feet import (
     Sole,
     sole,
 )
-from sim.physics.foot_state import FootState
 from sim.physics.ground import Ground, horizontal_speed, runs, speed
-
-#: PhysDiff's float tolerance [m] and skate threshold [m of horizontal travel between frames].
-PHYSDIFF_FLOAT_TOL, PHYSDIFF_SKATE_M = 0.005, 0.025
 
 
 def point_speed(positions: np.ndarray, fps: float) -> np.ndarray:
@@ -177,9 +162,9 @@ def label_contacts(
     """
     gap, hspeed = np.asarray(gap, dtype=np.float64), np.asarray(hspeed, dtype=np.float64)
     if gap.shape != hspeed.shape or gap.ndim != 2:
-        raise ValueError(f"gap and hspeed must both be (T, F); got {gap.shape}, {hspeed.shape}")
+        raise UsageError(f"gap and hspeed must both be (T, F); got {gap.shape}, {hspeed.shape}")
     if release < 0:
-        raise ValueError("release must be >= 0")
+        raise UsageError("release must be >= 0")
     vs = np.zeros_like(gap) if vspeed is None else np.abs(np.asarray(vspeed, dtype=np.float64))
     enter_all = (gap <= enter) & (hspeed < enter_speed)
     stay_all = gap <= enter + release
@@ -437,136 +422,3 @@ def trial_contacts(
         return c
     body = body_contacts(positions, names, parents, fps, ground, points=body_points)
     return replace(c, body=body)
-
-
-def _mean(x: np.ndarray) -> tuple[float, int]:
-    return (float(x.mean()) if x.size else float("nan")), int(x.size)
-
-
-def contact_metrics(reference: np.ndarray, motion: Contacts) -> dict[str, float]:
-    """Contact metrics of ``motion`` against the original's labels ``reference`` (T, F) (same
-    feet, same frames); see the module docstring.
-
-    Returns:
-        ``penetration_mm`` (+ ``penetration_n``, ``penetration_max_mm``), ``float_mm``
-        (+ ``float_n``), ``skate_mm_s`` (+ ``skate_n``), ``contact_precision`` (+
-        ``contact_precision_n``: the motion's contact samples), ``contact_recall`` (+
-        ``contact_recall_n``: the original's). Means over no samples are NaN.
-    """
-    ref = np.asarray(reference, dtype=bool)
-    own, h, v = motion.contact, motion.foot_gap, motion.foot_speed
-    if not (ref.shape == own.shape == h.shape == v.shape):
-        raise ValueError("contact metrics need arrays of one shape (T, F)")
-    pen, n_pen = _mean(np.maximum(-h, 0.0).ravel())
-    flo, n_flo = _mean(np.maximum(h[ref], 0.0))
-    sk, n_sk = _mean(v[ref])
-    tp = int((ref & own).sum())
-    return {
-        "penetration_mm": 1e3 * pen,
-        "penetration_n": n_pen,
-        "penetration_max_mm": 1e3 * float(np.maximum(-h, 0.0).max(initial=0.0)),
-        "float_mm": 1e3 * flo,
-        "float_n": n_flo,
-        "skate_mm_s": 1e3 * sk,
-        "skate_n": n_sk,
-        "contact_precision": tp / own.sum() if own.any() else float("nan"),
-        "contact_precision_n": int(own.sum()),
-        "contact_recall": tp / ref.sum() if ref.any() else float("nan"),
-        "contact_recall_n": int(ref.sum()),
-    }
-
-
-def lowest_body_point(
-    positions, names, parents, radius, ground: Ground, s: Sole, *, bones=None
-) -> np.ndarray:
-    """(T,) height [m] above the floor of the lowest point of the body's surface: the capsule of
-    every bone (``radius`` (B,) for the B non-root points in order, on the segment from its
-    parent; ``bones`` (B,) bool: which count, default all) and the sole spheres of ``s`` (their
-    gaps, with the feet's stance offsets)."""
-    p = np.asarray(positions, dtype=np.float64)
-    parents = np.asarray(parents)
-    child = np.flatnonzero(parents >= 0)
-    keep = np.ones(len(child), dtype=bool) if bones is None else np.asarray(bones, dtype=bool)
-    child, r = child[keep], np.asarray(radius, dtype=np.float64)[keep]
-    sole_low = ground.gaps(s).min(axis=1)
-    if not len(child):
-        return sole_low
-    ends = np.concatenate([p[:, child], p[:, parents[child]]], axis=1)  # (T, 2B, 3)
-    h = ends[..., 2] - ground.level(ends[..., :2]) - np.concatenate([r, r])
-    return np.minimum(h.min(axis=1), sole_low)
-
-
-def physdiff_metrics(lowest: np.ndarray, contacts: Contacts, fps: float) -> dict[str, float]:
-    """PhysDiff's ground metrics (see the module docstring) from the lowest body point's height
-    ``lowest`` (T,) [m] and the motion's own foot contacts.
-
-    Returns ``physdiff_penetrate_mm``, ``physdiff_float_mm`` (means over frames) and
-    ``physdiff_skate`` (share of frame pairs), with ``physdiff_n`` frames."""
-    lo = np.asarray(lowest, dtype=np.float64)
-    c = contacts.contact
-    step = np.linalg.norm(np.diff(contacts.lowest[..., :2], axis=0), axis=-1)  # (T-1, F)
-    both = c[1:] & c[:-1]
-    skate = (both & (step > PHYSDIFF_SKATE_M)).any(axis=1)
-    return {
-        "physdiff_penetrate_mm": 1e3 * float(np.maximum(-lo, 0.0).mean()) if lo.size else 0.0,
-        "physdiff_float_mm": 1e3 * float(np.maximum(lo - PHYSDIFF_FLOAT_TOL, 0.0).mean())
-        if lo.size
-        else 0.0,
-        "physdiff_skate": float(skate.mean()) if skate.size else 0.0,
-        "physdiff_n": int(lo.size),
-    }
-
-
-#: Flags of a reconstruction's foot against the original's contacts, for drawing: floating
-#: higher than this above the floor while the original's is in contact [m], sinking deeper than
-#: this below it [m], skating this much faster horizontally [m/s] while the original's stands.
-FLOAT_HEIGHT, SINK_DEPTH, SKATE_SPEED = 0.03, 0.02, 0.3
-
-
-def _point_rows(c: Contacts, points) -> tuple[np.ndarray, np.ndarray]:
-    """Per foot point (ankle, ball, toes) its foot's label and its part's gap (T, P): the
-    ankle stands for the heel sphere, the ball for the ball sphere, the toes for the toes'."""
-    part = {"heel": "heel", "ball": "ball", "toes": "toes"}
-    T = c.contact.shape[0]
-    lab, gap = np.zeros((T, len(points)), bool), np.zeros((T, len(points)))
-    for j, n in enumerate(points):
-        x, want = FOOT_PART[n].split("_")
-        f = c.sides.index(x)
-        ks = [k for k in c.sole.of(x) if c.sole.part[k] == part[want]] or list(c.sole.of(x))
-        gap[:, j] = c.gap[:, ks].min(axis=1)
-        lab[:, j] = c.contact[:, f] & (gap[:, j] <= SUPPORT_GAP)
-    return lab, gap
-
-
-def foot_states(
-    original: PointMotion, reconstruction: PointMotion | None, ground: Ground
-) -> FootState:
-    """What the renderer draws at the foot points both motions have: the original's foot in
-    contact (:func:`motion_contacts`), and the reconstruction's flags by :data:`FLOAT_HEIGHT`,
-    :data:`SINK_DEPTH` and :data:`SKATE_SPEED` (``None``: no flags)."""
-    names = foot_points(original.names)
-    if reconstruction is not None:
-        names = tuple(n for n in names if n in reconstruction.names)
-    o = motion_contacts(original.positions, original.names, original.fps, ground)
-    names = tuple(n for n in names if n[0] in o.sides)
-    contact, _ = _point_rows(o, names)
-    if reconstruction is None:
-        no = np.zeros_like(contact)
-        return FootState(names, contact, contact.copy(), no, no.copy(), no.copy())
-    r = motion_contacts(
-        reconstruction.positions, reconstruction.names, reconstruction.fps, ground,
-        initial=o.contact[0],
-    )  # fmt: skip
-    rec_contact, h_r = _point_rows(r, names)
-    idx_o = [original.names.index(n) for n in names]
-    idx_r = [reconstruction.names.index(n) for n in names]
-    s_o = horizontal_speed(original.positions[:, idx_o], original.fps)
-    s_r = horizontal_speed(reconstruction.positions[:, idx_r], reconstruction.fps)
-    return FootState(
-        points=names,
-        contact=contact,
-        rec_contact=rec_contact,
-        floating=contact & (h_r > FLOAT_HEIGHT),
-        sinking=h_r < -SINK_DEPTH,
-        skating=contact & (s_r - s_o > SKATE_SPEED),
-    )

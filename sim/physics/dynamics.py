@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import savgol_filter
 
+from sim.errors import UsageError
 from sim.model.angles import wrap_angle
 
 MU = 0.8  # friction coefficient of the ground (shoe sole on a floor)
@@ -226,13 +227,13 @@ class InverseDynamics:
         qpos = np.asarray(qpos, dtype=np.float64)
         T = len(qpos)
         if (qvel is None) != (qacc is None):
-            raise ValueError("give both qvel and qacc, or neither")
+            raise UsageError("give both qvel and qacc, or neither")
         if qvel is None:
             qvel, qacc = derivatives(
                 self.model, qpos, fps, window=self.window, polyorder=self.polyorder
             )
         elif np.shape(qvel) != (T, self.model.nv) or np.shape(qacc) != (T, self.model.nv):
-            raise ValueError(f"qvel and qacc must be {(T, self.model.nv)}")
+            raise UsageError(f"qvel and qacc must be {(T, self.model.nv)}")
         H = self.model.nv - 6
         out = {k: np.zeros((T, 3)) for k in ("com", "F", "tau", "rF", "rtau", "cF")}
         jt = np.zeros((T, H))

@@ -1,10 +1,11 @@
 """The foot: its sole's geometry, and the thresholds of when it touches the floor.
 
-The one definition of the sole and of the foot-floor contact thresholds (which points stand for
-the feet: :mod:`sim.model.kinematics`): :mod:`sim.physics.ground` (the floor),
-:mod:`sim.physics.contacts` (labels and metrics), :mod:`sim.analysis.job` (where ground forces
-act), :mod:`sim.replay.checks` (the kinematic replay's foot contacts) and the simulator's feet
-(:mod:`sim.simulate`) all read it.
+Where the sole's geometry and the foot-floor contact thresholds are defined (which points stand
+for the feet: :mod:`sim.model.kinematics`; the contact labels made with them:
+:mod:`sim.physics.contacts`): :mod:`sim.physics.ground` (the floor), :mod:`sim.physics.contacts`
+(labels), :mod:`sim.analysis.job` (where ground forces act), :mod:`sim.replay.checks` (the
+kinematic replay's foot contacts) and the simulator's feet (:mod:`sim.simulate`) all read it.
+Bones touching each other (self-penetration) are another idea: :mod:`sim.replay.checks`.
 
 The sole is the humanoid's own foot geometry (:func:`sim.model.humanoid.build_mjcf`, the body the
 dynamics and the simulator use): the foot bone's capsule from the ankle to the ball, shortened by
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.humanoid import capsule_radius
 from sim.model.kinematics import SIDES
 
@@ -143,7 +145,7 @@ def sole(positions: np.ndarray, names) -> Sole:
                 parts.append("toes")
                 bodies.append(s + "toes")
     if not centres:
-        raise ValueError(f"no foot with both ankle and ball among {names}; need e.g. ltibia, lfoot")
+        raise UsageError(f"no foot with both ankle and ball among {names}; need e.g. ltibia, lfoot")
     return Sole(
         np.stack(centres, axis=1), np.array(radius), tuple(sides), tuple(parts), tuple(bodies)
     )

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.model.kinematics import FOOT_POINTS, SIDES, foot_points
 from sim.physics.feet import Sole, sole
 
@@ -270,11 +271,11 @@ def estimate_ground(
     names = tuple(names)
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (len(names), 3) or p.shape[0] < 1:
-        raise ValueError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
+        raise UsageError(f"positions must be (T, {len(names)}, 3); got {p.shape}")
     if not np.all(np.isfinite(p)):
-        raise ValueError("positions must be finite")
+        raise UsageError("positions must be finite")
     if not foot_points(names):
-        raise ValueError(f"no foot point among {names}; need one of {FOOT_POINTS}")
+        raise UsageError(f"no foot point among {names}; need one of {FOOT_POINTS}")
     s = sole(p, names)
     low, idx = lowest_points(s)  # (T, F, 3), (T, F)
     T, F = low.shape[:2]
@@ -304,11 +305,21 @@ def estimate_ground(
     z0 = float(c[0] + off.min())
     ground = Ground(z0, s.sides, off - off.min(), 0, (float(slope[0]), float(slope[1])),
                     (float(origin[0]), float(origin[1])))  # fmt: skip
+    return _with_fit(ground, low, still, band, len(prints), int((w > 0).sum()))
+
+
+def _with_fit(
+    ground: Ground, low: np.ndarray, still: np.ndarray, band: float, footprints: int, inliers: int
+) -> Ground:
+    """``ground`` with how well it fits the planted feet: ``low`` (T, F, 3) the feet's lowest
+    sole points [m], ``still`` (T, F) bool the still feet, ``band`` [m] (see
+    :func:`estimate_ground`); ``footprints`` and ``inliers`` of the plane's fit."""
+    T = low.shape[0]
     gap = low[..., 2] - ground.level(low[..., :2]) - ground.offset[None, :]  # (T, F)
     planted = still & (np.abs(gap) < band)
     n = int(planted.sum())
     if n == 0:
-        return replace(ground, spread=np.nan, footprints=len(prints))
+        return replace(ground, spread=np.nan, footprints=footprints)
     r = gap[planted]
     spread = 1.4826 * float(np.median(np.abs(r - np.median(r))))
     t_of = np.broadcast_to(np.arange(T)[:, None], planted.shape)[planted]
@@ -319,5 +330,5 @@ def estimate_ground(
     below = float(np.maximum(-gap, 0.0).mean())
     return replace(
         ground, frames=n, spread=spread, drift=drift, tilt=tilt, below=below,
-        footprints=len(prints), inliers=int((w > 0).sum()),
+        footprints=footprints, inliers=inliers,
     )  # fmt: skip

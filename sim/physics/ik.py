@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim.errors import UnknownNameError, UsageError
 from sim.model import quaternion as quat
 from sim.model.angles import wrap_angle
 
@@ -86,7 +87,8 @@ class HumanoidIK:
                 continue
             s = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{n}_end")
             if s < 0:
-                raise KeyError(f"the model has no site {n}_end for point {n!r}")
+                known = [model.site(i).name for i in range(model.nsite)]
+                raise UnknownNameError("site for a point", f"{n}_end", known)
             sites.append(s)
         self._sites = np.array(sites)
         self._site_rows = np.flatnonzero(self._sites >= 0)
@@ -207,12 +209,12 @@ class HumanoidIK:
         """
         p = np.asarray(positions, dtype=np.float64)
         if p.ndim != 3 or p.shape[1:] != (len(self.names), 3):
-            raise ValueError(f"positions must be (T, {len(self.names)}, 3); got {p.shape}")
+            raise UsageError(f"positions must be (T, {len(self.names)}, 3); got {p.shape}")
         if not np.all(np.isfinite(p)):
-            raise ValueError("positions must be finite")
+            raise UsageError("positions must be finite")
         T = p.shape[0]
         if guesses is not None and np.shape(guesses) != (T, self.model.nq):
-            raise ValueError(f"guesses must be {(T, self.model.nq)}; got {np.shape(guesses)}")
+            raise UsageError(f"guesses must be {(T, self.model.nq)}; got {np.shape(guesses)}")
         qpos = np.empty((T, self.model.nq))
         err, its = np.empty(T), np.empty(T, dtype=int)
         q = self.initial_pose(p[0]) if q_init is None else np.asarray(q_init, dtype=np.float64)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.errors import UsageError
 from sim.motion.velocities import SOURCE_WINDOW, point_derivatives
 
 #: [mm] standard deviation of the marker noise of the noise floors.
@@ -42,7 +43,7 @@ def noisy_original(
     T = p.shape[0]
     step = int(round(source_fps / fps))
     if step < 1 or abs(source_fps / fps - step) > 1e-9:
-        raise ValueError(f"fps {fps} must divide the source rate {source_fps}")
+        raise UsageError(f"fps {fps} must divide the source rate {source_fps}")
     pad = SOURCE_WINDOW
     rng = np.random.default_rng(seed)
     n = rng.normal(0.0, 1e-3 * sigma_mm, (step * (T - 1) + 1 + 2 * pad,) + p.shape[1:])

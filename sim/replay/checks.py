@@ -1,9 +1,10 @@
 """Kinematic replay of a motion (original or reconstruction) in MuJoCo, and what a person would see.
 
-Each frame's points are mapped onto bone-aligned capsules on mocap bodies (:mod:`sim.model.capsules`);
-MuJoCo's collision detection then measures floor penetration and self-penetration between
-non-adjacent bones. Foot contact is the one definition of :mod:`sim.physics.contacts` (the sole's
-geometry against the trial's floor, rolling contact allowed). Together with bone-length drift,
+Each frame's points are mapped onto bone-aligned capsules on mocap bodies
+(:mod:`sim.model.capsules`); MuJoCo's collision detection then measures floor penetration and
+self-penetration between non-adjacent bones (touching bones). Foot-floor contact is read from
+:mod:`sim.physics.contacts` (the sole's geometry against the trial's floor, rolling contact
+allowed), as everywhere else. Together with bone-length drift,
 foot skating, joint-limit violations (where the motion carries joint angles), MPJPE and velocity
 error against the original, these are the per-frame :class:`FrameChecks`; :func:`summarise`
 condenses them per clip and :func:`excess` subtracts the original clip's own figures (the
@@ -25,8 +26,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim.errors import UsageError, require_type
 from sim.model.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
 from sim.model.kinematics import SIDES
+from sim.motion.clip import Clip
 from sim.motion.points import PointMotion, finite_velocity  # noqa: F401 (re-exported)
 from sim.physics.contacts import motion_contacts
 from sim.physics.ground import Ground
@@ -34,6 +37,7 @@ from sim.physics.ground import Ground
 
 def from_clip(clip) -> PointMotion:
     """A :class:`sim.motion.clip.Clip` as a point motion (exact velocities and joint angles kept)."""
+    require_type(clip, Clip, "clip")
     return PointMotion(
         tuple(clip.names), np.asarray(clip.parents), np.asarray(clip.positions), float(clip.fps),
         np.asarray(clip.velocities), np.asarray(clip.qpos), tuple(clip.joint_names),
@@ -217,9 +221,9 @@ def replay(
     """
     ref = motion if reference is None else reference.restrict(motion.names)
     if ref.n_frames != motion.n_frames:
-        raise ValueError(f"reference has {ref.n_frames} frames, motion {motion.n_frames}")
+        raise UsageError(f"reference has {ref.n_frames} frames, motion {motion.n_frames}")
     if not np.array_equal(ref.parents, motion.parents):
-        raise ValueError("reference and motion disagree on the tree of points")
+        raise UsageError("reference and motion disagree on the tree of points")
     T = motion.n_frames
     bones = bones_of(motion.names, motion.parents, _lengths(ref))
     if scene is None:
@@ -230,7 +234,7 @@ def replay(
         and np.array_equal(scene.bones.radius, bones.radius)
         and scene.settings == (float(floor_z), float(contact_height), int(hops))
     ):
-        raise ValueError("the scene was built for other bones or floor settings than this replay")
+        raise UsageError("the scene was built for other bones or floor settings than this replay")
     true_len = _lengths(ref)[bones.child]
     cur_len = np.linalg.norm(
         motion.positions[:, bones.child] - motion.positions[:, bones.parent], axis=-1
@@ -281,7 +285,8 @@ def self_penetration_excess(
     penetration depth [m] (0 when apart): overlaps the original has too (the thick capsules of
     thorax, neck and head touch in every frame) cancel, new or deeper ones count. A pair the
     original has deeper than ``tol`` that the motion loses by more than ``tol`` (a real contact,
-    e.g. hand on arm, gone) is a *lost contact*, counted separately rather than as an improvement.
+    e.g. hand on arm, gone) is a *lost touching pair* (``lost_contacts``: bones that touched, not a
+    foot on the floor), counted separately rather than as an improvement.
 
     Args:
         checks, baseline: the motion's and the original's :class:`FrameChecks` (same frames, same
@@ -292,7 +297,7 @@ def self_penetration_excess(
         (frame, pair) samples with excess > ``tol``; ``lost_contacts``: (frame, pair) samples lost.
     """
     if len(checks.self_pairs) != len(baseline.self_pairs):
-        raise ValueError("self-penetration excess needs both replays' pairs over the same frames")
+        raise UsageError("self-penetration excess needs both replays' pairs over the same frames")
     worst, n_exc, lost = [], 0, 0
     for rec, orig in zip(checks.self_pairs, baseline.self_pairs, strict=True):
         exc = [max(0.0, d - orig.get(k, 0.0)) for k, d in rec.items()]
@@ -330,7 +335,7 @@ def summarise(checks: FrameChecks, *, tol: float = 1e-3) -> dict[str, float]:
     frames; ``skate_*`` are over (frame, foot) samples in floor contact; ``joint_limit_*`` are NaN
     when the motion has no joint angles.
     """
-    c = checks
+    c = require_type(checks, FrameChecks, "checks")
     in_contact = c.foot_contact
     sk = c.foot_speed[in_contact]
     has_q = bool(np.all(c.joint_limit_count >= 0))

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from sim.errors import UsageError
 from sim.files import write_atomic
 from sim.motion.points import PointMotion
 from sim.physics.foot_state import FootState
@@ -23,7 +24,7 @@ def contact_sheet(images, labels, path: str | os.PathLike, *, cols: int = 4) -> 
     """Tile (H, W, 3) uint8 ``images`` with ``labels`` into one PNG written atomically."""
     images = list(images)
     if not images:
-        raise ValueError("a contact sheet needs at least one image")
+        raise UsageError("a contact sheet needs at least one image")
     H, W = images[0].shape[:2]
     cols = min(cols, len(images))
     rows = -(-len(images) // cols)

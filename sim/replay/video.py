@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from sim.errors import UsageError, require_positive, require_type
 from sim.files import written_by
 from sim.motion.points import PointMotion
 from sim.physics.foot_state import FootState
@@ -40,11 +41,24 @@ def render_frames(
         keyframes: frame indices marked as they pass.
         method: name in the caption.
         frames: which frame indices to render (default all).
-        feet: foot contact and flags per frame (e.g. :func:`sim.physics.contacts.foot_states`).
+        feet: foot contact and flags per frame (e.g. :func:`sim.physics.foot_state.foot_states`).
         ground_z: height of the drawn floor [m].
         renderer: the clip's :class:`SkeletonRenderer` (same points, style and ground), reused
             and left open; one is made and closed here when None.
+
+    Raises (when called, before any frame):
+        ArgumentTypeError: ``original`` or ``reconstruction`` not a :class:`PointMotion`.
     """
+    require_type(original, PointMotion, "original")
+    if reconstruction is not None:
+        require_type(reconstruction, PointMotion, "reconstruction")
+    return _frames(original, reconstruction, keyframes, method, style, frames, progress, feet,
+                   ground_z, renderer)  # fmt: skip
+
+
+def _frames(original, reconstruction, keyframes, method, style, frames, progress, feet, ground_z,
+            renderer):  # fmt: skip
+    """The generator behind :func:`render_frames` (arguments checked)."""
     rec = reconstruction
     orig = original if rec is None else original.restrict(rec.names)
     T = orig.n_frames
@@ -63,7 +77,7 @@ def render_frames(
         or renderer.style != style
         or renderer.ground_z != float(ground_z)
     ):
-        raise ValueError("the renderer was built for other points, another style or ground")
+        raise UsageError("the renderer was built for other points, another style or ground")
     owned = renderer is None
     r = SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z) if owned else renderer
     try:
@@ -92,6 +106,7 @@ def write_video(frames, path: str | os.PathLike, fps: float, *, root=None) -> Pa
     (:func:`sim.files.written_by`; ``root``: the output folder, no link below it followed)."""
     import imageio.v2 as imageio  # lazy: heavy optional video dependency, only to write an mp4
 
+    require_positive(fps, "fps")
     path = Path(path)
     with written_by(path, root=root, suffix=".mp4") as tmp:
         w = imageio.get_writer(
@@ -101,5 +116,7 @@ def write_video(frames, path: str | os.PathLike, fps: float, *, root=None) -> Pa
         )  # fmt: skip
         with w:
             for f in frames:
+                if np.ndim(f) != 3 or np.shape(f)[2] != 3:
+                    raise UsageError(f"video frames must be (H, W, 3); got {np.shape(f)}")
                 w.append_data(f)
     return path

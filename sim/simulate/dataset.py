@@ -30,7 +30,7 @@ import numpy as np
 from sim.acclaim.amc import parse_amc
 from sim.acclaim.asf import parse_asf
 from sim.batch import iter_batch, ray_session, run_batch
-from sim.errors import MotionDataError, UnknownNameError
+from sim.errors import MotionDataError, UnknownNameError, UsageError, require_positive
 from sim.files import remove_written, write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
@@ -51,9 +51,7 @@ def readable_trials(
     trials, skipped = [], []
     if any(k != "procedural" for k in kinds):
         if root is None:
-            raise MotionDataError(
-                None, None, "kinds other than procedural need a folder of CMU trials"
-            )
+            raise UsageError("kinds other than procedural need a folder of CMU trials (--data)")
         found = find_trials(root, skipped)  # links leaving root: listed, never read
         outcomes = run_batch(_parse, found, workers=workers, ray=ray, desc="read trials",
                              progress=False)  # fmt: skip
@@ -156,6 +154,10 @@ def synthesize(
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
     """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise UsageError(f"the number of clips must be a whole number >= 1; got {n!r}")
+    require_positive(seconds, "seconds")
+    require_positive(fps, "fps")
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
