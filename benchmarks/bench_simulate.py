@@ -23,6 +23,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from results import write_results  # noqa: E402
@@ -30,7 +32,69 @@ from results import write_results  # noqa: E402
 from sidql.evaluation.cases import load_cases  # noqa: E402
 from sidql.evaluation.evaluate import evaluate  # noqa: E402
 from sidql.evaluation.tables import simulate_markdown  # noqa: E402
+from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
+from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
+from sim.simulate.model import sim_model  # noqa: E402
+from sim.simulate.validate import ForwardValidation  # noqa: E402
+
+#: ``--controllers`` names: (label, ForwardValidation keywords, actuators)
+CONTROLLERS = {
+    "plain": ("plain tracker", {"controller": "plain"}, "position"),
+    "sampling64": ("sampler, 64 samples", {"controller": "sampling", "samples": 64}, "position"),
+    "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
+}
+
+
+def controller_rows(cases, names: list[str], log=None) -> dict[str, list[dict]]:
+    """Per controller name (:data:`CONTROLLERS`), the figures of
+    ``ForwardValidation.run`` for the original motion (its IK fit) of every case, one process."""
+    setup = physics_setup(cases)
+    bodies: dict = {}
+    out: dict[str, list[dict]] = {n: [] for n in names}
+    for i, c in enumerate(cases):
+        qpos = setup[c.clip.source].analyse(c.clip)["per_frame"]["qpos"]
+        for n in names:
+            _, kw, actuators = CONTROLLERS[n]
+            if (c.asf, n) not in bodies:
+                skeleton = subject_model(c.asf)[0]
+                model = sim_model(skeleton, actuators=actuators)
+                bodies[c.asf, n] = ForwardValidation(model, _protocol_names(c.clip), **kw)
+            t0 = time.process_time()
+            row = bodies[c.asf, n].run(qpos, c.clip.fps)  # the fits above are not timed
+            cpu = (time.process_time() - t0) / (c.clip.n_frames / c.clip.fps)
+            out[n].append({"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
+                           "sim_cpu_s_per_s": cpu})  # fmt: skip
+            if log:
+                log(f"{i + 1}/{len(cases)} {n} {out[n][-1]}")
+    return out
+
+
+def controllers_markdown(rows: dict[str, list[dict]]) -> str:
+    """The table of issue 27 per controller: falls, root-relative and global tracking error
+    (mean over the protocol points, median over clips), foot skating in contact against the
+    tracked motion's (medians over clips, the same estimator), CPU s per simulated s (mean)."""
+    head = (
+        "| controller | clips | falls | root-relative error, median [mm] | global error, "
+        "median [mm] | skating in contact, median [mm/s] | the reference's [mm/s] | CPU s per "
+        "simulated s |\n|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for n, rs in rows.items():
+
+        def med(k, rs=rs):
+            v = np.array([np.nan if r[k] is None else r[k] for r in rs], dtype=float)
+            v = v[np.isfinite(v)]
+            return float(np.median(v)) if v.size else float("nan")
+
+        fell = float(np.mean([r["sim_fell"] for r in rs]))
+        cpu = float(np.mean([r["sim_cpu_s_per_s"] for r in rs]))
+        lines.append(
+            f"| {CONTROLLERS[n][0]} | {len(rs)} | {fell:.2f} | {med('sim_error_local_mm'):.0f} "
+            f"| {med('sim_error_mm'):.0f} | {med('sim_skate_mm_s'):.0f} "
+            f"| {med('sim_skate_ref_mm_s'):.0f} | {cpu:.2f} |"
+        )
+    return head + "\n".join(lines) + "\n"
 
 
 def main() -> None:
@@ -56,12 +120,33 @@ def main() -> None:
         default=0,
         help="sampling tracker's rollouts per window (0: the plain tracker)",
     )
+    ap.add_argument(
+        "--controllers", nargs="+", choices=sorted(CONTROLLERS), default=None,
+        help="compare these controllers on the original motion only (one process; writes "
+        "docs/results/simulate_controllers.md)",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])
     t0 = time.perf_counter()
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
     cases = cases[:: args.every][: args.max_clips]
+    if args.controllers:
+        rows = controller_rows(cases, args.controllers, log=lambda m: print(m, flush=True))
+        limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
+        text = (
+            f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
+            f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
+            "IK fit on the subject's skeleton) tracked by each controller with no assistance; a "
+            "fall as `sim.simulate.falls` defines it; CPU time on one core.\n\n"
+            + controllers_markdown(rows)
+            + f"\nWall time {time.perf_counter() - t0:.0f} s (loading and fits included).\n"
+        )
+        print(text)
+        if not args.no_write:
+            write_results("simulate_controllers", "Forward simulation: the controllers on the "
+                          "original motion", text, command)  # fmt: skip
+        return
     out = evaluate(cases, args.methods, args.keyframes, physics=True, simulate=True,
                    simulate_samples=args.samples, workers=args.workers,
                    progress=False)  # fmt: skip

@@ -73,7 +73,7 @@ from sim.paths import default_data_dir  # noqa: E402
 
 #: Share of the inputs per file type.
 MIX = {"asf": 15, "amc": 20, "sidq": 15, "npz": 15, "index": 10, "policy": 12.5,
-       "checkpoint": 12.5, "output": 15}  # fmt: skip
+       "checkpoint": 12.5, "output": 15, "bvh": 10}  # fmt: skip
 FAILURES = ("foreign", "non-finite", "bad-error", "bad-name", "read-outside", "over-memory",
             "hang", "write-outside", "delete-outside", "leftover")  # fmt: skip
 TARGET_RSS_MB = 384  # any input file of at most 1 MB decodes or fails within this peak RSS
@@ -131,6 +131,7 @@ READER_MODULES = {
     "asf": "sim.motion.ingest", "amc": "sim.motion.ingest", "sidq": "sidql.codec.decode",
     "npz": "sim.motion.clip", "index": "sim.motion.dataset", "policy": "sidql.learning.policy",
     "checkpoint": "sidql.learning.dqn", "output": "sim.simulate.dataset",
+    "bvh": "sim.motion.ingest",
 }  # fmt: skip
 
 

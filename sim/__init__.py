@@ -32,7 +32,7 @@ _API = {
     "ingest_directory": "sim.motion.dataset",
     "synthetic_motion": "sim.motion.synthetic",
     "humanoid_model": "sim.model.humanoid",
-    "subject_model": "sim.model.humanoid",
+    "subject_model": "sim.motion.trial",
     "PointMotion": "sim.motion.points",
     "from_clip": "sim.replay.checks",
     "replay": "sim.replay.checks",

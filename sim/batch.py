@@ -12,6 +12,10 @@ local runtime with ``workers`` CPUs; any other string is a cluster address (``ra
 ``auto`` on a cluster node). ``fn`` and the items travel to the workers by value (pickled), results
 come back by value; so tasks that read input files need the same paths on every node, and the
 caller (the driver) writes the outputs.
+
+A large object that many items share (a subject's physics model) goes into them wrapped in
+:class:`Shared`: on Ray it is stored once in the object store and each worker fetches and
+unpickles it once (:func:`shared_value`), not with every task; elsewhere it travels as it is.
 """
 
 from __future__ import annotations
@@ -68,6 +72,14 @@ def _call(fn: Callable, item) -> Outcome:
         return Outcome(item, error=str(e), bad_input=True)
     except Exception as e:  # a bug in one task must not cost the others; report it with its type
         return Outcome(item, error=one_line(e))
+
+
+def _call_away(fn: Callable, item) -> Outcome:
+    """:func:`_call` in a worker: the outcome comes back without its item (the driver has it
+    and puts it back), so a task's inputs do not travel twice."""
+    outcome = _call(fn, item)
+    outcome.item = None
+    return outcome
 
 
 def _init_worker(parent_pid: int) -> None:
@@ -214,11 +226,11 @@ def _run_pool(fn, items: Iterator, workers: int, in_flight: int):
                 if item is _END:
                     break
                 try:
-                    fut = pool.submit(_call, fn, item)
+                    fut = pool.submit(_call_away, fn, item)
                 except BrokenProcessPool:  # broke since the last wait: a fresh pool takes it
                     pool.shutdown(wait=True, cancel_futures=True)
                     pool = _new_pool(workers)
-                    fut = pool.submit(_call, fn, item)
+                    fut = pool.submit(_call_away, fn, item)
                 pending[fut] = (position, item, pool)
                 position += 1
             if not pending:
@@ -228,6 +240,7 @@ def _run_pool(fn, items: Iterator, workers: int, in_flight: int):
                 i, item, its_pool = pending.pop(fut)
                 try:
                     outcome = fut.result()
+                    outcome.item = item
                 except Exception as e:  # the worker died (not an error inside fn)
                     outcome = Outcome(item, error=one_line(e))
                     if isinstance(e, BrokenProcessPool) and its_pool is pool:
@@ -240,6 +253,55 @@ def _run_pool(fn, items: Iterator, workers: int, in_flight: int):
 
 
 _END = object()
+
+
+class Shared:
+    """A large object several items of one batch hold (read it with :func:`shared_value`).
+
+    Pickled for a Ray task, it becomes a reference to one copy in Ray's object store, made the
+    first time it is sent; a worker fetches and unpickles it once and keeps it for the next
+    tasks (the last :data:`SHARED_CACHE` of them). Pickled any other way (a process pool), it
+    carries its value.
+    """
+
+    def __init__(self, value):
+        self.value = value
+        self._ref = None
+
+    def __reduce__(self):
+        if not _SENDING_TO_RAY:
+            return Shared, (self.value,)
+        if self._ref is None:
+            import ray  # lazy: an optional extra, and slow to import
+
+            self._ref = ray.put(self.value)
+        return _shared_from_ref, ([self._ref],)  # nested in a list: Ray does not fetch it
+
+
+def shared_value(x):
+    """The value of a :class:`Shared` (anything else: itself)."""
+    return x.value if isinstance(x, Shared) else x
+
+
+#: How many :class:`Shared` values a Ray worker keeps between tasks.
+SHARED_CACHE = 8
+_SENDING_TO_RAY = False  # set while this driver submits a Ray task (see Shared.__reduce__)
+_WORKER_SHARED: dict = {}  # in a Ray worker: object ref id -> Shared, oldest first
+
+
+def _shared_from_ref(box) -> Shared:
+    """In a Ray worker: the :class:`Shared` whose value is stored at ``box[0]``, fetched once."""
+    ref = box[0]
+    key = ref.hex()
+    out = _WORKER_SHARED.pop(key, None)
+    if out is None:
+        import ray  # lazy: an optional extra, and slow to import
+
+        out = Shared(ray.get(ref))
+        while len(_WORKER_SHARED) >= SHARED_CACHE:
+            _WORKER_SHARED.pop(next(iter(_WORKER_SHARED)))
+    _WORKER_SHARED[key] = out  # most recently used last
+    return out
 
 
 class RayConnectionError(ConnectionError):
@@ -301,7 +363,7 @@ def _run_ray(fn, items: Iterator, workers, address, in_flight):
     try:
         if in_flight is None:
             in_flight = max(4, 2 * int(ray.cluster_resources().get("CPU", 1)))
-        remote = ray.remote(_call)
+        remote = ray.remote(_call_away)
         fn_ref = ray.put(fn)  # shipped once, not with every task
         position = 0
         while True:
@@ -309,7 +371,7 @@ def _run_ray(fn, items: Iterator, workers, address, in_flight):
                 item = next(items, _END)
                 if item is _END:
                     break
-                ref = remote.remote(fn_ref, item)
+                ref = _submit(remote, fn_ref, item)
                 pending.append(ref)
                 where[ref] = (position, item)
                 position += 1
@@ -320,6 +382,7 @@ def _run_ray(fn, items: Iterator, workers, address, in_flight):
                 i, item = where.pop(ref)
                 try:
                     outcome = ray.get(ref)
+                    outcome.item = item
                 except Exception as e:  # the worker died (not an error inside fn)
                     outcome = Outcome(item, error=one_line(e))
                 yield i, outcome
@@ -328,3 +391,14 @@ def _run_ray(fn, items: Iterator, workers, address, in_flight):
             ray.cancel(ref)
         if started:
             ray.shutdown()
+
+
+def _submit(remote, fn_ref, item):
+    """``remote.remote(fn_ref, item)`` with the :class:`Shared` values in ``item`` sent by
+    reference (Ray pickles a task's arguments while it is submitted)."""
+    global _SENDING_TO_RAY
+    _SENDING_TO_RAY = True
+    try:
+        return remote.remote(fn_ref, item)
+    finally:
+        _SENDING_TO_RAY = False

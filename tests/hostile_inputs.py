@@ -4,7 +4,7 @@ Shared by ``tests/test_fuzz.py`` (hypothesis drives the choices) and
 ``benchmarks/fuzz_campaign.py`` (a seeded ``random.Random`` drives them, each input in its own
 process under a memory and time limit). A source of choices needs only ``randrange(n)``.
 
-File types (:data:`KINDS`): ASF and AMC (the mutators of ``acclaim_mutations``), ``.sidq``
+File types (:data:`KINDS`): ASF, AMC and BVH (the mutators of ``acclaim_mutations``), ``.sidq``
 streams, clip ``.npz`` files, dataset folders (``index.json`` with its clips and skeletons),
 policy files and training checkpoints. Each input is a :class:`Case`: a few files (bytes, or a
 FIFO, a directory, a symbolic link to ``/dev/zero`` or to a file outside the folder) made from
@@ -42,7 +42,7 @@ from acclaim_mutations import Breach, line_count, mutate, non_finite, read_all, 
 from sim.acclaim.asf import check_bone_name
 from sim.errors import BadFileError
 
-KINDS = ("asf", "amc", "sidq", "npz", "index", "policy", "checkpoint")
+KINDS = ("asf", "amc", "bvh", "sidq", "npz", "index", "policy", "checkpoint")
 CANARY = b"CANARY-7f3a9"  # the content of every file outside a case's folder
 MAX_PROBLEM_CHARS = 600  # an error's problem: one short line
 
@@ -61,6 +61,7 @@ class Seeds:
     policies: list  # the shipped policy, a small trained one
     checkpoint: bytes
     checkpoint_args: dict  # the Args of the checkpoint's run (out is set per case)
+    bvh: list = field(default_factory=list)  # a CMU trial written as BVH, a non-CMU skeleton
 
 
 def build_seeds(cmu_dir: Path, work: Path, trials=(("02", "02_01"), ("07", "07_12"))) -> Seeds:
@@ -125,7 +126,35 @@ def build_seeds(cmu_dir: Path, work: Path, trials=(("02", "02_01"), ("07", "07_1
     train(args)
     policies = [Path(DEFAULT_POLICY).read_bytes(), (work / "run" / "p.pt").read_bytes()]
     checkpoint = (work / "run" / "p.pt.ckpt").read_bytes()
-    return Seeds(acclaim, sidq, clips, dataset, policies, checkpoint, dataclasses.asdict(args))
+    return Seeds(
+        acclaim,
+        sidq,
+        clips,
+        dataset,
+        policies,
+        checkpoint,
+        dataclasses.asdict(args),
+        bvh_seeds(cmu_dir),
+    )
+
+
+def bvh_seeds(cmu_dir: Path) -> list[bytes]:
+    """Subject 02's walk cut to 30 frames, written as BVH; a figure of non-CMU names, channel
+    counts and orders (``tests/bvh_files.py``)."""
+    from bvh_files import bvh_text, creature, motion
+
+    from sim.bvh.writer import bvh_text as write_text
+    from sim.motion.trial import read_trial
+
+    skeleton, take, _ = read_trial(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")
+    take = dataclasses.replace(
+        take, root=take.root[:30], angles={k: v[:30] for k, v in take.angles.items()}
+    )
+    nodes = creature()
+    return [
+        write_text(skeleton, take, 120.0).encode(),
+        bvh_text(nodes, motion(nodes, 30, 60.0), 60.0).encode(),
+    ]
 
 
 # ------------------------------------------------------------------------------------ cases
@@ -163,6 +192,7 @@ def seed_case(kind: str, seeds: Seeds) -> Case:
     files = {
         "asf": {"t.asf": asf, "t.amc": amc},
         "amc": {"t.asf": asf, "t.amc": amc},
+        "bvh": {"t.bvh": seeds.bvh[0]},
         "sidq": {"s.sidq": seeds.sidq[0]},
         "npz": {"c.npz": seeds.clips[0]},
         "index": {f"d/{k}": v for k, v in seeds.dataset.items()},
@@ -199,6 +229,16 @@ def _acclaim_case(kind: str):
         return Case(kind, files, f"t.{kind}", ops, full, skeleton)
 
     return make
+
+
+def _bvh_case(seeds: Seeds, rng) -> Case:
+    data, ops = mutate(_pick(rng, seeds.bvh), rng)
+    files = {"t.bvh": data}
+    special = _special(rng)
+    if special:
+        files["t.bvh"] = special
+        ops.append(f"special:{special[-1]}")
+    return Case("bvh", files, "t.bvh", ops, full=rng.randrange(4) == 0)
 
 
 # --- .sidq -------------------------------------------------------------------------------------
@@ -735,6 +775,7 @@ def _checkpoint_case(seeds: Seeds, rng) -> Case:
 _MAKERS = {
     "asf": _acclaim_case("asf"),
     "amc": _acclaim_case("amc"),
+    "bvh": _bvh_case,
     "sidq": _sidq_case,
     "npz": _npz_case,
     "index": _index_case,
@@ -909,7 +950,24 @@ def _read_checkpoint(path: Path, folder: Path, args_dict) -> list:
     return [np.array([loss.item(), q.item(), *counters.values()])]
 
 
+def _read_bvh(path: Path, folder: Path, _args) -> list:
+    """The skeleton and motion; then (always: the file is small) the clip on its humanoid."""
+    from sim.bvh.convert import to_acclaim
+    from sim.bvh.reader import parse_bvh
+    from sim.motion.ingest import load_motion
+
+    take = to_acclaim(parse_bvh(path))
+    names = [p for b in take.skeleton.bones if (p := check_bone_name(b.name))]
+    if names:
+        raise Breach("bad-name", "; ".join(names))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        clip = load_motion(path, fps=take.fps, derivatives=False)
+    return [take.skeleton, take.motion, clip]
+
+
 _READERS = {
+    "bvh": _read_bvh,
     "sidq": _read_sidq,
     "npz": _read_npz,
     "index": _read_index,

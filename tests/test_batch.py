@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import operator
+import os
+import sys
 
 import pytest
 
@@ -145,3 +147,54 @@ def test_after_a_dead_worker_a_fresh_pool_takes_the_rest():
     assert not out[2].ok
     assert all(o.ok and o.result == o.item for o in out[-8:])
     assert sum(not o.ok for o in out) <= 12
+
+
+_COUNT = "SIDQL_TEST_UNPICKLED"  # in each process's environment: _Counted unpickled so often
+
+
+class _Counted:
+    """A payload that counts, in the process that unpickles it, how often that happens."""
+
+    def __init__(self, data):
+        self.data = data
+
+    def __reduce__(self):
+        return _counted, (self.data,)
+
+
+def _counted(data):
+    os.environ[_COUNT] = str(int(os.environ.get(_COUNT, "0")) + 1)
+    return _Counted(data)
+
+
+def _reads_shared(item):
+    from sim.batch import shared_value
+
+    k, shared = item
+    return os.getpid(), int(os.environ.get(_COUNT, "0")), k + int(shared_value(shared).data.sum())
+
+
+def test_on_ray_a_shared_value_reaches_each_worker_once():
+    """Items holding one Shared payload: on Ray each worker unpickles it once (not once per
+    task); in a process pool and in this process the same results, the payload by value; the
+    items do not travel back with the outcomes (each outcome still names its item)."""
+    ray = pytest.importorskip("ray")
+    import numpy as np
+
+    from sim.batch import Shared, run_batch
+
+    shared = Shared(_Counted(np.ones(50_000)))
+    items = [(k, shared) for k in range(12)]
+    want = [k + 50_000 for k in range(12)]
+    for workers in (1, 2):  # first: by value (Ray's pickling-by-value below changes this module)
+        out = run_batch(_reads_shared, items, workers=workers, progress=False)
+        assert [o.result and o.result[2] for o in out] == want, [o.error for o in out][:2]
+        assert all(o.item is item for o, item in zip(out, items, strict=True))
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers lack tests/
+    assert int(os.environ.get(_COUNT, "0")) == 0  # outcomes come back without their items
+    out = run_batch(_reads_shared, items, workers=2, ray="local", progress=False)
+    assert [o.result[2] for o in out] == want, [o.error for o in out]
+    per_worker = {}
+    for pid, seen, _ in (o.result for o in out):
+        per_worker[pid] = max(per_worker.get(pid, 0), seen)
+    assert set(per_worker.values()) == {1}, [o.result[:2] for o in out]  # once per worker

@@ -32,3 +32,38 @@ def test_optimal_method_uses_it_and_keeps_its_answers(walk_clip):
 def test_one_pass_refuses_the_non_separable_reconstruction():
     with pytest.raises(ValueError, match="catmull_rom"):
         clip_cost_matrix(smooth_clip(N=20), "catmull_rom")
+
+
+@pytest.mark.parametrize("reconstruction", ["hermite", "linear"])
+def test_optimum_costs_keep_the_optimum_of_the_full_matrix(reconstruction, walk_clip):
+    from sidql.keyframes.optimal import clip_optimal_keyframes, optimum_cost_matrix
+
+    for clip in (smooth_clip(N=30, seed=2), walk_clip.slice(0, 60), walk_clip.slice(50, 86)):
+        full = clip_cost_matrix(clip, reconstruction)
+        table = clip_optimal_table(clip, reconstruction)
+        pruned_any = False
+        for W in range(2, clip.n_frames + 1):
+            C = optimum_cost_matrix(clip, W, reconstruction)
+            kept = np.isfinite(C)
+            assert np.array_equal(C[kept], full[kept])  # the entries kept are the same numbers
+            pruned_any |= not kept.all()
+            keys = clip_optimal_keyframes(clip, W, reconstruction)
+            assert np.array_equal(keys, table.keyframes(W)), W
+            assert full[keys[:-1], keys[1:]].sum() == pytest.approx(table.cost[W], rel=1e-12)
+        assert pruned_any  # the pruning did something on real motion
+
+
+def test_optimum_costs_of_a_still_clip_and_bad_counts(walk_clip):
+    from dataclasses import replace
+
+    from sidql.keyframes.optimal import clip_optimal_keyframes, optimum_cost_matrix
+
+    clip = walk_clip.slice(0, 20)
+    still = replace(clip, positions=np.repeat(clip.positions[:1], 20, 0),
+                    velocities=np.zeros_like(clip.velocities))  # fmt: skip
+    for c in (still, clip):
+        for W in (2, 4, 20):
+            assert np.array_equal(clip_optimal_keyframes(c, W), clip_optimal_table(c).keyframes(W))
+    for W in (1, 21):
+        with pytest.raises(ValueError, match="W must be"):
+            optimum_cost_matrix(clip, W)

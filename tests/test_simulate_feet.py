@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from sim.model.humanoid import canonical_skeleton
-from sim.simulate.controller import reference_feedforward, track
+from sim.simulate.controller import track
+from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import (
     MIN_DEFLECTION,
     SOLE_HEEL,

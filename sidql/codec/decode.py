@@ -17,10 +17,11 @@ from sidql.keyframes.curves import interpolate_derivatives
 from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS, split_channels
 from sidql.keyframes.unchart import accelerations_from_chart, clip_from_chart, positions_from_chart
-from sim.acclaim.asf import parse_asf
 from sim.acclaim.writer import write_amc
+from sim.bvh.writer import write_bvh
 from sim.errors import MotionDataError
 from sim.motion.clip import Clip, save_npz
+from sim.motion.trial import read_skeleton
 
 #: Frames turned into points at a time (:func:`reconstruct_stream`, :func:`stream_to_clip`): the
 #: work is per frame, so chunks keep the temporaries small however long the stream.
@@ -132,28 +133,33 @@ _FRAME_ARRAYS = ("positions", "velocities", "qpos", "qvel", "rotations")
 def decode_file(
     path: str | os.PathLike, out: str | os.PathLike, asf: str | os.PathLike | None = None
 ) -> Path:
-    """Decode ``path`` to ``out``: ``.npz`` (ingest format) or ``.amc`` (needs the source ``asf``,
-    whose skeleton hash must match the stream's). Written atomically.
+    """Decode ``path`` to ``out``: ``.npz`` (ingest format), ``.amc`` or ``.bvh`` (angles of the
+    source skeleton fitted to the decoded points: needs the source ``asf``, an ASF or the BVH the
+    stream was encoded from, whose skeleton hash must match the stream's). Written atomically.
 
     Raises:
         MotionDataError: bad stream, bad or mismatched skeleton, unknown output suffix.
     """
     out = Path(out)
     suffix = out.suffix.lower()
-    if suffix not in (".npz", ".amc"):
-        raise MotionDataError(str(out), None, "output must end in .npz or .amc")
+    if suffix not in (".npz", ".amc", ".bvh"):
+        raise MotionDataError(str(out), None, "output must end in .npz, .amc or .bvh")
     stream = sidq.read(path)
     if suffix == ".npz":
         return save_npz(stream_to_clip(stream, str(path)), out)
     if asf is None:
-        raise MotionDataError(str(out), None, "an .amc output needs the source skeleton (--asf)")
-    skeleton = parse_asf(asf)
+        raise MotionDataError(
+            str(out), None, f"an {suffix} output needs the source skeleton (--asf)"
+        )
+    skeleton = read_skeleton(asf)
     if skeleton_hash(skeleton) != stream.skeleton_hash:
         raise MotionDataError(
             str(asf), None, f"skeleton does not match the stream's (hash of {path})"
         )
     rec = reconstruct_stream(stream)
     motion = fit_motion(skeleton, rec.positions, rec.names)
+    if suffix == ".bvh":
+        return write_bvh(out, skeleton, motion, stream.fps)
     write_amc(
         out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
     )

@@ -29,11 +29,11 @@ from sidql.codec.position_coding import encode_positions
 from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import SphericalSeries, chart
-from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError, UsageError
 from sim.files import write_atomic
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
+from sim.motion.trial import is_bvh, read_skeleton
 
 CHOICES: tuple[str, ...] = ("auto",) + CURVES
 
@@ -149,18 +149,19 @@ def encode_clip(clip: Clip, **kwargs) -> Encoded:
 
 def encode_files(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None,
     out: str | os.PathLike,
     *,
     fps: float = 30.0,
     **kwargs,
 ) -> Encoded:
-    """Encode one CMU trial (ASF + AMC) into ``out`` (``.sidq``), written atomically.
+    """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out`` (``.sidq``), written atomically.
 
     The trial is read with :func:`sim.motion.ingest.load_motion` on the subject's own skeleton at
     ``fps``; the stream records the skeleton's hash so the decoder can check the ASF it is given.
     """
-    skel = skeleton_hash(parse_asf(asf))
+    amc = asf if amc is None and is_bvh(asf) else amc
+    skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
     try:
         clip = load_motion(asf, amc, fps=fps, derivatives=False)  # the chart needs no more
     except MotionDataError:

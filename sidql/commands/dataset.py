@@ -14,8 +14,8 @@ from sidql.commands.usage import (
 from sim.motion.dataset import ingest_directory
 
 DESCRIPTION = (
-    "Ingest every SS_TT.amc (with SS.asf beside it) under --data, in worker processes with "
-    "--workers: one .npz per trial under OUT/<subject>/, plus OUT/index.json. Bad files are "
+    "Ingest every SS_TT.amc (with SS.asf beside it) and every .bvh under --data, in worker "
+    "processes with --workers: one .npz per trial under OUT/<subject>/, plus OUT/index.json. Bad files are "
     "skipped and listed; every good result is kept; every file is written atomically. Output "
     "names are made safe (never outside OUT) and unique (same-named trials from different folders "
     "get a hash suffix; index.json maps each file to its input)."

@@ -18,10 +18,11 @@ from sidql.commands.usage import (
 from sidql.evaluation.report import report_clips
 from sidql.evaluation.validation import joint_ranges
 from sidql.keyframes.methods import available, reconstruction_of
-from sim.model.humanoid import humanoid_model, subject_model
+from sim.model.humanoid import humanoid_model
 from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 from sim.motion.synthetic import synthetic_motion
+from sim.motion.trial import subject_model
 
 DEFAULT_TRIAL = ("02", "02_01")
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
-from sidql.commands.usage import positive
+from sidql.commands.usage import add_trial, positive
 
 DESCRIPTION = (
     "Chart the trial's 22 bones and root at --fps, choose keyframes over the whole trial by "
@@ -19,8 +19,7 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    add_trial(p)
     p.add_argument("--out", required=True, metavar="F.sidq", help="output stream")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument(

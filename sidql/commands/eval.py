@@ -12,6 +12,7 @@ from sidql.commands.usage import (
     add_methods,
     add_quiet,
     add_ray,
+    add_reconstruction,
     add_samples,
     add_skeleton,
     add_test_subjects,
@@ -31,6 +32,7 @@ from sidql.evaluation.tables import (
     simulate_markdown,
     table3_markdown,
 )
+from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic
@@ -91,6 +93,7 @@ def register(p) -> None:
         "--max-clips", type=positive(int), default=None, metavar="N",
         help="evaluate only the first N clips (e.g. to bound a --simulate run)",
     )  # fmt: skip
+    add_reconstruction(p)
     add_quiet(p)
     add_workers(p, "loading trials and evaluating clips (methods, physics, simulation)")
     add_ray(p, "the trials' loading and the clips' evaluation")
@@ -105,6 +108,8 @@ def run(args) -> int:
 def _run(args) -> int:
     for name in args.methods:  # unknown names fail before the (slow) ingest
         get(name)
+    if args.reconstruction is not None:
+        reconstructions.get(args.reconstruction)
     counts = check_keyframes(args, args.length)
     if args.samples and not args.simulate:
         raise UsageError("--samples needs --simulate")
@@ -129,6 +134,7 @@ def _run(args) -> int:
         cases, args.methods, counts, seed=args.seed, progress=not args.quiet,
         physics=args.physics, simulate=args.simulate,
         simulate_samples=args.samples or 0, workers=args.workers, ray=args.ray,
+        reconstruction=args.reconstruction,
     )  # fmt: skip
     out["skipped"] = skipped
     out["protocol"] = {
@@ -142,6 +148,7 @@ def _run(args) -> int:
         "simulate": bool(args.simulate),
         "simulate_samples": args.samples or 0,
         "max_clips": args.max_clips,
+        "reconstruction": args.reconstruction,
     }
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,7 @@ from sidql.commands.usage import (
     add_keyframes,
     add_methods,
     add_skeleton,
+    add_trial,
     check_keyframes,
     cmu_rate,
     positive,
@@ -28,8 +29,7 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    add_trial(p)
     add_keyframes(p, "keyframes W per clip (several: each in turn)", many=True)
     add_methods(p, ["optimal"], old_option="--method")
     p.add_argument("--seed", type=int, default=0, help="seed of randomised methods")
@@ -68,7 +68,7 @@ def run(args) -> int:
                     f"keyframes {' '.join(map(str, k))}"
                 )
     if not rows:
-        print(f"no {args.length}-frame clips in {args.amc}")
+        print(f"no {args.length}-frame clips in {args.amc or args.asf}")
     if args.out:
         path = Path(args.out)
         write_atomic(path, lambda f: f.write(json.dumps({"clips": rows}, indent=1).encode()))

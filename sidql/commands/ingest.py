@@ -1,27 +1,27 @@
-"""``sidql ingest ASF AMC``: one trial -> one ``.npz`` of positions and true velocities."""
+"""``sidql ingest ASF AMC`` (or ``F.bvh``): one trial -> one ``.npz`` of positions and true velocities."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from sidql.commands.usage import add_skeleton, cmu_rate, positive
+from sidql.commands.usage import add_bvh_axes, add_skeleton, add_trial, cmu_rate, positive
 from sim.motion.clip import save_npz
 from sim.motion.ingest import load_motion
 
 DESCRIPTION = (
-    "Parse an ASF skeleton and AMC motion, retarget onto a MuJoCo humanoid, and write positions "
+    "Parse an ASF skeleton and AMC motion (or one BVH file), retarget onto a MuJoCo humanoid, and write positions "
     "(T, J, 3) [m, z up], true velocities [m/s], qpos, qvel at the output rate."
 )
 
 
 def register(p) -> None:
-    p.add_argument("asf", metavar="ASF", help="subject skeleton, e.g. ../shared/cmu/02/02.asf")
-    p.add_argument("amc", metavar="AMC", help="motion, e.g. ../shared/cmu/02/02_01.amc")
+    add_trial(p)
     add_skeleton(p)
+    add_bvh_axes(p)
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="output frame rate (divides 120)")
     p.add_argument(
         "--source-fps", type=positive(float), default=120.0, metavar="FPS",
-        help="frame rate of the AMC file (a whole multiple of --fps)",
+        help="frame rate of the AMC file (a whole multiple of --fps); a BVH gives its own",
     )  # fmt: skip
     p.add_argument("--out", required=True, metavar="F.npz", help="output clip file")
     p.set_defaults(func=run)
@@ -29,8 +29,9 @@ def register(p) -> None:
 
 def run(args) -> int:
     clip = load_motion(
-        args.asf, args.amc, skeleton=args.skeleton, fps=args.fps, source_fps=args.source_fps
-    )
+        args.asf, args.amc, skeleton=args.skeleton, fps=args.fps, source_fps=args.source_fps,
+        unit=args.unit, up=args.up,
+    )  # fmt: skip
     path = save_npz(clip, args.out)
     print(describe(clip))
     print(f"wrote {path}")

@@ -24,7 +24,7 @@ from sim.errors import SidqlError
 
 #: Every command, in the order ``sidql --help`` lists them, with its one-line summary.
 COMMANDS = {
-    "ingest": "read one CMU trial (ASF + AMC) into a clip file (.npz): positions, true "
+    "ingest": "read one trial (ASF + AMC, or BVH) into a clip file (.npz): positions, true "
     "velocities, qpos, qvel",
     "dataset": "ingest every trial under a folder in parallel, with an index; bad files skipped "
     "and listed",
@@ -41,7 +41,9 @@ COMMANDS = {
     "learning curve, checkpoints",
     "encode": "encode a whole trial into a .sidq keyframe stream at a byte budget, a joint "
     "position error or an angle error",
-    "decode": "decode a .sidq stream to points (.npz) or the source skeleton's angles (.amc)",
+    "decode": "decode a .sidq stream to points (.npz) or the source skeleton's angles (.amc, .bvh)",
+    "convert": "write a trial in the other format (ASF + AMC -> BVH, BVH -> ASF + AMC) or a clip "
+    "(.npz) as BVH",
     "synth": "simulate clips (tracking with perturbations, falls, procedural) in the dataset "
     "format with learning labels; stored as they arrive, resumable",
 }

@@ -7,10 +7,13 @@ from sidql.commands.usage import (
     add_methods,
     add_quiet,
     add_ray,
+    add_reconstruction,
+    add_trial,
     add_workers,
     check_keyframes,
 )
 from sidql.evaluation.report import report_trial
+from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import get
 from sim.replay.render import RenderStyle
 
@@ -28,8 +31,7 @@ DESCRIPTION = (
 
 
 def register(p) -> None:
-    p.add_argument("asf", metavar="ASF", help="the subject's skeleton (.asf)")
-    p.add_argument("amc", metavar="AMC", help="one of its motions (.amc)")
+    add_trial(p)
     add_keyframes(p, "keyframes W per clip", default=10)
     add_methods(
         p, list(DEFAULT_METHODS),
@@ -52,6 +54,7 @@ def register(p) -> None:
         "with the subject's human-strength body and no assistance: tracking error, falls and "
         "torque per method (could a body perform this motion?)",
     )  # fmt: skip
+    add_reconstruction(p)
     add_workers(p, "validating clips")
     add_ray(p, "the clips' validation")
     add_quiet(p)
@@ -63,12 +66,14 @@ def run(args) -> int:
     methods = [m for m in args.methods if not m.endswith(".sidq")]
     for name in methods:  # unknown names fail before the (slow) ingest
         get(name)
+    if args.reconstruction is not None:
+        reconstructions.get(args.reconstruction)
     check_keyframes(args, 60)
     page = report_trial(
         args.asf, args.amc, args.out, W=args.W, methods=methods, streams=streams,
         clips=args.clips, seed=args.seed, videos=not args.no_video,
         style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
-        progress=not args.quiet, simulate=args.simulate,
+        progress=not args.quiet, simulate=args.simulate, reconstruction=args.reconstruction,
     )  # fmt: skip
     print(f"report: {page}")
     return 0

@@ -126,7 +126,7 @@ class OldSpelling(argparse.Action):
 
 def add_data(
     parser: argparse.ArgumentParser,
-    help: str = "folder of CMU trials (SS/SS.asf, SS/SS_TT.amc)",
+    help: str = "folder of CMU trials (SS/SS.asf, SS/SS_TT.amc) and/or .bvh files",
     *,
     old_option: str | None = None,
     old_positional: bool = False,
@@ -262,6 +262,27 @@ def add_workers(parser: argparse.ArgumentParser, what: str) -> None:
     )  # fmt: skip
 
 
+def add_trial(parser: argparse.ArgumentParser) -> None:
+    """``ASF AMC`` or ``F.bvh``: one trial's files (a BVH holds its skeleton and its motion)."""
+    parser.add_argument(
+        "asf", metavar="ASF|BVH",
+        help="subject skeleton, e.g. ../shared/cmu/02/02.asf; or a .bvh file (skeleton and motion)",
+    )  # fmt: skip
+    parser.add_argument(
+        "amc", metavar="AMC", nargs="?", default=None,
+        help="motion, e.g. ../shared/cmu/02/02_01.amc (none after a .bvh)",
+    )  # fmt: skip
+
+
+def add_bvh_axes(parser: argparse.ArgumentParser) -> None:
+    """``--unit`` and ``--up``: a BVH file's length unit and up axis (``sim.bvh.convert``)."""
+    parser.add_argument(
+        "--unit", choices=("m", "cm", "mm", "in"), default=None,
+        help="a BVH's length unit (default: read from its skeleton's size; written BVH: cm)",
+    )  # fmt: skip
+    parser.add_argument("--up", choices=("y", "z"), default="y", help="a BVH's up axis")
+
+
 def add_skeleton(parser: argparse.ArgumentParser) -> None:
     """``--skeleton subject|humanoid``: the model a trial is retargeted onto."""
     parser.add_argument(
@@ -279,6 +300,17 @@ def add_ray(parser: argparse.ArgumentParser, what: str = "the tasks") -> None:
     parser.add_argument(
         "--ray", nargs="?", const="local", default=None, metavar="ADDRESS", type=ray_address,
         help=f"run {what} as Ray tasks: a local runtime, or the cluster at ADDRESS",
+    )  # fmt: skip
+
+
+def add_reconstruction(parser: argparse.ArgumentParser) -> None:
+    """``--reconstruction NAME``: rebuild every method's keyframes with this registered
+    reconstruction (:mod:`sidql.keyframes.reconstructions`) instead of the method's own (an
+    unknown name is refused, listing the known ones, before any work starts)."""
+    parser.add_argument(
+        "--reconstruction", default=None, metavar="NAME",
+        help="rebuild every method's keyframes with this reconstruction instead of its own "
+        "(selection and reconstruction measured apart), e.g. hermite, linear, slerp, contacts",
     )  # fmt: skip
 
 

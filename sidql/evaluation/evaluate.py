@@ -28,9 +28,9 @@ from sidql.evaluation.scoring import (
 )
 from sidql.evaluation.significance import paired_comparisons
 from sidql.evaluation.trial_physics import physics_setup, simulate_setup
-from sidql.keyframes import methods
+from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.counts import check_counts
-from sim.batch import iter_batch
+from sim.batch import Shared, iter_batch, shared_value
 from sim.errors import UsageError
 from sim.simulate.validate import SIMULATE_KEYS
 
@@ -48,8 +48,10 @@ def evaluate(
     workers: int = 1,
     ray: str | None = None,
     chunk: int = 4,
+    reconstruction: str | None = None,
 ) -> dict:
-    """Run every method at every W on every case.
+    """Run every method at every W on every case (``reconstruction``: rebuild every method's
+    keyframes with this registered reconstruction instead of its own).
 
     The per-clip work (each method's choice and reconstruction, the physics of the original and
     of every reconstruction, the forward simulations) runs through ``sim.batch.iter_batch``:
@@ -84,9 +86,11 @@ def evaluate(
             methods.select(name, cases[0].clip, counts[0], seed=0)
     setup = physics_setup(cases) if physics else {}
     bodies = simulate_setup(cases, simulate_samples) if simulate else {}
+    if reconstruction is not None:
+        reconstructions.get(reconstruction)  # fail early, listing the known ones
     items = _tasks(cases, chunk, setup, bodies)
     task = partial(_evaluate_chunk, method_names=tuple(method_names), counts=tuple(counts),
-                   seed=seed)  # fmt: skip
+                   seed=seed, reconstruction=reconstruction)  # fmt: skip
     by_case: dict[int, list[dict]] = {}
     failed: list[dict] = []
     for _, o in iter_batch(task, items, workers=workers, ray=ray, desc="evaluate",
@@ -168,6 +172,8 @@ def _method_result(name: str, W: int, rows: Sequence[dict], physics: bool, simul
         "velocity_error_mm_s": float(np.mean([r["velocity_error_mm_s"] for r in rows])),
         "mean_li_error_mm": float(np.mean([r["li_error_mm"] for r in rows])),
         "median_decision_ms": float(np.median([r["decision_ms"] for r in rows])),
+        "reconstruction": rows[0]["reconstruction"],
+        "mean_side_bytes": float(np.mean([r["side_bytes"] for r in rows])),
         **(_physics_means(rows) if physics else {}),
         **(_simulate_means(rows) if simulate else {}),
     }
@@ -175,11 +181,15 @@ def _method_result(name: str, W: int, rows: Sequence[dict], physics: bool, simul
 
 def _tasks(cases: Sequence[Case], chunk: int, setup: dict, bodies: dict) -> list[tuple]:
     """The tasks of :func:`evaluate`: ``([(position, case)...], physics set-up or None, simulated
-    body or None)`` per chunk of up to ``chunk`` consecutive cases of one trial."""
+    body or None)`` per chunk of up to ``chunk`` consecutive cases of one trial, the last two
+    wrapped in :class:`sim.batch.Shared` (one per trial: Ray ships each to a worker once)."""
+    shared = {}  # one handle per trial: on Ray its set-up reaches each worker once
     items = []
     for group in _trial_chunks(cases, chunk):
         source = cases[group[0]].clip.source
-        items.append(([(i, cases[i]) for i in group], setup.get(source), bodies.get(source)))
+        if source not in shared:
+            shared[source] = (Shared(setup.get(source)), Shared(bodies.get(source)))
+        items.append(([(i, cases[i]) for i in group], *shared[source]))
     return items
 
 
@@ -195,11 +205,13 @@ def _trial_chunks(cases: Sequence[Case], size: int) -> list[list[int]]:
     return out
 
 
-def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list[dict]]]:
+def _evaluate_chunk(
+    item, *, method_names, counts, seed, reconstruction=None
+) -> list[tuple[int, list[dict]]]:
     """One task of :func:`evaluate`: per case of ``item = ([(position, case)...], physics set-up
     or None, simulated body or None)``, its position and rows: the original's (with physics),
     then each method at each W."""
-    cases, phys, body = item
+    cases, phys, body = item[0], shared_value(item[1]), shared_value(item[2])
     out = []
     for position, case in cases:
         rows, original_qpos = [], None
@@ -229,7 +241,7 @@ def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list
                         "method": name,
                         "keyframes": W,
                         "indices": k.tolist(),
-                        **score(case, k, name, phys, body, original_qpos),
+                        **score(case, k, name, phys, body, original_qpos, reconstruction),
                         "decision_ms": ms,
                     }
                 )
@@ -239,12 +251,13 @@ def _evaluate_chunk(item, *, method_names, counts, seed) -> list[tuple[int, list
 
 def _simulate_means(rows: Sequence[dict]) -> dict:
     """Mean over clips of each :data:`sim.simulate.validate.SIMULATE_KEYS` figure (the fall
-    time: over the clips that fell, None if none did)."""
+    time: over the clips that fell, None if none did), and its median (``<key>_median``)."""
     out = {}
     for k in SIMULATE_KEYS:
         v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
         v = v[np.isfinite(v)]
         out[k] = float(v.mean()) if v.size else None
+        out[f"{k}_median"] = float(np.median(v)) if v.size else None
     return out
 
 

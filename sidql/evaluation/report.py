@@ -31,13 +31,12 @@ from sidql.keyframes.counts import check_counts
 from sidql.keyframes.spherical import POINTS, protocol_indices
 from sim.batch import run_batch
 from sim.errors import AllFailedError, MotionDataError, UsageError, require_type
-from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion
+from sim.motion.trial import is_bvh, subject_model
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
-from sim.simulate.model import sim_model
-from sim.simulate.validate import ForwardValidation
+from sim.simulate.validate import forward_validation
 
 
 def report_clips(
@@ -61,6 +60,7 @@ def report_clips(
     workers: int = 1,
     ray: str | None = None,
     simulate=None,
+    reconstruction: str | None = None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
     report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
@@ -69,7 +69,8 @@ def report_clips(
     original's ``contacts`` labelled over the trial (:func:`trial_contacts_by_clip`), and with
     ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`) the forward simulation's. Clips are
     validated through ``sim.batch.run_batch`` (``workers`` processes or Ray); a clip that fails is
-    listed in the report's ``failed`` field.
+    listed in the report's ``failed`` field. ``reconstruction``: every method's keyframes rebuilt
+    with it alone (default: Hermite, and the method's own where it differs).
 
     Raises:
         UnknownNameError: an unknown method. UsageError: W out of range for a clip (both before
@@ -85,7 +86,7 @@ def report_clips(
     validate = partial(
         validate_clip, methods=list(methods), W=W, seed=seed, joint_ranges=joint_ranges,
         streams=streams, physics=job, ground=ground, contacts=contacts,
-        simulate=simulate if job else None,
+        simulate=simulate if job else None, reconstruction=reconstruction,
     )  # fmt: skip
     outcomes = run_batch(
         validate, clips, workers=workers, ray=ray, desc="replay", progress=progress
@@ -108,7 +109,7 @@ def report_clips(
 
 def report_trial(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None,
     out_dir: str | os.PathLike,
     *,
     W: int,
@@ -122,12 +123,16 @@ def report_trial(
     workers: int = 1,
     ray: str | None = None,
     simulate: bool = False,
+    reconstruction: str | None = None,
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
     ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods.
     ``simulate``: also track every motion in forward simulation (the subject's torque-limited
-    body, no assistance: :mod:`sim.simulate.validate`)."""
+    body, no assistance: :mod:`sim.simulate.validate`). ``reconstruction``: every method's
+    keyframes rebuilt with it (:func:`report_clips`). A BVH file stands for both ``asf`` and
+    ``amc`` (``amc`` None)."""
+    amc = asf if amc is None and is_bvh(asf) else amc
     decoded = tuple(load_stream(p, asf) for p in streams)
     motion = load_motion(asf, amc, fps=30.0)
     for path, d in zip(streams, decoded, strict=True):
@@ -151,7 +156,7 @@ def report_trial(
     forward = None
     if simulate:
         names = from_clip(all_clips[0]).restrict(POINTS).names
-        forward = ForwardValidation(sim_model(skeleton), names)
+        forward = forward_validation(skeleton, names)
     return report_clips(
         [all_clips[c] for c in clips], out_dir, W=W, methods=methods, seed=seed,
         joint_ranges=joint_ranges(model), videos=videos, style=style,
@@ -159,5 +164,5 @@ def report_trial(
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
         progress=progress, clip_numbers=list(clips), streams=decoded, model=model,
         ground=ground, contacts=trial_contacts_by_clip(all_clips, ground), workers=workers,
-        ray=ray, simulate=forward,
+        ray=ray, simulate=forward, reconstruction=reconstruction,
     )  # fmt: skip

@@ -38,7 +38,13 @@ from sim.analysis.figures import HEIGHT_KEYS
 
 
 def score(
-    case: Case, keyframes: np.ndarray, method: str, physics=None, simulate=None, original_qpos=None
+    case: Case,
+    keyframes: np.ndarray,
+    method: str,
+    physics=None,
+    simulate=None,
+    original_qpos=None,
+    reconstruction: str | None = None,
 ) -> dict:
     """Every error measure of one clip rebuilt from ``keyframes`` with the reconstruction
     ``method`` declares (:func:`sidql.keyframes.methods.reconstruction_of`; see the module
@@ -49,9 +55,11 @@ def score(
     labelled over the whole trial); ``simulate`` (a
     :class:`sim.simulate.validate.ForwardValidation`, with ``physics``) adds its forward
     simulation's figures (the IK fit tracked without assistance; ``original_qpos``: the
-    original's fit, computed here when None)."""
+    original's fit, computed here when None). ``reconstruction``: rebuild with this registered
+    reconstruction instead of the method's own (its name and ``side_bytes`` join the row)."""
     s = case.series
-    rec = reconstructions.rebuild(methods.reconstruction_of(method), case.clip, keyframes, s)
+    name = reconstruction or methods.reconstruction_of(method)
+    rec = reconstructions.rebuild(name, case.clip, keyframes, s)
     phys = {}
     if physics:
         analysis = physics.analyse(case.clip, rec)
@@ -62,6 +70,8 @@ def score(
             phys.update(simulate.run(analysis["per_frame"]["qpos"], case.clip.fps, original_qpos))
     return {
         **phys,
+        "reconstruction": name,
+        "side_bytes": rec.side_bytes,
         "q": q_from_angles(s, rec.theta, rec.phi),
         "q_hermite": q_error(s, keyframes, "hermite"),
         "geodesic_deg": geodesic_deg(case.pos, rec.positions, rec.parents),

@@ -103,15 +103,20 @@ def simulate_markdown(results: Sequence[dict]) -> str:
     rows = [r for r in results if r.get("sim_error_mm") is not None]
     rows.sort(key=lambda r: r["method"] != "original")
     lines = [
-        "| method | W | clips | error vs tracked (mm) | error vs original (mm) | fell (share) "
-        "| fall time (s) | joint torque RMS (N m/kg) | torque at limit (share) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| method | W | clips | error vs tracked (mm), mean / median | root-relative (mm), mean "
+        "/ median | error vs original (mm) | fell (share) | fall time (s) | joint torque RMS "
+        "(N m/kg) | torque at limit (share) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         fall = "-" if r["sim_fall_s"] is None else f"{r['sim_fall_s']:.2f}"
+        local = r.get("sim_error_local_mm")
+        local = "-" if local is None else f"{local:.1f} / {r['sim_error_local_mm_median']:.1f}"
+        median = r.get("sim_error_mm_median")
+        median = "" if median is None else f" / {median:.1f}"
         lines.append(
-            f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['sim_error_mm']:.1f} "
-            f"| {r['sim_error_original_mm']:.1f} | {r['sim_fell']:.2f} | {fall} "
+            f"| {r['method']} | {r['keyframes']} | {r['clips']} | {r['sim_error_mm']:.1f}{median} "
+            f"| {local} | {r['sim_error_original_mm']:.1f} | {r['sim_fell']:.2f} | {fall} "
             f"| {r['sim_torque_rms_nm_kg']:.3f} | {r['sim_torque_saturated']:.3f} |"
         )
     return "\n".join(lines)

@@ -17,13 +17,12 @@ from sidql.evaluation.cases import Case
 from sidql.keyframes.spherical import POINTS
 from sim.analysis.job import PhysicsJob
 from sim.errors import MotionDataError
-from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
+from sim.motion.trial import subject_model
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip
-from sim.simulate.model import sim_model
-from sim.simulate.validate import ForwardValidation
+from sim.simulate.validate import forward_validation
 
 
 @dataclass(frozen=True)
@@ -103,14 +102,13 @@ def physics_setup(cases: Sequence[Case]) -> dict:
 def simulate_setup(cases: Sequence[Case], samples: int = 0) -> dict:
     """Per trial (``clip.source``): the :class:`sim.simulate.validate.ForwardValidation` of its
     subject (one torque-limited simulated body per skeleton) for :func:`sidql.evaluation.scoring.score`; ``samples``:
-    its sampling tracker's rollouts per window (0: the plain tracker)."""
+    its sampling tracker's rollouts per window (0: ``sim.simulate.validate``'s default
+    controller)."""
     bodies, out = {}, {}
     for c in cases:
         if c.asf not in bodies:
             skeleton = subject_model(c.asf)[0]
-            bodies[c.asf] = ForwardValidation(
-                sim_model(skeleton), _protocol_names(c.clip), samples=samples
-            )
+            bodies[c.asf] = forward_validation(skeleton, _protocol_names(c.clip), samples=samples)
         out[c.clip.source] = bodies[c.asf]
     return out
 

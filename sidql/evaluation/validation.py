@@ -36,8 +36,8 @@ from sidql.keyframes.spherical import POINTS
 from sim.analysis.figures import HEIGHT_KEYS
 from sim.analysis.job import PhysicsJob
 from sim.errors import MotionDataError, UsageError
-from sim.model.humanoid import subject_model
 from sim.motion.clip import Clip
+from sim.motion.trial import subject_model
 from sim.physics.contacts import trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import (
@@ -193,6 +193,7 @@ def validate_clip(
     ground=None,
     simulate=None,
     contacts=None,
+    reconstruction: str | None = None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -211,6 +212,8 @@ def validate_clip(
             run in ``mj_step`` without assistance; its figures join ``physics``.
         contacts: the original's foot contacts labelled over the whole trial, by the clip's
             ``start_frame`` (:func:`trial_contacts`); default: labelled on the clip.
+        reconstruction: rebuild every method's keyframes with this one alone (default: Hermite,
+            and the method's own where it differs).
     """
     if physics is not None and ground is None:
         ground = estimate_ground(clip.positions, clip.names, clip.fps)
@@ -232,7 +235,7 @@ def validate_clip(
             out.physics.update(simulate.run(out.physics["per_frame"]["qpos"], clip.fps))
         analyse = partial(_run_physics, out, physics, simulate, ground, trial_labels)
     for m in methods:
-        out.runs += _method_runs(out, m, W, seed, full, kw, analyse)
+        out.runs += _method_runs(out, m, W, seed, full, kw, analyse, reconstruction)
     for stream in streams:
         keys, rec = stream.clip_part(clip)
         checks = replay(rec, full, **kw)
@@ -271,9 +274,12 @@ def _run_physics(out: ClipValidation, physics, simulate, ground, trial_labels, r
     return figures
 
 
-def _method_runs(out: ClipValidation, m: str, W: int, seed: int, full, kw: dict, analyse):
+def _method_runs(
+    out: ClipValidation, m: str, W: int, seed: int, full, kw: dict, analyse, reconstruction=None
+):
     """Method ``m``'s runs on ``out.clip``: its keyframes under the Hermite (unless another
-    method already shows the same keyframes so) and under its own reconstruction if another."""
+    method already shows the same keyframes so) and under its own reconstruction if another;
+    under ``reconstruction`` alone when it is given."""
     clip = out.clip
     runs = []
     keys = np.asarray(select(m, clip, W, seed=seed))
@@ -282,7 +288,8 @@ def _method_runs(out: ClipValidation, m: str, W: int, seed: int, full, kw: dict,
         r.reconstruction == "hermite" and np.array_equal(r.keyframes, keys) for r in out.runs
     )
     hermite = [] if own != "hermite" and shown else ["hermite"]  # cartesian's = uniform's
-    for name in hermite + ([own] if own != "hermite" else []):
+    names = hermite + ([own] if own != "hermite" else [])
+    for name in [reconstruction] if reconstruction else names:
         built = reconstructions.rebuild(name, clip, keys)
         rec = from_reconstruction(built, clip.fps)
         checks = replay(rec, full, **kw)

@@ -33,7 +33,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.counts import check_counts
 from sidql.keyframes.metrics import q_error
 from sidql.keyframes.old_names import RENAMED
-from sidql.keyframes.optimal import clip_optimal_table
+from sidql.keyframes.optimal import clip_optimal_keyframes
 from sidql.keyframes.pitch import keyframes_for_count, pitch_distances, protocol_rotations
 from sidql.keyframes.segment_costs import SEPARABLE, greedy_keyframes
 from sidql.keyframes.spherical import chart
@@ -50,7 +50,10 @@ RECONSTRUCTION: dict[str, str] = {}
 
 #: name -> module that registers it when imported (for methods with heavy dependencies).
 #: ``"module:function"`` names the method's function; a bare ``"module"`` must register it on import.
-LAZY_METHODS: dict[str, str] = {"dqn": "sidql.learning.policy:dqn"}
+LAZY_METHODS: dict[str, str] = {
+    "dqn": "sidql.learning.policy:dqn",
+    "physics": "sidql.keyframes.physical_costs",  # registers itself (rebuilt with contacts)
+}
 
 _OPTIONS = ("reconstruction", "memo")
 _TAKES: dict[str, tuple[str, ...]] = {}
@@ -246,8 +249,8 @@ def optimal(
     optimum = reconstructions.get(reconstruction).optimum
     if optimum is None:
         raise UsageError(f"reconstruction {reconstruction!r} has no registered optimum")
-    if memo is None and reconstruction in SEPARABLE:  # chart + costs in one pass
-        return clip_optimal_table(clip, reconstruction, w_max=W).keyframes(W)
+    if memo is None and reconstruction in SEPARABLE:  # chart + the costs it can use, one pass
+        return clip_optimal_keyframes(clip, W, reconstruction)
     series = _memo_chart(clip, memo)
     if memo is None:
         return optimum(series, w_max=W).keyframes(W)

@@ -17,12 +17,17 @@ import numba
 import numpy as np
 
 from sidql.keyframes.segment_costs import (
+    _FAST,
+    SEPARABLE,
+    _fill_costs,
+    _frame_cost,
+    _stacked_chart,
     catmull_rom_costs,
     clip_cost_matrix,
     segment_cost_matrix,
 )
-from sidql.keyframes.spherical import M_BONES, SphericalSeries
-from sim.errors import UsageError, require_type
+from sidql.keyframes.spherical import M_BONES, SIN_EPS, SphericalSeries, chart_points_of
+from sim.errors import UnknownNameError, UsageError, require_type
 
 
 @numba.njit(cache=True)
@@ -131,6 +136,73 @@ def clip_optimal_table(
     """:func:`optimal_table` of a clip's chart, chart and costs in one compiled pass
     (:func:`sidql.keyframes.segment_costs.clip_cost_matrix`); the same optima."""
     return solve(clip_cost_matrix(clip, reconstruction), M_BONES, w_max)
+
+
+def clip_optimal_keyframes(clip, W: int, reconstruction: str = "hermite") -> np.ndarray:
+    """(W,) the same keyframes as ``clip_optimal_table(clip, reconstruction, W).keyframes(W)``,
+    from :func:`optimum_cost_matrix` (only the segments that can be in the optimum): a fraction
+    of the work."""
+    return solve(optimum_cost_matrix(clip, W, reconstruction), M_BONES, W).keyframes(W)
+
+
+def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.ndarray:
+    """The (N, N) segment costs of ``clip`` (:func:`sidql.keyframes.segment_costs.clip_cost_matrix`)
+    that the optimum for exactly W keyframes can use; the others are inf.
+
+    The optimum's total is at most U, the optimum over segments of at most
+    ``ceil(1.5 (N - 1) / (W - 1))`` frames (a band of the matrix, computed first, with its own
+    programme). A longer segment (i, j) can be in it only if its cost plus the least the rest
+    of the clip can cost around it (programmes over lower bounds of every entry: the band's
+    exact costs, one middle frame's cost outside it) is at most U (1 + 1e-9); it is summed
+    frame by frame and abandoned, set to inf, once that fails. The entries kept are the numbers
+    of ``clip_cost_matrix``. A path through an inf entry costs more than U, so this matrix's
+    W-keyframe optimum, tie-breaking included, is the full matrix's; its optima for fewer
+    keyframes are not.
+
+    Raises:
+        MotionDataError: as :func:`sidql.keyframes.spherical.chart`. UsageError: W out of range.
+    """
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
+    P, V, parents = chart_points_of(clip)
+    if not 2 <= W <= P.shape[0]:
+        raise UsageError(f"W must be in [2, {P.shape[0]}]; got {W}")
+    X, R = _stacked_chart(P, V, parents, float(clip.dt), SIN_EPS)
+    return _optimum_costs(X, R, reconstruction == "linear", int(W))
+
+
+@numba.njit(cache=True, fastmath=_FAST)  # the flags of the kernels it shares
+def _optimum_costs(X, R, linear, W):
+    """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame].
+
+    Its disk cache does not notice a change in segment_costs.py's kernels: clear
+    ``sidql/keyframes/__pycache__/*.nb*`` after one (tests/test_keyframes_fused.py checks the
+    numbers against the full matrix)."""
+    N, D = X.shape
+    band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
+    C = np.zeros((N, N))
+    bounds = np.full((N, N), np.inf)
+    _fill_costs(X, R, linear, C, 2, band, bounds)
+    Cb = C.copy()  # the band alone: its optimum U bounds the true one
+    lb = C.copy()  # a lower bound of every entry: exact in the band, one middle frame outside
+    dX = np.empty(D)
+    for i in range(N):
+        for j in range(i + band, N):
+            Cb[i, j] = np.inf
+            for d in range(D):
+                dX[d] = X[j, d] - X[i, d]
+            lb[i, j] = _frame_cost(X, R, dX, i, j, i + (j - i) // 2, linear)
+    U = _dp(Cb, W)[0][W, N - 1] * (1.0 + 1e-9)  # feasible: (band - 1) (W - 1) >= N - 1
+    head = _dp(lb, W)[0]  # head[w, i] <= least cost of frames 0..i, w keyframes, the last i
+    tail = _dp(lb[::-1, ::-1].T.copy(), W)[0]  # the same for frames j..N-1 from the end
+    for i in range(N):
+        for j in range(i + band, N):
+            rest = np.inf  # the least the rest of the clip can cost around segment (i, j)
+            for w in range(1, W):
+                rest = min(rest, head[w, i] + tail[W - w, N - 1 - j])
+            bounds[i, j] = U - rest
+    _fill_costs(X, R, linear, C, band, N, bounds)
+    return C
 
 
 def optimal_keyframes(

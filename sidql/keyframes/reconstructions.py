@@ -21,6 +21,10 @@ The registered reconstructions:
 ``cartesian``
     every point on its own cubic Hermite in xyz (bone lengths not kept): the worked example of
     adding one.
+``contacts``
+    ``hermite`` plus per-frame foot-contact bits (run-length coded side information, counted in
+    :attr:`Reconstruction.side_bytes`); the receiver pins each foot in contact where it touched
+    down by analytic two-bone IK (:mod:`sidql.keyframes.contact_pinning`).
 
 Adding a reconstruction = one function + one :func:`register` call + its test; :mod:`evaluate
 <sidql.evaluation.evaluate>`, :mod:`rate <sidql.evaluation.rate>` and :mod:`validation
@@ -33,6 +37,7 @@ Pure numpy. Units: metres, seconds, radians; positions in world axes (z up).
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -81,6 +86,7 @@ class Reconstruction(PointMotion):
             themselves (:func:`~sidql.keyframes.curves.interpolate_derivatives`: at an inner
             keyframe the mean over the frame's interval); None where a reconstruction does not
             provide them.
+        side_bytes: bytes sent per clip beside the keyframes (``contacts``: its contact runs).
     """
 
     theta: np.ndarray
@@ -88,6 +94,7 @@ class Reconstruction(PointMotion):
     keyframes: np.ndarray
     reconstruction: str
     accelerations: np.ndarray | None = None
+    side_bytes: int = 0
 
     @property
     def dt(self) -> float:
@@ -103,6 +110,7 @@ def points_reconstruction(
     reconstruction: str,
     fps: float,
     accelerations: np.ndarray | None = None,
+    side_bytes: int = 0,
 ) -> Reconstruction:
     """A reconstruction rebuilt as points rather than in the chart (``slerp``, ``cartesian``):
     the 23 protocol points' positions (N, 23, 3) [m], velocities [m/s] and accelerations
@@ -122,6 +130,7 @@ def points_reconstruction(
         reconstruction=reconstruction,
         fps=fps,
         accelerations=accelerations,
+        side_bytes=side_bytes,
     )
 
 
@@ -169,13 +178,16 @@ Rebuild = Callable[..., Reconstruction]
 
 @dataclass(frozen=True)
 class ReconstructionSpec:
-    """What one registered reconstruction declares (see the module docstring)."""
+    """What one registered reconstruction declares (see the module docstring); ``exact_keyframes``:
+    every point of every keyframe is the original's (False: ``contacts``, whose fades and lifts
+    may move a leg at a keyframe near a contact change)."""
 
     name: str
     rebuild: Rebuild
     payload_bytes: int
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None
     optimum: Callable[[SphericalSeries, int], object] | None = None
+    exact_keyframes: bool = True
 
 
 #: name -> :class:`ReconstructionSpec`, in registration order.
@@ -188,14 +200,16 @@ def register(
     payload_floats: int,
     cost_matrix: Callable[[SphericalSeries], np.ndarray] | None = None,
     optimum: Callable[[SphericalSeries, int], object] | None = None,
+    exact_keyframes: bool = True,
 ) -> Callable[[Rebuild], Rebuild]:
     """Decorator registering ``rebuild(clip, keyframes, series=None)`` as reconstruction ``name``
     whose keyframe carries ``payload_floats`` float32 values (plus the one-byte frame index)."""
 
     def deco(fn: Rebuild) -> Rebuild:
         RECONSTRUCTIONS[name] = ReconstructionSpec(
-            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum
-        )
+            name, fn, payload_floats * FLOAT_BYTES + INDEX_BYTES, cost_matrix, optimum,
+            exact_keyframes,
+        )  # fmt: skip
         return fn
 
     return deco
@@ -286,3 +300,14 @@ def cartesian(clip: Clip, keyframes, series: SphericalSeries | None = None) -> R
     P, V, A = interpolate_derivatives(pos, vel, k, clip.dt, "hermite")
     P, V, A = (x.reshape(N, len(POINTS), 3) for x in (P, V, A))
     return points_reconstruction(P, V, protocol_parent_indices(), k, "cartesian", clip.fps, A)
+
+
+@register("contacts", payload_floats=2 * POSE_FLOATS, exact_keyframes=False)
+def contacts(clip: Clip, keyframes, series: SphericalSeries | None = None) -> Reconstruction:
+    """``hermite`` with the sender's foot-contact bits (run-length coded, their bytes in
+    ``side_bytes``): each foot in contact pinned where it touched down by two-bone IK
+    (:func:`sidql.keyframes.contact_pinning.rebuild`)."""
+    # imported on first use: the sender's contact labels stand on sim.physics (MuJoCo)
+    return importlib.import_module("sidql.keyframes.contact_pinning").rebuild(
+        clip, keyframes, series
+    )

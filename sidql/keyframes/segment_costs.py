@@ -36,25 +36,63 @@ def _cost_matrix(X, R, linear):
     The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01); the wrap
     (:func:`sim.model.angles.wrap_angle`) is branch-free, so the inner loop vectorises.
     """
-    N, D = X.shape
+    N = X.shape[0]
     C = np.zeros((N, N))
+    _fill_costs(X, R, linear, C, 2, N, np.full((N, N), np.inf))
+    return C
+
+
+#: fastmath without "no infinities / no NaNs" (the bound of :func:`_fill_costs` may be inf):
+#: reassociation is what lets the sums over channels vectorise.
+_FAST = {"reassoc", "contract", "nsz", "arcp", "afn"}
+
+
+@numba.njit(cache=True, fastmath=_FAST)
+def _fill_costs(X, R, linear, C, lo, hi, bounds):
+    """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``
+    (:func:`_entry_cost` with bound ``bounds[i, j]``; every caller passes an (N, N) array, so
+    all run one compiled loop and keep the same numbers)."""
+    N, D = X.shape
     dX = np.empty(D)
     for i in range(N):
-        for j in range(i + 2, N):
-            for d in range(D):
-                dX[d] = X[j, d] - X[i, d]
-            L = j - i
-            total = 0.0
-            for n in range(i + 1, j):
-                h01, h10, h11 = segment_weights(n, i, L, linear)
-                acc = 0.0
-                for d in range(D):
-                    v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
-                    v = wrap_angle(v)
-                    acc += abs(v)
-                total += acc
-            C[i, j] = total
-    return C
+        for j in range(i + max(lo, 2), min(i + hi, N)):
+            C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j])
+
+
+@numba.njit(cache=True, fastmath=_FAST, inline="always")
+def _entry_cost(X, R, dX, i, j, linear, bound):
+    """``C[i, j]`` of :func:`_cost_matrix` (``dX``: (D,) scratch), or inf if it exceeds
+    ``bound``: with a finite bound the frames are first summed from the middle out (where a
+    segment's error is largest), stopping once over it; an entry kept is then summed again in
+    frame order, so it is the same number whatever the bound."""
+    for d in range(X.shape[1]):
+        dX[d] = X[j, d] - X[i, d]
+    L = j - i
+    if bound < np.inf:  # any frames' sum is a lower bound: the middle ones first (the largest)
+        part = 0.0
+        for t in range(L - 1):
+            n = i + L // 2 + ((t + 1) // 2 if t % 2 else -((t + 1) // 2))
+            part += _frame_cost(X, R, dX, i, j, n, linear)
+            if part > bound:
+                return np.inf
+    total = 0.0
+    for n in range(i + 1, j):
+        total += _frame_cost(X, R, dX, i, j, n, linear)
+        if total > bound:
+            return np.inf
+    return total
+
+
+@numba.njit(cache=True, fastmath=_FAST, inline="always")
+def _frame_cost(X, R, dX, i, j, n, linear):
+    """Summed |angle error| [rad] of frame n of segment (i, j); ``dX = X[j] - X[i]``."""
+    h01, h10, h11 = segment_weights(n, i, j - i, linear)
+    acc = 0.0
+    for d in range(X.shape[1]):
+        v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
+        v = wrap_angle(v)
+        acc += abs(v)
+    return acc
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
@@ -235,6 +273,13 @@ def _chart_and_costs(P, V, parents, dt, sin_eps, linear):
     """The chart (:func:`sidql.keyframes.spherical._chart_kernel`) and the (N, N) segment costs
     (:func:`_cost_matrix`) of (N, J, 3) world-axes points in one compiled call: the same
     arithmetic as ``segment_cost_matrix(chart_arrays(P, V, parents, dt))``."""
+    X, R = _stacked_chart(P, V, parents, dt, sin_eps)
+    return _cost_matrix(X, R, linear)
+
+
+@numba.njit(cache=True)
+def _stacked_chart(P, V, parents, dt, sin_eps):
+    """:func:`stacked` of the chart of (N, J, 3) world-axes points, in compiled code."""
     theta, phi, dtheta, dphi, _ = _chart_kernel(P, V, parents, sin_eps)
     N, M = theta.shape
     X = np.empty((N, 2 * M))
@@ -245,7 +290,7 @@ def _chart_and_costs(P, V, parents, dt, sin_eps, linear):
             X[n, M + m] = phi[n, m]
             R[n, m] = dtheta[n, m] * dt
             R[n, M + m] = dphi[n, m] * dt
-    return _cost_matrix(X, R, linear)
+    return X, R
 
 
 def clip_cost_matrix(clip, reconstruction: str = "hermite") -> np.ndarray:
@@ -259,3 +304,20 @@ def clip_cost_matrix(clip, reconstruction: str = "hermite") -> np.ndarray:
         raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
     P, V, parents = chart_points_of(clip)
     return _chart_and_costs(P, V, parents, float(clip.dt), SIN_EPS, reconstruction == "linear")
+
+
+def clip_stacked_costs(
+    clip, reconstruction: str = "hermite"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The chart of ``clip`` as :func:`stacked` lays it out, (N, 2M) angles [rad] and rates
+    times dt [rad/frame], and its (N, N) segment costs [rad] (:func:`clip_cost_matrix`'s
+    numbers), in one compiled pass: what a learned policy needs (features and costs).
+
+    Raises:
+        MotionDataError: as :func:`sidql.keyframes.spherical.chart`.
+    """
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
+    P, V, parents = chart_points_of(clip)
+    X, R = _stacked_chart(P, V, parents, float(clip.dt), SIN_EPS)
+    return X, R, _cost_matrix(X, R, reconstruction == "linear")

@@ -16,13 +16,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from sidql.keyframes.segment_costs import segment_cost_matrix
-from sidql.keyframes.spherical import chart
+from sidql.keyframes.segment_costs import clip_stacked_costs
 from sidql.learning.decide import decide_clip, encode_clip, encoder_weights, head_weights
 from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
-from sidql.learning.tasks import clip_features
+from sidql.learning.tasks import stacked_features
 from sim.errors import ModelFileError, UsageError
 from sim.files import MAX_POLICY_BYTES
 from sim.paths import package_file
@@ -130,16 +129,16 @@ class Policy:
         return np.nonzero(mask.numpy())[1].reshape(b, W).astype(np.int64)
 
     def select(self, clip, W: int) -> np.ndarray:
-        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart, features, costs, :meth:`decide`)."""
-        series = chart(clip)
-        features = clip_features(series)
+        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart and costs in one compiled
+        pass, features, :meth:`decide`)."""
+        angles, rates, cost = clip_stacked_costs(clip, "hermite")
+        features = stacked_features(angles, rates)
         c = int(self.net.config["n_features"])
         if features.shape[-1] != c:  # a policy trained on clips of another skeleton
             raise ModelFileError(
                 self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
-                f"of {series.theta.shape[1]} bones give {features.shape[-1]}",
+                f"of {angles.shape[1] // 2} bones give {features.shape[-1]}",
             )  # fmt: skip
-        cost = segment_cost_matrix(series, "hermite")
         return self.decide(features[None], cost[None], W)[0]
 
 
@@ -153,9 +152,11 @@ def load_policy(path: str | os.PathLike | None = None) -> Policy:
             weights that do not fit the network it declares); one line naming the file.
     """
     path = Path(path or os.environ.get("SIDQL_POLICY") or DEFAULT_POLICY)
-    if not path.exists():
-        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`")
-    return _load(str(path.resolve()), path.stat().st_mtime_ns)
+    try:  # one system call per decision (the dqn method calls this every time)
+        st = path.stat()
+    except OSError:
+        raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`") from None
+    return _load(os.path.abspath(path), st.st_mtime_ns, st.st_ino)
 
 
 #: Stated limits of a policy file's network config: width, input channels, temporal layers and
@@ -212,7 +213,7 @@ def check_config(cfg, state_dict) -> tuple:
 
 
 @lru_cache(maxsize=4)
-def _load(path: str, _mtime: int) -> Policy:
+def _load(path: str, _mtime: int, _inode: int = 0) -> Policy:
     payload = load_payload(path, POLICY_FORMAT, MAX_POLICY_BYTES)
     try:
         cfg = payload["config"]

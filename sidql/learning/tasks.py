@@ -179,10 +179,18 @@ def clip_features(series) -> np.ndarray:
     """
     theta = np.asarray(series.theta, dtype=np.float64)
     phi = np.asarray(series.phi, dtype=np.float64)
-    phi = phi - phi.mean(axis=0, keepdims=True)
     dt = float(series.dt)
     rates = np.concatenate([series.dtheta * dt, series.dphi * dt], axis=1)
-    return np.concatenate([theta, phi, rates], axis=1).astype(np.float32)
+    return stacked_features(np.concatenate([theta, phi], axis=1), rates)
+
+
+def stacked_features(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """:func:`clip_features` from the chart as :func:`sidql.keyframes.segment_costs.stacked`
+    lays it out: (N, 2M) angles [theta | phi] [rad] and (N, 2M) rates times dt [rad/frame]."""
+    m = angles.shape[1] // 2
+    phi = angles[:, m:]
+    phi = phi - phi.mean(axis=0, keepdims=True)
+    return np.concatenate([angles[:, :m], phi, rates], axis=1).astype(np.float32)
 
 
 def clip_task(clip, *, subject: str = "") -> KeyframeTask:

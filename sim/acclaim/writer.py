@@ -1,4 +1,5 @@
-"""Write an Acclaim AMC motion (the inverse of :func:`sim.acclaim.amc.parse_amc`).
+"""Write an Acclaim AMC motion (the inverse of :func:`sim.acclaim.amc.parse_amc`) and its ASF
+skeleton (the inverse of :func:`sim.acclaim.asf.parse_asf`).
 
 The file is ``:FULLY-SPECIFIED`` and ``:DEGREES``, frames numbered from ``motion.first_frame``,
 the root's channels in the skeleton's ``root_order`` with translations in the skeleton's length
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.records import ROOT_CHANNELS, Motion, Skeleton
+from sim.acclaim.records import INCH, ROOT_CHANNELS, Motion, Skeleton
 from sim.errors import MotionDataError
 from sim.files import write_atomic
 
@@ -65,3 +66,43 @@ def write_amc(
     data = amc_text(skeleton, motion, comment).encode("ascii")
     write_atomic(path, lambda f: f.write(data))
     return path
+
+
+def asf_text(skeleton: Skeleton) -> str:
+    """The ASF text of ``skeleton``: lengths in its own unit (``:units length L`` with
+    ``L = 0.0254 / length_to_metres``, CMU's convention), angles in degrees, 9 significant
+    digits."""
+    L = INCH / skeleton.length_to_metres
+    out = [":version 1.10", f":name {skeleton.name or 'skeleton'}", ":units", "  mass 1.0",
+           f"  length {L:.12g}", "  angle deg", ":root", f"  order {' '.join(c.upper() for c in skeleton.root_order)}",
+           f"  axis {skeleton.root_axis_order}", "  position 0 0 0",
+           f"  orientation {_numbers(skeleton.root_orientation)}", ":bonedata"]  # fmt: skip
+    for i, b in enumerate(skeleton.bones, start=1):
+        out += ["  begin", f"    id {i}", f"    name {b.name}", f"    direction {_numbers(b.direction)}",
+                f"    length {b.length / skeleton.length_to_metres:.12g}",
+                f"    axis {_numbers(b.axis)} {b.axis_order}"]  # fmt: skip
+        if b.dofs:
+            out.append(f"    dof {' '.join(b.dofs)}")
+            pairs = [f"({lo:.9g} {hi:.9g})" for lo, hi in b.limits]
+            out.append(f"    limits {pairs[0]}")
+            out += [f"           {p}" for p in pairs[1:]]
+        out.append("  end")
+    out.append(":hierarchy\n  begin")
+    children: dict[str, list[str]] = {}
+    for b in skeleton.bones:
+        children.setdefault(b.parent, []).append(b.name)
+    out += [f"    {parent} {' '.join(kids)}" for parent, kids in children.items()]
+    out.append("  end")
+    return "\n".join(out) + "\n"
+
+
+def write_asf(path: str | os.PathLike, skeleton: Skeleton) -> Path:
+    """Write ``skeleton`` as an ASF file at ``path``, atomically."""
+    path = Path(path)
+    data = asf_text(skeleton).encode("ascii")
+    write_atomic(path, lambda f: f.write(data))
+    return path
+
+
+def _numbers(v) -> str:
+    return " ".join(f"{x:.12g}" for x in np.asarray(v, dtype=np.float64) + 0.0)

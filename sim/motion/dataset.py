@@ -1,7 +1,8 @@
 """Folders of CMU files: find trials, and ingest them all in parallel worker processes.
 
 Layout: subject folders holding ``SS.asf`` beside ``SS_TT.amc`` (any depth; names compared
-case-insensitively). A trial whose ASF is missing is reported, not silently dropped.
+case-insensitively), and BVH files (``SS_TT.bvh``, each a trial of its own) beside or instead of
+them. A trial whose ASF is missing is reported, not silently dropped.
 
 Outputs go to ``OUT/<subject>/<trial>.npz`` with both names made safe (:func:`output_paths`): they
 can never leave ``OUT`` and two inputs never share an output. Worker processes watch their parent
@@ -20,6 +21,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
+from sim.acclaim.writer import asf_text
 from sim.batch import WRITE_LOCK, run_batch
 from sim.errors import MotionDataError, MotionDataWarning
 from sim.files import (
@@ -34,8 +36,9 @@ from sim.files import (
 from sim.folders import MAX_DEPTH, walk
 from sim.motion.clip import load_npz, save_npz
 from sim.motion.ingest import load_motion
+from sim.motion.trial import is_bvh, read_skeleton
 
-_TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.amc$", re.IGNORECASE)
+_TRIAL_RE = re.compile(r"^(?P<subject>[^_]+)_(?P<trial>.+)\.(amc|bvh)$", re.IGNORECASE)
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]")
 
 
@@ -68,7 +71,8 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
 
     An AMC ``SS_TT.amc`` pairs with ``SS.asf`` in its own folder (or, failing that, the only ASF
     there). AMCs with no skeleton are returned with ``asf`` pointing at the expected path, so the
-    ingest reports them as bad input instead of dropping them.
+    ingest reports them as bad input instead of dropping them. A BVH file ``SS_TT.bvh`` (any
+    name: its subject is then its folder's) is a trial of its own, ``asf`` and ``amc`` both it.
 
     Nothing outside ``root`` is read: a trial whose AMC or ASF is a symbolic link (or lies under
     one) resolving outside ``root`` is left out and listed, as ``{"amc", "asf", "error"}``, in
@@ -93,7 +97,7 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
     for folder in too_deep[:20]:
         skip(folder, "", f"{excerpt(str(folder), 300, quote=False)}: nested over {MAX_DEPTH} "
              "folders deep; not searched")  # fmt: skip
-    named = [p for p in entries if p.suffix.lower() == ".amc"]
+    named = [p for p in entries if p.suffix.lower() in (".amc", ".bvh")]
     for amc in named:
         if not str(amc.relative_to(root)).isprintable():  # control characters: not echoed
             skip(amc, "", f"{excerpt(str(amc))}: a name that cannot be printed; skipped")
@@ -103,6 +107,12 @@ def find_trials(root: str | os.PathLike, skipped: list | None = None) -> list[Tr
             continue
         m = _TRIAL_RE.match(amc.name)
         subject = m.group("subject") if m else amc.parent.name
+        if is_bvh(amc):  # skeleton and motion in one file
+            if not inside(amc, root):
+                skip(amc, amc, f"{amc}: a symbolic link to a file outside {root}; skipped")
+                continue
+            trials.append(Trial(subject=subject, name=amc.stem, asf=amc, amc=amc))
+            continue
         asfs = {p.name.lower(): p for p in amc.parent.iterdir() if p.suffix.lower() == ".asf"}
         asf = asfs.get(f"{subject.lower()}.asf")
         if asf is None and len(asfs) == 1:
@@ -278,11 +288,15 @@ def ingest_directory(
 def _relative(record: dict, trial: Trial, root, out_dir: Path, skeletons: dict) -> dict:
     """``record`` with paths an index may hold: ``amc`` relative to the input ``root`` (recorded
     once as the index's ``source``; information only, never read back) and ``asf`` a copy of the
-    subject's skeleton inside ``out_dir`` (``<subject>/skeleton-<8 hex of its bytes>.asf``), so
+    subject's skeleton inside ``out_dir`` (``<subject>/skeleton-<8 hex of its bytes>.asf``; a
+    BVH's skeleton written as an ASF), so
     a dataset folder is self-contained and its readers never leave it."""
     key = os.path.realpath(trial.asf)
     if key not in skeletons:
-        data = read_regular(trial.asf, MAX_ASF_BYTES)  # parsed by the worker: a small regular file
+        if is_bvh(trial.asf):  # its skeleton as an ASF (read by the worker: a valid file)
+            data = asf_text(read_skeleton(trial.asf)).encode("ascii")
+        else:
+            data = read_regular(trial.asf, MAX_ASF_BYTES)  # parsed by the worker: small, regular
         rel = PurePosixPath(record["file"]).parent / (
             f"skeleton-{hashlib.sha1(data).hexdigest()[:8]}.asf"
         )

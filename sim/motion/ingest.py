@@ -1,4 +1,4 @@
-"""Ingest: ASF + AMC -> a :class:`~sim.motion.clip.Clip` of positions and true velocities.
+"""Ingest: ASF + AMC (or a BVH) -> a :class:`~sim.motion.clip.Clip` of positions and true velocities.
 
 Parse, retarget to a humanoid (the subject's own or the shared one), differentiate ``qpos`` at the
 source rate, resample by taking every k-th frame, and read positions, velocities and orientations
@@ -15,10 +15,17 @@ import numpy as np
 
 from sim.acclaim.amc import parse_amc
 from sim.errors import MotionDataError, UnknownNameError, UsageError
-from sim.model.humanoid import humanoid_model, subject_model
+from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
-from sim.motion.retarget import leg_length, local_rotations_from_world, motion_to_qpos
+from sim.motion.resample import grid_rate, resample_qpos, resampled_frames
+from sim.motion.retarget import (
+    leg_length,
+    local_rotations_from_world,
+    motion_to_qpos,
+    retarget_rotations,
+)
+from sim.motion.trial import CMU_FPS, read_trial, subject_model, trial_files
 from sim.motion.velocities import (
     body_rotation_steps,
     derivative_noise,
@@ -31,7 +38,6 @@ from sim.motion.velocities import (
 )
 
 SKELETONS = ("subject", "humanoid")
-CMU_FPS = 120.0
 #: Memory bound of :func:`load_motion`: the arrays it builds, about :data:`BYTES_PER_POINT_FRAME`
 #: per point and source frame (measured: ``benchmarks/fuzz_campaign.py``), at most
 #: :data:`ARRAY_BYTES_PER_INPUT_BYTE` times the AMC file's size or :data:`ARRAY_BYTES_FLOOR`
@@ -143,22 +149,28 @@ def clip_from_qpos(
 
 def load_motion(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None = None,
     *,
     skeleton: str = "subject",
     fps: float = 30.0,
     source_fps: float = CMU_FPS,
     derivatives: bool = True,
+    unit: str | None = None,
+    up: str = "y",
 ) -> Clip:
     """A whole trial as one clip at ``fps``.
 
     Args:
-        asf, amc: the subject's skeleton and one of its motions.
+        asf, amc: the subject's skeleton and one of its motions; or a BVH file as ``asf`` (or
+            both): its skeleton and motion, at its own rate (:mod:`sim.bvh.convert`: ``unit``
+            None detects the length unit, ``up`` is its up axis).
         skeleton: ``"subject"`` (the subject's own generated model: exact ASF/AMC kinematics) or
             ``"humanoid"`` (the shared ``models/cmu_humanoid.xml``; angles copied, root translation
-            scaled by the leg-length ratio).
+            scaled by the leg-length ratio; a BVH's rotations are re-expressed in its bones'
+            frames, :func:`sim.motion.retarget.retarget_rotations`).
         fps: output rate; ``source_fps / fps`` must be a whole number (CMU: 120 -> 30 takes every
-            4th frame).
+            4th frame). A BVH whose rate it does not divide is first interpolated onto the least
+            whole multiple of ``fps`` above its rate (:mod:`sim.motion.resample`: 100 -> 120).
         derivatives: also the points' velocities and accelerations from every source frame
             (``source_velocities``, ``accelerations``; :func:`clip_from_qpos`).
 
@@ -167,16 +179,29 @@ def load_motion(
     """
     if skeleton not in SKELETONS:
         raise UnknownNameError("skeleton", skeleton, SKELETONS)
-    resample_step(source_fps, fps)  # refused before any file is read
-    subject, model = subject_model(asf)
-    motion = parse_amc(amc, subject)
-    _check_memory(amc, motion.n_frames, len(point_names(subject)))
+    bvh = trial_files(asf, amc)
+    if bvh is None:  # a BVH's own rate is known once it is read
+        resample_step(source_fps, fps)  # refused before any file is read
+    subject, model = subject_model(bvh or asf, unit=unit, up=up)
+    if bvh is None:
+        motion = parse_amc(amc, subject)
+    else:
+        _, motion, source_fps = read_trial(bvh, unit=unit, up=up)
+    frames = motion.n_frames
+    if bvh is not None:  # a rate the clip rate does not divide: the frames once resampled
+        frames = resampled_frames(frames, source_fps, grid_rate(source_fps, fps))
+    check_memory(bvh or amc, frames, len(point_names(subject)))
     root_scale = 1.0
     target = subject
     if skeleton == "humanoid":
         target, model = humanoid_model()
+        if bvh is not None:
+            subject, motion = retarget_rotations(subject, motion, target)
         root_scale = leg_length(target) / leg_length(subject)
-    qpos = motion_to_qpos(subject, motion, model, root_scale=root_scale)
+    qpos = motion_to_qpos(subject if bvh is None else target, motion, model, root_scale=root_scale)
+    if bvh is not None and grid_rate(source_fps, fps) != source_fps:
+        qpos = resample_qpos(qpos, source_fps, grid_rate(source_fps, fps))
+        source_fps = grid_rate(source_fps, fps)
     return clip_from_qpos(
         model,
         point_names(target),
@@ -184,12 +209,12 @@ def load_motion(
         qpos,
         source_fps=source_fps,
         fps=fps,
-        source=str(Path(amc)),
+        source=str(Path(bvh or amc)),
         derivatives=derivatives,
     )
 
 
-def _check_memory(amc, frames: int, points: int) -> None:
+def check_memory(amc, frames: int, points: int) -> None:
     """Refuse a trial whose arrays would pass the stated bound (see :data:`ARRAY_BYTES_FLOOR`)."""
     need = frames * points * BYTES_PER_POINT_FRAME
     size = os.stat(amc).st_size
@@ -204,7 +229,7 @@ def _check_memory(amc, frames: int, points: int) -> None:
 
 def load_clips(
     asf: str | os.PathLike,
-    amc: str | os.PathLike,
+    amc: str | os.PathLike | None = None,
     *,
     fps: float = 30.0,
     length: int = 60,

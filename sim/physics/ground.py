@@ -215,11 +215,13 @@ def _robust_plane(xy, z, group, n_groups, *, min_span, min_scale, iters=30):
     r = z - c[group]
     slope = np.zeros(2)
     w = np.ones(N)
-    for _ in range(iters):
+    for it in range(iters):
         scale = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), min_scale)
         u = r / (4.685 * scale)
-        w = np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
+        w_prev, w = w, np.where(np.abs(u) < 1, (1 - u**2) ** 2, 0.0)
         if w.sum() < 1e-9:
+            break
+        if it > 0 and np.array_equal(w, w_prev):  # a fixed point: every later pass repeats it
             break
         inl = w > 0
         axes = np.zeros((2, 0))

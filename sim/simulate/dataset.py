@@ -27,13 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.acclaim.amc import parse_amc
-from sim.acclaim.asf import parse_asf
 from sim.batch import iter_batch, ray_session, run_batch
 from sim.errors import MotionDataError, UnknownNameError, UsageError, require_positive
 from sim.files import remove_written, write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
+from sim.motion.trial import read_trial
 from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_dict
 from sim.simulate.journal import JOURNAL, clip_name, open_journal  # noqa: F401 (JOURNAL: its name)
 from sim.simulate.journal import read as read_journal
@@ -66,7 +65,7 @@ def readable_trials(
 
 
 def _parse(trial) -> None:
-    parse_amc(trial.amc, parse_asf(trial.asf))
+    read_trial(trial.asf, trial.amc)  # ASF + AMC, or a BVH
 
 
 def simulate_file(task: SynthTask) -> tuple[bytes, dict]:

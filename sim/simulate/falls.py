@@ -24,10 +24,10 @@ import mujoco
 import numpy as np
 
 from sim.model.kinematics import SOLE_POINTS
-from sim.simulate.model import SOLE_GEOMS
+from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS
 
-#: geoms that may always touch the floor: the feet
-FOOT_GEOMS = SOLE_POINTS + SOLE_GEOMS
+#: geoms that may always touch the floor: the feet (capsules, sole and toe boxes)
+FOOT_GEOMS = SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
 #: [m] a reference part whose lowest surface point is at most this high is on the floor (a hand
 #: planted on the floor in motion capture hovers 1-3 cm: marker offsets, floor drift)
 REFERENCE_GAP = 0.05

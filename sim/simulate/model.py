@@ -31,8 +31,8 @@ module edits its output through ``mujoco.MjSpec``:
   other and pairs overlapping in the rest pose (:func:`self_collision_exclusions`), so a
   falling body's limbs cannot pass through each other or through its trunk;
 * feet that can stand (``soles=True``, the default): a flat sole box under each foot from
-  :data:`SOLE_HEEL` behind the ankle to the ball, heel and toe (:func:`add_soles`; the foot
-  capsule then touches the body only; ``sim.physics.feet``'s sole points, the physics
+  :data:`SOLE_HEEL` behind the ankle to the ball and a toe box under the toes from the ball to
+  their tip (:func:`add_soles`; the foot and toe capsules then touch the body only; ``sim.physics.feet``'s sole points, the physics
   analysis's, stay the capsules); opt-in (``stance_ankles=True``) ankles at least as stiff as
   the standing body's toppling stiffness (:func:`stance_stiffness`);
 * the physics step is ``1 / (4 * 120)`` s so one control tick holds 4 steps at 120 Hz, and the
@@ -242,6 +242,7 @@ def stance_stiffness(model) -> float:
 
 
 SOLE_GEOMS = ("lsole", "rsole")
+TOE_GEOMS = ("ltoesole", "rtoesole")  # the toes' boxes (:func:`add_soles`)
 SOLE_HALF_WIDTH = 0.045  # [m] a foot is about 9 cm wide at the ball
 SOLE_HEEL = 0.05  # [m] the heel reaches this far behind the ankle joint
 SOLE_HALF_THICKNESS = 0.01  # [m]
@@ -260,8 +261,10 @@ def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
 
     The box's bottom face is the sole: normal to :data:`STANCE_UP`, through the lowest point of
     the foot capsule and the toes in that direction, from :data:`SOLE_HEEL` behind the ankle
-    joint to the tip of the toes (the front of the foot capsule where there are none), :data:`SOLE_HALF_WIDTH`
-    either side. ``model``: the humanoid of ``build_mjcf`` (capsule feet, sphere or capsule
+    joint to the front of the foot capsule (the ball of the foot), :data:`SOLE_HALF_WIDTH`
+    either side; and per toes body (``"ltoes"``, ``"rtoes"``, where the toes reach beyond the
+    ball) the toe box in the toes' frame: the same bottom plane at rest, from the ball to the
+    tip of the toes. ``model``: the humanoid of ``build_mjcf`` (capsule feet, sphere or capsule
     toes), its joints at zero."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
@@ -287,29 +290,44 @@ def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         forward /= length
         lateral = np.cross(n, forward)
         heel, front = -SOLE_HEEL, length + 0.5 * radius
-        if toes >= 0:  # on to the tip of the toes: one rigid sole, heel to toe
-            t_axis = R_foot.T @ data.geom_xmat[toes].reshape(3, 3)[:, 2]
-            t_half = model.geom_size[toes, 1] if model.geom_type[toes] == 3 else 0.0
-            tip = np.max((toe_centre + np.outer([t_half, -t_half], t_axis)) @ forward)
-            front = max(front, float(tip) + model.geom_size[toes, 0])
         centre = 0.5 * (heel + front) * forward - (depth - SOLE_HALF_THICKNESS) * n
         q = np.zeros(4)
-        mujoco.mju_mat2Quat(q, np.column_stack([forward, lateral, n]).ravel())
+        frame = np.column_stack([forward, lateral, n])
+        mujoco.mju_mat2Quat(q, frame.ravel())
         size = np.array([0.5 * (front - heel), SOLE_HALF_WIDTH, SOLE_HALF_THICKNESS])
         out[f"{side}foot"] = (centre, q, size)
+        if toes < 0:
+            continue
+        # the toe box: the same bottom plane, from the ball to the tip of the toes, on the toes'
+        # body (the toe joint bends it: a foot standing on its ball stands on its toes' box)
+        t_axis = R_foot.T @ data.geom_xmat[toes].reshape(3, 3)[:, 2]
+        t_half = model.geom_size[toes, 1] if model.geom_type[toes] == 3 else 0.0
+        tip = float(np.max((toe_centre + np.outer([t_half, -t_half], t_axis)) @ forward))
+        tip += model.geom_size[toes, 0]
+        if tip <= front:
+            continue
+        body = model.geom_bodyid[toes]
+        R_toes, x_toes = data.xmat[body].reshape(3, 3), data.xpos[body]
+        c_foot = 0.5 * (front + tip) * forward - (depth - SOLE_HALF_THICKNESS) * n
+        c_toes = R_toes.T @ (R_foot @ c_foot + x_foot - x_toes)
+        qt = np.zeros(4)
+        mujoco.mju_mat2Quat(qt, (R_toes.T @ R_foot @ frame).ravel())
+        size_t = np.array([0.5 * (tip - front), SOLE_HALF_WIDTH, SOLE_HALF_THICKNESS])
+        out[f"{side}toes"] = (c_toes, qt, size_t)
     return out
 
 
 def add_soles(spec) -> None:
-    """Give each foot of ``spec`` a massless sole box (:func:`sole_boxes`, heel to toe tip) that
-    alone touches the floor for it: a foot then stands on a flat sole, not on the point or edge
-    where a capsule meets a plane, nor on a toe capsule that the captured toe angle holds below
-    the sole. The foot and toe capsules keep colliding with the other body geoms."""
+    """Give each foot of ``spec`` a massless sole box (:func:`sole_boxes`, heel to ball) and its
+    toes a toe box (ball to tip), which alone touch the floor for it: a foot then stands on a
+    flat sole, not on the point or edge where a capsule meets a plane, nor on a toe capsule
+    that the captured toe angle holds below the sole; on its ball it stands on its toes' box.
+    The foot and toe capsules keep colliding with the other body geoms."""
     boxes = sole_boxes(spec.compile())
     for body, (pos, quat, size) in boxes.items():
         b = spec.body(body)
         g = b.add_geom()
-        g.name = body[0] + "sole"
+        g.name = body[0] + ("sole" if body.endswith("foot") else "toesole")
         g.type = mujoco.mjtGeom.mjGEOM_BOX
         g.size = size
         g.pos = pos

@@ -14,32 +14,40 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from sim.acclaim.amc import parse_amc
-from sim.acclaim.asf import parse_asf
 from sim.errors import MotionDataError
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import SOLE_POINTS
-from sim.motion.retarget import leg_length, motion_to_qpos
-from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS
+from sim.motion.ingest import check_memory
+from sim.motion.resample import resample_qpos, resampled_frames
+from sim.motion.retarget import leg_length, motion_to_qpos, retarget_rotations
+from sim.motion.trial import CMU_FPS, read_trial, trial_files
+from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
-    """(T, nq) ``qpos`` of a CMU trial on the shared humanoid at the file's rate (120 Hz):
-    angles copied, root translation scaled by the leg-length ratio (as ``load_motion`` with
-    ``skeleton="humanoid"`` does, without computing the clip's kinematics).
+    """(T, nq) ``qpos`` of a CMU trial (or a BVH as both ``asf`` and ``amc``) on the shared
+    humanoid at 120 Hz (a BVH of another rate interpolated onto it): angles copied, root
+    translation scaled by the leg-length ratio (as ``load_motion`` with ``skeleton="humanoid"``
+    does, without computing the clip's kinematics).
 
     Raises:
         MotionDataError: malformed or unreadable files.
     """
     try:
-        subject = parse_asf(asf)
+        subject, motion, fps = read_trial(asf, amc)
     except FileNotFoundError as e:
         raise MotionDataError(str(asf), None, f"cannot read file: {e.strerror}") from e
-    motion = parse_amc(amc, subject)
     target, model = humanoid_model()
-    return motion_to_qpos(
-        subject, motion, model, root_scale=leg_length(target) / leg_length(subject)
+    source = subject
+    bvh = trial_files(asf, amc)
+    if bvh is not None:  # a BVH: rotations re-expressed in the ASF bones' frames, 120 Hz
+        check_memory(bvh, resampled_frames(motion.n_frames, fps, CMU_FPS), len(target.bones) + 1)
+        subject, motion = retarget_rotations(subject, motion, target)
+        source = target
+    qpos = motion_to_qpos(
+        source, motion, model, root_scale=leg_length(target) / leg_length(subject)
     )
+    return qpos if fps == CMU_FPS else resample_qpos(qpos, fps, CMU_FPS)
 
 
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
@@ -47,7 +55,7 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     each frame: the sole boxes where the model has them (``sim.simulate.model.add_soles``; the
     foot and toe capsules then touch the body only), else the foot and toe capsules."""
     data = mujoco.MjData(model)
-    names = SOLE_POINTS + SOLE_GEOMS
+    names = SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
     ids = [
         model.geom(n).id
         for n in names

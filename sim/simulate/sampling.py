@@ -34,11 +34,11 @@ from sim.simulate.controller import (
     Tracking,
     Weakening,
     apply_pushes,
-    reference_feedforward,
     set_controls,
     track,
     weakening_factor,
 )
+from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)

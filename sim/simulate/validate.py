@@ -9,6 +9,11 @@ tracks and from the original motion, whether and when it falls, and the torque i
 A reconstruction and its original are tracked on the same floor: both are shifted vertically
 by the original's floor track (``sim.simulate.reference.floor_track``), so a reconstruction's
 own height errors stay in it.
+
+Controllers (``ForwardValidation(controller=...)``): ``"plain"`` (``track``), ``"sampling"``
+(``sim.simulate.sampling``) and ``"wholebody"`` (``sim.simulate.wholebody``'s inverse-dynamics
+QP; it needs the torque-actuated body, ``sim_model(..., actuators="motor")``, and tracks a
+contact-consistent reference: no floor lift, stance soles laid on the floor).
 """
 
 from __future__ import annotations
@@ -17,15 +22,33 @@ import mujoco
 import numpy as np
 
 from sim.simulate.controller import track
-from sim.simulate.model import CONTROL_HZ, total_mass
-from sim.simulate.reference import FLOOR_LIFT, flat_soles, floor_track, time_warp
+from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS, sim_model, total_mass
+from sim.simulate.reference import (
+    FLOOR_LIFT,
+    contact_consistent,
+    flat_soles,
+    floor_track,
+    time_warp,
+)
 from sim.simulate.sampling import sample_track
+from sim.simulate.wholebody import track_wholebody
+from sim.simulate.wholebody_reference import sole_corners
 
-#: figures of :func:`simulate_figures`, in table order
+#: figures of :meth:`ForwardValidation.run`, in table order
 SIMULATE_KEYS = (
-    "sim_error_mm", "sim_error_original_mm", "sim_fell", "sim_fall_s", "sim_torque_rms_nm_kg",
-    "sim_torque_saturated",
+    "sim_error_mm", "sim_error_local_mm", "sim_error_original_mm", "sim_fell", "sim_fall_s",
+    "sim_torque_rms_nm_kg", "sim_torque_saturated",
 )  # fmt: skip
+#: further figures of :meth:`ForwardValidation.run` (not in the evaluation's tables)
+SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
+CONTROLLERS = ("plain", "sampling", "wholebody")
+#: the controller of ``eval --physics --simulate`` and ``report --simulate`` without
+#: ``--samples``: the plain tracker, because the whole-body QP does not beat it
+#: (``docs/results/simulate_controllers.md``: on 22 clips 0.91 against 0.95 falls, 665 against
+#: 673 mm global error, but 362 against 318 mm root-relative)
+DEFAULT_CONTROLLER = "plain"
+#: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator)
+SKATE_CONTACT = 0.01
 
 
 class ForwardValidation:
@@ -40,16 +63,25 @@ class ForwardValidation:
             corrects the joints' targets so the body keeps its balance where it can.
     """
 
-    def __init__(self, model, names, samples: int = 0):
+    def __init__(self, model, names, samples: int = 0, controller: str | None = None):
+        controller = controller or ("sampling" if samples else "plain")
+        if controller not in CONTROLLERS:
+            raise ValueError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
+        if (controller == "wholebody") != (not model.actuator_biasprm[:, 1].any()):
+            raise ValueError(
+                f"controller {controller!r} needs sim_model(..., actuators="
+                f"{'motor' if controller == 'wholebody' else 'position'!r})"
+            )
         self.model = model
         self.names = tuple(names)
-        self.samples = int(samples)
+        self.samples = int(samples) if controller == "sampling" else 0
+        self.controller = controller
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
 
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
-        return (ForwardValidation, (self.model, self.names, self.samples))
+        return (ForwardValidation, (self.model, self.names, self.samples, self.controller))
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -68,6 +100,9 @@ class ForwardValidation:
         (``sim.simulate.reference.flat_soles``)."""
         ref = time_warp(self.model, qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(ref) if floor is None else floor
+        if self.controller == "wholebody":  # feet meet the floor: no lift, stance soles on it
+            ref[:, 2] -= floor
+            return contact_consistent(self.model, flat_soles(self.model, ref))
         ref[:, 2] -= floor - FLOOR_LIFT
         return flat_soles(self.model, ref)
 
@@ -82,6 +117,10 @@ class ForwardValidation:
         * ``sim_error_mm``: mean distance [mm] of the simulated points to the tracked motion's;
         * ``sim_error_original_mm``: the same against ``original_qpos`` (the motion itself when
           None);
+        * ``sim_error_local_mm``: as ``sim_error_mm`` with each frame's points relative to the
+          root (root-relative: the pose, without the path);
+        * ``sim_skate_mm_s`` and ``sim_skate_ref_mm_s``: foot skating in contact of the
+          simulated and the tracked motion, one estimator for both (:meth:`skating`);
         * ``sim_fell`` (0/1) and ``sim_fall_s``: the time of the fall [s] (None: no fall), a fall
           as ``sim.simulate.falls`` defines it (a part other than the feet on the floor where
           the reference has none, or the head below half the reference's);
@@ -92,11 +131,12 @@ class ForwardValidation:
         orig = time_warp(self.model, original_qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(orig)
         ref = self.reference(qpos, fps, floor)
-        orig[:, 2] -= floor - FLOOR_LIFT
-        orig = flat_soles(self.model, orig)  # the same feet as the tracked reference's
+        orig = self.reference(original_qpos, fps, floor)  # the same floor and feet
         every = int(round(CONTROL_HZ / fps))
-        if self.samples:
+        if self.controller == "sampling":
             r = sample_track(self.model, ref, samples=self.samples, record_every=every)
+        elif self.controller == "wholebody":
+            r = track_wholebody(self.model, ref, record_every=every)
         else:
             r = track(self.model, ref, assist_limit=0.0, record_every=every)
         sim = self.points(r.qpos)
@@ -105,11 +145,46 @@ class ForwardValidation:
         original = self.points(orig[::every][:n])
         lim = self.model.actuator_forcerange[:, 1]
         tau = r.joint_torque
+        local = (sim - sim[:, :1]) - (target - target[:, :1])
         return {
             "sim_error_mm": 1e3 * float(np.linalg.norm(sim - target, axis=-1).mean()),
+            "sim_error_local_mm": 1e3 * float(np.linalg.norm(local, axis=-1).mean()),
+            "sim_skate_mm_s": self.skating(r.qpos, fps),
+            "sim_skate_ref_mm_s": self.skating(ref[::every][:n], fps),
             "sim_error_original_mm": 1e3 * float(np.linalg.norm(sim - original, axis=-1).mean()),
             "sim_fell": int(r.fell),
             "sim_fall_s": None if r.fall_frame < 0 else r.fall_frame / fps,
             "sim_torque_rms_nm_kg": float(np.sqrt(np.mean(tau**2)) / total_mass(self.model)),
             "sim_torque_saturated": float(np.mean(np.abs(tau) >= lim * (1 - 1e-6))),
         }
+
+    def skating(self, qpos: np.ndarray, fps: float) -> float | None:
+        """Foot skating in contact [mm/s] of a motion ``qpos`` (F, nq at ``fps``): the mean
+        horizontal speed of each sole box's bottom centre over the frames where its lowest
+        corner is at most :data:`SKATE_CONTACT` high (central differences); NaN without soles
+        or without contact: None. One geometric estimator for simulated and reference motion alike."""
+        soles = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in SOLE_GEOMS]
+        if min(soles) < 0 or len(qpos) < 3:
+            return None
+        low = np.empty((len(qpos), 2, 3))
+        for t, q in enumerate(qpos):
+            self.data.qpos[:] = q
+            mujoco.mj_kinematics(self.model, self.data)
+            for s, g in enumerate(soles):
+                c = sole_corners(self.model, self.data, g)
+                low[t, s] = c.mean(axis=0)[0], c.mean(axis=0)[1], c[:, 2].min()
+        speed = np.linalg.norm(np.gradient(low[..., :2], 1.0 / fps, axis=0), axis=-1)
+        contact = low[..., 2] <= SKATE_CONTACT
+        return 1e3 * float(speed[contact].mean()) if contact.any() else None
+
+
+def forward_validation(
+    skeleton, names, *, samples: int = 0, controller: str | None = None, **body
+) -> ForwardValidation:
+    """The :class:`ForwardValidation` of ``skeleton``'s simulated body (``sim_model(skeleton,
+    **body)`` with the actuators its controller needs) on points ``names``: ``samples`` > 0 the
+    sampling tracker, else ``controller`` (default :data:`DEFAULT_CONTROLLER`)."""
+    controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
+    actuators = "motor" if controller == "wholebody" else "position"
+    model = sim_model(skeleton, actuators=actuators, **body)
+    return ForwardValidation(model, names, samples=samples, controller=controller)

@@ -1,0 +1,104 @@
+"""The decision time a caller of ``select`` waits for, as ``sidql eval`` measures it (chart,
+segment costs and decision, one clip at a time), beside its parts and beside the path it
+replaced, all timed in the same run (shared by bench_dqn.py and bench_keyframes.py).
+
+Every figure is the median over clips and repeats of single calls (``eval`` reports the median
+over clips of one call each), in CPU time of this process (``time.process_time``: what other
+processes on a loaded machine take is not counted, though their sharing of the caches and of
+the core's other hyperthread still is) and in wall time. The columns of one clip are timed
+one after the other before the next clip, so a change of load hits every column alike; a
+ratio between columns of one run is the figure to trust on a busy machine.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+def _timed(fn) -> tuple[float, float]:
+    """(CPU ms, wall ms) of one call of ``fn()``."""
+    c, w = time.process_time(), time.perf_counter()
+    fn()
+    return 1e3 * (time.process_time() - c), 1e3 * (time.perf_counter() - w)
+
+
+def columns(clip, W: int, policy, with_dqn: bool) -> dict:
+    """name -> zero-argument callable for one clip: the end-to-end paths, the paths they
+    replaced and their parts."""
+    from sidql.keyframes import methods
+    from sidql.keyframes.optimal import clip_optimal_table, optimum_cost_matrix, solve
+    from sidql.keyframes.segment_costs import clip_stacked_costs, segment_cost_matrix
+    from sidql.keyframes.spherical import chart
+    from sidql.learning.tasks import clip_features, stacked_features
+
+    cols = {
+        "optimal: select (end to end)": lambda: methods.select("optimal", clip, W),
+        "optimal before: chart + full costs + programme": lambda: clip_optimal_table(
+            clip, w_max=W
+        ).keyframes(W),
+        "  optimal part: chart + costs it can use": lambda: optimum_cost_matrix(clip, W),
+    }
+    C = optimum_cost_matrix(clip, W)
+    cols["  optimal part: programme"] = lambda: solve(C, 22, W).keyframes(W)
+    if not with_dqn:
+        return cols
+
+    def before():
+        s = chart(clip)
+        feats, cost = clip_features(s), segment_cost_matrix(s)
+        return policy.decide(feats[None], cost[None], W)
+
+    X, R, cost = clip_stacked_costs(clip)
+    feats = stacked_features(X, R)
+    cols.update(
+        {
+            "dqn: select (end to end)": lambda: methods.select("dqn", clip, W),
+            "dqn: Policy.select": lambda: policy.select(clip, W),
+            "dqn before: Policy.select as it was (chart, features, costs, decide)": before,
+            "  dqn part: chart + full costs (one pass)": lambda: clip_stacked_costs(clip),
+            "  dqn part: features": lambda: stacked_features(X, R),
+            "  dqn part: decide (encoder + head)": lambda: policy.decide(
+                feats[None], cost[None], W
+            ),
+        }
+    )
+    return cols
+
+
+def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> str:
+    """Markdown table: per W and column, median CPU and wall ms per clip, and the
+    before / after ratios of the same run."""
+    policy = None
+    if with_dqn:
+        from sidql.learning.policy import load_policy
+
+        policy = load_policy()
+    lines = [
+        "| W | path | CPU ms per clip | wall ms per clip |",
+        "|---|---|---|---|",
+    ]
+    notes = []
+    for W in counts:
+        for fn in columns(clips[0], W, policy, with_dqn).values():
+            fn()  # compile and warm up
+        got: dict[str, list] = {}
+        for clip in clips:
+            for name, fn in columns(clip, W, policy, with_dqn).items():
+                got.setdefault(name, []).extend(_timed(fn) for _ in range(repeats))
+        med = {k: np.median(np.array(v), axis=0) for k, v in got.items()}
+        for name, (cpu, wall) in med.items():
+            lines.append(f"| {W} | {name} | {cpu:.3f} | {wall:.3f} |")
+        for m, aim in (("optimal", 0.7), ("dqn", 1.0)):
+            after = f"{m}: select (end to end)"
+            if after not in med:
+                continue
+            before = next(k for k in med if k.startswith(f"{m} before"))
+            same = "dqn: Policy.select" if m == "dqn" else after  # what 'before' replaced
+            notes.append(
+                f"W = {W}, {m}: end to end {med[after][0]:.3f} ms CPU per clip (aim: at most "
+                f"{aim} ms, quiet); before / after in this run {med[before][0] / med[same][0]:.2f}x "
+                f"CPU, {med[before][1] / med[same][1]:.2f}x wall."
+            )
+    return "\n".join(lines + [""] + notes)

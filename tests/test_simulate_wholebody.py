@@ -1,0 +1,149 @@
+"""The whole-body QP controller (``sim.simulate.wholebody``): its solution is physical (floor
+forces inside the friction pyramid, torques within the human limits, the floating base's
+equations of motion hold), nothing but the joints and scripted pushes acts on the body, and the
+same reference gives the same simulation bit for bit."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim.model.humanoid import canonical_skeleton
+from sim.simulate.controller import Push
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model
+from sim.simulate.reference import contact_consistent, flat_soles, lowest_foot_point, on_floor
+from sim.simulate.wholebody import (
+    WholeBodyGains,
+    qp_tick,
+    track_wholebody,
+    wholebody_reference,
+)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return sim_model(canonical_skeleton(), actuators="motor")
+
+
+@pytest.fixture(scope="module")
+def walk_ref(trial_on_floor, model):
+    ref = on_floor(model, trial_on_floor(model, "02_01")[:90], lift=0.0)
+    return contact_consistent(model, flat_soles(model, ref))
+
+
+def test_the_contact_consistent_reference_stands_on_the_floor(model, walk_ref):
+    low = lowest_foot_point(model, walk_ref)
+    stance = low <= 0.03
+    assert stance.mean() > 0.5  # a walk stands most of the time
+    # in stance the lower sole touches z = 0 (within the smoothing of the shift: millimetres)
+    assert np.abs(low[stance]).max() < 0.01
+    assert np.median(np.abs(low[stance])) < 0.002
+
+
+def test_qp_forces_lie_in_the_friction_pyramid_and_torques_within_limits(model, walk_ref):
+    """Each tick's solution, checked against MuJoCo's own quantities (not the QP's): the
+    planned forces push, inside the pyramid; the torques are within the limits; and the root's
+    six equations of motion hold with the planned accelerations and forces."""
+    gains = WholeBodyGains()
+    ref = wholebody_reference(model, walk_ref)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = walk_ref[0], ref.qvel[0]
+    lim = model.actuator_ctrlrange[:, 1]
+    s = gains.friction / np.sqrt(2.0)
+    scratch: dict = {}
+    M = np.zeros((model.nv, model.nv))
+    jacp = np.zeros((3, model.nv))
+    contacts = 0
+    for k in range(60):
+        mujoco.mj_forward(model, data)
+        res = qp_tick(model, data, ref, k, gains, lim, scratch)
+        assert res.status == 1
+        f = res.forces
+        assert np.all(f[:, 2] >= -1e-6)
+        assert np.all(np.abs(f[:, :2]) <= s * f[:, 2:3] + 1e-6)
+        assert np.all(np.abs(res.tau) <= lim + 1e-9)
+        mujoco.mj_fullM(model, data, M)
+        generalised = np.zeros(model.nv)
+        for p, force in zip(res.points, f, strict=True):
+            # the point's body: the geom nearest to it among the feet's (recomputed here)
+            body = _body_at(model, data, p)
+            mujoco.mj_jac(model, data, jacp, None, p, body)
+            generalised += jacp.T @ force
+        root = M[:6] @ res.qdd + data.qfrc_bias[:6] - data.qfrc_passive[:6] - generalised[:6]
+        assert np.abs(root).max() < 1e-6 * max(1.0, np.abs(generalised).max())
+        contacts += len(f) > 0
+        data.ctrl[:] = res.tau
+        mujoco.mj_step(model, data, nstep=SUBSTEPS)
+    assert contacts > 30  # the checks above met real contact
+
+
+def _body_at(model, data, p):
+    """The body of the foot geom (sole or toe box) whose surface is nearest point ``p``."""
+    best, body = np.inf, -1
+    for n in ("lsole", "rsole", "ltoesole", "rtoesole"):
+        g = model.geom(n).id
+        local = data.geom_xmat[g].reshape(3, 3).T @ (p - data.geom_xpos[g])
+        d = np.linalg.norm(np.maximum(np.abs(local) - model.geom_size[g], 0.0))
+        if d < best:
+            best, body = d, int(model.geom_bodyid[g])
+    return body
+
+
+def test_only_scripted_pushes_act_from_outside(model, walk_ref, monkeypatch):
+    """Every physics step of a tracking: ``qfrc_applied`` is zero and ``xfrc_applied`` is the
+    push on its body during its window, zero elsewhere and at other times."""
+    push = Push(body="thorax", start=0.2, duration=0.1, force=(80.0, 0.0, 0.0))
+    thorax = model.body("thorax").id
+    seen = []
+    step = mujoco.mj_step
+
+    def checked_step(m, d, nstep=1):
+        for _ in range(nstep):
+            assert not d.qfrc_applied.any()
+            other = np.delete(d.xfrc_applied, thorax, axis=0)
+            assert not other.any()
+            seen.append(d.xfrc_applied[thorax, 0])
+            step(m, d)
+
+    monkeypatch.setattr(mujoco, "mj_step", checked_step)
+    r = track_wholebody(model, walk_ref[:48], pushes=(push,))
+    seen = np.array(seen)
+    assert r.assistance.max() == 0.0 and not r.assist_wrench.any()
+    k = np.arange(len(seen)) // SUBSTEPS / CONTROL_HZ  # each step's control tick time
+    on = (k >= push.start) & (k < push.start + push.duration)
+    np.testing.assert_array_equal(seen[on], 80.0)
+    np.testing.assert_array_equal(seen[~on], 0.0)
+
+
+def test_torques_within_limits_and_same_reference_same_simulation(model, walk_ref):
+    a = track_wholebody(model, walk_ref)
+    b = track_wholebody(model, walk_ref)
+    np.testing.assert_array_equal(a.qpos, b.qpos)
+    np.testing.assert_array_equal(a.joint_torque, b.joint_torque)
+    lim = model.actuator_forcerange[:, 1]
+    assert np.all(np.abs(a.joint_torque) <= lim * (1 + 1e-12))
+    assert np.abs(a.joint_torque).max() > 10.0  # it did act
+
+
+def test_it_needs_torque_actuators():
+    with pytest.raises(ValueError, match="motor"):
+        track_wholebody(sim_model(canonical_skeleton()), np.zeros((2, 63)))
+
+
+def test_forward_validation_builds_the_body_its_controller_needs():
+    from sim.simulate.validate import DEFAULT_CONTROLLER, ForwardValidation, forward_validation
+
+    skeleton = canonical_skeleton()
+    names = ("root", "lfoot", "head")
+    default = forward_validation(skeleton, names)
+    assert default.controller == DEFAULT_CONTROLLER
+    qp = forward_validation(skeleton, names, controller="wholebody")
+    assert not qp.model.actuator_biasprm[:, 1].any()  # torque actuators
+    sampled = forward_validation(skeleton, names, samples=8)
+    assert sampled.controller == "sampling" and sampled.samples == 8
+    assert sampled.model.actuator_biasprm[:, 1].any()  # position actuators
+    with pytest.raises(ValueError, match="motor"):
+        ForwardValidation(sampled.model, names, controller="wholebody")
+    with pytest.raises(ValueError, match="known"):
+        ForwardValidation(sampled.model, names, controller="pid")
