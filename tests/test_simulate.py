@@ -16,7 +16,15 @@ from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import qvel_from_qpos
 from sim.simulate.controller import track
 from sim.simulate.dataset import synthesize
-from sim.simulate.generate import LABELS, PHYSICAL_BUDGET, SynthTask, generate
+from sim.simulate.episode import array_text
+from sim.simulate.generate import (
+    LABELS,
+    PHYSICAL_BUDGET,
+    SynthTask,
+    episode_seed,
+    generate,
+    simulated_clip,
+)
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model
 from sim.simulate.reference import on_floor, time_warp
 
@@ -32,13 +40,22 @@ def test_procedural_clip_is_simulated_state_in_dataset_format():
     # bone lengths are exact: positions come from the chain of the simulated qpos
     L = np.linalg.norm(clip.bone_vectors(), axis=-1)
     assert np.ptp(L, axis=0).max() < 1e-9
-    # point velocities (chain, from the simulator's qvel) agree with differences of positions
-    fd = (clip.positions[2:] - clip.positions[:-2]) * clip.fps / 2
-    err = np.linalg.norm(fd - clip.velocities[1:-1], axis=-1)
-    speed = np.linalg.norm(clip.velocities[1:-1], axis=-1)
-    assert np.median(err) < 0.1 * np.median(speed) + 0.02
+    # point velocities (chain, from the simulator's qvel) are the derivative of the points along
+    # qvel: central differences of positions at qpos moved by +-eps qvel (mj_integratePos)
+    model = mujoco.MjModel.from_xml_string(array_text(rec["labels"]["sim_mjcf"]))
+    eps, moved = 1e-6, []
+    for sign in (1, -1):
+        q = clip.qpos.copy()
+        for t in range(len(q)):
+            mujoco.mj_integratePos(model, q[t], clip.qvel[t], sign * eps)
+        zero = np.zeros_like(clip.qvel)
+        moved.append(simulated_clip(model, canonical_skeleton(), q, zero, 30.0, "").positions)
+    fd = (moved[0] - moved[1]) / (2 * eps)
+    assert np.abs(fd - clip.velocities).max() < 1e-5 * (1 + np.abs(clip.velocities).max())
+    assert np.linalg.norm(clip.velocities, axis=-1).max() > 1.0  # it moves
     assert rec["labels"]["sim_assist_wrench"].shape == (clip.n_frames, 6)
-    assert rec["generation"]["seed"] == 3
+    assert rec["generation"]["run_seed"] == 3
+    assert rec["generation"]["seed"] == episode_seed(SynthTask("procedural", seed=3, index=0))
 
 
 def test_same_seed_same_clip_bit_for_bit(tmp_path):
@@ -81,7 +98,12 @@ def test_dataset_keys_match_ingest(tmp_path, walk_clip):
 
     labels = load_extra(path, "sim_")
     F, U = clip.n_frames, len(clip.joint_names)
-    assert labels["sim_actions"].shape == labels["sim_joint_torque"].shape == (F, U)
+    assert labels["sim_joint_torque"].shape == (F, U)
+    T = int(round(1.0 * 120))  # control ticks: actions at the control rate, frame i = tick 4 i
+    assert labels["sim_actions"].shape == (T, U)
+    assert labels["sim_tick_qpos"].shape == (T + 1, clip.qpos.shape[1])
+    assert np.array_equal(labels["sim_tick_qpos"][: 4 * F : 4], clip.qpos)
+    assert int(labels["sim_frame_skip"]) == 4
     assert labels["sim_assist_wrench"].shape == (F, 6)
     assert labels["sim_foot_force"].shape == (F, 2, 3)
     assert labels["sim_foot_contact"].dtype == bool

@@ -111,15 +111,27 @@ def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(model):
     assert reached.min() > 0.999  # every joint was pushed to its limit
 
 
-def test_tracking_torques_stay_within_limits_and_weakening_is_restored(model, walk_ref):
+def test_tracking_torques_stay_within_limits_a_weakening_lowers_them_and_the_model_is_kept(
+    model, walk_ref
+):
+    """A weakening scales the controller's effort, never the body: the torques stay within the
+    human limits before and during it, are smaller while it lasts than the same ticks of an
+    unweakened run, and the model is left as it was (a dataset replays on the model it
+    stores)."""
     before = (model.actuator_gainprm.copy(), model.actuator_biasprm.copy(),
               model.actuator_forcerange.copy(), int(model.opt.disableflags))  # fmt: skip
-    r = track(model, walk_ref, assist_limit=0.5, weakenings=(Weakening(0.2, 10.0, 0.5),))
-    lim = model.actuator_forcerange[:, 1]
-    # weakened to half from 0.2 s on (recorded frame 6 = tick 24 = 0.2 s)
-    assert np.all(np.abs(r.joint_torque[:6]) <= lim * (1 + 1e-12))
-    assert np.all(np.abs(r.joint_torque[7:]) <= 0.5 * lim * (1 + 1e-12))
+    r = track(model, walk_ref, assist_limit=0.5, weakenings=(Weakening(0.2, 10.0, 0.3),))
+    full = track(model, walk_ref, assist_limit=0.5)
+    lim = np.array([human_torque_limit(model.actuator(i).name) for i in range(model.nu)])
+    assert np.all(np.abs(r.joint_torque) <= lim * (1 + 1e-12))
     assert np.abs(r.joint_torque[:6]).max() > 0.5 * lim.max()  # the limits are not idle
+    # weakened from 0.2 s on (recorded frame 6 = tick 24 = 0.2 s): leg and trunk torques shrink
+    legs = [i for i in range(model.nu) if model.actuator(i).name[1:6] in ("femur", "tibia")]
+    weak, strong = (
+        np.abs(r.joint_torque[7:, legs]).mean(),
+        np.abs(full.joint_torque[7:, legs]).mean(),
+    )
+    assert weak < 0.85 * strong  # (the sagging body asks more of each joint than 0.3 of it)
     after = (model.actuator_gainprm, model.actuator_biasprm, model.actuator_forcerange,
              int(model.opt.disableflags))  # fmt: skip
     for a, b in zip(before[:3], after[:3], strict=True):
@@ -128,14 +140,11 @@ def test_tracking_torques_stay_within_limits_and_weakening_is_restored(model, wa
 
 
 def test_model_edits_are_restored_when_tracking_raises(model):
-    gain = model.actuator_gainprm.copy()
     flags = int(model.opt.disableflags)
     with pytest.raises(RuntimeError), ActuatorEdits(model) as edits:
-        edits.scale(0.1)
         edits.without_contacts()
-        assert model.actuator_gainprm[0, 0] == pytest.approx(0.1 * gain[0, 0])
+        assert int(model.opt.disableflags) != flags
         raise RuntimeError("interrupted")
-    assert np.array_equal(model.actuator_gainprm, gain)
     assert int(model.opt.disableflags) == flags
 
 
@@ -195,12 +204,13 @@ def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
     budget = float(np.median(means))
     inside = [r for r, m in zip(full.written, means, strict=True) if m <= budget]
     assert 0 < len(inside) < len(means)
-    keep = min(2, len(inside))
+    keep = len(inside)  # up to the plan's last clip within the budget
     kept = synthesize(None, tmp_path / "kept", keep, max_assistance=budget, **kw)
     assert [r["trial"] for r in kept.written] == [r["trial"] for r in inside[:keep]]
     assert all(max(r["mean_assistance"], r["mean_assist_torque"]) <= budget for r in kept.written)
     last = int(kept.written[-1]["trial"].split("_")[-1])
-    assert kept.rejected == {"procedural": sum(m > budget for m in means[: last + 1])}
+    rejected = sum(m > budget for m in means[: last + 1])
+    assert kept.rejected == ({"procedural": rejected} if rejected else {})
     index = json.loads((tmp_path / "kept" / "index.json").read_text())
     assert index["synthetic"]["rejected"] == kept.rejected
     for r in kept.written:
@@ -209,42 +219,6 @@ def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
             np.load(tmp_path / "all" / r["file"]) as b,
         ):
             assert all(np.array_equal(a[k], b[k]) for k in a.files)
-
-
-def test_hdf5_export_round_trip(tmp_path):
-    import json
-
-    from sim.errors import MotionDataError
-    from sim.motion.clip import load_extra, load_npz
-    from sim.simulate.dataset import synthesize
-    from sim.simulate.export import export_hdf5, load_hdf5
-
-    synthesize(None, tmp_path / "d", 3, kinds=("procedural",), seconds=0.5, seed=1, workers=1,
-               progress=False)  # fmt: skip
-    n = export_hdf5(tmp_path / "d", tmp_path / "d.h5")
-    trials = json.loads((tmp_path / "d" / "index.json").read_text())["trials"]
-    episodes = load_hdf5(tmp_path / "d.h5")
-    assert n == len(episodes) == len(trials) == 3
-    for ep, r in zip(episodes, trials, strict=True):
-        clip = load_npz(tmp_path / "d" / r["file"])
-        labels = load_extra(tmp_path / "d" / r["file"], "sim_")
-        F = clip.n_frames
-        assert ep["file"] == r["file"] and ep["total_steps"] == F - 1
-        assert ep["physical"] == r["physical"] and ep["fall_frame"] == r["fall_frame"]
-        for k in ("qpos", "qvel", "positions", "velocities"):
-            assert np.array_equal(ep["observations"][k], getattr(clip, k))
-        assert np.array_equal(ep["actions"], labels["sim_actions"][: F - 1])
-        for k in ("joint_torque", "assist_wrench", "foot_contact", "foot_force"):
-            assert np.array_equal(ep["infos"][k], labels[f"sim_{k}"])
-        assert (
-            ep["rewards"].shape == ep["terminations"].shape == ep["truncations"].shape == (F - 1,)
-        )
-        assert ep["truncations"][-1] != ep["fell"]
-    physical = sum(r["physical"] for r in trials)
-    assert export_hdf5(tmp_path / "d", tmp_path / "p.h5", physical_only=True) == physical
-    (tmp_path / "bad.h5").write_bytes(b"not hdf5")
-    with pytest.raises(MotionDataError, match="bad.h5"):
-        load_hdf5(tmp_path / "bad.h5")
 
 
 def test_non_adjacent_bodies_collide_and_near_ones_do_not(model):

@@ -14,7 +14,7 @@ from sidql.commands.usage import (
     positive,
 )
 from sim.simulate.dataset import synthesize
-from sim.simulate.export import export_hdf5
+from sim.simulate.export import DATASET_ID, DEFAULT_ID, export_minari
 from sim.simulate.generate import ALL_KINDS, KINDS
 
 DESCRIPTION = (
@@ -59,9 +59,13 @@ def register(p) -> None:
         "as they arrive, so a stopped run keeps them and is not simulated again",
     )  # fmt: skip
     p.add_argument(
-        "--export-hdf5", default=None, metavar="FILE",
-        help="also write the clips as one offline-RL HDF5 file (Minari-style episodes: "
-        "observations, actions, infos; layout in docs/synthetic.md)",
+        "--export-minari", default=None, metavar="ROOT",
+        help="also write the clips as a Minari dataset under ROOT (load it with "
+        "MINARI_DATASETS_PATH=ROOT minari.load_dataset(ID); layout in docs/synthetic.md)",
+    )  # fmt: skip
+    p.add_argument(
+        "--minari-id", default=DEFAULT_ID, metavar="ID",
+        help="the Minari dataset id, (namespace/)name-v<version>",
     )  # fmt: skip
     add_quiet(p)
     p.set_defaults(func=run)
@@ -72,6 +76,10 @@ def run(args) -> int:
         raise UsageError("--fps must divide 120 and a clip (--seconds x --fps) hold 2 frames")
     if args.max_assistance is not None and not args.max_assistance >= 0:
         raise UsageError(f"--max-assistance must be >= 0 body weights; got {args.max_assistance}")
+    if not 0 <= args.seed < 2**31:
+        raise UsageError(f"--seed must be in 0 .. 2**31 - 1; got {args.seed}")
+    if args.export_minari and not DATASET_ID.match(args.minari_id):
+        raise UsageError(f"--minari-id {args.minari_id!r}: expected (namespace/)name-v<version>")
     data = data_folder(args, required=any(k != "procedural" for k in args.kinds))
     s = synthesize(
         data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
@@ -87,9 +95,9 @@ def run(args) -> int:
         print(f"rejected (mean assistance > {args.max_assistance:g} BW): {counts}")
         if len(s.written) < args.n:
             print(f"only {len(s.written)} of {args.n} clips within the budget")
-    if args.export_hdf5 and s.written:
-        n = export_hdf5(args.out, args.export_hdf5)
-        print(f"exported {n} episodes -> {args.export_hdf5}")
+    if args.export_minari and s.written:
+        n = export_minari(args.out, args.export_minari, args.minari_id)
+        print(f"exported {n} episodes -> {args.export_minari}/{args.minari_id}")
     if s.skipped:
         print(f"skipped {len(s.skipped)} bad input(s)/task(s):")
         for r in s.skipped:

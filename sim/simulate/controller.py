@@ -25,14 +25,17 @@ Every control tick (``sim.simulate.model.SUBSTEPS`` physics steps each):
 
 4. **A fall stays down.** Once the body has fallen (``sim.simulate.falls``: a part other than
    the feet on the floor where the reference has none, or the head below half the
-   reference's), the assistance stops for good and the joints hold the pose of the fall at :data:`FALLEN_TONE` of their
-   stiffness and strength, without feed-forward: the body settles on the floor (a get-up is
-   not generated).
+   reference's), the assistance stops for good and the joints hold the pose of the fall at
+   :data:`FALLEN_TONE` of their effort, without feed-forward: the body settles on the floor (a
+   get-up is not generated).
 
-External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (stiffness,
-torque limits and assistance scaled down for a while) perturb the motion. Recorded states are the
-simulator's own ``qpos`` and ``qvel``, never differences. A weakening edits the model's actuator
-parameters: :class:`ActuatorEdits` owns those edits and restores them however ``track`` ends.
+External pushes (``xfrc_applied`` on a body for a while) and a weakened controller (its effort
+and the assistance scaled down for a while: :func:`effort_target`) perturb the motion. The model
+is never edited while it is simulated (the torque limits are anatomy: no weakening or gain
+changes them), so the controls, applied forces and first state a ``recorder`` sees replay the
+simulation exactly (``sim.simulate.episode``). Recorded states are the simulator's own ``qpos``
+and ``qvel``, never differences. Inverse dynamics without contacts edits the model's flags:
+:class:`ActuatorEdits` owns that edit and restores it however it ends.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ from sim.simulate.model import (
 )
 
 ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
-FALLEN_TONE = 0.3  # share of stiffness and strength with which a fallen body holds its pose
+FALLEN_TONE = 0.3  # share of effort with which a fallen body holds its pose
 
 
 @dataclass(frozen=True)
@@ -76,8 +79,8 @@ class Push:
 
 @dataclass(frozen=True)
 class Weakening:
-    """From ``start`` for ``duration`` seconds the controller's stiffness, torque limits and root
-    assistance are multiplied by ``factor`` (0..1)."""
+    """From ``start`` for ``duration`` seconds the controller's effort (:func:`effort_target`)
+    and root assistance are multiplied by ``factor`` (0..1); the torque limits stay."""
 
     start: float
     duration: float
@@ -106,6 +109,7 @@ class Tracking:
             :data:`FALLEN_TONE` of their stiffness and strength (no tracking, no feed-forward):
             the body stays down (no get-up is generated).
         fell: whether the body fell (``sim.simulate.falls``; see :func:`track`).
+        fall_tick: the control tick whose state was found fallen first, -1 if none.
         ticks: control ticks simulated.
         mean_assistance_all: mean assistance over every tick.
         penetration: deepest floor contact penetration [m] seen at the control ticks (>= 0).
@@ -132,13 +136,15 @@ class Tracking:
     foot_force: np.ndarray | None = None
     fall_frame: int = -1
     self_penetration: float = 0.0
+    fall_tick: int = -1
 
 
 class ActuatorEdits:
-    """The owner of the temporary changes ``track`` makes to a model: actuator gains, biases and
-    force limits (a weakening scales them) and the disabled-feature flags (inverse dynamics
-    without contacts). A context manager: on exit, however reached, the model holds exactly the
-    values it had on entry.
+    """The owner of temporary changes to a model: actuator gains, biases and force limits
+    (:meth:`scale`: ``sim.simulate.wholebody``'s weakening; ``track`` and the sampler never call
+    it: a model edited during a simulation does not replay from its MJCF) and the
+    disabled-feature flags (inverse dynamics without contacts). A context manager: on exit,
+    however reached, the model holds exactly the values it had on entry.
     """
 
     def __init__(self, model):
@@ -173,6 +179,23 @@ class ActuatorEdits:
         m.actuator_biasprm[:, :3] = self._bias
         m.actuator_forcerange[:] = self._range
         m.opt.disableflags = self._flags
+
+
+def effort_target(target: np.ndarray, q: np.ndarray, effort: float) -> np.ndarray:
+    """(nu,) hinge targets [rad] of a controller working at ``effort`` (0..1): moved from the
+    current angles ``q`` (nu,) towards ``target`` (nu,) by that share, so the pull of the PD
+    and the feed-forward folded into the target scale with it (a joint's damping stays: a
+    weakened muscle is still viscous; its torque limit stays: anatomy). ``effort`` 1:
+    ``target`` itself."""
+    return target if effort == 1.0 else q + effort * (target - q)
+
+
+def set_controls(model, data, target: np.ndarray, effort: float) -> None:
+    """``data.ctrl`` = :func:`effort_target` of ``target`` (nu,) [rad] from ``data``'s hinge
+    angles, clipped to the actuators' control range (``sim.simulate.model.sim_spec``; MuJoCo
+    would clip it there too, so ``data.ctrl`` holds exactly what acts)."""
+    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
+    np.clip(effort_target(target, data.qpos[7:], effort), lo, hi, out=data.ctrl)
 
 
 def _root_inertia(model, qpos, data) -> np.ndarray:
@@ -247,13 +270,14 @@ def track(
     weakenings: tuple[Weakening, ...] = (),
     record_every: int = 4,
     offsets: np.ndarray | None = None,
+    recorder=None,
 ) -> Tracking:
     """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
 
     The simulation starts in the reference's first pose and velocity. ``model`` must come from
-    ``sim.simulate.model.sim_model`` (its actuators' gains are read; a weakening changes them and
-    they are restored on return, or on an exception). A fall is ``sim.simulate.falls``'s,
-    checked every control tick; ``fall_frame`` is the first recorded frame at or after it.
+    ``sim.simulate.model.sim_model`` (its actuators' gains are read; it is not edited). A fall is
+    ``sim.simulate.falls``'s, checked every control tick; ``fall_frame`` is the first recorded
+    frame at or after it.
 
     Args:
         gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
@@ -264,6 +288,9 @@ def track(
         record_every: ticks between recorded states (4: the 30 fps clip rate).
         offsets: (T, nu) [rad] added to the hinge targets at each tick while the body is up
             (the corrections a sampling controller found: ``sim.simulate.sampling``); None: none.
+        recorder: called as ``recorder(k, data)`` at each control tick ``k`` just before its
+            ``SUBSTEPS`` physics steps (controls and applied forces set) and as ``recorder(T,
+            data)`` after the last (``sim.simulate.episode.Recorder``); None: none.
 
     Returns:
         :class:`Tracking` with states at ticks ``0, record_every, 2 record_every, ...``.
@@ -302,78 +329,82 @@ def track(
     rec_u = np.empty((F, model.nu))
     rec_tau = np.empty((F, model.nu))
     rec_f = np.zeros((F, 2, 3))
-    fall_frame = -1
+    fall_frame = fall_tick = -1
     all_assist = np.empty(T)
     all_wrench = np.empty((T, 6))
     fell = False
     fallen_pose = None
     deepest = deepest_self = 0.0
-    with ActuatorEdits(model) as edits:
-        for k in range(T):
-            t = k * dt
-            factor = weakening_factor(weakenings, t)
-            if fell:  # down: the joints hold the pose of the fall with a lying body's tone
-                factor = min(factor, FALLEN_TONE)
-            edits.scale(factor)
-            q_ref, v_ref = ref_qpos[k], ref_qvel[k]
-            # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
-            mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
-            root_acc[:3] = kp_r * (q_ref[:3] - data.qpos[:3]) + kd_r * (v_ref[:3] - data.qvel[:3])
-            root_acc[3:] = kp_r * rot_err + kd_r * (v_ref[3:6] - data.qvel[3:6])
-            ff = ref_force[k]
-            # 2. hinges: the actuator carries PD and feed-forward, MuJoCo clamps their sum; the
-            # target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied,
-            # and by ff / kp so that the feed-forward is added (both scale with a weakening)
-            if fell:  # no more tracking of a standing motion, no feed-forward: it stays down
-                data.ctrl[:] = fallen_pose
-            else:
-                data.ctrl[:] = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
-                if offsets is not None:
-                    data.ctrl[:] += offsets[k]
-            # 3. root: bounded assistance, only while the body touches the floor
-            helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
-            if helped and (assist_in_flight or _floor_contact(data, floor)):
-                wrench = ff[:6] + root_inertia @ root_acc
-                force, torque = wrench[:3], wrench[3:]
-                fmax = factor * assist_limit * weight
-                tmax = fmax * ROOT_TORQUE_LEVER
-                fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
-                if fn > fmax:
-                    force *= fmax / fn
-                if tn > tmax:
-                    torque *= tmax / tn
-            else:
-                force, torque = np.zeros(3), np.zeros(3)
-            data.qfrc_applied[:3] = force
-            data.qfrc_applied[3:6] = torque
-            all_assist[k] = np.linalg.norm(force) / weight
-            all_wrench[k, :3], all_wrench[k, 3:] = force, torque
-            apply_pushes(data, pushes, push_ids, t)
-            i, on_record = divmod(k, record_every)
-            on_record = on_record == 0
+    for k in range(T):
+        t = k * dt
+        factor = weakening_factor(weakenings, t)
+        if fell:  # down: the joints hold the pose of the fall with a lying body's tone
+            factor = min(factor, FALLEN_TONE)
+        q_ref, v_ref = ref_qpos[k], ref_qvel[k]
+        # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
+        mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
+        root_acc[:3] = kp_r * (q_ref[:3] - data.qpos[:3]) + kd_r * (v_ref[:3] - data.qvel[:3])
+        root_acc[3:] = kp_r * rot_err + kd_r * (v_ref[3:6] - data.qvel[3:6])
+        ff = ref_force[k]
+        # 2. hinges: the actuator carries PD and feed-forward, MuJoCo clamps their sum; the
+        # target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied,
+        # and by ff / kp so that the feed-forward is added (both scale with a weakening)
+        if fell:  # no more tracking of a standing motion, no feed-forward: it stays down
+            target = fallen_pose
+        else:
+            target = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
+            if offsets is not None:
+                target += offsets[k]
+        set_controls(model, data, target, factor)
+        # 3. root: bounded assistance, only while the body touches the floor
+        helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
+        if helped and (assist_in_flight or _floor_contact(data, floor)):
+            wrench = ff[:6] + root_inertia @ root_acc
+            force, torque = wrench[:3], wrench[3:]
+            fmax = factor * assist_limit * weight
+            tmax = fmax * ROOT_TORQUE_LEVER
+            fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
+            if fn > fmax:
+                force *= fmax / fn
+            if tn > tmax:
+                torque *= tmax / tn
+        else:
+            force, torque = np.zeros(3), np.zeros(3)
+        data.qfrc_applied[:3] = force
+        data.qfrc_applied[3:6] = torque
+        all_assist[k] = np.linalg.norm(force) / weight
+        all_wrench[k, :3], all_wrench[k, 3:] = force, torque
+        apply_pushes(data, pushes, push_ids, t)
+        i, on_record = divmod(k, record_every)
+        on_record = on_record == 0
+        if on_record:
+            rec_q[i] = data.qpos
+            rec_v[i] = data.qvel
+            rec_u[i] = data.ctrl
+        if not fell and has_fallen(model, data, fall_ref, k):
+            fell, fall_tick = True, k
+            fall_frame = min(F - 1, -(-k // record_every))
+            fallen_pose = data.qpos[7:].copy()
+        n = data.ncon
+        if n:
+            on_floor = (data.contact.geom[:n] == floor).any(axis=1)
+            depth = -data.contact.dist[:n]
+            floor_depth = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
+            self_depth = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
+            deepest = max(deepest, floor_depth)
+            deepest_self = max(deepest_self, self_depth)
             if on_record:
-                rec_q[i] = data.qpos
-                rec_v[i] = data.qvel
-                rec_u[i] = data.ctrl
-            if not fell and has_fallen(model, data, fall_ref, k):
-                fell, fall_frame = True, min(F - 1, -(-k // record_every))
-                fallen_pose = data.qpos[7:].copy()
-            n = data.ncon
-            if n:
-                on_floor = (data.contact.geom[:n] == floor).any(axis=1)
-                depth = -data.contact.dist[:n]
-                floor_depth = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
-                self_depth = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
-                deepest = max(deepest, floor_depth)
-                deepest_self = max(deepest_self, self_depth)
-                if on_record:
-                    rec_p[i] = floor_depth
-            mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
-            if on_record:
-                rec_tau[i] = data.actuator_force
-                _foot_forces(model, data, floor, side, rec_f[i])
-            if SUBSTEPS > 1:
-                mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+                rec_p[i] = floor_depth
+        if recorder is not None:
+            recorder(k, data)
+        mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
+        if on_record:
+            rec_tau[i] = data.actuator_force
+            _foot_forces(model, data, floor, side, rec_f[i])
+        if SUBSTEPS > 1:
+            mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+    if recorder is not None:
+        recorder(T, data)
     # per recorded state, the mean wrench over the ticks centred on it (the impulse delivered
     # around that frame over its duration): a sample of every 4th tick would alias the 120 Hz
     # variations of the feed-forward
@@ -398,4 +429,5 @@ def track(
         joint_torque=rec_tau,
         foot_force=rec_f,
         fall_frame=fall_frame,
+        fall_tick=fall_tick,
     )

@@ -1,51 +1,129 @@
-"""Simulated clips as an offline-RL / imitation-learning dataset: one HDF5 file (``h5py``).
+"""Simulated clips as a Minari dataset (Farama's offline-RL format), written with ``h5py`` alone.
 
-The layout follows Minari's (Farama) episode layout, so loaders written for it need only the
-path changes; every array of a clip keeps its frame axis first:
+``export_minari(synth_dir, root, dataset_id)`` writes what ``minari.load_dataset(dataset_id)``
+loads with ``MINARI_DATASETS_PATH=root`` (Minari 0.5's HDF5 storage, as its own
+``DataCollector`` writes it):
 
-``/`` attributes: ``format`` = ``"sidql-sim-episodes"``, ``version`` = 1, ``fps`` [Hz],
-``joint_names`` (U,) the hinges in action order, ``point_names`` (P,), ``total_episodes``.
+``root/<dataset_id>/data/main_data.hdf5``, one group ``episode_<k>`` per clip (k = 0, 1, ... in
+the ``synth`` index's order), an episode of N steps being the control ticks up to the fall (or
+the whole clip):
 
-``/episode_<k>/`` (k = 0, 1, ... in the dataset index's order), attributes ``id`` (k), ``file``
-(the clip file in the dataset folder), ``kind``, ``seed``, ``mean_assistance`` [body weight],
-``physical``, ``fell``, ``fall_frame`` (-1: none), ``total_steps`` (F - 1), and
+* ``observations/qpos`` (N + 1, nq), ``observations/qvel`` (N + 1, nv): the simulator's state
+  before each step and after the last (root position [m], quaternion wxyz, hinge angles [rad];
+  velocities [m/s, rad/s], z up);
+* ``actions`` (N, U): ``data.ctrl`` of each step: the hinges' PD targets [rad], feed-forward
+  folded in, inside each actuator's control range (``sim.simulate.model.sim_spec``);
+* ``rewards`` (N,): zeros (imitation data); ``terminations`` (N,): True only at the last step
+  of an episode that ends in a fall (the state it reaches is the first fallen one);
+  ``truncations`` (N,): True only at the last step of one that does not (the clip's length);
+* ``infos/xfrc_applied`` (N + 1, B, 6) and ``infos/qfrc_applied`` (N + 1, nv): entry ``t + 1``
+  is the wrench applied during step ``t`` (pushes on bodies, world frame [N, N m]; root
+  assistance [N, N m]), entry 0 zeros (Minari's infos: one at reset, one per step);
+* attributes: ``id``, ``seed`` (the episode's own), ``total_steps`` and, read back by
+  ``episode.metadata`` (``dataset.storage.get_episode_metadata``): ``kind``, ``file``,
+  ``mjcf`` (its body), ``frame_skip``, ``initial_state`` (``mj_getState`` with
+  ``mjSTATE_INTEGRATION``), ``torque_limit`` (U,) [N m], ``generation`` (JSON of its
+  parameters: scale, gain, pushes, ...), ``fell``, ``fall_tick``, ``physical``,
+  ``mean_assistance``.
 
-* ``observations/qpos`` (F, nq), ``observations/qvel`` (F, nv): the simulator's state (root
-  position [m], quaternion wxyz, hinge angles [rad]; velocities [m/s, rad/s]);
-  ``observations/positions`` (F, P, 3) and ``observations/velocities`` (F, P, 3): points [m],
-  their velocities [m/s] (world frame, z up);
-* ``actions`` (F - 1, U): actuator controls (target angles [rad], feed-forward included) set at
-  frame ``t`` and held until ``t + 1``: the transition ``observations[t] -> observations[t + 1]``;
-* ``rewards`` (F - 1,): zeros (imitation data carries no reward); ``terminations`` (F - 1,): true
-  from the transition reaching the fall frame on (the figure is down), ``truncations`` (F - 1,):
-  true at the last transition of a clip that did not fall (the clip ends, the motion does not);
-* ``infos/joint_torque`` (F, U) [N m], ``infos/assist_wrench`` (F, 6) (force [N] world frame,
-  torque [N m] root frame), ``infos/foot_contact`` (F, 2) bool (left, right),
-  ``infos/foot_force`` (F, 2, 3) [N, world frame]: per frame, like Minari's ``infos``.
+``root/<dataset_id>/data/metadata.json`` (written last): Minari's keys (``dataset_id``,
+``minari_version``, ``data_format``, ``total_episodes``, ``total_steps``, the serialised
+``observation_space`` (a Dict of two Boxes) and ``action_space`` (a Box spanning every episode's
+control range)) plus ``frame_skip``, ``joint_names`` and the unscaled body's ``mjcf`` and
+``torque_limit`` (U,) [N m] (an episode of another body size carries its own).
+
+Replaying an episode: ``sim.simulate.episode.replay(mjcf, initial_state, actions,
+infos["xfrc_applied"][1:], infos["qfrc_applied"][1:], frame_skip)`` gives back its observations
+bit for bit.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
 from pathlib import Path
 
 import h5py
+import mujoco
 import numpy as np
 
 from sim.errors import MotionDataError
 from sim.files import write_atomic
-from sim.motion.clip import load_extra, load_npz
+from sim.model.humanoid import canonical_skeleton
+from sim.motion.clip import load_extra
 from sim.motion.dataset import entry_file, read_index
+from sim.simulate.episode import array_text, torque_limits
+from sim.simulate.generate import EPISODE_LABELS, episode_model
 
-FORMAT = "sidql-sim-episodes"
-_INFOS = ("joint_torque", "assist_wrench", "foot_contact", "foot_force")
+MINARI_VERSION = "0.5.4"  # the dataset format written (Minari's supported_dataset_versions)
+DEFAULT_ID = "sidql/synth-v0"
+# Minari's dataset id: (namespace/)name-v(version); no dots, so no path leaves the root
+DATASET_ID = re.compile(r"^(?:[-_\w][-_\w/]*[-_\w]+/)?[-_\w]+?-v\d+$")
 
 
-def export_hdf5(
-    dataset_dir: str | os.PathLike, out: str | os.PathLike, *, physical_only: bool = False
+def episode_steps(labels: dict) -> int:
+    """N, the steps of a clip's episode: its control ticks up to the first fallen state, or
+    all of them."""
+    T = len(labels["sim_actions"])
+    fall = int(labels["sim_fall_tick"])
+    return fall if 0 < fall < T else T
+
+
+def _box(low, high) -> dict:
+    low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+    return {"type": "Box", "dtype": "float64", "shape": list(low.shape),
+            "low": low.tolist(), "high": high.tolist()}  # fmt: skip
+
+
+def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray]:
+    """Write clip ``r`` (its index entry, its ``sim_`` labels) as ``episode_<k>``; returns its
+    step count and its (U, 2) control range (from its MJCF's model)."""
+    missing = set(EPISODE_LABELS) - set(labels)
+    if missing:
+        raise MotionDataError(r["file"], None, f"no {min(missing)}: not a synth episode")
+    N = episode_steps(labels)
+    fell = 0 < int(labels["sim_fall_tick"]) <= N
+    g = h.create_group(f"episode_{k}")
+    obs = g.create_group("observations")
+    obs.create_dataset("qpos", data=labels["sim_tick_qpos"][: N + 1])
+    obs.create_dataset("qvel", data=labels["sim_tick_qvel"][: N + 1])
+    g.create_dataset("actions", data=labels["sim_actions"][:N])
+    g.create_dataset("rewards", data=np.zeros(N))
+    end = np.zeros(N, dtype=bool)
+    end[-1] = True
+    g.create_dataset("terminations", data=end & fell)
+    g.create_dataset("truncations", data=end & (not fell))
+    infos = g.create_group("infos")
+    for name in ("xfrc_applied", "qfrc_applied"):
+        x = labels[f"sim_{name}"][:N]
+        infos.create_dataset(
+            name, data=np.concatenate([np.zeros_like(x[:1]), x]), compression="gzip"
+        )
+    generation = json.loads(array_text(labels["sim_generation"]))
+    g.attrs.update(
+        id=k, seed=int(generation["seed"]), total_steps=N, kind=r["subject"], file=r["file"],
+        mjcf=array_text(labels["sim_mjcf"]), frame_skip=int(labels["sim_frame_skip"]),
+        initial_state=labels["sim_initial_state"], torque_limit=labels["sim_torque_limit"],
+        generation=array_text(labels["sim_generation"]), fell=fell,
+        fall_tick=int(labels["sim_fall_tick"]), physical=bool(r.get("physical", False)),
+        mean_assistance=float(r.get("mean_assistance", 0.0)),
+    )  # fmt: skip
+    model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
+    return N, model.actuator_ctrlrange.copy()
+
+
+def export_minari(
+    dataset_dir: str | os.PathLike,
+    root: str | os.PathLike,
+    dataset_id: str = DEFAULT_ID,
+    *,
+    physical_only: bool = False,
 ) -> int:
-    """Write the clips of the ``synth`` folder ``dataset_dir`` (its ``index.json`` and clip files
-    with their ``sim_*`` labels) to the HDF5 file ``out`` atomically (layout: module docstring).
+    """Write the clips of the ``synth`` folder ``dataset_dir`` (its ``index.json`` and clip
+    files with their ``sim_`` labels) as the Minari dataset ``dataset_id`` under ``root``
+    (layout: module docstring); each file atomically through ``sim.files.write_atomic`` (no
+    link below ``root`` followed), ``metadata.json`` last.
 
     Args:
         physical_only: only the clips whose index entry says ``physical``.
@@ -54,79 +132,57 @@ def export_hdf5(
         the number of episodes written.
 
     Raises:
-        MotionDataError: the index or a clip file is unreadable or a clip has no labels.
+        MotionDataError: the index or a clip file is unreadable, a clip has no episode labels,
+            or ``dataset_id`` is not a Minari id (``name-v0``, ``namespace/name-v0``).
+        OutputError: a link below ``root``, or a target that is not a regular file.
     """
-    root = Path(dataset_dir)
-    index = read_index(root / "index.json")  # bounded, regular file; MotionDataError otherwise
+    if not DATASET_ID.match(dataset_id):
+        raise MotionDataError(
+            None, None, f"dataset id {dataset_id!r}: expected (namespace/)name-v<version>"
+        )
+    src = Path(dataset_dir)
+    index = read_index(src / "index.json")  # bounded, regular file; MotionDataError otherwise
     chosen = [i for i, r in enumerate(index["trials"]) if r.get("physical") or not physical_only]
-    trials = [index["trials"][i] for i in chosen]
-    episodes = []
-    for i, r in zip(chosen, trials, strict=True):
-        file = entry_file(root, index, i)  # relative, inside the folder
-        clip = load_npz(file)
-        labels = load_extra(file, "sim_")
-        if "sim_actions" not in labels:
-            raise MotionDataError(str(file), None, "no sim_ labels: not a synth clip")
-        episodes.append((r, clip, labels))
-    if not episodes and trials:
-        raise MotionDataError(str(root), None, "no clip to export")
+    if not chosen:
+        raise MotionDataError(str(src), None, "no clip to export")
+    files = [(index["trials"][i], entry_file(src, index, i)) for i in chosen]  # inside src
+    root = Path(root)
+    out = root / dataset_id / "data"  # made by the writer below root, through no link
+    steps, ranges = [], []
 
     def write(f) -> None:
-        with h5py.File(f, "w") as h:
-            h.attrs["format"] = FORMAT
-            h.attrs["version"] = 1
-            h.attrs["fps"] = float(index.get("fps", 30.0))
-            h.attrs["total_episodes"] = len(episodes)
-            if episodes:
-                h.attrs["joint_names"] = list(episodes[0][1].joint_names)
-                h.attrs["point_names"] = list(episodes[0][1].names)
-            for k, (r, clip, labels) in enumerate(episodes):
-                g = h.create_group(f"episode_{k}")
-                F = clip.n_frames
-                fall = int(r.get("fall_frame", -1))
-                g.attrs.update(
-                    id=k, file=r["file"], kind=r["subject"], seed=int(r["task"]["seed"]),
-                    mean_assistance=float(r["mean_assistance"]), physical=bool(r["physical"]),
-                    fell=bool(r["fell"]), fall_frame=fall, total_steps=F - 1,
-                )  # fmt: skip
-                obs = g.create_group("observations")
-                for name in ("qpos", "qvel", "positions", "velocities"):
-                    obs.create_dataset(name, data=getattr(clip, name), compression="gzip")
-                g.create_dataset("actions", data=labels["sim_actions"][: F - 1])
-                g.create_dataset("rewards", data=np.zeros(F - 1))
-                term = np.zeros(F - 1, dtype=bool)
-                if fall >= 1:
-                    term[fall - 1 :] = True
-                trunc = np.zeros(F - 1, dtype=bool)
-                if fall < 0 and F > 1:
-                    trunc[-1] = True
-                g.create_dataset("terminations", data=term)
-                g.create_dataset("truncations", data=trunc)
-                infos = g.create_group("infos")
-                for name in _INFOS:
-                    infos.create_dataset(name, data=labels[f"sim_{name}"], compression="gzip")
+        with h5py.File(f, "w", track_order=True) as h:
+            for k, (r, file) in enumerate(files):
+                n, rng = _write_episode(h, k, r, load_extra(file, "sim_"))
+                steps.append(n)
+                ranges.append(rng)
 
-    write_atomic(Path(out), write)
-    return len(episodes)
-
-
-def load_hdf5(path: str | os.PathLike) -> list[dict]:
-    """The episodes of a file written by :func:`export_hdf5`: per episode a dict of its
-    attributes plus ``observations`` (dict), ``actions``, ``rewards``, ``terminations``,
-    ``truncations`` and ``infos`` (dict), as numpy arrays."""
-    out = []
-    try:
-        with h5py.File(path, "r") as h:
-            if h.attrs.get("format") != FORMAT:
-                raise MotionDataError(str(path), None, f"not a {FORMAT} file")
-            for k in range(int(h.attrs["total_episodes"])):
-                g = h[f"episode_{k}"]
-                ep = {a: g.attrs[a] for a in g.attrs}
-                ep["observations"] = {n: g["observations"][n][()] for n in g["observations"]}
-                ep["infos"] = {n: g["infos"][n][()] for n in g["infos"]}
-                for n in ("actions", "rewards", "terminations", "truncations"):
-                    ep[n] = g[n][()]
-                out.append(ep)
-    except OSError as e:
-        raise MotionDataError(str(path), None, f"not an HDF5 file: {e}") from e
-    return out
+    write_atomic(out / "main_data.hdf5", write, root=root)
+    labels = load_extra(files[0][1], "sim_")
+    ranges = np.stack(ranges)
+    model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0)
+    nq, nv = labels["sim_tick_qpos"].shape[1], labels["sim_tick_qvel"].shape[1]
+    inf = np.full(nq, np.inf)
+    metadata = {
+        "dataset_id": dataset_id,
+        "minari_version": MINARI_VERSION,
+        "data_format": "hdf5",
+        "jpeg_encoding": False,
+        "total_episodes": len(files),
+        "total_steps": int(sum(steps)),
+        "observation_space": json.dumps(
+            {
+                "type": "Dict",
+                "subspaces": {"qpos": _box(-inf, inf), "qvel": _box(-inf[:nv], inf[:nv])},
+            }
+        ),  # fmt: skip
+        "action_space": json.dumps(_box(ranges[:, :, 0].min(0), ranges[:, :, 1].max(0))),
+        "description": "sidql synth: simulated humanoid clips (docs/synthetic.md)",
+        "frame_skip": int(labels["sim_frame_skip"]),
+        "joint_names": [model.actuator(a).name for a in range(model.nu)],
+        "mjcf": mjcf,
+        "torque_limit": torque_limits(model).tolist(),
+    }
+    text = json.dumps(metadata, indent=1).encode()
+    write_atomic(out / "metadata.json", lambda f: f.write(text), root=root)
+    return len(files)

@@ -8,7 +8,7 @@ Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``)
   on the thorax or the pelvis (impulse recorded);
 * ``fall``: falls and recoveries: a real trial sped up 1-2x, a push for 0.2 s and the controller
   weakened from the push on, then restored (the recovery attempt); one severity s ~ U(0, 1) sets
-  the push (250-900 N), the weakening (to 60-5 % of its stiffness) and its length (0.3-1.5 s), so
+  the push (250-900 N), the weakening (to 60-5 % of its effort) and its length (0.3-1.5 s), so
   mild draws stumble and recover and severe ones fall (``fell`` in the clip's record);
 * ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
 * ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` (amplitude 35-60 % of each
@@ -21,6 +21,7 @@ rate; point velocities come from the kinematic chain (``point_kinematics`` with 
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass
 
 import mujoco
@@ -35,7 +36,8 @@ from sim.motion.retarget import local_rotations_from_world
 from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Weakening, track
-from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_model, total_mass
+from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
+from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
 from sim.simulate.reference import on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
 
@@ -43,10 +45,30 @@ KINDS = ("track", "fall", "procedural")  # the default mix
 # a clip is "physical" when its mean root assistance force is within this share of its body
 # weight and its mean root assistance torque within this share of body weight x 1 m
 PHYSICAL_BUDGET = 0.05
-# per-frame learning labels stored in each clip file (``save_npz``'s ``extra``), with shapes:
-# F frames, U = nu actuators (one per hinge, the order of the clip's ``joint_names``)
+# learning labels stored in each clip file (``save_npz``'s ``extra``), with shapes: F frames,
+# T control ticks (F = ceil(T / record_every): frame i is tick i * record_every), U = nu
+# actuators (one per hinge, the order of the clip's ``joint_names``), B bodies, S state size
+EPISODE_LABELS = {
+    "sim_actions": "(T, U) actuator controls at each control tick: PD target [rad], the "
+    "feed-forward folded in, inside each actuator's control range (the joint range widened: "
+    "sim.simulate.model.sim_spec)",
+    "sim_xfrc_applied": "(T, B, 6) applied body wrenches at each tick (pushes): force [N], "
+    "torque [N m], world frame",
+    "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance)",
+    "sim_tick_qpos": "(T + 1, nq) qpos before each tick and after the last",
+    "sim_tick_qvel": "(T + 1, nv) qvel likewise",
+    "sim_initial_state": "(S,) mj_getState(mjSTATE_INTEGRATION) before the first tick",
+    "sim_mjcf": "(n,) uint8: the body's MJCF (UTF-8; sim.simulate.episode.array_text), the "
+    "model simulated",
+    "sim_frame_skip": "() int: physics steps per action",
+    "sim_torque_limit": "(U,) each actuator's torque limit [N m] (the human peak torque)",
+    "sim_generation": "(n,) uint8: JSON (UTF-8) of the generation parameters, the episode's "
+    "seed included",
+    "sim_fall_tick": "() int: the tick whose state is the first fallen one, -1 if none (an "
+    "episode for learners ends there: sim.simulate.export)",
+}
 LABELS = {
-    "sim_actions": "(F, U) actuator controls: target angles [rad], feed-forward included",
+    **EPISODE_LABELS,
     "sim_joint_torque": "(F, U) applied hinge torques [N m] (within the human limits)",
     "sim_assist_wrench": "(F, 6) root assistance: force [N] world frame, torque [N m] root frame",
     "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor",
@@ -84,9 +106,23 @@ class SynthTask:
     samples: int = 0  # > 0: real-motion kinds use the sampling tracker, no assistance
 
 
+def episode_seed(task: SynthTask) -> int:
+    """The seed of ``task``'s episode, its own (not the run's): the run's seed times 2**32 plus
+    the task's index; every random draw of the episode comes from :func:`episode_rng` of it."""
+    if not 0 <= task.seed < 2**31 or not 0 <= task.index < 2**32:
+        raise ValueError(f"seed {task.seed} and index {task.index}: expected 0 <= seed < 2**31")
+    return task.seed * 2**32 + task.index
+
+
+def episode_rng(seed: int) -> np.random.Generator:
+    """The random stream of the episode whose seed (:func:`episode_seed`) is ``seed``:
+    ``SeedSequence([run seed, task index])``."""
+    return np.random.default_rng(np.random.SeedSequence(list(divmod(int(seed), 2**32))))
+
+
 def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
     """The generation parameters of ``task`` (JSON-ready), drawn from ``rng``."""
-    p: dict = {"kind": task.kind, "seed": task.seed}
+    p: dict = {"kind": task.kind, "seed": episode_seed(task), "run_seed": task.seed}
     if task.kind == "track":
         # velocity-rich on purpose: a third log-uniform over 0.5-2x, two thirds 1.25-2x
         slow = rng.random() < 1 / 3
@@ -103,7 +139,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
             pushes.append(
                 {
                     "body": str(rng.choice(["thorax", "root"])),
-                    "start": float(rng.uniform(0.3, task.seconds - 0.5)),
+                    "start": float(rng.uniform(0.3, max(0.3, task.seconds - 0.5))),
                     "duration": float(rng.uniform(0.1, 0.2)),
                     "force": [float(mag * d[0]), float(mag * d[1]), 0.0],
                 }
@@ -159,11 +195,10 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         MotionDataError: the source trial is unreadable or shorter than one clip.
         UnstableSimulation: the simulation diverged.
     """
-    rng = np.random.default_rng(np.random.SeedSequence([task.seed, task.index]))
+    rng = episode_rng(episode_seed(task))
     p = draw_parameters(task, rng)
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
-    gains = Gains().scaled(p["gain"])
-    model = sim_model(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * p["scale"] ** 3, gains=gains)
+    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"])
     n = int(round(task.seconds * CONTROL_HZ))
     if task.kind == "procedural":
         slow, _ = synthetic_qpos(
@@ -194,6 +229,7 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         ),
         "weakenings": tuple(Weakening(**w) for w in p["weakenings"]),
         "record_every": int(round(CONTROL_HZ / task.fps)),
+        "recorder": Recorder(model, mjcf, n, FRAME_SKIP),
     }
     if task.samples and task.kind != "procedural":  # the body's own doing, or a fall
         p["assist_limit"] = 0.0
@@ -223,6 +259,8 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     fallen = np.zeros(F, dtype=bool)
     if result.fall_frame >= 0:
         fallen[result.fall_frame :] = True
+    episode = tracking["recorder"].episode()
+    fall_tick = result.fall_tick
     record = {
         "generation": p,
         "mean_assistance": float(result.assistance.mean()),
@@ -230,11 +268,22 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
         "fall_frame": int(result.fall_frame),
+        "fall_tick": int(fall_tick),
         "physical": is_physical(float(result.assistance.mean()), float(torque.mean())),
         "penetration_mm": 1000 * result.penetration,
         "self_penetration_mm": 1000 * result.self_penetration,
         "labels": {
-            "sim_actions": result.actions,
+            "sim_actions": episode.actions,
+            "sim_xfrc_applied": episode.xfrc_applied,
+            "sim_qfrc_applied": episode.qfrc_applied,
+            "sim_tick_qpos": episode.qpos,
+            "sim_tick_qvel": episode.qvel,
+            "sim_initial_state": episode.initial_state,
+            "sim_mjcf": text_array(mjcf),
+            "sim_frame_skip": np.int64(FRAME_SKIP),
+            "sim_torque_limit": torque_limits(model),
+            "sim_generation": text_array(json.dumps(p)),
+            "sim_fall_tick": np.int64(fall_tick),
             "sim_joint_torque": result.joint_torque,
             "sim_assist_wrench": result.assist_wrench,
             "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
@@ -244,6 +293,26 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
         },
     }
     return out, record
+
+
+def episode_model(skeleton, scale: float, gain: float) -> tuple[mujoco.MjModel, str, Gains]:
+    """The simulated body of an episode: ``skeleton`` (already scaled by ``scale``) with mass
+    scaling as its cube, the hinges' stiffness times ``gain`` (bandwidth times its square root;
+    the torque limits are the human ones, never scaled, rounded down to the 6 digits an MJCF
+    keeps); the model compiled from its MJCF (the model simulated, so the MJCF rebuilds it
+    exactly), the MJCF itself and the gains."""
+    gains = Gains().scaled(gain)
+    spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains)
+    for a in spec.actuators:  # the MJCF keeps 6 digits: round the limits down, never up
+        a.forcerange = [-_down6(a.forcerange[1]), _down6(a.forcerange[1])]
+    mjcf = spec.to_xml()
+    return mujoco.MjModel.from_xml_string(mjcf), mjcf, gains
+
+
+def _down6(x: float) -> float:
+    """``x`` > 0 rounded down to 6 significant digits (what an MJCF writes)."""
+    step = 10.0 ** (np.floor(np.log10(x)) - 5)
+    return float(np.floor(x / step) * step)
 
 
 def simulated_clip(model, skeleton, qpos, qvel, fps: float, source: str) -> Clip:

@@ -54,6 +54,10 @@ CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
 MIN_DEFLECTION = 0.25  # [rad] the smallest angle error that asks for a joint's peak torque
+# [rad/s] a position actuator's control range is its joint's range widened by (limit + kv *
+# TARGET_SPEED) / kp: a target that far out asks for the peak torque from anywhere in the range
+# while the joint moves towards it at up to this speed (faster, the damping takes a share)
+TARGET_SPEED = 30.0
 REFERENCE_MASS_KG = 75.0  # [kg] body mass of the peak torques below
 
 # Peak isometric joint torque [N m] of an adult man (about 75 kg), per joint and ASF axis (rx:
@@ -130,7 +134,13 @@ def scaled_skeleton(skeleton: Skeleton, scale: float) -> Skeleton:
     return replace(skeleton, bones=bones)
 
 
-def sim_model(
+def sim_model(skeleton: Skeleton, **kwargs) -> mujoco.MjModel:
+    """The actuated humanoid of ``skeleton`` (see the module docstring): :func:`sim_spec`
+    compiled (same keyword arguments)."""
+    return sim_spec(skeleton, **kwargs).compile()
+
+
+def sim_spec(
     skeleton: Skeleton,
     *,
     body_mass_kg: float = DEFAULT_BODY_MASS_KG,
@@ -138,10 +148,15 @@ def sim_model(
     soles: bool = True,
     stance_ankles: bool = False,
     actuators: str = "position",
-) -> mujoco.MjModel:
-    """The actuated humanoid of ``skeleton`` (see the module docstring).
+) -> mujoco.MjSpec:
+    """The ``MjSpec`` of :func:`sim_model` (``spec.to_xml()``: the MJCF a dataset stores).
 
-    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``). ``soles``: each foot
+    Actuator ``i`` drives hinge ``i`` (qpos ``7 + i``, qvel ``6 + i``); a position actuator's
+    control (the PD target [rad], the feed-forward folded in as ``ff / kp``) is limited to the
+    joint's range widened by ``(limit + kv TARGET_SPEED) / kp`` either side (``ctrllimited``): a
+    target further out asks for more than the joint's peak torque anywhere in its range (while
+    the joint moves towards it at up to :data:`TARGET_SPEED`), so the bound costs no torque
+    there, and actions stay in a fixed box. ``soles``: each foot
     touches the floor through a flat sole box reaching behind the ankle (:func:`add_soles`)
     instead of its capsule (False: the capsule feet of motion capture). ``stance_ankles``: the
     ankle hinges (``foot_rx``, ``foot_rz``) at least :func:`stance_stiffness` (capped by the
@@ -191,13 +206,17 @@ def sim_model(
             a.ctrlrange = [-limit, limit]
         else:
             a.set_to_position(kp=kp, kv=kv)
+            lo, hi = plain.jnt_range[j]
+            a.ctrllimited = True
+            reach = (limit + kv * TARGET_SPEED) / kp
+            a.ctrlrange = [lo - reach, hi + reach]
         a.forcelimited = True
         a.forcerange = [-limit, limit]
         # a light segment between two stiff joints (the spine) makes a mode of inertia ~ its own;
         # armature >= kp h^2 keeps every actuator mode below 1 / h (explicit-spring stability)
         joint = spec.joint(name)
         joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
-    return spec.compile()
+    return spec
 
 
 ANKLE_JOINTS = ("foot_rx", "foot_rz")  # the ankle (plantar/dorsiflexion) and subtalar hinges

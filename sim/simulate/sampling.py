@@ -30,11 +30,11 @@ import mujoco
 import numpy as np
 
 from sim.simulate.controller import (
-    ActuatorEdits,
     Push,
     Tracking,
     Weakening,
     apply_pushes,
+    set_controls,
     track,
     weakening_factor,
 )
@@ -136,6 +136,7 @@ def sample_track(
     record_every: int = 4,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
+    recorder=None,
     **search,
 ) -> Tracking:
     """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance, the hinge targets
@@ -144,12 +145,13 @@ def sample_track(
 
     Returns:
         ``track(model, ref_qpos, assist_limit=0, offsets=best, record_every=record_every,
-        pushes=pushes, weakenings=weakenings)``: the replay of the cheapest offsets (T, nu).
+        pushes=pushes, weakenings=weakenings, recorder=recorder)``: the replay of the cheapest
+        offsets (T, nu).
     """
     offsets, _ = search_offsets(model, ref_qpos, pushes=pushes, weakenings=weakenings, **search)
     return track(
         model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
-        pushes=pushes, weakenings=weakenings,
+        pushes=pushes, weakenings=weakenings, recorder=recorder,
     )  # fmt: skip
 
 
@@ -225,30 +227,28 @@ def search_offsets(
     new_states = np.empty((samples, size))
     new_qpos = np.empty((samples, model.nq))
     push_ids = [model.body(p.body).id for p in pushes]
-    with ActuatorEdits(model) as edits:  # a weakening scales the actuators; restored on exit
-        for k0 in range(0, T, window):
-            k1 = min(T, k0 + window)
-            parents = np.arange(samples) % len(states)
-            offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
-            new_costs = np.empty(samples)
-            k2 = min(T, k1 + lookahead)
-            for s in range(samples):
-                mujoco.mj_setState(model, data, states[parents[s]], spec)
-                for k in range(k0, k2):  # the window, then on with the same offset
-                    t = k / CONTROL_HZ
-                    edits.scale(weakening_factor(weakenings, t))
-                    apply_pushes(data, pushes, push_ids, t)
-                    data.ctrl[:] = base[k] + offs[s]
-                    mujoco.mj_step(model, data, nstep=SUBSTEPS)
-                    if k == k1 - 1:  # the window's end: the state kept
-                        mujoco.mj_getState(model, data, new_states[s], spec)
-                        new_qpos[s] = data.qpos
-                f = features(model, data, ee_ids, foot_ids)
-                cost = window_cost(f, ref_feat[min(k2, T - 1)], weights, hinge_w)
-                new_costs[s] = costs[parents[s]] + cost
-            best = np.argsort(new_costs, kind="stable")[:keep]
-            history.append((parents[best], offs[best], new_qpos[best].copy()))
-            states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
+    for k0 in range(0, T, window):
+        k1 = min(T, k0 + window)
+        parents = np.arange(samples) % len(states)
+        offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
+        new_costs = np.empty(samples)
+        k2 = min(T, k1 + lookahead)
+        for s in range(samples):
+            mujoco.mj_setState(model, data, states[parents[s]], spec)
+            for k in range(k0, k2):  # the window, then on with the same offset
+                t = k / CONTROL_HZ
+                apply_pushes(data, pushes, push_ids, t)
+                set_controls(model, data, base[k] + offs[s], weakening_factor(weakenings, t))
+                mujoco.mj_step(model, data, nstep=SUBSTEPS)
+                if k == k1 - 1:  # the window's end: the state kept
+                    mujoco.mj_getState(model, data, new_states[s], spec)
+                    new_qpos[s] = data.qpos
+            f = features(model, data, ee_ids, foot_ids)
+            cost = window_cost(f, ref_feat[min(k2, T - 1)], weights, hinge_w)
+            new_costs[s] = costs[parents[s]] + cost
+        best = np.argsort(new_costs, kind="stable")[:keep]
+        history.append((parents[best], offs[best], new_qpos[best].copy()))
+        states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
     # the cheapest final state's offsets, window by window back to the start
     offsets = np.zeros((T, nu))
     window_qpos = np.empty((len(history), model.nq))
