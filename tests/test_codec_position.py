@@ -60,6 +60,22 @@ def test_range_coder_round_trips(C, W, scale, seed, grouped):
     assert used <= len(data) + 5
 
 
+def test_the_range_coder_has_room_for_its_costliest_integers():
+    """Large values each in a fresh context group (coded from the prior, predicted against)
+    cost more than 8 bytes each: the coder once wrote past its buffer and lost the stream's
+    tail (hypothesis found it: 6 channels, 2 columns of values near 2^29, grouped)."""
+    group = np.arange(8)
+    longest = np.full((4, 8), (1 << 30) - 1)  # the longest code the coder takes
+    longest[1::2] *= -1
+    data = encode_integers(longest, group)
+    back, used = decode_integers(data, 4, 8, group)
+    assert np.array_equal(back, longest) and used <= len(data) + 5
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        v = rng.integers(-(2**29), 2**29, (6, 2))
+        assert np.array_equal(decode_integers(encode_integers(v, group[:2]), 6, 2, group[:2])[0], v)
+
+
 def test_range_coder_beats_lzma_and_the_size_model_is_close():
     import lzma
 

@@ -36,6 +36,10 @@ _MASK32 = 0xFFFFFFFF
 # contexts per channel: zero flag (2), sign (3), unary (MAX_CLASS + 1), first mantissa bit
 _ZERO, _SIGN, _UNARY, _MANT = 0, 2, 5, 5 + MAX_CLASS + 1
 _PER_CHANNEL = _MANT + MAX_CLASS + 1
+# the most bytes one integer can add: its adaptive bits (zero flag, sign, unary, first mantissa
+# bit) under 8 bits each (a probability adapted by a shift of _MOVE stays within [15, 2033] /
+# 2048: log2(2048 / 15) < 7.1), its direct bits 1 bit each, and the 5 bytes of the final flush
+_INTEGER_BYTES = ((2 + MAX_CLASS + 1) * 8 + MAX_CLASS) // 8 + 8
 
 
 def _prior() -> np.ndarray:
@@ -116,13 +120,19 @@ def _encode_kernel(values, group, n_groups, prior):
     """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column.
     Returns the coded bytes."""
     C, W = values.shape
-    out = np.empty(16 + C * W * 8, dtype=np.uint8)
+    out = np.empty(64 + C * W * 2, dtype=np.uint8)
     low, rng, cache, csize, pos = np.int64(0), np.int64(_MASK32), np.int64(0), np.int64(1), 0
     probs = _initial_probs(C * n_groups, prior)
     for c in range(C):
         prev_zero = 0
         prev_sign = 2
         for w in range(W):
+            # room for one more integer: at most _INTEGER_BYTES plus the bytes the cache holds
+            # back (a badly predicted large residual costs far more than its 8 raw bytes)
+            if pos + csize + _INTEGER_BYTES > out.shape[0]:
+                bigger = np.empty(2 * out.shape[0] + csize + _INTEGER_BYTES, dtype=np.uint8)
+                bigger[:pos] = out[:pos]
+                out = bigger
             base = (c * n_groups + group[w]) * _PER_CHANNEL
             r = values[c, w]
             if r == 0:
