@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_run import REPO, cli, one_line_exit_2
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -35,23 +36,6 @@ from sim.errors import MotionDataError
 from sim.files import excerpt, text_lines, write_atomic
 from sim.motion.clip import load_npz, save_npz
 from sim.motion.dataset import find_trials, load_dataset_clips, read_index
-
-REPO = Path(__file__).resolve().parent.parent
-
-
-def cli(*argv, timeout=120):
-    return subprocess.run(
-        [sys.executable, "-m", "sidql.commands.main", *argv], capture_output=True, text=True,
-        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=timeout,
-    )  # fmt: skip
-
-
-def one_line_exit_2(res, *needles):
-    assert res.returncode == 2, res.stderr
-    assert res.stderr.count("\n") == 1, res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
-
 
 # --- text read a chunk at a time ---------------------------------------------------------------
 

@@ -12,12 +12,11 @@ import json
 import os
 import shutil
 import stat
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_run import cli, one_line_exit_2
 
 import sim.motion.dataset as dataset_module
 from sim.errors import MotionDataError, OutputError, UnknownNameError
@@ -27,23 +26,6 @@ from sim.motion.dataset import dataset_clips, find_trials
 from sim.simulate.dataset import synthesize
 from sim.simulate.generate import SynthTask, task_dict
 from sim.simulate.journal import JOURNAL, MAX_LINE_BYTES, clip_name
-
-REPO = Path(__file__).resolve().parent.parent
-
-
-def cli(*argv, timeout=120):
-    return subprocess.run(
-        [sys.executable, "-m", "sidql.commands.main", *argv], capture_output=True, text=True,
-        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=timeout,
-    )  # fmt: skip
-
-
-def one_line_exit_2(res, *needles):
-    assert res.returncode == 2, res.stderr
-    assert res.stderr.count("\n") == 1, res.stderr
-    for n in needles:
-        assert n in res.stderr, res.stderr
-
 
 # --- a synth run's journal, crafted by hand (no simulation needed) -------------------------------
 
