@@ -175,7 +175,7 @@ def main() -> None:
     text = (
         f"{len(trials)} CMU trials ({frames:,} frames at 120 Hz), each written as BVH (centimetres, "
         "y up, `sim.bvh.writer`) and ingested back at 30 fps; the largest distance of any point in "
-        "any frame from the AMC's clip. Target (issue 29): 0.1 mm.\n\n"
+        "any frame from the AMC's clip. Target: 0.1 mm.\n\n"
         "True velocities (30 fps, `velocities`: the chain's `J(q) qdot` from central differences "
         "of `qpos`) depend on the model's joints, not only on the points: the BVH's subject "
         "humanoid turns each bone by three Euler hinges about the file's axes where the ASF's "
