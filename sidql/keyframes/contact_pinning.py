@@ -50,7 +50,7 @@ import numpy as np
 
 from sidql.keyframes.reconstructions import Reconstruction, hermite, points_reconstruction
 from sidql.keyframes.spherical import POINTS, SphericalSeries
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.motion.clip import Clip
 from sim.physics.contacts import motion_contacts
 from sim.physics.feet import SIDES, sole
@@ -130,7 +130,7 @@ def encode_runs(bits: np.ndarray) -> bytes:
     varint length of every run but the last (LEB128 varints)."""
     b = np.asarray(bits, dtype=bool)
     if b.ndim != 2 or b.shape[0] < 1:
-        raise ValueError(f"bits must be (N, F) with N >= 1; got {b.shape}")
+        raise UsageError(f"bits must be (N, F) with N >= 1; got {b.shape}")
     out = bytearray()
     for f in range(b.shape[1]):
         change = np.flatnonzero(b[1:, f] != b[:-1, f]) + 1
@@ -339,7 +339,7 @@ def pin_feet(
     c = np.asarray(contact, dtype=bool)
     N = P.shape[0]
     if P.shape != (N, len(POINTS), 3) or c.shape != (N, len(SIDES)):
-        raise ValueError(
+        raise UsageError(
             f"positions must be (N, 23, 3) and contact (N, 2); got {P.shape}, {c.shape}"
         )
     k = np.asarray(keyframes, dtype=np.int64)

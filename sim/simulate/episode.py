@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim.errors import UsageError
 from sim.simulate.model import SUBSTEPS
 
 #: physics steps per action (control tick)
@@ -69,7 +70,7 @@ class Recorder:
 
     def __call__(self, k: int, data) -> None:
         if k != self._seen or k > self.ticks:
-            raise RuntimeError(f"tick {k} recorded out of order (expected {self._seen})")
+            raise UsageError(f"tick {k} recorded out of order (expected {self._seen})")
         if k == 0:
             mujoco.mj_getState(self._model, data, self.state, STATE_SPEC)
         self.qpos[k], self.qvel[k] = data.qpos, data.qvel
@@ -81,7 +82,7 @@ class Recorder:
     def episode(self) -> Episode:
         """The recorded :class:`Episode` (every tick must have been seen)."""
         if self._seen != self.ticks + 1:
-            raise RuntimeError(f"{self._seen} of {self.ticks + 1} ticks recorded")
+            raise UsageError(f"{self._seen} of {self.ticks + 1} ticks recorded")
         return Episode(self.mjcf, self.frame_skip, self.state, self.ctrl, self.xfrc, self.qfrc,
                        self.qpos, self.qvel)  # fmt: skip
 

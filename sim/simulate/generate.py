@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from sim.errors import MotionDataError, UnknownNameError
+from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.model.humanoid import canonical_skeleton
 from sim.model.kinematics import point_names, point_parents
 from sim.model.mass import DEFAULT_BODY_MASS_KG
@@ -110,7 +110,7 @@ def episode_seed(task: SynthTask) -> int:
     """The seed of ``task``'s episode, its own (not the run's): the run's seed times 2**32 plus
     the task's index; every random draw of the episode comes from :func:`episode_rng` of it."""
     if not 0 <= task.seed < 2**31 or not 0 <= task.index < 2**32:
-        raise ValueError(f"seed {task.seed} and index {task.index}: expected 0 <= seed < 2**31")
+        raise UsageError(f"seed {task.seed} and index {task.index}: expected 0 <= seed < 2**31")
     return task.seed * 2**32 + task.index
 
 

@@ -47,6 +47,7 @@ import mujoco
 import numpy as np
 
 from sim.acclaim.records import Skeleton
+from sim.errors import UsageError
 from sim.model.humanoid import build_mjcf
 from sim.model.mass import DEFAULT_BODY_MASS_KG
 
@@ -129,7 +130,7 @@ class Gains:
 def scaled_skeleton(skeleton: Skeleton, scale: float) -> Skeleton:
     """``skeleton`` with every bone length times ``scale`` (angles unchanged)."""
     if scale <= 0:
-        raise ValueError(f"scale must be positive; got {scale}")
+        raise UsageError(f"scale must be positive; got {scale}")
     bones = tuple(replace(b, length=b.length * scale) for b in skeleton.bones)
     return replace(skeleton, bones=bones)
 
@@ -165,7 +166,7 @@ def sim_spec(
     the human limit); the armature is the same in both, so both are one body.
     """
     if actuators not in ("position", "motor"):
-        raise ValueError(f"unknown actuators {actuators!r}; known: 'position', 'motor'")
+        raise UsageError(f"unknown actuators {actuators!r}; known: 'position', 'motor'")
     gains = gains or Gains()
     spec = mujoco.MjSpec.from_string(build_mjcf(skeleton, body_mass_kg=body_mass_kg))
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from sim.errors import MotionDataError
+from sim.errors import MotionDataError, UsageError
 from sim.model.humanoid import humanoid_model
 from sim.model.kinematics import SOLE_POINTS
 from sim.motion.ingest import check_memory
@@ -121,7 +121,7 @@ def time_warp(model, qpos: np.ndarray, rate: float, speed: float, out_rate: floa
     shortest arc. Returns (T', nq) covering the same motion.
     """
     if speed <= 0:
-        raise ValueError(f"speed must be positive; got {speed}")
+        raise UsageError(f"speed must be positive; got {speed}")
     T = len(qpos)
     duration = (T - 1) / rate / speed
     n = int(np.floor(duration * out_rate + 1e-9)) + 1

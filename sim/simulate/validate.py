@@ -21,6 +21,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from sim.errors import UsageError
 from sim.simulate.controller import track
 from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS, sim_model, total_mass
 from sim.simulate.reference import (
@@ -66,9 +67,9 @@ class ForwardValidation:
     def __init__(self, model, names, samples: int = 0, controller: str | None = None):
         controller = controller or ("sampling" if samples else "plain")
         if controller not in CONTROLLERS:
-            raise ValueError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
+            raise UsageError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
         if (controller == "wholebody") != (not model.actuator_biasprm[:, 1].any()):
-            raise ValueError(
+            raise UsageError(
                 f"controller {controller!r} needs sim_model(..., actuators="
                 f"{'motor' if controller == 'wholebody' else 'position'!r})"
             )

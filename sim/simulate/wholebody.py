@@ -51,6 +51,7 @@ import daqp
 import mujoco
 import numpy as np
 
+from sim.errors import UsageError
 from sim.simulate.controller import (
     ActuatorEdits,
     Push,
@@ -357,7 +358,7 @@ def track_wholebody(
         torques [N m] (the actuators' controls).
     """
     if model.actuator_biasprm[:, 1].any():
-        raise ValueError("track_wholebody needs torque actuators: sim_model(actuators='motor')")
+        raise UsageError("track_wholebody needs torque actuators: sim_model(actuators='motor')")
     gains = gains or WholeBodyGains()
     T = ref_qpos.shape[0]
     ref = wholebody_reference(model, ref_qpos)
