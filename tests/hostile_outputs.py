@@ -80,12 +80,14 @@ def seed_case(kind: str = "output", seeds=None) -> OutCase:
     return OutCase("output", "clip", "none", "target", [], ["seed"])
 
 
-def _params(n: int) -> dict:
+def journal_params(n: int) -> dict:
+    """The parameters a procedural ``synth`` run of ``n`` clips writes at its journal's head."""
     return {"source": None, "n": n, "seed": 0, "kinds": ["procedural"], "seconds": 0.5,
             "fps": 30.0, "max_assistance": None, "max_tries": 20}  # fmt: skip
 
 
-def _kept(i: int, **change) -> dict:
+def kept_entry(i: int, **change) -> dict:
+    """The ``kept`` entry a procedural run writes for task ``i``."""
     from sim.simulate.generate import SynthTask, task_dict
     from sim.simulate.journal import clip_name
 
@@ -99,17 +101,19 @@ def _kept(i: int, **change) -> dict:
 def _journal(rng) -> list:
     """``[label, line...]``: the lines after the head of a crafted journal."""
     how = _pick(rng, ("surplus", "leaving", "absolute", "malformed", "mutated", "long"))
-    lines = [{"index": i, "kept": _kept(i)} for i in range(1 + rng.randrange(4))]
+    lines = [{"index": i, "kept": kept_entry(i)} for i in range(1 + rng.randrange(4))]
     if how == "leaving":
-        lines.append({"index": len(lines), "kept": _kept(len(lines), file="../outside/victim")})
+        lines.append(
+            {"index": len(lines), "kept": kept_entry(len(lines), file="../outside/victim")}
+        )
     elif how == "absolute":
-        lines.append({"index": len(lines), "kept": _kept(len(lines), file="@outside/victim")})
+        lines.append({"index": len(lines), "kept": kept_entry(len(lines), file="@outside/victim")})
     elif how == "malformed":
         lines.insert(rng.randrange(len(lines) + 1), _pick(rng, (
-            '"kept"', "[1, 2]", {"kept": _kept(0)}, {"index": -1, "kept": _kept(0)},
-            {"index": 0, "kept": "x.npz"}, {"index": 0, "kept": _kept(0, frames="15")},
-            {"index": 0, "kept": _kept(0, notes=["\x1b[2J"])}, {"index": 0, "skipped": {}},
-            {"index": 0, "rejected": "track"}, "{not json", {"index": 2**40, "kept": _kept(0)},
+            '"kept"', "[1, 2]", {"kept": kept_entry(0)}, {"index": -1, "kept": kept_entry(0)},
+            {"index": 0, "kept": "x.npz"}, {"index": 0, "kept": kept_entry(0, frames="15")},
+            {"index": 0, "kept": kept_entry(0, notes=["\x1b[2J"])}, {"index": 0, "skipped": {}},
+            {"index": 0, "rejected": "track"}, "{not json", {"index": 2**40, "kept": kept_entry(0)},
         )))  # fmt: skip
     elif how == "mutated":
         text = bytearray(json.dumps(lines[-1]).encode())
@@ -147,7 +151,7 @@ def _resume_state(case: OutCase, out: Path, outside: Path) -> None:
     (out / "procedural").mkdir(exist_ok=True)
     for i in range(3):
         (out / "procedural" / f"procedural_{i:05d}.npz").write_bytes(b"clip")
-    lines = [{"params": _params(1)}, *case.journal]
+    lines = [{"params": journal_params(1)}, *case.journal]
     text = "".join((x if isinstance(x, str) else json.dumps(x)).replace(
         "@outside", str(outside)) + "\n" for x in lines)  # fmt: skip
     (out / "journal.jsonl").write_text(text, encoding="latin-1")

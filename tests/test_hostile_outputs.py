@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_run import cli, one_line_exit_2
+from hostile_outputs import journal_params, kept_entry
 
 import sim.motion.dataset as dataset_module
 from sim.errors import MotionDataError, OutputError, UnknownNameError
@@ -24,7 +25,6 @@ from sim.files import write_atomic, written_by
 from sim.motion.clip import MAX_POINTS, Clip, load_npz, save_npz
 from sim.motion.dataset import dataset_clips, find_trials
 from sim.simulate.dataset import synthesize
-from sim.simulate.generate import SynthTask, task_dict
 from sim.simulate.journal import JOURNAL, MAX_LINE_BYTES, clip_name
 
 # --- a synth run's journal, crafted by hand (no simulation needed) -------------------------------
@@ -32,24 +32,10 @@ from sim.simulate.journal import JOURNAL, MAX_LINE_BYTES, clip_name
 SYNTH = dict(kinds=("procedural",), seconds=0.5, seed=0, workers=1, progress=False)
 
 
-def _params(n: int) -> dict:
-    return {"source": None, "n": n, "seed": 0, "kinds": ["procedural"], "seconds": 0.5,
-            "fps": 30.0, "max_assistance": None, "max_tries": 20}  # fmt: skip
-
-
-def _kept(i: int, **change) -> dict:
-    """The ``kept`` entry a procedural run writes for task ``i``."""
-    name = clip_name("procedural", i)
-    task = task_dict(SynthTask("procedural", 0, i, None, None, 0.5, 30.0, 0))
-    return {"subject": "procedural", "trial": name.stem, "asf": None, "amc": None,
-            "file": str(name), "frames": 15, "fps": 30.0, "notes": [], "task": task,
-            "mean_assistance": 0.0, **change}  # fmt: skip
-
-
 def _journal(out: Path, lines, n: int = 1) -> None:
     out.mkdir(parents=True, exist_ok=True)
     text = "".join((x if isinstance(x, str) else json.dumps(x)) + "\n"
-                   for x in [{"params": _params(n)}, *lines])  # fmt: skip
+                   for x in [{"params": journal_params(n)}, *lines])  # fmt: skip
     (out / JOURNAL).write_text(text)
 
 
@@ -70,15 +56,15 @@ def test_resume_deletes_only_the_clips_the_run_itself_names(tmp_path):
     out = tmp_path / "out"
     _clip_files(out, 0)
     for planted in ("../victim/precious.txt", str(victim / "precious.txt")):
-        _journal(out, [{"index": 0, "kept": _kept(0)},
-                       {"index": 1, "kept": _kept(1, file=planted)}])  # fmt: skip
+        _journal(out, [{"index": 0, "kept": kept_entry(0)},
+                       {"index": 1, "kept": kept_entry(1, file=planted)}])  # fmt: skip
         with pytest.raises(MotionDataError, match=r"journal.jsonl:3: kept: the file of task 1"):
             synthesize(None, out, 1, resume=True, **SYNTH)
         assert (victim / "precious.txt").read_text() == "keep me"
         assert (out / clip_name("procedural", 0)).exists() and not (out / "index.json").exists()
     _clip_files(out, 0, 1, 2)
     (victim / "link.npz").symlink_to(victim / "precious.txt")
-    _journal(out, [{"index": i, "kept": _kept(i)} for i in range(3)])
+    _journal(out, [{"index": i, "kept": kept_entry(i)} for i in range(3)])
     summary = synthesize(None, out, 1, resume=True, **SYNTH)
     assert [r["file"] for r in summary.written] == ["procedural/procedural_00000.npz"]
     assert sorted(p.name for p in (out / "procedural").iterdir()) == ["procedural_00000.npz"]
@@ -228,18 +214,18 @@ def test_control_characters_in_a_clip_never_reach_the_terminal(walk_clip, tmp_pa
 # 8. a malformed journal gives a traceback; a 150 MB journal line is read whole
 @pytest.mark.parametrize(
     "line, problem",
-    [('"kept"', "no task index"), ("[1, 2]", "no task index"), ({"kept": _kept(0)}, "no task index"),
-     ({"index": -1, "kept": _kept(0)}, "no task index"), ({"index": 0, "kept": "x.npz"}, "kept: not"),
-     ({"index": 0, "kept": _kept(0), "rejected": "procedural"}, "not one of"),
-     ({"index": 0, "kept": _kept(0, frames="15")}, "frames out of range"),
-     ({"index": 0, "kept": _kept(0, notes=["\x1b[2J"])}, "printable"),
+    [('"kept"', "no task index"), ("[1, 2]", "no task index"), ({"kept": kept_entry(0)}, "no task index"),
+     ({"index": -1, "kept": kept_entry(0)}, "no task index"), ({"index": 0, "kept": "x.npz"}, "kept: not"),
+     ({"index": 0, "kept": kept_entry(0), "rejected": "procedural"}, "not one of"),
+     ({"index": 0, "kept": kept_entry(0, frames="15")}, "frames out of range"),
+     ({"index": 0, "kept": kept_entry(0, notes=["\x1b[2J"])}, "printable"),
      ({"index": 0, "skipped": {"task": "x"}}, "not of a trial"), ("{not json", "not a JSON line"),
      ("x" * (MAX_LINE_BYTES + 1), "a line of over")],
 )  # fmt: skip
 def test_a_malformed_journal_is_one_line_and_deletes_nothing(tmp_path, line, problem):
     out = tmp_path / "out"
     _clip_files(out, 0)
-    _journal(out, [line, {"index": 1, "kept": _kept(1)}])
+    _journal(out, [line, {"index": 1, "kept": kept_entry(1)}])
     with pytest.raises(MotionDataError, match=rf"journal.jsonl:2: .*{problem}") as e:
         synthesize(None, out, 1, resume=True, **SYNTH)
     assert "\n" not in str(e.value) and "\x1b" not in str(e.value)

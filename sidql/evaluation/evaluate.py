@@ -252,23 +252,24 @@ def _evaluate_chunk(
 def _simulate_means(rows: Sequence[dict]) -> dict:
     """Mean over clips of each :data:`sim.simulate.validate.SIMULATE_KEYS` figure (the fall
     time: over the clips that fell, None if none did), and its median (``<key>_median``)."""
-    out = {}
-    for k in SIMULATE_KEYS:
-        v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
-        v = v[np.isfinite(v)]
-        out[k] = float(v.mean()) if v.size else None
-        out[f"{k}_median"] = float(np.median(v)) if v.size else None
-    return out
+    return _means(rows, SIMULATE_KEYS)
 
 
 def _physics_means(rows: Sequence[dict]) -> dict:
     """Mean over clips of each :data:`sidql.evaluation.scoring.PHYSICS_KEYS` figure, and its median (``<key>_median``:
     a few violent clips dominate the dynamics means), over ``<key>_clips`` clips with a value."""
+    return _means(rows, PHYSICS_KEYS, counts=True)
+
+
+def _means(rows: Sequence[dict], keys, *, counts: bool = False) -> dict:
+    """Per key, the mean and the median over the rows with a finite value (None where none has
+    one), and with ``counts`` how many rows had one (``<key>_clips``)."""
     out = {}
-    for k in PHYSICS_KEYS:
+    for k in keys:
         v = np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
         v = v[np.isfinite(v)]
         out[k] = float(v.mean()) if v.size else None
         out[f"{k}_median"] = float(np.median(v)) if v.size else None
-        out[f"{k}_clips"] = int(v.size)
+        if counts:
+            out[f"{k}_clips"] = int(v.size)
     return out
