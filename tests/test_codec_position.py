@@ -1,4 +1,4 @@
-"""The position coding (coding 2, .sidq version 2): range coder, position quantiser, the
+"""The position coding (coding 2, .sidq versions 2 and 3): range coder, position quantiser, the
 encoder's error measure against the decoder, targets, the container and hostile bytes."""
 
 from __future__ import annotations
@@ -129,6 +129,30 @@ def test_quantiser_round_trip_and_error_bound(series):
     assert np.allclose(lever * scale[:M], scale[2 * M] * np.sqrt(len(series.parents)))
 
 
+def test_aimed_keyframes_do_not_pile_errors_up_down_the_chain(series):
+    """Aiming each bone from its decoded parent point at its true point keeps the deepest points
+    (wrists, feet, head) about as close as the shallow ones, where quantising each angle on its
+    own lets the errors of every bone above them add up; the decoder rebuilds the same values
+    whichever way the encoder chose them."""
+    values, _ = series.channels()
+    keys = np.arange(series.n_frames)
+    q = PositionQuantiser(series.n_bones, series.lengths, series.parents, 0.004, 0.5, exponent=0)
+    truth = chart_points(values, series.lengths, series.parents)
+    depth = np.zeros(len(series.parents), dtype=int)
+    for j in range(1, len(series.parents)):
+        depth[j] = depth[series.parents[j]] + 1
+    deep = depth >= depth.max() - 1
+    errors = {}
+    for aim in (False, True):
+        codes, dec = q.encode_keyframes(values, keys, truth if aim else None)
+        assert np.array_equal(q.decode_keyframes(codes, keys), dec)
+        pts = chart_points(dec, series.lengths, series.parents)
+        errors[aim] = np.linalg.norm(pts - truth, axis=-1)
+    assert errors[True][:, deep].mean() < 0.7 * errors[False][:, deep].mean()
+    # each point's error stays near one step, not the chain's sum of steps
+    assert errors[True][:, deep].mean() < 1.5 * errors[True][:, ~deep].mean()
+
+
 # -------------------------------------------------------------------------- error measure
 @pytest.mark.parametrize("reconstruction", ["linear", "catmull_rom"])
 def test_encoder_error_is_the_decoded_error(series, reconstruction):
@@ -160,6 +184,38 @@ def test_motion_the_curve_represents_costs_nothing_between_its_keyframes(reconst
     for a, b in zip(keys[:-1], keys[1:], strict=True):
         assert C[a, b - a] < 1e-9
     assert plan(C, 1e-3).keyframes.tolist() == keys.tolist()
+
+
+def test_a_frame_cap_removes_exactly_the_segments_with_a_frame_beyond_it(series):
+    """Segments of the capped table are those of the uncapped one whose every inner frame's
+    first-order displacement bound (recomputed here for linear segments) is within the cap."""
+    values, _ = series.channels()
+    L, par = series.lengths, series.parents
+    free = position_band_costs(values, values, None, 12, "linear", L, par)
+    capped = position_band_costs(values, values, None, 12, "linear", L, par, frame_cap_mm=4.0)
+    M, J = series.n_bones, len(par)
+    weight = np.asarray(L) * subtree_sizes(par)[1:]
+    removed = kept = 0
+    for i in range(0, len(values) - 12, 7):
+        beyond = False  # a frame of this segment or a shorter one from i passes the cap
+        for g in range(1, 13):
+            if not np.isfinite(free[i, g]):
+                continue
+            t = (np.arange(i + 1, i + g) - i)[:, None] / g
+            e = values[i] + t * (values[i + g] - values[i]) - values[i + 1 : i + g]
+            e[:, : 2 * M] = (e[:, : 2 * M] + np.pi) % (2 * np.pi) - np.pi
+            sin = np.sin(values[i + 1 : i + g, :M])
+            per_frame = (weight * np.hypot(e[:, :M], sin * e[:, M : 2 * M])).sum(1)
+            per_frame += J * np.linalg.norm(e[:, 2 * M :], axis=1)
+            beyond = beyond or 1000.0 * per_frame.max(initial=0.0) / J > 4.0 + 1e-9
+            if np.isfinite(capped[i, g]):
+                assert not beyond and capped[i, g] == pytest.approx(free[i, g])
+                kept += 1
+            else:
+                assert beyond
+                removed += 1
+    assert removed and kept
+    assert np.isfinite(capped[:-1, 1]).all()  # one-frame segments always allowed
 
 
 # --------------------------------------------------------------------------------- targets
@@ -219,6 +275,34 @@ def test_container_round_trip(encoded):
     a = decoded_chart(s)["values"]
     b = decoded_chart(encoded.stream)["values"]
     assert np.array_equal(a, b)
+
+
+def _as_version_2(data: bytes) -> bytes:
+    """A version-3 stream rewritten as version 2 (no lever exponent byte: 1/2 implied)."""
+    body = bytearray(data[:-4])
+    lever = 23 + 1 + 2 * 22 + 5  # standard points: header, length unit and codes, step and rho
+    assert body[lever] == 8
+    del body[lever]
+    body[4] = 2
+    return bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+
+
+def test_version_2_streams_still_decode(encoded):
+    s = encoded.stream
+    old = replace(s, quantiser=replace(s.quantiser, exponent=0.5))  # what version 2 implies
+    back = sidq.from_bytes(_as_version_2(sidq.to_bytes(old)), "old.sidq")
+    assert back.quantiser.exponent == 0.5
+    assert np.array_equal(decoded_chart(back)["values"], decoded_chart(old)["values"])
+
+
+def test_a_bad_lever_exponent_is_one_line(encoded):
+    raw = bytearray(encoded.data[:-4])
+    lever = 23 + 1 + 2 * 22 + 5
+    assert raw[4] == 3 and raw[lever] == round(16 * encoded.stream.quantiser.exponent)
+    raw[lever] = 17
+    raw += struct.pack("<I", zlib.crc32(bytes(raw)))
+    with pytest.raises(MotionDataError, match=r"^bad\.sidq: bad lever exponent 17 / 16"):
+        sidq.from_bytes(bytes(raw), "bad.sidq")
 
 
 def test_stored_lengths_code_to_themselves():

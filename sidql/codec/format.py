@@ -39,9 +39,10 @@ from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1
-#: version of streams with coding 2 (position-coded); version 1 streams (codings 0 and 1) are
-#: written and read as before.
-VERSION_POSITION = 2
+#: version of coding-2 (position-coded) streams as written; 2 (no lever exponent byte: 1/2) is
+#: still read. Version 1 streams (codings 0 and 1) are written and read as before.
+VERSION_POSITION = 3
+POSITION_VERSIONS = (2, 3)
 MAX_GAP = 255
 
 
@@ -114,7 +115,7 @@ def header_bytes(stream: Stream) -> bytes:
         exponent, codes = length_codes(stream.lengths)
         out += struct.pack("<b", exponent) + codes.astype("<u2").tobytes()
         q = stream.quantiser
-        out += struct.pack("<fB", q.step, int(round(q.rho * 8)))
+        out += struct.pack("<fBB", q.step, int(round(q.rho * 8)), int(round(q.exponent * 16)))
         return bytes(out)
     out += np.asarray(stream.lengths, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
@@ -332,8 +333,8 @@ def _header(data: bytes, where: str):
         raise MotionDataError(where, None, "truncated stream: header missing")
     body, (crc,) = data[:-4], struct.unpack("<I", data[-4:])
     version = data[4]
-    if version not in (VERSION, VERSION_POSITION):
-        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1, 2)")
+    if version not in (VERSION, *POSITION_VERSIONS):
+        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1, 2, 3)")
     if zlib.crc32(body) != crc:
         raise MotionDataError(where, None, "checksum mismatch: the stream is truncated or corrupt")
     r = _Reader(body, where)
@@ -342,11 +343,11 @@ def _header(data: bytes, where: str):
     if kind >= len(CURVES):
         raise MotionDataError(where, None, f"unknown reconstruction code {kind}")
     recon = CURVES[kind]
-    if version == VERSION_POSITION:
+    if version in POSITION_VERSIONS:
         if coding != 2 or bits != 0 or recon not in POSITION_RECONSTRUCTIONS:
             raise MotionDataError(
-                where, None, f"version 2 needs coding 2, 0 bits and linear or catmull_rom; got "
-                f"coding {coding}, {bits} bits, {recon}",
+                where, None, f"version {version} needs coding 2, 0 bits and linear or catmull_rom;"
+                f" got coding {coding}, {bits} bits, {recon}",
             )  # fmt: skip
     elif coding > 1 or bits not in BITS or (coding == 0 and bits != 16):
         raise MotionDataError(where, None, f"unknown coding {coding} with {bits} bits")
@@ -446,6 +447,9 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
     step, rho8 = struct.unpack("<fB", r.take(5, "position step"))
     if not (np.isfinite(step) and step > 0) or rho8 > 16:
         raise MotionDataError(where, None, f"bad position step {step} or predictor {rho8}")
+    lever16 = r.take(1, "lever exponent")[0] if body[4] >= 3 else 8  # version 2: 1/2
+    if lever16 > 16:
+        raise MotionDataError(where, None, f"bad lever exponent {lever16} / 16 (0 to 16)")
     (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
     if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
         raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
@@ -456,7 +460,9 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
     if np.any(gaps < 0) or np.any(gaps > MAX_GAP):
         raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others 1..255)")
     _check_gaps(gaps, fps, J, where)
-    quant = PositionQuantiser(M, lengths.astype(np.float64), parents, float(step), rho8 / 8.0)
+    quant = PositionQuantiser(
+        M, lengths.astype(np.float64), parents, float(step), rho8 / 8.0, exponent=lever16 / 16.0
+    )
     keys = np.cumsum(gaps)
     pose = rows[1:].T.copy()
     with np.errstate(all="ignore"):

@@ -61,11 +61,14 @@ def _end_rates(Xq, Rq, i, j, g, mode, ma, mb):
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
-def _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weight, cap, position):
+def _band_row(
+    X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weight, cap, position, frame_cap
+):
     """Row ``i`` of a banded cost table ``C`` (N, G + 1): entry [i, g] for the segment
     (i, i + g); ``ma``, ``mb``, ``e``: (D,) scratch. Each inner frame adds its summed
     |wrapped angle error| or, with ``position``, its first-order point displacement (see
-    :func:`_position_band_costs`), which also ends the row at ``cap``."""
+    :func:`_position_band_costs`), which also ends the row at ``cap`` (the segment's mean) or
+    ``frame_cap`` (one inner frame's)."""
     N, D = X.shape
     M = (D - 3) // 2
     C[i, 0] = 0.0
@@ -91,6 +94,9 @@ def _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weigh
                 r1 = e[2 * M + 1]
                 r2 = e[2 * M + 2]
                 acc += root_weight * np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                if acc > frame_cap:
+                    total = np.inf
+                    break
             else:
                 for d in range(D):
                     v = Xq[i, d] + h01 * (Xq[j, d] - Xq[i, d]) + h10 * ma[d] + h11 * mb[d] - X[n, d]
@@ -98,7 +104,7 @@ def _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weigh
                     acc += abs(v)
             total += acc
         C[i, g] = total
-        if position and total > cap * (g - 1):
+        if position and total > cap * (g - 1):  # also ends at a frame beyond frame_cap (inf)
             break
 
 
@@ -117,17 +123,18 @@ def _band_costs(X, Xq, Rq, G, mode):
     e = np.zeros(D)
     none = np.zeros(0)
     for i in range(N):
-        _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, none, X, 0.0, 0.0, False)
+        _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, none, X, 0.0, 0.0, False, 0.0)
     return C
 
 
 @numba.njit(cache=True, fastmath=True, parallel=True)
-def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap):
+def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap, frame_cap):
     """(N, G + 1) position-error segment costs [m]: like :func:`_band_costs`, but frame n adds
     ``sum_b weight[b] sqrt(e_theta_b^2 + sin(theta_b)^2 e_phi_b^2) + root_weight |e_root|``, the
     summed displacement of all points to first order (a bone's error moves every point below it).
-    A segment whose mean cost per inner frame exceeds ``cap`` ends the row: it and every longer
-    segment from the same keyframe stay inf (no plan worth having uses them).
+    A segment whose mean cost per inner frame exceeds ``cap``, or one of whose inner frames
+    costs more than ``frame_cap``, ends the row: it and every longer segment from the same
+    keyframe stay inf (no plan worth having uses them; the second bounds the error tail).
 
     X, Xq, Rq: (N, 2 M + 3) all channels [theta | phi | root]; weight: (M,) bone length times the
     number of points at or below the bone [m]; sin_theta: (N, M) of the true angles.
@@ -140,7 +147,10 @@ def _position_band_costs(X, Xq, Rq, G, mode, weight, sin_theta, root_weight, cap
         ma = np.zeros(D)
         mb = np.zeros(D)
         e = np.zeros(D)
-        _band_row(X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weight, cap, True)
+        _band_row(
+            X, Xq, Rq, G, mode, i, C, ma, mb, e, weight, sin_theta, root_weight, cap, True,
+            frame_cap,
+        )  # fmt: skip
     return C
 
 
@@ -173,11 +183,13 @@ def position_band_costs(
     lengths: np.ndarray,
     parents: np.ndarray,
     cap_mm: float = POSITION_COST_CAP_MM,
+    frame_cap_mm: float = np.inf,
 ) -> np.ndarray:
     """(N, G + 1) banded segment costs in summed point displacement [m] (first order; see
     :func:`_position_band_costs`): divided by ``N J`` a plan's total is an upper bound on its
     mean joint position error, to first order. Segments from a keyframe stop at the first whose
-    frames' mean error bound exceeds ``cap_mm`` [mm] (longer ones stay inf).
+    frames' mean error bound exceeds ``cap_mm`` [mm], or one of whose frames' bound exceeds
+    ``frame_cap_mm`` [mm] (longer ones stay inf; segments of one frame are always allowed).
 
     Args:
         X: (N, 2 M + 3) true channels [theta | phi | root]; Xq: the keyframe values the decoder
@@ -195,7 +207,10 @@ def position_band_costs(
     sin_theta = np.ascontiguousarray(np.sin(X[:, :M]))
     J = float(len(parents))
     cap = J * cap_mm / 1000.0
-    return _position_band_costs(X, Xq, Rq, G, MODES[reconstruction], w, sin_theta, J, cap)
+    frame_cap = J * frame_cap_mm / 1000.0
+    return _position_band_costs(
+        X, Xq, Rq, G, MODES[reconstruction], w, sin_theta, J, cap, frame_cap
+    )
 
 
 @numba.njit(cache=True)

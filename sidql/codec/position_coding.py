@@ -33,6 +33,15 @@ _REAL_CODINGS = 3
 #: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
 #: extrapolation); 0.5 measured best on the CMU trials of ``../shared``.
 PREDICTOR = 0.5
+#: each bone's keyframe value aims from its decoded parent point at its true point (see
+#: :func:`sidql.codec.quantise._dpcm`): errors stop piling up down the chain.
+AIM = True
+#: the subtree size's exponent in the quantiser's levers with aiming (k / 16 in the stream):
+#: 1/4 measured best against 0, 1/2 (p95 and bytes) on the CMU trials of ``../shared``.
+LEVER_EXPONENT = 0.25
+#: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
+#: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
+FRAME_CAP = 3.0
 
 
 class _PositionSearch:
@@ -41,13 +50,16 @@ class _PositionSearch:
     Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
     the range coder itself runs only on the few plans that may be kept."""
 
-    def __init__(self, series, recon, G, build):
+    def __init__(self, series, recon, G, build, frame_cap_mm=np.inf):
         self.series, self.recon, self.build = series, recon, build
         values, _ = series.channels()
         self.values = values
         self.lengths = sidq.position_lengths(series.lengths)
         self.truth = chart_points(values, series.lengths, series.parents)
-        self.C = position_band_costs(values, values, None, G, recon, self.lengths, series.parents)
+        self.C = position_band_costs(
+            values, values, None, G, recon, self.lengths, series.parents,
+            frame_cap_mm=frame_cap_mm,
+        )  # fmt: skip
         self.plans: dict = {}
         self.coded: dict = {}
         self.last = None  # log lam of the previous search's answer
@@ -56,8 +68,9 @@ class _PositionSearch:
     def quantiser(self, step: float) -> PositionQuantiser:
         M = self.series.n_bones
         return PositionQuantiser(
-            M, self.lengths, self.series.parents, float(np.float32(step)), PREDICTOR
-        )
+            M, self.lengths, self.series.parents, float(np.float32(step)), PREDICTOR,
+            exponent=LEVER_EXPONENT,
+        )  # fmt: skip
 
     def keys(self, lam: float) -> np.ndarray:
         if lam not in self.plans:
@@ -69,7 +82,8 @@ class _PositionSearch:
         key = (hash(keys.tobytes()), len(keys), step)  # nearby multipliers often share a plan
         if key not in self.coded:
             q = self.quantiser(step)
-            codes, kv = q.encode_keyframes(self.values[keys], keys)
+            pts = self.truth[keys] if AIM else None
+            codes, kv = q.encode_keyframes(self.values[keys], keys, pts)
             self.coded[key] = (keys, q, codes, kv)
         return self.coded[key]
 
@@ -198,8 +212,9 @@ def encode_positions(
     """
     duration = series.n_frames / fps
     G = min(max_gap, sidq.MAX_GAP)
+    cap = FRAME_CAP * max_error if max_error is not None else np.inf
     searches = {
-        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash)) for r in recons
+        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash), cap) for r in recons
     }
     if max_error is not None:
         cands, recon, (keys, q, codes, E) = _for_error(searches, max_error, where)

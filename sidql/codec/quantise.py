@@ -160,18 +160,67 @@ SIN_FLOOR = 0.05
 MAX_PHI_STEP = 0.5
 
 
-#: exponent of the subtree size n_b in a channel's lever (see :class:`PositionQuantiser`): the
-#: errors of the bones above a point add like independent noise, so a point's error grows with the
-#: square root of their number; 0.5 measured best (bytes at equal mean error, and p95) over 0.75
-#: and 1 on the CMU trials of ``../shared`` (``benchmarks/bench_codec_rd.py``).
+#: exponent of the subtree size n_b in a channel's lever (see :class:`PositionQuantiser`) when
+#: the stream does not say (version 2 streams): with each value quantised on its own, the errors
+#: of the bones above a point add like independent noise, so a point's error grows with the
+#: square root of their number. Version 3 streams carry their exponent.
 SUBTREE_EXPONENT = 0.5
 #: the partner predictor (see :func:`_dpcm`): its adaptation rate and the range of its weights.
 PARTNER_RATE = 0.5
 PARTNER_WEIGHTS = (-0.5, 1.5)
 
 
+@numba.njit(cache=True, inline="always")
+def _aim(points, w, j, pts, parents, true, M):
+    """(theta, phi) of bone j - 1 aimed from the decoded parent point ``pts[parents[j]]`` at the
+    true point j at keyframe w (CMU axes), phi on the branch nearest the true one (``true``: the
+    keyframe's true values); the true angles where the two points coincide."""
+    p = parents[j]
+    v0 = points[w, j, 0] - pts[p, 0]
+    v1 = points[w, j, 1] - pts[p, 1]
+    v2 = points[w, j, 2] - pts[p, 2]
+    r = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    true_phi = true[M + j - 1]
+    if r < 1e-12:
+        return true[j - 1], true_phi
+    phi = np.arctan2(v1, v0)
+    phi += 2.0 * np.pi * np.floor((true_phi - phi) / (2.0 * np.pi) + 0.5)
+    return np.arccos(min(max(v2 / r, -1.0), 1.0)), phi
+
+
+@numba.njit(cache=True, inline="always")
+def _place(out, w, d, M, pts, parents, lengths):
+    """Update the decoded points ``pts`` (J, 3) after channel d of keyframe w is decoded: the
+    root's coordinates, or a bone's point once its phi (after its theta) is known."""
+    if d >= 2 * M:
+        pts[0, d - 2 * M] = out[w, d]
+    elif d >= M:
+        b = d - M
+        st = np.sin(out[w, b])
+        p = parents[b + 1]
+        pts[b + 1, 0] = pts[p, 0] + lengths[b] * st * np.cos(out[w, d])
+        pts[b + 1, 1] = pts[p, 1] + lengths[b] * st * np.sin(out[w, d])
+        pts[b + 1, 2] = pts[p, 2] + lengths[b] * np.cos(out[w, b])
+
+
+@numba.njit(cache=True, inline="always")
+def _adapt(kappa, d, partners, innov, err, mu, lo, hi):
+    """Normalised least mean squares step of channel d's partner weights towards ``err``."""
+    norm = 1e-8
+    for j in range(partners.shape[1]):
+        pc = partners[d, j]
+        if pc >= 0:
+            norm += innov[pc] * innov[pc]
+    for j in range(partners.shape[1]):
+        pc = partners[d, j]
+        if pc >= 0:
+            k = kappa[d, j] + mu * err * innov[pc] / norm
+            kappa[d, j] = min(max(k, lo), hi)
+
+
 @numba.njit(cache=True)
-def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi):
+def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, points, lengths,
+          parents):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
@@ -180,10 +229,18 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     ``x - t`` its partner channel (``partners[d]``, decoded before it: the parent bone's same
     angle) had at this keyframe (a bone tends to turn with its parent); ``kappa_d`` starts at 0
     and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
-    The value is sent as ``r = round((x - p) / step)``; the decoder rebuilds ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
+    The value is sent as ``r = round((x - p) / step)``; the decoder rebuilds ``p + r step``.
+    ``step`` is ``scale[d]`` for theta and root channels and
     ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being
-    the same keyframe's decoded theta of that bone (decoded first). encode: fill ``codes`` from
-    ``values``; else read ``codes``. Returns the decoded (W, D) values.
+    the same keyframe's decoded theta of that bone (decoded first).
+
+    Channels are visited root first, then bone by bone (parents first), theta before phi: every
+    value a channel's prediction or step needs is decoded before it, so the decoded values do not
+    depend on the order. encode: fill ``codes``; with ``points`` (W, J, 3) true points [m] (CMU
+    axes; (0, J, 3): none) a bone's target is not its own angle but the direction from its
+    *decoded* parent point to its true point, so each bone corrects the error its ancestors left
+    and errors do not pile up down the chain; without, ``values``. Else read ``codes``.
+    Returns the decoded (W, D) values.
     """
     W, D = codes.shape
     M = n_bones
@@ -191,13 +248,22 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     innov = np.zeros(D)
     P = partners.shape[1]
     kappa = np.zeros((D, P))
+    aim = encode and points.shape[0] == W
+    pts = np.zeros((M + 1, 3))
+    order = np.empty(D, dtype=np.int64)
+    order[0], order[1], order[2] = 2 * M, 2 * M + 1, 2 * M + 2
+    for b in range(M):
+        order[3 + 2 * b] = b
+        order[4 + 2 * b] = M + b
     for w in range(W):
         ratio = 0.0
         if w >= 2:
             ratio = (keys[w] - keys[w - 1]) / (keys[w - 1] - keys[w - 2])
             if ratio > 2.0:
                 ratio = 2.0
-        for d in range(D):
+        target_phi = 0.0
+        for i in range(D):
+            d = order[i]
             if w == 0:
                 pred = 0.0
             elif w == 1:
@@ -219,22 +285,19 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
                 if step > MAX_PHI_STEP:
                     step = MAX_PHI_STEP
             if encode:
-                codes[w, d] = np.int64(np.floor((values[w, d] - pred) / step + 0.5))
+                target = values[w, d]
+                if aim and d < M:  # theta; phi's target comes with it
+                    target, target_phi = _aim(points, w, d + 1, pts, parents, values[w], M)
+                elif aim and d < 2 * M:
+                    target = target_phi
+                codes[w, d] = np.int64(np.floor((target - pred) / step + 0.5))
             out[w, d] = pred + codes[w, d] * step
             own = out[w, d] - temporal
             if w >= 1:
-                err = own - (pred - temporal)
-                norm = 1e-8
-                for j in range(P):
-                    pc = partners[d, j]
-                    if pc >= 0:
-                        norm += innov[pc] * innov[pc]
-                for j in range(P):
-                    pc = partners[d, j]
-                    if pc >= 0:
-                        k = kappa[d, j] + mu * err * innov[pc] / norm
-                        kappa[d, j] = min(max(k, lo), hi)
+                _adapt(kappa, d, partners, innov, own - (pred - temporal), mu, lo, hi)
             innov[d] = own
+            if aim:
+                _place(out, w, d, M, pts, parents, lengths)
     return out
 
 
@@ -246,13 +309,15 @@ class PositionQuantiser:
     times the angle (phi: times sin theta), so each channel's step is ``step`` [m] divided by that
     lever: theta of bone b ``step / (L_b n_b^e)``, phi ``step / (L_b n_b^e sin theta)``, root
     ``step / J^e`` (all J points move with the root), n_b the points at or below b and e =
-    :data:`SUBTREE_EXPONENT`. Every channel's step then moves the points by about the same
-    amount, which is where a fixed number of bits buys the least joint position error. Values are predicted along the keyframes
-    (:func:`_dpcm`) and the integer residuals range-coded (:mod:`sidql.codec.entropy`).
+    ``exponent`` (1/2 for errors that add along the chain like independent noise; the encoder
+    aims each bone from its decoded parent point, which cancels most of that, and uses less).
+    Values are predicted along the keyframes (:func:`_dpcm`) and the integer residuals
+    range-coded (:mod:`sidql.codec.entropy`).
 
     Attributes:
         n_bones: M; lengths: (M,) bone lengths [m] as stored; parents: (M + 1,) parent indices.
         step: the position step [m] (float32 in the stream); rho: the predictor's slope weight.
+        exponent: e, the subtree size's exponent in the levers (k / 16 for k in 0..16).
     """
 
     n_bones: int
@@ -261,6 +326,7 @@ class PositionQuantiser:
     step: float
     rho: float = 0.5
     bits: int = 0  # no fixed bit depth: codes are residuals of any size
+    exponent: float = SUBTREE_EXPONENT
 
     @property
     def n_channels(self) -> int:
@@ -269,7 +335,7 @@ class PositionQuantiser:
     def scales(self) -> np.ndarray:
         """(2 M + 3,) per-channel steps before phi's sin theta division [rad, rad, m]."""
 
-        n = subtree_sizes(self.parents).astype(np.float64) ** SUBTREE_EXPONENT
+        n = subtree_sizes(self.parents).astype(np.float64) ** self.exponent
         lever = np.maximum(np.asarray(self.lengths, dtype=np.float64) * n[1:], 1e-6)
         s = np.float64(np.float32(self.step))
         return np.concatenate([s / lever, s / lever, np.full(3, s / n[0])])
@@ -284,11 +350,22 @@ class PositionQuantiser:
         out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
         return out
 
-    def encode_keyframes(self, values: np.ndarray, keys: np.ndarray):
-        """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values)."""
+    def _tree(self):
+        return (
+            np.ascontiguousarray(self.lengths, dtype=np.float64),
+            np.ascontiguousarray(self.parents, dtype=np.int64),
+        )
+
+    def encode_keyframes(self, values: np.ndarray, keys: np.ndarray, points=None):
+        """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values).
+
+        ``points``: (W, J, 3) the true points at the keyframes [m], CMU axes, or None. With them
+        each bone aims from its decoded parent point at its true point (see :func:`_dpcm`)."""
         v = np.ascontiguousarray(values, dtype=np.float64)
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
+        J = self.n_bones + 1
+        pts = np.zeros((0, J, 3)) if points is None else np.ascontiguousarray(points, np.float64)
         out = _dpcm(
             v,
             codes,
@@ -300,6 +377,8 @@ class PositionQuantiser:
             self.partners(),
             PARTNER_RATE,
             *PARTNER_WEIGHTS,
+            pts,
+            *self._tree(),
         )
         return codes, out
 
@@ -318,4 +397,6 @@ class PositionQuantiser:
             self.partners(),
             PARTNER_RATE,
             *PARTNER_WEIGHTS,
+            np.zeros((0, self.n_bones + 1, 3)),
+            *self._tree(),
         )
