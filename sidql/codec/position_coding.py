@@ -18,7 +18,7 @@ from sidql.codec.encoded import Encoded, measure, where_prefix
 from sidql.codec.entropy import encode_integers, estimate_size
 from sidql.codec.plan import plan, position_band_costs
 from sidql.codec.positions import chart_points, position_errors
-from sidql.codec.quantise import PositionQuantiser
+from sidql.codec.quantise import PositionQuantiser, aim_basis
 from sidql.keyframes.spherical import POINTS, SphericalSeries
 from sim.errors import UnmetTargetError
 
@@ -56,6 +56,7 @@ class _PositionSearch:
         self.values = values
         self.lengths = sidq.position_lengths(series.lengths)
         self.truth = chart_points(values, series.lengths, series.parents)
+        self.basis = aim_basis(values, series.n_bones)
         self.C = position_band_costs(
             values, values, None, G, recon, self.lengths, series.parents,
             frame_cap_mm=frame_cap_mm,
@@ -82,8 +83,7 @@ class _PositionSearch:
         key = (hash(keys.tobytes()), len(keys), step)  # nearby multipliers often share a plan
         if key not in self.coded:
             q = self.quantiser(step)
-            pts = self.truth[keys] if AIM else None
-            codes, kv = q.encode_keyframes(self.values[keys], keys, pts)
+            codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
             self.coded[key] = (keys, q, codes, kv)
         return self.coded[key]
 

@@ -170,56 +170,74 @@ PARTNER_RATE = 0.5
 PARTNER_WEIGHTS = (-0.5, 1.5)
 
 
-@numba.njit(cache=True, inline="always")
-def _aim(points, w, j, pts, parents, true, M):
-    """(theta, phi) of bone j - 1 aimed from the decoded parent point ``pts[parents[j]]`` at the
-    true point j at keyframe w (CMU axes), phi on the branch nearest the true one (``true``: the
-    keyframe's true values); the true angles where the two points coincide."""
-    p = parents[j]
-    v0 = points[w, j, 0] - pts[p, 0]
-    v1 = points[w, j, 1] - pts[p, 1]
-    v2 = points[w, j, 2] - pts[p, 2]
-    r = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    true_phi = true[M + j - 1]
-    if r < 1e-12:
-        return true[j - 1], true_phi
-    phi = np.arctan2(v1, v0)
-    phi += 2.0 * np.pi * np.floor((true_phi - phi) / (2.0 * np.pi) + 0.5)
-    return np.arccos(min(max(v2 / r, -1.0), 1.0)), phi
-
-
-@numba.njit(cache=True, inline="always")
-def _place(out, w, d, M, pts, parents, lengths):
-    """Update the decoded points ``pts`` (J, 3) after channel d of keyframe w is decoded: the
-    root's coordinates, or a bone's point once its phi (after its theta) is known."""
-    if d >= 2 * M:
-        pts[0, d - 2 * M] = out[w, d]
-    elif d >= M:
-        b = d - M
-        st = np.sin(out[w, b])
-        p = parents[b + 1]
-        pts[b + 1, 0] = pts[p, 0] + lengths[b] * st * np.cos(out[w, d])
-        pts[b + 1, 1] = pts[p, 1] + lengths[b] * st * np.sin(out[w, d])
-        pts[b + 1, 2] = pts[p, 2] + lengths[b] * np.cos(out[w, b])
-
-
-@numba.njit(cache=True, inline="always")
-def _adapt(kappa, d, partners, innov, err, mu, lo, hi):
-    """Normalised least mean squares step of channel d's partner weights towards ``err``."""
-    norm = 1e-8
-    for j in range(partners.shape[1]):
-        pc = partners[d, j]
-        if pc >= 0:
-            norm += innov[pc] * innov[pc]
-    for j in range(partners.shape[1]):
-        pc = partners[d, j]
-        if pc >= 0:
-            k = kappa[d, j] + mu * err * innov[pc] / norm
-            kappa[d, j] = min(max(k, lo), hi)
+@numba.njit(cache=True)
+def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
+              lengths, parents, innov, kappa, err, aim):  # fmt: skip
+    """Keyframe w of :func:`_dpcm`: channels root first, then bone by bone (parents first),
+    theta before phi. With ``aim``, ``err`` (J, 3) holds the decoded points' errors [m] to first
+    order, and a bone's targets are its true angles minus its parent point's error along the
+    bone's theta and phi directions (``basis[w, b]``) over its length (and sin theta, floored at
+    SIN_FLOOR, for phi), each change capped at 0.5 rad."""
+    D = codes.shape[1]
+    P = partners.shape[1]
+    ratio = 0.0
+    if w >= 2:
+        ratio = min((keys[w] - keys[w - 1]) / (keys[w - 1] - keys[w - 2]), 2.0)
+    target_phi = 0.0
+    for i in range(D):
+        d = 2 * M + i if i < 3 else (i - 3) // 2 + M * ((i - 3) % 2)
+        pred = 0.0
+        if w == 1:
+            pred = out[0, d]
+        elif w >= 2:
+            pred = out[w - 1, d] + rho * ratio * (out[w - 1, d] - out[w - 2, d])
+        temporal = pred
+        norm = 1e-8
+        for j in range(P):
+            pc = partners[d, j]
+            if w >= 1 and pc >= 0:
+                pred += kappa[d, j] * innov[pc]
+                norm += innov[pc] * innov[pc]
+        step = scale[d]
+        if M <= d < 2 * M:
+            step = min(step / max(np.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
+        if encode:
+            target = values[w, d]
+            if aim and d < M:  # theta; phi's target comes with it
+                p = parents[d + 1]
+                L = max(lengths[d], 1e-6)
+                g = basis[w, d]
+                e0, e1, e2 = err[p, 0], err[p, 1], err[p, 2]
+                dt = -(e0 * g[0] + e1 * g[1] + e2 * g[2]) / L
+                dp = -(e0 * g[3] + e1 * g[4]) / (L * max(-g[2], SIN_FLOOR))
+                target += min(max(dt, -0.5), 0.5)
+                target_phi = values[w, M + d] + min(max(dp, -0.5), 0.5)
+            elif aim and d < 2 * M:
+                target = target_phi
+            codes[w, d] = np.int64(np.floor((target - pred) / step + 0.5))
+        out[w, d] = pred + codes[w, d] * step
+        own = out[w, d] - temporal
+        for j in range(P):  # normalised least mean squares towards this keyframe's miss
+            pc = partners[d, j]
+            if w >= 1 and pc >= 0:
+                k = kappa[d, j] + mu * (own - (pred - temporal)) * innov[pc] / norm
+                kappa[d, j] = min(max(k, lo), hi)
+        innov[d] = own
+        if aim and d >= 2 * M:
+            err[0, d - 2 * M] = out[w, d] - values[w, d]
+        elif aim and d >= M:  # the bone's point: its parent's error plus its own turn
+            b = d - M
+            g = basis[w, b]
+            a = lengths[b] * (out[w, b] - values[w, b])
+            f = -lengths[b] * g[2] * (out[w, d] - values[w, d])
+            p = parents[b + 1]
+            err[b + 1, 0] = err[p, 0] + a * g[0] + f * g[3]
+            err[b + 1, 1] = err[p, 1] + a * g[1] + f * g[4]
+            err[b + 1, 2] = err[p, 2] + a * g[2]
 
 
 @numba.njit(cache=True)
-def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, points, lengths,
+def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
           parents):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
@@ -236,69 +254,34 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
 
     Channels are visited root first, then bone by bone (parents first), theta before phi: every
     value a channel's prediction or step needs is decoded before it, so the decoded values do not
-    depend on the order. encode: fill ``codes``; with ``points`` (W, J, 3) true points [m] (CMU
-    axes; (0, J, 3): none) a bone's target is not its own angle but the direction from its
-    *decoded* parent point to its true point, so each bone corrects the error its ancestors left
-    and errors do not pile up down the chain; without, ``values``. Else read ``codes``.
-    Returns the decoded (W, D) values.
+    depend on the order. encode: fill ``codes``; with ``basis`` (W, M, 5) (see
+    :func:`aim_basis`; (0, M, 5): none) a bone's target is not its own angle but the direction
+    from its *decoded* parent point to its true point (to first order, :func:`_keyframe`), so
+    each bone corrects the error its ancestors left and errors do not pile up down the chain;
+    without, ``values``. Else read ``codes``. Returns the decoded (W, D) values.
     """
     W, D = codes.shape
     M = n_bones
     out = np.zeros((W, D))
     innov = np.zeros(D)
-    P = partners.shape[1]
-    kappa = np.zeros((D, P))
-    aim = encode and points.shape[0] == W
-    pts = np.zeros((M + 1, 3))
-    order = np.empty(D, dtype=np.int64)
-    order[0], order[1], order[2] = 2 * M, 2 * M + 1, 2 * M + 2
-    for b in range(M):
-        order[3 + 2 * b] = b
-        order[4 + 2 * b] = M + b
+    kappa = np.zeros((D, partners.shape[1]))
+    aim = encode and basis.shape[0] == W
+    err = np.zeros((M + 1, 3))
     for w in range(W):
-        ratio = 0.0
-        if w >= 2:
-            ratio = (keys[w] - keys[w - 1]) / (keys[w - 1] - keys[w - 2])
-            if ratio > 2.0:
-                ratio = 2.0
-        target_phi = 0.0
-        for i in range(D):
-            d = order[i]
-            if w == 0:
-                pred = 0.0
-            elif w == 1:
-                pred = out[0, d]
-            else:
-                pred = out[w - 1, d] + rho * ratio * (out[w - 1, d] - out[w - 2, d])
-            temporal = pred
-            if w >= 1:
-                for j in range(P):
-                    pc = partners[d, j]
-                    if pc >= 0:
-                        pred += kappa[d, j] * innov[pc]
-            step = scale[d]
-            if M <= d < 2 * M:
-                s = np.sin(out[w, d - M])
-                if s < SIN_FLOOR:
-                    s = SIN_FLOOR
-                step = step / s
-                if step > MAX_PHI_STEP:
-                    step = MAX_PHI_STEP
-            if encode:
-                target = values[w, d]
-                if aim and d < M:  # theta; phi's target comes with it
-                    target, target_phi = _aim(points, w, d + 1, pts, parents, values[w], M)
-                elif aim and d < 2 * M:
-                    target = target_phi
-                codes[w, d] = np.int64(np.floor((target - pred) / step + 0.5))
-            out[w, d] = pred + codes[w, d] * step
-            own = out[w, d] - temporal
-            if w >= 1:
-                _adapt(kappa, d, partners, innov, own - (pred - temporal), mu, lo, hi)
-            innov[d] = own
-            if aim:
-                _place(out, w, d, M, pts, parents, lengths)
+        _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
+                  lengths, parents, innov, kappa, err, aim)  # fmt: skip
     return out
+
+
+def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
+    """(W, M, 5) per bone the unit vectors (CMU axes) a point moves along when the bone's theta
+    and phi grow: ``(cos t cos p, cos t sin p, -sin t)`` and ``(-sin p, cos p)`` (its z is 0), of
+    the (W, 2 M + 3) values [theta | phi | root]."""
+    M = n_bones
+    v = np.asarray(values, dtype=np.float64)
+    st, ct = np.sin(v[:, :M]), np.cos(v[:, :M])
+    sp, cp = np.sin(v[:, M : 2 * M]), np.cos(v[:, M : 2 * M])
+    return np.ascontiguousarray(np.stack([ct * cp, ct * sp, -st, -sp, cp], axis=-1))
 
 
 @dataclass(frozen=True)
@@ -356,16 +339,20 @@ class PositionQuantiser:
             np.ascontiguousarray(self.parents, dtype=np.int64),
         )
 
-    def encode_keyframes(self, values: np.ndarray, keys: np.ndarray, points=None):
+    def encode_keyframes(self, values: np.ndarray, keys: np.ndarray, aim: bool = False, basis=None):
         """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values).
 
-        ``points``: (W, J, 3) the true points at the keyframes [m], CMU axes, or None. With them
-        each bone aims from its decoded parent point at its true point (see :func:`_dpcm`)."""
+        ``aim``: each bone aims from its decoded parent point at its true point (see
+        :func:`_dpcm`) instead of quantising its own angles; ``basis``: ``aim_basis(values)``
+        if the caller has it."""
         v = np.ascontiguousarray(values, dtype=np.float64)
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
-        J = self.n_bones + 1
-        pts = np.zeros((0, J, 3)) if points is None else np.ascontiguousarray(points, np.float64)
+        M = self.n_bones
+        if not aim:
+            basis = np.zeros((0, M, 5))
+        elif basis is None:
+            basis = aim_basis(v, M)
         out = _dpcm(
             v,
             codes,
@@ -377,7 +364,7 @@ class PositionQuantiser:
             self.partners(),
             PARTNER_RATE,
             *PARTNER_WEIGHTS,
-            pts,
+            basis,
             *self._tree(),
         )
         return codes, out
@@ -397,6 +384,6 @@ class PositionQuantiser:
             self.partners(),
             PARTNER_RATE,
             *PARTNER_WEIGHTS,
-            np.zeros((0, self.n_bones + 1, 3)),
+            np.zeros((0, self.n_bones, 5)),
             *self._tree(),
         )
