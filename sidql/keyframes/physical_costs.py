@@ -161,15 +161,16 @@ def segment_inputs(clip: Clip, contact: np.ndarray | None = None) -> SegmentInpu
 
 
 @numba.njit(cache=True)
-def _physical_costs(com, cv, S, SV, radius, floor, contact, h0, v0, r0, dt, mu, g):
-    """(3, N, N) summed skating [m/s], floor [m] and residual [BW] terms of every segment
-    (the module docstring), on the cubic Hermite through each quantity's keyframe values."""
+def _physical_band(com, cv, S, SV, radius, floor, contact, h0, v0, r0, dt, mu, g, G):
+    """(3, N, G + 1) summed skating [m/s], floor [m] and residual [BW] terms of every segment
+    ``(i, i + L)``, 2 <= L <= G, at ``[:, i, L]`` (the module docstring), on the cubic Hermite
+    through each quantity's keyframe values."""
     N = com.shape[0]
     F, K = S.shape[1], S.shape[2]
-    out = np.zeros((3, N, N))
+    out = np.zeros((3, N, G + 1))
     root = np.sqrt(1.0 + mu * mu)
     for i in range(N):
-        for j in range(i + 2, N):
+        for j in range(i + 2, min(N, i + G + 1)):
             L = j - i
             T = L * dt
             sk = 0.0
@@ -218,19 +219,34 @@ def _physical_costs(com, cv, S, SV, radius, floor, contact, h0, v0, r0, dt, mu, 
                     elif mu * fh + fz > 0:
                         r = (fh - mu * fz) / root
                 rs += max(0.0, r / g - r0[n])
-            out[0, i, j] = sk
-            out[1, i, j] = ht
-            out[2, i, j] = rs
+            out[0, i, L] = sk
+            out[1, i, L] = ht
+            out[2, i, L] = rs
     return out
+
+
+def physical_band(x: SegmentInputs, G: int) -> np.ndarray:
+    """(3, N, G + 1) the physical terms of every segment ``(i, i + L)`` with ``L <= G`` at
+    ``[:, i, L]``, summed over its inner frames: skating [m/s], floor [m], residual [BW] (the
+    module docstring); 0 for ``L <= 1`` and past the last frame. O(N G^2) time, O(N G) memory:
+    what a whole trial's banded programme (the codec's) reads."""
+    return _physical_band(
+        x.com, x.com_vel, np.ascontiguousarray(x.spheres), np.ascontiguousarray(x.sphere_vel),
+        x.radius, x.floor, x.contact, x.height0, x.vel0, x.residual0, float(x.dt), MU, GRAVITY,
+        int(G),
+    )  # fmt: skip
 
 
 def physical_costs(x: SegmentInputs) -> np.ndarray:
     """(3, N, N) the physical terms of every segment ``(i, j)``, summed over its inner frames:
     skating [m/s], floor [m], residual [BW] (the module docstring); 0 for ``j <= i + 1``."""
-    return _physical_costs(
-        x.com, x.com_vel, np.ascontiguousarray(x.spheres), np.ascontiguousarray(x.sphere_vel),
-        x.radius, x.floor, x.contact, x.height0, x.vel0, x.residual0, float(x.dt), MU, GRAVITY,
-    )  # fmt: skip
+    N = x.com.shape[0]
+    band = physical_band(x, max(N - 1, 0))
+    out = np.zeros((3, N, N))
+    i, L = np.nonzero(np.ones((N, N), dtype=bool))
+    ok = i + L < N
+    out[:, i[ok], i[ok] + L[ok]] = band[:, i[ok], L[ok]]
+    return out
 
 
 def scaled(terms: np.ndarray) -> np.ndarray:
