@@ -121,9 +121,10 @@ class SegmentInputs:
     dt: float
 
 
-def segment_inputs(clip: Clip, contact: np.ndarray | None = None) -> SegmentInputs:
-    """:class:`SegmentInputs` of a clip (its 23 protocol points, the clip's own floor, the
-    sender's contact bits unless given (N, 2) bool)."""
+def segment_inputs(clip: Clip, contact: np.ndarray | None = None, ground=None) -> SegmentInputs:
+    """:class:`SegmentInputs` of a clip (its 23 protocol points, its floor ``ground`` (a
+    :class:`sim.physics.ground.Ground`; default the clip's own), the sender's contact bits on it
+    unless given (N, 2) bool)."""
     idx = protocol_indices(clip)
     P, V = clip.positions[:, idx], clip.velocities[:, idx]
     if clip.accelerations is not None:
@@ -133,7 +134,8 @@ def segment_inputs(clip: Clip, contact: np.ndarray | None = None) -> SegmentInpu
     w = point_masses()
     com, com_vel, com_acc = (np.einsum("j,njk->nk", w, X) for X in (P, V, A))
     s = sole(P, POINTS)
-    ground = estimate_ground(clip.positions, clip.names, clip.fps)
+    if ground is None:
+        ground = estimate_ground(clip.positions, clip.names, clip.fps)
     c = sender_contacts(clip, ground) if contact is None else np.asarray(contact, dtype=bool)
     ankle, ball = (
         np.stack([P[:, POINTS.index(x + b)] for x in SIDES], 1) for b in ("tibia", "foot")
