@@ -62,27 +62,31 @@ def codec_weight(series: SphericalSeries, weight: float = PHYSICS_WEIGHT) -> flo
     return float(weight * position_weights(series.lengths, series.parents).mean())
 
 
-def physical_cost_band(clip: Clip, series: SphericalSeries, G: int, ground=None) -> np.ndarray:
+def physical_cost_band(
+    clip: Clip, series: SphericalSeries, G: int, ground=None, weight: float = PHYSICS_WEIGHT
+) -> np.ndarray:
     """(N, G + 1) [m] the physical cost of every segment ``(i, i + g)``, ``g <= G``, in the
-    position coding's unit (:func:`codec_weight` times the scaled terms); ``ground``: the
-    trial's floor (default: estimated here)."""
+    position coding's unit (:func:`codec_weight` of ``weight`` times the scaled terms);
+    ``ground``: the trial's floor (default: estimated here)."""
     if ground is None:
         ground = sender_ground(clip)
     terms = physical_band(segment_inputs(clip, ground=ground), G)
-    return codec_weight(series) * scaled(terms)
+    return codec_weight(series, weight) * scaled(terms)
 
 
 def encode_with_contacts(
     clip: Clip,
     *,
     physics: bool = False,
+    weight: float = PHYSICS_WEIGHT,
     rate: float | None = None,
     max_gap: int = DEFAULT_MAX_GAP,
     latency: int = 0,
     **kwargs,
 ) -> Encoded:
     """:func:`sidql.codec.encode.encode_series` of the trial's chart with its foot-contact
-    section (and, with ``physics``, the physical cost in the keyframe programme); ``rate``
+    section (and, with ``physics``, the physical cost times ``weight`` [rad of Q per unit,
+    :func:`codec_weight`] in the keyframe programme); ``rate``
     [B/s] is the whole file's, section included. Other arguments as ``encode_series``'.
 
     Raises:
@@ -102,7 +106,7 @@ def encode_with_contacts(
             f"of the {rate:g} B/s budget"
         )
     G = min(max_gap, sidq.MAX_GAP)
-    extra = physical_cost_band(clip, series, G, ground) if physics else None
+    extra = physical_cost_band(clip, series, G, ground, weight) if physics else None
     enc = encode_series(
         series, rate=left, max_gap=max_gap, where=clip.source, extra_cost=extra, **kwargs
     )
