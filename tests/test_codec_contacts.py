@@ -156,6 +156,13 @@ def test_the_reader_bounds_the_section_before_slicing(plain):
         sidq.from_bytes(nan, "x.sidq")
 
 
+def test_a_section_on_another_skeleton_is_refused(plain):
+    names = ("root", *(f"b{i}" for i in range(22)))
+    other = replace(plain[1], names=names, contacts=FootContacts(_bits(6), FLOOR))
+    with pytest.raises(MotionDataError, match="other than the protocol"):
+        sidq.from_bytes(sidq.to_bytes(other), "o.sidq")
+
+
 def test_bits_of_another_length_are_refused_when_written(plain):
     with pytest.raises(UsageError, match="cover 10 frames"):
         sidq.to_bytes(replace(plain[0], contacts=FootContacts(_bits(5, 10), FLOOR)))

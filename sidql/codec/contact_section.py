@@ -131,6 +131,10 @@ def attach_section(stream, section: bytes | None, where: str):
     :class:`FootContacts` of ``section`` (itself when None)."""
     if section is None:
         return stream
+    if tuple(stream.names) != POINTS:  # the pinning knows the protocol's legs only
+        raise MotionDataError(
+            where, None, "contact section on a skeleton other than the protocol's"
+        )
     return replace(stream, contacts=parse_section(section, stream.n_frames, where))
 
 
