@@ -102,7 +102,9 @@ def run(args) -> int:
     print(f"keyframes     {len(s.keyframes)} ({s.reconstruction}, latency {s.latency})")
     if s.contacts is not None:
         n = s.contacts.n_bytes
-        print(f"foot contacts {n} bytes ({'physics-aware keyframes, ' * args.physics}pinned)")
+        what = "physics-aware keyframes, " * args.physics + "feet pinned"
+        print(f"foot contacts {n} bytes ({what}; the figures below are after the pinning, a "
+              "--max-error or --max-q target is met before it)")  # fmt: skip
     print(f"size          {len(enc.data)} bytes, {enc.bytes_per_second:.1f} B/s")
     print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
     if s.coding == 2:
