@@ -324,7 +324,7 @@ def test_a_bad_lever_exponent_is_one_line(encoded):
     assert raw[4] == 3 and raw[lever] == round(16 * encoded.stream.quantiser.exponent)
     raw[lever] = 17
     raw += struct.pack("<I", zlib.crc32(bytes(raw)))
-    with pytest.raises(MotionDataError, match=r"^bad\.sidq: bad lever exponent 17 / 16"):
+    with pytest.raises(MotionDataError, match=r"^bad\.sidq: .*or lever exponent 17$"):
         sidq.from_bytes(bytes(raw), "bad.sidq")
 
 

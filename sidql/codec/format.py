@@ -1,8 +1,8 @@
-"""The ``.sidq`` container, versions 1 and 2: bytes <-> :class:`Stream`.
+"""The ``.sidq`` container, versions 1 to 3: bytes <-> :class:`Stream`.
 
 The byte format is specified once, in ``docs/codec.md`` ("The .sidq format"): version 1 carries
-codings 0 (fixed-size records, for live streaming) and 1 (packed, LZMA, offline), version 2
-carries coding 2, the position coding (:func:`position_bytes`; values as
+codings 0 (fixed-size records, for live streaming) and 1 (packed, LZMA, offline), versions 2
+and 3 coding 2, the position coding (:func:`position_bytes`; values as
 :class:`sidql.codec.quantise.PositionQuantiser` rebuilds them). All numbers are little-endian;
 the header names the reconstruction (its index in :data:`sidql.keyframes.curves.CURVES`), the
 stream rate, the skeleton's hash (:func:`sidql.codec.skeleton.skeleton_hash`) and the points
@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sidql.codec.contact_section import FootContacts, attach_section, split_section, with_section
 from sidql.codec.entropy import decode_integers, encode_integers
 from sidql.codec.quantise import BITS, PositionQuantiser, Quantiser
 from sidql.keyframes.curves import CURVES
@@ -39,10 +40,8 @@ from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1
-#: version of coding-2 (position-coded) streams as written; 2 (no lever exponent byte: 1/2) is
-#: still read. Version 1 streams (codings 0 and 1) are written and read as before.
-VERSION_POSITION = 3
-POSITION_VERSIONS = (2, 3)
+#: coding 2 (position-coded) as written, and as read (2: no lever exponent byte, 1/2 implied)
+VERSION_POSITION, POSITION_VERSIONS = 3, (2, 3)
 MAX_GAP = 255
 
 
@@ -61,6 +60,7 @@ class Stream:
         keyframes: (W,) frame indices, 0 first, strictly increasing.
         pose_codes: (W, D) uint16; rate_codes: (W, D) int16 or None.
         coding: 0 fixed records, 1 packed (see the module docstring).
+        contacts: the optional foot-contact section (:mod:`sidql.codec.contact_section`).
     """
 
     reconstruction: str
@@ -75,6 +75,7 @@ class Stream:
     pose_codes: np.ndarray
     rate_codes: np.ndarray | None
     coding: int = 0
+    contacts: FootContacts | None = None
 
     @property
     def n_frames(self) -> int:
@@ -165,6 +166,7 @@ def to_bytes(stream: Stream) -> bytes:
         raise UsageError("coding 0 carries 16-bit codes only")
     else:
         body = header_bytes(stream) + record_bytes(stream)
+    body = with_section(body, stream.contacts, stream.n_frames)  # as is without contacts
     return body + struct.pack("<I", zlib.crc32(body))
 
 
@@ -287,6 +289,11 @@ class _Reader:
 
 def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     """Parse a container (see the module docstring); MotionDataError on any defect."""
+    data, section = split_section(bytes(data), where)
+    return attach_section(_from_plain(data, where), section, where)
+
+
+def _from_plain(data: bytes, where: str) -> Stream:
     body, r, recon, coding, bits, latency, fps = _header(bytes(data), where)
     skel = r.take(8, "skeleton hash")
     names, parents = _points(r, where)
@@ -445,11 +452,11 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
     M = J - 1
     D = 2 * M + 3
     step, rho8 = struct.unpack("<fB", r.take(5, "position step"))
-    if not (np.isfinite(step) and step > 0) or rho8 > 16:
-        raise MotionDataError(where, None, f"bad position step {step} or predictor {rho8}")
     lever16 = r.take(1, "lever exponent")[0] if body[4] >= 3 else 8  # version 2: 1/2
-    if lever16 > 16:
-        raise MotionDataError(where, None, f"bad lever exponent {lever16} / 16 (0 to 16)")
+    if not (np.isfinite(step) and step > 0) or rho8 > 16 or lever16 > 16:
+        raise MotionDataError(
+            where, None, f"bad position step {step}, predictor {rho8} or lever exponent {lever16}"
+        )
     (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
     if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
         raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
@@ -460,9 +467,7 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
     if np.any(gaps < 0) or np.any(gaps > MAX_GAP):
         raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others 1..255)")
     _check_gaps(gaps, fps, J, where)
-    quant = PositionQuantiser(
-        M, lengths.astype(np.float64), parents, float(step), rho8 / 8.0, exponent=lever16 / 16.0
-    )
+    quant = PositionQuantiser(M, lengths, parents, float(step), rho8 / 8.0, exponent=lever16 / 16)
     keys = np.cumsum(gaps)
     pose = rows[1:].T.copy()
     with np.errstate(all="ignore"):

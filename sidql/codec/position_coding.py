@@ -50,7 +50,7 @@ class _PositionSearch:
     Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
     the range coder itself runs only on the few plans that may be kept."""
 
-    def __init__(self, series, recon, G, build, frame_cap_mm=np.inf):
+    def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf):
         self.series, self.recon, self.build = series, recon, build
         values, _ = series.channels()
         self.values = values
@@ -61,6 +61,8 @@ class _PositionSearch:
             values, values, None, G, recon, self.lengths, series.parents,
             frame_cap_mm=frame_cap_mm,
         )  # fmt: skip
+        if extra_cost is not None:  # e.g. the physical cost (sidql.codec.contact_coding) [m]
+            self.C = self.C + extra_cost[:, : G + 1]
         self.plans: dict = {}
         self.coded: dict = {}
         self.last = None  # log lam of the previous search's answer
@@ -199,6 +201,7 @@ def encode_positions(
     fps: float,
     skel_hash: bytes,
     where: str,
+    extra_cost: np.ndarray | None = None,
 ) -> tuple[Encoded, dict]:
     """Coding 2: keyframes by the position-error programme, values by their effect on positions
     (:class:`~sidql.codec.quantise.PositionQuantiser`), range-coded; the best of ``recons``.
@@ -209,12 +212,14 @@ def encode_positions(
     size model), the least mean error wins, and only the winner is range-coded (at most
     :data:`_REAL_CODINGS` times, correcting the model). Returns the encoding and every
     candidate's (mean error [mm], bytes or estimated bytes) by "reconstruction/position".
+    ``extra_cost``: (N, >= G + 1) [m] added to the keyframe programme's segment costs.
     """
     duration = series.n_frames / fps
     G = min(max_gap, sidq.MAX_GAP)
     cap = FRAME_CAP * max_error if max_error is not None else np.inf
     searches = {
-        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash), cap) for r in recons
+        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash), extra_cost, cap)
+        for r in recons
     }
     if max_error is not None:
         cands, recon, (keys, q, codes, E) = _for_error(searches, max_error, where)
