@@ -37,7 +37,7 @@ PREDICTOR = 0.5
 #: :func:`sidql.codec.quantise._dpcm`): errors stop piling up down the chain.
 AIM = True
 #: the subtree size's exponent in the quantiser's levers with aiming (k / 16 in the stream):
-#: 1/4 measured best against 0, 1/2 (p95 and bytes) on the CMU trials of ``../shared``.
+#: 1/4 measured best against 0, 1/8, 3/8 and 1/2 (p95 and bytes) on the CMU trials of ``../shared``.
 LEVER_EXPONENT = 0.25
 #: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
 #: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
