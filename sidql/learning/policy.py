@@ -33,11 +33,19 @@ DEFAULT_POLICY = package_file("sidql", "data/policy.pt")
 
 
 def _weight_key(net: KeyframeQNet) -> tuple:
-    """Identity and in-place version of every tensor of ``net``: changes whenever a weight is
-    replaced or written (optimiser steps and ``load_state_dict`` write in place, bumping it)."""
-    return tuple((id(t), t._version) for t in (*net.parameters(), *net.buffers())) + tuple(
-        id(m) for m in net.children()
-    )
+    """Identity and in-place version of every tensor of ``net``, and every module's identity:
+    changes whenever a weight or module is replaced or written (optimiser steps and
+    ``load_state_dict`` write in place, bumping the version). A plain walk over the module
+    dicts: a tenth of the cost of ``named_parameters`` (which a decision would pay per clip)."""
+    key = []
+    stack = [net]
+    while stack:
+        m = stack.pop()
+        key.append(id(m))
+        for group in (m._parameters, m._buffers):
+            key.extend((id(t), t._version) for t in group.values() if t is not None)
+        stack.extend(c for c in m._modules.values() if c is not None)
+    return tuple(key)
 
 
 class Policy:
@@ -92,7 +100,7 @@ class Policy:
             self._cached_weights = (encoder_weights(self.net), head_weights(self.net))
             # the key holds ids: keep the objects alive so that no new tensor can reuse one
             self._weights_key, self._keyed = key, (*self.net.parameters(), *self.net.buffers(),
-                                                   *self.net.children())  # fmt: skip
+                                                   *self.net.modules())  # fmt: skip
         return self._cached_weights
 
     def _check(self, features, costs, W):
