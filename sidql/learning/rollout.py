@@ -94,6 +94,16 @@ def _merge_sum(seqs, lens, count, k, buf):
 
 
 @numba.njit(cache=True)
+def _pair(a, a_len, b, b_len, two, lens2):
+    """Rows ``a[:a_len]`` and ``b[:b_len]`` into ``two`` (2, width) and their lengths into
+    ``lens2``, for :func:`_merge` (the first row wins ties)."""
+    two[0, :a_len] = a[:a_len]
+    two[1, :b_len] = b[:b_len]
+    lens2[0] = a_len
+    lens2[1] = b_len
+
+
+@numba.njit(cache=True)
 def rollout_values_seq(cost, mask, rem, seq, length):
     """As :func:`rollout_values`, from the tables of :func:`greedy_sequences` (``kmax >= rem``)."""
     n = cost.shape[0]
@@ -105,19 +115,30 @@ def rollout_values_seq(cost, mask, rem, seq, length):
         return out
     s0 = max(cost[0, n - 1], 1e-12)
     kmax = seq.shape[2]
-    # others[j]: the merged greedy sequence of every current segment except segment j
+    # others[j]: the merged greedy sequence of every current segment except segment j, as the
+    # merge of the segments before j with those after it: a head-merge of merges picks what the
+    # merge of all picks (the next of a merge is the largest of its heads, ties to the earlier
+    # segment), so two sweeps of k-long merges replace one merge of nk - 2 segments per j
+    width = max(k, kmax)
+    before = np.zeros((nk, width))  # before[j]: segments 0..j-1; after[j]: segments j..nk-2
+    after = np.zeros((nk, width))
+    before_len = np.zeros(nk, np.int64)
+    after_len = np.zeros(nk, np.int64)
+    two = np.zeros((2, width))
+    lens2 = np.zeros(2, np.int64)
+    for j in range(nk - 1):
+        _pair(before[j], before_len[j], seq[keys[j], keys[j + 1]], length[keys[j], keys[j + 1]],
+              two, lens2)  # fmt: skip
+        before_len[j + 1] = _merge(two, lens2, 2, k, before[j + 1])
+    for j in range(nk - 2, -1, -1):
+        _pair(seq[keys[j], keys[j + 1]], length[keys[j], keys[j + 1]], after[j + 1],
+              after_len[j + 1], two, lens2)  # fmt: skip
+        after_len[j] = _merge(two, lens2, 2, k, after[j])
     others = np.zeros((nk - 1, k))
     others_len = np.zeros(nk - 1, np.int64)
-    buf = np.zeros((nk, kmax))
-    blen = np.zeros(nk, np.int64)
     for j in range(nk - 1):
-        c = 0
-        for i in range(nk - 1):
-            if i != j:
-                buf[c] = seq[keys[i], keys[i + 1]]
-                blen[c] = length[keys[i], keys[i + 1]]
-                c += 1
-        others_len[j] = _merge(buf, blen, c, k, others[j])
+        _pair(before[j], before_len[j], after[j + 1], after_len[j + 1], two, lens2)
+        others_len[j] = _merge(two, lens2, 2, k, others[j])
     three = np.zeros((3, kmax))
     lens = np.zeros(3, np.int64)
     scratch = np.zeros(k)
