@@ -147,8 +147,9 @@ def main() -> int:
             f"What a caller of `select` waits for per clip (chart, segment costs, decision), "
             f"{len(clips)} 60-frame clips of {args.data} (two per trial), one thread, median "
             f"of single calls (5 per clip); CPU time of this process and wall time; load "
-            f"average {os.getloadavg()[0]:.1f} before this table. 'before' is the path "
-            "`select` took until now, timed in the same run.",
+            f"average {os.getloadavg()[0]:.1f} before this table. A 'before' row is a path "
+            "`select` took before, timed in the same run (after rows share today's kernels). "
+            "On this machine wall time also counts the time the process waits for a core.",
             "",
             end_to_end_table(clips, args.keyframes),
             "",

@@ -28,13 +28,21 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
     """name -> zero-argument callable for one clip: the end-to-end paths, the paths they
     replaced and their parts."""
     from sidql.keyframes import methods
-    from sidql.keyframes.optimal import clip_optimal_table, optimum_cost_matrix, solve
+    from sidql.keyframes.optimal import (
+        clip_optimal_keyframes,
+        clip_optimal_table,
+        optimum_cost_matrix,
+        solve,
+    )
     from sidql.keyframes.segment_costs import clip_stacked_costs, segment_cost_matrix
     from sidql.keyframes.spherical import chart
     from sidql.learning.tasks import clip_features, stacked_features
 
     cols = {
         "optimal: select (end to end)": lambda: methods.select("optimal", clip, W),
+        "optimal: clip_optimal_keyframes (what select runs)": lambda: clip_optimal_keyframes(
+            clip, W
+        ),
         "optimal before: chart + costs it can use, then programme and walk back in Python": lambda: (
             solve(optimum_cost_matrix(clip, W), 22, W).keyframes(W)
         ),
@@ -97,7 +105,10 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> 
             after = f"{m}: select (end to end)"
             if after not in med:
                 continue
-            same = "dqn: Policy.select" if m == "dqn" else after  # what 'before' replaced
+            same = {
+                "dqn": "dqn: Policy.select",
+                "optimal": "optimal: clip_optimal_keyframes (what select runs)",
+            }[m]  # what 'before' replaced
             ratios = "; ".join(
                 f"{k[len(m) + 9 :]}: {med[k][0] / med[same][0]:.2f}x CPU, "
                 f"{med[k][1] / med[same][1]:.2f}x wall"
