@@ -27,15 +27,19 @@ from sidql.codec.encoded import Encoded
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.codec.position_coding import encode_positions
 from sidql.codec.skeleton import skeleton_hash
+from sidql.codec.windows import WINDOW_FRAMES, TakeEncoding, encode_windows
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import SphericalSeries, chart
 from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError, UsageError
 from sim.files import write_atomic
+from sim.motion.chunks import stream_clips
 from sim.motion.clip import Clip
-from sim.motion.ingest import load_motion
-from sim.motion.trial import is_bvh, read_skeleton
+from sim.motion.ingest import load_motion, resample_step
+from sim.motion.trial import CMU_FPS, is_bvh, read_skeleton
 
 CHOICES: tuple[str, ...] = ("auto",) + CURVES
+#: Frames (at the stream rate) read, retargeted and charted at a time by :func:`encode_files`.
+READ_FRAMES = 300
 
 
 def encode_series(
@@ -153,21 +157,37 @@ def encode_files(
     out: str | os.PathLike,
     *,
     fps: float = 30.0,
+    window: int = WINDOW_FRAMES,
     **kwargs,
-) -> Encoded:
-    """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out`` (``.sidq``), written atomically.
+) -> TakeEncoding:
+    """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out``, written atomically.
 
-    The trial is read with :func:`sim.motion.ingest.load_motion` on the subject's own skeleton at
-    ``fps``; the stream records the skeleton's hash so the decoder can check the ASF it is given.
+    The AMC is read, retargeted and charted a chunk at a time (:func:`sim.motion.chunks.stream_clips`,
+    the subject's own skeleton at ``fps``) and encoded ``window`` frames at a time
+    (:mod:`sidql.codec.windows`), so memory does not grow with the take: a take of at most
+    ``window`` frames (plus the overlap) is one ordinary ``.sidq`` stream, a longer one a sequence
+    of streams (:mod:`sidql.codec.sequence`). A BVH is read whole. The streams record the
+    skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
+    options of :func:`encode_series`.
     """
     amc = asf if amc is None and is_bvh(asf) else amc
     skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
     try:
-        clip = load_motion(asf, amc, fps=fps, derivatives=False)  # the chart needs no more
+        if is_bvh(amc):
+            clips = [load_motion(asf, amc, fps=fps, derivatives=False)]  # the chart needs no more
+        else:
+            resample_step(CMU_FPS, fps)  # refused before any frame is read
+            clips = stream_clips(asf, amc, fps=fps, chunk_frames=READ_FRAMES)
     except MotionDataError:
         raise
     except ValueError as e:  # e.g. an output rate that does not divide the source rate
         raise MotionDataError(str(amc), None, str(e)) from None
-    enc = encode_clip(clip, skel_hash=skel, **kwargs)
-    write_atomic(Path(out), lambda f: f.write(enc.data))
-    return enc
+    done = []
+
+    def write(f):
+        done.append(
+            encode_windows(f, clips, encode_series, window=window, skel_hash=skel, **kwargs)
+        )
+
+    write_atomic(Path(out), write)
+    return done[0]

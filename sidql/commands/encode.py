@@ -77,17 +77,29 @@ def run(args) -> int:
         latency=args.latency,
         max_gap=args.max_gap,
     )
-    s = enc.stream
-    n = s.n_frames
-    print(f"frames        {n} at {s.fps:g} fps ({n / s.fps:.2f} s)")
-    print(f"keyframes     {len(s.keyframes)} ({s.reconstruction}, latency {s.latency})")
-    print(f"size          {len(enc.data)} bytes, {enc.bytes_per_second:.1f} B/s")
-    print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
-    if s.coding == 2:
-        print(f"position      mean error {enc.mean_error_mm:.2f} mm, p95 {enc.p95_error_mm:.2f} mm")
-    if len(enc.candidates) > 1:
-        what = "mean error [mm]" if s.coding == 2 else "Q"
-        tried = ", ".join(f"{r} {e:.5f} / {b} B" for r, (e, b) in enc.candidates.items())
-        print(f"tried ({what}) {tried}")
+    print_summary(enc)
     print(f"wrote {args.out}")
     return 0
+
+
+def print_summary(enc) -> None:
+    """The figures of a :class:`~sidql.codec.windows.TakeEncoding`, one per line."""
+    s = enc.first.stream
+    n = enc.n_frames
+    recon = ", ".join(f"{r} x{k}" for r, k in enc.reconstructions.items())
+    if enc.streams == 1:
+        recon = s.reconstruction
+    print(f"frames        {n} at {s.fps:g} fps ({n / s.fps:.2f} s)")
+    print(f"keyframes     {enc.keyframes} ({recon}, latency {s.latency})")
+    streams = "" if enc.streams == 1 else f", a sequence of {enc.streams} streams"
+    print(f"size          {enc.n_bytes} bytes, {enc.bytes_per_second:.1f} B/s{streams}")
+    print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
+    if s.coding == 2:
+        p95 = "p95" if enc.streams == 1 else "p95 at most"
+        print(
+            f"position      mean error {enc.mean_error_mm:.2f} mm, {p95} {enc.p95_error_mm:.2f} mm"
+        )
+    if enc.streams == 1 and len(enc.first.candidates) > 1:
+        what = "mean error [mm]" if s.coding == 2 else "Q"
+        tried = ", ".join(f"{r} {e:.5f} / {b} B" for r, (e, b) in enc.first.candidates.items())
+        print(f"tried ({what}) {tried}")
