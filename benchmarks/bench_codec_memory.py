@@ -33,8 +33,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -75,7 +73,9 @@ def write_take(asf: Path, amc: Path, frames: int, out: Path) -> Path:
     written frame by frame (the take is never held whole)."""
     lines = amc.read_text().splitlines()
     starts = [i for i, line in enumerate(lines) if line.strip().isdigit()]
-    bodies = ["\n".join(lines[a + 1 : b]) for a, b in zip(starts, starts[1:] + [len(lines)])]
+    bodies = [
+        "\n".join(lines[a + 1 : b]) for a, b in zip(starts, starts[1:] + [len(lines)], strict=True)
+    ]
     n = len(bodies)
     with open(out, "w") as f:  # a benchmark's temporary folder, not a user's output
         f.write(f"# {amc.name} forwards and backwards\n:FULLY-SPECIFIED\n:DEGREES\n")

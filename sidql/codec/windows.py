@@ -114,6 +114,7 @@ def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
             ``kwargs``; every other keyword as ``encode`` takes it.
     """
     writer, parts, reconstructions, first = None, [], {}, None
+    overlap = min(overlap, window // 2)
     for P, V, parents, dt, source, start, last in windows(clips, window, overlap):
         n = len(P)
         fps = 1.0 / dt

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
+from sidql.codec.windows import WINDOW_FRAMES
 from sidql.commands.usage import add_trial, positive
 
 DESCRIPTION = (
@@ -57,10 +58,20 @@ def register(p) -> None:
         "--max-gap", type=int, default=DEFAULT_MAX_GAP, metavar="G", help="largest keyframe gap G"
     )
     p.add_argument("--fps", type=positive(float), default=30.0, help="stream rate (divides 120)")
+    p.add_argument(
+        "--window",
+        type=int,
+        default=WINDOW_FRAMES,
+        metavar="FRAMES",
+        help="frames encoded at a time (memory grows with it); a longer take is written as a "
+        "sequence of streams",
+    )
     p.set_defaults(func=run, parser=p)
 
 
 def run(args) -> int:
+    if args.window < 2:
+        args.parser.error("--window must be at least 2 frames")
     if not 0 <= args.latency <= 65535 or not 1 <= args.max_gap <= 255:
         args.parser.error("--latency must be in 0..65535 and --max-gap in 1..255")
     if args.max_error is not None and (args.latency or args.reconstruction == "hermite"):
@@ -76,6 +87,7 @@ def run(args) -> int:
         reconstruction=args.reconstruction,
         latency=args.latency,
         max_gap=args.max_gap,
+        window=args.window,
     )
     print_summary(enc)
     print(f"wrote {args.out}")
