@@ -8,9 +8,10 @@ from sidql.codec.windows import WINDOW_FRAMES
 from sidql.commands.usage import add_trial, positive
 
 DESCRIPTION = (
-    "Chart the trial's 22 bones and root at --fps, choose keyframes over the whole trial by "
-    "dynamic programming (max gap --max-gap, distortion + lambda x bytes, lambda by bisection) and "
-    "write the .sidq container (format: docs/codec.md). --rate and --max-error (offline, linear "
+    "Chart the trial's 22 bones and root at --fps, choose keyframes by dynamic programming (max "
+    "gap --max-gap, distortion + lambda x bytes, lambda by bisection) and write the .sidq "
+    "container (format: docs/codec.md). The take is read and encoded --window frames at a time "
+    "(bounded memory, any length): a longer take is written as a sequence of streams. --rate and --max-error (offline, linear "
     "or catmull_rom): keyframes and bits where they lower the mean joint position error most "
     "(each value's step by its effect on positions, predicted along the keyframes, range-coded). "
     "--max-q, hermite or --latency: the angle-error coding (offline: 9 to 16 bits per channel, "
