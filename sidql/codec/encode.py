@@ -81,9 +81,7 @@ def encode_series(
         series, rate, max_q, max_error, reconstruction, latency, max_gap, where, objective
     )
     fps = 1.0 / series.dt
-    position = (
-        objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
-    )
+    position = position_coded(max_q, latency, reconstruction, objective)
     if max_error is not None and not position:
         raise UsageError("max_error needs an offline stream (latency 0), linear or catmull_rom")
     if position:
@@ -105,6 +103,14 @@ def encode_series(
         raise errors[0]
     cand = {r: (e.q, len(e.data)) for r, e in results.items()}
     return replace(results[_best(results, rate, max_q)], candidates=cand)
+
+
+def position_coded(max_q, latency: int, reconstruction: str, objective: str) -> bool:
+    """Whether :func:`encode_series` position-codes (coding 2) with these arguments: its
+    streams need the chart's values only, never its rates."""
+    return (
+        objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
+    )
 
 
 def _check_arguments(
@@ -166,7 +172,8 @@ def encode_files(
     the subject's own skeleton at ``fps``) and encoded ``window`` frames at a time
     (:mod:`sidql.codec.windows`), so memory does not grow with the take: a take of at most
     ``window`` frames (plus the overlap) is one ordinary ``.sidq`` stream, a longer one a sequence
-    of streams (:mod:`sidql.codec.sequence`). A BVH is read whole. The streams record the
+    of streams (:mod:`sidql.codec.sequence`); the position coding reads positions only (its
+    streams never use the chart's rates). A BVH is read whole. The streams record the
     skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
     options of :func:`encode_series`.
     """
@@ -177,7 +184,11 @@ def encode_files(
             clips = [load_motion(asf, amc, fps=fps, derivatives=False)]  # the chart needs no more
         else:
             resample_step(CMU_FPS, fps)  # refused before any frame is read
-            clips = stream_clips(asf, amc, fps=fps, chunk_frames=READ_FRAMES)
+            rates = not position_coded(
+                kwargs.get("max_q"), kwargs.get("latency", 0),
+                kwargs.get("reconstruction", "auto"), kwargs.get("objective", "position"),
+            )  # fmt: skip
+            clips = stream_clips(asf, amc, fps=fps, chunk_frames=READ_FRAMES, velocities=rates)
     except MotionDataError:
         raise
     except ValueError as e:  # e.g. an output rate that does not divide the source rate

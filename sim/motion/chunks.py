@@ -44,10 +44,12 @@ def stream_clips(
     chunk_frames: int = 1800,
     source_fps: float = CMU_FPS,
     max_bytes: int = MAX_STREAMED_AMC_BYTES,
+    velocities: bool = True,
 ):
     """Yield the trial as consecutive clips of ``chunk_frames`` frames at ``fps`` (the last one
     up to ``chunk_frames`` plus the margin), positions and velocities [m, m/s] in world axes (z
-    up), no source derivatives (see the module docstring).
+    up), no source derivatives (see the module docstring); ``velocities=False``: positions only,
+    velocities zero (:func:`~sim.motion.ingest.clip_from_qpos`).
 
     Raises:
         MotionDataError: malformed files (naming file and line), when the bad chunk is read.
@@ -74,7 +76,7 @@ def stream_clips(
         del motion
         clip = clip_from_qpos(
             model, names, parents, qpos, source_fps=source_fps, fps=fps,
-            source=str(Path(amc)), data=data, derivatives=False,
+            source=str(Path(amc)), data=data, derivatives=False, velocities=velocities,
         )  # fmt: skip
         first = (done - a) // step
         count = -(-(stop - done) // step)
