@@ -196,3 +196,15 @@ def test_a_window_is_cut_where_the_points_bend_most():
     P[60:, :, 1] = (t[60:] - 60)[:, None] * 0.5  # a kink at frame 60
     assert cut_frame(P, 40, 90) == 60
     assert cut_frame(P, 70, 90) in range(70, 91)
+
+
+def test_a_report_takes_a_sequence_and_checks_its_skeleton(trial, cmu_dir, tmp_path):
+    from sidql.evaluation.validation import load_stream
+
+    asf, amc = trial
+    out = tmp_path / "r.sidq"
+    enc = encode_files(asf, amc, out, rate=500.0, window=300)
+    decoded = load_stream(out, asf)
+    assert enc.streams > 1 and decoded.motion.positions.shape[0] == enc.n_frames
+    with pytest.raises(MotionDataError, match="another skeleton"):
+        load_stream(out, cmu_dir / "02" / "02.asf")

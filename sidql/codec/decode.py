@@ -112,6 +112,12 @@ def decode_to_reconstruction(path: str | os.PathLike) -> Reconstruction:
     return reconstruct_stream(sidq.read(path))
 
 
+def first_stream(path: str | os.PathLike) -> sidq.Stream:
+    """The stream of a ``.sidq`` file, or the first stream of a sequence (its rate, skeleton hash
+    and points are every stream's)."""
+    return next(iter_streams(path)) if is_sequence(path) else sidq.read(path)
+
+
 def _sequence_reconstructions(path):
     """The reconstruction of each stream of a sequence, each after the first without its first
     frame (the one before it ends there), keyframes as frame indices of the take."""
@@ -213,7 +219,7 @@ def _source_skeleton(asf, out: Path, suffix: str, stream: sidq.Stream, path):
 def _decode_sequence(path, out: Path, suffix: str, asf) -> Path:
     """Decode a sequence of streams one stream at a time (bounded memory): ``.npz`` and
     ``.amc`` are written as the streams are decoded; ``.bvh`` joins the whole take first."""
-    first = next(iter_streams(path))
+    first = first_stream(path)
     if suffix == ".npz":
         write_atomic(out, lambda f: _write_sequence_npz(f, path, out))
         return out
