@@ -27,7 +27,7 @@ from sidql.codec.encoded import Encoded
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.codec.position_coding import encode_positions
 from sidql.codec.skeleton import skeleton_hash
-from sidql.codec.windows import WINDOW_FRAMES, TakeEncoding, encode_windows
+from sidql.codec.windows import WINDOW_FRAMES, TakeEncoding, encode_windows, one_stream
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import SphericalSeries, chart
 from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError, UsageError
@@ -54,6 +54,7 @@ def encode_series(
     skel_hash: bytes = bytes(8),
     where: str = "",
     objective: str = "position",
+    extra_cost=None,
 ) -> Encoded:
     """Encode a chart (see the module docstring).
 
@@ -72,6 +73,8 @@ def encode_series(
         max_gap: G, the largest gap between keyframes [frames] (<= 255).
         skel_hash: 8 bytes naming the source skeleton.
         objective: "position" (mean joint position error) or "angle" (Q).
+        extra_cost: (N, G + 1) [m] added to the position coding's segment costs (e.g. the
+            physical cost, :mod:`sidql.codec.contact_coding`); the position coding only.
 
     Raises:
         UnmetTargetError: the rate cannot be met; UnknownNameError: an unknown reconstruction;
@@ -82,15 +85,18 @@ def encode_series(
     )
     fps = 1.0 / series.dt
     position = position_coded(max_q, latency, reconstruction, objective)
-    if max_error is not None and not position:
-        raise UsageError("max_error needs an offline stream (latency 0), linear or catmull_rom")
+    if (max_error is not None or extra_cost is not None) and not position:
+        what = "max_error" if max_error is not None else "a physical cost"
+        raise UsageError(f"{what} needs an offline stream (latency 0), linear or catmull_rom")
     if position:
         names = sidq.POSITION_RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
     else:
         names = CURVES if reconstruction == "auto" else (reconstruction,)
     common = dict(max_gap=max_gap, fps=fps, skel_hash=skel_hash, where=where)
     if position:
-        enc, cand = encode_positions(series, names, rate=rate, max_error=max_error, **common)
+        enc, cand = encode_positions(
+            series, names, rate=rate, max_error=max_error, extra_cost=extra_cost, **common
+        )
         return replace(enc, candidates=cand)
     results, errors = {}, []
     for r in names:
@@ -164,6 +170,7 @@ def encode_files(
     *,
     fps: float = 30.0,
     window: int = WINDOW_FRAMES,
+    encoder=None,
     **kwargs,
 ) -> TakeEncoding:
     """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out``, written atomically.
@@ -176,12 +183,17 @@ def encode_files(
     streams never use the chart's rates). A BVH is read whole. The streams record the
     skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
     options of :func:`encode_series`.
+
+    ``encoder(clip, **kwargs) -> Encoded``: when given (e.g.
+    :func:`sidql.codec.contact_coding.encode_with_contacts`, whose floor is estimated on the whole
+    trial), the take is read whole (:func:`sim.motion.ingest.load_motion`) and encoded as one
+    stream by it: memory then grows with the take.
     """
     amc = asf if amc is None and is_bvh(asf) else amc
     skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
     try:
-        if is_bvh(amc):
-            clips = [load_motion(asf, amc, fps=fps, derivatives=False)]  # the chart needs no more
+        if is_bvh(amc) or encoder is not None:  # the chart needs no more than this
+            clips = [load_motion(asf, amc, fps=fps, derivatives=False)]
         else:
             resample_step(CMU_FPS, fps)  # refused before any frame is read
             rates = not position_coded(
@@ -193,6 +205,10 @@ def encode_files(
         raise
     except ValueError as e:  # e.g. an output rate that does not divide the source rate
         raise MotionDataError(str(amc), None, str(e)) from None
+    if encoder is not None:
+        enc = encoder(clips[0], skel_hash=skel, **kwargs)
+        write_atomic(Path(out), lambda f: f.write(enc.data))
+        return one_stream(enc)
     done = []
 
     def write(f):

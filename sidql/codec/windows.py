@@ -141,6 +141,13 @@ def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
     return _summary(parts, writer.size, fps, reconstructions, first)
 
 
+def one_stream(enc: Encoded) -> TakeEncoding:
+    """The :class:`TakeEncoding` of a take encoded whole as the one stream ``enc``."""
+    s = enc.stream
+    part = (s.n_frames, len(s.keyframes), enc.q, enc.mean_error_mm, enc.p95_error_mm)
+    return _summary([part], len(enc.data), s.fps, {s.reconstruction: 1}, enc)
+
+
 def _summary(parts, n_bytes: int, fps: float, reconstructions: dict, first) -> TakeEncoding:
     n = np.array([p[0] for p in parts], dtype=np.float64)
     frames = int(n.sum()) - (len(parts) - 1)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from functools import partial
+
+from sidql.codec.contact_coding import encode_with_contacts
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.codec.windows import WINDOW_FRAMES
@@ -67,6 +70,18 @@ def register(p) -> None:
         help="frames encoded at a time (memory grows with it); a longer take is written as a "
         "sequence of streams",
     )
+    p.add_argument(
+        "--contacts",
+        action="store_true",
+        help="send the foot-contact bits and floor (offline): the decoder pins each foot in "
+        "contact (docs/codec.md)",
+    )
+    p.add_argument(
+        "--physics",
+        action="store_true",
+        help="also choose keyframes with the physical cost (implies --contacts; --rate or "
+        "--max-error, linear or catmull_rom)",
+    )
     p.set_defaults(func=run, parser=p)
 
 
@@ -77,6 +92,9 @@ def run(args) -> int:
         args.parser.error("--latency must be in 0..65535 and --max-gap in 1..255")
     if args.max_error is not None and (args.latency or args.reconstruction == "hermite"):
         args.parser.error("--max-error needs an offline stream (--latency 0), not hermite")
+    if (args.contacts or args.physics) and args.latency:
+        args.parser.error("--contacts and --physics need an offline stream (--latency 0)")
+    contacts = args.contacts or args.physics
     enc = encode_files(
         args.asf,
         args.amc,
@@ -89,13 +107,14 @@ def run(args) -> int:
         latency=args.latency,
         max_gap=args.max_gap,
         window=args.window,
+        encoder=partial(encode_with_contacts, physics=args.physics) if contacts else None,
     )
-    print_summary(enc)
+    print_summary(enc, args.physics)
     print(f"wrote {args.out}")
     return 0
 
 
-def print_summary(enc) -> None:
+def print_summary(enc, physics: bool = False) -> None:
     """The figures of a :class:`~sidql.codec.windows.TakeEncoding`, one per line."""
     s = enc.first.stream
     n = enc.n_frames
@@ -104,6 +123,10 @@ def print_summary(enc) -> None:
         recon = s.reconstruction
     print(f"frames        {n} at {s.fps:g} fps ({n / s.fps:.2f} s)")
     print(f"keyframes     {enc.keyframes} ({recon}, latency {s.latency})")
+    if s.contacts is not None:
+        what = "physics-aware keyframes, " * physics + "feet pinned"
+        print(f"foot contacts {s.contacts.n_bytes} bytes ({what}; the figures below are after the "
+              "pinning, a --max-error or --max-q target is met before it)")  # fmt: skip
     streams = "" if enc.streams == 1 else f", a sequence of {enc.streams} streams"
     print(f"size          {enc.n_bytes} bytes, {enc.bytes_per_second:.1f} B/s{streams}")
     print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
