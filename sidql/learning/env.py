@@ -33,6 +33,7 @@ the raw arrays read ``env.unwrapped.tasks[info["task_index"]]``.
 from __future__ import annotations
 
 import operator
+import warnings
 from collections.abc import Sequence
 
 import gymnasium as gym
@@ -138,8 +139,9 @@ class KeyframeEnv(gym.Env):
         tasks: the clips to draw from (all with the same N and C). ``None`` builds a small
             deterministic synthetic set (:func:`sidql.learning.tasks.synthetic_tasks`) so that
             ``gymnasium.make(ENV_ID)`` works without data.
-        keyframes: the keyframe counts W an episode may ask for (each 3 <= W <= N: :data:`sidql.keyframes.counts.LEAST_LEARNED_W`); one is drawn
-            per episode with ``self.np_random``.
+        keyframe_counts: the keyframe counts W an episode may ask for (each 3 <= W <= N:
+            :data:`sidql.keyframes.counts.LEAST_LEARNED_W`); one is drawn per episode with
+            ``self.np_random``. (The old keyword ``keyframes`` still works and warns.)
         feature_stats: (mean, std), each (C,), for the observation's standardisation (e.g. the
             training environment's, for an evaluation environment); None: from ``tasks``.
         physics_weight: lambda of the physical reward (the module docstring); > 0 needs every
@@ -154,10 +156,16 @@ class KeyframeEnv(gym.Env):
     def __init__(
         self,
         tasks: Sequence[KeyframeTask] | None = None,
-        keyframes: Sequence[int] = (5, 10, 15),
+        keyframe_counts: Sequence[int] = (5, 10, 15),
         feature_stats: tuple[np.ndarray, np.ndarray] | None = None,
         physics_weight: float = 0.0,
+        *,
+        keyframes: Sequence[int] | None = None,
     ):
+        if keyframes is not None:  # the old name of keyframe_counts
+            warnings.warn("KeyframeEnv(keyframes=...) is an old name; use keyframe_counts=",
+                          FutureWarning, stacklevel=2)  # fmt: skip
+            keyframe_counts = keyframes
         self.tasks = list(synthetic_tasks(8, seed=0) if tasks is None else tasks)
         if not self.tasks:
             raise UsageError("KeyframeEnv needs at least one task")
@@ -170,7 +178,7 @@ class KeyframeEnv(gym.Env):
         for t in self.tasks:
             if t.features.shape != (n, c):
                 raise UsageError(f"all tasks must have features ({n}, {c}); got {t.features.shape}")
-        self.keyframe_counts = tuple(as_index(w, "keyframes") for w in keyframes)
+        self.keyframe_counts = tuple(as_index(w, "keyframe_counts") for w in keyframe_counts)
         check_counts(self.keyframe_counts, n, least=LEAST_LEARNED_W, name="keyframe counts")
         self.n_frames = n
         if feature_stats is None:
