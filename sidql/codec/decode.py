@@ -6,6 +6,7 @@ Deterministic: the same bytes give the same arrays (pure numpy, no randomness, f
 from __future__ import annotations
 
 import os
+import zipfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -13,15 +14,17 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.contact_section import pin_decoded, pinned_clip
+from sidql.codec.sequence import is_sequence, iter_streams
 from sidql.codec.skeleton import fit_motion, skeleton_hash
 from sidql.keyframes.curves import interpolate_derivatives
 from sidql.keyframes.reconstructions import Reconstruction
 from sidql.keyframes.spherical import POINTS, split_channels
 from sidql.keyframes.unchart import accelerations_from_chart, clip_from_chart, positions_from_chart
-from sim.acclaim.writer import write_amc
+from sim.acclaim.writer import amc_text, write_amc
 from sim.bvh.writer import write_bvh
-from sim.errors import MotionDataError
-from sim.motion.clip import Clip, save_npz
+from sim.errors import MotionDataError, OutputError
+from sim.files import write_atomic
+from sim.motion.clip import MAX_CLIP_FRAMES, MAX_NPZ_INFLATED, Clip, save_npz
 from sim.motion.trial import read_skeleton
 
 #: Frames turned into points at a time (:func:`reconstruct_stream`, :func:`stream_to_clip`): the
@@ -107,7 +110,46 @@ def decode_to_reconstruction(path: str | os.PathLike) -> Reconstruction:
     Raises:
         MotionDataError: the file is missing, truncated or corrupt (one line).
     """
+    if is_sequence(path):  # a sequence: its streams' frames joined (the whole take in memory)
+        return _joined(list(_sequence_reconstructions(path)))
     return reconstruct_stream(sidq.read(path))
+
+
+def first_stream(path: str | os.PathLike) -> sidq.Stream:
+    """The stream of a ``.sidq`` file, or the first stream of a sequence (its rate, skeleton hash
+    and points are every stream's)."""
+    return next(iter_streams(path)) if is_sequence(path) else sidq.read(path)
+
+
+def _sequence_reconstructions(path):
+    """The reconstruction of each stream of a sequence, each after the first without its first
+    frame (the one before it ends there), keyframes as frame indices of the take."""
+    offset = 0
+    for k, stream in enumerate(iter_streams(path)):
+        rec = reconstruct_stream(stream)
+        keys = rec.keyframes + offset
+        if k:
+            rec = _frames_from(rec, 1)
+            keys = keys[1:]
+        yield replace(rec, keyframes=keys)
+        offset += stream.n_frames - 1
+
+
+def _frames_from(rec: Reconstruction, start: int) -> Reconstruction:
+    """``rec`` without its first ``start`` frames (keyframes left as they are)."""
+    cut = {k: getattr(rec, k)[start:] for k in ("positions", "velocities", "theta", "phi")}
+    if rec.accelerations is not None:
+        cut["accelerations"] = rec.accelerations[start:]
+    return replace(rec, **cut)
+
+
+def _joined(parts: list[Reconstruction]) -> Reconstruction:
+    """One reconstruction of consecutive parts (frames and keyframes joined)."""
+    cat = {k: np.concatenate([getattr(p, k) for p in parts])
+           for k in ("positions", "velocities", "theta", "phi", "keyframes")}  # fmt: skip
+    if all(p.accelerations is not None for p in parts):
+        cat["accelerations"] = np.concatenate([p.accelerations for p in parts])
+    return replace(parts[0], **cat)
 
 
 def stream_to_clip(stream: sidq.Stream, source: str = "") -> Clip:
@@ -149,9 +191,24 @@ def decode_file(
     suffix = out.suffix.lower()
     if suffix not in (".npz", ".amc", ".bvh"):
         raise MotionDataError(str(out), None, "output must end in .npz, .amc or .bvh")
+    if is_sequence(path):
+        return _decode_sequence(path, out, suffix, asf)
     stream = sidq.read(path)
     if suffix == ".npz":
         return save_npz(stream_to_clip(stream, str(path)), out)
+    skeleton = _source_skeleton(asf, out, suffix, stream, path)
+    rec = reconstruct_stream(stream)
+    motion = fit_motion(skeleton, rec.positions, rec.names)
+    if suffix == ".bvh":
+        return write_bvh(out, skeleton, motion, stream.fps)
+    write_amc(
+        out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
+    )
+    return out
+
+
+def _source_skeleton(asf, out: Path, suffix: str, stream: sidq.Stream, path):
+    """The ``asf`` skeleton, checked against the stream's hash (AMC and BVH output)."""
     if asf is None:
         raise MotionDataError(
             str(out), None, f"an {suffix} output needs the source skeleton (--asf)"
@@ -161,11 +218,77 @@ def decode_file(
         raise MotionDataError(
             str(asf), None, f"skeleton does not match the stream's (hash of {path})"
         )
-    rec = reconstruct_stream(stream)
-    motion = fit_motion(skeleton, rec.positions, rec.names)
+    return skeleton
+
+
+def _decode_sequence(path, out: Path, suffix: str, asf) -> Path:
+    """Decode a sequence of streams one stream at a time (bounded memory): ``.npz`` and
+    ``.amc`` are written as the streams are decoded; ``.bvh`` joins the whole take first."""
+    first = first_stream(path)
+    if suffix == ".npz":
+        write_atomic(out, lambda f: _write_sequence_npz(f, path, out))
+        return out
+    skeleton = _source_skeleton(asf, out, suffix, first, path)
     if suffix == ".bvh":
-        return write_bvh(out, skeleton, motion, stream.fps)
-    write_amc(
-        out, skeleton, motion, comment=f"decoded from {Path(path).name} at {stream.fps:g} fps"
-    )
+        rec = decode_to_reconstruction(path)
+        return write_bvh(out, skeleton, fit_motion(skeleton, rec.positions, rec.names), first.fps)
+
+    def write(f):
+        frame = 1
+        for k, rec in enumerate(_sequence_reconstructions(path)):
+            motion = replace(fit_motion(skeleton, rec.positions, rec.names), first_frame=frame)
+            text = amc_text(
+                skeleton, motion, f"decoded from {Path(path).name} at {first.fps:g} fps"
+            )
+            if k:  # the header once
+                text = text[text.index(f"\n{frame}\n") + 1 :]
+            f.write(text.encode("ascii"))
+            frame += motion.n_frames
+
+    write_atomic(out, write)
     return out
+
+
+def _sequence_clips(path):
+    """Each stream of a sequence as a clip (:func:`stream_to_clip`), each after the first without
+    its first frame."""
+    for k, stream in enumerate(iter_streams(path)):
+        clip = stream_to_clip(stream, str(path))
+        yield clip if k == 0 else clip.slice(1, clip.n_frames)
+
+
+def _write_sequence_npz(f, path, out: Path) -> None:
+    """The ingest-format ``.npz`` of a sequence (the keys of :func:`sim.motion.clip.save_npz`),
+    each per-frame array written stream by stream (the sequence decoded once per array)."""
+    frames, first = 0, None
+    for clip in _sequence_clips(path):
+        frames += clip.n_frames
+        first = clip if first is None else first
+    per_frame = [k for k in (*_FRAME_ARRAYS, "angular_velocities")
+                 if getattr(first, k) is not None]  # fmt: skip
+    inflated = sum(frames * getattr(first, k)[0].nbytes for k in per_frame)
+    if frames > MAX_CLIP_FRAMES or inflated > MAX_NPZ_INFLATED:
+        raise OutputError(str(out), None, f"a clip of {frames:,} frames ({inflated:,} bytes); "
+                          f"its reader takes at most {MAX_CLIP_FRAMES:,} frames and "
+                          f"{MAX_NPZ_INFLATED:,} bytes")  # fmt: skip
+    constants = {
+        "names": np.array(first.names),
+        "parents": np.asarray(first.parents),
+        "joint_names": np.array(first.joint_names, dtype=str),
+        "fps": np.float64(first.fps),
+        "source": np.array(first.source),
+        "start_frame": np.int64(first.start_frame),
+        "source_fps": np.float64(first.source_fps),
+    }
+    with zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        for key, value in constants.items():
+            with z.open(f"{key}.npy", "w") as member:
+                np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+        for key in per_frame:
+            shape = (frames, *getattr(first, key).shape[1:])
+            with z.open(f"{key}.npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array_header_1_0(
+                    member, {"descr": "<f8", "fortran_order": False, "shape": shape}
+                )
+                for clip in _sequence_clips(path):
+                    member.write(np.ascontiguousarray(getattr(clip, key), dtype="<f8").tobytes())

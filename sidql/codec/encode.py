@@ -27,15 +27,19 @@ from sidql.codec.encoded import Encoded
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.codec.position_coding import encode_positions
 from sidql.codec.skeleton import skeleton_hash
+from sidql.codec.windows import WINDOW_FRAMES, TakeEncoding, encode_windows, one_stream
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import SphericalSeries, chart
 from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError, UsageError
 from sim.files import write_atomic
+from sim.motion.chunks import stream_clips
 from sim.motion.clip import Clip
-from sim.motion.ingest import load_motion
-from sim.motion.trial import is_bvh, read_skeleton
+from sim.motion.ingest import load_motion, resample_step
+from sim.motion.trial import CMU_FPS, is_bvh, read_skeleton
 
 CHOICES: tuple[str, ...] = ("auto",) + CURVES
+#: Frames (at the stream rate) read, retargeted and charted at a time by :func:`encode_files`.
+READ_FRAMES = 300
 
 
 def encode_series(
@@ -80,9 +84,7 @@ def encode_series(
         series, rate, max_q, max_error, reconstruction, latency, max_gap, where, objective
     )
     fps = 1.0 / series.dt
-    position = (
-        objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
-    )
+    position = position_coded(max_q, latency, reconstruction, objective)
     if (max_error is not None or extra_cost is not None) and not position:
         what = "max_error" if max_error is not None else "a physical cost"
         raise UsageError(f"{what} needs an offline stream (latency 0), linear or catmull_rom")
@@ -107,6 +109,14 @@ def encode_series(
         raise errors[0]
     cand = {r: (e.q, len(e.data)) for r, e in results.items()}
     return replace(results[_best(results, rate, max_q)], candidates=cand)
+
+
+def position_coded(max_q, latency: int, reconstruction: str, objective: str) -> bool:
+    """Whether :func:`encode_series` position-codes (coding 2) with these arguments: its
+    streams need the chart's values only, never its rates."""
+    return (
+        objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
+    )
 
 
 def _check_arguments(
@@ -159,25 +169,52 @@ def encode_files(
     out: str | os.PathLike,
     *,
     fps: float = 30.0,
+    window: int = WINDOW_FRAMES,
     encoder=None,
     **kwargs,
-) -> Encoded:
-    """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out`` (``.sidq``), written atomically.
+) -> TakeEncoding:
+    """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out``, written atomically.
 
-    ``encoder(clip, **kwargs) -> Encoded``: :func:`encode_clip` unless given (e.g.
-    :func:`sidql.codec.contact_coding.encode_with_contacts`).
+    The AMC is read, retargeted and charted a chunk at a time (:func:`sim.motion.chunks.stream_clips`,
+    the subject's own skeleton at ``fps``) and encoded ``window`` frames at a time
+    (:mod:`sidql.codec.windows`), so memory does not grow with the take: a take of at most
+    ``window`` frames (plus the overlap) is one ordinary ``.sidq`` stream, a longer one a sequence
+    of streams (:mod:`sidql.codec.sequence`); the position coding reads positions only (its
+    streams never use the chart's rates). A BVH is read whole. The streams record the
+    skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
+    options of :func:`encode_series`.
 
-    The trial is read with :func:`sim.motion.ingest.load_motion` on the subject's own skeleton at
-    ``fps``; the stream records the skeleton's hash so the decoder can check the ASF it is given.
+    ``encoder(clip, **kwargs) -> Encoded``: when given (e.g.
+    :func:`sidql.codec.contact_coding.encode_with_contacts`, whose floor is estimated on the whole
+    trial), the take is read whole (:func:`sim.motion.ingest.load_motion`) and encoded as one
+    stream by it: memory then grows with the take.
     """
     amc = asf if amc is None and is_bvh(asf) else amc
     skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
     try:
-        clip = load_motion(asf, amc, fps=fps, derivatives=False)  # the chart needs no more
+        if is_bvh(amc) or encoder is not None:  # the chart needs no more than this
+            clips = [load_motion(asf, amc, fps=fps, derivatives=False)]
+        else:
+            resample_step(CMU_FPS, fps)  # refused before any frame is read
+            rates = not position_coded(
+                kwargs.get("max_q"), kwargs.get("latency", 0),
+                kwargs.get("reconstruction", "auto"), kwargs.get("objective", "position"),
+            )  # fmt: skip
+            clips = stream_clips(asf, amc, fps=fps, chunk_frames=READ_FRAMES, velocities=rates)
     except MotionDataError:
         raise
     except ValueError as e:  # e.g. an output rate that does not divide the source rate
         raise MotionDataError(str(amc), None, str(e)) from None
-    enc = (encoder or encode_clip)(clip, skel_hash=skel, **kwargs)
-    write_atomic(Path(out), lambda f: f.write(enc.data))
-    return enc
+    if encoder is not None:
+        enc = encoder(clips[0], skel_hash=skel, **kwargs)
+        write_atomic(Path(out), lambda f: f.write(enc.data))
+        return one_stream(enc)
+    done = []
+
+    def write(f):
+        done.append(
+            encode_windows(f, clips, encode_series, window=window, skel_hash=skel, **kwargs)
+        )
+
+    write_atomic(Path(out), write)
+    return done[0]

@@ -7,12 +7,14 @@ from functools import partial
 from sidql.codec.contact_coding import encode_with_contacts
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
+from sidql.codec.windows import WINDOW_FRAMES
 from sidql.commands.usage import add_trial, positive
 
 DESCRIPTION = (
-    "Chart the trial's 22 bones and root at --fps, choose keyframes over the whole trial by "
-    "dynamic programming (max gap --max-gap, distortion + lambda x bytes, lambda by bisection) and "
-    "write the .sidq container (format: docs/codec.md). --rate and --max-error (offline, linear "
+    "Chart the trial's 22 bones and root at --fps, choose keyframes by dynamic programming (max "
+    "gap --max-gap, distortion + lambda x bytes, lambda by bisection) and write the .sidq "
+    "container (format: docs/codec.md). The take is read and encoded --window frames at a time "
+    "(bounded memory, any length): a longer take is written as a sequence of streams. --rate and --max-error (offline, linear "
     "or catmull_rom): keyframes and bits where they lower the mean joint position error most "
     "(each value's step by its effect on positions, predicted along the keyframes, range-coded). "
     "--max-q, hermite or --latency: the angle-error coding (offline: 9 to 16 bits per channel, "
@@ -61,6 +63,14 @@ def register(p) -> None:
     )
     p.add_argument("--fps", type=positive(float), default=30.0, help="stream rate (divides 120)")
     p.add_argument(
+        "--window",
+        type=int,
+        default=WINDOW_FRAMES,
+        metavar="FRAMES",
+        help="frames encoded at a time (memory grows with it); a longer take is written as a "
+        "sequence of streams",
+    )
+    p.add_argument(
         "--contacts",
         action="store_true",
         help="send the foot-contact bits and floor (offline): the decoder pins each foot in "
@@ -76,6 +86,8 @@ def register(p) -> None:
 
 
 def run(args) -> int:
+    if args.window < 2:
+        args.parser.error("--window must be at least 2 frames")
     if not 0 <= args.latency <= 65535 or not 1 <= args.max_gap <= 255:
         args.parser.error("--latency must be in 0..65535 and --max-gap in 1..255")
     if args.max_error is not None and (args.latency or args.reconstruction == "hermite"):
@@ -94,24 +106,36 @@ def run(args) -> int:
         reconstruction=args.reconstruction,
         latency=args.latency,
         max_gap=args.max_gap,
+        window=args.window,
         encoder=partial(encode_with_contacts, physics=args.physics) if contacts else None,
     )
-    s = enc.stream
-    n = s.n_frames
-    print(f"frames        {n} at {s.fps:g} fps ({n / s.fps:.2f} s)")
-    print(f"keyframes     {len(s.keyframes)} ({s.reconstruction}, latency {s.latency})")
-    if s.contacts is not None:
-        n = s.contacts.n_bytes
-        what = "physics-aware keyframes, " * args.physics + "feet pinned"
-        print(f"foot contacts {n} bytes ({what}; the figures below are after the pinning, a "
-              "--max-error or --max-q target is met before it)")  # fmt: skip
-    print(f"size          {len(enc.data)} bytes, {enc.bytes_per_second:.1f} B/s")
-    print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
-    if s.coding == 2:
-        print(f"position      mean error {enc.mean_error_mm:.2f} mm, p95 {enc.p95_error_mm:.2f} mm")
-    if len(enc.candidates) > 1:
-        what = "mean error [mm]" if s.coding == 2 else "Q"
-        tried = ", ".join(f"{r} {e:.5f} / {b} B" for r, (e, b) in enc.candidates.items())
-        print(f"tried ({what}) {tried}")
+    print_summary(enc, args.physics)
     print(f"wrote {args.out}")
     return 0
+
+
+def print_summary(enc, physics: bool = False) -> None:
+    """The figures of a :class:`~sidql.codec.windows.TakeEncoding`, one per line."""
+    s = enc.first.stream
+    n = enc.n_frames
+    recon = ", ".join(f"{r} x{k}" for r, k in enc.reconstructions.items())
+    if enc.streams == 1:
+        recon = s.reconstruction
+    print(f"frames        {n} at {s.fps:g} fps ({n / s.fps:.2f} s)")
+    print(f"keyframes     {enc.keyframes} ({recon}, latency {s.latency})")
+    if s.contacts is not None:
+        what = "physics-aware keyframes, " * physics + "feet pinned"
+        print(f"foot contacts {s.contacts.n_bytes} bytes ({what}; the figures below are after the "
+              "pinning, a --max-error or --max-q target is met before it)")  # fmt: skip
+    streams = "" if enc.streams == 1 else f", a sequence of {enc.streams} streams"
+    print(f"size          {enc.n_bytes} bytes, {enc.bytes_per_second:.1f} B/s{streams}")
+    print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
+    if s.coding == 2:
+        p95 = "p95" if enc.streams == 1 else "p95 at most"
+        print(
+            f"position      mean error {enc.mean_error_mm:.2f} mm, {p95} {enc.p95_error_mm:.2f} mm"
+        )
+    if enc.streams == 1 and len(enc.first.candidates) > 1:
+        what = "mean error [mm]" if s.coding == 2 else "Q"
+        tried = ", ".join(f"{r} {e:.5f} / {b} B" for r, (e, b) in enc.first.candidates.items())
+        print(f"tried ({what}) {tried}")

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from sidql.codec.decode import decode_to_reconstruction
-from sidql.codec.format import read as read_stream
+from sidql.codec.decode import first_stream as read_stream
 from sidql.codec.skeleton import skeleton_hash
 from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import reconstruction_of, select

@@ -21,6 +21,11 @@ from sim.acclaim.tokens import float_list, known_names
 from sim.errors import MotionDataError, MotionDataWarning
 from sim.files import MAX_AMC_BYTES, excerpt, open_regular, text_lines
 
+#: Largest AMC file :func:`iter_amc` reads [bytes]: it holds one chunk of frames at a time, so
+#: its memory does not grow with the file; the limit only bounds the time a read can take
+#: (16 GiB is ~20 million frames, two days at 120 fps).
+MAX_STREAMED_AMC_BYTES = 16 << 30
+
 _FRAME_NUMBER_RE = re.compile(r"[0-9]{1,12}\Z")
 
 
@@ -52,6 +57,39 @@ def parse_amc(path: str | os.PathLike, skeleton: Skeleton, *, strict: bool = Fal
     for note in motion.notes:
         warnings.warn(note, MotionDataWarning, stacklevel=2)
     return motion
+
+
+def iter_amc(
+    path: str | os.PathLike,
+    skeleton: Skeleton,
+    *,
+    strict: bool = False,
+    max_bytes: int = MAX_STREAMED_AMC_BYTES,
+):
+    """Read an AMC motion a chunk of frames at a time: yields :class:`Motion` pieces, frame after
+    frame (``first_frame`` of each: the file's number of its first frame), the same values,
+    checks, notes and one-line errors (file and line) as :func:`parse_amc` of the whole file.
+
+    Bounded memory whatever the file's length: each piece holds the frames of one text chunk
+    (:data:`sim.files.TEXT_CHUNK_BYTES`, at most ~4x its size in arrays); the file may be as
+    large as ``max_bytes``. A caller that stops early closes the file (a generator).
+
+    Raises:
+        MotionDataError: as :func:`parse_amc` (a defect is raised when its chunk is read: the
+            pieces before it have been yielded).
+    """
+    path = str(path)
+    parser = _AmcParser(path, skeleton, strict)
+    with open_regular(path, max_bytes) as f:
+        for first_line, lines in text_lines(f, path, max_bytes):
+            parser.feed(first_line, lines)
+            if parser.n - parser.taken > 0 and not parser.in_header:
+                yield parser.take()
+    motion = parser.finish()
+    for note in motion.notes:
+        warnings.warn(note, MotionDataWarning, stacklevel=2)
+    if motion.n_frames:
+        yield motion
 
 
 def _is_frame_number(token: str) -> bool:
@@ -90,6 +128,7 @@ class _AmcParser:
         self.rows: list[list] = []  # closed frames of the checked path, not yet arrays
         self.columns: dict[str, list[np.ndarray]] = {}  # bone -> (frames, dofs) pieces
         self.notes: list[str] = []
+        self.taken = 0  # frames already handed out by :meth:`take`
 
     # -- feeding ---------------------------------------------------------------------------------
 
@@ -281,7 +320,15 @@ class _AmcParser:
 
     # -- the result ------------------------------------------------------------------------------
 
+    def take(self) -> Motion:
+        """The closed frames not yet taken, as a motion (the frame being read stays open)."""
+        self._flush()
+        motion = self._motion()
+        self.columns = {name: [] for name in self.names}
+        return motion
+
     def finish(self) -> Motion:
+        """The frames not yet taken (all of them unless :meth:`take` ran), the file ended."""
         path = self.path
         if not self.seen_text:
             raise MotionDataError(path, None, "empty file")
@@ -292,7 +339,14 @@ class _AmcParser:
         if not had_frame:
             raise MotionDataError(path, None, "no frames")
         self._flush()
-        T = self.n
+        return self._motion()
+
+    def _motion(self) -> Motion:
+        """The frames closed since the last :meth:`take`, emptying the column pieces."""
+        path = self.path
+        T = self.n - self.taken
+        first = self.first + self.taken
+        self.taken = self.n
         skeleton = self.skeleton
         columns = self.columns
         order = [skeleton.root_order.index(c) for c in ROOT_CHANNELS]
@@ -316,7 +370,7 @@ class _AmcParser:
         # Finite: every value passed its bound (finite, bounded), and rad2deg of a bounded value
         # is finite; the zeros of unmentioned bones are too.
         return Motion(
-            path=path, root=root, angles=angles, first_frame=self.first, notes=tuple(self.notes)
+            path=path, root=root, angles=angles, first_frame=first, notes=tuple(self.notes)
         )
 
 

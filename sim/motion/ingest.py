@@ -78,6 +78,7 @@ def clip_from_qpos(
     source: str = "",
     data: mujoco.MjData | None = None,
     derivatives: bool = True,
+    velocities: bool = True,
 ) -> Clip:
     """Clip at ``fps`` of a ``qpos`` stream sampled at ``source_fps`` on ``model``.
 
@@ -89,6 +90,7 @@ def clip_from_qpos(
     ``data``: the job's ``MjData`` of ``model``, reused for every frame (made here when None: one
     per trial). ``derivatives=False`` leaves ``source_velocities`` and ``accelerations`` out (None):
     a caller that needs neither (the codec) saves the kinematics of every source frame.
+    ``velocities=False`` (and no ``derivatives``): ``qvel`` and all velocities zero, positions alone.
 
     Raises:
         MotionDataError: (naming ``source``) a non-finite ``qpos`` or any non-finite result; the
@@ -104,8 +106,7 @@ def clip_from_qpos(
         site_ids.append(-1 if n == "root" else model.site(f"{n}_end").id)
     data = mujoco.MjData(model) if data is None else data
     with np.errstate(all="ignore"):  # overflow shows up as non-finite values, refused below
-        jumps = pose_jumps(body_rotation_steps(model, qpos), source_fps, kin_related(model))
-        qvel = qvel_from_qpos(model, qpos, source_fps, frames, across_jumps=False, jumps=jumps)
+        qvel, jumps = _joint_velocities(model, qpos, source_fps, frames, velocities or derivatives)
         if not np.isfinite(qvel).all():
             raise MotionDataError(source or None, None, "non-finite joint velocities (qvel)")
         pos, vel, xquat, omega = point_kinematics(
@@ -145,6 +146,16 @@ def clip_from_qpos(
         accelerations=acc,
         derivative_noise=noise,
     )
+
+
+def _joint_velocities(model, qpos, source_fps: float, frames, velocities: bool):
+    """``qvel`` at ``frames`` (never differenced across a pose jump) and the pose jumps; zeros
+    and None without ``velocities``."""
+    if not velocities:
+        return np.zeros((len(frames), model.nv)), None
+    jumps = pose_jumps(body_rotation_steps(model, qpos), source_fps, kin_related(model))
+    qvel = qvel_from_qpos(model, qpos, source_fps, frames, across_jumps=False, jumps=jumps)
+    return qvel, jumps
 
 
 def load_motion(
