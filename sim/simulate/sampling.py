@@ -155,6 +155,86 @@ def sample_track(
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """What the search needs of the reference and the body: the uncorrected hinge targets
+    ``base`` (T, nu) [rad] (reference angle, velocity lead and feed-forward, as ``track``), the
+    reference's velocities (T, nv), the noise ``sigma`` (nu,) [rad] of each hinge's offset (0
+    for the uncorrected), the pose term's hinge weights (nu,), the reference's
+    :class:`Features` per tick, the cost's body ids and the pushes' body ids."""
+
+    base: np.ndarray
+    ref_qvel: np.ndarray
+    sigma: np.ndarray
+    hinge_w: np.ndarray
+    ref_feat: list
+    ee_ids: np.ndarray
+    foot_ids: np.ndarray
+    push_ids: list
+
+
+def _problem(model, ref_qpos, data, torque_sigma: float, pushes: tuple[Push, ...]) -> _Problem:
+    """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten."""
+    nu = model.nu
+    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
+    kp = model.actuator_gainprm[:, 0].copy()
+    lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]
+    base = ref_qpos[:, 7:] + lead * ref_qvel[:, 6:] + ref_force[:, 6:] / kp  # (T, nu) targets
+    names = [model.actuator(a).name for a in range(nu)]
+    corrected = np.array([_bone(n) in CORRECTED for n in names])
+    sigma = np.where(corrected, torque_sigma * model.actuator_forcerange[:, 1] / kp, 0.0)
+    sub = model.body_subtreemass[model.jnt_bodyid[model.actuator_trnid[:, 0]]]
+    ee_ids = np.array([model.body(n).id for n in END_EFFECTORS])
+    foot_ids = np.array([model.body(n).id for n in ("lfoot", "rfoot")])
+    ref_feat = []
+    for k in range(ref_qpos.shape[0]):
+        data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
+        ref_feat.append(features(model, data, ee_ids, foot_ids))
+    return _Problem(
+        base=base,
+        ref_qvel=ref_qvel,
+        sigma=sigma,
+        hinge_w=sub / sub.sum(),  # a hinge that moves more mass weighs more
+        ref_feat=ref_feat,
+        ee_ids=ee_ids,
+        foot_ids=foot_ids,
+        push_ids=[model.body(p.body).id for p in pushes],
+    )
+
+
+def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], perturb, keep):
+    """Roll ``data`` (set to the parent's state) on with hinge offset ``off`` (nu,) [rad] from
+    tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
+    ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
+    ``keep`` = (state row, qpos row, state spec). ``data`` is left at tick ``k2``."""
+    k0, k1, k2 = ticks
+    pushes, weakenings = perturb
+    state, qpos, spec = keep
+    for k in range(k0, k2):  # the window, then on with the same offset
+        t = k / CONTROL_HZ
+        apply_pushes(data, pushes, prob.push_ids, t)
+        set_controls(model, data, prob.base[k] + off, weakening_factor(weakenings, t))
+        mujoco.mj_step(model, data, nstep=SUBSTEPS)
+        if k == k1 - 1:  # the window's end: the state kept
+            mujoco.mj_getState(model, data, state, spec)
+            qpos[:] = data.qpos
+
+
+def _backtrack(history, T: int, window: int, nu: int, nq: int):
+    """The cheapest final state's offsets (T, nu) and window-end ``qpos`` (W, nq), window by
+    window back to the start through ``history`` (per window, of the kept states: parent index,
+    offset, ``qpos`` reached; the cheapest kept first)."""
+    offsets = np.zeros((T, nu))
+    window_qpos = np.empty((len(history), nq))
+    j = 0
+    for w in range(len(history) - 1, -1, -1):
+        parent, off, reached = history[w]
+        offsets[w * window : min(T, (w + 1) * window)] = off[j]
+        window_qpos[w] = reached[j]
+        j = parent[j]
+    return offsets, window_qpos
+
+
 def search_offsets(
     model,
     ref_qpos: np.ndarray,
@@ -192,29 +272,13 @@ def search_offsets(
         ``track(..., offsets=offsets)`` reaches there while the body is up.
     """
     weights = weights or CostWeights()
-    T = ref_qpos.shape[0]
-    nu = model.nu
+    T, nu = ref_qpos.shape[0], model.nu
     rng = np.random.default_rng(seed)
     data = mujoco.MjData(model)
-    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
-    kp = model.actuator_gainprm[:, 0].copy()
-    lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]
-    base = ref_qpos[:, 7:] + lead * ref_qvel[:, 6:] + ref_force[:, 6:] / kp  # (T, nu) targets
-    names = [model.actuator(a).name for a in range(nu)]
-    corrected = np.array([_bone(n) in CORRECTED for n in names])
-    sigma = np.where(corrected, torque_sigma * model.actuator_forcerange[:, 1] / kp, 0.0)
-    sub = model.body_subtreemass[model.jnt_bodyid[model.actuator_trnid[:, 0]]]
-    hinge_w = sub / sub.sum()  # a hinge that moves more mass weighs more
-    ee_ids = np.array([model.body(n).id for n in END_EFFECTORS])
-    foot_ids = np.array([model.body(n).id for n in ("lfoot", "rfoot")])
-    ref_feat = []
-    for k in range(T):
-        data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
-        ref_feat.append(features(model, data, ee_ids, foot_ids))
-
+    prob = _problem(model, ref_qpos, data, torque_sigma, pushes)
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
-    data.qvel[:] = ref_qvel[0]
+    data.qvel[:] = prob.ref_qvel[0]
     mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     size = mujoco.mj_stateSize(model, spec)
@@ -222,40 +286,23 @@ def search_offsets(
     mujoco.mj_getState(model, data, states[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
-    # per window, of the kept states: (parent, offset, qpos reached)
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     new_states = np.empty((samples, size))
     new_qpos = np.empty((samples, model.nq))
-    push_ids = [model.body(p.body).id for p in pushes]
     for k0 in range(0, T, window):
         k1 = min(T, k0 + window)
         parents = np.arange(samples) % len(states)
-        offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
+        offs = persistence * last[parents] + prob.sigma * rng.standard_normal((samples, nu))
         new_costs = np.empty(samples)
         k2 = min(T, k1 + lookahead)
         for s in range(samples):
             mujoco.mj_setState(model, data, states[parents[s]], spec)
-            for k in range(k0, k2):  # the window, then on with the same offset
-                t = k / CONTROL_HZ
-                apply_pushes(data, pushes, push_ids, t)
-                set_controls(model, data, base[k] + offs[s], weakening_factor(weakenings, t))
-                mujoco.mj_step(model, data, nstep=SUBSTEPS)
-                if k == k1 - 1:  # the window's end: the state kept
-                    mujoco.mj_getState(model, data, new_states[s], spec)
-                    new_qpos[s] = data.qpos
-            f = features(model, data, ee_ids, foot_ids)
-            cost = window_cost(f, ref_feat[min(k2, T - 1)], weights, hinge_w)
+            keep_at = (new_states[s], new_qpos[s], spec)
+            _rollout(model, data, prob, offs[s], (k0, k1, k2), (pushes, weakenings), keep_at)
+            f = features(model, data, prob.ee_ids, prob.foot_ids)
+            cost = window_cost(f, prob.ref_feat[min(k2, T - 1)], weights, prob.hinge_w)
             new_costs[s] = costs[parents[s]] + cost
         best = np.argsort(new_costs, kind="stable")[:keep]
         history.append((parents[best], offs[best], new_qpos[best].copy()))
         states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
-    # the cheapest final state's offsets, window by window back to the start
-    offsets = np.zeros((T, nu))
-    window_qpos = np.empty((len(history), model.nq))
-    j = 0
-    for w in range(len(history) - 1, -1, -1):
-        parent, off, reached = history[w]
-        offsets[w * window : min(T, (w + 1) * window)] = off[j]
-        window_qpos[w] = reached[j]
-        j = parent[j]
-    return offsets, window_qpos
+    return _backtrack(history, T, window, nu, model.nq)
