@@ -135,7 +135,8 @@ def set_controls(model, data, target: np.ndarray, effort: float) -> None:
     angles, clipped to the actuators' control range (``sim.simulate.model.sim_spec``; MuJoCo
     would clip it there too, so ``data.ctrl`` holds exactly what acts)."""
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
-    np.clip(effort_target(target, data.qpos[7:], effort), lo, hi, out=data.ctrl)
+    np.maximum(effort_target(target, data.qpos[7:], effort), lo, out=data.ctrl)
+    np.minimum(data.ctrl, hi, out=data.ctrl)  # np.clip's result, without its overhead
 
 
 def _root_inertia(model, qpos, data) -> np.ndarray:

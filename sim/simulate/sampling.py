@@ -24,6 +24,7 @@ tracker's (``docs/results/synth_sampled.md``).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import mujoco
@@ -38,17 +39,20 @@ from sim.simulate.controller import (
     track,
     weakening_factor,
 )
+from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
 CORRECTED = ("femur", "tibia", "foot", "toes", "lowerback", "upperback", "thorax")
-#: control ticks (0.4 s) a candidate is rolled on past its window before it is judged. Measured
-#: on 15 time-warped 4 s track clips of ``synth`` at 64 samples: 0 / 12 / 24 / 48 ticks kept 0 /
-#: 2 / 1 / 8 up; at 48, the root pull of :class:`CostWeights` (``root_xy`` 20) kept 7 up with
-#: about half the drift (2 s of 07_01: 1.37 -> 0.80 m of root error); judging at the window's
-#: end as well kept 2 of the first 8 up, against 4 (docs/synthetic.md)
-LOOKAHEAD = 48
+#: control ticks (0.3 s) a candidate is rolled on past its window before it is judged. Measured
+#: on 15 time-warped 4 s track clips of ``synth`` at 64 samples, falls not yet in the cost: 0 /
+#: 12 / 24 / 48 ticks kept 0 / 2 / 1 / 8 up; at 48, the root pull of :class:`CostWeights`
+#: (``root_xy`` 20) kept 7 up with about half the drift (2 s of 07_01: 1.37 -> 0.80 m of root
+#: error); judging at the window's end as well kept 2 of the first 8 up, against 4. With falls
+#: in the cost, on 8 of the 22 clips of ``bench_simulate.py --controllers`` at 32 samples: 24 /
+#: 36 ticks fell in 4 / 2 of 8 (24 samples, 36 ticks: 3) (docs/synthetic.md)
+LOOKAHEAD = 36
 #: bodies whose positions relative to the root enter the cost
 END_EFFECTORS = ("lfoot", "rfoot", "ltoes", "rtoes", "lhand", "rhand", "head")
 
@@ -67,6 +71,9 @@ class CostWeights:
     balance: float = 50.0  # CoM minus the ankles' mid-point, horizontal [m^2]
     root_vel: float = 0.5  # root linear velocity [m^2/s^2]
     fallen: float = 1e4  # root below half its reference height
+    #: a fall (``sim.simulate.falls``) in the rollout, doubled if at its start; 0: the rollouts
+    #: do not look for falls and run to their end (the sampler as first built)
+    fall: float = 1e4
 
 
 @dataclass(frozen=True)
@@ -171,10 +178,14 @@ class _Problem:
     ee_ids: np.ndarray
     foot_ids: np.ndarray
     push_ids: list
+    fall_ref: object | None
 
 
-def _problem(model, ref_qpos, data, torque_sigma: float, pushes: tuple[Push, ...]) -> _Problem:
-    """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten."""
+def _problem(
+    model, ref_qpos, data, torque_sigma: float, pushes: tuple[Push, ...], falls: bool = True
+) -> _Problem:
+    """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
+    rollouts look for falls (``fall_ref`` set) or not (None)."""
     nu = model.nu
     ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     kp = model.actuator_gainprm[:, 0].copy()
@@ -199,25 +210,40 @@ def _problem(model, ref_qpos, data, torque_sigma: float, pushes: tuple[Push, ...
         ee_ids=ee_ids,
         foot_ids=foot_ids,
         push_ids=[model.body(p.body).id for p in pushes],
+        fall_ref=fall_reference(model, ref_qpos) if falls else None,
     )
 
 
-def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], perturb, keep):
+def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], perturb, keep) -> int:
     """Roll ``data`` (set to the parent's state) on with hinge offset ``off`` (nu,) [rad] from
     tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
     ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
-    ``keep`` = (state row, qpos row, state spec). ``data`` is left at tick ``k2``."""
+    ``keep`` = (state row, qpos row, state spec). A rollout that falls (``sim.simulate.falls``,
+    checked after every tick where ``prob.fall_ref`` is set) stops at the fall or at the
+    window's end, whichever is later.
+
+    Returns:
+        the tick ``data`` is left at, negated where the body fell (``-k``, k >= 1).
+    """
     k0, k1, k2 = ticks
     pushes, weakenings = perturb
     state, qpos, spec = keep
+    T = len(prob.base)
+    fell = False
     for k in range(k0, k2):  # the window, then on with the same offset
         t = k / CONTROL_HZ
-        apply_pushes(data, pushes, prob.push_ids, t)
+        if pushes:  # else no external force: the kept states carry none
+            apply_pushes(data, pushes, prob.push_ids, t)
         set_controls(model, data, prob.base[k] + off, weakening_factor(weakenings, t))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
         if k == k1 - 1:  # the window's end: the state kept
             mujoco.mj_getState(model, data, state, spec)
             qpos[:] = data.qpos
+        if prob.fall_ref is not None and not fell:
+            fell = has_fallen(model, data, prob.fall_ref, min(k + 1, T - 1))
+        if fell and k >= k1 - 1:
+            return -(k + 1)
+    return k2
 
 
 def _backtrack(history, T: int, window: int, nu: int, nq: int):
@@ -235,6 +261,37 @@ def _backtrack(history, T: int, window: int, nu: int, nq: int):
     return offsets, window_qpos
 
 
+def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool) -> np.ndarray:
+    """(S,) each candidate's cost, its parent's cost not included: candidate ``s`` rolled out
+    (:func:`_rollout`) from kept state ``parents[s]`` with offset ``offs[s]`` (nu,), judged by
+    :func:`window_cost` where it stopped plus ``CostWeights.fall`` (more the earlier) if it
+    fell. ``search`` = (kept states, weights, perturbations, state spec); ``out`` = (window-end
+    states (S, size), qpos (S, nq)), written. The candidates are split in contiguous runs over
+    ``datas`` (one ``MjData`` per thread of ``pool``; ``pool`` None: one run): every rollout
+    starts from a full state, so the result does not depend on the split."""
+    states, weights, perturb, spec = search
+    k0, _, k2 = ticks
+    T = len(prob.base)
+    cost = np.empty(len(offs))
+
+    def run(chunk: np.ndarray, data) -> None:
+        for s in chunk:
+            mujoco.mj_setState(model, data, states[parents[s]], spec)
+            keep_at = (out[0][s], out[1][s], spec)
+            end = _rollout(model, data, prob, offs[s], ticks, perturb, keep_at)
+            f = features(model, data, prob.ee_ids, prob.foot_ids)
+            cost[s] = window_cost(f, prob.ref_feat[min(abs(end), T - 1)], weights, prob.hinge_w)
+            if end < 0:  # fell: a later fall costs less
+                cost[s] += weights.fall * (1.0 + (k2 + end) / max(1, k2 - k0))
+
+    chunks = np.array_split(np.arange(len(offs)), len(datas))
+    if pool is None:
+        run(chunks[0], datas[0])
+    else:
+        list(pool.map(run, chunks, datas))
+    return cost
+
+
 def search_offsets(
     model,
     ref_qpos: np.ndarray,
@@ -249,6 +306,7 @@ def search_offsets(
     weights: CostWeights | None = None,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
+    threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
@@ -265,6 +323,8 @@ def search_offsets(
         seed: seeds the noise (same seed, same result).
         pushes, weakenings: perturbations, as in ``track``; every candidate rollout meets them
             too, so the corrections are found against the perturbed body.
+        threads: rollouts run on this many threads (MuJoCo releases the GIL while it steps);
+            the result is the same for any number.
 
     Returns:
         ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
@@ -274,8 +334,9 @@ def search_offsets(
     weights = weights or CostWeights()
     T, nu = ref_qpos.shape[0], model.nu
     rng = np.random.default_rng(seed)
-    data = mujoco.MjData(model)
-    prob = _problem(model, ref_qpos, data, torque_sigma, pushes)
+    datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
+    data = datas[0]
+    prob = _problem(model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0)
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
     data.qvel[:] = prob.ref_qvel[0]
@@ -287,22 +348,20 @@ def search_offsets(
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    new_states = np.empty((samples, size))
-    new_qpos = np.empty((samples, model.nq))
-    for k0 in range(0, T, window):
-        k1 = min(T, k0 + window)
-        parents = np.arange(samples) % len(states)
-        offs = persistence * last[parents] + prob.sigma * rng.standard_normal((samples, nu))
-        new_costs = np.empty(samples)
-        k2 = min(T, k1 + lookahead)
-        for s in range(samples):
-            mujoco.mj_setState(model, data, states[parents[s]], spec)
-            keep_at = (new_states[s], new_qpos[s], spec)
-            _rollout(model, data, prob, offs[s], (k0, k1, k2), (pushes, weakenings), keep_at)
-            f = features(model, data, prob.ee_ids, prob.foot_ids)
-            cost = window_cost(f, prob.ref_feat[min(k2, T - 1)], weights, prob.hinge_w)
-            new_costs[s] = costs[parents[s]] + cost
-        best = np.argsort(new_costs, kind="stable")[:keep]
-        history.append((parents[best], offs[best], new_qpos[best].copy()))
-        states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
+    out = np.empty((samples, size)), np.empty((samples, model.nq))
+    pool = ThreadPoolExecutor(len(datas)) if len(datas) > 1 else None
+    try:
+        for k0 in range(0, T, window):
+            ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
+            parents = np.arange(samples) % len(states)
+            offs = persistence * last[parents] + prob.sigma * rng.standard_normal((samples, nu))
+            search = states, weights, (pushes, weakenings), spec
+            cost = _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool)
+            new_costs = costs[parents] + cost
+            best = np.argsort(new_costs, kind="stable")[:keep]
+            history.append((parents[best], offs[best], out[1][best].copy()))
+            states, costs, last = out[0][best].copy(), new_costs[best], offs[best]
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return _backtrack(history, T, window, nu, model.nq)

@@ -48,6 +48,8 @@ CONTROLLERS = ("plain", "sampling", "wholebody")
 #: (``docs/results/simulate_controllers.md``: on 22 clips 0.91 against 0.95 falls, 665 against
 #: 673 mm global error, but 362 against 318 mm root-relative)
 DEFAULT_CONTROLLER = "plain"
+#: the sampler's rollouts per window where it is chosen without a count
+DEFAULT_SAMPLES = 32
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator)
 SKATE_CONTACT = 0.01
 
@@ -62,9 +64,20 @@ class ForwardValidation:
             (``sim.simulate.sampling.sample_track``, N rollouts per 0.1 s window, each judged
             0.4 s on, seed 0), which
             corrects the joints' targets so the body keeps its balance where it can.
+        search: further keywords of the sampler's search (``sim.simulate.sampling.
+            search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults.
+        threads: the sampler's rollouts run on this many threads (the same result for any).
     """
 
-    def __init__(self, model, names, samples: int = 0, controller: str | None = None):
+    def __init__(
+        self,
+        model,
+        names,
+        samples: int = 0,
+        controller: str | None = None,
+        search: dict | None = None,
+        threads: int = 1,
+    ):
         controller = controller or ("sampling" if samples else "plain")
         if controller not in CONTROLLERS:
             raise UsageError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
@@ -75,14 +88,17 @@ class ForwardValidation:
             )
         self.model = model
         self.names = tuple(names)
-        self.samples = int(samples) if controller == "sampling" else 0
+        self.samples = int(samples or DEFAULT_SAMPLES) if controller == "sampling" else 0
         self.controller = controller
+        self.search = dict(search or {})
+        self.threads = int(threads)
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
 
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
-        return (ForwardValidation, (self.model, self.names, self.samples, self.controller))
+        args = self.model, self.names, self.samples, self.controller, self.search, self.threads
+        return (ForwardValidation, args)
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -135,7 +151,8 @@ class ForwardValidation:
         orig = self.reference(original_qpos, fps, floor)  # the same floor and feet
         every = int(round(CONTROL_HZ / fps))
         if self.controller == "sampling":
-            r = sample_track(self.model, ref, samples=self.samples, record_every=every)
+            r = sample_track(self.model, ref, samples=self.samples, record_every=every,
+                             threads=self.threads, **self.search)  # fmt: skip
         elif self.controller == "wholebody":
             r = track_wholebody(self.model, ref, record_every=every)
         else:
