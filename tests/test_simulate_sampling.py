@@ -83,7 +83,8 @@ def test_forward_validation_carries_its_sampling_to_other_processes(model):
 
     fv = pickle.loads(pickle.dumps(ForwardValidation(model, ("root",), samples=8)))
     assert fv.samples == 8 and fv.names == ("root",)
-    assert pickle.loads(pickle.dumps(ForwardValidation(model, ("root",)))).samples == 0
+    plain = ForwardValidation(model, ("root",), controller="plain")
+    assert pickle.loads(pickle.dumps(plain)).samples == 0
 
 
 def test_eval_samples_needs_simulate_and_a_positive_count(tmp_path, capsys):
@@ -174,3 +175,15 @@ def test_forward_validation_carries_its_search_and_threads_to_other_processes(mo
     assert again.search == search and again.threads == 3 and again.samples == 8
     chosen = ForwardValidation(model, ("root",), controller="sampling")  # no count given
     assert chosen.samples == DEFAULT_SAMPLES > 0
+
+
+def test_recentred_search_is_deterministic_and_another_search(model, walk_ref):
+    """``recentre``: children start between their parent's offset and the cheapest kept
+    state's, so the search takes another path than from the parents alone (same seed), and
+    the same one again."""
+    ref = walk_ref[:36]
+    kw = dict(samples=8, keep=4, window=12, lookahead=0, persistence=1.0, seed=5)
+    plain = search_offsets(model, ref, recentre=0.0, **kw)[0]
+    centred = search_offsets(model, ref, recentre=1.0, **kw)[0]
+    again = search_offsets(model, ref, recentre=1.0, **kw)[0]
+    assert np.array_equal(centred, again) and not np.array_equal(plain, centred)

@@ -12,14 +12,18 @@ asks ``torque_sigma`` of the joint's peak torque). Each candidate runs through t
 the same torque-limited actuators, perturbations and no assistance, then on for ``lookahead``
 more ticks with the same offset; its cost there (:func:`window_cost`: a correction that only
 delays a fall costs what the fall costs) is added to its parent's, and the ``keep`` cheapest
-states, taken at the window's end, go on. At the end the cheapest sequence of
+states, taken at the window's end, go on. A fall as ``sim.simulate.falls`` defines it (a part
+other than the feet on the floor, or the head low) is looked for after every tick of a rollout:
+the rollout stops there (or at its window's end, whose state is kept) and pays
+``CostWeights.fall``, more the earlier it fell. At the end the cheapest sequence of
 offsets is replayed by ``track(..., offsets=...)``, so the result is an ordinary
-:class:`sim.simulate.controller.Tracking` of one simulation (the replay is the same
-deterministic computation as the sampled rollout). Deterministic given ``seed``.
+:class:`sim.simulate.tracking.Tracking` of one simulation (the replay is the same
+deterministic computation as the sampled rollout). Deterministic given ``seed``, whatever the
+number of ``threads`` the rollouts run on.
 
-Cost: ``samples`` rollouts of ``window + lookahead`` ticks per window plus one replay: with 64
-and the default lookahead about 6 s per simulated second on one core, some 200 times the plain
-tracker's (``docs/results/synth_sampled.md``).
+Cost: ``samples`` rollouts of up to ``window + lookahead`` ticks per window plus one replay:
+with 32 and the default lookahead about 5 CPU s per simulated second
+(``docs/results/simulate_controllers.md``).
 """
 
 from __future__ import annotations
@@ -307,6 +311,7 @@ def search_offsets(
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
     threads: int = 1,
+    recentre: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
@@ -323,6 +328,8 @@ def search_offsets(
         seed: seeds the noise (same seed, same result).
         pushes, weakenings: perturbations, as in ``track``; every candidate rollout meets them
             too, so the corrections are found against the perturbed body.
+        recentre: share (0..1) by which a child's starting offset moves from its parent's
+            towards the cheapest kept state's (0: its parent's alone).
         threads: rollouts run on this many threads (MuJoCo releases the GIL while it steps);
             the result is the same for any number.
 
@@ -354,7 +361,8 @@ def search_offsets(
         for k0 in range(0, T, window):
             ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
             parents = np.arange(samples) % len(states)
-            offs = persistence * last[parents] + prob.sigma * rng.standard_normal((samples, nu))
+            centre = (1.0 - recentre) * last[parents] + recentre * last[0]  # [0]: the cheapest
+            offs = persistence * centre + prob.sigma * rng.standard_normal((samples, nu))
             search = states, weights, (pushes, weakenings), spec
             cost = _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool)
             new_costs = costs[parents] + cost
