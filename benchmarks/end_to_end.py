@@ -28,13 +28,24 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
     """name -> zero-argument callable for one clip: the end-to-end paths, the paths they
     replaced and their parts."""
     from sidql.keyframes import methods
-    from sidql.keyframes.optimal import clip_optimal_table, optimum_cost_matrix, solve
+    from sidql.keyframes.optimal import (
+        clip_optimal_keyframes,
+        clip_optimal_table,
+        optimum_cost_matrix,
+        solve,
+    )
     from sidql.keyframes.segment_costs import clip_stacked_costs, segment_cost_matrix
     from sidql.keyframes.spherical import chart
     from sidql.learning.tasks import clip_features, stacked_features
 
     cols = {
         "optimal: select (end to end)": lambda: methods.select("optimal", clip, W),
+        "optimal: clip_optimal_keyframes (what select runs)": lambda: clip_optimal_keyframes(
+            clip, W
+        ),
+        "optimal before: chart + costs it can use, then programme and walk back in Python": lambda: (
+            solve(optimum_cost_matrix(clip, W), 22, W).keyframes(W)
+        ),
         "optimal before: chart + full costs + programme": lambda: clip_optimal_table(
             clip, w_max=W
         ).keyframes(W),
@@ -94,11 +105,51 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> 
             after = f"{m}: select (end to end)"
             if after not in med:
                 continue
-            before = next(k for k in med if k.startswith(f"{m} before"))
-            same = "dqn: Policy.select" if m == "dqn" else after  # what 'before' replaced
+            same = {
+                "dqn": "dqn: Policy.select",
+                "optimal": "optimal: clip_optimal_keyframes (what select runs)",
+            }[m]  # what 'before' replaced
+            ratios = "; ".join(
+                f"{k[len(m) + 9 :]}: {med[k][0] / med[same][0]:.2f}x CPU, "
+                f"{med[k][1] / med[same][1]:.2f}x wall"
+                for k in med
+                if k.startswith(f"{m} before")
+            )
             notes.append(
                 f"W = {W}, {m}: end to end {med[after][0]:.3f} ms CPU per clip (aim: at most "
-                f"{aim} ms, quiet); before / after in this run {med[before][0] / med[same][0]:.2f}x "
-                f"CPU, {med[before][1] / med[same][1]:.2f}x wall."
+                f"{aim} ms, quiet); before / after in this run ({ratios})."
             )
     return "\n".join(lines + [""] + notes)
+
+
+def busy_table(clips, counts, n_busy: int = 1, repeats: int = 3) -> str:
+    """Markdown table: ``select``'s end-to-end CPU and wall ms per clip (median) for dqn and the
+    optimum, on the machine as it is, then with ``n_busy`` more processes spinning
+    (:func:`busy.busy`), then as it is again; busy over the mean of both quiet passes."""
+    from busy import busy
+
+    from sidql.keyframes import methods
+
+    def median_ms(name, W):
+        got = [
+            _timed(lambda c=c: methods.select(name, c, W)) for c in clips for _ in range(repeats)
+        ]
+        return np.median(np.array(got), axis=0)
+
+    lines = [
+        "| W | method | quiet CPU ms | busy CPU ms | busy / quiet CPU | quiet wall ms | "
+        "busy wall ms | busy / quiet wall |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for W in counts:
+        for name in ("optimal", "dqn"):
+            methods.select(name, clips[0], W)  # compile and warm up
+            first = median_ms(name, W)
+            with busy(n_busy):
+                loaded = median_ms(name, W)
+            quiet = (first + median_ms(name, W)) / 2
+            lines.append(
+                f"| {W} | {name} | {quiet[0]:.3f} | {loaded[0]:.3f} | {loaded[0] / quiet[0]:.2f}x "
+                f"| {quiet[1]:.3f} | {loaded[1]:.3f} | {loaded[1] / quiet[1]:.2f}x |"
+            )
+    return "\n".join(lines)

@@ -118,7 +118,7 @@ def build_seeds(cmu_dir: Path, work: Path, trials=(("02", "02_01"), ("07", "07_1
         "02/skeleton-0.asf": (cmu_dir / "02" / "02.asf").read_bytes(),
     }
     args = Args(
-        out=str(work / "run" / "p.pt"), steps=24, synthetic_tasks=8, keyframes=(4,),
+        out=str(work / "run" / "p.pt"), steps=24, synthetic_tasks=8, keyframe_counts=(4,),
         batch_size=8, buffer_size=40, learning_starts=8, n_envs=2, demo_episodes=2,
         eval_every=24, progress=False, hidden=8, seed=3,
     )  # fmt: skip
@@ -935,10 +935,10 @@ def _read_checkpoint(path: Path, folder: Path, args_dict) -> list:
     costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
     net, target, opt = dqn.make_networks(args, feats)
     memory = replay.ReplayMemory(args.buffer_size, n)
-    demos = replay.ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
+    demos = replay.ReplayMemory(max(1, args.demo_episodes * (max(args.keyframe_counts) - 2)), n)
     rng = np.random.default_rng(args.seed)
     counters, log = checkpoint.restore(
-        ck, net, target, opt, memory, demos, rng, path=str(path), keyframes=args.keyframes,
+        ck, net, target, opt, memory, demos, rng, path=str(path), keyframe_counts=args.keyframe_counts,
         n_tasks=len(train_tasks),
     )  # fmt: skip
     if not len(memory):  # as train() does: no gradient step before there is a transition

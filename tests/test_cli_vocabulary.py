@@ -13,7 +13,7 @@ import pytest
 import sidql
 from sidql.commands import main as cli
 from sidql.commands.usage import UsageWarning, one_line_warning
-from sidql.learning.settings import Args, field_docs
+from sidql.learning.settings import Args, field_docs, option_of
 from sim import paths
 
 #: Commands that read a folder of CMU trials, that choose W keyframes (several: a sweep), that
@@ -64,7 +64,7 @@ def test_help_shows_no_empty_defaults_and_train_explains_every_setting():
     for f in dataclasses.fields(Args):
         if f.name in shown:
             continue
-        action = train["--" + f.name.replace("_", "-")]
+        action = train[option_of(f.name)]
         assert action.help and action.help == docs[f.name].replace("%", "%%"), f.name
     assert "discount" in train["--gamma"].help and train["--gamma"].default == Args().gamma
 

@@ -116,7 +116,7 @@ def test_nstep_transitions_discount_rewards_and_bootstrap():
 def test_tiny_training_beats_random_resumes_and_ships_a_loadable_policy(tmp_path, tasks):
     out = tmp_path / "p.pt"
     args = Args(
-        out=str(out), steps=240, synthetic_tasks=16, keyframes=(4, 6), batch_size=32,
+        out=str(out), steps=240, synthetic_tasks=16, keyframe_counts=(4, 6), batch_size=32,
         buffer_size=500, learning_starts=60, train_frequency=4, target_update=20, n_envs=4,
         demo_episodes=40, eval_every=120, progress=False, seed=1,
     )  # fmt: skip
@@ -145,7 +145,7 @@ def test_policy_round_trip_and_bad_inputs(tmp_path, tasks):
     torch.nn.init.normal_(net.adv_out.weight, std=0.5)
     torch.nn.init.normal_(net.value_out.weight, std=0.5)
     path = tmp_path / "p.pt"
-    save_policy(net, path, Args(keyframes=(5,)), {"train": [], "test": []}, {}, {})
+    save_policy(net, path, Args(keyframe_counts=(5,)), {"train": [], "test": []}, {}, {})
     loaded = load_policy(path)
     feats = np.stack([t.features for t in tasks])
     costs = np.stack([t.cost for t in tasks])
@@ -172,7 +172,7 @@ def test_dqn_method_is_lazy_and_the_env_accepts_its_actions(tasks):
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    env = KeyframeEnv(tasks, keyframes=(6,))
+    env = KeyframeEnv(tasks, keyframe_counts=(6,))
     net = KeyframeQNet(tasks[0].features.shape[1])
     obs, info = env.reset(seed=0)
     done = False
@@ -355,7 +355,7 @@ def test_a_planted_checkpoint_is_refused_by_resume_and_runs_nothing(tmp_path, ki
 def test_policy_files_of_another_format_version_are_refused(tmp_path, tasks):
     net = KeyframeQNet(tasks[0].features.shape[1])
     path = tmp_path / "p.pt"
-    save_policy(net, path, Args(keyframes=(5,)), {"train": [], "test": []}, {}, {})
+    save_policy(net, path, Args(keyframe_counts=(5,)), {"train": [], "test": []}, {}, {})
     payload = torch.load(path, weights_only=True)
     assert payload["format"] == POLICY_FORMAT
     for bad in ("sidql-dqn-policy/1", CHECKPOINT_FORMAT, None):
@@ -384,7 +384,7 @@ def test_resume_with_other_settings_is_one_line_and_exit_2(tmp_path):
     assert res.stderr.count("\n") == 1
     assert "written with --hidden 32, this run has --hidden 16" in res.stderr
     with pytest.raises(ModelFileError, match="--keyframes 5 10 15, this run has --keyframes 5 10"):
-        load_checkpoint(out.with_name("policy.pt.ckpt"), Args(keyframes=(5, 10)))
+        load_checkpoint(out.with_name("policy.pt.ckpt"), Args(keyframe_counts=(5, 10)))
     # what may change does not matter
     load_checkpoint(out.with_name("policy.pt.ckpt"), Args(steps=99, out="x", threads=2))
 
@@ -412,7 +412,7 @@ def test_train_without_clips_for_the_held_out_subjects_is_one_line_and_exit_2(tm
 
 def test_resume_of_a_real_run_refuses_another_width(tmp_path):
     args = Args(
-        out=str(tmp_path / "p.pt"), steps=40, synthetic_tasks=8, keyframes=(4,), batch_size=8,
+        out=str(tmp_path / "p.pt"), steps=40, synthetic_tasks=8, keyframe_counts=(4,), batch_size=8,
         buffer_size=100, learning_starts=10, n_envs=2, demo_episodes=4, eval_every=40,
         progress=False, hidden=8,
     )  # fmt: skip
@@ -519,3 +519,49 @@ def test_compiled_decisions_equal_the_torch_network_on_real_clips(cmu_dir):
         p, g = encode_clip(feats[i], *enc_w)
         np.testing.assert_allclose(p, proj[i], rtol=1e-4, atol=1e-5)
         np.testing.assert_allclose(g, glob[i], rtol=1e-4, atol=1e-5)
+
+
+def test_the_old_name_of_the_keyframe_counts_still_works_and_warns(tmp_path, tasks):
+    """``keyframes`` was a count in Args and Policy (and their files); it is ``keyframe_counts``
+    now, ``keyframes`` being an index array everywhere else."""
+    import dataclasses
+    import warnings
+
+    with pytest.warns(FutureWarning, match="Args.keyframes is an old name"):
+        args = Args(keyframes=(4, 6))
+    assert args.keyframe_counts == (4, 6) and args == Args(keyframe_counts=(4, 6))
+    with pytest.warns(FutureWarning, match="use Args.keyframe_counts"):
+        assert args.keyframes == (4, 6)
+    with pytest.warns(FutureWarning):
+        assert dataclasses.replace(args, keyframes=(7,)).keyframe_counts == (7,)
+    with pytest.raises(AttributeError, match="no attribute 'keyframez'"):
+        args.keyframez  # noqa: B018
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the new name does not warn
+        assert Args(keyframe_counts=(5,)).keyframe_counts == (5,)
+    # a policy file written before the rename (the shipped one is) still loads, counts and all
+    net = KeyframeQNet(tasks[0].features.shape[1])
+    path = tmp_path / "old.pt"
+    save_policy(net, path, Args(keyframe_counts=(5, 9)), {"train": [], "test": []}, {}, {})
+    payload = torch.load(path, weights_only=True)
+    assert payload["keyframe_counts"] == [5, 9] and tuple(payload["args"]["keyframe_counts"]) == (
+        5,
+        9,
+    )
+    payload["keyframes"] = payload.pop("keyframe_counts")
+    payload["args"]["keyframes"] = payload["args"].pop("keyframe_counts")
+    torch.save(payload, path)
+    old = load_policy(path)
+    assert old.keyframe_counts == (5, 9) and tuple(old.meta["args"]["keyframe_counts"]) == (5, 9)
+    with pytest.warns(FutureWarning, match="Policy.keyframes is an old name"):
+        assert old.keyframes == (5, 9)
+    assert load_policy(DEFAULT_POLICY).keyframe_counts == (5, 10, 15)
+    # and so does a checkpoint: its settings match a run with the same counts
+    ck = tmp_path / "old.ckpt"
+    save_checkpoint(ck, {}, Args(keyframe_counts=(5, 9)))
+    payload = torch.load(ck, weights_only=True)
+    payload["args"]["keyframes"] = payload["args"].pop("keyframe_counts")
+    torch.save(payload, ck)
+    load_checkpoint(ck, Args(keyframe_counts=(5, 9)))
+    with pytest.raises(ModelFileError, match="--keyframes 5 9, this run has --keyframes 5"):
+        load_checkpoint(ck, Args(keyframe_counts=(5,)))

@@ -49,7 +49,7 @@ def test_linear_cost_matrix_matches_rebuilding_the_signal():
 
 
 def test_rewards_sum_to_final_minus_initial_R_and_info_holds_the_terms(tasks):
-    env = KeyframeEnv(tasks, keyframes=(7,))
+    env = KeyframeEnv(tasks, keyframe_counts=(7,))
     obs, info = env.reset(seed=0)
     task = tasks[info["task_index"]]
     q0 = keyframe_q(task, [0, task.n_frames - 1])
@@ -88,7 +88,7 @@ def test_same_seed_same_episode(tasks):
 
 
 def test_invalid_actions_raise_clear_errors(tasks):
-    env = KeyframeEnv(tasks, keyframes=(3,))
+    env = KeyframeEnv(tasks, keyframe_counts=(3,))
     env.reset(seed=0)
     with pytest.raises(InvalidActionError, match="already a keyframe"):
         env.step(0)
@@ -131,7 +131,7 @@ def test_reset_refuses_unknown_option_keys_and_non_integer_values(tasks, options
 
 
 def test_float_actions_are_refused_not_truncated(tasks):
-    env = KeyframeEnv(tasks, keyframes=(6,))
+    env = KeyframeEnv(tasks, keyframe_counts=(6,))
     env.reset(seed=0)
     for bad in (13.9, 13.0, np.float32(5.0), np.array(4.0), "4", True, None):
         with pytest.raises(InvalidActionError, match="must be an integer"):
@@ -144,7 +144,7 @@ def test_float_actions_are_refused_not_truncated(tasks):
 
 def test_zero_initial_error_gives_zero_rewards():
     task = KeyframeTask(np.zeros((6, 2), np.float32), np.zeros((6, 6)))
-    env = KeyframeEnv([task], keyframes=(4,))
+    env = KeyframeEnv([task], keyframe_counts=(4,))
     env.reset(seed=0)
     _, r, _, _, info = env.step(2)
     assert r == 0.0 and info["R"] == 0.0
@@ -188,7 +188,7 @@ def test_action_masks_through_wrappers_the_documented_way():
 
 
 def test_observations_are_bounded_on_a_unit_scale_and_keep_the_rewards(tasks):
-    env = KeyframeEnv(tasks, keyframes=(8,))
+    env = KeyframeEnv(tasks, keyframe_counts=(8,))
     for space in ("features", "cost"):
         assert np.all(np.isfinite(env.observation_space[space].low))
         assert np.all(np.isfinite(env.observation_space[space].high))
@@ -223,7 +223,7 @@ def test_real_clip_observations_stay_in_bounds_and_env_q_is_q_error(walk_clip):
     from sidql.learning.tasks import clip_task
 
     clips = [walk_clip.slice(s, s + 60) for s in (0, 13, 26)]
-    env = KeyframeEnv([clip_task(c) for c in clips], keyframes=(9,))
+    env = KeyframeEnv([clip_task(c) for c in clips], keyframe_counts=(9,))
     rng = np.random.default_rng(1)
     for i, clip in enumerate(clips):
         obs, info = env.reset(options={"task": i})
@@ -265,3 +265,11 @@ def test_load_tasks_gives_env_tasks_and_a_repeated_load_reads_only_the_default_c
     assert env.observation_space.contains(obs)
     with pytest.raises(AssertionError, match="read the motion files"):  # False: no cache at all
         tasks_module.load_tasks(tmp_path / "data", progress=False, cache_dir=False)
+
+
+def test_the_old_keyword_for_the_keyframe_counts_still_works_and_warns(tasks):
+    with pytest.warns(FutureWarning, match="KeyframeEnv\\(keyframes=...\\) is an old name"):
+        env = KeyframeEnv(tasks, keyframes=(6,))
+    assert env.keyframe_counts == (6,)
+    obs, _ = env.reset(seed=0)
+    assert obs["remaining"] == 4

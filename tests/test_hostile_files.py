@@ -268,7 +268,7 @@ def run(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("run") / "p.pt"
     args = Args(
-        out=str(out), steps=24, synthetic_tasks=8, keyframes=(4,), batch_size=8, buffer_size=40,
+        out=str(out), steps=24, synthetic_tasks=8, keyframe_counts=(4,), batch_size=8, buffer_size=40,
         learning_starts=8, n_envs=2, demo_episodes=2, eval_every=24, progress=False, hidden=8,
     )  # fmt: skip
     train(args)

@@ -67,3 +67,32 @@ def test_optimum_costs_of_a_still_clip_and_bad_counts(walk_clip):
     for W in (1, 21):
         with pytest.raises(ValueError, match="W must be"):
             optimum_cost_matrix(clip, W)
+
+
+def test_the_compiled_gather_gives_the_chart_and_refuses_what_chart_refuses(walk_clip):
+    from dataclasses import fields, replace
+
+    from sidql.keyframes.segment_costs import clip_stacked, stacked
+    from sim.errors import MotionDataError
+
+    for clip in (smooth_clip(N=40, seed=3), walk_clip.slice(10, 70)):
+        X, R = clip_stacked(clip)
+        want_x, want_r = stacked(chart(clip))
+        assert np.array_equal(X, want_x) and np.array_equal(R, want_r)
+    clip = walk_clip.slice(0, 30)
+    bad = clip.positions.copy()
+    bad[7, clip.names.index("lfemur"), 1] = np.nan
+    with pytest.raises(MotionDataError, match="non-finite"):
+        clip_stacked(replace(clip, positions=bad))
+    with pytest.raises(MotionDataError, match="non-finite"):
+        chart(replace(clip, positions=bad))
+    keep = [i for i, n in enumerate(clip.names) if n != "lhumerus"]
+    parents = np.array([keep.index(p) if p in keep else -1 for p in clip.parents[keep]])
+    J = len(clip.names)
+    per_point = {f.name: getattr(clip, f.name)[:, keep] for f in fields(clip)
+                 if isinstance(getattr(clip, f.name), np.ndarray)
+                 and getattr(clip, f.name).ndim >= 2 and getattr(clip, f.name).shape[1] == J}  # fmt: skip
+    lacking = replace(clip, names=tuple(clip.names[i] for i in keep), parents=parents, **per_point)
+    for fn in (clip_stacked, chart):
+        with pytest.raises(MotionDataError, match="lhumerus"):
+            fn(lacking)

@@ -31,7 +31,7 @@ def register(p) -> None:
     d = Args()
     docs = {k: v.replace("%", "%%") for k, v in field_docs().items()}  # help is %-formatted
     add_data(p)
-    add_keyframes(p, docs["keyframes"], default=list(d.keyframes), many=True)
+    add_keyframes(p, docs["keyframe_counts"], default=list(d.keyframe_counts), many=True)
     p.add_argument("--steps", type=int, default=d.steps, metavar="N", help=docs["steps"])
     p.add_argument("--out", default=d.out, metavar="F.pt", help=docs["out"])
     p.add_argument("--resume", action="store_true", help=docs["resume"])
@@ -42,7 +42,7 @@ def register(p) -> None:
     add_quiet(p)
     tuned = p.add_argument_group("DQN hyper-parameters (sidql.learning.settings.Args)")
     for f in dataclasses.fields(Args):
-        if f.name in {"data", "keyframes", "steps", "out", "resume", "seed", "test_subjects",
+        if f.name in {"data", "keyframe_counts", "steps", "out", "resume", "seed", "test_subjects",
                       "cache_dir", "progress", "extra", "synthetic_tasks", "train_also"}:  # fmt: skip
             continue
         flag = "--" + f.name.replace("_", "-")
@@ -67,7 +67,7 @@ def run(args) -> int:
         f.name: getattr(args, f.name) for f in dataclasses.fields(Args) if hasattr(args, f.name)
     }
     values["data"] = str(data_folder(args))
-    values["keyframes"] = tuple(args.W)  # checked with the rest (settings_problems)
+    values["keyframe_counts"] = tuple(args.W)  # checked with the rest (settings_problems)
     values["test_subjects"] = tuple(args.test_subjects) if args.test_subjects else None
     values["progress"] = not args.quiet
     problems = settings_problems(Args(**values))

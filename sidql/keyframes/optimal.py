@@ -21,12 +21,12 @@ from sidql.keyframes.segment_costs import (
     SEPARABLE,
     _fill_costs,
     _frame_cost,
-    _stacked_chart,
     catmull_rom_costs,
     clip_cost_matrix,
+    clip_stacked,
     segment_cost_matrix,
 )
-from sidql.keyframes.spherical import M_BONES, SIN_EPS, SphericalSeries, chart_points_of
+from sidql.keyframes.spherical import M_BONES, SphericalSeries
 from sim.errors import UnknownNameError, UsageError, require_type
 
 
@@ -141,8 +141,25 @@ def clip_optimal_table(
 def clip_optimal_keyframes(clip, W: int, reconstruction: str = "hermite") -> np.ndarray:
     """(W,) the same keyframes as ``clip_optimal_table(clip, reconstruction, W).keyframes(W)``,
     from :func:`optimum_cost_matrix` (only the segments that can be in the optimum): a fraction
-    of the work."""
-    return solve(optimum_cost_matrix(clip, W, reconstruction), M_BONES, W).keyframes(W)
+    of the work, in one compiled call after the chart."""
+    if reconstruction not in SEPARABLE:
+        raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
+    X, R = clip_stacked(clip)
+    if not 2 <= W <= X.shape[0]:
+        raise UsageError(f"W must be in [2, {X.shape[0]}]; got {W}")
+    return _optimum_keyframes(X, R, reconstruction == "linear", int(W))
+
+
+@numba.njit(cache=True)
+def _optimum_keyframes(X, R, linear, W):
+    """(W,) the optimum's keyframes from the stacked chart: :func:`_optimum_costs`, the
+    programme (:func:`_dp`) and :meth:`OptimalTable.keyframes`' walk back, compiled."""
+    _, P = _dp(_optimum_costs(X, R, linear, W), W)
+    out = np.empty(W, np.int64)
+    out[W - 1] = X.shape[0] - 1
+    for w in range(W, 1, -1):
+        out[w - 2] = P[w, out[w - 1]]
+    return out
 
 
 def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.ndarray:
@@ -164,10 +181,9 @@ def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.nda
     """
     if reconstruction not in SEPARABLE:
         raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
-    P, V, parents = chart_points_of(clip)
-    if not 2 <= W <= P.shape[0]:
-        raise UsageError(f"W must be in [2, {P.shape[0]}]; got {W}")
-    X, R = _stacked_chart(P, V, parents, float(clip.dt), SIN_EPS)
+    X, R = clip_stacked(clip)
+    if not 2 <= W <= X.shape[0]:
+        raise UsageError(f"W must be in [2, {X.shape[0]}]; got {W}")
     return _optimum_costs(X, R, reconstruction == "linear", int(W))
 
 

@@ -21,8 +21,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sidql.keyframes.spherical import SIN_EPS, SphericalSeries, _chart_kernel, chart_points_of
-from sim.errors import UnknownNameError, UsageError
+from sidql.keyframes.spherical import (
+    SIN_EPS,
+    SphericalSeries,
+    _chart_kernel,
+    chart_points_of,
+    protocol_maps,
+)
+from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.model.angles import wrap_angle
 
 #: The reconstructions (curves of :mod:`sidql.keyframes.curves`) whose Q separates over segments.
@@ -293,6 +299,44 @@ def _stacked_chart(P, V, parents, dt, sin_eps):
     return X, R
 
 
+@numba.njit(cache=True)
+def _clip_stacked_chart(positions, velocities, idx, parents, dt, sin_eps):
+    """:func:`_stacked_chart` of the points ``idx`` of (N, J, 3) ``positions`` and
+    ``velocities``, gathered here; ``ok`` False (and empty arrays) if any of them is not
+    finite. Returns (X, R, ok)."""
+    N = positions.shape[0]
+    K = idx.shape[0]
+    P = np.empty((N, K, 3))
+    V = np.empty((N, K, 3))
+    for n in range(N):
+        for k in range(K):
+            for a in range(3):
+                p = positions[n, idx[k], a]
+                v = velocities[n, idx[k], a]
+                if not (np.isfinite(p) and np.isfinite(v)):
+                    return np.empty((0, 0)), np.empty((0, 0)), False
+                P[n, k, a] = p
+                V[n, k, a] = v
+    X, R = _stacked_chart(P, V, parents, dt, sin_eps)
+    return X, R, True
+
+
+def clip_stacked(clip) -> tuple[np.ndarray, np.ndarray]:
+    """The chart of ``clip`` as :func:`stacked` lays it out, (N, 2M) angles [rad] and rates
+    times dt [rad/frame]: :func:`sidql.keyframes.spherical.chart_points_of` and the chart in one
+    compiled call (the same numbers).
+
+    Raises:
+        MotionDataError: as :func:`sidql.keyframes.spherical.chart`.
+    """
+    idx, parents = protocol_maps(clip)
+    X, R, ok = _clip_stacked_chart(clip.positions, clip.velocities, idx, parents,
+                                   float(clip.dt), SIN_EPS)  # fmt: skip
+    if not ok:
+        raise MotionDataError(clip.source or None, None, "non-finite positions or velocities")
+    return X, R
+
+
 def clip_cost_matrix(clip, reconstruction: str = "hermite") -> np.ndarray:
     """:func:`segment_cost_matrix` of ``chart(clip)``, chart and costs in one compiled pass (the
     exact optimum of a clip needs nothing else from the chart).
@@ -318,6 +362,5 @@ def clip_stacked_costs(
     """
     if reconstruction not in SEPARABLE:
         raise UnknownNameError("separable reconstruction", reconstruction, SEPARABLE)
-    P, V, parents = chart_points_of(clip)
-    X, R = _stacked_chart(P, V, parents, float(clip.dt), SIN_EPS)
+    X, R = clip_stacked(clip)
     return X, R, _cost_matrix(X, R, reconstruction == "linear")

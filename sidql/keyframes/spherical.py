@@ -334,6 +334,22 @@ def _skeleton_maps(names: tuple[str, ...], parents: tuple[int, ...]):
     return idx, protocol_parents(names, np.array(parents))
 
 
+def protocol_maps(clip: Clip) -> tuple[np.ndarray, np.ndarray]:
+    """(23,) indices of :data:`POINTS` in ``clip.names`` and (23,) their parents as indices into
+    POINTS, cached per skeleton (a clip costs a look-up; treat both as read-only).
+
+    Raises:
+        MotionDataError: a protocol point is missing (the message names it).
+    """
+    try:
+        return _skeleton_maps(tuple(clip.names), tuple(clip.parents.tolist()))
+    except MotionDataError as e:
+        raise MotionDataError(clip.source or None, None, e.problem) from None
+    except ValueError:  # a protocol point is missing
+        protocol_indices(clip)  # a clear error naming it
+        raise
+
+
 def chart_points_of(clip: Clip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The protocol points of a clip as the chart kernel takes them: (N, 23, 3) positions [m] and
     velocities [m/s] (world axes, contiguous float64) and (23,) parents, checked as
@@ -342,11 +358,7 @@ def chart_points_of(clip: Clip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Raises:
         MotionDataError: a protocol point is missing, or the data holds non-finite values.
     """
-    protocol_indices(clip)  # a clear error naming any missing point
-    try:
-        idx, parents = _skeleton_maps(tuple(clip.names), tuple(int(p) for p in clip.parents))
-    except MotionDataError as e:
-        raise MotionDataError(clip.source or None, None, e.problem) from None
+    idx, parents = protocol_maps(clip)
     pos = np.ascontiguousarray(clip.positions[:, idx], dtype=np.float64)
     vel = np.ascontiguousarray(clip.velocities[:, idx], dtype=np.float64)
     if not (np.isfinite(pos).all() and np.isfinite(vel).all()):

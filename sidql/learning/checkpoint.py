@@ -21,7 +21,13 @@ import numpy as np
 import torch
 
 from sidql.learning.files import load_payload, save_payload
-from sidql.learning.settings import RESUME_MAY_CHANGE, Args
+from sidql.learning.settings import (
+    LATER_DEFAULTS,
+    RESUME_MAY_CHANGE,
+    Args,
+    current_fields,
+    option_of,
+)
 from sim.errors import ModelFileError
 from sim.files import excerpt
 
@@ -52,14 +58,15 @@ def load_checkpoint(path: Path, args: Args) -> dict:
     stored, now = ck.get("args"), asdict(args)
     if not isinstance(stored, dict):
         raise ModelFileError(str(path), None, "holds no training settings")
+    stored = current_fields(stored)  # settings stored under an old field name
     for key, value in now.items():
         if key in RESUME_MAY_CHANGE:
             continue
-        old = stored.get(key)
+        old = stored.get(key, LATER_DEFAULTS.get(key))
         if isinstance(value, tuple) and isinstance(old, list | tuple):
             old = tuple(old)
         if old != value:
-            flag = "--" + key.replace("_", "-")
+            flag = option_of(key)
             raise ModelFileError(
                 str(path), None, f"written with {flag} {_show(old)}, this run has {flag} "
                 f"{_show(value)}; resume with the same settings or choose another --out",
@@ -78,7 +85,7 @@ def training_state(net, target, opt, memory, demos, counters, log_rows, rng, spl
 
 
 def restore(ck: dict, net, target, opt, memory, demos, rng, *, path: str = "",
-            keyframes=(), n_tasks: int = 0) -> tuple[dict, list[dict]]:  # fmt: skip
+            keyframe_counts=(), n_tasks: int = 0) -> tuple[dict, list[dict]]:  # fmt: skip
     """Load a checkpoint's state into the run's objects; returns (counters, log rows).
 
     Every entry is checked against those objects first (:func:`checkpoint_problem`), so a file
@@ -88,7 +95,13 @@ def restore(ck: dict, net, target, opt, memory, demos, rng, *, path: str = "",
         ModelFileError: one line naming ``path`` and the entry that does not fit.
     """
     problem = checkpoint_problem(
-        ck, net=net, opt=opt, memory=memory, demos=demos, keyframes=keyframes, n_tasks=n_tasks
+        ck,
+        net=net,
+        opt=opt,
+        memory=memory,
+        demos=demos,
+        keyframe_counts=keyframe_counts,
+        n_tasks=n_tasks,
     )
     if problem:
         raise ModelFileError(path or None, None, f"cannot resume from it: {problem}")
@@ -106,14 +119,15 @@ def restore(ck: dict, net, target, opt, memory, demos, rng, *, path: str = "",
     return {k: int(ck[k]) for k in ("step", "updates", "episodes")}, list(ck["log"])
 
 
-def checkpoint_problem(ck: dict, *, net, opt, memory, demos, keyframes, n_tasks: int) -> str | None:
+def checkpoint_problem(ck: dict, *, net, opt, memory, demos, keyframe_counts,
+                       n_tasks: int) -> str | None:  # fmt: skip
     """Why ``ck`` cannot be loaded into this run's objects, or None when it can.
 
     Args:
         ck: the loaded checkpoint (settings already matched).
         net: the run's Q-network (the target network has the same layout); opt: its optimiser;
             memory, demos: its replay memories (:class:`sidql.learning.replay.ReplayMemory`);
-        keyframes: the run's W values (the log's columns); n_tasks: its training tasks.
+        keyframe_counts: the run's W values (the log's columns); n_tasks: its training tasks.
     """
     for key in _COUNTERS:
         v = ck.get(key)
@@ -128,10 +142,10 @@ def checkpoint_problem(ck: dict, *, net, opt, memory, demos, keyframes, n_tasks:
     if problem:
         return problem
     for key, mem in (("memory", memory), ("demos", demos)):
-        problem = _memory_problem(ck.get(key), mem, key, max(keyframes), n_tasks)
+        problem = _memory_problem(ck.get(key), mem, key, max(keyframe_counts), n_tasks)
         if problem:
             return problem
-    problem = _log_problem(ck.get("log"), keyframes)
+    problem = _log_problem(ck.get("log"), keyframe_counts)
     if problem:
         return problem
     generator = np.random.default_rng()

@@ -63,6 +63,7 @@ from sidql.learning.tasks import (
     insertion_gain,
     keyframe_q,
     load_tasks,
+    reward_tasks,
     synthetic_tasks,
 )
 from sim.errors import ModelFileError, MotionDataError, UsageError
@@ -106,7 +107,8 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
         train_s, test_s = split_subjects(found, args.test_subjects, args.seed)
     except ValueError as e:
         raise MotionDataError(args.data, None, str(e)) from None
-    kw = dict(cache_dir=args.cache_dir, progress=args.progress)  # None: the default task cache
+    physics = args.reward == "physics"  # then every task also carries its physical costs
+    kw = dict(cache_dir=args.cache_dir, progress=args.progress, physics=physics)
     test_tasks = load_tasks(args.data, stride=60, subjects=set(test_s), **kw).tasks()
     if not test_tasks:
         raise MotionDataError(
@@ -126,15 +128,16 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
                 f"--train-also: left out {len(entries) - len(kept)} of {len(entries)} clips made "
                 f"from held-out subjects' trials ({', '.join(test_s)})", file=sys.stderr,
             )  # fmt: skip
-        train_tasks += [_also_task(c, e, args.train_also) for c, e in kept]
-    return train_tasks, test_tasks, {"train": train_s, "test": test_s}
+        train_tasks += [_also_task(c, e, args.train_also, physics) for c, e in kept]
+    split = {"train": train_s, "test": test_s}
+    return reward_tasks(train_tasks, args.reward), reward_tasks(test_tasks, args.reward), split
 
 
-def _also_task(clip, entry: dict, folder) -> KeyframeTask:
+def _also_task(clip, entry: dict, folder, physics: bool = False) -> KeyframeTask:
     """The task of a ``--train-also`` clip; one that cannot be a task is named by its index
     file and entry (never by the path its ``source`` claims)."""
     try:
-        return clip_task(clip, subject=str(entry.get("subject", "")))
+        return clip_task(clip, subject=str(entry.get("subject", "")), physics=physics)
     except MotionDataError as e:
         name = excerpt(str(entry.get("file")), 100, quote=False)
         raise MotionDataError(
@@ -213,7 +216,7 @@ def play_demonstrations(env: KeyframeEnv, memory: ReplayMemory, args: Args, rng)
     nstep = NStep(args.n_step, args.gamma)
     for _ in range(args.demo_episodes):
         i = int(rng.integers(len(env.tasks)))
-        w = int(rng.choice(args.keyframes))
+        w = int(rng.choice(args.keyframe_counts))
         if (i, w) not in cache:
             cache[i, w] = optimal_keyframes(env.tasks[i].cost, w)
         todo = set(int(k) for k in cache[i, w][1:-1])
@@ -341,7 +344,7 @@ def training_data(args: Args, ck: dict | None, checkpoint: Path) -> TrainingData
     feats = torch.as_tensor(np.stack([t.features for t in train_tasks]))
     costs_np = np.ascontiguousarray(np.stack([t.cost for t in train_tasks]), dtype=np.float64)
     costs = torch.as_tensor(costs_np.astype(np.float32))
-    base = baselines(test_tasks, args.keyframes)
+    base = baselines(test_tasks, args.keyframe_counts)
     return TrainingData(train_tasks, test_tasks, split, feats, costs_np, costs, base)
 
 
@@ -387,23 +390,23 @@ def train(args: Args) -> dict:
     data = training_data(args, ck, files.checkpoint)
     n = data.train[0].n_frames
     net, target, opt = make_networks(args, data.feats)
-    envs = [KeyframeEnv(data.train, args.keyframes) for _ in range(args.n_envs)]
+    envs = [KeyframeEnv(data.train, args.keyframe_counts) for _ in range(args.n_envs)]
     memory = ReplayMemory(args.buffer_size, n)
-    demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframes) - 2)), n)
+    demos = ReplayMemory(max(1, args.demo_episodes * (max(args.keyframe_counts) - 2)), n)
     if ck is not None:
         counters, log_rows = restore(
             ck, net, target, opt, memory, demos, rng, path=str(files.checkpoint),
-            keyframes=args.keyframes, n_tasks=len(data.train),
+            keyframe_counts=args.keyframe_counts, n_tasks=len(data.train),
         )  # fmt: skip
         seeds = [args.seed + 1000 * (counters["step"] + 1) + i for i in range(len(envs))]
     else:
         counters, log_rows = {"step": 0, "updates": 0, "episodes": 0}, []
         if args.demo_episodes:
-            play_demonstrations(KeyframeEnv(data.train, args.keyframes), demos, args, rng)
+            play_demonstrations(KeyframeEnv(data.train, args.keyframe_counts), demos, args, rng)
         seeds = [args.seed + i for i in range(len(envs))]
     step = run_loop(args, data, files, (net, target, opt), (memory, demos), envs, seeds,
                     counters, log_rows, rng)  # fmt: skip
-    final = {w: log_rows[-1][f"dqn_W{w}"] for w in args.keyframes}
+    final = {w: log_rows[-1][f"dqn_W{w}"] for w in args.keyframe_counts}
     save_policy(net, files.policy, args, data.split, final, data.base)
     return {"dqn": final, **data.base, "split": data.split, "steps": step}
 
@@ -424,10 +427,10 @@ def run_loop(args, data, files, nets, memories, envs, seeds, counters, log_rows,
     losses, q_mean = [], math.nan
     eps_steps = args.eps_fraction * args.steps
     if not log_rows:  # step 0: the untrained network = its prior (greedy, or the greedy rollout)
-        heldout = evaluate(net, data.test, args.keyframes)
+        heldout = evaluate(net, data.test, args.keyframe_counts)
         row = log_row({"step": 0, "updates": 0, "episodes": 0}, 0.0, args.eps_start, math.nan,
-                      math.nan, heldout, data.base, args.keyframes)  # fmt: skip
-        record(files, log_rows, row, args.keyframes)
+                      math.nan, heldout, data.base, args.keyframe_counts)  # fmt: skip
+        record(files, log_rows, row, args.keyframe_counts)
 
     bar = tqdm(total=args.steps, initial=step, desc="train", disable=not args.progress)
     while step < args.steps:
@@ -462,16 +465,16 @@ def run_loop(args, data, files, nets, memories, envs, seeds, counters, log_rows,
                     target.load_state_dict(net.state_dict())
             # evaluate on the held-out clips, log, checkpoint
             if step % args.eval_every == 0 or step == args.steps:
-                heldout = evaluate(net, data.test, args.keyframes)
+                heldout = evaluate(net, data.test, args.keyframe_counts)
                 counters = {"step": step, "updates": updates, "episodes": episodes}
                 row = log_row(
                     counters, elapsed0 + time.perf_counter() - t0,
                     linear_schedule(args.eps_start, args.eps_end, eps_steps, step),
                     float(np.mean(losses)) if losses else math.nan, q_mean, heldout, data.base,
-                    args.keyframes,
+                    args.keyframe_counts,
                 )  # fmt: skip
                 losses = []
-                record(files, log_rows, row, args.keyframes)
+                record(files, log_rows, row, args.keyframe_counts)
                 state = training_state(net, target, opt, memory, demos, counters, log_rows, rng,
                                        data.split, len(data.train))  # fmt: skip
                 save_checkpoint(files.checkpoint, state, args)

@@ -10,6 +10,7 @@ loaded with ``torch.load(weights_only=True)`` and a format check (:mod:`sidql.le
 from __future__ import annotations
 
 import os
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from sidql.learning.decide import decide_clip, encode_clip, encoder_weights, hea
 from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
+from sidql.learning.settings import current_fields
 from sidql.learning.tasks import stacked_features
 from sim.errors import ModelFileError, UsageError
 from sim.files import MAX_POLICY_BYTES
@@ -31,11 +33,19 @@ DEFAULT_POLICY = package_file("sidql", "data/policy.pt")
 
 
 def _weight_key(net: KeyframeQNet) -> tuple:
-    """Identity and in-place version of every tensor of ``net``: changes whenever a weight is
-    replaced or written (optimiser steps and ``load_state_dict`` write in place, bumping it)."""
-    return tuple((id(t), t._version) for t in (*net.parameters(), *net.buffers())) + tuple(
-        id(m) for m in net.children()
-    )
+    """Identity and in-place version of every tensor of ``net``, and every module's identity:
+    changes whenever a weight or module is replaced or written (optimiser steps and
+    ``load_state_dict`` write in place, bumping the version). A plain walk over the module
+    dicts: a tenth of the cost of ``named_parameters`` (which a decision would pay per clip)."""
+    key = []
+    stack = [net]
+    while stack:
+        m = stack.pop()
+        key.append(id(m))
+        for group in (m._parameters, m._buffers):
+            key.extend((id(t), t._version) for t in group.values() if t is not None)
+        stack.extend(c for c in m._modules.values() if c is not None)
+    return tuple(key)
 
 
 class Policy:
@@ -43,13 +53,21 @@ class Policy:
 
     Attributes:
         net: the :class:`sidql.learning.qnet.KeyframeQNet` (eval mode).
-        keyframes: the W it was trained on (it accepts any 3 <= W <= N).
+        keyframe_counts: the keyframe counts W it was trained on (it accepts any
+            2 <= W <= N; ``keyframes``, the old name, still reads it and warns).
         meta: training arguments, subject split and held-out figures stored with it.
     """
 
-    def __init__(self, net: KeyframeQNet, keyframes, meta: dict):
-        self.net, self.keyframes, self.meta = net.eval(), tuple(keyframes), meta
+    def __init__(self, net: KeyframeQNet, keyframe_counts, meta: dict):
+        self.net, self.keyframe_counts, self.meta = net.eval(), tuple(keyframe_counts), meta
         self.uses_prior = net.config.get("prior", "greedy") == "rollout"
+
+    @property
+    def keyframes(self) -> tuple[int, ...]:
+        """The old name of :attr:`keyframe_counts` (warns)."""
+        warnings.warn("Policy.keyframes is an old name; use Policy.keyframe_counts",
+                      FutureWarning, stacklevel=2)  # fmt: skip
+        return self.keyframe_counts
 
     def decide(self, features: np.ndarray, costs: np.ndarray, W: int) -> np.ndarray:
         """Greedy (masked argmax) decisions for a batch of clips, all in compiled code: per clip
@@ -82,7 +100,7 @@ class Policy:
             self._cached_weights = (encoder_weights(self.net), head_weights(self.net))
             # the key holds ids: keep the objects alive so that no new tensor can reuse one
             self._weights_key, self._keyed = key, (*self.net.parameters(), *self.net.buffers(),
-                                                   *self.net.children())  # fmt: skip
+                                                   *self.net.modules())  # fmt: skip
         return self._cached_weights
 
     def _check(self, features, costs, W):
@@ -220,13 +238,16 @@ def _load(path: str, _mtime: int, _inode: int = 0) -> Policy:
         args = check_config(cfg, payload["state_dict"])  # before allocating any weight
         net = KeyframeQNet(*args[:3], prior=args[3])
         net.load_state_dict(payload["state_dict"])
-        keyframes = tuple(int(w) for w in payload["keyframes"])
+        payload = current_fields(payload)  # a file written before the counts' rename
+        counts = tuple(int(w) for w in payload["keyframe_counts"])
     except (KeyError, TypeError, ValueError, RuntimeError) as e:
         first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
         raise ModelFileError(path, None, f"not a usable policy: {first}") from None
     meta = {k: v for k, v in payload.items() if k != "state_dict"}
+    if isinstance(meta.get("args"), dict):
+        meta["args"] = current_fields(meta["args"])
     meta["file"] = path
-    return Policy(net, keyframes, meta)
+    return Policy(net, counts, meta)
 
 
 def dqn(clip, W: int, *, seed: int = 0) -> np.ndarray:

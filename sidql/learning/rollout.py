@@ -84,13 +84,13 @@ def _merge(seqs, lens, count, k, out):
 
 
 @numba.njit(cache=True)
-def _merge_sum(seqs, lens, count, k, buf):
-    """Sum of the first ``k`` values of the head-merge of ``count`` sequences (``buf``: scratch
-    of at least ``k``)."""
-    total = 0.0
-    for i in range(_merge(seqs, lens, count, k, buf)):
-        total += buf[i]
-    return total
+def _pair(a, a_len, b, b_len, two, lens2):
+    """Rows ``a[:a_len]`` and ``b[:b_len]`` into ``two`` (2, width) and their lengths into
+    ``lens2``, for :func:`_merge` (the first row wins ties)."""
+    two[0, :a_len] = a[:a_len]
+    two[1, :b_len] = b[:b_len]
+    lens2[0] = a_len
+    lens2[1] = b_len
 
 
 @numba.njit(cache=True)
@@ -105,34 +105,71 @@ def rollout_values_seq(cost, mask, rem, seq, length):
         return out
     s0 = max(cost[0, n - 1], 1e-12)
     kmax = seq.shape[2]
-    # others[j]: the merged greedy sequence of every current segment except segment j
+    # others[j]: the merged greedy sequence of every current segment except segment j, as the
+    # merge of the segments before j with those after it: a head-merge of merges picks what the
+    # merge of all picks (the next of a merge is the largest of its heads, ties to the earlier
+    # segment), so two sweeps of k-long merges replace one merge of nk - 2 segments per j
+    width = max(k, kmax)
+    before = np.zeros((nk, width))  # before[j]: segments 0..j-1; after[j]: segments j..nk-2
+    after = np.zeros((nk, width))
+    before_len = np.zeros(nk, np.int64)
+    after_len = np.zeros(nk, np.int64)
+    two = np.zeros((2, width))
+    lens2 = np.zeros(2, np.int64)
+    for j in range(nk - 1):
+        _pair(before[j], before_len[j], seq[keys[j], keys[j + 1]], length[keys[j], keys[j + 1]],
+              two, lens2)  # fmt: skip
+        before_len[j + 1] = _merge(two, lens2, 2, k, before[j + 1])
+    for j in range(nk - 2, -1, -1):
+        _pair(seq[keys[j], keys[j + 1]], length[keys[j], keys[j + 1]], after[j + 1],
+              after_len[j + 1], two, lens2)  # fmt: skip
+        after_len[j] = _merge(two, lens2, 2, k, after[j])
     others = np.zeros((nk - 1, k))
     others_len = np.zeros(nk - 1, np.int64)
-    buf = np.zeros((nk, kmax))
-    blen = np.zeros(nk, np.int64)
     for j in range(nk - 1):
-        c = 0
-        for i in range(nk - 1):
-            if i != j:
-                buf[c] = seq[keys[i], keys[i + 1]]
-                blen[c] = length[keys[i], keys[i + 1]]
-                c += 1
-        others_len[j] = _merge(buf, blen, c, k, others[j])
-    three = np.zeros((3, kmax))
-    lens = np.zeros(3, np.int64)
-    scratch = np.zeros(k)
+        _pair(before[j], before_len[j], after[j + 1], after_len[j + 1], two, lens2)
+        others_len[j] = _merge(two, lens2, 2, k, others[j])
     for j in range(nk - 1):
         l0 = keys[j]
         r0 = keys[j + 1]
-        three[0, :k] = others[j, :k]
-        lens[0] = others_len[j]
         for a in range(l0 + 1, r0):
-            three[1] = seq[l0, a]
-            lens[1] = length[l0, a]
-            three[2] = seq[a, r0]
-            lens[2] = length[a, r0]
-            out[a] = _merge_sum(three, lens, 3, k, scratch) / s0
+            total = _merge3_sum(others[j], others_len[j], seq[l0, a], length[l0, a], seq[a, r0],
+                                length[a, r0], k)  # fmt: skip
+            out[a] = total / s0
     return out
+
+
+@numba.njit(cache=True)
+def _merge3_sum(s0, n0, s1, n1, s2, n2, k):
+    """Sum of the first ``k`` values of the head-merge (:func:`_merge`'s picks: the largest head,
+    ties to the earlier sequence) of ``s0[:n0]``, ``s1[:n1]``, ``s2[:n2]``, in the order picked,
+    without copying them."""
+    i0 = 0
+    i1 = 0
+    i2 = 0
+    total = 0.0
+    for _ in range(k):
+        best = -np.inf
+        bi = -1
+        if i0 < n0 and s0[i0] > best:
+            best = s0[i0]
+            bi = 0
+        if i1 < n1 and s1[i1] > best:
+            best = s1[i1]
+            bi = 1
+        if i2 < n2 and s2[i2] > best:
+            best = s2[i2]
+            bi = 2
+        if bi < 0:
+            break
+        total += best
+        if bi == 0:
+            i0 += 1
+        elif bi == 1:
+            i1 += 1
+        else:
+            i2 += 1
+    return total
 
 
 @numba.njit(cache=True)

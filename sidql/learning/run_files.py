@@ -19,7 +19,7 @@ def save_policy(net, path, args, split, final, baselines) -> None:
         "format": POLICY_FORMAT,
         "config": dict(net.config),
         "state_dict": {k: v.clone() for k, v in net.state_dict().items()},
-        "keyframes": list(args.keyframes),
+        "keyframe_counts": list(args.keyframe_counts),
         "args": {k: v for k, v in asdict(args).items() if k != "extra"},
         "split": split,
         "heldout": {"dqn": final, **baselines},

@@ -4,8 +4,10 @@ line builds its options from :class:`Args` without importing torch."""
 from __future__ import annotations
 
 import ast
+import functools
 import inspect
 import math
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -16,6 +18,21 @@ from sim.errors import UsageError
 #: match: the network, the replay memories and the data split are built from it).
 RESUME_MAY_CHANGE = ("steps", "resume", "out", "cache_dir", "progress", "threads", "eval_every",
                      "extra", "data")  # fmt: skip
+#: Settings added after checkpoints were first written, with the value every older run had (a
+#: checkpoint that does not store one is read as having it).
+LATER_DEFAULTS = {"reward": "q"}
+#: The rewards a run may learn from (:attr:`Args.reward`).
+REWARDS = ("q", "physics")
+
+#: Old names of :class:`Args` fields, still accepted (``Args(keyframes=...)``, ``args.keyframes``
+#: and the settings stored in older checkpoint and policy files): old name -> the name now.
+OLD_FIELDS = {"keyframes": "keyframe_counts"}
+
+
+def option_of(name: str) -> str:
+    """The ``sidql train`` option of :class:`Args` field ``name``: ``--`` and the name with
+    dashes, except the keyframe counts, ``-W/--keyframes`` as in every command."""
+    return "--keyframes" if name == "keyframe_counts" else "--" + name.replace("_", "-")
 
 
 @dataclass
@@ -25,7 +42,7 @@ class Args:
 
     data: str | None = None
     """directory of CMU trials (``sim.motion.dataset.find_trials``); None: synthetic tasks (for tests)"""
-    keyframes: tuple[int, ...] = (5, 10, 15)
+    keyframe_counts: tuple[int, ...] = (5, 10, 15)
     """keyframe counts W the policy learns (one drawn per episode)"""
     steps: int = 16_000
     """environment steps (keyframes chosen) in total"""
@@ -43,6 +60,11 @@ class Args:
     """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
     synthetic_tasks: int = 64
     """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
+    reward: str = "q"
+    """"q": the paper's reward (eq. 21-22, from Q); "physics": from Q plus the physics method's
+    weight (its stated rule) times the physical cost of the segments (skating, floor, residual
+    force; sidql.keyframes.physical_costs): every task's segment costs become the physics
+    method's, so demonstrations, prior and held-out figures follow them (needs --data)"""
     train_also: str | None = None
     """a ``sidql synth`` / ``sidql dataset`` folder whose 60-frame clips join the training tasks
     only (the held-out tasks stay the real held-out subjects')"""
@@ -97,6 +119,39 @@ class Args:
     """tqdm progress bar"""
     extra: dict = field(default_factory=dict)
     """free-form notes stored with the policy"""
+
+    def __getattr__(self, name: str):  # only for names that are not fields: the old ones
+        if name in OLD_FIELDS:
+            _warn_old_field(name)
+            return getattr(self, OLD_FIELDS[name])
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+
+def _warn_old_field(name: str) -> None:
+    warnings.warn(f"Args.{name} is an old name; use Args.{OLD_FIELDS[name]}", FutureWarning,
+                  stacklevel=3)  # fmt: skip
+
+
+def current_fields(values: dict) -> dict:
+    """``values`` (settings by field name, e.g. as a checkpoint or policy file stored them) with
+    every old field name (:data:`OLD_FIELDS`) replaced by its name now (no warning: files
+    written before the rename are not the reader's mistake)."""
+    return {OLD_FIELDS.get(k, k): v for k, v in values.items()}
+
+
+_dataclass_init = Args.__init__
+
+
+@functools.wraps(_dataclass_init)
+def _init(self, *args, **kwargs):
+    for old, new in OLD_FIELDS.items():
+        if old in kwargs:
+            _warn_old_field(old)
+            kwargs[new] = kwargs.pop(old)
+    _dataclass_init(self, *args, **kwargs)
+
+
+Args.__init__ = _init
 
 
 @lru_cache(maxsize=1)
@@ -155,8 +210,12 @@ def settings_problems(args: Args) -> list[str]:
         finite = not isinstance(v, float) or math.isfinite(v)
         if isinstance(v, bool) or not isinstance(v, int | float) or not finite or not ok(v):
             out.append(f"--{name.replace('_', '-')} must be {what}; got {v}")
+    if args.reward not in REWARDS:
+        out.append(f"--reward must be one of {', '.join(REWARDS)}; got {args.reward}")
+    elif args.reward == "physics" and args.data is None:
+        out.append("--reward physics needs --data (synthetic tasks have no physics)")
     try:
-        check_counts(args.keyframes, 60, least=LEAST_LEARNED_W, name="--keyframes")
+        check_counts(args.keyframe_counts, 60, least=LEAST_LEARNED_W, name="--keyframes")
     except UsageError as e:
         out.append(str(e))
     return out
