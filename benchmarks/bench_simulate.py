@@ -36,19 +36,33 @@ from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noq
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.simulate.model import sim_model  # noqa: E402
+from sim.simulate.sampling import CostWeights  # noqa: E402
 from sim.simulate.validate import ForwardValidation  # noqa: E402
 
+#: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window
+FIRST_SAMPLER = {"weights": CostWeights(fall=0.0), "lookahead": 48}
 #: ``--controllers`` names: (label, ForwardValidation keywords, actuators)
 CONTROLLERS = {
     "plain": ("plain tracker", {"controller": "plain"}, "position"),
-    "sampling64": ("sampler, 64 samples", {"controller": "sampling", "samples": 64}, "position"),
+    "sampling64": (
+        "sampler, 64 samples (as first built)",
+        {"controller": "sampling", "samples": 64, "search": FIRST_SAMPLER},
+        "position",
+    ),
     "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
 }
+for _n in (16, 24, 32, 48, 64):  # the sampler as it is now (sim.simulate.sampling's defaults)
+    CONTROLLERS[f"falls{_n}"] = (
+        f"sampler, {_n} samples, falls in its cost",
+        {"controller": "sampling", "samples": _n},
+        "position",
+    )
 
 
-def controller_rows(cases, names: list[str], log=None) -> dict[str, list[dict]]:
+def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict[str, list[dict]]:
     """Per controller name (:data:`CONTROLLERS`), the figures of
-    ``ForwardValidation.run`` for the original motion (its IK fit) of every case, one process."""
+    ``ForwardValidation.run`` for the original motion (its IK fit) of every case, one process
+    (the sampler's rollouts on ``threads`` threads; its CPU time counts every thread's)."""
     setup = physics_setup(cases)
     bodies: dict = {}
     out: dict[str, list[dict]] = {n: [] for n in names}
@@ -59,12 +73,17 @@ def controller_rows(cases, names: list[str], log=None) -> dict[str, list[dict]]:
             if (c.asf, n) not in bodies:
                 skeleton = subject_model(c.asf)[0]
                 model = sim_model(skeleton, actuators=actuators)
-                bodies[c.asf, n] = ForwardValidation(model, _protocol_names(c.clip), **kw)
+                bodies[c.asf, n] = ForwardValidation(
+                    model, _protocol_names(c.clip), threads=threads, **kw
+                )
             t0 = time.process_time()
+            w0 = time.perf_counter()
             row = bodies[c.asf, n].run(qpos, c.clip.fps)  # the fits above are not timed
-            cpu = (time.process_time() - t0) / (c.clip.n_frames / c.clip.fps)
+            seconds = c.clip.n_frames / c.clip.fps
+            cpu = (time.process_time() - t0) / seconds
+            wall = (time.perf_counter() - w0) / seconds
             out[n].append({"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
-                           "sim_cpu_s_per_s": cpu})  # fmt: skip
+                           "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall})  # fmt: skip
             if log:
                 log(f"{i + 1}/{len(cases)} {n} {out[n][-1]}")
     return out
@@ -125,6 +144,10 @@ def main() -> None:
         help="compare these controllers on the original motion only (one process; writes "
         "docs/results/simulate_controllers.md)",
     )  # fmt: skip
+    ap.add_argument(
+        "--threads", type=int, default=1,
+        help="with --controllers: the sampler's rollouts on this many threads",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])
@@ -132,13 +155,16 @@ def main() -> None:
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
     cases = cases[:: args.every][: args.max_clips]
     if args.controllers:
-        rows = controller_rows(cases, args.controllers, log=lambda m: print(m, flush=True))
+        rows = controller_rows(
+            cases, args.controllers, log=lambda m: print(m, flush=True), threads=args.threads
+        )
         limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
         text = (
             f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
             f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
             "IK fit on the subject's skeleton) tracked by each controller with no assistance; a "
-            "fall as `sim.simulate.falls` defines it; CPU time on one core.\n\n"
+            "fall as `sim.simulate.falls` defines it; CPU time of every thread "
+            f"(--threads {args.threads}).\n\n"
             + controllers_markdown(rows)
             + f"\nWall time {time.perf_counter() - t0:.0f} s (loading and fits included).\n"
         )

@@ -83,7 +83,8 @@ def test_forward_validation_carries_its_sampling_to_other_processes(model):
 
     fv = pickle.loads(pickle.dumps(ForwardValidation(model, ("root",), samples=8)))
     assert fv.samples == 8 and fv.names == ("root",)
-    assert pickle.loads(pickle.dumps(ForwardValidation(model, ("root",)))).samples == 0
+    plain = ForwardValidation(model, ("root",), controller="plain")
+    assert pickle.loads(pickle.dumps(plain)).samples == 0
 
 
 def test_eval_samples_needs_simulate_and_a_positive_count(tmp_path, capsys):
@@ -129,3 +130,60 @@ def test_synth_samples_must_be_positive(tmp_path):
         cli.main(["synth", "--kinds", "procedural", "--n", "1", "--out", str(tmp_path / "o"),
                   "--samples", "0"])  # fmt: skip
     assert e.value.code == 2
+
+
+def test_threads_give_the_same_search_as_one_thread(model, walk_ref):
+    """Every rollout starts from a full MuJoCo state on its thread's own ``MjData``: the offsets
+    and the states reached do not depend on how many threads ran them."""
+    ref = walk_ref[:48]
+    one = search_offsets(model, ref, samples=6, keep=2, lookahead=12, seed=4)
+    for threads in (2, 4):
+        many = search_offsets(model, ref, samples=6, keep=2, lookahead=12, seed=4, threads=threads)
+        assert np.array_equal(one[0], many[0]) and np.array_equal(one[1], many[1])
+
+
+def test_a_rollout_stops_where_the_plain_tracker_falls(model, walk_ref):
+    """The search sees the falls ``sim.simulate.falls`` defines: with no offset, a rollout from
+    the start reports a fall within a tick of where ``track`` finds it, and stops there."""
+    import mujoco
+
+    from sim.simulate.sampling import _problem, _rollout
+
+    plain = track(model, walk_ref, assist_limit=0.0, record_every=1)
+    assert plain.fell
+    data = mujoco.MjData(model)
+    prob = _problem(model, walk_ref, data, 0.3, ())
+    mujoco.mj_resetData(model, data)
+    data.qpos[:], data.qvel[:] = walk_ref[0], prob.ref_qvel[0]
+    mujoco.mj_forward(model, data)
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    keep = np.empty(mujoco.mj_stateSize(model, spec)), np.empty(model.nq), spec
+    end = _rollout(model, data, prob, np.zeros(model.nu), (0, 12, len(walk_ref)), ((), ()), keep)
+    assert end < 0 and abs(-end - plain.fall_tick) <= 1
+    assert data.time == pytest.approx(-end * 4 * model.opt.timestep)  # stopped at the fall
+
+
+def test_forward_validation_carries_its_search_and_threads_to_other_processes(model):
+    import pickle
+
+    from sim.simulate.sampling import CostWeights
+    from sim.simulate.validate import DEFAULT_SAMPLES, ForwardValidation
+
+    search = {"lookahead": 24, "weights": CostWeights(fall=0.0)}
+    fv = ForwardValidation(model, ("root",), samples=8, search=search, threads=3)
+    again = pickle.loads(pickle.dumps(fv))
+    assert again.search == search and again.threads == 3 and again.samples == 8
+    chosen = ForwardValidation(model, ("root",), controller="sampling")  # no count given
+    assert chosen.samples == DEFAULT_SAMPLES > 0
+
+
+def test_recentred_search_is_deterministic_and_another_search(model, walk_ref):
+    """``recentre``: children start between their parent's offset and the cheapest kept
+    state's, so the search takes another path than from the parents alone (same seed), and
+    the same one again."""
+    ref = walk_ref[:36]
+    kw = dict(samples=8, keep=4, window=12, lookahead=0, persistence=1.0, seed=5)
+    plain = search_offsets(model, ref, recentre=0.0, **kw)[0]
+    centred = search_offsets(model, ref, recentre=1.0, **kw)[0]
+    again = search_offsets(model, ref, recentre=1.0, **kw)[0]
+    assert np.array_equal(centred, again) and not np.array_equal(plain, centred)

@@ -45,18 +45,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.model.kinematics import SOLE_POINTS
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
-from sim.simulate.model import (
-    CONTROL_HZ,
-    SOLE_GEOMS,
-    SUBSTEPS,
-    TOE_GEOMS,
-    G,
-    Gains,
-    total_mass,
-)
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
+from sim.simulate.tracking import Tracking, TrackRecord, foot_forces, foot_sides
 
 ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
 FALLEN_TONE = 0.3  # share of effort with which a fallen body holds its pose
@@ -85,58 +77,6 @@ class Weakening:
     start: float
     duration: float
     factor: float
-
-
-@dataclass
-class Tracking:
-    """What one simulation produced, sampled every ``record_every`` ticks.
-
-    Attributes:
-        qpos: (F, nq) and qvel: (F, nv) the simulator's state.
-        assistance: (F,) root assistance force over body weight around each recorded tick: the
-            norm of the mean force over the ``record_every`` ticks centred on it.
-        assist_wrench: (F, 6) the applied root wrench (free-joint generalised force: force [N]
-            in the world frame, torque [N m] in the root's frame), the same mean.
-        actions: (F, nu) the actuator controls (target angles [rad], feed-forward included)
-            set at each recorded tick.
-        joint_torque: (F, nu) the torque [N m] each actuator applied at the recorded tick's
-            first physics step (``data.actuator_force``, within the joint's limit).
-        foot_force: (F, 2, 3) the floor's contact force [N, world frame] on the left and right
-            foot (foot and toe geoms) at that step (``mj_contactForce``); a foot is in contact
-            where its force is non-zero.
-        fall_frame: the recorded frame where the fall was detected, -1 if none; from that tick
-            on the assistance is off and the joints hold the pose of the fall at
-            :data:`FALLEN_TONE` of their stiffness and strength (no tracking, no feed-forward):
-            the body stays down (no get-up is generated).
-        fell: whether the body fell (``sim.simulate.falls``; see :func:`track`).
-        fall_tick: the control tick whose state was found fallen first, -1 if none.
-        ticks: control ticks simulated.
-        mean_assistance_all: mean assistance over every tick.
-        penetration: deepest floor contact penetration [m] seen at the control ticks (>= 0).
-        self_penetration: deepest contact penetration [m] between two body geoms seen at the
-            control ticks (self-collision keeps it small).
-        contact_penetration: (F,) deepest floor contact penetration [m] at the recorded ticks, 0
-            where nothing touches the floor (the steady figure: its median over contact frames).
-        unstable: MuJoCo flagged a diverging acceleration (it then resets the state, so the
-            recorded motion jumps: such a simulation is not a motion).
-    """
-
-    qpos: np.ndarray
-    qvel: np.ndarray
-    assistance: np.ndarray
-    assist_wrench: np.ndarray
-    fell: bool
-    ticks: int
-    mean_assistance_all: float = 0.0
-    penetration: float = 0.0
-    unstable: bool = False
-    contact_penetration: np.ndarray | None = None
-    actions: np.ndarray | None = None
-    joint_torque: np.ndarray | None = None
-    foot_force: np.ndarray | None = None
-    fall_frame: int = -1
-    self_penetration: float = 0.0
-    fall_tick: int = -1
 
 
 class ActuatorEdits:
@@ -195,7 +135,8 @@ def set_controls(model, data, target: np.ndarray, effort: float) -> None:
     angles, clipped to the actuators' control range (``sim.simulate.model.sim_spec``; MuJoCo
     would clip it there too, so ``data.ctrl`` holds exactly what acts)."""
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
-    np.clip(effort_target(target, data.qpos[7:], effort), lo, hi, out=data.ctrl)
+    np.maximum(effort_target(target, data.qpos[7:], effort), lo, out=data.ctrl)
+    np.minimum(data.ctrl, hi, out=data.ctrl)  # np.clip's result, without its overhead
 
 
 def _root_inertia(model, qpos, data) -> np.ndarray:
@@ -209,26 +150,6 @@ def _root_inertia(model, qpos, data) -> np.ndarray:
     out = M[:6, :6].copy()
     out[:3, 3:] = out[3:, :3] = 0.0  # block-diagonal: the force pulls the position only
     return out
-
-
-def _foot_forces(model, data, floor: int, side: np.ndarray, out: np.ndarray) -> None:
-    """Write into ``out`` (2, 3) the floor's contact force [N, world frame] on the left (row 0)
-    and right (row 1) foot: ``side`` (ngeom,) is 0/1 for a foot geom of that side, -1 else."""
-    out[:] = 0.0
-    f6 = np.zeros(6)
-    for c in range(data.ncon):
-        con = data.contact[c]
-        g1, g2 = con.geom
-        if g1 == floor:
-            s, sign = side[g2], 1.0  # the force acts from geom1 on geom2
-        elif g2 == floor:
-            s, sign = side[g1], -1.0
-        else:
-            continue
-        if s < 0:
-            continue
-        mujoco.mj_contactForce(model, data, c, f6)
-        out[s] += sign * (con.frame.reshape(3, 3).T @ f6[:3])
 
 
 def _floor_contact(data, floor: int) -> bool:
@@ -257,6 +178,97 @@ def apply_pushes(data, pushes: tuple[Push, ...], body_ids, t: float) -> None:
     for p, b in zip(pushes, body_ids, strict=True):
         if p.start <= t < p.start + p.duration:
             data.xfrc_applied[b, :3] += p.force
+
+
+def _root_assistance(
+    ff_root: np.ndarray, root_inertia: np.ndarray, root_acc: np.ndarray, fmax: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The root assistance: force (3,) [N] and torque (3,) [N m] of the reference's residual
+    root wrench ``ff_root`` (6,) plus ``root_inertia`` (6, 6) times the PD pull ``root_acc``
+    (6,), the force's norm clipped to ``fmax`` [N], the torque's to ``fmax`` times
+    :data:`ROOT_TORQUE_LEVER`."""
+    wrench = ff_root + root_inertia @ root_acc
+    force, torque = wrench[:3], wrench[3:]
+    tmax = fmax * ROOT_TORQUE_LEVER
+    fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
+    if fn > fmax:
+        force *= fmax / fn
+    if tn > tmax:
+        torque *= tmax / tn
+    return force, torque
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What ``track`` computes before its simulation: the reference's velocities (T, nv) and
+    inverse-dynamics feed-forward (T, nv), the root's inertia block (6, 6), the fall reference,
+    the actuators' stiffness ``kp`` (nu,) and target lead ``kv / kp`` (nu,) [s], the root PD's
+    gains, the body weight [N], the floor's geom id, the foot geoms' sides and the pushes' body
+    ids."""
+
+    ref_qvel: np.ndarray
+    ref_force: np.ndarray
+    root_inertia: np.ndarray
+    fall_ref: object
+    kp: np.ndarray
+    lead: np.ndarray
+    kp_r: float
+    kd_r: float
+    weight: float
+    floor: int
+    side: np.ndarray
+    push_ids: list
+
+
+def _plan(model, ref_qpos: np.ndarray, gains: Gains, pushes: tuple[Push, ...], data) -> _Plan:
+    """:class:`_Plan` of tracking ``ref_qpos`` (T, nq); ``data`` is used, then left in the
+    reference's first state (position and velocity, ``mj_forward`` done)."""
+    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
+    root_inertia = _root_inertia(model, ref_qpos[0], data)
+    fall_ref = fall_reference(model, ref_qpos)
+    mujoco.mj_resetData(model, data)
+    data.qpos[:] = ref_qpos[0]
+    data.qvel[:] = ref_qvel[0]
+    mujoco.mj_forward(model, data)
+    return _Plan(
+        ref_qvel=ref_qvel,
+        ref_force=ref_force,
+        root_inertia=root_inertia,
+        fall_ref=fall_ref,
+        kp=model.actuator_gainprm[:, 0].copy(),
+        lead=model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1],  # kv / kp [s]
+        kp_r=gains.root_omega**2,
+        kd_r=2 * gains.root_zeta * gains.root_omega,
+        weight=total_mass(model) * G,
+        floor=model.geom("floor").id,
+        side=foot_sides(model),
+        push_ids=[model.body(p.body).id for p in pushes],
+    )
+
+
+def _root_pull(plan: _Plan, q_ref: np.ndarray, v_ref: np.ndarray, data) -> np.ndarray:
+    """(6,) the root's PD acceleration towards ``q_ref`` (nq,) and ``v_ref`` (nv,): linear
+    [m/s^2] and angular [rad/s^2] (the orientation error by ``mju_subQuat``)."""
+    rot_err = np.zeros(3)
+    root_acc = np.zeros(6)
+    mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
+    root_acc[:3] = plan.kp_r * (q_ref[:3] - data.qpos[:3]) + plan.kd_r * (v_ref[:3] - data.qvel[:3])
+    root_acc[3:] = plan.kp_r * rot_err + plan.kd_r * (v_ref[3:6] - data.qvel[3:6])
+    return root_acc
+
+
+def _control_tick(model, data, plan: _Plan, ref_qpos, k: int, target, factor, assist) -> None:
+    """Set tick ``k``'s controls: hinge ``target`` (nu,) [rad] at effort ``factor``, and the
+    root assistance bounded by ``assist`` body weights (0: none) in ``data.qfrc_applied``."""
+    set_controls(model, data, target, factor)
+    if assist > 0:
+        root_acc = _root_pull(plan, ref_qpos[k], plan.ref_qvel[k], data)
+        fmax = factor * assist * plan.weight
+        force, torque = _root_assistance(plan.ref_force[k][:6], plan.root_inertia, root_acc, fmax)
+    else:
+        force, torque = np.zeros(3), np.zeros(3)
+    data.qfrc_applied[:3] = force
+    data.qfrc_applied[3:6] = torque
 
 
 def track(
@@ -293,141 +305,49 @@ def track(
             data)`` after the last (``sim.simulate.episode.Recorder``); None: none.
 
     Returns:
-        :class:`Tracking` with states at ticks ``0, record_every, 2 record_every, ...``.
+        :class:`sim.simulate.tracking.Tracking` with states at ticks ``0, record_every,
+        2 record_every, ...``.
     """
-    gains = gains or Gains()
     T = ref_qpos.shape[0]
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
-    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
-    root_inertia = _root_inertia(model, ref_qpos[0], data)
-    fall_ref = fall_reference(model, ref_qpos)
-    mujoco.mj_resetData(model, data)
-    data.qpos[:] = ref_qpos[0]
-    data.qvel[:] = ref_qvel[0]
-    mujoco.mj_forward(model, data)
-    weight = total_mass(model) * G
-    kp_r = gains.root_omega**2
-    kd_r = 2 * gains.root_zeta * gains.root_omega
-    kp = model.actuator_gainprm[:, 0].copy()
-    lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]  # kv / kp [s]
-    floor = model.geom("floor").id
-    side = np.full(model.ngeom, -1)
-    for name in SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS:
-        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
-        if g >= 0:
-            side[g] = 0 if name.startswith("l") else 1
-    push_ids = [model.body(p.body).id for p in pushes]
+    plan = _plan(model, ref_qpos, gains or Gains(), pushes, data)
+    rec = TrackRecord(model, T, record_every)
+    fell, fallen_pose = False, None
     dt = 1.0 / CONTROL_HZ
-    rot_err = np.zeros(3)
-    root_acc = np.zeros(6)
-    F = (T + record_every - 1) // record_every
-    rec_q = np.empty((F, model.nq))
-    rec_v = np.empty((F, model.nv))
-    rec_a = np.empty(F)
-    rec_w = np.empty((F, 6))
-    rec_p = np.zeros(F)
-    rec_u = np.empty((F, model.nu))
-    rec_tau = np.empty((F, model.nu))
-    rec_f = np.zeros((F, 2, 3))
-    fall_frame = fall_tick = -1
-    all_assist = np.empty(T)
-    all_wrench = np.empty((T, 6))
-    fell = False
-    fallen_pose = None
-    deepest = deepest_self = 0.0
     for k in range(T):
         t = k * dt
         factor = weakening_factor(weakenings, t)
         if fell:  # down: the joints hold the pose of the fall with a lying body's tone
             factor = min(factor, FALLEN_TONE)
-        q_ref, v_ref = ref_qpos[k], ref_qvel[k]
-        # 1. feed-forward (inverse dynamics of the reference) + PD pull of the root
-        mujoco.mju_subQuat(rot_err, q_ref[3:7], data.qpos[3:7])
-        root_acc[:3] = kp_r * (q_ref[:3] - data.qpos[:3]) + kd_r * (v_ref[:3] - data.qvel[:3])
-        root_acc[3:] = kp_r * rot_err + kd_r * (v_ref[3:6] - data.qvel[3:6])
-        ff = ref_force[k]
-        # 2. hinges: the actuator carries PD and feed-forward, MuJoCo clamps their sum; the
-        # target leads by kv/kp * v_ref so that kp (q_ref - q) + kv (v_ref - v) is applied,
-        # and by ff / kp so that the feed-forward is added (both scale with a weakening)
-        if fell:  # no more tracking of a standing motion, no feed-forward: it stays down
-            target = fallen_pose
-        else:
-            target = q_ref[7:] + lead * v_ref[6:] + ff[6:] / kp
+            target = fallen_pose  # no tracking of a standing motion, no feed-forward
+        else:  # the actuator carries PD and feed-forward, MuJoCo clamps their sum: the target
+            # leads by kv/kp * v_ref (kp (q_ref - q) + kv (v_ref - v) applied) and by ff / kp
+            target = (
+                ref_qpos[k, 7:] + plan.lead * plan.ref_qvel[k, 6:] + plan.ref_force[k, 6:] / plan.kp
+            )
             if offsets is not None:
                 target += offsets[k]
-        set_controls(model, data, target, factor)
-        # 3. root: bounded assistance, only while the body touches the floor
-        helped = fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
-        if helped and (assist_in_flight or _floor_contact(data, floor)):
-            wrench = ff[:6] + root_inertia @ root_acc
-            force, torque = wrench[:3], wrench[3:]
-            fmax = factor * assist_limit * weight
-            tmax = fmax * ROOT_TORQUE_LEVER
-            fn, tn = np.linalg.norm(force), np.linalg.norm(torque)
-            if fn > fmax:
-                force *= fmax / fn
-            if tn > tmax:
-                torque *= tmax / tn
-        else:
-            force, torque = np.zeros(3), np.zeros(3)
-        data.qfrc_applied[:3] = force
-        data.qfrc_applied[3:6] = torque
-        all_assist[k] = np.linalg.norm(force) / weight
-        all_wrench[k, :3], all_wrench[k, 3:] = force, torque
-        apply_pushes(data, pushes, push_ids, t)
-        i, on_record = divmod(k, record_every)
-        on_record = on_record == 0
-        if on_record:
-            rec_q[i] = data.qpos
-            rec_v[i] = data.qvel
-            rec_u[i] = data.ctrl
-        if not fell and has_fallen(model, data, fall_ref, k):
-            fell, fall_tick = True, k
-            fall_frame = min(F - 1, -(-k // record_every))
-            fallen_pose = data.qpos[7:].copy()
-        n = data.ncon
-        if n:
-            on_floor = (data.contact.geom[:n] == floor).any(axis=1)
-            depth = -data.contact.dist[:n]
-            floor_depth = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
-            self_depth = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
-            deepest = max(deepest, floor_depth)
-            deepest_self = max(deepest_self, self_depth)
-            if on_record:
-                rec_p[i] = floor_depth
+        helped = rec.fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
+        on = helped and (assist_in_flight or _floor_contact(data, plan.floor))
+        _control_tick(model, data, plan, ref_qpos, k, target, factor, assist_limit if on else 0.0)
+        rec.assist[k] = np.linalg.norm(data.qfrc_applied[:3]) / plan.weight
+        rec.wrench[k] = data.qfrc_applied[:6]
+        apply_pushes(data, pushes, plan.push_ids, t)
+        i = k // record_every if k % record_every == 0 else None  # a recorded tick's frame
+        if i is not None:
+            rec.state(i, data)
+        if not fell and has_fallen(model, data, plan.fall_ref, k):
+            fell, fallen_pose = True, data.qpos[7:].copy()
+            rec.fall(k)
+        rec.contacts(data, plan.floor, i)
         if recorder is not None:
             recorder(k, data)
         mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
-        if on_record:
-            rec_tau[i] = data.actuator_force
-            _foot_forces(model, data, floor, side, rec_f[i])
+        if i is not None:
+            rec.torque[i] = data.actuator_force
+            foot_forces(model, data, plan.floor, plan.side, rec.foot[i])
         if SUBSTEPS > 1:
             mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
     if recorder is not None:
         recorder(T, data)
-    # per recorded state, the mean wrench over the ticks centred on it (the impulse delivered
-    # around that frame over its duration): a sample of every 4th tick would alias the 120 Hz
-    # variations of the feed-forward
-    half = record_every // 2
-    for i in range(F):
-        lo, hi = max(0, i * record_every - half), min(T, i * record_every - half + record_every)
-        rec_w[i] = all_wrench[lo:hi].mean(axis=0)
-        rec_a[i] = np.linalg.norm(rec_w[i, :3]) / weight
-    return Tracking(
-        qpos=rec_q,
-        qvel=rec_v,
-        assistance=rec_a,
-        assist_wrench=rec_w,
-        fell=fell,
-        ticks=T,
-        mean_assistance_all=float(all_assist.mean()) if T else 0.0,
-        penetration=deepest,
-        self_penetration=deepest_self,
-        contact_penetration=rec_p,
-        unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
-        actions=rec_u,
-        joint_torque=rec_tau,
-        foot_force=rec_f,
-        fall_frame=fall_frame,
-        fall_tick=fall_tick,
-    )
+    return rec.result(model, data, fell)

@@ -12,18 +12,23 @@ asks ``torque_sigma`` of the joint's peak torque). Each candidate runs through t
 the same torque-limited actuators, perturbations and no assistance, then on for ``lookahead``
 more ticks with the same offset; its cost there (:func:`window_cost`: a correction that only
 delays a fall costs what the fall costs) is added to its parent's, and the ``keep`` cheapest
-states, taken at the window's end, go on. At the end the cheapest sequence of
+states, taken at the window's end, go on. A fall as ``sim.simulate.falls`` defines it (a part
+other than the feet on the floor, or the head low) is looked for after every tick of a rollout:
+the rollout stops there (or at its window's end, whose state is kept) and pays
+``CostWeights.fall``, more the earlier it fell. At the end the cheapest sequence of
 offsets is replayed by ``track(..., offsets=...)``, so the result is an ordinary
-:class:`sim.simulate.controller.Tracking` of one simulation (the replay is the same
-deterministic computation as the sampled rollout). Deterministic given ``seed``.
+:class:`sim.simulate.tracking.Tracking` of one simulation (the replay is the same
+deterministic computation as the sampled rollout). Deterministic given ``seed``, whatever the
+number of ``threads`` the rollouts run on.
 
-Cost: ``samples`` rollouts of ``window + lookahead`` ticks per window plus one replay: with 64
-and the default lookahead about 6 s per simulated second on one core, some 200 times the plain
-tracker's (``docs/results/synth_sampled.md``).
+Cost: ``samples`` rollouts of up to ``window + lookahead`` ticks per window plus one replay:
+with 32 and the default lookahead about 5 CPU s per simulated second
+(``docs/results/simulate_controllers.md``).
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import mujoco
@@ -38,17 +43,20 @@ from sim.simulate.controller import (
     track,
     weakening_factor,
 )
+from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
 CORRECTED = ("femur", "tibia", "foot", "toes", "lowerback", "upperback", "thorax")
-#: control ticks (0.4 s) a candidate is rolled on past its window before it is judged. Measured
-#: on 15 time-warped 4 s track clips of ``synth`` at 64 samples: 0 / 12 / 24 / 48 ticks kept 0 /
-#: 2 / 1 / 8 up; at 48, the root pull of :class:`CostWeights` (``root_xy`` 20) kept 7 up with
-#: about half the drift (2 s of 07_01: 1.37 -> 0.80 m of root error); judging at the window's
-#: end as well kept 2 of the first 8 up, against 4 (docs/synthetic.md)
-LOOKAHEAD = 48
+#: control ticks (0.3 s) a candidate is rolled on past its window before it is judged. Measured
+#: on 15 time-warped 4 s track clips of ``synth`` at 64 samples, falls not yet in the cost: 0 /
+#: 12 / 24 / 48 ticks kept 0 / 2 / 1 / 8 up; at 48, the root pull of :class:`CostWeights`
+#: (``root_xy`` 20) kept 7 up with about half the drift (2 s of 07_01: 1.37 -> 0.80 m of root
+#: error); judging at the window's end as well kept 2 of the first 8 up, against 4. With falls
+#: in the cost, on 8 of the 22 clips of ``bench_simulate.py --controllers`` at 32 samples: 24 /
+#: 36 ticks fell in 4 / 2 of 8 (24 samples, 36 ticks: 3) (docs/synthetic.md)
+LOOKAHEAD = 36
 #: bodies whose positions relative to the root enter the cost
 END_EFFECTORS = ("lfoot", "rfoot", "ltoes", "rtoes", "lhand", "rhand", "head")
 
@@ -67,6 +75,9 @@ class CostWeights:
     balance: float = 50.0  # CoM minus the ankles' mid-point, horizontal [m^2]
     root_vel: float = 0.5  # root linear velocity [m^2/s^2]
     fallen: float = 1e4  # root below half its reference height
+    #: a fall (``sim.simulate.falls``) in the rollout, doubled if at its start; 0: the rollouts
+    #: do not look for falls and run to their end (the sampler as first built)
+    fall: float = 1e4
 
 
 @dataclass(frozen=True)
@@ -155,6 +166,136 @@ def sample_track(
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """What the search needs of the reference and the body: the uncorrected hinge targets
+    ``base`` (T, nu) [rad] (reference angle, velocity lead and feed-forward, as ``track``), the
+    reference's velocities (T, nv), the noise ``sigma`` (nu,) [rad] of each hinge's offset (0
+    for the uncorrected), the pose term's hinge weights (nu,), the reference's
+    :class:`Features` per tick, the cost's body ids and the pushes' body ids."""
+
+    base: np.ndarray
+    ref_qvel: np.ndarray
+    sigma: np.ndarray
+    hinge_w: np.ndarray
+    ref_feat: list
+    ee_ids: np.ndarray
+    foot_ids: np.ndarray
+    push_ids: list
+    fall_ref: object | None
+
+
+def _problem(
+    model, ref_qpos, data, torque_sigma: float, pushes: tuple[Push, ...], falls: bool = True
+) -> _Problem:
+    """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
+    rollouts look for falls (``fall_ref`` set) or not (None)."""
+    nu = model.nu
+    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
+    kp = model.actuator_gainprm[:, 0].copy()
+    lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]
+    base = ref_qpos[:, 7:] + lead * ref_qvel[:, 6:] + ref_force[:, 6:] / kp  # (T, nu) targets
+    names = [model.actuator(a).name for a in range(nu)]
+    corrected = np.array([_bone(n) in CORRECTED for n in names])
+    sigma = np.where(corrected, torque_sigma * model.actuator_forcerange[:, 1] / kp, 0.0)
+    sub = model.body_subtreemass[model.jnt_bodyid[model.actuator_trnid[:, 0]]]
+    ee_ids = np.array([model.body(n).id for n in END_EFFECTORS])
+    foot_ids = np.array([model.body(n).id for n in ("lfoot", "rfoot")])
+    ref_feat = []
+    for k in range(ref_qpos.shape[0]):
+        data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
+        ref_feat.append(features(model, data, ee_ids, foot_ids))
+    return _Problem(
+        base=base,
+        ref_qvel=ref_qvel,
+        sigma=sigma,
+        hinge_w=sub / sub.sum(),  # a hinge that moves more mass weighs more
+        ref_feat=ref_feat,
+        ee_ids=ee_ids,
+        foot_ids=foot_ids,
+        push_ids=[model.body(p.body).id for p in pushes],
+        fall_ref=fall_reference(model, ref_qpos) if falls else None,
+    )
+
+
+def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], perturb, keep) -> int:
+    """Roll ``data`` (set to the parent's state) on with hinge offset ``off`` (nu,) [rad] from
+    tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
+    ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
+    ``keep`` = (state row, qpos row, state spec). A rollout that falls (``sim.simulate.falls``,
+    checked after every tick where ``prob.fall_ref`` is set) stops at the fall or at the
+    window's end, whichever is later.
+
+    Returns:
+        the tick ``data`` is left at, negated where the body fell (``-k``, k >= 1).
+    """
+    k0, k1, k2 = ticks
+    pushes, weakenings = perturb
+    state, qpos, spec = keep
+    T = len(prob.base)
+    fell = False
+    for k in range(k0, k2):  # the window, then on with the same offset
+        t = k / CONTROL_HZ
+        if pushes:  # else no external force: the kept states carry none
+            apply_pushes(data, pushes, prob.push_ids, t)
+        set_controls(model, data, prob.base[k] + off, weakening_factor(weakenings, t))
+        mujoco.mj_step(model, data, nstep=SUBSTEPS)
+        if k == k1 - 1:  # the window's end: the state kept
+            mujoco.mj_getState(model, data, state, spec)
+            qpos[:] = data.qpos
+        if prob.fall_ref is not None and not fell:
+            fell = has_fallen(model, data, prob.fall_ref, min(k + 1, T - 1))
+        if fell and k >= k1 - 1:
+            return -(k + 1)
+    return k2
+
+
+def _backtrack(history, T: int, window: int, nu: int, nq: int):
+    """The cheapest final state's offsets (T, nu) and window-end ``qpos`` (W, nq), window by
+    window back to the start through ``history`` (per window, of the kept states: parent index,
+    offset, ``qpos`` reached; the cheapest kept first)."""
+    offsets = np.zeros((T, nu))
+    window_qpos = np.empty((len(history), nq))
+    j = 0
+    for w in range(len(history) - 1, -1, -1):
+        parent, off, reached = history[w]
+        offsets[w * window : min(T, (w + 1) * window)] = off[j]
+        window_qpos[w] = reached[j]
+        j = parent[j]
+    return offsets, window_qpos
+
+
+def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool) -> np.ndarray:
+    """(S,) each candidate's cost, its parent's cost not included: candidate ``s`` rolled out
+    (:func:`_rollout`) from kept state ``parents[s]`` with offset ``offs[s]`` (nu,), judged by
+    :func:`window_cost` where it stopped plus ``CostWeights.fall`` (more the earlier) if it
+    fell. ``search`` = (kept states, weights, perturbations, state spec); ``out`` = (window-end
+    states (S, size), qpos (S, nq)), written. The candidates are split in contiguous runs over
+    ``datas`` (one ``MjData`` per thread of ``pool``; ``pool`` None: one run): every rollout
+    starts from a full state, so the result does not depend on the split."""
+    states, weights, perturb, spec = search
+    k0, _, k2 = ticks
+    T = len(prob.base)
+    cost = np.empty(len(offs))
+
+    def run(chunk: np.ndarray, data) -> None:
+        for s in chunk:
+            mujoco.mj_setState(model, data, states[parents[s]], spec)
+            keep_at = (out[0][s], out[1][s], spec)
+            end = _rollout(model, data, prob, offs[s], ticks, perturb, keep_at)
+            f = features(model, data, prob.ee_ids, prob.foot_ids)
+            cost[s] = window_cost(f, prob.ref_feat[min(abs(end), T - 1)], weights, prob.hinge_w)
+            if end < 0:  # fell: a later fall costs less
+                cost[s] += weights.fall * (1.0 + (k2 + end) / max(1, k2 - k0))
+
+    chunks = np.array_split(np.arange(len(offs)), len(datas))
+    if pool is None:
+        run(chunks[0], datas[0])
+    else:
+        list(pool.map(run, chunks, datas))
+    return cost
+
+
 def search_offsets(
     model,
     ref_qpos: np.ndarray,
@@ -169,6 +310,8 @@ def search_offsets(
     weights: CostWeights | None = None,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
+    threads: int = 1,
+    recentre: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
@@ -185,6 +328,10 @@ def search_offsets(
         seed: seeds the noise (same seed, same result).
         pushes, weakenings: perturbations, as in ``track``; every candidate rollout meets them
             too, so the corrections are found against the perturbed body.
+        recentre: share (0..1) by which a child's starting offset moves from its parent's
+            towards the cheapest kept state's (0: its parent's alone).
+        threads: rollouts run on this many threads (MuJoCo releases the GIL while it steps);
+            the result is the same for any number.
 
     Returns:
         ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
@@ -192,29 +339,14 @@ def search_offsets(
         ``track(..., offsets=offsets)`` reaches there while the body is up.
     """
     weights = weights or CostWeights()
-    T = ref_qpos.shape[0]
-    nu = model.nu
+    T, nu = ref_qpos.shape[0], model.nu
     rng = np.random.default_rng(seed)
-    data = mujoco.MjData(model)
-    ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
-    kp = model.actuator_gainprm[:, 0].copy()
-    lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]
-    base = ref_qpos[:, 7:] + lead * ref_qvel[:, 6:] + ref_force[:, 6:] / kp  # (T, nu) targets
-    names = [model.actuator(a).name for a in range(nu)]
-    corrected = np.array([_bone(n) in CORRECTED for n in names])
-    sigma = np.where(corrected, torque_sigma * model.actuator_forcerange[:, 1] / kp, 0.0)
-    sub = model.body_subtreemass[model.jnt_bodyid[model.actuator_trnid[:, 0]]]
-    hinge_w = sub / sub.sum()  # a hinge that moves more mass weighs more
-    ee_ids = np.array([model.body(n).id for n in END_EFFECTORS])
-    foot_ids = np.array([model.body(n).id for n in ("lfoot", "rfoot")])
-    ref_feat = []
-    for k in range(T):
-        data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
-        ref_feat.append(features(model, data, ee_ids, foot_ids))
-
+    datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
+    data = datas[0]
+    prob = _problem(model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0)
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
-    data.qvel[:] = ref_qvel[0]
+    data.qvel[:] = prob.ref_qvel[0]
     mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     size = mujoco.mj_stateSize(model, spec)
@@ -222,40 +354,22 @@ def search_offsets(
     mujoco.mj_getState(model, data, states[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
-    # per window, of the kept states: (parent, offset, qpos reached)
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    new_states = np.empty((samples, size))
-    new_qpos = np.empty((samples, model.nq))
-    push_ids = [model.body(p.body).id for p in pushes]
-    for k0 in range(0, T, window):
-        k1 = min(T, k0 + window)
-        parents = np.arange(samples) % len(states)
-        offs = persistence * last[parents] + sigma * rng.standard_normal((samples, nu))
-        new_costs = np.empty(samples)
-        k2 = min(T, k1 + lookahead)
-        for s in range(samples):
-            mujoco.mj_setState(model, data, states[parents[s]], spec)
-            for k in range(k0, k2):  # the window, then on with the same offset
-                t = k / CONTROL_HZ
-                apply_pushes(data, pushes, push_ids, t)
-                set_controls(model, data, base[k] + offs[s], weakening_factor(weakenings, t))
-                mujoco.mj_step(model, data, nstep=SUBSTEPS)
-                if k == k1 - 1:  # the window's end: the state kept
-                    mujoco.mj_getState(model, data, new_states[s], spec)
-                    new_qpos[s] = data.qpos
-            f = features(model, data, ee_ids, foot_ids)
-            cost = window_cost(f, ref_feat[min(k2, T - 1)], weights, hinge_w)
-            new_costs[s] = costs[parents[s]] + cost
-        best = np.argsort(new_costs, kind="stable")[:keep]
-        history.append((parents[best], offs[best], new_qpos[best].copy()))
-        states, costs, last = new_states[best].copy(), new_costs[best], offs[best]
-    # the cheapest final state's offsets, window by window back to the start
-    offsets = np.zeros((T, nu))
-    window_qpos = np.empty((len(history), model.nq))
-    j = 0
-    for w in range(len(history) - 1, -1, -1):
-        parent, off, reached = history[w]
-        offsets[w * window : min(T, (w + 1) * window)] = off[j]
-        window_qpos[w] = reached[j]
-        j = parent[j]
-    return offsets, window_qpos
+    out = np.empty((samples, size)), np.empty((samples, model.nq))
+    pool = ThreadPoolExecutor(len(datas)) if len(datas) > 1 else None
+    try:
+        for k0 in range(0, T, window):
+            ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
+            parents = np.arange(samples) % len(states)
+            centre = (1.0 - recentre) * last[parents] + recentre * last[0]  # [0]: the cheapest
+            offs = persistence * centre + prob.sigma * rng.standard_normal((samples, nu))
+            search = states, weights, (pushes, weakenings), spec
+            cost = _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool)
+            new_costs = costs[parents] + cost
+            best = np.argsort(new_costs, kind="stable")[:keep]
+            history.append((parents[best], offs[best], out[1][best].copy()))
+            states, costs, last = out[0][best].copy(), new_costs[best], offs[best]
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return _backtrack(history, T, window, nu, model.nq)

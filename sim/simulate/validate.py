@@ -1,8 +1,8 @@
 """Validation by forward simulation: could a body with human strength perform this motion?
 
 A motion given as configurations (``qpos`` fitted to its points, e.g. by ``sim.physics``'s IK)
-is tracked in ``mj_step`` by the torque-limited controller of ``sim.simulate.controller`` with no
-root assistance at all (``assist_limit = 0``): only the joints (within their human limits) and
+is tracked in ``mj_step`` by a torque-limited controller (by default the sampler of
+``sim.simulate.sampling``, :data:`DEFAULT_CONTROLLER`) with no root assistance at all (``assist_limit = 0``): only the joints (within their human limits) and
 the floor move the body. The figures say how far the simulated body strays from the motion it
 tracks and from the original motion, whether and when it falls, and the torque it used.
 
@@ -44,10 +44,14 @@ SIMULATE_KEYS = (
 SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
 CONTROLLERS = ("plain", "sampling", "wholebody")
 #: the controller of ``eval --physics --simulate`` and ``report --simulate`` without
-#: ``--samples``: the plain tracker, because the whole-body QP does not beat it
-#: (``docs/results/simulate_controllers.md``: on 22 clips 0.91 against 0.95 falls, 665 against
-#: 673 mm global error, but 362 against 318 mm root-relative)
-DEFAULT_CONTROLLER = "plain"
+#: ``--samples``: the sampler with falls in its cost at :data:`DEFAULT_SAMPLES`, because within
+#: the budget of 5 CPU s per simulated second it beats the plain tracker on falls and error
+#: (``docs/results/simulate_controllers.md``, 22 clips: 0.32 against 0.95 falls, 138 against
+#: 316 mm root-relative, 466 against 694 mm global error, 4.64 CPU s per simulated s; the
+#: whole-body QP: 0.91, 362, 665 mm)
+DEFAULT_CONTROLLER = "sampling"
+#: the sampler's rollouts per window where it is chosen without a count
+DEFAULT_SAMPLES = 32
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator)
 SKATE_CONTACT = 0.01
 
@@ -58,14 +62,27 @@ class ForwardValidation:
     Args:
         model: ``sim.simulate.model.sim_model`` of the subject's skeleton.
         names: (P,) point names (``"root"`` and bone names with sites ``<name>_end``).
-        samples: 0: the plain tracker (``track``); N > 0: the sampling tracker
-            (``sim.simulate.sampling.sample_track``, N rollouts per 0.1 s window, each judged
-            0.4 s on, seed 0), which
-            corrects the joints' targets so the body keeps its balance where it can.
+        samples: N > 0: the sampling tracker (``sim.simulate.sampling.sample_track``, N
+            rollouts per 0.1 s window, each judged 0.3 s on, seed 0), which corrects the
+            joints' targets so the body keeps its balance where it can; 0: ``controller``'s
+            default count (:data:`DEFAULT_SAMPLES`) where it is the sampler.
+        controller: ``"plain"``, ``"sampling"`` or ``"wholebody"``; None: the sampler if
+            ``samples`` is given, else :data:`DEFAULT_CONTROLLER`.
+        search: further keywords of the sampler's search (``sim.simulate.sampling.
+            search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults.
+        threads: the sampler's rollouts run on this many threads (the same result for any).
     """
 
-    def __init__(self, model, names, samples: int = 0, controller: str | None = None):
-        controller = controller or ("sampling" if samples else "plain")
+    def __init__(
+        self,
+        model,
+        names,
+        samples: int = 0,
+        controller: str | None = None,
+        search: dict | None = None,
+        threads: int = 1,
+    ):
+        controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
         if controller not in CONTROLLERS:
             raise UsageError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
         if (controller == "wholebody") != (not model.actuator_biasprm[:, 1].any()):
@@ -75,14 +92,17 @@ class ForwardValidation:
             )
         self.model = model
         self.names = tuple(names)
-        self.samples = int(samples) if controller == "sampling" else 0
+        self.samples = int(samples or DEFAULT_SAMPLES) if controller == "sampling" else 0
         self.controller = controller
+        self.search = dict(search or {})
+        self.threads = int(threads)
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
 
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
-        return (ForwardValidation, (self.model, self.names, self.samples, self.controller))
+        args = self.model, self.names, self.samples, self.controller, self.search, self.threads
+        return (ForwardValidation, args)
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -135,7 +155,8 @@ class ForwardValidation:
         orig = self.reference(original_qpos, fps, floor)  # the same floor and feet
         every = int(round(CONTROL_HZ / fps))
         if self.controller == "sampling":
-            r = sample_track(self.model, ref, samples=self.samples, record_every=every)
+            r = sample_track(self.model, ref, samples=self.samples, record_every=every,
+                             threads=self.threads, **self.search)  # fmt: skip
         elif self.controller == "wholebody":
             r = track_wholebody(self.model, ref, record_every=every)
         else:
@@ -184,7 +205,8 @@ def forward_validation(
 ) -> ForwardValidation:
     """The :class:`ForwardValidation` of ``skeleton``'s simulated body (``sim_model(skeleton,
     **body)`` with the actuators its controller needs) on points ``names``: ``samples`` > 0 the
-    sampling tracker, else ``controller`` (default :data:`DEFAULT_CONTROLLER`)."""
+    sampling tracker with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`,
+    the sampler at :data:`DEFAULT_SAMPLES`)."""
     controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
     actuators = "motor" if controller == "wholebody" else "position"
     model = sim_model(skeleton, actuators=actuators, **body)

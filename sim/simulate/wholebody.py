@@ -55,9 +55,7 @@ from sim.errors import UsageError
 from sim.simulate.controller import (
     ActuatorEdits,
     Push,
-    Tracking,
     Weakening,
-    _foot_forces,
     apply_pushes,
     weakening_factor,
 )
@@ -69,6 +67,7 @@ from sim.simulate.model import (
     rest_inertia,
     total_mass,
 )
+from sim.simulate.tracking import Tracking, foot_forces
 from sim.simulate.wholebody_reference import (
     WholeBodyReference,
     foot_box_ids,
@@ -399,7 +398,7 @@ def track_wholebody(
             mujoco.mj_step(model, data)
             if on_record:
                 rec_tau[i] = data.actuator_force
-                _foot_forces(model, data, floor, side, rec_f[i])
+                foot_forces(model, data, floor, side, rec_f[i])
             if gains.every_step:  # a QP before every physics step, the reference held
                 for _ in range(SUBSTEPS - 1):
                     mujoco.mj_forward(model, data)
