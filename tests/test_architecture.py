@@ -246,7 +246,6 @@ MAX_MODULE_LINES, MAX_FUNCTION_LINES = 500, 80
 #: shrinks as they are split), and nothing else may be.
 OVERSIZED_ELSEWHERE = {
     "sim/simulate/controller.py:track",
-    "sim/simulate/generate.py:generate",
     "sim/simulate/sampling.py:search_offsets",
 }
 

@@ -35,7 +35,7 @@ from sim.motion.clip import Clip
 from sim.motion.retarget import local_rotations_from_world
 from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
-from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Weakening, track
+from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening, track
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
 from sim.simulate.reference import on_floor, time_warp, trial_qpos
@@ -200,36 +200,73 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
     model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"])
     n = int(round(task.seconds * CONTROL_HZ))
+    ref = reference_motion(task, p, model, n, rng)
+    recorder = Recorder(model, mjcf, n, FRAME_SKIP)
+    result = simulate_episode(task, p, model, gains, ref, recorder, rng)
+    if result.unstable:
+        raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
+    out = simulated_clip(
+        model, skeleton, result.qpos, result.qvel, task.fps, f"synth:{task.kind}:{p['source']}"
+    )
+    ref_pos = simulated_clip(
+        model, skeleton, ref[:: int(round(CONTROL_HZ / task.fps))],
+        np.zeros((len(result.qpos), model.nv)), task.fps, "",
+    ).positions  # fmt: skip
+    record = episode_record(p, model, result, out.positions, ref_pos)
+    record["labels"] = episode_labels(p, model, mjcf, result, recorder.episode())
+    return out, record
+
+
+def reference_motion(
+    task: SynthTask, p: dict, model, n: int, rng: np.random.Generator
+) -> np.ndarray:
+    """The (n, nq) reference the body tracks at ``CONTROL_HZ``: the procedural motion, or a
+    window of the source trial time-warped by ``p["speed"]`` (lowered to the fastest warp that
+    still fills the clip) and set on the floor; records ``source`` (and ``start_tick``, drawn
+    from ``rng``) in ``p``.
+
+    Raises:
+        MotionDataError: the source trial is unreadable or shorter than one clip.
+    """
     if task.kind == "procedural":
         slow, _ = synthetic_qpos(
             model, task.seconds * p["speed"] + 0.1, seed=p["motion_seed"], rate=CONTROL_HZ,
             energy=p["energy"],
         )  # fmt: skip
-        ref = time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
         p["source"] = ""
-    else:
-        qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
-        qpos[:, :3] *= p["scale"]
-        fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
-        if p["speed"] > fit >= 0.5:
-            p["speed"] = fit
-        warped = time_warp(model, qpos, CONTROL_HZ, p["speed"], CONTROL_HZ)
-        if len(warped) < n:
-            raise MotionDataError(
-                str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
-                f" time warp: shorter than one {task.seconds:g} s clip"
-            )  # fmt: skip
-        start = int(rng.integers(0, len(warped) - n + 1))
-        ref = on_floor(model, warped[start : start + n])
-        p["source"] = str(task.amc)
-        p["start_tick"] = start
+        return time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
+    qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
+    qpos[:, :3] *= p["scale"]
+    fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
+    if p["speed"] > fit >= 0.5:
+        p["speed"] = fit
+    warped = time_warp(model, qpos, CONTROL_HZ, p["speed"], CONTROL_HZ)
+    if len(warped) < n:
+        raise MotionDataError(
+            str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
+            f" time warp: shorter than one {task.seconds:g} s clip"
+        )  # fmt: skip
+    start = int(rng.integers(0, len(warped) - n + 1))
+    p["source"] = str(task.amc)
+    p["start_tick"] = start
+    return on_floor(model, warped[start : start + n])
+
+
+def simulate_episode(
+    task: SynthTask, p: dict, model, gains: Gains, ref: np.ndarray, recorder: Recorder,
+    rng: np.random.Generator,
+) -> Tracking:  # fmt: skip
+    """Track ``ref`` (T, nq) with ``p``'s pushes and weakenings, every tick recorded by
+    ``recorder``: the sampling tracker with no assistance for the real-motion kinds when
+    ``task.samples`` > 0 (its settings and seed, drawn from ``rng``, recorded in ``p``), else
+    the plain tracker with ``p["assist_limit"]``."""
     tracking = {  # what both trackers take: the perturbations and the clip rate
         "pushes": tuple(
             Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]
         ),
         "weakenings": tuple(Weakening(**w) for w in p["weakenings"]),
         "record_every": int(round(CONTROL_HZ / task.fps)),
-        "recorder": Recorder(model, mjcf, n, FRAME_SKIP),
+        "recorder": recorder,
     }
     if task.samples and task.kind != "procedural":  # the body's own doing, or a fall
         p["assist_limit"] = 0.0
@@ -240,59 +277,55 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
         kw = {"samples": task.samples, "seed": p["sampling"]["seed"]}
-        result = sample_track(model, ref, **kw, **tracking)
-    else:
-        result = track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
-    if result.unstable:
-        raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
-    out = simulated_clip(
-        model, skeleton, result.qpos, result.qvel, task.fps, f"synth:{task.kind}:{p['source']}"
-    )
-    pos = out.positions
-    ref_pos = simulated_clip(
-        model, skeleton, ref[:: int(round(CONTROL_HZ / task.fps))],
-        np.zeros((len(result.qpos), model.nv)), task.fps, "",
-    ).positions  # fmt: skip
+        return sample_track(model, ref, **kw, **tracking)
+    return track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
+
+
+def episode_record(p: dict, model, result: Tracking, pos: np.ndarray, ref_pos: np.ndarray) -> dict:
+    """The index record of an episode (:func:`generate`'s, without ``labels``): its parameters
+    ``p``, assistance, tracking error of the simulated points ``pos`` (F, P, 3) [m] against the
+    reference's ``ref_pos``, fall and penetration figures."""
     weight = total_mass(model) * G
     torque = np.linalg.norm(result.assist_wrench[:, 3:], axis=1) / (weight * ROOT_TORQUE_LEVER)
-    F = len(result.qpos)
-    fallen = np.zeros(F, dtype=bool)
-    if result.fall_frame >= 0:
-        fallen[result.fall_frame :] = True
-    episode = tracking["recorder"].episode()
-    fall_tick = result.fall_tick
-    record = {
+    return {
         "generation": p,
         "mean_assistance": float(result.assistance.mean()),
         "mean_assist_torque": float(torque.mean()),
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
         "fall_frame": int(result.fall_frame),
-        "fall_tick": int(fall_tick),
+        "fall_tick": int(result.fall_tick),
         "physical": is_physical(float(result.assistance.mean()), float(torque.mean())),
         "penetration_mm": 1000 * result.penetration,
         "self_penetration_mm": 1000 * result.self_penetration,
-        "labels": {
-            "sim_actions": episode.actions,
-            "sim_xfrc_applied": episode.xfrc_applied,
-            "sim_qfrc_applied": episode.qfrc_applied,
-            "sim_tick_qpos": episode.qpos,
-            "sim_tick_qvel": episode.qvel,
-            "sim_initial_state": episode.initial_state,
-            "sim_mjcf": text_array(mjcf),
-            "sim_frame_skip": np.int64(FRAME_SKIP),
-            "sim_torque_limit": torque_limits(model),
-            "sim_generation": text_array(json.dumps(p)),
-            "sim_fall_tick": np.int64(fall_tick),
-            "sim_joint_torque": result.joint_torque,
-            "sim_assist_wrench": result.assist_wrench,
-            "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
-            "sim_foot_force": result.foot_force,
-            "sim_contact_penetration": result.contact_penetration,
-            "sim_fallen": fallen,
-        },
     }
-    return out, record
+
+
+def episode_labels(p: dict, model, mjcf: str, result: Tracking, episode) -> dict:
+    """The arrays of :data:`LABELS` for the clip file: the recorded ``episode``
+    (``Recorder.episode()``), the body and the per-frame figures of ``result``."""
+    fallen = np.zeros(len(result.qpos), dtype=bool)
+    if result.fall_frame >= 0:
+        fallen[result.fall_frame :] = True
+    return {
+        "sim_actions": episode.actions,
+        "sim_xfrc_applied": episode.xfrc_applied,
+        "sim_qfrc_applied": episode.qfrc_applied,
+        "sim_tick_qpos": episode.qpos,
+        "sim_tick_qvel": episode.qvel,
+        "sim_initial_state": episode.initial_state,
+        "sim_mjcf": text_array(mjcf),
+        "sim_frame_skip": np.int64(FRAME_SKIP),
+        "sim_torque_limit": torque_limits(model),
+        "sim_generation": text_array(json.dumps(p)),
+        "sim_fall_tick": np.int64(result.fall_tick),
+        "sim_joint_torque": result.joint_torque,
+        "sim_assist_wrench": result.assist_wrench,
+        "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
+        "sim_foot_force": result.foot_force,
+        "sim_contact_penetration": result.contact_penetration,
+        "sim_fallen": fallen,
+    }
 
 
 def episode_model(skeleton, scale: float, gain: float) -> tuple[mujoco.MjModel, str, Gains]:
