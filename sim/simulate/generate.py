@@ -2,8 +2,9 @@
 
 Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``):
 
-* ``track``: perturbed tracking of a real trial: time warp 0.5-2x (a third log-uniform over
-  0.5-2x, two thirds uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
+* ``track``: perturbed tracking of a real trial: the most active of 4 random windows
+  (:func:`most_active_window`) time-warped 0.5-2x (a third log-uniform over 0.5-2x, two thirds
+  uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
   scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
   on the thorax or the pelvis (impulse recorded);
 * ``fall``: falls and recoveries: a real trial sped up 1-2x, a push for 0.2 s and the controller
@@ -38,10 +39,11 @@ from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening, track
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
-from sim.simulate.reference import on_floor, time_warp, trial_qpos
+from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
+from sim.simulate.wholebody import track_wholebody
 
-KINDS = ("track", "fall", "procedural")  # the default mix
+KINDS = ("track", "fall")  # the default mix: real motion, no assistance
 # a clip is "physical" when its mean root assistance force is within this share of its body
 # weight and its mean root assistance torque within this share of body weight x 1 m
 PHYSICAL_BUDGET = 0.05
@@ -76,10 +78,18 @@ LABELS = {
     "sim_contact_penetration": "(F,) deepest floor contact penetration [m], 0 without contact",
     "sim_fallen": "(F,) bool: the figure has fallen (sim.simulate.falls: a part other than the feet on the floor where the reference has none, or the head below half the reference's)",
 }
-ALL_KINDS = (*KINDS, "follow")
-# root assistance bound [body weight]; procedural motion is not physically plausible (its feet
-# slide and its root glides), so it gets the whole body weight and the label says how much it took
-ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
+ALL_KINDS = (*KINDS, "follow", "procedural")
+REAL_KINDS = ("track", "fall", "follow")
+# root assistance bound [body weight] of the procedural kind: its motion is not physically
+# plausible (its feet slide and its root glides), so asking for it asks for a hand of up to the
+# whole body weight, recorded per tick and per frame; the real-motion kinds get none unless a
+# task asks for it (``SynthTask.assist``)
+PROCEDURAL_ASSIST = 1.0
+#: windows drawn per clip of a kind, the most active kept (:func:`most_active_window`): the
+#: ``track`` kind is velocity-rich on purpose, the others take one window at random
+WINDOW_CANDIDATES = {"track": 4}
+#: controllers of the real-motion kinds (``sampling``: ``SynthTask.samples`` > 0)
+SYNTH_CONTROLLERS = ("plain", "wholebody", "sampling")
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -104,6 +114,20 @@ class SynthTask:
     seconds: float = 4.0
     fps: float = 30.0
     samples: int = 0  # > 0: real-motion kinds use the sampling tracker, no assistance
+    controller: str = "plain"  # of the real-motion kinds without samples: plain or wholebody
+    assist: float = 0.0  # root assistance bound [body weight] of the real-motion kinds: none
+
+
+def task_controller(task: SynthTask) -> str:
+    """The controller that tracks ``task``: the plain tracker for procedural motion (its
+    assistance), else the sampling tracker when ``task.samples`` > 0, else ``task.controller``."""
+    if task.kind == "procedural":
+        return "plain"
+    if task.samples:
+        return "sampling"
+    if task.controller not in SYNTH_CONTROLLERS[:2]:
+        raise UnknownNameError("controller", task.controller, SYNTH_CONTROLLERS[:2])
+    return task.controller
 
 
 def episode_seed(task: SynthTask) -> int:
@@ -175,7 +199,14 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
     else:
         raise UnknownNameError("kind", task.kind, ALL_KINDS)
-    p["assist_limit"] = ASSIST_LIMIT[task.kind]
+    if not 0 <= task.assist <= 1:
+        raise UsageError(f"assistance {task.assist} body weights: expected 0 .. 1")
+    p["controller"] = task_controller(task)
+    if p["controller"] == "wholebody":  # its feedback gains are its own: no stiffness factor
+        p["gain"] = 1.0
+    p["assist_limit"] = PROCEDURAL_ASSIST if task.kind == "procedural" else float(task.assist)
+    if p["controller"] != "plain" and p["assist_limit"]:
+        raise UsageError(f"the {p['controller']} controller takes no assistance")
     for push in p["pushes"]:
         push["impulse"] = [f * push["duration"] for f in push["force"]]
     return p
@@ -198,7 +229,8 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     rng = episode_rng(episode_seed(task))
     p = draw_parameters(task, rng)
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
-    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"])
+    actuators = "motor" if p["controller"] == "wholebody" else "position"
+    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"], actuators)
     n = int(round(task.seconds * CONTROL_HZ))
     ref = reference_motion(task, p, model, n, rng)
     recorder = Recorder(model, mjcf, n, FRAME_SKIP)
@@ -246,10 +278,26 @@ def reference_motion(
             str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
             f" time warp: shorter than one {task.seconds:g} s clip"
         )  # fmt: skip
-    start = int(rng.integers(0, len(warped) - n + 1))
+    starts = rng.integers(0, len(warped) - n + 1, WINDOW_CANDIDATES.get(task.kind, 1))
+    start = int(starts[0]) if len(starts) == 1 else most_active_window(warped, n, starts)
     p["source"] = str(task.amc)
     p["start_tick"] = start
-    return on_floor(model, warped[start : start + n])
+    window = warped[start : start + n]
+    if p["controller"] == "wholebody":  # feet meet the floor: no lift, stance soles on it
+        return contact_consistent(model, flat_soles(model, on_floor(model, window, lift=0.0)))
+    # the 1 cm lift, and soles near the floor laid flat (as ``eval --simulate`` tracks)
+    return flat_soles(model, on_floor(model, window))
+
+
+def most_active_window(qpos: np.ndarray, n: int, starts: np.ndarray) -> int:
+    """Of the windows ``qpos[s : s + n]`` (qpos (T, nq) at any rate), the start ``s`` of
+    ``starts`` whose hinges move most: the largest sum of |hinge angle change| [rad] over the
+    window (the first of equals)."""
+    step = np.abs(np.diff(qpos[:, 7:], axis=0)).sum(axis=1)  # (T - 1,) per tick
+    total = np.concatenate([[0.0], np.cumsum(step)])
+    starts = np.asarray(starts, dtype=np.int64)
+    motion = total[starts + n - 1] - total[starts]
+    return int(starts[int(np.argmax(motion))])
 
 
 def simulate_episode(
@@ -257,9 +305,9 @@ def simulate_episode(
     rng: np.random.Generator,
 ) -> Tracking:  # fmt: skip
     """Track ``ref`` (T, nq) with ``p``'s pushes and weakenings, every tick recorded by
-    ``recorder``: the sampling tracker with no assistance for the real-motion kinds when
-    ``task.samples`` > 0 (its settings and seed, drawn from ``rng``, recorded in ``p``), else
-    the plain tracker with ``p["assist_limit"]``."""
+    ``recorder``, by ``p["controller"]``: the sampling tracker (no assistance; its settings and
+    seed, drawn from ``rng``, recorded in ``p``), the whole-body QP (no assistance) or the plain
+    tracker with ``p["assist_limit"]`` (0 for real motion unless the task asked for it)."""
     tracking = {  # what both trackers take: the perturbations and the clip rate
         "pushes": tuple(
             Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]
@@ -268,8 +316,9 @@ def simulate_episode(
         "record_every": int(round(CONTROL_HZ / task.fps)),
         "recorder": recorder,
     }
-    if task.samples and task.kind != "procedural":  # the body's own doing, or a fall
-        p["assist_limit"] = 0.0
+    if p["controller"] == "wholebody":
+        return track_wholebody(model, ref, **tracking)
+    if p["controller"] == "sampling":  # the body's own doing, or a fall
         p["sampling"] = {
             "samples": task.samples,
             "lookahead": LOOKAHEAD,
@@ -328,16 +377,22 @@ def episode_labels(p: dict, model, mjcf: str, result: Tracking, episode) -> dict
     }
 
 
-def episode_model(skeleton, scale: float, gain: float) -> tuple[mujoco.MjModel, str, Gains]:
+def episode_model(
+    skeleton, scale: float, gain: float, actuators: str = "position"
+) -> tuple[mujoco.MjModel, str, Gains]:
     """The simulated body of an episode: ``skeleton`` (already scaled by ``scale``) with mass
     scaling as its cube, the hinges' stiffness times ``gain`` (bandwidth times its square root;
     the torque limits are the human ones, never scaled, rounded down to the 6 digits an MJCF
-    keeps); the model compiled from its MJCF (the model simulated, so the MJCF rebuilds it
-    exactly), the MJCF itself and the gains."""
+    keeps), ``actuators`` ``"position"`` or ``"motor"`` (``sim_spec``'s); the model compiled
+    from its MJCF (the model simulated, so the MJCF rebuilds it exactly), the MJCF itself and
+    the gains."""
     gains = Gains().scaled(gain)
-    spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains)
+    spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains,
+                    actuators=actuators)  # fmt: skip
     for a in spec.actuators:  # the MJCF keeps 6 digits: round the limits down, never up
         a.forcerange = [-_down6(a.forcerange[1]), _down6(a.forcerange[1])]
+        if actuators == "motor":  # a torque's control range is its limit
+            a.ctrlrange = a.forcerange
     mjcf = spec.to_xml()
     return mujoco.MjModel.from_xml_string(mjcf), mjcf, gains
 
