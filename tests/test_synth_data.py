@@ -232,3 +232,19 @@ def test_cli_synth_exports_minari_and_refuses_a_bad_id(tmp_path, monkeypatch, ca
     assert main([*args, "--minari-id", "../escape"]) == 2
     assert "../escape" in capsys.readouterr().err
     assert not (tmp_path / "escape").exists()
+
+
+def test_minari_export_of_torque_actions_carries_the_torque_body(synth_wholebody, tmp_path):
+    from sim.simulate.export import export_minari
+
+    out, written = synth_wholebody
+    assert export_minari(out, tmp_path / "root", "sidql/wb-test-v0") == len(written)
+    meta = json.loads(
+        (tmp_path / "root" / "sidql/wb-test-v0" / "data" / "metadata.json").read_text()
+    )
+    assert meta["actions"] == "torque [N m]"
+    body = mujoco.MjModel.from_xml_string(meta["mjcf"])
+    assert not body.actuator_biasprm[:, 1].any()  # torque actuators, not PD servos
+    space = json.loads(meta["action_space"])
+    high, limit = np.array(space["high"]), np.array(meta["torque_limit"])
+    assert np.all(high >= 0.6 * limit) and np.all(high <= 1.6 * limit)  # limits x body sizes

@@ -12,8 +12,12 @@ Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``)
   the push (250-900 N), the weakening (to 60-5 % of its effort) and its length (0.3-1.5 s), so
   mild draws stumble and recover and severe ones fall (``fell`` in the clip's record);
 * ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
-* ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` (amplitude 35-60 % of each
-  joint's half range) replayed 1-2x faster, tracked in simulation.
+* ``procedural`` (not in the default mix): the sinusoidal motion of ``sim.motion.synthetic``
+  (amplitude 35-60 % of each joint's half range) replayed 1-2x faster, tracked in simulation
+  with up to :data:`PROCEDURAL_ASSIST` body weight of recorded root assistance.
+
+The real-motion kinds get no assistance unless their task asks for it (``SynthTask.assist``):
+only the joints, within the human torque limits, and the floor move the body.
 
 Positions, point velocities and ``qvel`` of a clip are the simulator's state sampled at the clip
 rate; point velocities come from the kinematic chain (``point_kinematics`` with the simulator's
@@ -51,12 +55,14 @@ PHYSICAL_BUDGET = 0.05
 # T control ticks (F = ceil(T / record_every): frame i is tick i * record_every), U = nu
 # actuators (one per hinge, the order of the clip's ``joint_names``), B bodies, S state size
 EPISODE_LABELS = {
-    "sim_actions": "(T, U) actuator controls at each control tick: PD target [rad], the "
-    "feed-forward folded in, inside each actuator's control range (the joint range widened: "
-    "sim.simulate.model.sim_spec)",
+    "sim_actions": "(T, U) actuator controls at each control tick, as they act on the body "
+    "the MJCF builds (sim.simulate.episode.Recorder): PD target [rad], the feed-forward "
+    "folded in, inside each actuator's control range (the joint range widened: "
+    "sim.simulate.model.sim_spec), or with the whole-body QP the torque [N m] within its limit",
     "sim_xfrc_applied": "(T, B, 6) applied body wrenches at each tick (pushes): force [N], "
     "torque [N m], world frame",
-    "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance)",
+    "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance: "
+    "zero unless the task asked for it or the clip is procedural)",
     "sim_tick_qpos": "(T + 1, nq) qpos before each tick and after the last",
     "sim_tick_qvel": "(T + 1, nv) qvel likewise",
     "sim_initial_state": "(S,) mj_getState(mjSTATE_INTEGRATION) before the first tick",

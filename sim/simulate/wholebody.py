@@ -338,6 +338,19 @@ def _penetration(data, floor: int) -> tuple[float, float]:
     return fd, sd
 
 
+def _finish_tick(model, data, ref, k: int, gains, limit: np.ndarray, scratch: dict) -> None:
+    """The physics steps of control tick ``k`` after its first: the torques held, or with
+    ``gains.every_step`` a QP (torques within ``limit`` (nu,) [N m]) before each, the reference
+    held."""
+    if not gains.every_step:
+        mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+        return
+    for _ in range(SUBSTEPS - 1):
+        mujoco.mj_forward(model, data)
+        data.ctrl[:] = qp_tick(model, data, ref, k, gains, limit, scratch).tau
+        mujoco.mj_step(model, data)
+
+
 def track_wholebody(
     model,
     ref_qpos: np.ndarray,
@@ -407,15 +420,7 @@ def track_wholebody(
             if on_record:
                 rec_tau[i] = data.actuator_force
                 _foot_forces(model, data, floor, side, rec_f[i])
-            if gains.every_step:  # a QP before every physics step, the reference held
-                for _ in range(SUBSTEPS - 1):
-                    mujoco.mj_forward(model, data)
-                    data.ctrl[:] = qp_tick(
-                        model, data, ref, k, gains, factor * base_limit, scratch
-                    ).tau
-                    mujoco.mj_step(model, data)
-            else:
-                mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+            _finish_tick(model, data, ref, k, gains, factor * base_limit, scratch)
     if recorder is not None:
         recorder(T, data)
     return Tracking(
