@@ -72,10 +72,11 @@ SPEED_RATIO_TARGET = 1.5  # p95 point speed of the clips that do not fall over t
 #: the targets' figures as the pages last measured them before this version (their rows stay
 #: beside the new ones): (page, date, command, clips, not fallen, p95 ratio, skating, real's)
 EARLIER = {
-    "synth_sampled": ("2026-11-25", "python benchmarks/bench_synth.py --data ../shared/cmu "
-                      "--samples 64 --n 60 --kinds track fall --workers 2", 58, 26, 1.17, 291, 235),
-    "synth": ("2026-11-25", "python benchmarks/bench_synth.py --data ../shared/cmu --audit "
-              "(plain tracker, 0.5 BW of assistance; not fallen and physical)", 88, 0,
+    "synth_sampled": ("2026-11-25", "`python benchmarks/bench_synth.py --data ../shared/cmu "
+                      "--samples 64 --n 60 --kinds track fall --workers 2`", 58, 26, 1.17, 291,
+                      235),
+    "synth": ("2026-11-25", "`python benchmarks/bench_synth.py --data ../shared/cmu --audit`, "
+              "plain tracker with up to 0.5 BW of assistance: not fallen and physical", 88, 0,
               float("nan"), float("nan"), 235),
 }  # fmt: skip
 
@@ -215,7 +216,7 @@ def quality(
     ]
     if earlier:
         date, command, n, n_up0, ratio0, skate0, real0 = earlier
-        lines.append(f"| earlier ({date}: `{command}`) | {n} | {n_up0} | {ratio0:.2f} "
+        lines.append(f"| earlier ({date}: {command}) | {n} | {n_up0} | {ratio0:.2f} "
                      f"| {skate0:.0f} | {real0:.0f} |")  # fmt: skip
     lines += [
         f"| this run | {len(rows)} | {n_up} | {up['p95_ratio']:.2f} | {up['skate_mm_s']:.0f} "
@@ -357,6 +358,8 @@ def main() -> None:
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=ALL_KINDS)
     ap.add_argument("--controller", default=DEFAULT_CONTROLLER, choices=SYNTH_CONTROLLERS[:2],
                     help="controller of the real-motion kinds without --samples")  # fmt: skip
+    ap.add_argument("--no-speed", action="store_true",
+                    help="skip the speed timings (synth_speed.md stays as it is)")  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
@@ -395,12 +398,15 @@ def main() -> None:
                 table, command,
             )  # fmt: skip
         return
+    if not args.no_write:
+        write_results("synth", "Synthetic clips: physical share, speeds, skating, contacts",
+                      table, command)  # fmt: skip
+    if args.no_speed:
+        return
     speed_table, timing = speed(args.cmu, args.speed_clips, args.seed + 99)
     print(speed_table)
     if args.no_write:
         return
-    write_results("synth", "Synthetic clips: physical share, speeds, skating, contacts", table,
-                  command)  # fmt: skip
     write_results(
         "synth_speed", "Synthetic clips: simulation speed and 1 -> 2 worker scaling",
         speed_table, command,
