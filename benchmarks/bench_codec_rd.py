@@ -40,6 +40,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
+import codec_physics  # noqa: E402
 import scipy.fft  # noqa: E402
 from results import load_trials, write_results  # noqa: E402
 
@@ -299,6 +300,8 @@ def main(argv=None) -> int:
     ap.add_argument("--plot", type=Path, default=REPO / "docs" / "codec_rd.png")
     ap.add_argument("--json", type=Path, default=None, help="also write every number here")
     ap.add_argument("--no-write", action="store_true", help="print only (no docs/results file)")
+    ap.add_argument("--physics", action="store_true", help="also foot contacts at equal rate "
+                    "(benchmarks/codec_physics.py, which alone writes its own page)")  # fmt: skip
     args = ap.parse_args(argv)
 
     clips, skipped = load_trials(args.data)
@@ -363,6 +366,8 @@ def main(argv=None) -> int:
             f"{c['brotli 11'] / seconds:.1f} |"
         )
     text = "\n".join(lines)
+    if args.physics:
+        text += "\n\n" + codec_physics.section(clips)
     print(text)
     if args.plot:
         write_plot(base, codec, angle, args.plot,
@@ -373,7 +378,7 @@ def main(argv=None) -> int:
             "codec_rd",
             "Codec against practical baselines: rate and joint position error",
             text + f"\n\n![rate-distortion](../{args.plot.name})\n",
-            command="python benchmarks/bench_codec_rd.py",
+            command="python benchmarks/bench_codec_rd.py" + " --physics" * args.physics,
         )
         print(f"wrote {path}")
     if args.json:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from sidql.codec import format as sidq
+from sidql.codec.contact_section import pin_decoded, pinned_clip
 from sidql.codec.skeleton import fit_motion, skeleton_hash
 from sidql.keyframes.curves import interpolate_derivatives
 from sidql.keyframes.reconstructions import Reconstruction
@@ -80,6 +81,8 @@ def reconstruct_stream(stream: sidq.Stream) -> Reconstruction:
             *(c[part] for c in (root_acc, theta, phi, dtheta, dphi, ddtheta, ddphi)),
             stream.lengths, stream.parents,
         )  # fmt: skip
+    if stream.contacts is not None:  # the sender's foot contacts: each foot pinned
+        P, V, A = pin_decoded(stream.contacts, stream.names, stream.keyframes, stream.fps, P, V, A)
     return Reconstruction(
         positions=P,
         velocities=V,
@@ -111,6 +114,8 @@ def stream_to_clip(stream: sidq.Stream, source: str = "") -> Clip:
     """The decoded trial as a 23-point :class:`Clip` (the ``sidql ingest`` format)."""
     if tuple(stream.names) != POINTS:
         raise MotionDataError(source or None, None, "stream points are not the CMU protocol's")
+    if stream.contacts is not None:  # the pinned points charted again (legs keep their lengths)
+        return pinned_clip(reconstruct_stream(stream), stream.lengths, stream.fps, source)
     channels = _split(stream, decoded_chart(stream))
     N = channels[0].shape[0]
     parts = None

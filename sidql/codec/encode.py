@@ -50,6 +50,7 @@ def encode_series(
     skel_hash: bytes = bytes(8),
     where: str = "",
     objective: str = "position",
+    extra_cost=None,
 ) -> Encoded:
     """Encode a chart (see the module docstring).
 
@@ -68,6 +69,8 @@ def encode_series(
         max_gap: G, the largest gap between keyframes [frames] (<= 255).
         skel_hash: 8 bytes naming the source skeleton.
         objective: "position" (mean joint position error) or "angle" (Q).
+        extra_cost: (N, G + 1) [m] added to the position coding's segment costs (e.g. the
+            physical cost, :mod:`sidql.codec.contact_coding`); the position coding only.
 
     Raises:
         UnmetTargetError: the rate cannot be met; UnknownNameError: an unknown reconstruction;
@@ -80,15 +83,18 @@ def encode_series(
     position = (
         objective == "position" and max_q is None and latency == 0 and reconstruction != "hermite"
     )
-    if max_error is not None and not position:
-        raise UsageError("max_error needs an offline stream (latency 0), linear or catmull_rom")
+    if (max_error is not None or extra_cost is not None) and not position:
+        what = "max_error" if max_error is not None else "a physical cost"
+        raise UsageError(f"{what} needs an offline stream (latency 0), linear or catmull_rom")
     if position:
         names = sidq.POSITION_RECONSTRUCTIONS if reconstruction == "auto" else (reconstruction,)
     else:
         names = CURVES if reconstruction == "auto" else (reconstruction,)
     common = dict(max_gap=max_gap, fps=fps, skel_hash=skel_hash, where=where)
     if position:
-        enc, cand = encode_positions(series, names, rate=rate, max_error=max_error, **common)
+        enc, cand = encode_positions(
+            series, names, rate=rate, max_error=max_error, extra_cost=extra_cost, **common
+        )
         return replace(enc, candidates=cand)
     results, errors = {}, []
     for r in names:
@@ -153,9 +159,13 @@ def encode_files(
     out: str | os.PathLike,
     *,
     fps: float = 30.0,
+    encoder=None,
     **kwargs,
 ) -> Encoded:
     """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out`` (``.sidq``), written atomically.
+
+    ``encoder(clip, **kwargs) -> Encoded``: :func:`encode_clip` unless given (e.g.
+    :func:`sidql.codec.contact_coding.encode_with_contacts`).
 
     The trial is read with :func:`sim.motion.ingest.load_motion` on the subject's own skeleton at
     ``fps``; the stream records the skeleton's hash so the decoder can check the ASF it is given.
@@ -168,6 +178,6 @@ def encode_files(
         raise
     except ValueError as e:  # e.g. an output rate that does not divide the source rate
         raise MotionDataError(str(amc), None, str(e)) from None
-    enc = encode_clip(clip, skel_hash=skel, **kwargs)
+    enc = (encoder or encode_clip)(clip, skel_hash=skel, **kwargs)
     write_atomic(Path(out), lambda f: f.write(enc.data))
     return enc

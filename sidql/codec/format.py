@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sidql.codec.contact_section import FootContacts, attach_section, split_section, with_section
 from sidql.codec.entropy import decode_integers, encode_integers
 from sidql.codec.quantise import BITS, PositionQuantiser, Quantiser
 from sidql.keyframes.curves import CURVES
@@ -60,6 +61,7 @@ class Stream:
         keyframes: (W,) frame indices, 0 first, strictly increasing.
         pose_codes: (W, D) uint16; rate_codes: (W, D) int16 or None.
         coding: 0 fixed records, 1 packed (see the module docstring).
+        contacts: the optional foot-contact section (:mod:`sidql.codec.contact_section`).
     """
 
     reconstruction: str
@@ -74,6 +76,7 @@ class Stream:
     pose_codes: np.ndarray
     rate_codes: np.ndarray | None
     coding: int = 0
+    contacts: FootContacts | None = None
 
     @property
     def n_frames(self) -> int:
@@ -164,6 +167,7 @@ def to_bytes(stream: Stream) -> bytes:
         raise UsageError("coding 0 carries 16-bit codes only")
     else:
         body = header_bytes(stream) + record_bytes(stream)
+    body = with_section(body, stream.contacts, stream.n_frames)  # as is without contacts
     return body + struct.pack("<I", zlib.crc32(body))
 
 
@@ -286,6 +290,11 @@ class _Reader:
 
 def from_bytes(data: bytes, where: str = "<stream>") -> Stream:
     """Parse a container (see the module docstring); MotionDataError on any defect."""
+    data, section = split_section(bytes(data), where)
+    return attach_section(_from_plain(data, where), section, where)
+
+
+def _from_plain(data: bytes, where: str) -> Stream:
     body, r, recon, coding, bits, latency, fps = _header(bytes(data), where)
     skel = r.take(8, "skeleton hash")
     names, parents = _points(r, where)

@@ -41,13 +41,15 @@ class _PositionSearch:
     Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
     the range coder itself runs only on the few plans that may be kept."""
 
-    def __init__(self, series, recon, G, build):
+    def __init__(self, series, recon, G, build, extra_cost=None):
         self.series, self.recon, self.build = series, recon, build
         values, _ = series.channels()
         self.values = values
         self.lengths = sidq.position_lengths(series.lengths)
         self.truth = chart_points(values, series.lengths, series.parents)
         self.C = position_band_costs(values, values, None, G, recon, self.lengths, series.parents)
+        if extra_cost is not None:  # e.g. the physical cost (sidql.codec.contact_coding) [m]
+            self.C = self.C + extra_cost[:, : G + 1]
         self.plans: dict = {}
         self.coded: dict = {}
         self.last = None  # log lam of the previous search's answer
@@ -185,6 +187,7 @@ def encode_positions(
     fps: float,
     skel_hash: bytes,
     where: str,
+    extra_cost: np.ndarray | None = None,
 ) -> tuple[Encoded, dict]:
     """Coding 2: keyframes by the position-error programme, values by their effect on positions
     (:class:`~sidql.codec.quantise.PositionQuantiser`), range-coded; the best of ``recons``.
@@ -195,11 +198,13 @@ def encode_positions(
     size model), the least mean error wins, and only the winner is range-coded (at most
     :data:`_REAL_CODINGS` times, correcting the model). Returns the encoding and every
     candidate's (mean error [mm], bytes or estimated bytes) by "reconstruction/position".
+    ``extra_cost``: (N, >= G + 1) [m] added to the keyframe programme's segment costs.
     """
     duration = series.n_frames / fps
     G = min(max_gap, sidq.MAX_GAP)
     searches = {
-        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash)) for r in recons
+        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash), extra_cost)
+        for r in recons
     }
     if max_error is not None:
         cands, recon, (keys, q, codes, E) = _for_error(searches, max_error, where)

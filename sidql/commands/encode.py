@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from functools import partial
+
+from sidql.codec.contact_coding import encode_with_contacts
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.commands.usage import add_trial, positive
@@ -57,6 +60,18 @@ def register(p) -> None:
         "--max-gap", type=int, default=DEFAULT_MAX_GAP, metavar="G", help="largest keyframe gap G"
     )
     p.add_argument("--fps", type=positive(float), default=30.0, help="stream rate (divides 120)")
+    p.add_argument(
+        "--contacts",
+        action="store_true",
+        help="send the foot-contact bits and floor (offline): the decoder pins each foot in "
+        "contact (docs/codec.md)",
+    )
+    p.add_argument(
+        "--physics",
+        action="store_true",
+        help="also choose keyframes with the physical cost (implies --contacts; --rate or "
+        "--max-error, linear or catmull_rom)",
+    )
     p.set_defaults(func=run, parser=p)
 
 
@@ -65,6 +80,9 @@ def run(args) -> int:
         args.parser.error("--latency must be in 0..65535 and --max-gap in 1..255")
     if args.max_error is not None and (args.latency or args.reconstruction == "hermite"):
         args.parser.error("--max-error needs an offline stream (--latency 0), not hermite")
+    if (args.contacts or args.physics) and args.latency:
+        args.parser.error("--contacts and --physics need an offline stream (--latency 0)")
+    contacts = args.contacts or args.physics
     enc = encode_files(
         args.asf,
         args.amc,
@@ -76,11 +94,17 @@ def run(args) -> int:
         reconstruction=args.reconstruction,
         latency=args.latency,
         max_gap=args.max_gap,
+        encoder=partial(encode_with_contacts, physics=args.physics) if contacts else None,
     )
     s = enc.stream
     n = s.n_frames
     print(f"frames        {n} at {s.fps:g} fps ({n / s.fps:.2f} s)")
     print(f"keyframes     {len(s.keyframes)} ({s.reconstruction}, latency {s.latency})")
+    if s.contacts is not None:
+        n = s.contacts.n_bytes
+        what = "physics-aware keyframes, " * args.physics + "feet pinned"
+        print(f"foot contacts {n} bytes ({what}; the figures below are after the pinning, a "
+              "--max-error or --max-q target is met before it)")  # fmt: skip
     print(f"size          {len(enc.data)} bytes, {enc.bytes_per_second:.1f} B/s")
     print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
     if s.coding == 2:

@@ -121,9 +121,10 @@ class SegmentInputs:
     dt: float
 
 
-def segment_inputs(clip: Clip, contact: np.ndarray | None = None) -> SegmentInputs:
-    """:class:`SegmentInputs` of a clip (its 23 protocol points, the clip's own floor, the
-    sender's contact bits unless given (N, 2) bool)."""
+def segment_inputs(clip: Clip, contact: np.ndarray | None = None, ground=None) -> SegmentInputs:
+    """:class:`SegmentInputs` of a clip (its 23 protocol points, its floor ``ground`` (a
+    :class:`sim.physics.ground.Ground`; default the clip's own), the sender's contact bits on it
+    unless given (N, 2) bool)."""
     idx = protocol_indices(clip)
     P, V = clip.positions[:, idx], clip.velocities[:, idx]
     if clip.accelerations is not None:
@@ -133,7 +134,8 @@ def segment_inputs(clip: Clip, contact: np.ndarray | None = None) -> SegmentInpu
     w = point_masses()
     com, com_vel, com_acc = (np.einsum("j,njk->nk", w, X) for X in (P, V, A))
     s = sole(P, POINTS)
-    ground = estimate_ground(clip.positions, clip.names, clip.fps)
+    if ground is None:
+        ground = estimate_ground(clip.positions, clip.names, clip.fps)
     c = sender_contacts(clip, ground) if contact is None else np.asarray(contact, dtype=bool)
     ankle, ball = (
         np.stack([P[:, POINTS.index(x + b)] for x in SIDES], 1) for b in ("tibia", "foot")
@@ -161,15 +163,16 @@ def segment_inputs(clip: Clip, contact: np.ndarray | None = None) -> SegmentInpu
 
 
 @numba.njit(cache=True)
-def _physical_costs(com, cv, S, SV, radius, floor, contact, h0, v0, r0, dt, mu, g):
-    """(3, N, N) summed skating [m/s], floor [m] and residual [BW] terms of every segment
-    (the module docstring), on the cubic Hermite through each quantity's keyframe values."""
+def _physical_band(com, cv, S, SV, radius, floor, contact, h0, v0, r0, dt, mu, g, G):
+    """(3, N, G + 1) summed skating [m/s], floor [m] and residual [BW] terms of every segment
+    ``(i, i + L)``, 2 <= L <= G, at ``[:, i, L]`` (the module docstring), on the cubic Hermite
+    through each quantity's keyframe values."""
     N = com.shape[0]
     F, K = S.shape[1], S.shape[2]
-    out = np.zeros((3, N, N))
+    out = np.zeros((3, N, G + 1))
     root = np.sqrt(1.0 + mu * mu)
     for i in range(N):
-        for j in range(i + 2, N):
+        for j in range(i + 2, min(N, i + G + 1)):
             L = j - i
             T = L * dt
             sk = 0.0
@@ -218,19 +221,34 @@ def _physical_costs(com, cv, S, SV, radius, floor, contact, h0, v0, r0, dt, mu, 
                     elif mu * fh + fz > 0:
                         r = (fh - mu * fz) / root
                 rs += max(0.0, r / g - r0[n])
-            out[0, i, j] = sk
-            out[1, i, j] = ht
-            out[2, i, j] = rs
+            out[0, i, L] = sk
+            out[1, i, L] = ht
+            out[2, i, L] = rs
     return out
+
+
+def physical_band(x: SegmentInputs, G: int) -> np.ndarray:
+    """(3, N, G + 1) the physical terms of every segment ``(i, i + L)`` with ``L <= G`` at
+    ``[:, i, L]``, summed over its inner frames: skating [m/s], floor [m], residual [BW] (the
+    module docstring); 0 for ``L <= 1`` and past the last frame. O(N G^2) time, O(N G) memory:
+    what a whole trial's banded programme (the codec's) reads."""
+    return _physical_band(
+        x.com, x.com_vel, np.ascontiguousarray(x.spheres), np.ascontiguousarray(x.sphere_vel),
+        x.radius, x.floor, x.contact, x.height0, x.vel0, x.residual0, float(x.dt), MU, GRAVITY,
+        int(G),
+    )  # fmt: skip
 
 
 def physical_costs(x: SegmentInputs) -> np.ndarray:
     """(3, N, N) the physical terms of every segment ``(i, j)``, summed over its inner frames:
     skating [m/s], floor [m], residual [BW] (the module docstring); 0 for ``j <= i + 1``."""
-    return _physical_costs(
-        x.com, x.com_vel, np.ascontiguousarray(x.spheres), np.ascontiguousarray(x.sphere_vel),
-        x.radius, x.floor, x.contact, x.height0, x.vel0, x.residual0, float(x.dt), MU, GRAVITY,
-    )  # fmt: skip
+    N = x.com.shape[0]
+    band = physical_band(x, max(N - 1, 0))
+    out = np.zeros((3, N, N))
+    i, L = np.nonzero(np.ones((N, N), dtype=bool))
+    ok = i + L < N
+    out[:, i[ok], i[ok] + L[ok]] = band[:, i[ok], L[ok]]
+    return out
 
 
 def scaled(terms: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from sidql.learning.files import load_payload, save_payload
-from sidql.learning.settings import RESUME_MAY_CHANGE, Args
+from sidql.learning.settings import LATER_DEFAULTS, RESUME_MAY_CHANGE, Args
 from sim.errors import ModelFileError
 from sim.files import excerpt
 
@@ -55,7 +55,7 @@ def load_checkpoint(path: Path, args: Args) -> dict:
     for key, value in now.items():
         if key in RESUME_MAY_CHANGE:
             continue
-        old = stored.get(key)
+        old = stored.get(key, LATER_DEFAULTS.get(key))
         if isinstance(value, tuple) and isinstance(old, list | tuple):
             old = tuple(old)
         if old != value:

@@ -63,6 +63,7 @@ from sidql.learning.tasks import (
     insertion_gain,
     keyframe_q,
     load_tasks,
+    reward_tasks,
     synthetic_tasks,
 )
 from sim.errors import ModelFileError, MotionDataError, UsageError
@@ -106,7 +107,8 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
         train_s, test_s = split_subjects(found, args.test_subjects, args.seed)
     except ValueError as e:
         raise MotionDataError(args.data, None, str(e)) from None
-    kw = dict(cache_dir=args.cache_dir, progress=args.progress)  # None: the default task cache
+    physics = args.reward == "physics"  # then every task also carries its physical costs
+    kw = dict(cache_dir=args.cache_dir, progress=args.progress, physics=physics)
     test_tasks = load_tasks(args.data, stride=60, subjects=set(test_s), **kw).tasks()
     if not test_tasks:
         raise MotionDataError(
@@ -126,15 +128,16 @@ def make_tasks(args: Args) -> tuple[list[KeyframeTask], list[KeyframeTask], dict
                 f"--train-also: left out {len(entries) - len(kept)} of {len(entries)} clips made "
                 f"from held-out subjects' trials ({', '.join(test_s)})", file=sys.stderr,
             )  # fmt: skip
-        train_tasks += [_also_task(c, e, args.train_also) for c, e in kept]
-    return train_tasks, test_tasks, {"train": train_s, "test": test_s}
+        train_tasks += [_also_task(c, e, args.train_also, physics) for c, e in kept]
+    split = {"train": train_s, "test": test_s}
+    return reward_tasks(train_tasks, args.reward), reward_tasks(test_tasks, args.reward), split
 
 
-def _also_task(clip, entry: dict, folder) -> KeyframeTask:
+def _also_task(clip, entry: dict, folder, physics: bool = False) -> KeyframeTask:
     """The task of a ``--train-also`` clip; one that cannot be a task is named by its index
     file and entry (never by the path its ``source`` claims)."""
     try:
-        return clip_task(clip, subject=str(entry.get("subject", "")))
+        return clip_task(clip, subject=str(entry.get("subject", "")), physics=physics)
     except MotionDataError as e:
         name = excerpt(str(entry.get("file")), 100, quote=False)
         raise MotionDataError(

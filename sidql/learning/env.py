@@ -18,6 +18,14 @@ paper's r_i = R_{i+1} - R_i with R_i = 1 - Q_i / Q_0 (eq. 21-22), Q from
 A clip whose Q_0 is zero (nothing to reconstruct: the first and last keyframes already reproduce it)
 gives R_i = 0 and zero rewards throughout.
 
+**The physical reward** (``physics_weight`` lambda > 0, e.g. the ``physics`` method's
+:data:`sidql.keyframes.physical_costs.PHYSICS_WEIGHT`): the error becomes the ``physics``
+method's, ``E = Q + lambda Phi`` with ``Phi = sum_w P[k_w, k_{w+1}] / (N M)`` the physical cost
+of the segments (each task's ``physical``, :attr:`sidql.learning.tasks.KeyframeTask.physical`),
+and ``R_i = 1 - E_i / E_0``; the reward of a step then splits into ``(Q_i - Q_{i+1}) / E_0``
+(``info["reward_q"]``) and ``lambda (Phi_i - Phi_{i+1}) / E_0`` (``info["reward_physics"]``).
+With lambda = 0 (the default) everything is as above, to the bit.
+
 Observations are on a unit scale with finite bounds (see :class:`KeyframeEnv`); learners that want
 the raw arrays read ``env.unwrapped.tasks[info["task_index"]]``.
 """
@@ -117,10 +125,13 @@ class KeyframeEnv(gym.Env):
     ``env.get_wrapper_attr("action_masks")()``; in a vector env use ``infos["action_mask"]`` or
     ``envs.call("action_masks")``.
     Reward: r_i = R_{i+1} - R_i, R_i = 1 - Q_i / Q_0; ``info`` carries the terms (``R``, ``R_prev``,
-    ``q``, ``q_prev``, ``q0``) so that ``reward == R - R_prev``.
+    ``q``, ``q_prev``, ``q0``) so that ``reward == R - R_prev``; with ``physics_weight`` lambda the
+    error is ``E = Q + lambda Phi`` (the module docstring) and ``reward == reward_q + reward_physics``.
     Info (fixed shapes, so vector envs can stack them): ``action_mask`` (N,) bool,
-    ``keyframe_mask`` (N,) bool, ``task_index`` int, ``q``, ``q_prev``, ``q0``, ``R``, ``R_prev``
-    floats (at reset the ``_prev`` terms equal the current ones).
+    ``keyframe_mask`` (N,) bool, ``task_index`` int, ``q``, ``q_prev``, ``q0``, ``R``, ``R_prev``,
+    ``physical``, ``physical_prev`` (Phi; 0 without a physical reward), ``reward_q``,
+    ``reward_physics`` floats (at reset the ``_prev`` terms equal the current ones and the
+    rewards are 0).
     Episode: starts from {0, N-1}; terminates when W keyframes are chosen (no truncation).
 
     Args:
@@ -131,6 +142,8 @@ class KeyframeEnv(gym.Env):
             per episode with ``self.np_random``.
         feature_stats: (mean, std), each (C,), for the observation's standardisation (e.g. the
             training environment's, for an evaluation environment); None: from ``tasks``.
+        physics_weight: lambda of the physical reward (the module docstring); > 0 needs every
+            task's ``physical`` (:func:`sidql.learning.tasks.clip_task` with ``physics``).
 
     ``reset(options={"task": i, "keyframes": W})`` fixes the clip and/or W of the episode (integers;
     any other key is refused with ``ValueError``).
@@ -143,10 +156,16 @@ class KeyframeEnv(gym.Env):
         tasks: Sequence[KeyframeTask] | None = None,
         keyframes: Sequence[int] = (5, 10, 15),
         feature_stats: tuple[np.ndarray, np.ndarray] | None = None,
+        physics_weight: float = 0.0,
     ):
         self.tasks = list(synthetic_tasks(8, seed=0) if tasks is None else tasks)
         if not self.tasks:
             raise UsageError("KeyframeEnv needs at least one task")
+        self.physics_weight = float(physics_weight)
+        if not (np.isfinite(self.physics_weight) and self.physics_weight >= 0):
+            raise UsageError(f"physics_weight must be >= 0; got {physics_weight}")
+        if self.physics_weight > 0 and any(t.physical is None for t in self.tasks):
+            raise UsageError("a physical reward needs tasks with physical costs (physics=True)")
         n, c = self.tasks[0].features.shape
         for t in self.tasks:
             if t.features.shape != (n, c):
@@ -173,18 +192,37 @@ class KeyframeEnv(gym.Env):
         self._mask = np.zeros(n, dtype=bool)
         self._budget = 0
         self._q0 = self._q = self._q_prev = 0.0
+        self._phi0 = self._phi = self._phi_prev = 0.0
         self._scaled: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- helpers -------------------------------------------------------------------------------
-    def _R(self, q: float) -> float:
-        return 0.0 if self._q0 <= 0.0 else 1.0 - q / self._q0
+    def _error(self, q: float, phi: float) -> float:
+        """E = Q + lambda Phi (Q itself, to the bit, when lambda is 0)."""
+        return q + self.physics_weight * phi if self.physics_weight > 0 else q
+
+    def _R(self, q: float, phi: float = 0.0) -> float:
+        e0 = self._error(self._q0, self._phi0)
+        return 0.0 if e0 <= 0.0 else 1.0 - self._error(q, phi) / e0
+
+    def _physical(self, keyframes) -> float:
+        """Phi of sorted ``keyframes`` on the current task (0 without a physical reward)."""
+        if self.physics_weight <= 0:
+            return 0.0
+        t = self._task
+        return keyframe_error_sum(t.physical, keyframes) / (t.n_frames * t.n_bones)
+
+    def segment_cost(self, task: KeyframeTask) -> np.ndarray:
+        """(N, N) the segment costs a task's error sums: ``cost`` (+ lambda ``physical``)."""
+        if self.physics_weight <= 0:
+            return task.cost
+        return task.cost + self.physics_weight * task.physical
 
     def scaled(self, task: KeyframeTask) -> tuple[np.ndarray, np.ndarray]:
         """A task's (features, cost) as observed: standardised and clipped features (N, C), costs
         over their largest entry (N, N), both float32 (see the class docstring)."""
         f = (task.features - self.feature_mean) / self.feature_std
         f = np.clip(f, -FEATURE_CLIP, FEATURE_CLIP).astype(np.float32)
-        cost = np.maximum(task.cost, 0.0)
+        cost = np.maximum(self.segment_cost(task), 0.0)
         top = float(cost.max())
         cost = (cost / top if top > 0.0 else cost).astype(np.float32)
         return f, cost
@@ -199,6 +237,8 @@ class KeyframeEnv(gym.Env):
         }
 
     def _info(self) -> dict:
+        e0 = self._error(self._q0, self._phi0)
+        unit = 0.0 if e0 <= 0.0 else 1.0 / e0
         return {
             "action_mask": self.action_masks(),
             "keyframe_mask": self._mask.copy(),
@@ -206,8 +246,12 @@ class KeyframeEnv(gym.Env):
             "q": self._q,
             "q_prev": self._q_prev,
             "q0": self._q0,
-            "R": self._R(self._q),
-            "R_prev": self._R(self._q_prev),
+            "R": self._R(self._q, self._phi),
+            "R_prev": self._R(self._q_prev, self._phi_prev),
+            "physical": self._phi,
+            "physical_prev": self._phi_prev,
+            "reward_q": (self._q_prev - self._q) * unit,
+            "reward_physics": self.physics_weight * (self._phi_prev - self._phi) * unit,
         }
 
     def action_masks(self) -> np.ndarray:
@@ -242,6 +286,7 @@ class KeyframeEnv(gym.Env):
         self._mask = np.zeros(self.n_frames, dtype=bool)
         self._mask[[0, -1]] = True
         self._q0 = self._q = self._q_prev = keyframe_q(self._task, [0, self.n_frames - 1])
+        self._phi0 = self._phi = self._phi_prev = self._physical([0, self.n_frames - 1])
         return self._obs(), self._info()
 
     def step(self, action):
@@ -259,8 +304,10 @@ class KeyframeEnv(gym.Env):
             chosen = ", ".join(map(str, np.flatnonzero(self._mask)))
             raise InvalidActionError(f"frame {a} is already a keyframe (chosen: {chosen})")
         self._mask[a] = True
-        self._q_prev, self._q = self._q, keyframe_q(self._task, np.flatnonzero(self._mask))
-        reward = self._R(self._q) - self._R(self._q_prev)
+        keys = np.flatnonzero(self._mask)
+        self._q_prev, self._q = self._q, keyframe_q(self._task, keys)
+        self._phi_prev, self._phi = self._phi, self._physical(keys)
+        reward = self._R(self._q, self._phi) - self._R(self._q_prev, self._phi_prev)
         terminated = bool(self._mask.sum() >= self._budget)
         return self._obs(), float(reward), terminated, False, self._info()
 

@@ -16,6 +16,11 @@ from sim.errors import UsageError
 #: match: the network, the replay memories and the data split are built from it).
 RESUME_MAY_CHANGE = ("steps", "resume", "out", "cache_dir", "progress", "threads", "eval_every",
                      "extra", "data")  # fmt: skip
+#: Settings added after checkpoints were first written, with the value every older run had (a
+#: checkpoint that does not store one is read as having it).
+LATER_DEFAULTS = {"reward": "q"}
+#: The rewards a run may learn from (:attr:`Args.reward`).
+REWARDS = ("q", "physics")
 
 
 @dataclass
@@ -43,6 +48,11 @@ class Args:
     """cache of per-trial (features, costs); None: ``sidql.learning.tasks.default_cache_dir()``"""
     synthetic_tasks: int = 64
     """number of synthetic tasks when ``data`` is None (a quarter of them held out)"""
+    reward: str = "q"
+    """"q": the paper's reward (eq. 21-22, from Q); "physics": from Q plus the physics method's
+    weight (its stated rule) times the physical cost of the segments (skating, floor, residual
+    force; sidql.keyframes.physical_costs): every task's segment costs become the physics
+    method's, so demonstrations, prior and held-out figures follow them (needs --data)"""
     train_also: str | None = None
     """a ``sidql synth`` / ``sidql dataset`` folder whose 60-frame clips join the training tasks
     only (the held-out tasks stay the real held-out subjects')"""
@@ -155,6 +165,10 @@ def settings_problems(args: Args) -> list[str]:
         finite = not isinstance(v, float) or math.isfinite(v)
         if isinstance(v, bool) or not isinstance(v, int | float) or not finite or not ok(v):
             out.append(f"--{name.replace('_', '-')} must be {what}; got {v}")
+    if args.reward not in REWARDS:
+        out.append(f"--reward must be one of {', '.join(REWARDS)}; got {args.reward}")
+    elif args.reward == "physics" and args.data is None:
+        out.append("--reward physics needs --data (synthetic tasks have no physics)")
     try:
         check_counts(args.keyframes, 60, least=LEAST_LEARNED_W, name="--keyframes")
     except UsageError as e:

@@ -8,7 +8,8 @@
   arguments and by CI's tiny training run;
 - :func:`clip_features` / :func:`clip_task`: a 60-frame motion clip -> the paper's state
   inputs F, V (bone angles and rates of the spherical chart) and the Hermite segment-cost matrix
-  (:mod:`sidql.keyframes.segment_costs`);
+  (:mod:`sidql.keyframes.segment_costs`), and with ``physics`` the physical cost of each segment
+  (:mod:`sidql.keyframes.physical_costs`, the ``physics`` method's) for a physical reward;
 - :func:`load_tasks`: every trial under a CMU directory, cut into 60-frame clips (optionally with a
   stride smaller than 60 for more, overlapping training clips), cached per trial as ``.npz`` in
   :func:`default_cache_dir` (``$SIDQL_CACHE`` or ``~/.cache/sidql/tasks``) unless told otherwise,
@@ -23,12 +24,13 @@ import hashlib
 import os
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from sidql.keyframes.physical_costs import PHYSICS_WEIGHT, physical_costs, scaled, segment_inputs
 from sidql.keyframes.segment_costs import segment_cost_matrix
 from sidql.keyframes.spherical import chart
 from sim.errors import MotionDataError, OutputError, UsageError
@@ -52,6 +54,9 @@ class KeyframeTask:
             Q = sum / (N M).
         source: where the clip came from (file and start frame), for reports.
         subject: subject id of the trial (for subject-wise splits); "" if unknown.
+        physical: (N, N) the physical cost P of each segment (dimensionless: skating, floor and
+            residual force over their scales, :func:`sidql.keyframes.physical_costs.scaled`;
+            only i < j is read), or None when not computed.
     """
 
     features: np.ndarray
@@ -59,6 +64,7 @@ class KeyframeTask:
     n_bones: int = 22
     source: str = ""
     subject: str = ""
+    physical: np.ndarray | None = None
 
     def __post_init__(self):
         n = self.features.shape[0]
@@ -66,12 +72,30 @@ class KeyframeTask:
             raise UsageError(f"features must be (N >= 3, C); got {self.features.shape}")
         if self.cost.shape != (n, n):
             raise UsageError(f"cost must be (N, N) = ({n}, {n}); got {self.cost.shape}")
+        if self.physical is not None and self.physical.shape != (n, n):
+            raise UsageError(f"physical must be (N, N) = ({n}, {n}); got {self.physical.shape}")
         if self.n_bones < 1:
             raise UsageError(f"n_bones must be positive; got {self.n_bones}")
 
     @property
     def n_frames(self) -> int:
         return int(self.features.shape[0])
+
+
+def physics_task(task: KeyframeTask, weight: float = PHYSICS_WEIGHT) -> KeyframeTask:
+    """``task`` whose segment costs are the ``physics`` method's, ``cost + weight * physical``
+    [rad] (its :func:`keyframe_q` is then that method's combined error): the physical reward of
+    :class:`sidql.learning.env.KeyframeEnv` with ``physics_weight = weight`` folded into the
+    costs, for learners that read ``cost`` (demonstrations, priors, baselines)."""
+    if task.physical is None:
+        raise UsageError(f"task {task.source or '?'} has no physical costs (physics=True)")
+    return replace(task, cost=task.cost + weight * task.physical)
+
+
+def reward_tasks(tasks: Sequence[KeyframeTask], reward: str) -> list[KeyframeTask]:
+    """The tasks a run with ``reward`` ("q" or "physics", :attr:`sidql.learning.settings.Args.reward`)
+    learns on: as they are, or each :func:`physics_task`."""
+    return list(tasks) if reward == "q" else [physics_task(t) for t in tasks]
 
 
 def keyframe_error_sum(cost: np.ndarray, keyframes: Sequence[int] | np.ndarray) -> float:
@@ -193,23 +217,27 @@ def stacked_features(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
     return np.concatenate([angles[:, :m], phi, rates], axis=1).astype(np.float32)
 
 
-def clip_task(clip, *, subject: str = "") -> KeyframeTask:
+def clip_task(clip, *, subject: str = "", physics: bool = False) -> KeyframeTask:
     """A motion clip (:class:`sim.motion.clip.Clip`, N frames) -> its :class:`KeyframeTask`
-    (features from :func:`clip_features`, Hermite costs of :mod:`sidql.keyframes.segment_costs`)."""
+    (features from :func:`clip_features`, Hermite costs of :mod:`sidql.keyframes.segment_costs`;
+    with ``physics`` also the physical cost P of every segment, as the ``physics`` method's)."""
     series = chart(clip)
+    physical = scaled(physical_costs(segment_inputs(clip))) if physics else None
     return KeyframeTask(
         features=clip_features(series),
         cost=np.asarray(segment_cost_matrix(series, "hermite"), dtype=np.float64),
         n_bones=int(series.theta.shape[1]),
         source=f"{clip.source}@{clip.start_frame}",
         subject=subject,
+        physical=physical,
     )
 
 
 @dataclass(frozen=True)
 class TrialTasks:
     """The tasks of one trial: ``features`` (K, N, C) float32, ``costs`` (K, N, N) float64,
-    ``starts`` (K,) first frame of each clip [frames of the 30 fps trial]."""
+    ``starts`` (K,) first frame of each clip [frames of the 30 fps trial]; ``physical``
+    (K, N, N) float64 or None (:attr:`KeyframeTask.physical`)."""
 
     subject: str
     source: str
@@ -217,42 +245,51 @@ class TrialTasks:
     costs: np.ndarray
     starts: np.ndarray
     n_bones: int
+    physical: np.ndarray | None = None
 
     def tasks(self) -> list[KeyframeTask]:
+        P = [None] * len(self.starts) if self.physical is None else self.physical
         return [
-            KeyframeTask(f, c, self.n_bones, f"{self.source}@{int(s)}", self.subject)
-            for f, c, s in zip(self.features, self.costs, self.starts, strict=True)
+            KeyframeTask(f, c, self.n_bones, f"{self.source}@{int(s)}", self.subject, p)
+            for f, c, s, p in zip(self.features, self.costs, self.starts, P, strict=True)
         ]
 
 
-def _cache_path(cache_dir: Path, amc: Path, length: int, stride: int, fps: float) -> Path:
+def _cache_path(cache_dir: Path, amc: Path, length: int, stride: int, fps: float, physics=False):
     st = amc.stat()
     key = f"{amc.resolve()}|{st.st_size}|{st.st_mtime_ns}|{length}|{stride}|{fps}|{CACHE_VERSION}"
+    key += "|physics" * bool(physics)  # tasks without physical costs keep their old files
     return cache_dir / f"{amc.stem}-{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
 
 
-def _read_cache(path: Path, length: int):
-    """``(features, costs, starts, n_bones)`` of a cache file, or None when it is unreadable or
-    not of the expected layout (it is then rebuilt): read within stated limits like any input."""
+def _read_cache(path: Path, length: int, physics: bool = False):
+    """``(features, costs, starts, n_bones, physical)`` of a cache file (``physical`` None
+    unless ``physics``), or None when it is unreadable or not of the expected layout (it is then
+    rebuilt): read within stated limits like any input."""
+    keys = ("features", "costs", "starts", "n_bones") + ("physical",) * bool(physics)
     try:
-        z = read_arrays(path, ("features", "costs", "starts", "n_bones"))
+        z = read_arrays(path, keys)
     except MotionDataError:
         return None
     f, c, s, n = z["features"], z["costs"], z["starts"], z["n_bones"]
+    p = z["physical"] if physics else c
     K = len(s)
     if (f.ndim != 3 or f.shape[:2] != (K, length) or c.shape != (K, length, length)
             or s.ndim != 1 or n.shape != () or f.dtype.kind != "f" or c.dtype.kind != "f"
             or s.dtype.kind not in "iu" or n.dtype.kind not in "iu"
-            or not (np.isfinite(f).all() and np.isfinite(c).all())):  # fmt: skip
+            or p.shape != c.shape or p.dtype.kind != "f"
+            or not (np.isfinite(f).all() and np.isfinite(c).all() and np.isfinite(p).all())):  # fmt: skip
         return None
-    return f, c, s, int(n)
+    return f, c, s, int(n), (p if physics else None)
 
 
 def trial_tasks(
-    trial, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None
-) -> TrialTasks:
+    trial, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None,
+    physics: bool = False,
+) -> TrialTasks:  # fmt: skip
     """Cut one trial (``sim.motion.dataset.Trial``) into ``length``-frame clips starting every ``stride``
-    frames from frame 0 and reduce each to features and costs.
+    frames from frame 0 and reduce each to features and costs (with ``physics`` also the
+    physical costs, :func:`clip_task`).
 
     Cached as one ``.npz`` per trial (keyed by the file's path, size, modification time, the
     arguments and :data:`CACHE_VERSION`) in ``cache_dir``; None: :func:`default_cache_dir`;
@@ -266,15 +303,15 @@ def trial_tasks(
     if cache_dir is None:
         cache_dir = default_cache_dir()
     if cache_dir is not False:
-        path = _cache_path(Path(cache_dir), amc, length, stride, fps)
-        cached = _read_cache(path, length) if path.exists() else None
+        path = _cache_path(Path(cache_dir), amc, length, stride, fps, physics)
+        cached = _read_cache(path, length, physics) if path.exists() else None
         if cached is not None:
             return TrialTasks(trial.subject, str(amc), *cached)
     motion = load_motion(trial.asf, trial.amc, fps=fps)
     if motion.n_frames < length:
         raise MotionDataError(str(amc), None, f"{motion.n_frames} frames < one {length}-frame clip")
     starts = np.arange(0, motion.n_frames - length + 1, stride)
-    tasks = [clip_task(motion.slice(int(s), int(s) + length)) for s in starts]
+    tasks = [clip_task(motion.slice(int(s), int(s) + length), physics=physics) for s in starts]
     out = TrialTasks(
         trial.subject,
         str(amc),
@@ -282,15 +319,18 @@ def trial_tasks(
         np.stack([t.cost for t in tasks]),
         starts,
         tasks[0].n_bones,
+        np.stack([t.physical for t in tasks]) if physics else None,
     )
     if path is not None:
+        extra = {"physical": out.physical} if physics else {}
         try:
             write_atomic(
                 path,
                 lambda f: np.savez(
-                    f, features=out.features, costs=out.costs, starts=starts, n_bones=out.n_bones
+                    f, features=out.features, costs=out.costs, starts=starts,
+                    n_bones=out.n_bones, **extra,
                 ),
-            )
+            )  # fmt: skip
         except (OSError, OutputError) as e:  # a cache that cannot be written only costs time
             why = e.problem if isinstance(e, OutputError) else e.strerror or e
             print(f"warning: {path}: task cache not written: {why}", file=sys.stderr)
@@ -315,14 +355,14 @@ class TaskSet(list):
 
 def load_tasks(
     data_dir, *, length: int = 60, stride: int = 60, fps: float = 30.0, cache_dir=None,
-    subjects=None, progress: bool = True,
+    subjects=None, progress: bool = True, physics: bool = False,
 ) -> TaskSet:  # fmt: skip
     """Every trial under ``data_dir`` (``sim.motion.dataset.find_trials``) as :class:`TrialTasks`;
     ``load_tasks(DIR).tasks()`` is the flat list of clips for :class:`sidql.learning.env.KeyframeEnv`.
 
     Bad trials are skipped, reported on stderr and listed in ``.skipped``; ``subjects`` (a set of
-    ids) keeps only those. ``cache_dir`` as in :func:`trial_tasks` (default: a per-user cache, so a
-    repeated load reads one ``.npz`` per trial instead of the motion files).
+    ids) keeps only those. ``cache_dir`` and ``physics`` as in :func:`trial_tasks` (default: a
+    per-user cache, so a repeated load reads one ``.npz`` per trial instead of the motion files).
     """
     outside: list[dict] = []  # symbolic links leaving data_dir: listed, never read
     trials = [
@@ -335,7 +375,14 @@ def load_tasks(
     for trial in tqdm(trials, desc=f"clips (stride {stride})", disable=not progress, leave=False):
         try:
             out.append(
-                trial_tasks(trial, length=length, stride=stride, fps=fps, cache_dir=cache_dir)
+                trial_tasks(
+                    trial,
+                    length=length,
+                    stride=stride,
+                    fps=fps,
+                    cache_dir=cache_dir,
+                    physics=physics,
+                )  # fmt: skip
             )
         except MotionDataError as e:
             out.skipped.append((str(trial.amc), str(e)))

@@ -1,0 +1,132 @@
+"""Encoding a trial with its foot contacts: the ``contacts`` reconstruction and the ``physics``
+keyframes in the codec (``sidql encode --contacts`` / ``--physics``).
+
+The sender, who has the whole trial, estimates its floor once
+(:func:`sidql.keyframes.contact_pinning.sender_ground` on the trial: a property of the trial,
+not of a clip), labels every frame's foot contacts on it
+(:func:`sidql.keyframes.contact_pinning.sender_contacts`) and sends both in the stream's
+foot-contact section (:mod:`sidql.codec.contact_section`); the decoder pins each foot in contact.
+The section's bytes come out of a ``rate`` budget (the keyframes are encoded at the rate left)
+and count in every byte figure.
+
+With ``physics`` the position coding's keyframe programme also pays the physical cost of each
+segment (:func:`sidql.keyframes.physical_costs.physical_band`: skating in contact, floor and the
+residual force of the cubic-Hermite proxy, each over its scale), banded like the programme's own
+costs, times :func:`codec_weight`: the keyframe method's one weight
+(:data:`~sidql.keyframes.physical_costs.PHYSICS_WEIGHT`, radians of Q per unit) turned into the
+programme's unit (summed point displacement [m]) by the mean over bones of how far all points
+move per radian of the bone (:func:`sidql.codec.plan.position_weights`). The rule is carried
+over, not re-tuned on the codec.
+
+Errors reported (``q``, ``mean_error_mm``, ``p95_error_mm``) are those of the decoded, pinned
+points against the trial's chart. Units: metres, seconds, bytes; world axes z up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from sidql.codec import format as sidq
+from sidql.codec.contact_section import FootContacts
+from sidql.codec.decode import reconstruct_stream
+from sidql.codec.encode import encode_series
+from sidql.codec.encoded import Encoded
+from sidql.codec.plan import DEFAULT_MAX_GAP, position_weights
+from sidql.keyframes.contact_pinning import (
+    decode_floor,
+    encode_floor,
+    sender_contacts,
+    sender_ground,
+)
+from sidql.keyframes.metrics import q_from_angles
+from sidql.keyframes.physical_costs import PHYSICS_WEIGHT, physical_band, scaled, segment_inputs
+from sidql.keyframes.spherical import SphericalSeries, chart, chart_arrays
+from sidql.keyframes.unchart import positions_from_chart
+from sim.errors import UnmetTargetError, UsageError
+from sim.motion.clip import Clip
+
+
+def trial_contacts(clip: Clip, ground=None) -> FootContacts:
+    """The sender's foot-contact side information of a whole trial: its floor (estimated once,
+    on the whole trial, unless ``ground`` is given) as float32, and the (N, 2) bits on it."""
+    if ground is None:
+        ground = sender_ground(clip)
+    return FootContacts(sender_contacts(clip, ground), decode_floor(encode_floor(ground)))
+
+
+def codec_weight(series: SphericalSeries, weight: float = PHYSICS_WEIGHT) -> float:
+    """[m per unit of the physical cost] ``weight`` [rad per unit] times the mean over bones of
+    the points' displacement per radian of the bone [m/rad] (see the module docstring)."""
+    return float(weight * position_weights(series.lengths, series.parents).mean())
+
+
+def physical_cost_band(
+    clip: Clip, series: SphericalSeries, G: int, ground=None, weight: float = PHYSICS_WEIGHT
+) -> np.ndarray:
+    """(N, G + 1) [m] the physical cost of every segment ``(i, i + g)``, ``g <= G``, in the
+    position coding's unit (:func:`codec_weight` of ``weight`` times the scaled terms);
+    ``ground``: the trial's floor (default: estimated here)."""
+    if ground is None:
+        ground = sender_ground(clip)
+    terms = physical_band(segment_inputs(clip, ground=ground), G)
+    return codec_weight(series, weight) * scaled(terms)
+
+
+def encode_with_contacts(
+    clip: Clip,
+    *,
+    physics: bool = False,
+    weight: float = PHYSICS_WEIGHT,
+    rate: float | None = None,
+    max_gap: int = DEFAULT_MAX_GAP,
+    latency: int = 0,
+    **kwargs,
+) -> Encoded:
+    """:func:`sidql.codec.encode.encode_series` of the trial's chart with its foot-contact
+    section (and, with ``physics``, the physical cost times ``weight`` [rad of Q per unit,
+    :func:`codec_weight`] in the keyframe programme); ``rate``
+    [B/s] is the whole file's, section included. Other arguments as ``encode_series``'.
+
+    Raises:
+        UsageError: a latency (the section ends the stream: a live decoder would not have it in
+            time); UnmetTargetError: the section alone exceeds the rate.
+    """
+    if latency:
+        raise UsageError("foot contacts need an offline stream (latency 0)")
+    series = chart(clip)
+    ground = sender_ground(clip)  # once per trial
+    side = trial_contacts(clip, ground)
+    duration = series.n_frames * series.dt
+    left = None if rate is None else rate - side.n_bytes / duration
+    if left is not None and left <= 0:
+        raise UnmetTargetError(
+            f"{clip.source}: the foot contacts alone take {side.n_bytes / duration:.1f} B/s "
+            f"of the {rate:g} B/s budget"
+        )
+    G = min(max_gap, sidq.MAX_GAP)
+    extra = physical_cost_band(clip, series, G, ground, weight) if physics else None
+    enc = encode_series(
+        series, rate=left, max_gap=max_gap, where=clip.source, extra_cost=extra, **kwargs
+    )
+    stream = replace(enc.stream, contacts=side)
+    data = sidq.to_bytes(stream)
+    q, mean_mm, p95_mm = pinned_errors(series, stream)
+    return replace(
+        enc, stream=stream, data=data, q=q, bytes_per_second=len(data) / duration,
+        mean_error_mm=mean_mm, p95_error_mm=p95_mm,
+    )  # fmt: skip
+
+
+def pinned_errors(series: SphericalSeries, stream: sidq.Stream) -> tuple[float, float, float]:
+    """Q [rad] (eq. 18) and the mean and 95th-percentile Euclidean point error [mm] of the
+    decoded (pinned) stream against the true chart ``series``."""
+    rec = reconstruct_stream(stream)
+    truth, _ = positions_from_chart(
+        series.root_pos, series.root_vel, series.theta, series.phi, series.dtheta, series.dphi,
+        series.lengths, series.parents,
+    )  # fmt: skip
+    E = 1e3 * np.linalg.norm(rec.positions - truth, axis=-1)
+    s = chart_arrays(rec.positions, rec.velocities, series.parents, series.dt)
+    return q_from_angles(series, s.theta, s.phi), float(E.mean()), float(np.percentile(E, 95))
