@@ -59,7 +59,13 @@ from sim.physics.ground import estimate_ground  # noqa: E402
 from sim.simulate.controller import track  # noqa: E402
 from sim.simulate.dataset import synthesize  # noqa: E402
 from sim.simulate.episode import array_text, replay  # noqa: E402
-from sim.simulate.generate import ALL_KINDS, KINDS, PHYSICAL_BUDGET  # noqa: E402
+from sim.simulate.generate import (  # noqa: E402
+    ALL_KINDS,
+    KINDS,
+    PHYSICAL_BUDGET,
+    SYNTH_CONTROLLERS,
+    SYNTH_DEFAULT_CONTROLLER,
+)
 from sim.simulate.model import G, sim_model  # noqa: E402
 from sim.simulate.reference import on_floor, trial_qpos  # noqa: E402
 
@@ -68,6 +74,16 @@ Q = (50, 95, 99)
 SPEED_TARGET = 20.0  # simulated seconds per wall second on one core
 SCALING_TARGET = 1.7  # 2 workers over 1
 SPEED_RATIO_TARGET = 1.5  # p95 point speed of the clips that do not fall over the real trials'
+#: the targets' figures as the pages last measured them before this version (their rows stay
+#: beside the new ones): (page, date, command, clips, not fallen, p95 ratio, skating, real's)
+EARLIER = {
+    "synth_sampled": ("2026-11-25", "`python benchmarks/bench_synth.py --data ../shared/cmu "
+                      "--samples 64 --n 60 --kinds track fall --workers 2`", 58, 26, 1.17, 291,
+                      235),
+    "synth": ("2026-11-25", "`python benchmarks/bench_synth.py --data ../shared/cmu --audit`, "
+              "plain tracker with up to 0.5 BW of assistance: not fallen and physical", 88, 0,
+              float("nan"), float("nan"), 235),
+}  # fmt: skip
 
 
 def speeds(clips) -> tuple[np.ndarray, np.ndarray]:
@@ -118,7 +134,7 @@ def pct(x: np.ndarray) -> str:
 
 
 def quality(
-    cmu: str, folder: Path, plot: str | None, label: str = "`synthesize`"
+    cmu: str, folder: Path, plot: str | None, label: str = "`synthesize`", earlier=None
 ) -> tuple[str, dict]:
     index = json.loads((folder / "index.json").read_text())
     rows = index["trials"]
@@ -196,7 +212,21 @@ def quality(
         )
     up, real_fig = figures["synthetic, not fallen"], figures[groups[0][0]]
     verdict = lambda ok: "met" if ok else "**not met**"  # noqa: E731
+    n_up = sum(not r["fell"] for r in rows)
     lines += [
+        "",
+        "| run | clips | not fallen | p95 point speed / real's, not fallen | skating in contact, "
+        "not fallen [mm/s] | real trials' [mm/s] |",
+        "|---|---|---|---|---|---|",
+    ]
+    if earlier:
+        date, command, n, n_up0, ratio0, skate0, real0 = earlier
+        lines.append(f"| earlier ({date}: {command}) | {n} | {n_up0} | {ratio0:.2f} "
+                     f"| {skate0:.0f} | {real0:.0f} |")  # fmt: skip
+    lines += [
+        f"| this run | {len(rows)} | {n_up} | {up['p95_ratio']:.2f} | {up['skate_mm_s']:.0f} "
+        f"| {real_fig['skate_mm_s']:.0f} |",
+        f"| target | | | >= {SPEED_RATIO_TARGET:g} | <= the real trials' | |",
         "",
         f"Targets, among the clips that do not fall: p95 point speed {up['p95_ratio']:.2f}x the "
         f"real trials' (target >= {SPEED_RATIO_TARGET:g}x: "
@@ -331,6 +361,10 @@ def main() -> None:
         "assistance (writes synth_sampled.md; no speed timings)",
     )  # fmt: skip
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=ALL_KINDS)
+    ap.add_argument("--controller", default=SYNTH_DEFAULT_CONTROLLER, choices=SYNTH_CONTROLLERS[:2],
+                    help="controller of the real-motion kinds without --samples")  # fmt: skip
+    ap.add_argument("--no-speed", action="store_true",
+                    help="skip the speed timings (synth_speed.md stays as it is)")  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
@@ -344,7 +378,7 @@ def main() -> None:
             t0 = time.perf_counter()
             s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
                            kinds=tuple(args.kinds), samples=args.samples,
-                           progress=False)  # fmt: skip
+                           controller=args.controller, progress=False)  # fmt: skip
             wall = time.perf_counter() - t0
             simulated = sum(r["frames"] for r in s.written) / 30.0
             cost = (
@@ -353,7 +387,9 @@ def main() -> None:
                 "per wall s per worker."
             )
             print(cost)
-        table, figures = quality(args.cmu, folder, None if args.no_write else plot, label)
+        earlier = EARLIER["synth_sampled" if sampled else "synth"]
+        table, figures = quality(args.cmu, folder, None if args.no_write else plot, label,
+                                 earlier)  # fmt: skip
         if not args.synth:
             table = cost + "\n\n" + table
         print(table)
@@ -367,12 +403,15 @@ def main() -> None:
                 table, command,
             )  # fmt: skip
         return
+    if not args.no_write:
+        write_results("synth", "Synthetic clips: physical share, speeds, skating, contacts",
+                      table, command)  # fmt: skip
+    if args.no_speed:
+        return
     speed_table, timing = speed(args.cmu, args.speed_clips, args.seed + 99)
     print(speed_table)
     if args.no_write:
         return
-    write_results("synth", "Synthetic clips: physical share, speeds, skating, contacts", table,
-                  command)  # fmt: skip
     write_results(
         "synth_speed", "Synthetic clips: simulation speed and 1 -> 2 worker scaling",
         speed_table, command,

@@ -46,6 +46,10 @@ def test_pool_and_ray_give_the_rows_of_one_process(cases, monkeypatch):
     assert len(one["per_clip"]) == len(methods) * len(cases)
     simulated = [r for r in one["per_clip"] if r["method"] != "noise floor"]
     assert all(r["sim_error_mm"] is not None for r in simulated)
+    decided = {(r["method"], r["metric"]): r for r in one["versus_original"]}  # the decision
+    assert set(decided) == {(m, k) for m in ("random", "optimal")
+                            for k in ("sim_fell", "sim_error_mm", "sim_error_local_mm")}  # fmt: skip
+    assert all(r["clips"] == len(cases) and 0 < r["p_value"] <= 1 for r in decided.values())
     pool = evaluate(cases, ["random", "optimal"], [8], workers=2, **kw)
     assert _without_times(pool) == _without_times(one)
     pytest.importorskip("ray")

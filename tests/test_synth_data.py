@@ -16,6 +16,7 @@ from sim.simulate.episode import array_text
 from sim.simulate.model import human_torque_limit
 
 KINDS = ("track", "fall", "follow", "procedural")
+REAL = ("track", "fall", "follow")
 PER_KIND = 20
 SECONDS = 1.0  # long enough for the pushes of track (from 0.3 s) and many of fall (0.5-1.5 s)
 
@@ -30,8 +31,21 @@ def synth(cmu_dir, tmp_path_factory):
     # a few spare tasks: a simulation MuJoCo flags as diverging is dropped and listed (the
     # plain tracker diverges on a few references at their first ticks)
     s = synthesize(cmu_dir, out, (PER_KIND + 2) * len(KINDS), kinds=KINDS, seconds=SECONDS,
-                   seed=0, workers=1, progress=False)  # fmt: skip
+                   seed=0, workers=1, progress=False, controller="plain")  # fmt: skip
     assert all("UnstableSimulation" in r["error"] for r in s.skipped) and len(s.skipped) <= 4
+    return out, s.written
+
+
+@pytest.fixture(scope="module")
+def synth_wholebody(cmu_dir, tmp_path_factory):
+    """``PER_KIND`` short clips of every real-motion kind tracked by the whole-body QP, whose
+    weakening (the ``fall`` kind) scales the actuators while it simulates."""
+    from sim.simulate.dataset import synthesize
+
+    out = tmp_path_factory.mktemp("synth_wb")
+    s = synthesize(cmu_dir, out, (PER_KIND + 1) * 3, kinds=REAL, seconds=SECONDS, seed=0,
+                   workers=1, progress=False, controller="wholebody")  # fmt: skip
+    assert all("UnstableSimulation" in r["error"] for r in s.skipped) and len(s.skipped) <= 3
     return out, s.written
 
 
@@ -59,10 +73,10 @@ def _oracle_replay(labels: dict, limits: np.ndarray):
     return np.array(qpos), np.array(qvel), worst, model
 
 
-def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limits(synth):
-    out, written = synth
-    kinds = {k: 0 for k in KINDS}
-    pushed = assisted = strong = 0
+def _check_replays(out, written, kinds) -> dict:
+    """Every clip of ``written`` replays bit for bit within the human limits (the assertions
+    below); returns counts of what the clips held."""
+    count = {k: 0 for k in kinds} | {"pushed": 0, "assisted": 0, "strong": 0, "weakened": 0}
     for r in written:
         path = out / r["file"]
         labels, clip = load_extra(path, "sim_"), load_npz(path)
@@ -86,14 +100,65 @@ def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limit
         assert worst <= 1 + 1e-12
         lo, hi = model.actuator_ctrlrange.T  # actions in the documented, bounded space
         assert np.all((labels["sim_actions"] >= lo) & (labels["sim_actions"] <= hi))
-        kinds[r["subject"]] += 1
-        pushed += bool(np.any(labels["sim_xfrc_applied"]))
-        assisted += bool(np.any(labels["sim_qfrc_applied"]))
-        strong += generation["gain"] > 1.2
-    assert all(n >= PER_KIND for n in kinds.values()), kinds
-    assert pushed >= 10 and assisted >= 20 and strong >= 3  # the wrenches and gains were there
+        # no help unless asked for: only the procedural kind asks (and is labelled so)
+        helped = bool(np.any(labels["sim_qfrc_applied"]))
+        assert (generation["assist_limit"] > 0) == (r["subject"] == "procedural")
+        assert not helped or generation["assist_limit"] > 0
+        count[r["subject"]] += 1
+        count["pushed"] += bool(np.any(labels["sim_xfrc_applied"]))
+        count["assisted"] += helped
+        count["strong"] += generation["gain"] > 1.2
+        count["weakened"] += any(w["start"] < SECONDS - 0.1 for w in generation["weakenings"])
+    assert all(count[k] >= PER_KIND for k in kinds), count
     seeds = [r["generation"]["seed"] for r in written]
     assert len(set(seeds)) == len(seeds)  # a seed per episode, not the run's
+    return count
+
+
+def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limits(synth):
+    count = _check_replays(*synth, KINDS)
+    assert count["pushed"] >= 10 and count["assisted"] >= 20 and count["strong"] >= 3
+    assert count["weakened"] >= 5  # the wrenches, assistance, gains and weakenings were there
+    assert all(r["generation"]["controller"] == "plain" for r in synth[1])
+
+
+def test_the_wholebody_controller_replays_bit_for_bit_through_its_weakenings(synth_wholebody):
+    """The QP weakens by scaling its torque actuators while it simulates; the episode records
+    the torque that acts, so the MJCF's own model replays it (``Recorder``)."""
+    count = _check_replays(*synth_wholebody, REAL)
+    assert count["pushed"] >= 10 and count["weakened"] >= 5 and count["assisted"] == 0
+    assert all(r["generation"]["controller"] == "wholebody" for r in synth_wholebody[1])
+
+
+def test_an_edited_position_actuator_is_refused_by_the_recorder():
+    from sim.errors import UsageError
+    from sim.model.humanoid import canonical_skeleton
+    from sim.simulate.episode import Recorder
+    from sim.simulate.model import sim_model
+
+    model = sim_model(canonical_skeleton())
+    data = mujoco.MjData(model)
+    rec = Recorder(model, "", 2)
+    rec(0, data)
+    model.actuator_gainprm[:, 0] *= 0.5  # a weakening by editing the model's PD servos
+    with pytest.raises(UsageError):
+        rec(1, data)
+
+
+def test_assistance_only_on_request_and_labelled(cmu_dir):
+    from dataclasses import replace
+
+    from sim.simulate.generate import SynthTask, generate
+
+    asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
+    task = SynthTask("follow", 0, 0, str(asf), str(amc), seconds=0.5)
+    _, plain = generate(task)
+    _, helped = generate(replace(task, assist=0.5))
+    assert plain["generation"]["assist_limit"] == 0 and plain["mean_assistance"] == 0
+    assert not plain["labels"]["sim_qfrc_applied"].any() and plain["physical"]
+    assert helped["generation"]["assist_limit"] == 0.5 and helped["mean_assistance"] > 0
+    assert helped["labels"]["sim_qfrc_applied"].any()
+    assert np.abs(helped["labels"]["sim_assist_wrench"]).max() > 0
 
 
 def test_the_sampling_tracker_replays_bit_for_bit(cmu_dir):
@@ -167,3 +232,19 @@ def test_cli_synth_exports_minari_and_refuses_a_bad_id(tmp_path, monkeypatch, ca
     assert main([*args, "--minari-id", "../escape"]) == 2
     assert "../escape" in capsys.readouterr().err
     assert not (tmp_path / "escape").exists()
+
+
+def test_minari_export_of_torque_actions_carries_the_torque_body(synth_wholebody, tmp_path):
+    from sim.simulate.export import export_minari
+
+    out, written = synth_wholebody
+    assert export_minari(out, tmp_path / "root", "sidql/wb-test-v0") == len(written)
+    meta = json.loads(
+        (tmp_path / "root" / "sidql/wb-test-v0" / "data" / "metadata.json").read_text()
+    )
+    assert meta["actions"] == "torque [N m]"
+    body = mujoco.MjModel.from_xml_string(meta["mjcf"])
+    assert not body.actuator_biasprm[:, 1].any()  # torque actuators, not PD servos
+    space = json.loads(meta["action_space"])
+    high, limit = np.array(space["high"]), np.array(meta["torque_limit"])
+    assert np.all(high >= 0.6 * limit) and np.all(high <= 1.6 * limit)  # limits x body sizes

@@ -25,7 +25,7 @@ from sidql.commands.usage import (
 from sidql.evaluation.cases import load_cases
 from sidql.evaluation.evaluate import evaluate
 from sidql.evaluation.rate import rate_distortion, write_plot
-from sidql.evaluation.significance import comparisons_markdown
+from sidql.evaluation.significance import comparisons_markdown, versus_original_markdown
 from sidql.evaluation.tables import (
     floors_markdown,
     physics_markdown,
@@ -167,6 +167,8 @@ def _run(args) -> int:
     if args.simulate:
         print("forward simulation (human-strength body, no assistance), means over clips:")
         print(simulate_markdown(out["results"]))
+        print("each method against the original on the same clips (paired bootstrap):")
+        print(versus_original_markdown(out["versus_original"]))
     print(f"wrote {path}")
     if args.rate_plot:
         rd = rate_distortion(cases, seed=args.seed, progress=not args.quiet)

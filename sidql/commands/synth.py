@@ -15,12 +15,14 @@ from sidql.commands.usage import (
 )
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import DATASET_ID, DEFAULT_ID, export_minari
-from sim.simulate.generate import ALL_KINDS, KINDS
+from sim.simulate.generate import ALL_KINDS, KINDS, SYNTH_CONTROLLERS, SYNTH_DEFAULT_CONTROLLER
 
 DESCRIPTION = (
     "Track real trials under --data with a controller in MuJoCo's forward simulation (time warps, "
     "body scaling, gain changes, pushes), make the figure fall and recover, or track procedural "
-    "motion; write OUT/<kind>/<kind>_NNNNN.npz in the `sidql dataset` format plus OUT/index.json "
+    "motion; the body has human strength and no help unless --assist asks for it (procedural "
+    "clips are tracked with help, recorded); write OUT/<kind>/<kind>_NNNNN.npz in the `sidql "
+    "dataset` format plus OUT/index.json "
     "recording every clip's parameters, seed, per-frame root assistance and tracking error. "
     "Positions and velocities are the simulator's state. The same --seed gives the same clips bit "
     "for bit. Bad input is skipped and listed."
@@ -38,8 +40,19 @@ def register(p) -> None:
         choices=ALL_KINDS,
         default=list(KINDS),
         metavar="KIND",
-        help=f"clip kinds, of {', '.join(ALL_KINDS)} (follow: unperturbed tracking, the baseline)",
+        help=f"clip kinds, of {', '.join(ALL_KINDS)} (follow: unperturbed tracking, the baseline; "
+        "procedural: sinusoids tracked with up to 1 body weight of recorded root assistance)",
     )
+    p.add_argument(
+        "--controller", choices=SYNTH_CONTROLLERS[:2], default=SYNTH_DEFAULT_CONTROLLER,
+        help="controller of the real-motion kinds (default: the plain tracker; --samples N: the "
+        "sampling tracker, eval --simulate's default, about 20x the cost)",
+    )  # fmt: skip
+    p.add_argument(
+        "--assist", type=float, default=0.0, metavar="BW",
+        help="let a root assistance of up to BW body weights help the plain tracker on the "
+        "real-motion kinds (recorded per tick; default 0: none)",
+    )  # fmt: skip
     p.add_argument(
         "--seconds", type=positive(float), default=4.0, metavar="S", help="clip length [s]"
     )
@@ -76,6 +89,10 @@ def run(args) -> int:
         raise UsageError("--fps must divide 120 and a clip (--seconds x --fps) hold 2 frames")
     if args.max_assistance is not None and not args.max_assistance >= 0:
         raise UsageError(f"--max-assistance must be >= 0 body weights; got {args.max_assistance}")
+    if not 0 <= args.assist <= 1 or (args.assist and (args.samples or args.controller != "plain")):
+        raise UsageError(
+            f"--assist must be 0 .. 1 body weights, with the plain tracker; got {args.assist}"
+        )
     if not 0 <= args.seed < 2**31:
         raise UsageError(f"--seed must be in 0 .. 2**31 - 1; got {args.seed}")
     if args.export_minari and not DATASET_ID.match(args.minari_id):
@@ -84,6 +101,7 @@ def run(args) -> int:
     s = synthesize(
         data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
         seconds=args.seconds, fps=args.fps, samples=args.samples or 0,
+        controller=args.controller, assist=args.assist,
         workers=args.workers, ray=args.ray,
         progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
     )  # fmt: skip

@@ -26,7 +26,7 @@ from sidql.evaluation.scoring import (
     physics_figures,
     score,
 )
-from sidql.evaluation.significance import paired_comparisons
+from sidql.evaluation.significance import paired_comparisons, versus_original
 from sidql.evaluation.trial_physics import physics_setup, simulate_setup
 from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.counts import check_counts
@@ -61,7 +61,9 @@ def evaluate(
 
     Returns:
         ``{"results": [row...], "per_clip": [row...], "comparisons": ..., "failed": [...]}``
-        (``"floors"`` too with ``physics``); a task that fails (bad input or a bug in one clip)
+        (``"floors"`` too with ``physics``, ``"versus_original"`` with ``simulate``:
+        :func:`sidql.evaluation.significance.versus_original`, each method's simulation figures
+        against the original's, paired over clips); a task that fails (bad input or a bug in one clip)
         is reported on stderr and listed in ``failed`` (``source``, ``start_frames`` of its
         clips, ``problem``), its clips left out of every row: the others are kept. A result row
         holds method, keyframes, clips, mean_q, mean_q_hermite, mean_geodesic_deg, mpjpe_mm,
@@ -109,6 +111,8 @@ def evaluate(
     out["comparisons"] = paired_comparisons(per_clip, method_names, seed=seed)
     if physics:
         out["floors"] = floor_report(setup, originals)
+    if simulate:  # could a body do each method's motion as well as the original?
+        out["versus_original"] = versus_original(per_clip, method_names, seed=seed)
     out["failed"] = failed
     return out
 

@@ -45,6 +45,7 @@ from sidql.evaluation.plots import metrics_plot, summary_plot
 from sidql.evaluation.validation import ClipValidation, MethodRun, checks_document
 from sim.errors import UsageError
 from sim.files import write_atomic
+from sim.motion.points import PointMotion
 from sim.physics.foot_state import FootState, foot_states
 from sim.physics.ground import estimate_ground
 from sim.physics.noise import NOISE_MM
@@ -298,10 +299,16 @@ def _clip_section(
                     v.original.names, v.original.parents, style, ground_z=trial_floor(v).floor_z
                 )
             )
+        if videos:  # the original as the simulated body performed it
+            cards.append(_simulated_card(v, "original", v.physics, "#555555",
+                                         out / f"clip{number:02d}_original", style, renderer))  # fmt: skip
         for r, colour in zip(v.runs, colours, strict=True):
             stem = f"clip{number:02d}_{_slug(r.label)}"
             card, sheet = _method_media(v, r, colour, out / stem, videos, style, renderer)
             cards.append(card)
+            if videos:  # beside the reconstruction: the simulated body that tracked it
+                cards.append(_simulated_card(v, r.label, r.physics, colour, out / stem, style,
+                                             renderer))  # fmt: skip
             sheets.append(sheet)
             done()
     player = ("<h3>Videos</h3>" + _player(T, v.clip.fps)) if videos else ""
@@ -317,6 +324,37 @@ def _clip_section(
     parts.append("<h3>Keyframes and the worst frame between each pair</h3>" + "".join(sheets))
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _simulated_card(
+    v: ClipValidation, label: str, physics: dict, colour: str, stem: Path, style: RenderStyle,
+    renderer: SkeletonRenderer | None,
+) -> str:  # fmt: skip
+    """The video card of the simulated body that tracked ``label``'s motion (``report
+    --simulate``: ``physics["per_frame"]["sim_positions"]``) with the original as the ghost;
+    writes ``stem_simulated.mp4``. Empty without a simulation."""
+    pos = (physics or {}).get("per_frame", {}).get("sim_positions")
+    if pos is None:
+        return ""
+    body = PointMotion(v.original.names, v.original.parents, np.asarray(pos, dtype=float),
+                       v.clip.fps)  # fmt: skip
+    name = f"{label}, simulated"
+    frames = render_frames(v.original, body, method=name, style=style,
+                           ground_z=trial_floor(v).floor_z, renderer=renderer)  # fmt: skip
+    mp4 = write_video(frames, stem.with_name(stem.name + "_simulated.mp4"), v.clip.fps)
+    fell = physics.get("sim_fall_s")
+    note = "did not fall" if fell is None else f"fell at {fell:.2f} s"
+    error = physics.get("sim_error_mm")
+    error = "" if error is None else f"; {error:.0f} mm from the motion it tracked"
+    return (
+        f"<div class='card' style='--c:{colour}'><h3>{html.escape(name)}</h3>"
+        f"<video loop muted playsinline preload='auto' width='{style.width}' "
+        f"height='{style.height}' data-file='{mp4.name}' "
+        f"src='{_data_uri('video/mp4', mp4.read_bytes())}'></video>"
+        f"<p class='note'>the human-strength body tracking {html.escape(label)} in MuJoCo "
+        f"with no assistance (the original as the ghost): {note}{error}; file "
+        f"<a href='{mp4.name}'>{mp4.name}</a></p></div>"
+    )
 
 
 def _method_media(

@@ -233,6 +233,7 @@ def validate_clip(
         out.noise = physics.noise_floor(clip, ground, contacts=trial_labels, seed=seed)
         if simulate is not None:
             out.physics.update(simulate.run(out.physics["per_frame"]["qpos"], clip.fps))
+            out.physics["per_frame"]["sim_positions"] = simulated_points(simulate, clip, floor_z)
         analyse = partial(_run_physics, out, physics, simulate, ground, trial_labels)
     for m in methods:
         out.runs += _method_runs(out, m, W, seed, full, kw, analyse, reconstruction)
@@ -271,7 +272,21 @@ def _run_physics(out: ClipValidation, physics, simulate, ground, trial_labels, r
     if simulate is not None:  # the forward simulation's figures join the physics
         original_qpos = out.physics["per_frame"]["qpos"]
         figures.update(simulate.run(figures["per_frame"]["qpos"], clip.fps, original_qpos))
+        floor_z = out.ground.floor_z if out.ground is not None else 0.0
+        figures["per_frame"]["sim_positions"] = simulated_points(simulate, clip, floor_z)
     return figures
+
+
+def simulated_points(simulate, clip: Clip, floor_z: float) -> np.ndarray:
+    """(T, P, 3) [m] the protocol points of the simulated body in ``simulate``'s last run
+    (:class:`sim.simulate.validate.ForwardValidation`), one per frame of ``clip`` (T frames),
+    lifted from the simulation's floor (z = 0) to the trial's ``floor_z``: the body as it
+    moved, to be drawn beside the motion it tracked."""
+    pos = simulate.points(simulate.last_qpos)[: clip.n_frames]
+    if len(pos) < clip.n_frames:  # (a clip's last frame between control ticks: held)
+        pos = np.concatenate([pos, np.repeat(pos[-1:], clip.n_frames - len(pos), axis=0)])
+    pos[..., 2] += floor_z
+    return pos
 
 
 def _method_runs(

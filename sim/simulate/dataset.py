@@ -33,7 +33,15 @@ from sim.files import remove_written, write_atomic
 from sim.motion.clip import save_npz
 from sim.motion.dataset import DatasetSummary, find_trials
 from sim.motion.trial import read_trial
-from sim.simulate.generate import ALL_KINDS, KINDS, SynthTask, generate, task_dict
+from sim.simulate.generate import (
+    ALL_KINDS,
+    KINDS,
+    SYNTH_CONTROLLERS,
+    SYNTH_DEFAULT_CONTROLLER,
+    SynthTask,
+    generate,
+    task_dict,
+)
 from sim.simulate.journal import JOURNAL, clip_name, open_journal  # noqa: F401 (JOURNAL: its name)
 from sim.simulate.journal import read as read_journal
 
@@ -88,6 +96,8 @@ def iter_tasks(
     seconds: float = 4.0,
     fps: float = 30.0,
     samples: int = 0,
+    controller: str = "plain",
+    assist: float = 0.0,
 ) -> Iterator[SynthTask]:
     """The plan: an endless stream of tasks cycling through ``kinds``; real-motion kinds take
     ``trials`` in seeded shuffled rounds (every trial once per round). Every prefix is the same
@@ -103,7 +113,7 @@ def iter_tasks(
                 order = [trials[j] for j in rng.permutation(len(trials))]
             t = order.pop()
             asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
-        yield SynthTask(kind, seed, i, asf, amc, seconds, fps, samples)
+        yield SynthTask(kind, seed, i, asf, amc, seconds, fps, samples, controller, assist)
         i += 1
 
 
@@ -116,10 +126,13 @@ def plan_tasks(
     seconds: float = 4.0,
     fps: float = 30.0,
     samples: int = 0,
+    controller: str = "plain",
+    assist: float = 0.0,
 ) -> tuple[list[SynthTask], list[dict]]:
     """The first ``n`` tasks of the plan (:func:`iter_tasks`) and the skipped trials."""
     trials, skipped = readable_trials(root, kinds)
-    stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, samples=samples)
+    stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, samples=samples,
+                        controller=controller, assist=assist)  # fmt: skip
     return [next(stream) for _ in range(n)], skipped
 
 
@@ -133,6 +146,8 @@ def synthesize(
     seconds: float = 4.0,
     fps: float = 30.0,
     samples: int = 0,
+    controller: str = SYNTH_DEFAULT_CONTROLLER,
+    assist: float = 0.0,
     workers: int | None = None,
     ray: str | None = None,
     progress: bool = True,
@@ -150,6 +165,10 @@ def synthesize(
     ``summary.rejected`` counts, per kind, the clips over the budget before the last one kept
     (also in ``index.json``).
 
+    ``controller``: of the real-motion kinds (``sim.simulate.generate.SynthTask``; ``samples`` >
+    0: the sampling tracker); ``assist``: their root assistance bound [body weight], 0 (none)
+    unless asked for (with the plain tracker only).
+
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
     """
@@ -157,12 +176,17 @@ def synthesize(
         raise UsageError(f"the number of clips must be a whole number >= 1; got {n!r}")
     require_positive(seconds, "seconds")
     require_positive(fps, "fps")
+    if controller not in SYNTH_CONTROLLERS[:2]:
+        raise UnknownNameError("controller", controller, SYNTH_CONTROLLERS[:2])
+    if not 0 <= assist <= 1 or (assist and (samples or controller != "plain")):
+        raise UsageError(f"assistance {assist} BW: 0 .. 1, and only for the plain tracker")
+    task = {"samples": samples, "controller": controller, "assist": float(assist)}
     with ray_session(ray, workers):  # Ray started or joined once for both batches
-        return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,
+        return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
 
 
-def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, ray, progress,
+def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task_kw, workers, ray, progress,
                 max_assistance, max_tries, resume) -> DatasetSummary:  # fmt: skip
     start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -171,7 +195,8 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, r
         "source": None if root is None else str(Path(root).resolve()),
         "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds, "fps": fps,
         "max_assistance": max_assistance, "max_tries": max_tries,
-        **({"samples": samples} if samples else {}),  # an older run's journal has none
+        **({"samples": task_kw["samples"]} if task_kw["samples"] else {}),
+        "controller": task_kw["controller"], "assist": task_kw["assist"],
     }  # fmt: skip
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     done = read_journal(out_dir, params, trials) if resume else {}  # checked before any write
@@ -183,9 +208,7 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, samples, workers, r
         return len(kept) >= n
 
     def pending_tasks() -> Iterator[SynthTask]:
-        stream = iter_tasks(
-            trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, samples=samples
-        )
+        stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, **task_kw)
         for task in stream:
             if task.index >= limit or enough():
                 return
@@ -262,6 +285,7 @@ def _finish(out_dir: Path, done: dict, n: int, params: dict, summary, start) -> 
         "synthetic": {
             **{k: params[k] for k in ("n", "seed", "kinds", "seconds", "max_assistance")},
             "samples": params.get("samples", 0),
+            "controller": params["controller"], "assist": params["assist"],
             "tasks_tried": last + 1, "rejected": rejected,
         },
         "trials": summary.written,

@@ -4,7 +4,8 @@ A simulation (``sim.simulate.controller.track``) runs ``T`` control ticks; at ea
 the controller sets ``data.ctrl`` (the action), ``data.xfrc_applied`` (the pushes: a wrench per
 body, world frame, force [N] then torque [N m]) and ``data.qfrc_applied`` (root assistance,
 where a task asks for it: generalised force [N, N m]), then MuJoCo takes :data:`FRAME_SKIP`
-physics steps (``mj_step``) with the model unchanged. :class:`Recorder` keeps all of it plus
+physics steps (``mj_step``). :class:`Recorder` keeps all of it (as it acts on the model its
+MJCF builds: :class:`Recorder`'s note on a controller that scales its actuators) plus
 the full integration state before the first tick (``mj_getState`` with
 ``mjSTATE_INTEGRATION``: time, ``qpos``, ``qvel``, ``act``, warm start, controls and applied
 forces) and ``qpos``/``qvel`` before every tick and after the last. :func:`replay` rebuilds the
@@ -55,7 +56,16 @@ class Episode:
 class Recorder:
     """Called by the controller as ``recorder(k, data)`` at each tick ``k`` < ``ticks``, just
     before its physics steps, and as ``recorder(ticks, data)`` after the last;
-    :meth:`episode` then holds what was recorded."""
+    :meth:`episode` then holds what was recorded.
+
+    The action recorded is what acts on the model as its MJCF builds it. A controller that
+    scales the actuators while it simulates (``sim.simulate.wholebody``'s weakening:
+    ``ActuatorEdits.scale``) changes what a control does; for torque actuators (gain 1, no
+    bias) the recorded action is then the torque that acts, ``clip(gain * clip(ctrl, ctrl
+    range), force range)`` as MuJoCo computes it, which the unedited model applies unchanged
+    (the same product, bit for bit), so the episode still replays from its MJCF. An edited
+    position actuator cannot be folded into its control: refused.
+    """
 
     def __init__(self, model, mjcf: str, ticks: int, frame_skip: int = FRAME_SKIP):
         self.mjcf, self.frame_skip, self.ticks = mjcf, frame_skip, ticks
@@ -67,6 +77,9 @@ class Recorder:
         self.qvel = np.empty((ticks + 1, model.nv))
         self._model = model
         self._seen = 0
+        self._gain = model.actuator_gainprm[:, 0].copy()
+        self._bias = model.actuator_biasprm[:, :3].copy()
+        self._force = model.actuator_forcerange.copy()
 
     def __call__(self, k: int, data) -> None:
         if k != self._seen or k > self.ticks:
@@ -75,9 +88,33 @@ class Recorder:
             mujoco.mj_getState(self._model, data, self.state, STATE_SPEC)
         self.qpos[k], self.qvel[k] = data.qpos, data.qvel
         if k < self.ticks:
-            self.ctrl[k], self.xfrc[k] = data.ctrl, data.xfrc_applied
+            self.ctrl[k], self.xfrc[k] = self._acting(data.ctrl), data.xfrc_applied
             self.qfrc[k] = data.qfrc_applied
         self._seen += 1
+
+    def _acting(self, ctrl: np.ndarray) -> np.ndarray:
+        """(nu,) the control that acts as ``ctrl`` does now, on the model as it was built: inside
+        the control range (MuJoCo clamps a control to it before it acts, so the clamped value
+        acts the same, bit for bit), folded with any scaling of the actuators (class note)."""
+        m = self._model
+        lo, hi = m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1]
+        limited = m.actuator_ctrllimited.astype(bool)
+        ctrl = np.where(limited, np.clip(ctrl, lo, hi), ctrl)
+        gain, bias = m.actuator_gainprm[:, 0], m.actuator_biasprm[:, :3]
+        if (
+            np.array_equal(gain, self._gain)
+            and np.array_equal(bias, self._bias)
+            and np.array_equal(m.actuator_forcerange, self._force)
+        ):
+            return ctrl
+        if self._bias.any() or bias.any() or np.any(self._gain != 1.0) or not limited.all():
+            raise UsageError("position actuators edited during a simulation: it would not replay")
+        force = np.clip(gain * ctrl, *m.actuator_forcerange.T)
+        if np.any(force < np.maximum(lo, self._force[:, 0])) or np.any(
+            force > np.minimum(hi, self._force[:, 1])
+        ):
+            raise UsageError("actuators strengthened during a simulation: it would not replay")
+        return force
 
     def episode(self) -> Episode:
         """The recorded :class:`Episode` (every tick must have been seen)."""

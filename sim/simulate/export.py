@@ -11,8 +11,11 @@ the whole clip):
 * ``observations/qpos`` (N + 1, nq), ``observations/qvel`` (N + 1, nv): the simulator's state
   before each step and after the last (root position [m], quaternion wxyz, hinge angles [rad];
   velocities [m/s, rad/s], z up);
-* ``actions`` (N, U): ``data.ctrl`` of each step: the hinges' PD targets [rad], feed-forward
-  folded in, inside each actuator's control range (``sim.simulate.model.sim_spec``);
+* ``actions`` (N, U): the control of each step, inside each actuator's control range
+  (``sim.simulate.model.sim_spec``): the hinges' PD targets [rad], feed-forward folded in (plain
+  and sampling trackers), or their torques [N m] (the whole-body QP's torque actuators: the
+  torque that acts, ``sim.simulate.episode.Recorder``); one kind per dataset (metadata
+  ``actions``);
 * ``rewards`` (N,): zeros (imitation data); ``terminations`` (N,): True only at the last step
   of an episode that ends in a fall (the state it reaches is the first fallen one);
   ``truncations`` (N,): True only at the last step of one that does not (the clip's length);
@@ -76,9 +79,10 @@ def _box(low, high) -> dict:
             "low": low.tolist(), "high": high.tolist()}  # fmt: skip
 
 
-def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray]:
+def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray, str]:
     """Write clip ``r`` (its index entry, its ``sim_`` labels) as ``episode_<k>``; returns its
-    step count and its (U, 2) control range (from its MJCF's model)."""
+    step count, its (U, 2) control range and its actuators (:func:`_actuators`; from its MJCF's
+    model)."""
     missing = set(EPISODE_LABELS) - set(labels)
     if missing:
         raise MotionDataError(r["file"], None, f"no {min(missing)}: not a synth episode")
@@ -110,7 +114,13 @@ def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray]:
         mean_assistance=float(r.get("mean_assistance", 0.0)),
     )  # fmt: skip
     model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
-    return N, model.actuator_ctrlrange.copy()
+    return N, model.actuator_ctrlrange.copy(), _actuators(model)
+
+
+def _actuators(model) -> str:
+    """``"motor"`` (torque actuators: the action is a torque [N m]) or ``"position"`` (PD
+    servos: the action is a target angle [rad]), as ``sim.simulate.model.sim_spec`` names them."""
+    return "position" if model.actuator_biasprm[:, 1].any() else "motor"
 
 
 def export_minari(
@@ -148,19 +158,24 @@ def export_minari(
     files = [(index["trials"][i], entry_file(src, index, i)) for i in chosen]  # inside src
     root = Path(root)
     out = root / dataset_id / "data"  # made by the writer below root, through no link
-    steps, ranges = [], []
+    steps, ranges, kinds = [], [], set()
 
     def write(f) -> None:
         with h5py.File(f, "w", track_order=True) as h:
             for k, (r, file) in enumerate(files):
-                n, rng = _write_episode(h, k, r, load_extra(file, "sim_"))
+                n, rng, actuators = _write_episode(h, k, r, load_extra(file, "sim_"))
                 steps.append(n)
                 ranges.append(rng)
+                kinds.add(actuators)
+                if len(kinds) > 1:  # one action space per dataset
+                    raise MotionDataError(str(file), None, "torque and PD-target actions in one "
+                                          "folder: export the controllers' clips apart")  # fmt: skip
 
     write_atomic(out / "main_data.hdf5", write, root=root)
     labels = load_extra(files[0][1], "sim_")
     ranges = np.stack(ranges)
-    model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0)
+    (actuators,) = kinds
+    model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0, actuators)
     nq, nv = labels["sim_tick_qpos"].shape[1], labels["sim_tick_qvel"].shape[1]
     inf = np.full(nq, np.inf)
     metadata = {
@@ -182,6 +197,7 @@ def export_minari(
         "joint_names": [model.actuator(a).name for a in range(model.nu)],
         "mjcf": mjcf,
         "torque_limit": torque_limits(model).tolist(),
+        "actions": "torque [N m]" if actuators == "motor" else "PD target [rad]",
     }
     text = json.dumps(metadata, indent=1).encode()
     write_atomic(out / "metadata.json", lambda f: f.write(text), root=root)

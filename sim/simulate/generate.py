@@ -2,8 +2,9 @@
 
 Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``):
 
-* ``track``: perturbed tracking of a real trial: time warp 0.5-2x (a third log-uniform over
-  0.5-2x, two thirds uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
+* ``track``: perturbed tracking of a real trial: the most active of 4 random windows
+  (:func:`most_active_window`) time-warped 0.5-2x (a third log-uniform over 0.5-2x, two thirds
+  uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
   scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
   on the thorax or the pelvis (impulse recorded);
 * ``fall``: falls and recoveries: a real trial sped up 1-2x, a push for 0.2 s and the controller
@@ -11,8 +12,12 @@ Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``)
   the push (250-900 N), the weakening (to 60-5 % of its effort) and its length (0.3-1.5 s), so
   mild draws stumble and recover and severe ones fall (``fell`` in the clip's record);
 * ``follow`` (not in the default mix): unperturbed tracking of a real trial, the baseline;
-* ``procedural``: the sinusoidal motion of ``sim.motion.synthetic`` (amplitude 35-60 % of each
-  joint's half range) replayed 1-2x faster, tracked in simulation.
+* ``procedural`` (not in the default mix): the sinusoidal motion of ``sim.motion.synthetic``
+  (amplitude 35-60 % of each joint's half range) replayed 1-2x faster, tracked in simulation
+  with up to :data:`PROCEDURAL_ASSIST` body weight of recorded root assistance.
+
+The real-motion kinds get no assistance unless their task asks for it (``SynthTask.assist``):
+only the joints, within the human torque limits, and the floor move the body.
 
 Positions, point velocities and ``qvel`` of a clip are the simulator's state sampled at the clip
 rate; point velocities come from the kinematic chain (``point_kinematics`` with the simulator's
@@ -35,13 +40,14 @@ from sim.motion.clip import Clip
 from sim.motion.retarget import local_rotations_from_world
 from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
-from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Weakening, track
+from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening, track
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
-from sim.simulate.reference import on_floor, time_warp, trial_qpos
+from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
+from sim.simulate.wholebody import track_wholebody
 
-KINDS = ("track", "fall", "procedural")  # the default mix
+KINDS = ("track", "fall")  # the default mix: real motion, no assistance
 # a clip is "physical" when its mean root assistance force is within this share of its body
 # weight and its mean root assistance torque within this share of body weight x 1 m
 PHYSICAL_BUDGET = 0.05
@@ -49,12 +55,14 @@ PHYSICAL_BUDGET = 0.05
 # T control ticks (F = ceil(T / record_every): frame i is tick i * record_every), U = nu
 # actuators (one per hinge, the order of the clip's ``joint_names``), B bodies, S state size
 EPISODE_LABELS = {
-    "sim_actions": "(T, U) actuator controls at each control tick: PD target [rad], the "
-    "feed-forward folded in, inside each actuator's control range (the joint range widened: "
-    "sim.simulate.model.sim_spec)",
+    "sim_actions": "(T, U) actuator controls at each control tick, as they act on the body "
+    "the MJCF builds (sim.simulate.episode.Recorder): PD target [rad], the feed-forward "
+    "folded in, inside each actuator's control range (the joint range widened: "
+    "sim.simulate.model.sim_spec), or with the whole-body QP the torque [N m] within its limit",
     "sim_xfrc_applied": "(T, B, 6) applied body wrenches at each tick (pushes): force [N], "
     "torque [N m], world frame",
-    "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance)",
+    "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance: "
+    "zero unless the task asked for it or the clip is procedural)",
     "sim_tick_qpos": "(T + 1, nq) qpos before each tick and after the last",
     "sim_tick_qvel": "(T + 1, nv) qvel likewise",
     "sim_initial_state": "(S,) mj_getState(mjSTATE_INTEGRATION) before the first tick",
@@ -76,10 +84,21 @@ LABELS = {
     "sim_contact_penetration": "(F,) deepest floor contact penetration [m], 0 without contact",
     "sim_fallen": "(F,) bool: the figure has fallen (sim.simulate.falls: a part other than the feet on the floor where the reference has none, or the head below half the reference's)",
 }
-ALL_KINDS = (*KINDS, "follow")
-# root assistance bound [body weight]; procedural motion is not physically plausible (its feet
-# slide and its root glides), so it gets the whole body weight and the label says how much it took
-ASSIST_LIMIT = {"track": 0.5, "fall": 0.5, "follow": 0.5, "procedural": 1.0}
+ALL_KINDS = (*KINDS, "follow", "procedural")
+REAL_KINDS = ("track", "fall", "follow")
+# root assistance bound [body weight] of the procedural kind: its motion is not physically
+# plausible (its feet slide and its root glides), so asking for it asks for a hand of up to the
+# whole body weight, recorded per tick and per frame; the real-motion kinds get none unless a
+# task asks for it (``SynthTask.assist``)
+PROCEDURAL_ASSIST = 1.0
+#: windows drawn per clip of a kind, the most active kept (:func:`most_active_window`): the
+#: ``track`` kind is velocity-rich on purpose, the others take one window at random
+WINDOW_CANDIDATES = {"track": 4}
+#: controllers of the real-motion kinds (``sampling``: ``SynthTask.samples`` > 0)
+SYNTH_CONTROLLERS = ("plain", "wholebody", "sampling")
+#: ``synth``'s controller without ``--samples``: the plain tracker, not eval's default sampler,
+#: whose cost (about 20x per clip) a data run asks for explicitly with ``--samples N``
+SYNTH_DEFAULT_CONTROLLER = "plain"
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -104,6 +123,20 @@ class SynthTask:
     seconds: float = 4.0
     fps: float = 30.0
     samples: int = 0  # > 0: real-motion kinds use the sampling tracker, no assistance
+    controller: str = "plain"  # of the real-motion kinds without samples: plain or wholebody
+    assist: float = 0.0  # root assistance bound [body weight] of the real-motion kinds: none
+
+
+def task_controller(task: SynthTask) -> str:
+    """The controller that tracks ``task``: the plain tracker for procedural motion (its
+    assistance), else the sampling tracker when ``task.samples`` > 0, else ``task.controller``."""
+    if task.kind == "procedural":
+        return "plain"
+    if task.samples:
+        return "sampling"
+    if task.controller not in SYNTH_CONTROLLERS[:2]:
+        raise UnknownNameError("controller", task.controller, SYNTH_CONTROLLERS[:2])
+    return task.controller
 
 
 def episode_seed(task: SynthTask) -> int:
@@ -175,7 +208,14 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["motion_seed"] = int(rng.integers(0, 2**31 - 1))
     else:
         raise UnknownNameError("kind", task.kind, ALL_KINDS)
-    p["assist_limit"] = ASSIST_LIMIT[task.kind]
+    if not 0 <= task.assist <= 1:
+        raise UsageError(f"assistance {task.assist} body weights: expected 0 .. 1")
+    p["controller"] = task_controller(task)
+    if p["controller"] == "wholebody":  # its feedback gains are its own: no stiffness factor
+        p["gain"] = 1.0
+    p["assist_limit"] = PROCEDURAL_ASSIST if task.kind == "procedural" else float(task.assist)
+    if p["controller"] != "plain" and p["assist_limit"]:
+        raise UsageError(f"the {p['controller']} controller takes no assistance")
     for push in p["pushes"]:
         push["impulse"] = [f * push["duration"] for f in push["force"]]
     return p
@@ -198,41 +238,96 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     rng = episode_rng(episode_seed(task))
     p = draw_parameters(task, rng)
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
-    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"])
+    actuators = "motor" if p["controller"] == "wholebody" else "position"
+    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"], actuators)
     n = int(round(task.seconds * CONTROL_HZ))
+    ref = reference_motion(task, p, model, n, rng)
+    recorder = Recorder(model, mjcf, n, FRAME_SKIP)
+    result = simulate_episode(task, p, model, gains, ref, recorder, rng)
+    if result.unstable:
+        raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
+    out = simulated_clip(
+        model, skeleton, result.qpos, result.qvel, task.fps, f"synth:{task.kind}:{p['source']}"
+    )
+    ref_pos = simulated_clip(
+        model, skeleton, ref[:: int(round(CONTROL_HZ / task.fps))],
+        np.zeros((len(result.qpos), model.nv)), task.fps, "",
+    ).positions  # fmt: skip
+    record = episode_record(p, model, result, out.positions, ref_pos)
+    record["labels"] = episode_labels(p, model, mjcf, result, recorder.episode())
+    return out, record
+
+
+def reference_motion(
+    task: SynthTask, p: dict, model, n: int, rng: np.random.Generator
+) -> np.ndarray:
+    """The (n, nq) reference the body tracks at ``CONTROL_HZ``: the procedural motion, or a
+    window of the source trial time-warped by ``p["speed"]`` (lowered to the fastest warp that
+    still fills the clip) and set on the floor; records ``source`` (and ``start_tick``, drawn
+    from ``rng``) in ``p``.
+
+    Raises:
+        MotionDataError: the source trial is unreadable or shorter than one clip.
+    """
     if task.kind == "procedural":
         slow, _ = synthetic_qpos(
             model, task.seconds * p["speed"] + 0.1, seed=p["motion_seed"], rate=CONTROL_HZ,
             energy=p["energy"],
         )  # fmt: skip
-        ref = time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
         p["source"] = ""
-    else:
-        qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
-        qpos[:, :3] *= p["scale"]
-        fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
-        if p["speed"] > fit >= 0.5:
-            p["speed"] = fit
-        warped = time_warp(model, qpos, CONTROL_HZ, p["speed"], CONTROL_HZ)
-        if len(warped) < n:
-            raise MotionDataError(
-                str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
-                f" time warp: shorter than one {task.seconds:g} s clip"
-            )  # fmt: skip
-        start = int(rng.integers(0, len(warped) - n + 1))
-        ref = on_floor(model, warped[start : start + n])
-        p["source"] = str(task.amc)
-        p["start_tick"] = start
+        return time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
+    qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
+    qpos[:, :3] *= p["scale"]
+    fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
+    if p["speed"] > fit >= 0.5:
+        p["speed"] = fit
+    warped = time_warp(model, qpos, CONTROL_HZ, p["speed"], CONTROL_HZ)
+    if len(warped) < n:
+        raise MotionDataError(
+            str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
+            f" time warp: shorter than one {task.seconds:g} s clip"
+        )  # fmt: skip
+    starts = rng.integers(0, len(warped) - n + 1, WINDOW_CANDIDATES.get(task.kind, 1))
+    start = int(starts[0]) if len(starts) == 1 else most_active_window(warped, n, starts)
+    p["source"] = str(task.amc)
+    p["start_tick"] = start
+    window = warped[start : start + n]
+    if p["controller"] == "wholebody":  # feet meet the floor: no lift, stance soles on it
+        return contact_consistent(model, flat_soles(model, on_floor(model, window, lift=0.0)))
+    # the 1 cm lift, and soles near the floor laid flat (as ``eval --simulate`` tracks)
+    return flat_soles(model, on_floor(model, window))
+
+
+def most_active_window(qpos: np.ndarray, n: int, starts: np.ndarray) -> int:
+    """Of the windows ``qpos[s : s + n]`` (qpos (T, nq) at any rate), the start ``s`` of
+    ``starts`` whose hinges move most: the largest sum of |hinge angle change| [rad] over the
+    window (the first of equals)."""
+    step = np.abs(np.diff(qpos[:, 7:], axis=0)).sum(axis=1)  # (T - 1,) per tick
+    total = np.concatenate([[0.0], np.cumsum(step)])
+    starts = np.asarray(starts, dtype=np.int64)
+    motion = total[starts + n - 1] - total[starts]
+    return int(starts[int(np.argmax(motion))])
+
+
+def simulate_episode(
+    task: SynthTask, p: dict, model, gains: Gains, ref: np.ndarray, recorder: Recorder,
+    rng: np.random.Generator,
+) -> Tracking:  # fmt: skip
+    """Track ``ref`` (T, nq) with ``p``'s pushes and weakenings, every tick recorded by
+    ``recorder``, by ``p["controller"]``: the sampling tracker (no assistance; its settings and
+    seed, drawn from ``rng``, recorded in ``p``), the whole-body QP (no assistance) or the plain
+    tracker with ``p["assist_limit"]`` (0 for real motion unless the task asked for it)."""
     tracking = {  # what both trackers take: the perturbations and the clip rate
         "pushes": tuple(
             Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]
         ),
         "weakenings": tuple(Weakening(**w) for w in p["weakenings"]),
         "record_every": int(round(CONTROL_HZ / task.fps)),
-        "recorder": Recorder(model, mjcf, n, FRAME_SKIP),
+        "recorder": recorder,
     }
-    if task.samples and task.kind != "procedural":  # the body's own doing, or a fall
-        p["assist_limit"] = 0.0
+    if p["controller"] == "wholebody":
+        return track_wholebody(model, ref, **tracking)
+    if p["controller"] == "sampling":  # the body's own doing, or a fall
         p["sampling"] = {
             "samples": task.samples,
             "lookahead": LOOKAHEAD,
@@ -240,71 +335,73 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
         kw = {"samples": task.samples, "seed": p["sampling"]["seed"]}
-        result = sample_track(model, ref, **kw, **tracking)
-    else:
-        result = track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
-    if result.unstable:
-        raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
-    out = simulated_clip(
-        model, skeleton, result.qpos, result.qvel, task.fps, f"synth:{task.kind}:{p['source']}"
-    )
-    pos = out.positions
-    ref_pos = simulated_clip(
-        model, skeleton, ref[:: int(round(CONTROL_HZ / task.fps))],
-        np.zeros((len(result.qpos), model.nv)), task.fps, "",
-    ).positions  # fmt: skip
+        return sample_track(model, ref, **kw, **tracking)
+    return track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
+
+
+def episode_record(p: dict, model, result: Tracking, pos: np.ndarray, ref_pos: np.ndarray) -> dict:
+    """The index record of an episode (:func:`generate`'s, without ``labels``): its parameters
+    ``p``, assistance, tracking error of the simulated points ``pos`` (F, P, 3) [m] against the
+    reference's ``ref_pos``, fall and penetration figures."""
     weight = total_mass(model) * G
     torque = np.linalg.norm(result.assist_wrench[:, 3:], axis=1) / (weight * ROOT_TORQUE_LEVER)
-    F = len(result.qpos)
-    fallen = np.zeros(F, dtype=bool)
-    if result.fall_frame >= 0:
-        fallen[result.fall_frame :] = True
-    episode = tracking["recorder"].episode()
-    fall_tick = result.fall_tick
-    record = {
+    return {
         "generation": p,
         "mean_assistance": float(result.assistance.mean()),
         "mean_assist_torque": float(torque.mean()),
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
         "fell": bool(result.fell),
         "fall_frame": int(result.fall_frame),
-        "fall_tick": int(fall_tick),
+        "fall_tick": int(result.fall_tick),
         "physical": is_physical(float(result.assistance.mean()), float(torque.mean())),
         "penetration_mm": 1000 * result.penetration,
         "self_penetration_mm": 1000 * result.self_penetration,
-        "labels": {
-            "sim_actions": episode.actions,
-            "sim_xfrc_applied": episode.xfrc_applied,
-            "sim_qfrc_applied": episode.qfrc_applied,
-            "sim_tick_qpos": episode.qpos,
-            "sim_tick_qvel": episode.qvel,
-            "sim_initial_state": episode.initial_state,
-            "sim_mjcf": text_array(mjcf),
-            "sim_frame_skip": np.int64(FRAME_SKIP),
-            "sim_torque_limit": torque_limits(model),
-            "sim_generation": text_array(json.dumps(p)),
-            "sim_fall_tick": np.int64(fall_tick),
-            "sim_joint_torque": result.joint_torque,
-            "sim_assist_wrench": result.assist_wrench,
-            "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
-            "sim_foot_force": result.foot_force,
-            "sim_contact_penetration": result.contact_penetration,
-            "sim_fallen": fallen,
-        },
     }
-    return out, record
 
 
-def episode_model(skeleton, scale: float, gain: float) -> tuple[mujoco.MjModel, str, Gains]:
+def episode_labels(p: dict, model, mjcf: str, result: Tracking, episode) -> dict:
+    """The arrays of :data:`LABELS` for the clip file: the recorded ``episode``
+    (``Recorder.episode()``), the body and the per-frame figures of ``result``."""
+    fallen = np.zeros(len(result.qpos), dtype=bool)
+    if result.fall_frame >= 0:
+        fallen[result.fall_frame :] = True
+    return {
+        "sim_actions": episode.actions,
+        "sim_xfrc_applied": episode.xfrc_applied,
+        "sim_qfrc_applied": episode.qfrc_applied,
+        "sim_tick_qpos": episode.qpos,
+        "sim_tick_qvel": episode.qvel,
+        "sim_initial_state": episode.initial_state,
+        "sim_mjcf": text_array(mjcf),
+        "sim_frame_skip": np.int64(FRAME_SKIP),
+        "sim_torque_limit": torque_limits(model),
+        "sim_generation": text_array(json.dumps(p)),
+        "sim_fall_tick": np.int64(result.fall_tick),
+        "sim_joint_torque": result.joint_torque,
+        "sim_assist_wrench": result.assist_wrench,
+        "sim_foot_contact": np.linalg.norm(result.foot_force, axis=-1) > 0,
+        "sim_foot_force": result.foot_force,
+        "sim_contact_penetration": result.contact_penetration,
+        "sim_fallen": fallen,
+    }
+
+
+def episode_model(
+    skeleton, scale: float, gain: float, actuators: str = "position"
+) -> tuple[mujoco.MjModel, str, Gains]:
     """The simulated body of an episode: ``skeleton`` (already scaled by ``scale``) with mass
     scaling as its cube, the hinges' stiffness times ``gain`` (bandwidth times its square root;
     the torque limits are the human ones, never scaled, rounded down to the 6 digits an MJCF
-    keeps); the model compiled from its MJCF (the model simulated, so the MJCF rebuilds it
-    exactly), the MJCF itself and the gains."""
+    keeps), ``actuators`` ``"position"`` or ``"motor"`` (``sim_spec``'s); the model compiled
+    from its MJCF (the model simulated, so the MJCF rebuilds it exactly), the MJCF itself and
+    the gains."""
     gains = Gains().scaled(gain)
-    spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains)
+    spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains,
+                    actuators=actuators)  # fmt: skip
     for a in spec.actuators:  # the MJCF keeps 6 digits: round the limits down, never up
         a.forcerange = [-_down6(a.forcerange[1]), _down6(a.forcerange[1])]
+        if actuators == "motor":  # a torque's control range is its limit
+            a.ctrlrange = a.forcerange
     mjcf = spec.to_xml()
     return mujoco.MjModel.from_xml_string(mjcf), mjcf, gains
 

@@ -124,7 +124,8 @@ def _task_line(e, params: dict, sources: set, path: Path, number: int) -> tuple[
         if source not in sources:
             raise bad(f"{what}: task {i} is not of a trial of the input folder")
     want = task_dict(SynthTask(kind, params["seed"], i, *source, params["seconds"],
-                               params["fps"], params.get("samples", 0)))  # fmt: skip
+                               params["fps"], params.get("samples", 0),
+                               params.get("controller", "plain"), params.get("assist", 0.0)))  # fmt: skip
     if task != want:
         raise bad(f"{what}: not task {i} of this run")
     if what == "skipped":

@@ -161,6 +161,7 @@ class ForwardValidation:
             r = track_wholebody(self.model, ref, record_every=every)
         else:
             r = track(self.model, ref, assist_limit=0.0, record_every=every)
+        self.last_qpos = r.qpos  # the simulated states (F, nq) of the last run: for pictures
         sim = self.points(r.qpos)
         n = len(sim)
         target = self.points(ref[::every][:n])

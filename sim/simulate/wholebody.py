@@ -337,6 +337,19 @@ def _penetration(data, floor: int) -> tuple[float, float]:
     return fd, sd
 
 
+def _finish_tick(model, data, ref, k: int, gains, limit: np.ndarray, scratch: dict) -> None:
+    """The physics steps of control tick ``k`` after its first: the torques held, or with
+    ``gains.every_step`` a QP (torques within ``limit`` (nu,) [N m]) before each, the reference
+    held."""
+    if not gains.every_step:
+        mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+        return
+    for _ in range(SUBSTEPS - 1):
+        mujoco.mj_forward(model, data)
+        data.ctrl[:] = qp_tick(model, data, ref, k, gains, limit, scratch).tau
+        mujoco.mj_step(model, data)
+
+
 def track_wholebody(
     model,
     ref_qpos: np.ndarray,
@@ -345,12 +358,15 @@ def track_wholebody(
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
     record_every: int = 4,
+    recorder=None,
 ) -> Tracking:
     """Simulate ``model`` (``sim_model(..., actuators="motor")``) following ``ref_qpos`` (T, nq
     at ``CONTROL_HZ``, floor at z = 0) with the whole-body QP (module docstring) and nothing
     else: no assistance (the :class:`Tracking`'s assistance is zero), pushes the only external
     forces. A weakening scales the torque limits (the QP's and the actuators'). After a fall
     (``sim.simulate.falls``) the QP goes on tracking: whether the body gets up is its own doing.
+    ``recorder``: as ``track``'s (``sim.simulate.episode.Recorder``: called before each tick's
+    physics steps and after the last; not with ``gains.every_step``).
 
     Returns:
         :class:`Tracking` with states at ticks ``0, record_every, ...``; ``actions`` are the
@@ -359,6 +375,8 @@ def track_wholebody(
     if model.actuator_biasprm[:, 1].any():
         raise UsageError("track_wholebody needs torque actuators: sim_model(actuators='motor')")
     gains = gains or WholeBodyGains()
+    if recorder is not None and gains.every_step:
+        raise UsageError("a recorder needs one action per control tick: not with every_step")
     T = ref_qpos.shape[0]
     ref = wholebody_reference(model, ref_qpos)
     fall_ref = fall_reference(model, ref_qpos)
@@ -372,7 +390,7 @@ def track_wholebody(
     rec_q, rec_v = np.empty((F, model.nq)), np.empty((F, model.nv))
     rec_u, rec_tau = np.empty((F, model.nu)), np.empty((F, model.nu))
     rec_f, rec_p = np.zeros((F, 2, 3)), np.zeros(F)
-    fell, fall_frame = False, -1
+    fell, fall_frame, fall_tick = False, -1, -1
     deepest = deepest_self = 0.0
     scratch: dict = {}
     base_limit = model.actuator_ctrlrange[:, 1].copy()
@@ -383,7 +401,7 @@ def track_wholebody(
             edits.scale(factor)
             mujoco.mj_forward(model, data)
             if not fell and has_fallen(model, data, fall_ref, k):
-                fell, fall_frame = True, min(F - 1, -(-k // record_every))
+                fell, fall_frame, fall_tick = True, min(F - 1, -(-k // record_every)), k
             res = qp_tick(model, data, ref, k, gains, factor * base_limit, scratch)
             data.ctrl[:] = res.tau
             apply_pushes(data, pushes, push_ids, t)
@@ -395,23 +413,20 @@ def track_wholebody(
                 rec_p[i] = fd
             if on_record:
                 rec_q[i], rec_v[i], rec_u[i] = data.qpos, data.qvel, data.ctrl
+            if recorder is not None:
+                recorder(k, data)
             mujoco.mj_step(model, data)
             if on_record:
                 rec_tau[i] = data.actuator_force
                 foot_forces(model, data, floor, side, rec_f[i])
-            if gains.every_step:  # a QP before every physics step, the reference held
-                for _ in range(SUBSTEPS - 1):
-                    mujoco.mj_forward(model, data)
-                    data.ctrl[:] = qp_tick(
-                        model, data, ref, k, gains, factor * base_limit, scratch
-                    ).tau
-                    mujoco.mj_step(model, data)
-            else:
-                mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
+            _finish_tick(model, data, ref, k, gains, factor * base_limit, scratch)
+    if recorder is not None:
+        recorder(T, data)
     return Tracking(
         qpos=rec_q, qvel=rec_v, assistance=np.zeros(F), assist_wrench=np.zeros((F, 6)),
         fell=fell, ticks=T, penetration=deepest, self_penetration=deepest_self,
         contact_penetration=rec_p,
         unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
         actions=rec_u, joint_torque=rec_tau, foot_force=rec_f, fall_frame=fall_frame,
+        fall_tick=fall_tick,
     )  # fmt: skip
