@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sim.model.humanoid import canonical_skeleton
-from sim.simulate.controller import Push
+from sim.simulate.controller import Push, Weakening
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model
 from sim.simulate.reference import contact_consistent, flat_soles, lowest_foot_point, on_floor
 from sim.simulate.wholebody import (
@@ -124,6 +124,16 @@ def test_torques_within_limits_and_same_reference_same_simulation(model, walk_re
     lim = model.actuator_forcerange[:, 1]
     assert np.all(np.abs(a.joint_torque) <= lim * (1 + 1e-12))
     assert np.abs(a.joint_torque).max() > 10.0  # it did act
+
+
+def test_a_weakening_to_s_bounds_the_torque_at_s_of_the_limit_not_s_squared(model, walk_ref):
+    """The QP's bound is what acts: the actuators are not also weakened (which made s act as
+    s^2 of the limit)."""
+    s = 0.5
+    weak = track_wholebody(model, walk_ref, weakenings=(Weakening(0.0, 10.0, s),), record_every=1)
+    share = np.abs(weak.joint_torque) / model.actuator_forcerange[:, 1]
+    assert share.max() <= s * (1 + 1e-9)
+    assert share.max() > 0.9 * s  # some joint used (nearly) all it was left, more than s^2
 
 
 def test_it_needs_torque_actuators():

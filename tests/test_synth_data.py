@@ -39,7 +39,7 @@ def synth(cmu_dir, tmp_path_factory):
 @pytest.fixture(scope="module")
 def synth_wholebody(cmu_dir, tmp_path_factory):
     """``PER_KIND`` short clips of every real-motion kind tracked by the whole-body QP, whose
-    weakening (the ``fall`` kind) scales the actuators while it simulates."""
+    weakening (the ``fall`` kind) bounds its torques at a share of the limits for a while."""
     from sim.simulate.dataset import synthesize
 
     out = tmp_path_factory.mktemp("synth_wb")
@@ -123,8 +123,8 @@ def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limit
 
 
 def test_the_wholebody_controller_replays_bit_for_bit_through_its_weakenings(synth_wholebody):
-    """The QP weakens by scaling its torque actuators while it simulates; the episode records
-    the torque that acts, so the MJCF's own model replays it (``Recorder``)."""
+    """The QP weakens by bounding its torques; the episode records the torque that acts, so
+    the MJCF's own model replays it (``Recorder``)."""
     count = _check_replays(*synth_wholebody, REAL)
     assert count["pushed"] >= 10 and count["weakened"] >= 5 and count["assisted"] == 0
     assert all(r["generation"]["controller"] == "wholebody" for r in synth_wholebody[1])

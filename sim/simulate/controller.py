@@ -80,10 +80,10 @@ class Weakening:
 
 
 class ActuatorEdits:
-    """The owner of temporary changes to a model: actuator gains, biases and force limits
-    (:meth:`scale`: ``sim.simulate.wholebody``'s weakening; ``track`` and the sampler never call
-    it: a model edited during a simulation does not replay from its MJCF) and the
-    disabled-feature flags (inverse dynamics without contacts). A context manager: on exit,
+    """The owner of temporary changes to a model: the disabled-feature flags (inverse dynamics
+    without contacts; no controller edits its actuators while it simulates: a model edited
+    during a simulation does not replay from its MJCF), and the actuator gains, biases and force
+    limits are restored too. A context manager: on exit,
     however reached, the model holds exactly the values it had on entry.
     """
 
@@ -96,18 +96,7 @@ class ActuatorEdits:
         self._bias = m.actuator_biasprm[:, :3].copy()
         self._range = m.actuator_forcerange.copy()
         self._flags = int(m.opt.disableflags)
-        self.factor = 1.0
         return self
-
-    def scale(self, factor: float) -> None:
-        """Actuator stiffness, damping and torque limits at ``factor`` times their values on
-        entry."""
-        if factor != self.factor:
-            m = self.model
-            m.actuator_gainprm[:, 0] = self._gain * factor
-            m.actuator_biasprm[:, :3] = self._bias * factor
-            m.actuator_forcerange[:] = self._range * factor
-            self.factor = factor
 
     def without_contacts(self) -> None:
         """Disable contacts (until exit)."""

@@ -59,8 +59,8 @@ class Recorder:
     :meth:`episode` then holds what was recorded.
 
     The action recorded is what acts on the model as its MJCF builds it. A controller that
-    scales the actuators while it simulates (``sim.simulate.wholebody``'s weakening:
-    ``ActuatorEdits.scale``) changes what a control does; for torque actuators (gain 1, no
+    scaled the actuators while it simulates would change what a control does (none does now:
+    the whole-body QP weakens by bounding its torques); for torque actuators (gain 1, no
     bias) the recorded action is then the torque that acts, ``clip(gain * clip(ctrl, ctrl
     range), force range)`` as MuJoCo computes it, which the unedited model applies unchanged
     (the same product, bit for bit), so the episode still replays from its MJCF. An edited

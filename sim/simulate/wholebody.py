@@ -53,7 +53,6 @@ import numpy as np
 
 from sim.errors import UsageError
 from sim.simulate.controller import (
-    ActuatorEdits,
     Push,
     Weakening,
     apply_pushes,
@@ -394,32 +393,30 @@ def track_wholebody(
     deepest = deepest_self = 0.0
     scratch: dict = {}
     base_limit = model.actuator_ctrlrange[:, 1].copy()
-    with ActuatorEdits(model) as edits:
-        for k in range(T):
-            t = k / CONTROL_HZ
-            factor = weakening_factor(weakenings, t)
-            edits.scale(factor)
-            mujoco.mj_forward(model, data)
-            if not fell and has_fallen(model, data, fall_ref, k):
-                fell, fall_frame, fall_tick = True, min(F - 1, -(-k // record_every)), k
-            res = qp_tick(model, data, ref, k, gains, factor * base_limit, scratch)
-            data.ctrl[:] = res.tau
-            apply_pushes(data, pushes, push_ids, t)
-            i, r = divmod(k, record_every)
-            on_record = r == 0
-            fd, sd = _penetration(data, floor)
-            deepest, deepest_self = max(deepest, fd), max(deepest_self, sd)
-            if on_record:
-                rec_p[i] = fd
-            if on_record:
-                rec_q[i], rec_v[i], rec_u[i] = data.qpos, data.qvel, data.ctrl
-            if recorder is not None:
-                recorder(k, data)
-            mujoco.mj_step(model, data)
-            if on_record:
-                rec_tau[i] = data.actuator_force
-                foot_forces(model, data, floor, side, rec_f[i])
-            _finish_tick(model, data, ref, k, gains, factor * base_limit, scratch)
+    for k in range(T):
+        t = k / CONTROL_HZ
+        factor = weakening_factor(weakenings, t)
+        mujoco.mj_forward(model, data)
+        if not fell and has_fallen(model, data, fall_ref, k):
+            fell, fall_frame, fall_tick = True, min(F - 1, -(-k // record_every)), k
+        res = qp_tick(model, data, ref, k, gains, factor * base_limit, scratch)
+        data.ctrl[:] = res.tau
+        apply_pushes(data, pushes, push_ids, t)
+        i, r = divmod(k, record_every)
+        on_record = r == 0
+        fd, sd = _penetration(data, floor)
+        deepest, deepest_self = max(deepest, fd), max(deepest_self, sd)
+        if on_record:
+            rec_p[i] = fd
+        if on_record:
+            rec_q[i], rec_v[i], rec_u[i] = data.qpos, data.qvel, data.ctrl
+        if recorder is not None:
+            recorder(k, data)
+        mujoco.mj_step(model, data)
+        if on_record:
+            rec_tau[i] = data.actuator_force
+            foot_forces(model, data, floor, side, rec_f[i])
+        _finish_tick(model, data, ref, k, gains, factor * base_limit, scratch)
     if recorder is not None:
         recorder(T, data)
     return Tracking(
