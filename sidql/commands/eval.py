@@ -36,6 +36,7 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.methods import get
 from sim.batch import ray_session
 from sim.files import write_atomic
+from sim.simulate.validate import chosen_controller
 
 DESCRIPTION = (
     "Cut every trial under --data into clips of --length frames at --fps (60 frames at 30 fps by "
@@ -146,7 +147,8 @@ def _run(args) -> int:
         "clips": len(cases),
         "physics": bool(args.physics),
         "simulate": bool(args.simulate),
-        "simulate_samples": args.samples or 0,
+        # the controller that ran (the default: the sampler at its default count)
+        **_simulation_protocol(args.samples or 0),
         "max_clips": args.max_clips,
         "reconstruction": args.reconstruction,
     }
@@ -179,3 +181,8 @@ def _run(args) -> int:
         write_atomic(data, lambda f: f.write(json.dumps(rd, indent=1).encode()))
         print(f"wrote {png} and {data}")
     return 0
+
+
+def _simulation_protocol(samples: int) -> dict:
+    controller, count = chosen_controller(samples)
+    return {"simulate_controller": controller, "simulate_samples": count}

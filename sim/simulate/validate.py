@@ -56,6 +56,14 @@ DEFAULT_SAMPLES = 32
 SKATE_CONTACT = 0.01
 
 
+def chosen_controller(samples: int = 0, controller: str | None = None) -> tuple[str, int]:
+    """The controller and sample count a forward validation runs with: ``samples`` > 0 the
+    sampler with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`; the
+    sampler at :data:`DEFAULT_SAMPLES`); the count is 0 for the other controllers."""
+    controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
+    return controller, int(samples or DEFAULT_SAMPLES) if controller == "sampling" else 0
+
+
 class ForwardValidation:
     """One subject's simulated body and the points the errors are measured on.
 
@@ -82,7 +90,7 @@ class ForwardValidation:
         search: dict | None = None,
         threads: int = 1,
     ):
-        controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
+        controller, samples = chosen_controller(samples, controller)
         if controller not in CONTROLLERS:
             raise UsageError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
         if (controller == "wholebody") != (not model.actuator_biasprm[:, 1].any()):
@@ -92,7 +100,7 @@ class ForwardValidation:
             )
         self.model = model
         self.names = tuple(names)
-        self.samples = int(samples or DEFAULT_SAMPLES) if controller == "sampling" else 0
+        self.samples = samples
         self.controller = controller
         self.search = dict(search or {})
         self.threads = int(threads)
@@ -208,7 +216,7 @@ def forward_validation(
     **body)`` with the actuators its controller needs) on points ``names``: ``samples`` > 0 the
     sampling tracker with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`,
     the sampler at :data:`DEFAULT_SAMPLES`)."""
-    controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
+    controller, _ = chosen_controller(samples, controller)
     actuators = "motor" if controller == "wholebody" else "position"
     model = sim_model(skeleton, actuators=actuators, **body)
     return ForwardValidation(model, names, samples=samples, controller=controller)
