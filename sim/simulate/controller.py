@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim.simulate.balance import Balance, balance_plan, balance_torques
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
@@ -271,6 +272,7 @@ def track(
     weakenings: tuple[Weakening, ...] = (),
     record_every: int = 4,
     offsets: np.ndarray | None = None,
+    balance: Balance | None = None,
     recorder=None,
 ) -> Tracking:
     """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
@@ -289,6 +291,8 @@ def track(
         record_every: ticks between recorded states (4: the 30 fps clip rate).
         offsets: (T, nu) [rad] added to the hinge targets at each tick while the body is up
             (the corrections a sampling controller found: ``sim.simulate.sampling``); None: none.
+        balance: gains of the balance feedback (``sim.simulate.balance``) whose torques are
+            added to the targets (as ``tau / kp``) while the body is up; None: none.
         recorder: called as ``recorder(k, data)`` at each control tick ``k`` just before its
             ``SUBSTEPS`` physics steps (controls and applied forces set) and as ``recorder(T,
             data)`` after the last (``sim.simulate.episode.Recorder``); None: none.
@@ -303,6 +307,8 @@ def track(
     rec = TrackRecord(model, T, record_every)
     fell, fallen_pose = False, None
     dt = 1.0 / CONTROL_HZ
+    bplan = None if balance is None else balance_plan(model, ref_qpos, plan.ref_qvel, balance)
+    fb = np.zeros(model.nu)
     for k in range(T):
         t = k * dt
         factor = weakening_factor(weakenings, t)
@@ -316,6 +322,8 @@ def track(
             )
             if offsets is not None:
                 target += offsets[k]
+            if bplan is not None:
+                target += balance_torques(model, data, bplan, k, fb) / plan.kp
         helped = rec.fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
         on = helped and (assist_in_flight or _floor_contact(data, plan.floor))
         _control_tick(model, data, plan, ref_qpos, k, target, factor, assist_limit if on else 0.0)

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim.simulate.balance import Balance, balance_plan, balance_torques
 from sim.simulate.controller import (
     Push,
     Tracking,
@@ -162,7 +163,7 @@ def sample_track(
     offsets, _ = search_offsets(model, ref_qpos, pushes=pushes, weakenings=weakenings, **search)
     return track(
         model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
-        pushes=pushes, weakenings=weakenings, recorder=recorder,
+        pushes=pushes, weakenings=weakenings, recorder=recorder, balance=search.get("balance"),
     )  # fmt: skip
 
 
@@ -183,10 +184,18 @@ class _Problem:
     foot_ids: np.ndarray
     push_ids: list
     fall_ref: object | None
+    kp: np.ndarray | None = None
+    balance: object | None = None
 
 
 def _problem(
-    model, ref_qpos, data, torque_sigma: float, pushes: tuple[Push, ...], falls: bool = True
+    model,
+    ref_qpos,
+    data,
+    torque_sigma: float,
+    pushes: tuple[Push, ...],
+    falls: bool = True,
+    balance: Balance | None = None,
 ) -> _Problem:
     """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
     rollouts look for falls (``fall_ref`` set) or not (None)."""
@@ -215,6 +224,8 @@ def _problem(
         foot_ids=foot_ids,
         push_ids=[model.body(p.body).id for p in pushes],
         fall_ref=fall_reference(model, ref_qpos) if falls else None,
+        kp=kp,
+        balance=None if balance is None else balance_plan(model, ref_qpos, ref_qvel, balance),
     )
 
 
@@ -234,11 +245,15 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     state, qpos, spec = keep
     T = len(prob.base)
     fell = False
+    fb = np.zeros(model.nu)
     for k in range(k0, k2):  # the window, then on with the same offset
         t = k / CONTROL_HZ
         if pushes:  # else no external force: the kept states carry none
             apply_pushes(data, pushes, prob.push_ids, t)
-        set_controls(model, data, prob.base[k] + off, weakening_factor(weakenings, t))
+        target = prob.base[k] + off
+        if prob.balance is not None:  # as track's: the same state, the same torques
+            target += balance_torques(model, data, prob.balance, k, fb) / prob.kp
+        set_controls(model, data, target, weakening_factor(weakenings, t))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
         if k == k1 - 1:  # the window's end: the state kept
             mujoco.mj_getState(model, data, state, spec)
@@ -312,6 +327,7 @@ def search_offsets(
     weakenings: tuple[Weakening, ...] = (),
     threads: int = 1,
     recentre: float = 0.0,
+    balance: Balance | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
@@ -332,6 +348,8 @@ def search_offsets(
             towards the cheapest kept state's (0: its parent's alone).
         threads: rollouts run on this many threads (MuJoCo releases the GIL while it steps);
             the result is the same for any number.
+        balance: the balance feedback (``sim.simulate.balance``) every rollout and the
+            replay add to their targets; None: none.
 
     Returns:
         ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
@@ -343,7 +361,9 @@ def search_offsets(
     rng = np.random.default_rng(seed)
     datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
     data = datas[0]
-    prob = _problem(model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0)
+    prob = _problem(
+        model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance
+    )
     mujoco.mj_resetData(model, data)
     data.qpos[:] = ref_qpos[0]
     data.qvel[:] = prob.ref_qvel[0]

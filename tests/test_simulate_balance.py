@@ -1,0 +1,111 @@
+"""The balance feedback (``sim.simulate.balance``): zero on the reference, the pelvis moment the
+stance hips make is the one asked for, the ankles push a leaning centre of mass back, and a
+sampled rollout with it is replayed state for state."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim.model.humanoid import canonical_skeleton
+from sim.simulate.balance import Balance, balance_plan, balance_torques
+from sim.simulate.controller import track
+from sim.simulate.feedforward import reference_feedforward
+from sim.simulate.model import G, sim_model, total_mass
+from sim.simulate.sampling import search_offsets
+
+
+@pytest.fixture(scope="module")
+def model():
+    return sim_model(canonical_skeleton())
+
+
+@pytest.fixture(scope="module")
+def walk(trial_on_floor, model):
+    """(ref_qpos, ref_qvel): 1 s of the walk 07_01 on the canonical body, on the floor."""
+    ref = trial_on_floor(model, "07_01")[:120]
+    qvel, _ = reference_feedforward(model, ref, mujoco.MjData(model))
+    return ref, qvel
+
+
+def _stance_tick(plan, both: bool) -> int:
+    ticks = np.flatnonzero(plan.stance.all(axis=1) if both else plan.stance.sum(axis=1) == 1)
+    assert ticks.size, "the walk has such ticks"
+    return int(ticks[0])
+
+
+def test_no_torque_on_the_reference_itself(model, walk):
+    ref, qvel = walk
+    plan = balance_plan(model, ref, qvel, Balance())
+    assert plan.stance.any(axis=1).mean() > 0.8  # a walk stands most of the time
+    data = mujoco.MjData(model)
+    out = np.zeros(model.nu)
+    for k in range(0, len(ref), 7):
+        data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+        np.testing.assert_allclose(balance_torques(model, data, plan, k, out), 0.0, atol=1e-6)
+
+
+def test_stance_hips_make_the_pelvis_moment_asked_for(model, walk):
+    """A pelvis turned by a small rotation about world x: the moment the hips' torques put on
+    the pelvis (each hinge pushes its parent by -tau times its world axis, the axis computed
+    here from the parent's frame and the joint's local axis) is -k_rot times the error, the
+    ankles get nothing from it (no centre-of-mass error asked for with k_com 0)."""
+    ref, qvel = walk
+    gains = Balance(k_rot=1.0, d_rot=0.0, k_com=0.0, d_com=0.0)
+    plan = balance_plan(model, ref, qvel, gains)
+    k = _stance_tick(plan, both=False)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+    turn = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(turn, np.array([1.0, 0.0, 0.0]), 0.05)
+    mujoco.mju_mulQuat(data.qpos[3:7], turn, ref[k, 3:7].copy())  # world-frame turn
+    tau = balance_torques(model, data, plan, k, np.zeros(model.nu))
+    mujoco.mj_forward(model, data)
+    moment = np.zeros(3)
+    for a in np.flatnonzero(tau):  # -tau times the dof's world axis, from the child's Jacobian
+        j = model.actuator_trnid[a, 0]
+        jacr = np.zeros((3, model.nv))
+        mujoco.mj_jacBody(model, data, None, jacr, model.jnt_bodyid[j])
+        moment -= tau[a] * jacr[:, model.jnt_dofadr[j]]
+    mgh = total_mass(model) * G
+    np.testing.assert_allclose(moment, [-0.05 * mgh, 0.0, 0.0], atol=1e-3 * mgh)
+    names = [model.actuator(int(a)).name for a in np.flatnonzero(tau)]
+    assert names and all("femur" in n for n in names)
+
+
+def test_ankles_push_a_forward_centre_of_mass_back(model, walk):
+    """A root moving faster than the reference along the walk (the ankle's flexion axis lies
+    across it) gets ankle torques whose moment on each stance leg turns the centre of mass
+    back (the moment crossed with the centre of mass's lever from the ankle points against
+    the walk)."""
+    ref, qvel = walk
+    gains = Balance(k_rot=0.0, d_rot=0.0, k_com=1.0, d_com=0.3)
+    plan = balance_plan(model, ref, qvel, gains)
+    k = _stance_tick(plan, both=True)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+    ahead = np.append(qvel[k, :2] / np.linalg.norm(qvel[k, :2]), 0.0)
+    data.qvel[:3] += 0.5 * ahead  # [m/s] too fast
+    tau = balance_torques(model, data, plan, k, np.zeros(model.nu))
+    assert all("foot" in model.actuator(int(a)).name for a in np.flatnonzero(tau))
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    for side in "lr":
+        ids = [a for a in np.flatnonzero(tau) if model.actuator(int(a)).name.startswith(side)]
+        on_leg = -sum(tau[a] * data.xaxis[model.actuator_trnid[a, 0]] for a in ids)
+        r = data.subtree_com[1] - data.xpos[model.body(f"{side}foot").id]
+        assert np.cross(on_leg, r) @ ahead < -0.2 * np.linalg.norm(on_leg) * np.linalg.norm(r)
+
+
+def test_a_search_with_balance_is_replayed_state_for_state(model, walk):
+    """Rollouts and replay add the same feedback of the same states: ``track`` with the offsets
+    found passes through the states the search reached; without the feedback it would not."""
+    ref = walk[0][:48]
+    gains = Balance()
+    kw = dict(samples=6, keep=2, window=12, lookahead=12, seed=3, balance=gains)
+    offsets, reached = search_offsets(model, ref, **kw)
+    r = track(model, ref, assist_limit=0.0, offsets=offsets, record_every=1, balance=gains)
+    np.testing.assert_allclose(r.qpos[12::12], reached[:-1], rtol=0, atol=1e-9)
+    bare = track(model, ref, assist_limit=0.0, offsets=offsets, record_every=1)
+    assert np.abs(bare.qpos[12::12] - reached[:-1]).max() > 1e-3
