@@ -39,8 +39,9 @@ from sim.simulate.model import sim_model  # noqa: E402
 from sim.simulate.sampling import CostWeights  # noqa: E402
 from sim.simulate.validate import ForwardValidation  # noqa: E402
 
-#: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window
-FIRST_SAMPLER = {"weights": CostWeights(fall=0.0), "lookahead": 48}
+#: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
+#: balance feedback
+FIRST_SAMPLER = {"weights": CostWeights(fall=0.0), "lookahead": 48, "balance": None}
 #: ``--controllers`` names: (label, ForwardValidation keywords, actuators)
 CONTROLLERS = {
     "plain": ("plain tracker", {"controller": "plain"}, "position"),
@@ -51,9 +52,14 @@ CONTROLLERS = {
     ),
     "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
 }
-for _n in (16, 24, 32, 48, 64):  # the sampler as it is now (sim.simulate.sampling's defaults)
-    CONTROLLERS[f"falls{_n}"] = (
+for _n in (16, 24, 28, 32, 48, 64):
+    CONTROLLERS[f"falls{_n}"] = (  # falls in the cost, no balance feedback
         f"sampler, {_n} samples, falls in its cost",
+        {"controller": "sampling", "samples": _n, "search": {"balance": None}},
+        "position",
+    )
+    CONTROLLERS[f"balance{_n}"] = (  # the sampler as it is now (sim.simulate.sampling's defaults)
+        f"sampler, {_n} samples, falls in its cost, balance feedback",
         {"controller": "sampling", "samples": _n},
         "position",
     )

@@ -10,7 +10,7 @@ import pytest
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.controller import Push, Weakening, track
 from sim.simulate.model import sim_model
-from sim.simulate.sampling import sample_track, search_offsets
+from sim.simulate.sampling import BALANCE, sample_track, search_offsets
 
 
 @pytest.fixture(scope="module")
@@ -48,10 +48,15 @@ def test_same_seed_same_result_other_seed_another(model, walk_ref):
 
 
 def test_without_noise_it_is_the_plain_tracker(model, walk_ref):
+    """With no noise the sampler is the plain tracker: without its balance feedback the bare
+    one, with it ``track(balance=...)``, bit for bit."""
     ref = walk_ref[:60]
-    r = sample_track(model, ref, samples=2, keep=1, torque_sigma=0.0)
+    r = sample_track(model, ref, samples=2, keep=1, torque_sigma=0.0, balance=None)
     p = track(model, ref, assist_limit=0.0)
     assert np.array_equal(r.qpos, p.qpos) and np.array_equal(r.joint_torque, p.joint_torque)
+    r = sample_track(model, ref, samples=2, keep=1, torque_sigma=0.0)
+    b = track(model, ref, assist_limit=0.0, balance=BALANCE)
+    assert np.array_equal(r.qpos, b.qpos) and not np.array_equal(b.qpos, p.qpos)
 
 
 def test_replay_reaches_the_rolled_out_states_under_pushes_and_a_weakening(model, walk_ref):
@@ -65,7 +70,7 @@ def test_replay_reaches_the_rolled_out_states_under_pushes_and_a_weakening(model
     offsets, reached = search_offsets(
         model, ref, samples=6, keep=2, window=12, lookahead=12, seed=3, **kw
     )
-    r = track(model, ref, assist_limit=0.0, offsets=offsets, record_every=1, **kw)
+    r = track(model, ref, assist_limit=0.0, offsets=offsets, record_every=1, balance=BALANCE, **kw)
     assert not r.fell
     np.testing.assert_allclose(r.qpos[12::12], reached[:-1], rtol=0, atol=1e-9)
     # a search blind to the perturbations would have reached other states

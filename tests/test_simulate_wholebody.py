@@ -157,3 +157,30 @@ def test_forward_validation_builds_the_body_its_controller_needs():
         ForwardValidation(sampled.model, names, controller="wholebody")
     with pytest.raises(ValueError, match="known"):
         ForwardValidation(sampled.model, names, controller="pid")
+
+
+def test_skating_is_measured_on_one_reference_whatever_the_controller(trial_on_floor):
+    """The skating's reference of the sampler (its tracked motion lifted by the floor lift)
+    and of the QP (contact-consistent already) stand alike: stance soles on z = 0 (the
+    simulated floor), where the lifted reference's soles hover and the contact threshold
+    would pick other frames; the two differ only by the ankles ``flat_soles`` turned (a sole
+    1 cm higher is turned less), so their roots agree within millimetres."""
+    from sim.simulate.reference import FLOOR_LIFT
+    from sim.simulate.validate import SKATE_CONTACT, forward_validation
+
+    skeleton = canonical_skeleton()
+    names = ("root", "lfoot", "head")
+    sampled = forward_validation(skeleton, names, controller="sampling")
+    qp = forward_validation(skeleton, names, controller="wholebody")
+    qpos = trial_on_floor(sampled.model, "02_01")[:360:4]  # 3 s at 30 fps
+    floor = sampled.floor_of(qpos.repeat(4, axis=0)[: 4 * len(qpos) - 3])
+    a = sampled.skating_reference(sampled.reference(qpos, 30.0, floor))
+    b = qp.skating_reference(qp.reference(qpos, 30.0, floor))
+    assert np.median(np.abs(a[:, 2] - b[:, 2])) < 0.003
+    for ref in (a, b):
+        low = lowest_foot_point(sampled.model, ref)
+        stance = low <= 0.03
+        assert stance.mean() > 0.5 and np.median(np.abs(low[stance])) < 0.002  # on the floor
+    lifted = lowest_foot_point(sampled.model, sampled.reference(qpos, 30.0, floor))
+    assert np.median(lifted[stance]) > FLOOR_LIFT / 2  # the lifted one hovers
+    assert (low <= SKATE_CONTACT).sum() > (lifted <= SKATE_CONTACT).sum()

@@ -34,6 +34,10 @@ from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS, G, total_mass
 #: [m] a reference foot (sole or toe box) whose lowest point is at most this high is in stance
 #: (the reference may be lifted by ``sim.simulate.reference.FLOOR_LIFT``)
 STANCE_HEIGHT = 0.04
+#: Tikhonov damping of the hinge torques' least squares (the axes are unit vectors): a hip
+#: near gimbal lock gets bounded torques
+DAMPING = 1e-3
+_DAMPED = DAMPING * np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -52,17 +56,23 @@ class Balance:
 class BalancePlan:
     """What the feedback needs per reference tick (T ticks): root orientation (T, 4) and angular
     velocity (T, 3) [rad/s, local frame], root horizontal velocity (T, 2) [m/s], the centre of
-    mass minus the stance feet's mid-point (T, 2) [m], stance per side (T, 2) bool; per side the
-    hip hinges' joint ids (3,) and actuator ids, the ankle's likewise, the foot body ids (2,);
-    the gains in SI units (k_rot [N m/rad], d_rot [N m s/rad], k_com [N], d_com [N s])."""
+    mass minus the stance feet's mid-point (T, 2) [m], stance per side (T, 2) bool and each
+    side's share of the moments (T, 2) (1 over the stance feet's count, 0 off stance); the hinges
+    driven, per side (left, right) and group (hip, ankle), up to three each: joint ids and
+    actuator ids (2, 2, 3) (a missing hinge repeats the first, masked out by ``mask`` (2, 2,
+    3); ``valid`` its bool); the foot body ids (2,); the gains in SI units (k_rot [N m/rad], d_rot [N m s/rad],
+    k_com [N], d_com [N s])."""
 
     quat: np.ndarray
     angvel: np.ndarray
     vel: np.ndarray
     com_off: np.ndarray
     stance: np.ndarray
-    hips: list
-    ankles: list
+    share: np.ndarray
+    jids: np.ndarray
+    aids: np.ndarray
+    mask: np.ndarray
+    valid: np.ndarray
     feet: np.ndarray
     gains: tuple[float, float, float, float]
 
@@ -112,14 +122,26 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
         on = stance[t] if stance[t].any() else np.ones(2, dtype=bool)
         com_off[t] = (data.subtree_com[1] - data.xpos[feet[on]].mean(axis=0))[:2]
     mgh = total_mass(model) * G
+    jids, aids = np.zeros((2, 2, 3), dtype=int), np.zeros((2, 2, 3), dtype=int)
+    mask = np.zeros((2, 2, 3))
+    for i, side in enumerate("lr"):
+        for j, bone in enumerate(("femur", "foot")):
+            js, as_ = _hinges(model, side, bone)
+            n = min(3, js.size)
+            if n:
+                jids[i, j], aids[i, j] = js[0], as_[0]
+                jids[i, j, :n], aids[i, j, :n], mask[i, j, :n] = js[:n], as_[:n], 1.0
     return BalancePlan(
         quat=ref_qpos[:, 3:7].copy(),
         angvel=ref_qvel[:, 3:6].copy(),
         vel=ref_qvel[:, :2].copy(),
         com_off=com_off,
         stance=stance,
-        hips=[_hinges(model, s, "femur") for s in "lr"],
-        ankles=[_hinges(model, s, "foot") for s in "lr"],
+        share=stance / np.maximum(1, stance.sum(axis=1, keepdims=True)),
+        jids=jids,
+        aids=aids,
+        mask=mask,
+        valid=mask > 0,
         feet=feet,
         gains=(
             gains.k_rot * mgh,
@@ -135,25 +157,25 @@ def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> 
     ``qpos``/``qvel`` (kinematics and centre of mass recomputed); zero off the stance legs and
     where the reference has no stance foot. Returns ``out``."""
     out[:] = 0.0
-    on = np.flatnonzero(plan.stance[k])
-    if on.size == 0:
+    w = plan.share[k]  # (2,) each side's share of the moments: 1 / stance feet, 0 off stance
+    if not w.any():
         return out
     mujoco.mj_kinematics(model, data)
     mujoco.mj_comPos(model, data)
     k_rot, d_rot, k_com, d_com = plan.gains
-    R = data.xmat[1].reshape(3, 3)
     e = np.zeros(3)
     mujoco.mju_subQuat(e, plan.quat[k], data.qpos[3:7])  # local frame of the simulated root
     de = plan.angvel[k] - data.qvel[3:6]  # local frame
-    M_r = R @ (k_rot * e + d_rot * de) / on.size
-    mid = data.xpos[plan.feet[on]].mean(axis=0)
-    e_c = (data.subtree_com[1] - mid)[:2] - plan.com_off[k]
-    de_c = data.qvel[:2] - plan.vel[k]
-    f = k_com * e_c + d_com * de_c  # (2,) horizontal
-    M_c = -np.array([-f[1], f[0], 0.0]) / on.size  # -(z x f)
-    for s in on:
-        for (jids, aids), M in ((plan.hips[s], M_r), (plan.ankles[s], M_c)):
-            if jids.size:
-                A = data.xaxis[jids].T  # (3, n) world axes
-                out[aids] = -np.linalg.lstsq(A, M, rcond=1e-3)[0]
+    rot = data.xmat[1].reshape(3, 3) @ (k_rot * e + d_rot * de)  # world [N m]
+    mid = w @ data.xpos[plan.feet] / w.sum()
+    f = k_com * ((data.subtree_com[1, :2] - mid[:2]) - plan.com_off[k])
+    f += d_com * (data.qvel[:2] - plan.vel[k])  # (2,) horizontal [N]
+    M = np.empty((2, 2, 3))  # per side and group (hip, ankle): the moment asked for [N m]
+    M[:, 0] = w[:, None] * rot
+    M[:, 1] = w[:, None] * (f[1], -f[0], 0.0)  # -(z x f)
+    # damped least squares over each group's hinge axes X (rows: world axes; masked rows 0)
+    X = data.xaxis[plan.jids] * plan.mask[..., None]  # (2, 2, 3, 3)
+    XXt = X @ np.swapaxes(X, -1, -2) + _DAMPED
+    tau = np.linalg.solve(XXt, X @ M[..., None])
+    out[plan.aids[plan.valid]] = -tau.reshape(-1)[plan.valid.reshape(-1)]
     return out

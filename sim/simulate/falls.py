@@ -63,10 +63,14 @@ class FallReference:
         head_z: (T,) height [m] of the reference's head (centre of its head geom).
         on_floor: (T, ngeom) the reference's geom is on the floor (:data:`REFERENCE_GAP`); the
             feet are always allowed.
+        floor, head: the floor's and the head's geom ids (looked up once: a fall is looked for
+            every control tick of every rollout).
     """
 
     head_z: np.ndarray
     on_floor: np.ndarray
+    floor: int = -1
+    head: int = -1
 
 
 def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
@@ -81,7 +85,8 @@ def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
         mujoco.mj_kinematics(model, data)
         head_z[t] = data.geom_xpos[head, 2]
         on_floor[t] = (geom_bottoms(model, data) <= REFERENCE_GAP) | allowed
-    return FallReference(head_z=head_z, on_floor=on_floor)
+    floor = model.geom("floor").id
+    return FallReference(head_z=head_z, on_floor=on_floor, floor=floor, head=head)
 
 
 def _foot_mask(model) -> np.ndarray:
@@ -98,7 +103,7 @@ def fall_cause(model, data, ref: FallReference, k: int) -> str | None:
     ``"contact:<geom>"`` (a part the reference does not have on the floor touches it, among
     ``data``'s contacts of its last step) or ``"head"`` (head below :data:`HEAD_SHARE` of the
     reference's head height; ``data``'s kinematics must be current)."""
-    floor = model.geom("floor").id
+    floor = ref.floor if ref.floor >= 0 else model.geom("floor").id
     allowed = ref.on_floor[k]
     n = data.ncon
     if n:
@@ -111,7 +116,8 @@ def fall_cause(model, data, ref: FallReference, k: int) -> str | None:
                 return f"contact:{model.geom(g2).name}"
             if g2 == floor and not allowed[g1]:
                 return f"contact:{model.geom(g1).name}"
-    if data.geom_xpos[model.geom(HEAD_GEOM).id, 2] < HEAD_SHARE * ref.head_z[k]:
+    head = ref.head if ref.head >= 0 else model.geom(HEAD_GEOM).id
+    if data.geom_xpos[head, 2] < HEAD_SHARE * ref.head_z[k]:
         return "head"
     return None
 

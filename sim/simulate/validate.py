@@ -135,6 +135,18 @@ class ForwardValidation:
         ref[:, 2] -= floor - FLOOR_LIFT
         return flat_soles(self.model, ref)
 
+    def skating_reference(self, ref: np.ndarray) -> np.ndarray:
+        """The tracked motion as :meth:`skating` measures it: ``ref`` (T, nq, from
+        :meth:`reference`) with its floor at z = 0 and its stance soles on it
+        (``contact_consistent``), whatever the controller: a lifted reference's soles reach the
+        contact threshold only where its floor estimate is high, so its contact frames are not
+        the simulated body's (which stands on z = 0)."""
+        if self.controller == "wholebody":  # its reference is contact-consistent already
+            return ref
+        out = ref.copy()
+        out[:, 2] -= FLOOR_LIFT  # its floor back at z = 0
+        return contact_consistent(self.model, out)
+
     def floor_of(self, ref120: np.ndarray) -> np.ndarray:
         """(T',) floor height [m] under a control-rate ``qpos`` stream."""
         return floor_track(self.model, ref120, CONTROL_HZ)
@@ -149,7 +161,8 @@ class ForwardValidation:
         * ``sim_error_local_mm``: as ``sim_error_mm`` with each frame's points relative to the
           root (root-relative: the pose, without the path);
         * ``sim_skate_mm_s`` and ``sim_skate_ref_mm_s``: foot skating in contact of the
-          simulated and the tracked motion, one estimator for both (:meth:`skating`);
+          simulated and the tracked motion, one estimator for both (:meth:`skating`), the
+          tracked motion's with its stance soles on the floor (:meth:`skating_reference`);
         * ``sim_fell`` (0/1) and ``sim_fall_s``: the time of the fall [s] (None: no fall), a fall
           as ``sim.simulate.falls`` defines it (a part other than the feet on the floor where
           the reference has none, or the head below half the reference's);
@@ -181,7 +194,7 @@ class ForwardValidation:
             "sim_error_mm": 1e3 * float(np.linalg.norm(sim - target, axis=-1).mean()),
             "sim_error_local_mm": 1e3 * float(np.linalg.norm(local, axis=-1).mean()),
             "sim_skate_mm_s": self.skating(r.qpos, fps),
-            "sim_skate_ref_mm_s": self.skating(ref[::every][:n], fps),
+            "sim_skate_ref_mm_s": self.skating(self.skating_reference(ref)[::every][:n], fps),
             "sim_error_original_mm": 1e3 * float(np.linalg.norm(sim - original, axis=-1).mean()),
             "sim_fell": int(r.fell),
             "sim_fall_s": None if r.fall_frame < 0 else r.fall_frame / fps,
