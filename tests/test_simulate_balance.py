@@ -109,3 +109,28 @@ def test_a_search_with_balance_is_replayed_state_for_state(model, walk):
     np.testing.assert_allclose(r.qpos[12::12], reached[:-1], rtol=0, atol=1e-9)
     bare = track(model, ref, assist_limit=0.0, offsets=offsets, record_every=1)
     assert np.abs(bare.qpos[12::12] - reached[:-1]).max() > 1e-3
+
+
+def test_torques_are_held_between_updates_and_windows_must_start_on_one(model, walk):
+    """``every`` 2: at an odd tick the torques are the previous even tick's, whatever the state
+    now; a search whose windows would start between two updates is refused (its rollouts could
+    not start where the replay holds a torque computed before them)."""
+    from sim.errors import SidqlError
+    from sim.simulate.balance import held_torques
+
+    ref, qvel = walk
+    plan = balance_plan(model, ref, qvel, Balance(every=2))
+    k = 2 * (_stance_tick(plan, both=False) // 2)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+    data.qvel[:3] += 0.3
+    out = np.zeros(model.nu)
+    first = held_torques(model, data, plan, k, out).copy()
+    assert np.abs(first).max() > 1.0
+    data.qvel[:3] -= 0.6  # another state: an update would differ
+    assert np.array_equal(held_torques(model, data, plan, k + 1, out), first)
+    assert not np.allclose(held_torques(model, data, plan, k + 2, out), first)
+    with pytest.raises(SidqlError, match="multiple"):
+        search_offsets(model, ref[:24], samples=2, window=9, balance=Balance(every=2))
+    with pytest.raises(SidqlError, match="positive"):
+        Balance(every=0)

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.simulate.balance import Balance, balance_plan, balance_torques
+from sim.simulate.balance import Balance, balance_plan, held_torques
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
@@ -323,7 +323,7 @@ def track(
             if offsets is not None:
                 target += offsets[k]
             if bplan is not None:
-                target += balance_torques(model, data, bplan, k, fb) / plan.kp
+                target += held_torques(model, data, bplan, k, fb) / plan.kp
         helped = rec.fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
         on = helped and (assist_in_flight or _floor_contact(data, plan.floor))
         _control_tick(model, data, plan, ref_qpos, k, target, factor, assist_limit if on else 0.0)

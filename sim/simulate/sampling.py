@@ -36,7 +36,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.simulate.balance import Balance, balance_plan, balance_torques
+from sim.errors import UsageError
+from sim.simulate.balance import Balance, balance_plan, held_torques
 from sim.simulate.controller import (
     Push,
     Tracking,
@@ -261,7 +262,7 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
             apply_pushes(data, pushes, prob.push_ids, t)
         target = prob.base[k] + off
         if prob.balance is not None:  # as track's: the same state, the same torques
-            target += balance_torques(model, data, prob.balance, k, fb) / prob.kp
+            target += held_torques(model, data, prob.balance, k, fb) / prob.kp
         set_controls(model, data, target, weakening_factor(weakenings, t))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
         if k == k1 - 1:  # the window's end: the state kept
@@ -370,6 +371,11 @@ def search_offsets(
     rng = np.random.default_rng(seed)
     datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
     data = datas[0]
+    if balance is not None and window % balance.every:
+        raise UsageError(
+            f"window ({window} ticks) must be a multiple of Balance.every ({balance.every}): "
+            "a rollout starts where the replay updates its feedback"
+        )
     prob = _problem(
         model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance
     )
