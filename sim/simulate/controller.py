@@ -261,6 +261,20 @@ def _control_tick(model, data, plan: _Plan, ref_qpos, k: int, target, factor, as
     data.qfrc_applied[3:6] = torque
 
 
+def _target(model, data, plan: _Plan, ref_qpos, k: int, offsets, balance) -> np.ndarray:
+    """(nu,) tick ``k``'s hinge targets [rad] of a body that is up. The actuator carries PD and
+    feed-forward, MuJoCo clamps their sum: the target leads by kv/kp * v_ref (kp (q_ref - q) +
+    kv (v_ref - v) applied) and by ff / kp; plus ``offsets[k]`` (None: none) and the balance
+    feedback's torques over kp (``balance``: (its plan, (nu,) the torques held from tick to
+    tick, updated here) or None)."""
+    target = ref_qpos[k, 7:] + plan.lead * plan.ref_qvel[k, 6:] + plan.ref_force[k, 6:] / plan.kp
+    if offsets is not None:
+        target += offsets[k]
+    if balance is not None:
+        target += held_torques(model, data, balance[0], k, balance[1]) / plan.kp
+    return target
+
+
 def track(
     model,
     ref_qpos: np.ndarray,
@@ -307,23 +321,15 @@ def track(
     rec = TrackRecord(model, T, record_every)
     fell, fallen_pose = False, None
     dt = 1.0 / CONTROL_HZ
-    bplan = None if balance is None else balance_plan(model, ref_qpos, plan.ref_qvel, balance)
-    fb = np.zeros(model.nu)
+    bal = balance and (balance_plan(model, ref_qpos, plan.ref_qvel, balance), np.zeros(model.nu))
     for k in range(T):
         t = k * dt
         factor = weakening_factor(weakenings, t)
         if fell:  # down: the joints hold the pose of the fall with a lying body's tone
             factor = min(factor, FALLEN_TONE)
             target = fallen_pose  # no tracking of a standing motion, no feed-forward
-        else:  # the actuator carries PD and feed-forward, MuJoCo clamps their sum: the target
-            # leads by kv/kp * v_ref (kp (q_ref - q) + kv (v_ref - v) applied) and by ff / kp
-            target = (
-                ref_qpos[k, 7:] + plan.lead * plan.ref_qvel[k, 6:] + plan.ref_force[k, 6:] / plan.kp
-            )
-            if offsets is not None:
-                target += offsets[k]
-            if bplan is not None:
-                target += held_torques(model, data, bplan, k, fb) / plan.kp
+        else:  # PD, feed-forward, offsets and balance feedback
+            target = _target(model, data, plan, ref_qpos, k, offsets, bal)
         helped = rec.fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
         on = helped and (assist_in_flight or _floor_contact(data, plan.floor))
         _control_tick(model, data, plan, ref_qpos, k, target, factor, assist_limit if on else 0.0)

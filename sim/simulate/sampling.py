@@ -321,6 +321,26 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     return cost
 
 
+def _check_window(window: int, balance: Balance | None) -> None:
+    """Refuse windows that start between two updates of the balance feedback (a rollout could
+    not start where the replay holds torques computed before it)."""
+    if balance is not None and window % balance.every:
+        raise UsageError(
+            f"window ({window} ticks) must be a multiple of Balance.every ({balance.every}): "
+            "a rollout starts where the replay updates its feedback"
+        )
+
+
+def _first_state(model, data, qpos: np.ndarray, qvel: np.ndarray, spec) -> np.ndarray:
+    """(1, state size) the full state of ``data`` reset to ``qpos`` (nq,) and ``qvel`` (nv,)."""
+    mujoco.mj_resetData(model, data)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(model, data)
+    state = np.empty((1, mujoco.mj_stateSize(model, spec)))
+    mujoco.mj_getState(model, data, state[0], spec)
+    return state
+
+
 def search_offsets(
     model,
     ref_qpos: np.ndarray,
@@ -371,22 +391,13 @@ def search_offsets(
     rng = np.random.default_rng(seed)
     datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
     data = datas[0]
-    if balance is not None and window % balance.every:
-        raise UsageError(
-            f"window ({window} ticks) must be a multiple of Balance.every ({balance.every}): "
-            "a rollout starts where the replay updates its feedback"
-        )
+    _check_window(window, balance)
     prob = _problem(
         model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance
     )
-    mujoco.mj_resetData(model, data)
-    data.qpos[:] = ref_qpos[0]
-    data.qvel[:] = prob.ref_qvel[0]
-    mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     size = mujoco.mj_stateSize(model, spec)
-    states = np.empty((1, size))
-    mujoco.mj_getState(model, data, states[0], spec)
+    states = _first_state(model, data, ref_qpos[0], prob.ref_qvel[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
