@@ -154,8 +154,14 @@ def main() -> None:
         "--threads", type=int, default=1,
         help="with --controllers: the sampler's rollouts on this many threads",
     )  # fmt: skip
+    ap.add_argument(
+        "--page", default="simulate_controllers",
+        help="with --controllers: the docs/results page written (default simulate_controllers)",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
+    if not args.page.replace("_", "").isalnum():
+        ap.error(f"--page must be a plain name (letters, digits, _); got {args.page!r}")
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])
     t0 = time.perf_counter()
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
@@ -176,7 +182,7 @@ def main() -> None:
         )
         print(text)
         if not args.no_write:
-            write_results("simulate_controllers", "Forward simulation: the controllers on the "
+            write_results(args.page, "Forward simulation: the controllers on the "
                           "original motion", text, command)  # fmt: skip
         return
     out = evaluate(cases, args.methods, args.keyframes, physics=True, simulate=True,

@@ -24,8 +24,8 @@ deterministic computation as the sampled rollout). Deterministic given ``seed``,
 number of ``threads`` the rollouts run on.
 
 Cost: ``samples`` rollouts of up to ``window + lookahead`` ticks per window plus one replay:
-with 32 and the default lookahead about 5 CPU s per simulated second
-(``docs/results/simulate_controllers.md``).
+with the balance feedback about 4.9 CPU s per simulated second at 28 samples, 5.2 at 32
+(without it 4.4 at 32; ``docs/results/simulate_controllers.md``).
 """
 
 from __future__ import annotations
@@ -62,9 +62,9 @@ CORRECTED = ("femur", "tibia", "foot", "toes", "lowerback", "upperback", "thorax
 #: 36 ticks fell in 4 / 2 of 8 (24 samples, 36 ticks: 3) (docs/synthetic.md)
 LOOKAHEAD = 36
 #: the balance feedback (``sim.simulate.balance``) every rollout and the replay add by default
-#: (``balance=None``: none, the sampler before it). On 8 of the 22 clips of ``bench_simulate.py
-#: --controllers`` at 32 samples: falls 2 / 8 either way, root-relative error 158 -> 111 mm,
-#: global 356 -> 237 mm (docs/synthetic.md)
+#: (``balance=None``: none, the sampler before it). On the 22 clips of ``bench_simulate.py
+#: --controllers`` at 32 samples: falls 0.32 -> 0.27, root-relative error 138 -> 127 mm, global
+#: 466 -> 383 mm, CPU 1.18x (docs/results/simulate_controllers.md)
 BALANCE = Balance()
 #: bodies whose positions relative to the root enter the cost
 END_EFFECTORS = ("lfoot", "rfoot", "ltoes", "rtoes", "lhand", "rhand", "head")

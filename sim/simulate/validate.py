@@ -44,14 +44,18 @@ SIMULATE_KEYS = (
 SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
 CONTROLLERS = ("plain", "sampling", "wholebody")
 #: the controller of ``eval --physics --simulate`` and ``report --simulate`` without
-#: ``--samples``: the sampler with falls in its cost at :data:`DEFAULT_SAMPLES`, because within
-#: the budget of 5 CPU s per simulated second it beats the plain tracker on falls and error
-#: (``docs/results/simulate_controllers.md``, 22 clips: 0.32 against 0.95 falls, 138 against
-#: 316 mm root-relative, 466 against 694 mm global error, 4.64 CPU s per simulated s; the
-#: whole-body QP: 0.91, 362, 665 mm)
+#: ``--samples``: the sampler with falls in its cost and the balance feedback
+#: (``sim.simulate.sampling.BALANCE``) at :data:`DEFAULT_SAMPLES`, because within the budget of
+#: 5 CPU s per simulated second it beats the other controllers on falls and error
+#: (``docs/results/simulate_default.md`` and ``simulate_controllers.md``, 22 clips: 0.27 falls,
+#: 113 mm root-relative, 322 mm global error, 4.98 CPU s per simulated s; the sampler without
+#: the feedback at 32 samples in the same run: 0.32, 138, 466 mm, 4.67; the plain tracker 0.95,
+#: 316, 694 mm;
+#: the whole-body QP 0.91, 362, 665 mm)
 DEFAULT_CONTROLLER = "sampling"
-#: the sampler's rollouts per window where it is chosen without a count
-DEFAULT_SAMPLES = 32
+#: the sampler's rollouts per window where it is chosen without a count (with the feedback,
+#: 32 cost 5.22 CPU s per simulated s: over the budget)
+DEFAULT_SAMPLES = 28
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator)
 SKATE_CONTACT = 0.01
 
