@@ -96,7 +96,7 @@ def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict
 
 
 def controllers_markdown(rows: dict[str, list[dict]]) -> str:
-    """The table of issue 27 per controller: falls, root-relative and global tracking error
+    """The controllers' table: falls, root-relative and global tracking error
     (mean over the protocol points, median over clips), foot skating in contact against the
     tracked motion's (medians over clips, the same estimator), CPU s per simulated s (mean)."""
     head = (
