@@ -17,6 +17,7 @@ from sidql.codec import format as sidq
 from sidql.codec.encoded import Encoded, measure, where_prefix
 from sidql.codec.entropy import encode_integers, estimate_size
 from sidql.codec.plan import plan, position_band_costs
+from sidql.codec.position_format import channel_kinds, coded_rows
 from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser, aim_basis
 from sidql.keyframes.spherical import POINTS, SphericalSeries
@@ -33,6 +34,9 @@ _REAL_CODINGS = 3
 #: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
 #: extrapolation); 0.5 measured best on the CMU trials of ``../shared``.
 PREDICTOR = 0.5
+#: the root position channels' slope weight: 1 (linear extrapolation; the pelvis moves smoothly)
+#: measured best against 0.5 and 0.75 on the CMU trials of ``../shared``.
+ROOT_PREDICTOR = 1.0
 #: each bone's keyframe value aims from its decoded parent point at its true point (see
 #: :func:`sidql.codec.quantise._dpcm`): errors stop piling up down the chain.
 AIM = True
@@ -72,7 +76,7 @@ class _PositionSearch:
         M = self.series.n_bones
         return PositionQuantiser(
             M, self.lengths, self.series.parents, float(np.float32(step)), PREDICTOR,
-            exponent=LEVER_EXPONENT,
+            exponent=LEVER_EXPONENT, root_rho=ROOT_PREDICTOR,
         )  # fmt: skip
 
     def keys(self, lam: float) -> np.ndarray:
@@ -89,16 +93,12 @@ class _PositionSearch:
             self.coded[key] = (keys, q, codes, kv)
         return self.coded[key]
 
-    @staticmethod
-    def rows(keys, codes) -> np.ndarray:
-        gaps = np.diff(keys, prepend=0)
-        return np.vstack([np.diff(gaps, prepend=0)[None], codes.T])
-
     def estimate(self, keys, codes) -> float:
-        return self.header + estimate_size(self.rows(keys, codes))
+        return self.header + estimate_size(coded_rows(keys, codes))
 
     def size(self, keys, codes) -> int:
-        return self.header + len(encode_integers(self.rows(keys, codes)))
+        kinds = channel_kinds(self.series.n_bones)
+        return self.header + len(encode_integers(coded_rows(keys, codes), kinds=kinds))
 
     def errors(self, keys, kv) -> np.ndarray:
         return position_errors(self.truth, keys, kv, self.recon, self.lengths, self.series.parents)
