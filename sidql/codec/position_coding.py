@@ -41,8 +41,10 @@ ROOT_PREDICTOR = 1.0
 #: :func:`sidql.codec.quantise._dpcm`): errors stop piling up down the chain.
 AIM = True
 #: the subtree size's exponent in the quantiser's levers with aiming (k / 16 in the stream):
-#: 1/4 measured best against 0, 1/8, 3/8 and 1/2 (p95 and bytes) on the CMU trials of ``../shared``.
-LEVER_EXPONENT = 0.25
+#: 1/8 measured best against 1/16, 1/4 and 3/8 on the CMU trials of ``../shared`` with the
+#: version-4 coder (bytes at equal 95th percentile 1-4 % fewer than 1/4, at equal mean error
+#: 0-1.5 % more; 1/16 loses at both ends).
+LEVER_EXPONENT = 0.125
 #: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
 #: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
 FRAME_CAP = 3.0
