@@ -347,6 +347,47 @@ def test_a_stream_of_the_version_2_encoder_decodes_bit_for_bit():
     assert hashlib.sha256(values.tobytes()).hexdigest() == V2_CHART_SHA256
 
 
+#: a version-4 stream written by the version-4 encoder (``smooth_clip(N=24, seed=3)`` at 4 mm),
+#: and the SHA-256 of the float64 chart its decoder rebuilt: the bit stream stays decodable
+V4_STREAM = bytes.fromhex(
+    "534944510402020000000000f041000000000000000000efc36556b6047f26ba57835d3a787458cc4c8d32df"
+    "d6194f5f1ab720a67d8c89a118cd97a5ac89cb8c13a2f05ba69bc43b0402080500000000194d324cee4d240f"
+    "a22680505ebf7c3f22cd490b242064496f8a55e4ec62e541ee4fc4a5c6086e0cdda1abb990ba801b8d3608e1"
+    "cab784eb71b77940e4d27f0150b7cf454e45b48cf7f95c7a90f3e2d7ec8c7575c18c295b1600750d3976099a"
+    "f204a07dc38dbbe4066e54b4b23a5ac7c0eea6d6dd689c30d29cd777fa388a30f37e8b5f70634c24260a6201"
+    "2f856cacf3ee796a7813165d453b8deddb864814261f6488424c9c6cdd2b86ed8bf71fc92c7c81ed235a6895"
+    "45b6ac449acb1db09deb17006ca70c98"
+)
+V4_CHART_SHA256 = "fab152e360fb4d568f3b1e770da704c32efe37836033e8a2ced342869c3abf1e"
+
+
+def test_a_stream_of_the_version_4_encoder_decodes_bit_for_bit():
+    import hashlib
+
+    s = sidq.from_bytes(V4_STREAM, "v4.sidq")
+    assert V4_STREAM[4] == 4 and s.quantiser.root_rho == 1.0 and s.quantiser.exponent == 0.125
+    values = np.ascontiguousarray(decoded_chart(s)["values"])
+    assert hashlib.sha256(values.tobytes()).hexdigest() == V4_CHART_SHA256
+
+
+def test_a_root_at_constant_velocity_costs_no_residuals_after_two_keyframes():
+    """The root channels are predicted by linear extrapolation (rho_root = 1): a pelvis gliding
+    at constant velocity through a still pose leaves zero residuals from the third keyframe on;
+    the angles' half slope (rho = 0.5) would not."""
+    M, W = 22, 12
+    parents = np.asarray(chart(smooth_clip(N=8, seed=1)).parents)
+    values = np.zeros((W, 2 * M + 3))
+    values[:, :M] = 1.0
+    keys = np.arange(W) * 2
+    q = PositionQuantiser(M, np.full(M, 0.2), parents, 0.001, 0.5, exponent=0.125, root_rho=1.0)
+    root_step = q.scales()[2 * M]  # on the grid, so that only the predictor decides
+    values[:, 2 * M :] = np.arange(W)[:, None] * np.array([19, -31, 6]) * root_step
+    codes, _ = q.encode_keyframes(values, keys)
+    assert not codes[2:, 2 * M :].any() and codes[1, 2 * M :].any()
+    half = replace(q, root_rho=0.5).encode_keyframes(values, keys)[0]
+    assert np.abs(half[2:, 2 * M :]).min() > 0
+
+
 @pytest.mark.parametrize("offset, what", [(1, "lever exponent"), (2, "root predictor")])
 def test_a_bad_lever_exponent_or_root_predictor_is_one_line(encoded, offset, what):
     raw = bytearray(encoded.data[:-4])
