@@ -45,6 +45,7 @@ from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
 from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
+from sim.simulate.validate import CONTROLLERS, chosen_controller
 from sim.simulate.wholebody import track_wholebody
 
 KINDS = ("track", "fall")  # the default mix: real motion, no assistance
@@ -94,11 +95,13 @@ PROCEDURAL_ASSIST = 1.0
 #: windows drawn per clip of a kind, the most active kept (:func:`most_active_window`): the
 #: ``track`` kind is velocity-rich on purpose, the others take one window at random
 WINDOW_CANDIDATES = {"track": 4}
-#: controllers of the real-motion kinds (``sampling``: ``SynthTask.samples`` > 0)
-SYNTH_CONTROLLERS = ("plain", "wholebody", "sampling")
-#: ``synth``'s controller without ``--samples``: the plain tracker, not eval's default sampler,
-#: whose cost (about 20x per clip) a data run asks for explicitly with ``--samples N``
-SYNTH_DEFAULT_CONTROLLER = "plain"
+#: controllers of the real-motion kinds: ``eval --simulate``'s (``sim.simulate.validate``)
+SYNTH_CONTROLLERS = CONTROLLERS
+#: the controller of the real-motion kinds unless a task names one: ``eval --simulate``'s
+#: default (``sim.simulate.validate.chosen_controller``: the sampler, at its default count of
+#: rollouts), no assistance; the plain tracker costs about a twentieth of it but falls in
+#: nearly every clip (docs/results/synth.md)
+SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -122,21 +125,30 @@ class SynthTask:
     amc: str | None = None
     seconds: float = 4.0
     fps: float = 30.0
-    samples: int = 0  # > 0: real-motion kinds use the sampling tracker, no assistance
-    controller: str = "plain"  # of the real-motion kinds without samples: plain or wholebody
+    samples: int = 0  # the sampler's rollouts per window; 0: its default count
+    controller: str = SYNTH_DEFAULT_CONTROLLER  # of the real-motion kinds (SYNTH_CONTROLLERS)
     assist: float = 0.0  # root assistance bound [body weight] of the real-motion kinds: none
+    threads: int = 1  # the sampler's rollouts run on this many threads (same result for any)
 
 
-def task_controller(task: SynthTask) -> str:
-    """The controller that tracks ``task``: the plain tracker for procedural motion (its
-    assistance), else the sampling tracker when ``task.samples`` > 0, else ``task.controller``."""
+def task_controller(task: SynthTask) -> tuple[str, int]:
+    """The controller that tracks ``task`` and its sample count (0 but for the sampler): the
+    plain tracker for procedural motion (its assistance), else ``task.controller`` (the
+    sampler at ``task.samples`` rollouts per window, its default count where 0:
+    ``sim.simulate.validate.chosen_controller``).
+
+    Raises:
+        UnknownNameError: an unknown controller.
+        UsageError: samples asked of a controller that does not sample.
+    """
     if task.kind == "procedural":
-        return "plain"
-    if task.samples:
-        return "sampling"
-    if task.controller not in SYNTH_CONTROLLERS[:2]:
-        raise UnknownNameError("controller", task.controller, SYNTH_CONTROLLERS[:2])
-    return task.controller
+        return "plain", 0
+    if task.controller not in SYNTH_CONTROLLERS:
+        raise UnknownNameError("controller", task.controller, SYNTH_CONTROLLERS)
+    if task.samples and task.controller != "sampling":
+        raise UsageError(f"{task.samples} samples: only the sampling controller samples, not "
+                         f"{task.controller!r}")  # fmt: skip
+    return chosen_controller(task.samples, task.controller)
 
 
 def episode_seed(task: SynthTask) -> int:
@@ -210,7 +222,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         raise UnknownNameError("kind", task.kind, ALL_KINDS)
     if not 0 <= task.assist <= 1:
         raise UsageError(f"assistance {task.assist} body weights: expected 0 .. 1")
-    p["controller"] = task_controller(task)
+    p["controller"] = task_controller(task)[0]
     if p["controller"] == "wholebody":  # its feedback gains are its own: no stiffness factor
         p["gain"] = 1.0
     p["assist_limit"] = PROCEDURAL_ASSIST if task.kind == "procedural" else float(task.assist)
@@ -328,13 +340,14 @@ def simulate_episode(
     if p["controller"] == "wholebody":
         return track_wholebody(model, ref, **tracking)
     if p["controller"] == "sampling":  # the body's own doing, or a fall
+        samples = task_controller(task)[1]
         p["sampling"] = {
-            "samples": task.samples,
+            "samples": samples,
             "lookahead": LOOKAHEAD,
             "root_xy_weight": CostWeights().root_xy,
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
-        kw = {"samples": task.samples, "seed": p["sampling"]["seed"]}
+        kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads}
         return sample_track(model, ref, **kw, **tracking)
     return track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
 
@@ -439,5 +452,7 @@ def simulated_clip(model, skeleton, qpos, qvel, fps: float, source: str) -> Clip
 
 
 def task_dict(task: SynthTask) -> dict:
-    """JSON-ready copy of ``task``."""
-    return asdict(task)
+    """JSON-ready copy of ``task`` without ``threads`` (how it runs, not what it gives)."""
+    d = asdict(task)
+    del d["threads"]
+    return d
