@@ -30,9 +30,9 @@ are noisy, re-run them on a quiet one.
 (``sim.simulate.audit``), written to ``docs/results/synth_audit.md``.
 
 ``--samples N`` (another count) or ``--controller C`` (another controller): the same figures
-for that controller, written to ``docs/results/synth_sampled.md`` or ``synth_<C>.md``; the
-speed timings (the plain tracker's) and the audit (which needs the plain tracker's recorded
-help) are for ``--controller plain``.
+for that controller, written to ``docs/results/synth_sampled.md`` or ``synth_<C>.md``. The
+speed timings always time the plain tracker (``--no-speed`` skips them); the audit compares
+against recorded help, which only the plain tracker asked for help gives.
 """
 
 from __future__ import annotations
@@ -62,6 +62,7 @@ from sim.simulate.dataset import synthesize  # noqa: E402
 from sim.simulate.episode import array_text, replay  # noqa: E402
 from sim.simulate.generate import (  # noqa: E402
     ALL_KINDS,
+    CLIP_SECONDS,
     KINDS,
     PHYSICAL_BUDGET,
     SYNTH_CONTROLLERS,
@@ -87,6 +88,9 @@ EARLIER = {
         ("sampler, 64 samples, track only", "2026-11-26",
          "`python benchmarks/bench_synth.py --data /work/shared/cmu --samples 64 --n 14 --kinds "
          "track --workers 2`", 13, 9, 1.15, 413, 235),
+        ("sampler, 32 samples (the new default), 4 s clips, the windows and warps of then",
+         "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 16 "
+         "--workers 1 --no-speed --keep /tmp/synthx/base`", 15, 1, 0.88, 669, 235),
     ],
     "synth_sampled": [
         ("sampler, 64 samples", "2026-11-25", "`python benchmarks/bench_synth.py --data "
@@ -394,7 +398,7 @@ def main() -> None:
     ap.add_argument("--controller", default=None, choices=SYNTH_CONTROLLERS,
                     help="controller of the real-motion kinds (default: synth's, "
                     f"{SYNTH_DEFAULT_CONTROLLER}); another writes synth_<controller>.md")  # fmt: skip
-    ap.add_argument("--seconds", type=float, default=4.0, help="clip length [s]")
+    ap.add_argument("--seconds", type=float, default=CLIP_SECONDS, help="clip length [s]")
     ap.add_argument("--no-speed", action="store_true",
                     help="skip the speed timings (synth_speed.md stays as it is)")  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
@@ -432,14 +436,10 @@ def main() -> None:
         audit_table = audit(folder) if args.audit else None
         if audit_table:
             print(audit_table)
-    if page != "synth":
-        if not args.no_write:
-            write_results(page, f"Synthetic clips tracked by the {run} controller", table,
-                          command)  # fmt: skip
-        return
     if not args.no_write:
-        write_results("synth", "Synthetic clips: physical share, speeds, skating, contacts",
-                      table, command)  # fmt: skip
+        title = ("Synthetic clips: physical share, speeds, skating, contacts" if page == "synth"
+                 else f"Synthetic clips tracked by the {run} controller")  # fmt: skip
+        write_results(page, title, table, command)
     if args.no_speed:
         return
     speed_table, timing = speed(args.cmu, args.speed_clips, args.seed + 99)

@@ -15,7 +15,13 @@ from sidql.commands.usage import (
 )
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import DATASET_ID, DEFAULT_ID, export_minari
-from sim.simulate.generate import ALL_KINDS, KINDS, SYNTH_CONTROLLERS, SYNTH_DEFAULT_CONTROLLER
+from sim.simulate.generate import (
+    ALL_KINDS,
+    CLIP_SECONDS,
+    KINDS,
+    SYNTH_CONTROLLERS,
+    SYNTH_DEFAULT_CONTROLLER,
+)
 
 DESCRIPTION = (
     "Track real trials under --data with a controller in MuJoCo's forward simulation (by default "
@@ -60,7 +66,11 @@ def register(p) -> None:
         "real-motion kinds (recorded per tick; default 0: none)",
     )  # fmt: skip
     p.add_argument(
-        "--seconds", type=positive(float), default=4.0, metavar="S", help="clip length [s]"
+        "--seconds",
+        type=positive(float),
+        default=CLIP_SECONDS,
+        metavar="S",
+        help="clip length [s] (default: the protocol's 60 frames at 30 fps)",
     )
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
     add_workers(p, "the simulations")
