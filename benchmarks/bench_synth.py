@@ -91,6 +91,9 @@ EARLIER = {
         ("sampler, 32 samples (the new default), 4 s clips, the windows and warps of then",
          "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 16 "
          "--workers 1 --no-speed --keep /tmp/synthx/base`", 15, 1, 0.88, 669, 235),
+        ("sampler, 32 samples, 2 s clips, 1-1.6x, the fastest windows, 0-2 pushes per track "
+         "clip", "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 20 "
+         "--workers 1 --no-speed --keep /tmp/synthx/new`", 20, 9, 1.25, 430, 235),
     ],
     "synth_sampled": [
         ("sampler, 64 samples", "2026-11-25", "`python benchmarks/bench_synth.py --data "

@@ -6,8 +6,9 @@ otherwise. Kinds (each clip's parameters are drawn from its own seed, :func:`epi
 * ``track``: perturbed tracking of a real trial: the fastest of 4 random windows
   (:func:`fastest_window`) time-warped 1-1.6x (:data:`TRACK_SPEED`: velocity-rich on purpose,
   never slower than recorded unless the trial is too short to fill the clip), body size
-  0.85-1.15x (mass scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
-  on the thorax or the pelvis (impulse recorded);
+  0.85-1.15x (mass scaling with its cube), controller stiffness 0.6-1.5x, 0-1 push in a 2 s
+  clip, 0-2 in 4 s (:data:`PUSH_SECONDS`) of 100-300 N for 0.1-0.2 s on the thorax or the
+  pelvis (impulse recorded);
 * ``fall``: falls and recoveries: a real trial sped up 1-2x, a push for 0.2 s and the controller
   weakened from the push on, then restored (the recovery attempt); one severity s ~ U(0, 1) sets
   the push (250-900 N), the weakening (to 60-5 % of its effort) and its length (0.3-1.5 s), so
@@ -99,6 +100,9 @@ PROCEDURAL_ASSIST = 1.0
 #: windows drawn per clip of a kind, the fastest kept (:func:`fastest_window`): the ``track``
 #: kind is velocity-rich on purpose, the others take one window at random
 WINDOW_CANDIDATES = {"track": 4}
+#: [s] the ``track`` kind draws 0 to 1 + (its length // this) pushes: 0-1 in a 2 s clip, 0-2
+#: in 4 s (a short clip is not pushed more often than a long one)
+PUSH_SECONDS = 4.0
 #: the ``track`` kind's time warp, uniform over this range: faster than recorded (a source too
 #: short to fill a clip at the drawn warp is played at the fastest warp that fills it)
 TRACK_SPEED = (1.0, 1.6)
@@ -181,7 +185,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         p["scale"] = float(rng.uniform(0.85, 1.15))
         p["gain"] = float(rng.uniform(0.6, 1.5))
         pushes = []
-        for _ in range(int(rng.integers(0, 3))):
+        for _ in range(int(rng.integers(0, 2 + int(task.seconds // PUSH_SECONDS)))):
             d = rng.normal(size=2)
             d /= np.linalg.norm(d)
             mag = rng.uniform(100, 300)
