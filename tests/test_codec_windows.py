@@ -208,3 +208,29 @@ def test_a_report_takes_a_sequence_and_checks_its_skeleton(trial, cmu_dir, tmp_p
     assert enc.streams > 1 and decoded.motion.positions.shape[0] == enc.n_frames
     with pytest.raises(MotionDataError, match="another skeleton"):
         load_stream(out, cmu_dir / "02" / "02.asf")
+
+
+def test_reading_ahead_keeps_the_order_raises_in_place_and_closes_an_abandoned_source():
+    from sidql.codec.windows import read_ahead
+
+    assert list(read_ahead(iter(range(50)))) == list(range(50))
+    closed = []
+
+    def source(fail_at=None):
+        try:
+            for i in range(10):
+                if i == fail_at:
+                    raise MotionDataError("take.amc", 7, "bad frame")
+                yield i
+        finally:
+            closed.append(True)
+
+    got = []
+    with pytest.raises(MotionDataError, match="bad frame"):
+        for x in read_ahead(source(fail_at=4)):
+            got.append(x)
+    assert got == [0, 1, 2, 3]  # every item before the defect, then the defect itself
+    it = read_ahead(source())
+    assert next(it) == 0
+    it.close()  # the caller stops early: the source is closed too
+    assert closed == [True, True]
