@@ -234,3 +234,16 @@ def test_reading_ahead_keeps_the_order_raises_in_place_and_closes_an_abandoned_s
     assert next(it) == 0
     it.close()  # the caller stops early: the source is closed too
     assert closed == [True, True]
+
+
+def test_a_sequence_too_long_to_join_in_memory_is_refused_in_one_line(
+    two_streams, tmp_path, monkeypatch
+):
+    a, b = two_streams
+    path = tmp_path / "long.sidq"
+    path.write_bytes(_sequence(tmp_path, [a, b]))
+    frames = len(decode_to_reconstruction(path).positions)
+    monkeypatch.setattr(sidq, "frame_limit", lambda J: frames - 1)
+    with pytest.raises(MotionDataError, match="cannot be joined") as e:
+        decode_to_reconstruction(path)
+    assert "\n" not in str(e.value) and str(path) in str(e.value)
