@@ -46,9 +46,10 @@ LEVER_EXPONENT = 0.25
 #: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
 #: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
 FRAME_CAP = 3.0
-#: coded plans a search keeps (least recently used dropped): each holds (W, D) codes and decoded
-#: values, about 0.7 MB at W = 900 keyframes; repeats are rare past the last few.
-CODED_KEPT = 8
+#: bytes of coded plans a search keeps, the least recently used dropped first (at least the last
+#: two): each holds (W, D) codes and decoded values, 0.7 MB at W = 900 keyframes (11 kept), so
+#: memory does not grow with the take when it is encoded whole; repeats are rare past the last few.
+CODED_BYTES = 8 << 20
 
 
 class _PositionSearch:
@@ -71,7 +72,7 @@ class _PositionSearch:
         if extra_cost is not None:  # e.g. the physical cost (sidql.codec.contact_coding) [m]
             self.C = self.C + extra_cost[:, : G + 1]
         self.plans: dict = {}
-        self.coded: OrderedDict = OrderedDict()  # at most CODED_KEPT, least recent first
+        self.coded: OrderedDict = OrderedDict()  # at most CODED_BYTES, least recent first
         self.last = None  # log lam of the previous search's answer
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
@@ -96,8 +97,10 @@ class _PositionSearch:
         q = self.quantiser(step)
         codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
         self.coded[key] = (keys, q, codes, kv)
-        if len(self.coded) > CODED_KEPT:
-            self.coded.popitem(last=False)
+        held = sum(c.nbytes + v.nbytes for _, _, c, v in self.coded.values())
+        while len(self.coded) > 2 and held > CODED_BYTES:
+            _, _, c, v = self.coded.popitem(last=False)[1]
+            held -= c.nbytes + v.nbytes
         return self.coded[key]
 
     @staticmethod
