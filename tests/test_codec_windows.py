@@ -247,3 +247,21 @@ def test_a_sequence_too_long_to_join_in_memory_is_refused_in_one_line(
     with pytest.raises(MotionDataError, match="cannot be joined") as e:
         decode_to_reconstruction(path)
     assert "\n" not in str(e.value) and str(path) in str(e.value)
+
+
+def test_a_record_longer_than_the_file_is_refused_before_it_is_allocated(two_streams, tmp_path):
+    import tracemalloc
+
+    a, _ = two_streams
+    data = bytearray(_sequence(tmp_path, [a]))
+    data[5:9] = struct.pack("<I", 60 << 20)  # a record of 60 MiB in a file of a few hundred bytes
+    path = tmp_path / "claims.sidq"
+    path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        with pytest.raises(MotionDataError, match="truncated sequence"):
+            list(iter_streams(path))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20
