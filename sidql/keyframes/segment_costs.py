@@ -68,18 +68,21 @@ def _fill_costs(X, R, linear, C, lo, hi, bounds):
 @numba.njit(cache=True, fastmath=_FAST, inline="always")
 def _entry_cost(X, R, dX, i, j, linear, bound):
     """``C[i, j]`` of :func:`_cost_matrix` (``dX``: (D,) scratch), or inf if it exceeds
-    ``bound``. The frames are summed from the middle out (where a segment's error is largest),
-    four at a time (one pass over the channels for four frames); after each four the sum so
-    far is compared with the bound and the entry abandoned once over it. Whatever the bound,
-    an entry kept is the same sum in the same order, so the same number."""
+    ``bound``. The frames are summed from the middle out (where a segment's error is largest):
+    the middle one, then four at a time (one pass over the channels for four frames), then the
+    last few one by one; after each pass the sum so far is compared with the bound and the
+    entry abandoned once over it. Whatever the bound, an entry kept is the same sum in the
+    same order, so the same number."""
     for d in range(X.shape[1]):
         dX[d] = X[j, d] - X[i, d]
     L = j - i
     mid = i + L // 2
-    total = 0.0
-    t = 0
-    while t + 4 <= L - 1:  # frames mid, mid + 1, mid - 1, mid + 2, ... four at a time
-        lo, hi = mid - t // 2, mid + t // 2 + 1  # frames lo, hi, lo - 1, hi + 1
+    total = _frame_cost(X, R, dX, i, j, mid, linear)  # frame t = 0: mid, alone (abandons most)
+    if total > bound:
+        return np.inf
+    t = 1
+    while t + 4 <= L - 1:  # frames t..t + 3: mid + 1, mid - 1, mid + 2, mid - 2, ...
+        lo, hi = mid - (t + 1) // 2, mid + (t + 1) // 2  # frames hi, lo, hi + 1, lo - 1
         total += _four_frames_cost(X, R, dX, i, j, lo, hi, linear)
         if total > bound:
             return np.inf
