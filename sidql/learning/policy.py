@@ -73,7 +73,8 @@ class Policy:
         """Greedy (masked argmax) decisions for a batch of clips, all in compiled code: per clip
         the encoder (:func:`sidql.learning.decide.encode_clip`) and the head's W - 2 steps (:func:`sidql.learning.decide.decide_clip`),
         the arithmetic of :meth:`KeyframeQNet.encode` and :meth:`KeyframeQNet.head` in float64.
-        No torch call, so no torch threads: a decision costs one core however busy the machine.
+        No torch call, so no torch threads: a decision costs one core however busy the machine
+        (the encoder's matrix products go to BLAS, which runs products this small on one thread).
 
         Args:
             features: (B, N, C) float32 per-frame features (:func:`sidql.learning.tasks.clip_features`).
