@@ -186,6 +186,7 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
     z = np.zeros(k)
     zsum = np.zeros(k)
     hid = np.zeros(b1.shape[0])
+    seg_best = np.zeros(n)
     w1t = np.ascontiguousarray(w1.T)
     for step in range(W - 2):
         rem = W - 2 - step
@@ -194,8 +195,8 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
             prior = rollout_values_seq(cost, mask, rem, seq, length)
         _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_right, left,
                           right, g1, base)  # fmt: skip
-        top1, top2 = _two_best(mask, new_right, g1)
-        adv_mean, value = _advantages(mask, left, right, g1, base, ws, rem, top1, top2, w1t, b1,
+        top1, top2 = _two_best(mask, new_right, g1, seg_best)
+        adv_mean, value = _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1,
                                       w2, b2, wv1, bv1, wv2, bv2, z, zsum, hid, adv)  # fmt: skip
         best_a = _best_action(mask, g1, adv, prior, value, adv_mean, e, rem, use_prior)
         mask[best_a] = True
@@ -263,8 +264,9 @@ def _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_ri
 
 
 @numba.njit(cache=True, fastmath=True)
-def _two_best(mask, new_right, g1):
-    """The best reward per segment, and the two best segments' (-inf where none)."""
+def _two_best(mask, new_right, g1, seg_best):
+    """The best reward per segment into ``seg_best`` (N,), at the segment's first keyframe,
+    and the two best segments' (-inf where none)."""
     n = mask.shape[0]
     top1 = -np.inf
     top2 = -np.inf
@@ -274,6 +276,7 @@ def _two_best(mask, new_right, g1):
         best = -np.inf
         for a in range(i + 1, new_right[i + 1]):
             best = max(best, g1[a])
+        seg_best[i] = best
         if best > top1:
             top2 = top1
             top1 = best
@@ -283,11 +286,12 @@ def _two_best(mask, new_right, g1):
 
 
 @numba.njit(cache=True, fastmath=True)
-def _advantages(mask, left, right, g1, base, ws, rem, top1, top2, w1t, b1, w2, b2, wv1, bv1,
+def _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1, w2, b2, wv1, bv1,
                 wv2, bv2, z, zsum, hid, adv):  # fmt: skip
     """The advantage MLP of every free frame into ``adv`` (N,) and the value MLP over their
-    mean hidden input; returns (mean advantage, value). ``w1t``: the advantage MLP's first
-    layer as (in, out); ``z``, ``zsum`` (K,), ``hid`` (H,): scratch."""
+    mean hidden input; returns (mean advantage, value). ``seg_best``: each segment's best
+    reward (:func:`_two_best`); ``w1t``: the advantage MLP's first layer as (in, out); ``z``,
+    ``zsum`` (K,), ``hid`` (H,): scratch."""
     n = mask.shape[0]
     k = base.shape[1]
     hdim = b1.shape[0]
@@ -298,9 +302,7 @@ def _advantages(mask, left, right, g1, base, ws, rem, top1, top2, w1t, b1, w2, b
         if mask[a]:
             continue
         n_free += 1
-        own = -np.inf
-        for m in range(left[a] + 1, right[a]):
-            own = max(own, g1[m])
+        own = seg_best[left[a]]
         other = top2 if own >= top1 else top1
         if not np.isfinite(other) or other < 0.0:
             other = 0.0
