@@ -95,7 +95,8 @@ def _merge2(a, n1, b, n2, k, out):
 
 @numba.njit(cache=True)
 def rollout_values_seq(cost, mask, rem, seq, length):
-    """As :func:`rollout_values`, from the tables of :func:`greedy_sequences` (``kmax >= rem``)."""
+    """As :func:`rollout_values`, from the tables of :func:`greedy_sequences` (``kmax >= rem``;
+    its runs end with -inf)."""
     n = cost.shape[0]
     keys = np.flatnonzero(mask)
     nk = len(keys)
@@ -122,51 +123,40 @@ def rollout_values_seq(cost, mask, rem, seq, length):
         l0, r0 = keys[j], keys[j + 1]
         after_len[j] = _merge2(seq[l0, r0], length[l0, r0], after[j + 1], after_len[j + 1], k,
                                after[j])  # fmt: skip
-    others = np.zeros((nk - 1, k))
-    others_len = np.zeros(nk - 1, np.int64)
+    others = np.empty((nk - 1, k + 1))  # each run ended by -inf, as greedy_sequences' are
     for j in range(nk - 1):
-        others_len[j] = _merge2(before[j], before_len[j], after[j + 1], after_len[j + 1], k,
-                                others[j])  # fmt: skip
+        used = _merge2(before[j], before_len[j], after[j + 1], after_len[j + 1], k, others[j])
+        others[j, used] = -np.inf
     for j in range(nk - 1):
         l0 = keys[j]
         r0 = keys[j + 1]
         for a in range(l0 + 1, r0):
-            total = _merge3_sum(others[j], others_len[j], seq[l0, a], length[l0, a], seq[a, r0],
-                                length[a, r0], k)  # fmt: skip
-            out[a] = total / s0
+            out[a] = _merge3_sum(others[j], seq[l0, a], seq[a, r0], k) / s0
     return out
 
 
 @numba.njit(cache=True)
-def _merge3_sum(s0, n0, s1, n1, s2, n2, k):
-    """Sum of the first ``k`` values of the head-merge (:func:`_merge`'s picks: the largest head,
-    ties to the earlier sequence) of ``s0[:n0]``, ``s1[:n1]``, ``s2[:n2]``, in the order picked,
-    without copying them."""
+def _merge3_sum(s0, s1, s2, k):
+    """Sum of the first ``k`` values of the head-merge (the largest head each time, ties to the
+    earlier sequence) of three descending runs, each ended by -inf (fewer when all three end),
+    in the order picked, without copying them; branch-free picks."""
     i0 = 0
     i1 = 0
     i2 = 0
     total = 0.0
     for _ in range(k):
-        best = -np.inf
-        bi = -1
-        if i0 < n0 and s0[i0] > best:
-            best = s0[i0]
-            bi = 0
-        if i1 < n1 and s1[i1] > best:
-            best = s1[i1]
-            bi = 1
-        if i2 < n2 and s2[i2] > best:
-            best = s2[i2]
-            bi = 2
-        if bi < 0:
+        v0 = s0[i0]
+        v1 = s1[i1]
+        v2 = s2[i2]
+        take0 = v0 >= v1 and v0 >= v2
+        take1 = not take0 and v1 >= v2
+        best = v0 if take0 else (v1 if take1 else v2)
+        if best == -np.inf:
             break
         total += best
-        if bi == 0:
-            i0 += 1
-        elif bi == 1:
-            i1 += 1
-        else:
-            i2 += 1
+        i0 += take0
+        i1 += take1
+        i2 += not (take0 or take1)
     return total
 
 
