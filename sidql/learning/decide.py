@@ -183,9 +183,9 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
     adv = np.zeros(n)
     prior = np.zeros(n)
     seq, length = greedy_sequences(cost, max(W - 3, 0) if use_prior else 0)
-    z = np.zeros(k)
     zsum = np.zeros(k)
-    hid = np.zeros(b1.shape[0])
+    zs = np.empty((n, k))
+    rows = np.empty(n, np.int64)
     seg_best = np.zeros(n)
     w1t = np.ascontiguousarray(w1.T)
     for step in range(W - 2):
@@ -197,7 +197,7 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
                           right, g1, base)  # fmt: skip
         top1, top2 = _two_best(mask, new_right, g1, seg_best)
         adv_mean, value = _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1,
-                                      w2, b2, wv1, bv1, wv2, bv2, z, zsum, hid, adv)  # fmt: skip
+                                      w2, b2, wv1, bv1, wv2, bv2, zs, zsum, rows, adv)  # fmt: skip
         best_a = _best_action(mask, g1, adv, prior, value, adv_mean, e, rem, use_prior)
         mask[best_a] = True
     return np.flatnonzero(mask)
@@ -287,38 +287,39 @@ def _two_best(mask, new_right, g1, seg_best):
 
 @numba.njit(cache=True, fastmath=True)
 def _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1, w2, b2, wv1, bv1,
-                wv2, bv2, z, zsum, hid, adv):  # fmt: skip
+                wv2, bv2, zs, zsum, rows, adv):  # fmt: skip
     """The advantage MLP of every free frame into ``adv`` (N,) and the value MLP over their
     mean hidden input; returns (mean advantage, value). ``seg_best``: each segment's best
-    reward (:func:`_two_best`); ``w1t``: the advantage MLP's first layer as (in, out); ``z``,
-    ``zsum`` (K,), ``hid`` (H,): scratch."""
+    reward (:func:`_two_best`); ``w1t``: the advantage MLP's first layer as (in, out), applied
+    to every free frame in one matrix product; ``zs`` (N, K), ``zsum`` (K,), ``rows`` (N,):
+    scratch."""
     n = mask.shape[0]
     k = base.shape[1]
     hdim = b1.shape[0]
     n_free = 0
-    adv_sum = 0.0
     zsum[:] = 0.0
     for a in range(n):
         if mask[a]:
             continue
-        n_free += 1
         own = seg_best[left[a]]
         other = top2 if own >= top1 else top1
         if not np.isfinite(other) or other < 0.0:
             other = 0.0
-        for i in range(hdim):
-            hid[i] = b1[i]
         for j in range(k):
             v = base[a, j] + ws[j, 3] * rem / n + ws[j, 10] * other
-            z[j] = v if v > 0.0 else 0.0
-            zsum[j] += z[j]
-            for i in range(hdim):  # w1t: (K, H), so this loop vectorises over the outputs
-                hid[i] += w1t[j, i] * z[j]
+            zs[n_free, j] = v if v > 0.0 else 0.0
+            zsum[j] += zs[n_free, j]
+        rows[n_free] = a
+        n_free += 1
+    hid = np.dot(zs[:n_free], w1t)  # (free frames, H)
+    adv_sum = 0.0
+    for f in range(n_free):
         out = b2
         for i in range(hdim):
-            if hid[i] > 0.0:
-                out += w2[i] * hid[i]
-        adv[a] = out
+            h = hid[f, i] + b1[i]
+            if h > 0.0:
+                out += w2[i] * h
+        adv[rows[f]] = out
         adv_sum += out
     value = bv2
     for i in range(hdim):
