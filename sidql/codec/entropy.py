@@ -160,7 +160,7 @@ def _after(w, a, sc):
     sc[0] += (a16 - sc[0]) >> _SCALE_SHIFT
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _encode_kernel(values, group, n_groups, prior, kinds):
     """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column;
     kinds: (C,) -1 (own contexts) or a shared kind (see :func:`_context_base`).
@@ -368,25 +368,34 @@ def decode_integers(
     return values, int(used)
 
 
-@numba.njit(cache=True)
+#: bit length of each magnitude below 2^12 (most residuals): a table read instead of a loop
+#: whose trip count the processor cannot predict.
+_BIT_LENGTH = np.array([int(a).bit_length() for a in range(1 << 12)], dtype=np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
 def _estimate_bits(values):
     C, W = values.shape
     total = 0.0
-    counts = np.zeros(MAX_CLASS + 1)
+    counts = np.zeros(MAX_CLASS + 1, dtype=np.int64)
     for c in range(C):
-        counts[:] = 0.0
+        counts[:] = 0
         for w in range(W):
             a = abs(values[c, w])
-            k = 0
-            while a > 0:
-                k += 1
-                a >>= 1
-            counts[k] += 1.0
+            if a < _BIT_LENGTH.shape[0]:
+                k = _BIT_LENGTH[a]
+            else:
+                k = 0
+                while a > 0:
+                    k += 1
+                    a >>= 1
+            counts[k] += 1
             if k > 0:
                 total += k  # sign and the k - 1 bits below the leading one
         for k in range(MAX_CLASS + 1):
             if counts[k] > 0:
-                total -= counts[k] * np.log2(counts[k] / W)
+                n = np.float64(counts[k])
+                total -= n * np.log2(n / W)
     return total
 
 

@@ -246,7 +246,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             err[b + 1, 2] = err[p, 2] + a * g[2]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
           parents, root_rho):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
