@@ -15,6 +15,11 @@ its chart, ``encode_series``, the file written), run the same way in a child, fo
 take is decoded back to ``.npz``, the longest of at most 10 minutes to ``.amc`` (``sidql
 decode``), in a child too.
 
+The walk take of every length of ``--bvh-minutes`` is also written as BVH (``sidql convert``) and
+encoded from it (``sidql encode F.bvh --rate 942``) against the same baseline; a BVH over the
+reader's bound (:data:`sim.bvh.records.MAX_BVH_BYTES`, 64 MiB: about 9 minutes of CMU's
+skeleton) is refused, in one line, and said so.
+
 The cost of windowing in bytes is measured on the trials of ``--data`` (all shorter than one
 window): each is encoded whole and in 300-frame windows (several cuts per trial) at a mean
 position error of 2 mm (bytes) and at 942 B/s (mean error).
@@ -128,6 +133,50 @@ def best(cmd: list[str], repeats: int) -> dict:
     }
 
 
+def bvh_row(sidql: list, baseline: list, asf: Path, amc: Path, tmp: Path) -> dict:
+    """The take written as BVH and encoded from it (a refusal: its one-line error), and the
+    baseline's whole-take path on the same BVH."""
+    bvh, out = tmp / "take.bvh", str(tmp / "bvh.sidq")
+    measured([*sidql, "convert", str(asf), str(amc), str(bvh)])
+    row = {"mb": bvh.stat().st_size / 2**20}
+    try:
+        row["new"] = measured([*sidql, "encode", str(bvh), "--out", out, "--rate", RATE])
+        row["old"] = measured([*baseline, str(bvh), str(bvh), str(tmp / "old.sidq"), RATE])
+        row["bytes"] = Path(out).stat().st_size
+    except RuntimeError as e:
+        row["refused"] = str(e).split(" failed: ", 1)[-1].strip().splitlines()[-1]
+    os.unlink(bvh)
+    return row
+
+
+def bvh_page(bvh_rows) -> str:
+    """The BVH table (see the module docstring)."""
+    if not bvh_rows:
+        return ""
+    lines = [
+        "", "",
+        f"BVH takes: the walk take written as BVH (`sidql convert`), `sidql encode F.bvh --rate "
+        f"{RATE}` (read a chunk of frames at a time) against the baseline's whole-take path on "
+        "the same file:",
+        "",
+        "| take | minutes | BVH MB | peak MB | wall s | CPU s | file bytes | baseline peak MB "
+        "| baseline wall s | baseline CPU s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for minutes, r in bvh_rows:
+        if "refused" in r:
+            lines.append(f"| 01_02 walk | {minutes:g} | {r['mb']:.0f} | refused: "
+                         f"`{r['refused'][-160:]}` | - | - | - | - | - | - |")  # fmt: skip
+            continue
+        new, old = r["new"], r["old"]
+        lines.append(
+            f"| 01_02 walk | {minutes:g} | {r['mb']:.0f} | {new['peak']:.0f} | {new['wall']:.1f} "
+            f"| {new['cpu']:.1f} | {r['bytes']:,} | {old['peak']:.0f} | {old['wall']:.1f} "
+            f"| {old['cpu']:.1f} |"
+        )
+    return "\n".join(lines)
+
+
 def window_cost(data: Path) -> dict:
     """Bytes at 2 mm and mean error at 942 B/s of every trial of ``data``: whole against 300-frame
     windows."""
@@ -166,6 +215,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=default_data())
     ap.add_argument("--minutes", type=float, nargs="+", default=[2.5, 5.0, 10.0, 30.0, 60.0])
     ap.add_argument("--baseline-minutes", type=float, nargs="+", default=[2.5, 5.0, 10.0])
+    ap.add_argument("--bvh-minutes", type=float, nargs="*", default=[5.0, 10.0])
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--vigorous-minutes", type=float, default=VIGOROUS_MINUTES)
     ap.add_argument("--no-write", action="store_true")
@@ -174,7 +224,7 @@ def main(argv=None) -> int:
     baseline = [sys.executable, "-c", BASELINE]
     load_start = os.getloadavg()
     amc_take, targets = None, []
-    mem_rows, speed_rows = [], []
+    mem_rows, speed_rows, bvh_rows = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
 
@@ -199,6 +249,8 @@ def main(argv=None) -> int:
                 old = measured([*baseline, str(asf), str(amc), str(tmp / "old.sidq"), RATE])
             mem_rows.append((minutes, seconds, Path(amc).stat().st_size, new, old,
                              Path(out).stat().st_size))  # fmt: skip
+            if minutes in args.bvh_minutes:
+                bvh_rows.append((minutes, bvh_row(sidql, baseline, asf, amc, tmp)))
             if last is not None:
                 os.unlink(last)
             last = amc
@@ -230,6 +282,7 @@ def main(argv=None) -> int:
             os.unlink(amc)
     cost = window_cost(args.data)
     text = page(args, mem_rows, speed_rows, decoded, targets, cost, load_start, os.getloadavg())
+    text += bvh_page(bvh_rows)
     print(text)
     if not args.no_write:
         print("wrote", write_results("codec_memory", "Codec memory and speed at any length", text,

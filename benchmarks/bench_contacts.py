@@ -134,7 +134,7 @@ def simulated_labels(data: Path) -> str:
     for subject, trial, seconds in SIMULATED:
         task = SynthTask(
             "follow", 0, 0, str(data / subject / f"{subject}.asf"),
-            str(data / subject / f"{trial}.amc"), seconds, 120.0, assist=0.5,
+            str(data / subject / f"{trial}.amc"), seconds, 120.0, controller="plain", assist=0.5,
         )  # fmt: skip
         clip, record = generate(task)
         if record["fell"]:

@@ -59,6 +59,11 @@ def grouped_ms(fn, n: int, size: int = 1, repeat: int = 5) -> float:
     return 1e3 * float(np.mean(times))
 
 
+def _uptime() -> str:
+    """The load averages ``uptime`` prints (1, 5, 15 min)."""
+    return ", ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", default=str(default_data_dir() or ""))
@@ -153,6 +158,8 @@ def main() -> int:
             "",
             end_to_end_table(clips, args.keyframes),
             "",
+            f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
+            "",
             "## End to end with a core busy",
             "",
             f"The same `select` calls, {len(clips)} clips x 3, median per clip, on the machine as "
@@ -161,6 +168,8 @@ def main() -> int:
             "before this table.",
             "",
             busy_table(clips, args.keyframes),
+            "",
+            f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
         ]
     text = "\n".join(lines)
     print(text)

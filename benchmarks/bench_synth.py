@@ -2,11 +2,13 @@
 
 Usage::
 
-    python benchmarks/bench_synth.py --data ../shared/cmu [--n 90] [--workers 2] [--audit]
+    python benchmarks/bench_synth.py --data ../shared/cmu [--n 16] [--workers 1] [--no-speed]
     python benchmarks/bench_synth.py --data ../shared/cmu --samples 64 [--n 60] [--kinds track fall]
+    python benchmarks/bench_synth.py --data ../shared/cmu --controller plain [--audit]
 
 Quality (deterministic for a seed, unaffected by machine load): ``synthesize`` writes ``--n``
-clips of the default mix into a temporary folder (or ``--synth DIR`` reads a folder written by
+clips of the default mix with synth's default controller (the sampler at its default count, no
+assistance) into a temporary folder (or ``--synth DIR`` reads a folder written by
 ``sidql synth``); per kind the tracking error, falls, root height after a fall, self- and floor
 penetration and the share of *physical* clips (mean root assistance, force and torque, within
 ``PHYSICAL_BUDGET``); point and hinge speed percentiles of the real trials (on the shared
@@ -27,11 +29,10 @@ are noisy, re-run them on a quiet one.
 ``--audit``: the physics room's residual force against the recorded help per kind
 (``sim.simulate.audit``), written to ``docs/results/synth_audit.md``.
 
-``--samples N``: the clips of real-motion kinds are tracked by the sampling tracker with no
-assistance (``sidql synth --samples N``): every such clip is physical, and the question is how
-many stay up and how fast they move. The quality tables go to ``docs/results/synth_sampled.md``
-with the generation's cost (simulated seconds per wall second per worker); the speed timings of
-the plain tracker are not repeated.
+``--samples N`` (another count) or ``--controller C`` (another controller): the same figures
+for that controller, written to ``docs/results/synth_sampled.md`` or ``synth_<C>.md``. The
+speed timings always time the plain tracker (``--no-speed`` skips them); the audit compares
+against recorded help, which only the plain tracker asked for help gives.
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ from sim.simulate.dataset import synthesize  # noqa: E402
 from sim.simulate.episode import array_text, replay  # noqa: E402
 from sim.simulate.generate import (  # noqa: E402
     ALL_KINDS,
+    CLIP_SECONDS,
     KINDS,
     PHYSICAL_BUDGET,
     SYNTH_CONTROLLERS,
@@ -68,6 +70,7 @@ from sim.simulate.generate import (  # noqa: E402
 )
 from sim.simulate.model import G, sim_model  # noqa: E402
 from sim.simulate.reference import on_floor, trial_qpos  # noqa: E402
+from sim.simulate.validate import chosen_controller  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 Q = (50, 95, 99)
@@ -75,14 +78,28 @@ SPEED_TARGET = 20.0  # simulated seconds per wall second on one core
 SCALING_TARGET = 1.7  # 2 workers over 1
 SPEED_RATIO_TARGET = 1.5  # p95 point speed of the clips that do not fall over the real trials'
 #: the targets' figures as the pages last measured them before this version (their rows stay
-#: beside the new ones): (page, date, command, clips, not fallen, p95 ratio, skating, real's)
+#: beside the new ones), per page: (what ran, date, command, clips, not fallen, p95 ratio,
+#: skating, real's)
 EARLIER = {
-    "synth_sampled": ("2026-11-25", "`python benchmarks/bench_synth.py --data ../shared/cmu "
-                      "--samples 64 --n 60 --kinds track fall --workers 2`", 58, 26, 1.17, 291,
-                      235),
-    "synth": ("2026-11-25", "`python benchmarks/bench_synth.py --data ../shared/cmu --audit`, "
-              "plain tracker with up to 0.5 BW of assistance: not fallen and physical", 88, 0,
-              float("nan"), float("nan"), 235),
+    "synth": [
+        ("the default then: plain tracker, no assistance", "2026-11-26",
+         "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 40 --workers 1 "
+         "--no-speed`", 39, 0, float("nan"), float("nan"), 235),
+        ("sampler, 64 samples, track only", "2026-11-26",
+         "`python benchmarks/bench_synth.py --data /work/shared/cmu --samples 64 --n 14 --kinds "
+         "track --workers 2`", 13, 9, 1.15, 413, 235),
+        ("sampler, 32 samples (the new default), 4 s clips, the windows and warps of then",
+         "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 16 "
+         "--workers 1 --no-speed --keep /tmp/synthx/base`", 15, 1, 0.88, 669, 235),
+        ("sampler, 32 samples, 2 s clips, 1-1.6x, the fastest windows, 0-2 pushes per track "
+         "clip", "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 20 "
+         "--workers 1 --no-speed --keep /tmp/synthx/new`", 20, 9, 1.25, 430, 235),
+    ],
+    "synth_sampled": [
+        ("sampler, 64 samples", "2026-11-25", "`python benchmarks/bench_synth.py --data "
+         "../shared/cmu --samples 64 --n 60 --kinds track fall --workers 2`", 58, 26, 1.17, 291,
+         235),
+    ],
 }  # fmt: skip
 
 
@@ -106,6 +123,11 @@ def skating(clips) -> tuple[float, int]:
         v.append(contacts.foot_speed[contacts.contact])
     v = np.concatenate(v) if v else np.zeros(0)
     return (1e3 * float(v.mean()) if v.size else float("nan")), int(v.size)
+
+
+def _until(clip, frames: int):
+    """``clip``'s first ``frames`` frames (at least 3: the skating estimator's differences)."""
+    return clip.slice(0, max(3, min(frames, clip.n_frames)))
 
 
 def replays(folder: Path, rows: list[dict]) -> str:
@@ -134,7 +156,12 @@ def pct(x: np.ndarray) -> str:
 
 
 def quality(
-    cmu: str, folder: Path, plot: str | None, label: str = "`synthesize`", earlier=None
+    cmu: str,
+    folder: Path,
+    plot: str | None,
+    label: str = "`synthesize`",
+    earlier=None,
+    run: str = "",
 ) -> tuple[str, dict]:
     index = json.loads((folder / "index.json").read_text())
     rows = index["trials"]
@@ -210,6 +237,14 @@ def quality(
         lines.append(
             f"| {name} | {len(cs)} | {pct(p)} | {ratio:.2f} | {pct(w)} | {sk:.0f} ({n_sk}) |"
         )
+    before = [clips[r["file"]] for r in rows]
+    before = [_until(c, r["fall_frame"] if r["fell"] else c.n_frames) for c, r in
+              zip(before, rows, strict=True)]  # fmt: skip
+    p, w = speeds(before)
+    sk, n_sk = skating(before)
+    ratio = np.percentile(p, 95) / np.percentile(rp, 95) if p.size else float("nan")
+    lines.append(f"| synthetic, every clip up to its fall (an episode's steps) | {len(before)} "
+                 f"| {pct(p)} | {ratio:.2f} | {pct(w)} | {sk:.0f} ({n_sk}) |")  # fmt: skip
     up, real_fig = figures["synthetic, not fallen"], figures[groups[0][0]]
     verdict = lambda ok: "met" if ok else "**not met**"  # noqa: E731
     n_up = sum(not r["fell"] for r in rows)
@@ -219,12 +254,12 @@ def quality(
         "not fallen [mm/s] | real trials' [mm/s] |",
         "|---|---|---|---|---|---|",
     ]
-    if earlier:
-        date, command, n, n_up0, ratio0, skate0, real0 = earlier
-        lines.append(f"| earlier ({date}: {command}) | {n} | {n_up0} | {ratio0:.2f} "
+    for what, date, command, n, n_up0, ratio0, skate0, real0 in earlier or ():
+        lines.append(f"| earlier, {what} ({date}: {command}) | {n} | {n_up0} | {ratio0:.2f} "
                      f"| {skate0:.0f} | {real0:.0f} |")  # fmt: skip
     lines += [
-        f"| this run | {len(rows)} | {n_up} | {up['p95_ratio']:.2f} | {up['skate_mm_s']:.0f} "
+        f"| this run ({run}) | {len(rows)} | {n_up} | {up['p95_ratio']:.2f} "
+        f"| {up['skate_mm_s']:.0f} "
         f"| {real_fig['skate_mm_s']:.0f} |",
         f"| target | | | >= {SPEED_RATIO_TARGET:g} | <= the real trials' | |",
         "",
@@ -322,7 +357,7 @@ def speed(cmu: str, clips: int, seed: int) -> tuple[str, dict]:
         for w in (1, 2, 1, 2):  # interleaved, best of two each: load changes between runs
             t0 = time.perf_counter()
             s = synthesize(cmu, Path(tmp) / f"{w}_{len(times)}", clips, seed=seed, workers=w,
-                           kinds=("track",), progress=False)  # fmt: skip
+                           kinds=("track",), controller="plain", progress=False)  # fmt: skip
             times[w] = min(times.get(w, np.inf), time.perf_counter() - t0)
             frames = sum(r["frames"] for r in s.written)
     sim_s = frames / 30.0
@@ -334,7 +369,7 @@ def speed(cmu: str, clips: int, seed: int) -> tuple[str, dict]:
         f"| control loop alone ({trial.name}, {len(ref) / 120:.1f} s, torque limits, "
         f"self-collision, inverse dynamics incl.): simulated s per wall s, one core "
         f"| **{loop:.1f}x** | >= {SPEED_TARGET:g}x |",
-        f"| end to end, 1 worker ({len(s.written)} track clips, {sim_s:.0f} simulated s, parsing "
+        f"| end to end, 1 worker ({len(s.written)} track clips, plain tracker, {sim_s:.0f} simulated s, parsing "
         f"and kinematics incl.): simulated s per wall s | {end_to_end:.1f}x | - |",
         f"| 2 workers over 1 (same tasks, best of two runs each) | **{scaling:.2f}x** "
         f"| >= {SCALING_TARGET:g}x |",
@@ -349,6 +384,8 @@ def main() -> None:
         help="folder of CMU trials (default: $SIDQL_DATA or ../shared/cmu)",
     )  # fmt: skip
     ap.add_argument("--synth", default=None, help="a folder written by sidql synth (else made)")
+    ap.add_argument("--keep", default=None, metavar="DIR",
+                    help="make the clips in DIR (kept) instead of a temporary folder")  # fmt: skip
     ap.add_argument("--n", type=int, default=90, help="clips to synthesize for the figures")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="workers for the figures' clips")
@@ -357,55 +394,55 @@ def main() -> None:
     ap.add_argument("--audit", action="store_true", help="also the physics room's audit")
     ap.add_argument(
         "--samples", type=int, default=0,
-        help="track real-motion kinds with the sampling tracker, N rollouts per window, no "
-        "assistance (writes synth_sampled.md; no speed timings)",
+        help="the sampler's rollouts per window (default: its default count); another count "
+        "writes synth_sampled.md, without speed timings",
     )  # fmt: skip
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=ALL_KINDS)
-    ap.add_argument("--controller", default=SYNTH_DEFAULT_CONTROLLER, choices=SYNTH_CONTROLLERS[:2],
-                    help="controller of the real-motion kinds without --samples")  # fmt: skip
+    ap.add_argument("--controller", default=None, choices=SYNTH_CONTROLLERS,
+                    help="controller of the real-motion kinds (default: synth's, "
+                    f"{SYNTH_DEFAULT_CONTROLLER}); another writes synth_<controller>.md")  # fmt: skip
+    ap.add_argument("--seconds", type=float, default=CLIP_SECONDS, help="clip length [s]")
     ap.add_argument("--no-speed", action="store_true",
                     help="skip the speed timings (synth_speed.md stays as it is)")  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
 
-    sampled = args.samples > 0
-    label = f"`synthesize(..., samples={args.samples})`" if sampled else "`synthesize`"
-    plot = args.plot.replace(".png", "_sampled.png") if sampled else args.plot
+    controller, samples = chosen_controller(args.samples, args.controller)
+    page = ("synth" if (controller, samples) == chosen_controller()
+            else "synth_sampled" if controller == "sampling" else f"synth_{controller}")  # fmt: skip
+    run = controller + (f", {samples} samples" if samples else "")
+    label = f"`synthesize`: {run}"
+    plot = args.plot if page == "synth" else args.plot.replace(".png", f"_{page[6:]}.png")
     with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(args.synth) if args.synth else Path(tmp) / "synth"
+        folder = Path(args.synth or args.keep or Path(tmp) / "synth")
         if not args.synth:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
-                           kinds=tuple(args.kinds), samples=args.samples,
-                           controller=args.controller, progress=False)  # fmt: skip
-            wall = time.perf_counter() - t0
+                           kinds=tuple(args.kinds), samples=samples, controller=controller,
+                           seconds=args.seconds, progress=False)  # fmt: skip
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             simulated = sum(r["frames"] for r in s.written) / 30.0
             cost = (
                 f"Generation: {len(s.written)} clips, {simulated:.0f} simulated s in {wall:.0f} s "
                 f"on {args.workers} worker(s): {simulated / wall / args.workers:.2f} simulated s "
-                "per wall s per worker."
-            )
+                "per wall s per worker"
+                + (f"; {cpu / simulated:.1f} CPU s per simulated s (this process)."
+                   if args.workers == 1 else ".")
+            )  # fmt: skip
             print(cost)
-        earlier = EARLIER["synth_sampled" if sampled else "synth"]
         table, figures = quality(args.cmu, folder, None if args.no_write else plot, label,
-                                 earlier)  # fmt: skip
+                                 EARLIER.get(page), run)  # fmt: skip
         if not args.synth:
             table = cost + "\n\n" + table
         print(table)
         audit_table = audit(folder) if args.audit else None
         if audit_table:
             print(audit_table)
-    if sampled:
-        if not args.no_write:
-            write_results(
-                "synth_sampled", "Synthetic clips tracked by sampling, without assistance",
-                table, command,
-            )  # fmt: skip
-        return
     if not args.no_write:
-        write_results("synth", "Synthetic clips: physical share, speeds, skating, contacts",
-                      table, command)  # fmt: skip
+        title = ("Synthetic clips: physical share, speeds, skating, contacts" if page == "synth"
+                 else f"Synthetic clips tracked by the {run} controller")  # fmt: skip
+        write_results(page, title, table, command)
     if args.no_speed:
         return
     speed_table, timing = speed(args.cmu, args.speed_clips, args.seed + 99)

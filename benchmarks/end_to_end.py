@@ -61,8 +61,13 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
         feats, cost = clip_features(s), segment_cost_matrix(s)
         return policy.decide(feats[None], cost[None], W)
 
+    from sidql.learning.decide import decide_clip, encode_clip
+
     X, R, cost = clip_stacked_costs(clip)
     feats = stacked_features(X, R)
+    enc_w, head_w = policy._weights()
+    enc = encode_clip(feats.astype(np.float32), *enc_w)
+    cost32 = cost.astype(np.float32).astype(np.float64)  # as Policy.decide passes them
     cols.update(
         {
             "dqn: select (end to end)": lambda: methods.select("dqn", clip, W),
@@ -72,6 +77,12 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
             "  dqn part: features": lambda: stacked_features(X, R),
             "  dqn part: decide (encoder + head)": lambda: policy.decide(
                 feats[None], cost[None], W
+            ),
+            "    dqn part of decide: encoder": lambda: encode_clip(
+                feats.astype(np.float32), *enc_w
+            ),
+            "    dqn part of decide: head, W - 2 steps with the rollout prior": lambda: decide_clip(
+                *enc, cost32, W, policy.uses_prior, *head_w
             ),
         }
     )
@@ -115,9 +126,10 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> 
                 for k in med
                 if k.startswith(f"{m} before")
             )
+            verdict = "met" if med[after][0] <= aim else "UNMET"
             notes.append(
                 f"W = {W}, {m}: end to end {med[after][0]:.3f} ms CPU per clip (aim: at most "
-                f"{aim} ms, quiet); before / after in this run ({ratios})."
+                f"{aim} ms, quiet: {verdict}); before / after in this run ({ratios})."
             )
     return "\n".join(lines + [""] + notes)
 

@@ -7,7 +7,8 @@ Usage: .venv/bin/python benchmarks/fuzz_campaign.py [--n 10500] [--seed 2026] [-
 
 File types (``tests/hostile_inputs.py``, shared with the hypothesis tests): ASF and AMC (real
 trials, byte/line/token/number/name mutations), ``.sidq`` streams (header fields, counts, bounds,
-LZMA bombs, damaged records), clip ``.npz`` files (array types and shapes, lying npy headers,
+LZMA bombs, damaged records) and sequences of them (record lengths, counts, damaged or mismatched
+streams, streams too long to join, thousands of records), clip ``.npz`` files (array types and shapes, lying npy headers,
 deflate bombs, overlapping or encrypted zip members), dataset folders (``index.json`` entries
 that are absolute, leave the folder or lead to FIFOs and ``/dev/zero``; nesting, width), policy
 files (settings out of bounds, tampered weights, pickled objects, compressed or overlapping
@@ -72,7 +73,7 @@ from results import write_results  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 
 #: Share of the inputs per file type.
-MIX = {"asf": 15, "amc": 20, "sidq": 15, "npz": 15, "index": 10, "policy": 12.5,
+MIX = {"asf": 15, "amc": 20, "sidq": 15, "sidm": 10, "npz": 15, "index": 10, "policy": 12.5,
        "checkpoint": 12.5, "output": 15, "bvh": 10}  # fmt: skip
 FAILURES = ("foreign", "non-finite", "bad-error", "bad-name", "read-outside", "over-memory",
             "hang", "write-outside", "delete-outside", "leftover")  # fmt: skip
@@ -82,10 +83,10 @@ AMC_TARGET_RATIO = 5.0
 TARGET_INPUT_BYTES = 1 << 20  # the targets are for inputs of at most 1 MB
 
 
-def kind_of(seed: int, i: int) -> str:
+def kind_of(seed: int, i: int, mix: dict = MIX) -> str:
     rng = random.Random(f"{seed}:kind:{i}")
-    x = rng.random() * sum(MIX.values())
-    for kind, share in MIX.items():
+    x = rng.random() * sum(mix.values())
+    for kind, share in mix.items():
         x -= share
         if x < 0:
             return kind
@@ -101,8 +102,8 @@ def cases(kind: str):
     return hostile_outputs if kind == "output" else hostile_inputs
 
 
-def make_input(seeds, seed: int, i: int):
-    kind = kind_of(seed, i)
+def make_input(seeds, seed: int, i: int, mix: dict = MIX):
+    kind = kind_of(seed, i, mix)
     return cases(kind).make_case(kind, seeds, random.Random(f"{seed}:{kind}:{i}"))
 
 
@@ -131,7 +132,7 @@ READER_MODULES = {
     "asf": "sim.motion.ingest", "amc": "sim.motion.ingest", "sidq": "sidql.codec.decode",
     "npz": "sim.motion.clip", "index": "sim.motion.dataset", "policy": "sidql.learning.policy",
     "checkpoint": "sidql.learning.dqn", "output": "sim.simulate.dataset",
-    "bvh": "sim.motion.ingest",
+    "bvh": "sim.motion.ingest", "sidm": "sidql.codec.decode",
 }  # fmt: skip
 
 
@@ -434,7 +435,13 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="fuzz_campaign.json", help="JSON summary (repros beside it)")
     p.add_argument("--no-results", action="store_true", help="do not write docs/results/")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument(
+        "--kinds", nargs="+", choices=sorted(MIX), default=None,
+        help="only these file types (no results page, no memory tables)",
+    )  # fmt: skip
     args = p.parse_args(argv)
+    mix = {k: v for k, v in MIX.items() if args.kinds is None or k in args.kinds}
+    args.no_results = args.no_results or args.kinds is not None
     cmu = Path(args.data)
     if not (cmu / "MANIFEST.tsv").exists():
         print(f"no CMU data at {cmu}", file=sys.stderr)
@@ -449,15 +456,15 @@ def main(argv=None) -> int:
         seeds_path = work / "seeds.pkl"
         seeds_path.write_bytes(pickle.dumps(seeds))
         print(f"seeds built in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-        amc_rows = amc_memory(cmu, work)
-        bound_rows = memory_bounds.measure(cmu, work)
+        amc_rows = amc_memory(cmu, work) if args.kinds is None else []
+        bound_rows = memory_bounds.measure(cmu, work) if args.kinds is None else []
         counts: dict[str, Counter] = defaultdict(Counter)
         peaks: dict[str, list] = defaultdict(list)
         over: dict[str, Counter] = defaultdict(Counter)
         ops = Counter()
         failures = []
         start = time.perf_counter()
-        jobs = ((i, make_input(seeds, args.seed, i)) for i in range(args.n))
+        jobs = ((i, make_input(seeds, args.seed, i, mix)) for i in range(args.n))
         repro = Path(args.out).with_suffix(".repro")
         for i, case, r in run_all(jobs, str(seeds_path), args, not args.no_progress):
             kind = case.kind

@@ -5,7 +5,7 @@ Shared by ``tests/test_fuzz.py`` (hypothesis drives the choices) and
 process under a memory and time limit). A source of choices needs only ``randrange(n)``.
 
 File types (:data:`KINDS`): ASF, AMC and BVH (the mutators of ``acclaim_mutations``), ``.sidq``
-streams, clip ``.npz`` files, dataset folders (``index.json`` with its clips and skeletons),
+streams and sequences of them (``tests/hostile_sequences.py``), clip ``.npz`` files, dataset folders (``index.json`` with its clips and skeletons),
 policy files and training checkpoints. Each input is a :class:`Case`: a few files (bytes, or a
 FIFO, a directory, a symbolic link to ``/dev/zero`` or to a file outside the folder) made from
 real seeds (:func:`build_seeds`: CMU trials, their encodings and clips, a trained policy and
@@ -42,7 +42,7 @@ from acclaim_mutations import Breach, line_count, mutate, non_finite, read_all, 
 from sim.acclaim.asf import check_bone_name
 from sim.errors import BadFileError
 
-KINDS = ("asf", "amc", "bvh", "sidq", "npz", "index", "policy", "checkpoint")
+KINDS = ("asf", "amc", "bvh", "sidq", "sidm", "npz", "index", "policy", "checkpoint")
 CANARY = b"CANARY-7f3a9"  # the content of every file outside a case's folder
 MAX_PROBLEM_CHARS = 600  # an error's problem: one short line
 
@@ -194,6 +194,7 @@ def seed_case(kind: str, seeds: Seeds) -> Case:
         "amc": {"t.asf": asf, "t.amc": amc},
         "bvh": {"t.bvh": seeds.bvh[0]},
         "sidq": {"s.sidq": seeds.sidq[0]},
+        "sidm": {"s.sidq": _sidm().sidm_seeds(seeds)[0]},
         "npz": {"c.npz": seeds.clips[0]},
         "index": {f"d/{k}": v for k, v in seeds.dataset.items()},
         "policy": {"p.pt": seeds.policies[0]},
@@ -201,6 +202,13 @@ def seed_case(kind: str, seeds: Seeds) -> Case:
     }[kind]
     target = {"asf": "t.asf", "amc": "t.amc", "index": "d"}.get(kind, next(iter(files)))
     return Case(kind, files, target, ["seed"], full=kind in ("asf", "amc"))
+
+
+def _sidm():
+    """``tests/hostile_sequences.py`` (sequences of streams), imported when first needed."""
+    import hostile_sequences
+
+    return hostile_sequences
 
 
 def _special(rng) -> tuple | None:
@@ -777,6 +785,7 @@ _MAKERS = {
     "amc": _acclaim_case("amc"),
     "bvh": _bvh_case,
     "sidq": _sidq_case,
+    "sidm": lambda seeds, rng: _sidm().sidm_case(seeds, rng),
     "npz": _npz_case,
     "index": _index_case,
     "policy": _policy_case,
@@ -969,6 +978,7 @@ def _read_bvh(path: Path, folder: Path, _args) -> list:
 _READERS = {
     "bvh": _read_bvh,
     "sidq": _read_sidq,
+    "sidm": lambda path, folder, args: _sidm().read_sidm(path, folder, args),
     "npz": _read_npz,
     "index": _read_index,
     "policy": _read_policy,

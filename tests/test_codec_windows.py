@@ -208,3 +208,60 @@ def test_a_report_takes_a_sequence_and_checks_its_skeleton(trial, cmu_dir, tmp_p
     assert enc.streams > 1 and decoded.motion.positions.shape[0] == enc.n_frames
     with pytest.raises(MotionDataError, match="another skeleton"):
         load_stream(out, cmu_dir / "02" / "02.asf")
+
+
+def test_reading_ahead_keeps_the_order_raises_in_place_and_closes_an_abandoned_source():
+    from sidql.codec.windows import read_ahead
+
+    assert list(read_ahead(iter(range(50)))) == list(range(50))
+    closed = []
+
+    def source(fail_at=None):
+        try:
+            for i in range(10):
+                if i == fail_at:
+                    raise MotionDataError("take.amc", 7, "bad frame")
+                yield i
+        finally:
+            closed.append(True)
+
+    got = []
+    with pytest.raises(MotionDataError, match="bad frame"):
+        for x in read_ahead(source(fail_at=4)):
+            got.append(x)
+    assert got == [0, 1, 2, 3]  # every item before the defect, then the defect itself
+    it = read_ahead(source())
+    assert next(it) == 0
+    it.close()  # the caller stops early: the source is closed too
+    assert closed == [True, True]
+
+
+def test_a_sequence_too_long_to_join_in_memory_is_refused_in_one_line(
+    two_streams, tmp_path, monkeypatch
+):
+    a, b = two_streams
+    path = tmp_path / "long.sidq"
+    path.write_bytes(_sequence(tmp_path, [a, b]))
+    frames = len(decode_to_reconstruction(path).positions)
+    monkeypatch.setattr(sidq, "frame_limit", lambda J: frames - 1)
+    with pytest.raises(MotionDataError, match="cannot be joined") as e:
+        decode_to_reconstruction(path)
+    assert "\n" not in str(e.value) and str(path) in str(e.value)
+
+
+def test_a_record_longer_than_the_file_is_refused_before_it_is_allocated(two_streams, tmp_path):
+    import tracemalloc
+
+    a, _ = two_streams
+    data = bytearray(_sequence(tmp_path, [a]))
+    data[5:9] = struct.pack("<I", 60 << 20)  # a record of 60 MiB in a file of a few hundred bytes
+    path = tmp_path / "claims.sidq"
+    path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        with pytest.raises(MotionDataError, match="truncated sequence"):
+            list(iter_streams(path))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20

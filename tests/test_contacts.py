@@ -265,7 +265,7 @@ def test_labels_match_mujocos_contacts_in_simulated_motion(cmu_dir, monkeypatch)
     for subject, trial, seconds in SIMULATED:
         task = SynthTask(
             "follow", 0, 0, str(cmu_dir / subject / f"{subject}.asf"),
-            str(cmu_dir / subject / f"{trial}.amc"), seconds, 120.0, assist=0.5,
+            str(cmu_dir / subject / f"{trial}.amc"), seconds, 120.0, controller="plain", assist=0.5,
         )  # fmt: skip
         clip, record = generate(task)
         assert not record["fell"]

@@ -127,7 +127,15 @@ def read_hostile(kind, seeds, tmp_path_factory, data) -> str:
 
 @pytest.mark.parametrize(
     ("kind", "examples"),
-    [("bvh", 60), ("sidq", 60), ("npz", 60), ("index", 40), ("policy", 40), ("checkpoint", 30)],
+    [
+        ("bvh", 60),
+        ("sidq", 60),
+        ("sidm", 40),
+        ("npz", 60),
+        ("index", 40),
+        ("policy", 40),
+        ("checkpoint", 30),
+    ],
 )
 def test_every_reader_reads_cleanly_or_fails_cleanly(kind, examples, hostile_seeds,
                                                       tmp_path_factory):  # fmt: skip

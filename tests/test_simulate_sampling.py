@@ -122,7 +122,7 @@ def test_synth_with_samples_tracks_real_kinds_without_any_help(cmu_dir):
     assert not rec["labels"]["sim_assist_wrench"].any()
     again, rec2 = generate(task)
     assert np.array_equal(clip.qpos, again.qpos) and rec2["generation"] == g
-    plain, rec3 = generate(replace(task, samples=0))  # the plain tracker: no help either
+    plain, rec3 = generate(replace(task, samples=0, controller="plain"))  # no help either
     assert "sampling" not in rec3["generation"] and rec3["generation"]["assist_limit"] == 0
     assert rec3["generation"]["controller"] == "plain" and g["controller"] == "sampling"
     proc = generate(SynthTask("procedural", seed=0, index=2, seconds=0.5, samples=4))[1]

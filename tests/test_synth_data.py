@@ -9,16 +9,13 @@ import json
 import mujoco
 import numpy as np
 import pytest
+from synth_replay import PER_KIND, REAL, SECONDS, check_replays
 
-from sim.model.mass import DEFAULT_BODY_MASS_KG
-from sim.motion.clip import load_extra, load_npz
+from sim.motion.clip import load_extra
 from sim.simulate.episode import array_text
 from sim.simulate.model import human_torque_limit
 
 KINDS = ("track", "fall", "follow", "procedural")
-REAL = ("track", "fall", "follow")
-PER_KIND = 20
-SECONDS = 1.0  # long enough for the pushes of track (from 0.3 s) and many of fall (0.5-1.5 s)
 
 
 @pytest.fixture(scope="module")
@@ -49,74 +46,8 @@ def synth_wholebody(cmu_dir, tmp_path_factory):
     return out, s.written
 
 
-def _oracle_replay(labels: dict, limits: np.ndarray):
-    """Step the stored actions and wrenches one physics step at a time on the stored MJCF's
-    model (MuJoCo alone, nothing of ours); return the states before each action and after the
-    last, and the largest |hinge actuator torque| over its limit seen at any step."""
-    model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
-    data = mujoco.MjData(model)
-    spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    mujoco.mj_setState(model, data, labels["sim_initial_state"], spec)
-    actions = labels["sim_actions"]
-    qpos, qvel, worst = [], [], 0.0
-    for k in range(len(actions)):
-        qpos.append(data.qpos.copy())
-        qvel.append(data.qvel.copy())
-        data.ctrl[:] = actions[k]
-        data.xfrc_applied[:] = labels["sim_xfrc_applied"][k]
-        data.qfrc_applied[:] = labels["sim_qfrc_applied"][k]
-        for _ in range(int(labels["sim_frame_skip"])):
-            mujoco.mj_step(model, data)
-            worst = max(worst, float(np.max(np.abs(data.actuator_force) / limits)))
-    qpos.append(data.qpos.copy())
-    qvel.append(data.qvel.copy())
-    return np.array(qpos), np.array(qvel), worst, model
-
-
-def _check_replays(out, written, kinds) -> dict:
-    """Every clip of ``written`` replays bit for bit within the human limits (the assertions
-    below); returns counts of what the clips held."""
-    count = {k: 0 for k in kinds} | {"pushed": 0, "assisted": 0, "strong": 0, "weakened": 0}
-    for r in written:
-        path = out / r["file"]
-        labels, clip = load_extra(path, "sim_"), load_npz(path)
-        generation = json.loads(array_text(labels["sim_generation"]))
-        assert generation == r["generation"]  # the episode carries its own parameters
-        mass = DEFAULT_BODY_MASS_KG * generation["scale"] ** 3
-        names = clip.joint_names
-        limits = np.array([human_torque_limit(n, mass) for n in names])
-        q, v, worst, model = _oracle_replay(labels, limits)
-        assert np.array_equal(q, labels["sim_tick_qpos"]), r["file"]
-        assert np.array_equal(v, labels["sim_tick_qvel"]), r["file"]
-        T = len(labels["sim_actions"])
-        assert T == round(SECONDS * 120) and int(labels["sim_frame_skip"]) == 4
-        assert np.array_equal(q[: 4 * clip.n_frames : 4], clip.qpos)  # the clip's frames
-        # human strength: the body's limits are the table's (never times a gain), and no
-        # physics step of the replay applied more
-        assert [model.actuator(i).name for i in range(model.nu)] == list(names)
-        body = model.actuator_forcerange[:, 1]  # (the MJCF's 6 digits, rounded down)
-        assert np.all(body <= limits) and np.all(body >= limits * (1 - 1e-5))
-        assert np.array_equal(labels["sim_torque_limit"], model.actuator_forcerange[:, 1])
-        assert worst <= 1 + 1e-12
-        lo, hi = model.actuator_ctrlrange.T  # actions in the documented, bounded space
-        assert np.all((labels["sim_actions"] >= lo) & (labels["sim_actions"] <= hi))
-        # no help unless asked for: only the procedural kind asks (and is labelled so)
-        helped = bool(np.any(labels["sim_qfrc_applied"]))
-        assert (generation["assist_limit"] > 0) == (r["subject"] == "procedural")
-        assert not helped or generation["assist_limit"] > 0
-        count[r["subject"]] += 1
-        count["pushed"] += bool(np.any(labels["sim_xfrc_applied"]))
-        count["assisted"] += helped
-        count["strong"] += generation["gain"] > 1.2
-        count["weakened"] += any(w["start"] < SECONDS - 0.1 for w in generation["weakenings"])
-    assert all(count[k] >= PER_KIND for k in kinds), count
-    seeds = [r["generation"]["seed"] for r in written]
-    assert len(set(seeds)) == len(seeds)  # a seed per episode, not the run's
-    return count
-
-
 def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limits(synth):
-    count = _check_replays(*synth, KINDS)
+    count = check_replays(*synth, KINDS)
     assert count["pushed"] >= 10 and count["assisted"] >= 20 and count["strong"] >= 3
     assert count["weakened"] >= 5  # the wrenches, assistance, gains and weakenings were there
     assert all(r["generation"]["controller"] == "plain" for r in synth[1])
@@ -125,7 +56,7 @@ def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limit
 def test_the_wholebody_controller_replays_bit_for_bit_through_its_weakenings(synth_wholebody):
     """The QP weakens by bounding its torques; the episode records the torque that acts, so
     the MJCF's own model replays it (``Recorder``)."""
-    count = _check_replays(*synth_wholebody, REAL)
+    count = check_replays(*synth_wholebody, REAL)
     assert count["pushed"] >= 10 and count["weakened"] >= 5 and count["assisted"] == 0
     assert all(r["generation"]["controller"] == "wholebody" for r in synth_wholebody[1])
 
@@ -151,7 +82,7 @@ def test_assistance_only_on_request_and_labelled(cmu_dir):
     from sim.simulate.generate import SynthTask, generate
 
     asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
-    task = SynthTask("follow", 0, 0, str(asf), str(amc), seconds=0.5)
+    task = SynthTask("follow", 0, 0, str(asf), str(amc), seconds=0.5, controller="plain")
     _, plain = generate(task)
     _, helped = generate(replace(task, assist=0.5))
     assert plain["generation"]["assist_limit"] == 0 and plain["mean_assistance"] == 0

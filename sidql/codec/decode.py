@@ -107,12 +107,27 @@ def decode_to_reconstruction(path: str | os.PathLike) -> Reconstruction:
     encoded trial: positions (N, 23, 3) [m] and velocities [m/s], world axes (z up), in
     :data:`~sidql.keyframes.spherical.POINTS` order, like any reconstruction of the project.
 
+    A sequence of streams is joined whole in memory, so it may hold at most as many frames as
+    one stream may (:func:`sidql.codec.format.frame_limit`); ``sidql decode`` to ``.npz`` or
+    ``.amc`` takes longer ones stream by stream.
+
     Raises:
-        MotionDataError: the file is missing, truncated or corrupt (one line).
+        MotionDataError: the file is missing, truncated or corrupt, or a sequence too long to
+            join (one line).
     """
-    if is_sequence(path):  # a sequence: its streams' frames joined (the whole take in memory)
-        return _joined(list(_sequence_reconstructions(path)))
-    return reconstruct_stream(sidq.read(path))
+    if not is_sequence(path):
+        return reconstruct_stream(sidq.read(path))
+    parts, frames = [], 0
+    for rec in _sequence_reconstructions(path):
+        limit = sidq.frame_limit(len(rec.names))
+        frames += len(rec.positions)
+        if frames > limit:  # refused before the next stream is decoded
+            raise MotionDataError(
+                str(path), None, f"a sequence of more than {limit:,} frames cannot be joined in "
+                "memory; decode it to .npz or .amc (stream by stream)",
+            )  # fmt: skip
+        parts.append(rec)
+    return _joined(parts)
 
 
 def first_stream(path: str | os.PathLike) -> sidq.Stream:

@@ -30,11 +30,13 @@ from sidql.codec.skeleton import skeleton_hash
 from sidql.codec.windows import WINDOW_FRAMES, TakeEncoding, encode_windows, one_stream
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import SphericalSeries, chart
+from sim.bvh.reader import parse_bvh
 from sim.errors import MotionDataError, UnknownNameError, UnmetTargetError, UsageError
 from sim.files import write_atomic
 from sim.motion.chunks import stream_clips
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion, resample_step
+from sim.motion.resample import grid_rate
 from sim.motion.trial import CMU_FPS, is_bvh, read_skeleton
 
 CHOICES: tuple[str, ...] = ("auto",) + CURVES
@@ -163,6 +165,17 @@ def encode_clip(clip: Clip, **kwargs) -> Encoded:
     return encode_series(chart(clip), where=clip.source, **kwargs)
 
 
+def _rate(bvh) -> float:
+    """A BVH file's frame rate [frames per second], its hierarchy and header alone read."""
+    return parse_bvh(bvh, motion=False).fps
+
+
+def _divides(bvh, fps: float) -> bool:
+    """Whether ``fps`` divides the BVH file's rate (it is then streamed, never resampled)."""
+    rate = _rate(bvh)
+    return grid_rate(rate, fps) == rate
+
+
 def encode_files(
     asf: str | os.PathLike,
     amc: str | os.PathLike | None,
@@ -180,7 +193,8 @@ def encode_files(
     (:mod:`sidql.codec.windows`), so memory does not grow with the take: a take of at most
     ``window`` frames (plus the overlap) is one ordinary ``.sidq`` stream, a longer one a sequence
     of streams (:mod:`sidql.codec.sequence`); the position coding reads positions only (its
-    streams never use the chart's rates). A BVH is read whole. The streams record the
+    streams never use the chart's rates). A BVH is read the same way, unless ``fps`` does not
+    divide its rate: it is then read and resampled whole. The streams record the
     skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
     options of :func:`encode_series`.
 
@@ -192,10 +206,10 @@ def encode_files(
     amc = asf if amc is None and is_bvh(asf) else amc
     skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
     try:
-        if is_bvh(amc) or encoder is not None:  # the chart needs no more than this
+        if encoder is not None or (is_bvh(amc) and not _divides(amc, fps)):
             clips = [load_motion(asf, amc, fps=fps, derivatives=False)]
         else:
-            resample_step(CMU_FPS, fps)  # refused before any frame is read
+            resample_step(CMU_FPS if not is_bvh(amc) else _rate(amc), fps)  # before any frame
             rates = not position_coded(
                 kwargs.get("max_q"), kwargs.get("latency", 0),
                 kwargs.get("reconstruction", "auto"), kwargs.get("objective", "position"),

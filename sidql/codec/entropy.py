@@ -36,6 +36,14 @@ _MASK32 = 0xFFFFFFFF
 # contexts per channel: zero flag (2), sign (3), unary (MAX_CLASS + 1), first mantissa bit
 _ZERO, _SIGN, _UNARY, _MANT = 0, 2, 5, 5 + MAX_CLASS + 1
 _PER_CHANNEL = _MANT + MAX_CLASS + 1
+#: shared contexts (``kinds``): buckets of the expected magnitude, the running mean's
+#: adaptation shift, its start (|r| = 2, x 16) and the largest |r| it counts.
+SCALE_BUCKETS = 8
+_SCALE_SHIFT = 2
+_SCALE_START = 32
+_SURPRISE_CAP = 1 << 20
+#: the most kinds of shared contexts
+MAX_KINDS = 16
 # the most bytes one integer can add: its adaptive bits (zero flag, sign, unary, first mantissa
 # bit) under 8 bits each (a probability adapted by a shift of _MOVE stays within [15, 2033] /
 # 2048: log2(2048 / 15) < 7.1), its direct bits 1 bit each, and the 5 bytes of the final flush
@@ -115,17 +123,57 @@ def _initial_probs(contexts, prior):
     return probs
 
 
-@numba.njit(cache=True)
-def _encode_kernel(values, group, n_groups, prior):
-    """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column.
+@numba.njit(cache=True, inline="always")
+def _context_base(c, w, group, n_groups, kinds, sc):
+    """Index of the first context of integer (c, w): the channel's own set (per column group),
+    or with ``kinds[c] >= 0`` the set of its kind and its expected-magnitude bucket
+    (:func:`_bucket`)."""
+    k = kinds[c]
+    if k < 0:
+        return (c * n_groups + group[w]) * _PER_CHANNEL
+    C = kinds.shape[0]
+    return (C * n_groups + k * SCALE_BUCKETS + _bucket(w, sc)) * _PER_CHANNEL
+
+
+@numba.njit(cache=True, inline="always")
+def _bucket(w, sc):
+    """The expected-magnitude bucket of column w of the current channel: log2 of the channel's
+    running mean |r| times the column's activity (the mean surprise of the channels coded
+    before it at this column, 1 if none), integers only (encoder and decoder agree on every
+    machine). ``sc``: [mean x 16, channels counted, column sums (W) of surprise x 256]."""
+    n = sc[1]
+    act = 256 if n == 0 else sc[2 + w] // n
+    sig = (sc[0] * act) >> 8
+    b = -2
+    t = sig + 4
+    while t > 0:
+        b += 1
+        t >>= 1
+    return min(max(b, 0), SCALE_BUCKETS - 1)
+
+
+@numba.njit(cache=True, inline="always")
+def _after(w, a, sc):
+    """Update the scale state ``sc`` (see :func:`_bucket`) with |r| = ``a`` at column w."""
+    a16 = 16 * min(a, _SURPRISE_CAP)
+    sc[2 + w] += ((a16 + 8) << 8) // (sc[0] + 8)
+    sc[0] += (a16 - sc[0]) >> _SCALE_SHIFT
+
+
+@numba.njit(cache=True, nogil=True)
+def _encode_kernel(values, group, n_groups, prior, kinds):
+    """values: (C, W) int64, sent channel by channel; group: (W,) context group of each column;
+    kinds: (C,) -1 (own contexts) or a shared kind (see :func:`_context_base`).
     Returns the coded bytes."""
     C, W = values.shape
     out = np.empty(64 + C * W * 2, dtype=np.uint8)
     low, rng, cache, csize, pos = np.int64(0), np.int64(_MASK32), np.int64(0), np.int64(1), 0
-    probs = _initial_probs(C * n_groups, prior)
+    probs = _initial_probs(C * n_groups + (kinds.max() + 1) * SCALE_BUCKETS, prior)
+    sc = np.zeros(2 + W, dtype=np.int64)
     for c in range(C):
         prev_zero = 0
         prev_sign = 2
+        sc[0] = _SCALE_START
         for w in range(W):
             # room for one more integer: at most _INTEGER_BYTES plus the bytes the cache holds
             # back (a badly predicted large residual costs far more than its 8 raw bytes)
@@ -133,8 +181,10 @@ def _encode_kernel(values, group, n_groups, prior):
                 bigger = np.empty(2 * out.shape[0] + csize + _INTEGER_BYTES, dtype=np.uint8)
                 bigger[:pos] = out[:pos]
                 out = bigger
-            base = (c * n_groups + group[w]) * _PER_CHANNEL
+            base = _context_base(c, w, group, n_groups, kinds, sc)
             r = values[c, w]
+            if kinds[c] >= 0:
+                _after(w, abs(r), sc)
             if r == 0:
                 low, rng, cache, csize, pos = _bit(
                     low, rng, cache, csize, pos, out, probs, base + _ZERO + prev_zero, 0
@@ -173,6 +223,8 @@ def _encode_kernel(values, group, n_groups, prior):
                     low, rng, cache, csize, pos = _direct(
                         low, rng, cache, csize, pos, out, (a >> b) & 1
                     )
+        if kinds[c] >= 0:
+            sc[1] += 1
     for _ in range(5):
         low, cache, csize, pos = _shift_low(low, cache, csize, pos, out)
     return out[:pos].copy()
@@ -221,21 +273,27 @@ def _decode_direct(data, st):
 
 
 @numba.njit(cache=True)
-def _decode_kernel(data, C, W, group, n_groups, prior):
+def _decode_kernel(data, C, W, group, n_groups, prior, kinds):
     values = np.zeros((C, W), dtype=np.int64)
     st = np.zeros(4, dtype=np.int64)
     st[1] = _MASK32
     for _ in range(5):
         st[0] = ((st[0] << 8) | _next_byte(data, st)) & _MASK32
-    probs = _initial_probs(C * n_groups, prior)
+    probs = _initial_probs(C * n_groups + (kinds.max() + 1) * SCALE_BUCKETS, prior)
+    sc = np.zeros(2 + W, dtype=np.int64)
     for c in range(C):
         prev_zero = 0
         prev_sign = 2
+        if c > 0 and kinds[c - 1] >= 0:
+            sc[1] += 1
+        sc[0] = _SCALE_START
         for w in range(W):
-            base = (c * n_groups + group[w]) * _PER_CHANNEL
+            base = _context_base(c, w, group, n_groups, kinds, sc)
             if _decode_bit(data, st, probs, base + _ZERO + prev_zero) == 0:
                 prev_zero = 1
                 prev_sign = 2
+                if kinds[c] >= 0:
+                    _after(w, 0, sc)
                 continue
             prev_zero = 0
             neg = _decode_bit(data, st, probs, base + _SIGN + prev_sign)
@@ -249,6 +307,8 @@ def _decode_kernel(data, C, W, group, n_groups, prior):
                 for _b in range(k - 3, -1, -1):
                     a = (a << 1) | _decode_direct(data, st)
             values[c, w] = -a if neg else a
+            if kinds[c] >= 0:
+                _after(w, a, sc)
     return values, st[3]
 
 
@@ -261,10 +321,23 @@ def _groups(group, W: int) -> tuple[np.ndarray, int]:
     return g, int(g.max()) + 1 if W else 1
 
 
-def encode_integers(values: np.ndarray, group: np.ndarray | None = None) -> bytes:
+def _kinds(kinds, C: int) -> np.ndarray:
+    if kinds is None:
+        return np.full(C, -1, dtype=np.int64)
+    k = np.ascontiguousarray(kinds, dtype=np.int64)
+    if k.shape != (C,) or (C and (k.min() < -1 or k.max() >= MAX_KINDS)):
+        raise UsageError(f"kinds must be ({C},) integers in -1..{MAX_KINDS - 1}")
+    return k
+
+
+def encode_integers(
+    values: np.ndarray, group: np.ndarray | None = None, kinds: np.ndarray | None = None
+) -> bytes:
     """Range-code a (C, W) array of integers channel by channel (see the module docstring);
     ``group`` (W,) gives each column a context group (e.g. its level in a coarse-to-fine order),
-    so columns of different spread learn separate statistics.
+    so columns of different spread learn separate statistics. ``kinds`` (C,): -1 for a channel
+    with its own contexts (the default for all), or a kind k >= 0: the channel then shares the
+    contexts of kind k, chosen by its expected magnitude (see the module docstring).
 
     Raises:
         ValueError: a value's magnitude reaches 2^MAX_CLASS.
@@ -275,40 +348,54 @@ def encode_integers(values: np.ndarray, group: np.ndarray | None = None) -> byte
     if v.size and np.abs(v).max() >= (1 << MAX_CLASS):
         raise UsageError(f"residual beyond 2^{MAX_CLASS}")
     g, n = _groups(group, v.shape[1])
-    return bytes(_encode_kernel(v, g, n, _PRIOR))
+    return bytes(_encode_kernel(v, g, n, _PRIOR, _kinds(kinds, v.shape[0])))
 
 
 def decode_integers(
-    data: bytes, n_channels: int, count: int, group: np.ndarray | None = None
+    data: bytes,
+    n_channels: int,
+    count: int,
+    group: np.ndarray | None = None,
+    kinds: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """The (n_channels, count) int64 array :func:`encode_integers` coded into ``data`` (with the
-    same ``group``), and the number of bytes the decoder read (more than ``len(data)``: the data
-    was short)."""
+    same ``group`` and ``kinds``), and the number of bytes the decoder read (more than
+    ``len(data)``: the data was short)."""
     buf = np.frombuffer(bytes(data), dtype=np.uint8)
     g, n = _groups(group, int(count))
-    values, used = _decode_kernel(buf, int(n_channels), int(count), g, n, _PRIOR)
+    k = _kinds(kinds, int(n_channels))
+    values, used = _decode_kernel(buf, int(n_channels), int(count), g, n, _PRIOR, k)
     return values, int(used)
 
 
-@numba.njit(cache=True)
+#: bit length of each magnitude below 2^12 (most residuals): a table read instead of a loop
+#: whose trip count the processor cannot predict.
+_BIT_LENGTH = np.array([int(a).bit_length() for a in range(1 << 12)], dtype=np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
 def _estimate_bits(values):
     C, W = values.shape
     total = 0.0
-    counts = np.zeros(MAX_CLASS + 1)
+    counts = np.zeros(MAX_CLASS + 1, dtype=np.int64)
     for c in range(C):
-        counts[:] = 0.0
+        counts[:] = 0
         for w in range(W):
             a = abs(values[c, w])
-            k = 0
-            while a > 0:
-                k += 1
-                a >>= 1
-            counts[k] += 1.0
+            if a < _BIT_LENGTH.shape[0]:
+                k = _BIT_LENGTH[a]
+            else:
+                k = 0
+                while a > 0:
+                    k += 1
+                    a >>= 1
+            counts[k] += 1
             if k > 0:
                 total += k  # sign and the k - 1 bits below the leading one
         for k in range(MAX_CLASS + 1):
             if counts[k] > 0:
-                total -= counts[k] * np.log2(counts[k] / W)
+                n = np.float64(counts[k])
+                total -= n * np.log2(n / W)
     return total
 
 

@@ -1,8 +1,8 @@
-"""The ``.sidq`` container, versions 1 to 3: bytes <-> :class:`Stream`.
+"""The ``.sidq`` container, versions 1 to 4: bytes <-> :class:`Stream`.
 
 The byte format is specified once, in ``docs/codec.md`` ("The .sidq format"): version 1 carries
 codings 0 (fixed-size records, for live streaming) and 1 (packed, LZMA, offline), versions 2
-and 3 coding 2, the position coding (:func:`position_bytes`; values as
+to 4 coding 2, the position coding (its fields: :mod:`sidql.codec.position_format`; values as
 :class:`sidql.codec.quantise.PositionQuantiser` rebuilds them). All numbers are little-endian;
 the header names the reconstruction (its index in :data:`sidql.keyframes.curves.CURVES`), the
 stream rate, the skeleton's hash (:func:`sidql.codec.skeleton.skeleton_hash`) and the points
@@ -31,8 +31,20 @@ from pathlib import Path
 import numpy as np
 
 from sidql.codec.contact_section import FootContacts, attach_section, split_section, with_section
-from sidql.codec.entropy import decode_integers, encode_integers
-from sidql.codec.quantise import BITS, PositionQuantiser, Quantiser
+from sidql.codec.position_format import (  # noqa: F401 (re-exported: the format's one name)
+    MAX_DECODED_VALUE,
+    POSITION_RECONSTRUCTIONS,
+    POSITION_VERSIONS,
+    VERSION_POSITION,
+    block_bytes,
+    length_codes,
+    lengths_from_codes,
+    position_lengths,
+    quantiser_bytes,
+    read_block,
+    read_quantiser,
+)
+from sidql.codec.quantise import BITS, Quantiser
 from sidql.keyframes.curves import CURVES
 from sidql.keyframes.spherical import POINTS, protocol_parent_indices
 from sim.errors import MotionDataError, UsageError
@@ -40,8 +52,6 @@ from sim.files import MAX_SIDQ_BYTES, read_regular, write_atomic
 
 MAGIC = b"SIDQ"
 VERSION = 1
-#: coding 2 (position-coded) as written, and as read (2: no lever exponent byte, 1/2 implied)
-VERSION_POSITION, POSITION_VERSIONS = 3, (2, 3)
 MAX_GAP = 255
 
 
@@ -88,8 +98,9 @@ def record_size(reconstruction: str, n_bones: int) -> int:
     return 1 + 2 * D * (2 if reconstruction == "hermite" else 1)
 
 
-def header_bytes(stream: Stream) -> bytes:
-    """The header of ``stream`` (everything before the first record)."""
+def header_bytes(stream: Stream, position_version: int = VERSION_POSITION) -> bytes:
+    """The header of ``stream`` (everything before the first record); coding 2 as version
+    ``position_version`` (older ones for tests of the readers)."""
     J = len(stream.names)
     standard = tuple(stream.names) == POINTS and np.array_equal(
         stream.parents, protocol_parent_indices()
@@ -98,7 +109,7 @@ def header_bytes(stream: Stream) -> bytes:
     out += MAGIC
     out += struct.pack(
         "<BBBBHf",
-        VERSION_POSITION if stream.coding == 2 else VERSION,
+        position_version if stream.coding == 2 else VERSION,
         CURVES.index(stream.reconstruction),
         stream.coding,
         stream.quantiser.bits,
@@ -115,9 +126,7 @@ def header_bytes(stream: Stream) -> bytes:
     if stream.coding == 2:
         exponent, codes = length_codes(stream.lengths)
         out += struct.pack("<b", exponent) + codes.astype("<u2").tobytes()
-        q = stream.quantiser
-        out += struct.pack("<fBB", q.step, int(round(q.rho * 8)), int(round(q.exponent * 16)))
-        return bytes(out)
+        return bytes(out + quantiser_bytes(stream.quantiser, position_version))
     out += np.asarray(stream.lengths, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_origin, dtype="<f4").tobytes()
     out += np.asarray(stream.quantiser.root_step, dtype="<f4").tobytes()
@@ -144,8 +153,8 @@ def record_bytes(stream: Stream, start: int = 0, stop: int | None = None) -> byt
     return rec.tobytes()
 
 
-def to_bytes(stream: Stream) -> bytes:
-    """The whole container: header, records, CRC-32."""
+def to_bytes(stream: Stream, position_version: int = VERSION_POSITION) -> bytes:
+    """The whole container: header, records, CRC-32 (coding 2 as ``position_version``)."""
     gaps = np.diff(stream.keyframes)
     if stream.keyframes[0] != 0 or len(stream.keyframes) < 2 or gaps.min() < 1:
         raise UsageError("keyframes must start at 0 and increase strictly (at least 2)")
@@ -159,7 +168,7 @@ def to_bytes(stream: Stream) -> bytes:
     if stream.coding == 2:
         if stream.reconstruction not in POSITION_RECONSTRUCTIONS:
             raise UsageError(f"coding 2 carries {', '.join(POSITION_RECONSTRUCTIONS)} only")
-        body = header_bytes(stream) + position_bytes(stream)
+        body = header_bytes(stream, position_version) + position_bytes(stream, position_version)
     elif stream.coding == 1:
         body = header_bytes(stream) + packed_bytes(stream)
     elif stream.quantiser.bits != 16:
@@ -194,40 +203,10 @@ def packed_bytes(stream: Stream) -> bytes:
     )
 
 
-def length_codes(lengths: np.ndarray) -> tuple[int, np.ndarray]:
-    """Coding 2's bone lengths: an exponent e (int8; unit 2^e m, the least power of two with the
-    longest bone within 65535 units) and (M,) uint16 multiples of the unit (at most 7 um of
-    rounding for bones under 0.9 m). Stored lengths code to themselves."""
-    lengths = np.asarray(lengths, dtype=np.float64)
-    top = max(float(lengths.max(initial=0.0)), 1e-9)
-    e = int(np.clip(np.ceil(np.log2(top / 65535.0)), -127, 127))
-    return e, np.clip(np.rint(lengths / 2.0**e), 0, 65535).astype(np.uint16)
-
-
-def lengths_from_codes(exponent: int, codes: np.ndarray) -> np.ndarray:
-    """(M,) bone lengths [m] a coding-2 stream stores (the inverse of :func:`length_codes`)."""
-    return np.asarray(codes, dtype=np.float64) * 2.0 ** int(exponent)
-
-
-def position_lengths(lengths: np.ndarray) -> np.ndarray:
-    """The bone lengths [m] a decoder of a coding-2 stream will use for ``lengths``."""
-    return lengths_from_codes(*length_codes(lengths))
-
-
-#: the largest magnitude a decoded coding-2 keyframe value may have [rad or m].
-MAX_DECODED_VALUE = 1e6
-
-#: reconstructions coding 2 carries (no rates are sent).
-POSITION_RECONSTRUCTIONS: tuple[str, ...] = ("linear", "catmull_rom")
-
-
-def position_bytes(stream: Stream) -> bytes:
+def position_bytes(stream: Stream, version: int = VERSION_POSITION) -> bytes:
     """The coding-2 body: keyframe count, then one range-coded block of integers (one channel of
     gap changes, then the D channels' prediction residuals; :mod:`sidql.codec.entropy`)."""
-    k = np.asarray(stream.keyframes, dtype=np.int64)
-    gaps = np.diff(k, prepend=k[:1])
-    rows = np.vstack([np.diff(gaps, prepend=0)[None], np.asarray(stream.pose_codes).T])
-    return struct.pack("<I", len(k)) + encode_integers(rows)
+    return block_bytes(stream.keyframes, stream.pose_codes, stream.quantiser.n_bones, version)
 
 
 def write(stream: Stream, path: str | os.PathLike) -> Path:
@@ -341,7 +320,9 @@ def _header(data: bytes, where: str):
     body, (crc,) = data[:-4], struct.unpack("<I", data[-4:])
     version = data[4]
     if version not in (VERSION, *POSITION_VERSIONS):
-        raise MotionDataError(where, None, f"unsupported .sidq version {version} (known: 1, 2, 3)")
+        raise MotionDataError(
+            where, None, f"unsupported .sidq version {version} (known: 1 to {VERSION_POSITION})"
+        )
     if zlib.crc32(body) != crc:
         raise MotionDataError(where, None, "checksum mismatch: the stream is truncated or corrupt")
     r = _Reader(body, where)
@@ -450,24 +431,15 @@ def _position_stream(r, body, where, recon, latency, fps, skel, names, parents, 
     """The rest of a coding-2 stream after the bone lengths (see :func:`position_bytes`)."""
     J = len(names)
     M = J - 1
-    D = 2 * M + 3
-    step, rho8 = struct.unpack("<fB", r.take(5, "position step"))
-    lever16 = r.take(1, "lever exponent")[0] if body[4] >= 3 else 8  # version 2: 1/2
-    if not (np.isfinite(step) and step > 0) or rho8 > 16 or lever16 > 16:
-        raise MotionDataError(
-            where, None, f"bad position step {step}, predictor {rho8} or lever exponent {lever16}"
-        )
+    quant = read_quantiser(r.take, body[4], where, M, lengths, parents)
     (W,) = struct.unpack("<I", r.take(4, "keyframe count"))
     if not 2 <= W <= frame_limit(J):  # checked before anything of size W is allocated
         raise MotionDataError(where, None, f"bad keyframe count {W} (2 to {frame_limit(J):,})")
-    rows, used = decode_integers(body[r.pos :], D + 1, W)
-    if used > len(body) - r.pos + 5:  # the coder reads at most 5 bytes ahead of its data
-        raise MotionDataError(where, None, "truncated stream: coded keyframes missing")
+    rows = read_block(body[r.pos :], body[4], M, W, where)
     gaps = np.cumsum(rows[0])
     if np.any(gaps < 0) or np.any(gaps > MAX_GAP):
         raise MotionDataError(where, None, "bad keyframe gap (first must be 0, others 1..255)")
     _check_gaps(gaps, fps, J, where)
-    quant = PositionQuantiser(M, lengths, parents, float(step), rho8 / 8.0, exponent=lever16 / 16)
     keys = np.cumsum(gaps)
     pose = rows[1:].T.copy()
     with np.errstate(all="ignore"):

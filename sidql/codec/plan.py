@@ -213,7 +213,7 @@ def position_band_costs(
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _dp(C, per_key):
     """Optimal keyframes of the banded table C for a cost ``per_key`` per keyframe.
 
@@ -242,7 +242,7 @@ def _dp(C, per_key):
     return cnt[N - 1], dist[N - 1], prev
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _backtrack(prev, last):
     n = 1
     j = last

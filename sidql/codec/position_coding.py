@@ -11,12 +11,17 @@ Units: metres inside, millimetres in the targets and figures; bytes, bytes per s
 
 from __future__ import annotations
 
+import os
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.encoded import Encoded, measure, where_prefix
 from sidql.codec.entropy import encode_integers, estimate_size
 from sidql.codec.plan import plan, position_band_costs
+from sidql.codec.position_format import channel_kinds, coded_rows
 from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser, aim_basis
 from sidql.keyframes.spherical import POINTS, SphericalSeries
@@ -33,15 +38,24 @@ _REAL_CODINGS = 3
 #: slope weight of the keyframe predictor of coding 2 (0: previous keyframe; 1: linear
 #: extrapolation); 0.5 measured best on the CMU trials of ``../shared``.
 PREDICTOR = 0.5
+#: the root position channels' slope weight: 1 (linear extrapolation; the pelvis moves smoothly)
+#: measured best against 0.5 and 0.75 on the CMU trials of ``../shared``.
+ROOT_PREDICTOR = 1.0
 #: each bone's keyframe value aims from its decoded parent point at its true point (see
 #: :func:`sidql.codec.quantise._dpcm`): errors stop piling up down the chain.
 AIM = True
 #: the subtree size's exponent in the quantiser's levers with aiming (k / 16 in the stream):
-#: 1/4 measured best against 0, 1/8, 3/8 and 1/2 (p95 and bytes) on the CMU trials of ``../shared``.
-LEVER_EXPONENT = 0.25
+#: 1/8 measured best against 1/16, 1/4 and 3/8 on the CMU trials of ``../shared`` with the
+#: version-4 coder (bytes at equal 95th percentile 1-4 % fewer than 1/4, at equal mean error
+#: 0-1.5 % more; 1/16 loses at both ends).
+LEVER_EXPONENT = 0.125
 #: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
 #: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
 FRAME_CAP = 3.0
+#: bytes of coded plans a search keeps, the least recently used dropped first (at least the last
+#: two): each holds (W, D) codes and decoded values, 0.7 MB at W = 900 keyframes (11 kept), so
+#: memory does not grow with the take when it is encoded whole; repeats are rare past the last few.
+CODED_BYTES = 8 << 20
 
 
 class _PositionSearch:
@@ -64,7 +78,7 @@ class _PositionSearch:
         if extra_cost is not None:  # e.g. the physical cost (sidql.codec.contact_coding) [m]
             self.C = self.C + extra_cost[:, : G + 1]
         self.plans: dict = {}
-        self.coded: dict = {}
+        self.coded: OrderedDict = OrderedDict()  # at most CODED_BYTES, least recent first
         self.last = None  # log lam of the previous search's answer
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
@@ -72,7 +86,7 @@ class _PositionSearch:
         M = self.series.n_bones
         return PositionQuantiser(
             M, self.lengths, self.series.parents, float(np.float32(step)), PREDICTOR,
-            exponent=LEVER_EXPONENT,
+            exponent=LEVER_EXPONENT, root_rho=ROOT_PREDICTOR,
         )  # fmt: skip
 
     def keys(self, lam: float) -> np.ndarray:
@@ -83,22 +97,24 @@ class _PositionSearch:
     def code(self, lam: float, step: float):
         keys = self.keys(lam)
         key = (hash(keys.tobytes()), len(keys), step)  # nearby multipliers often share a plan
-        if key not in self.coded:
-            q = self.quantiser(step)
-            codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
-            self.coded[key] = (keys, q, codes, kv)
+        if key in self.coded:
+            self.coded.move_to_end(key)
+            return self.coded[key]
+        q = self.quantiser(step)
+        codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
+        self.coded[key] = (keys, q, codes, kv)
+        held = sum(c.nbytes + v.nbytes for _, _, c, v in self.coded.values())
+        while len(self.coded) > 2 and held > CODED_BYTES:
+            _, _, c, v = self.coded.popitem(last=False)[1]
+            held -= c.nbytes + v.nbytes
         return self.coded[key]
 
-    @staticmethod
-    def rows(keys, codes) -> np.ndarray:
-        gaps = np.diff(keys, prepend=0)
-        return np.vstack([np.diff(gaps, prepend=0)[None], codes.T])
-
     def estimate(self, keys, codes) -> float:
-        return self.header + estimate_size(self.rows(keys, codes))
+        return self.header + estimate_size(coded_rows(keys, codes))
 
     def size(self, keys, codes) -> int:
-        return self.header + len(encode_integers(self.rows(keys, codes)))
+        kinds = channel_kinds(self.series.n_bones)
+        return self.header + len(encode_integers(coded_rows(keys, codes), kinds=kinds))
 
     def errors(self, keys, kv) -> np.ndarray:
         return position_errors(self.truth, keys, kv, self.recon, self.lengths, self.series.parents)
@@ -265,12 +281,24 @@ def _builder(series: SphericalSeries, recon: str, fps: float, skel_hash: bytes):
     return build
 
 
+def _each(fn, searches: dict) -> dict:
+    """``{recon: fn(search)}`` for every reconstruction's search, side by side in threads (each
+    search is independent and its compiled kernels release the GIL): the results one after the
+    other would give, sooner where there are cores to spare."""
+    if len(searches) < 2 or (os.cpu_count() or 1) < 2:
+        return {r: fn(search) for r, search in searches.items()}
+    with ThreadPoolExecutor(max_workers=len(searches)) as pool:
+        futures = {r: pool.submit(fn, search) for r, search in searches.items()}
+        return {r: f.result() for r, f in futures.items()}
+
+
 def _for_error(searches: dict, max_error: float, where: str):
     """At a mean error target ``max_error`` [mm]: the candidates by reconstruction, the winner
     (fewest estimated bytes) and its (keys, quantiser, codes, errors)."""
-    cands: dict = {}  # recon -> (keys, q, codes, errors, est bytes, step)
     target = max_error / 1000.0
-    for recon, search in searches.items():
+
+    def fewest_bytes(search):  # -> (keys, q, codes, errors, est bytes, step) or None
+        best = None
         for f in STEP_FACTORS:
             step = f * target
             r = search.for_error(target, step)
@@ -279,8 +307,11 @@ def _for_error(searches: dict, max_error: float, where: str):
                 r = search.for_error(target, step)
             if r is not None:
                 est = search.estimate(r[0], r[2])
-                if recon not in cands or est < cands[recon][4]:
-                    cands[recon] = (*r, est, step)
+                if best is None or est < best[4]:
+                    best = (*r, est, step)
+        return best
+
+    cands = {r: c for r, c in _each(fewest_bytes, searches).items() if c is not None}
     if not cands:  # even every frame at the finest step misses it (e.g. the stored lengths)
         search = next(iter(searches.values()))
         keys, _, _, kv = search.code(_LAM_LO, 1e-7)
@@ -296,11 +327,8 @@ def _for_error(searches: dict, max_error: float, where: str):
 def _for_rate(searches: dict, budget: float, where: str):
     """At ``budget`` bytes: the candidates by reconstruction, the winner (least mean error) and
     its (keys, quantiser, codes, errors), range-coded to fit."""
-    cands: dict = {}  # recon -> (keys, q, codes, errors, bytes, step)
-    for recon, search in searches.items():
-        best = _step_for_budget(search, budget)
-        if best is not None:
-            cands[recon] = best
+    found = _each(lambda search: _step_for_budget(search, budget), searches)
+    cands = {r: c for r, c in found.items() if c is not None}  # (keys, q, codes, errors, B, step)
     if not cands:
         search = next(iter(searches.values()))
         size = search.size(*search.code(_LAM_HI, 1.0)[::2])

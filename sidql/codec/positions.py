@@ -18,7 +18,7 @@ from sidql.keyframes.segment_costs import hermite_basis
 _MODES = {"linear": 1, "catmull_rom": 2}
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _errors(P, keys, kv, mode, lengths, parents, out):
     """P: (N, J, 3) true points in CMU axes [m]; keys (W,); kv (W, D) decoded keyframe values;
     out: (N, J) filled with Euclidean errors [m]."""

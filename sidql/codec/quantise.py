@@ -176,7 +176,7 @@ PARTNER_WEIGHTS = (-0.5, 1.5)
 
 @numba.njit(cache=True)
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-              lengths, parents, innov, kappa, err, aim):  # fmt: skip
+              lengths, parents, innov, kappa, err, aim, root_rho):  # fmt: skip
     """Keyframe w of :func:`_dpcm`: channels root first, then bone by bone (parents first),
     theta before phi. With ``aim``, ``err`` (J, 3) holds the decoded points' errors [m] to first
     order, and a bone's targets are its true angles minus its parent point's error along the
@@ -194,7 +194,8 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
         if w == 1:
             pred = out[0, d]
         elif w >= 2:
-            pred = out[w - 1, d] + rho * ratio * (out[w - 1, d] - out[w - 2, d])
+            slope = root_rho if d >= 2 * M else rho
+            pred = out[w - 1, d] + slope * ratio * (out[w - 1, d] - out[w - 2, d])
         temporal = pred
         norm = 1e-8
         for j in range(P):
@@ -245,9 +246,9 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             err[b + 1, 2] = err[p, 2] + a * g[2]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-          parents):  # fmt: skip
+          parents, root_rho):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
@@ -279,7 +280,7 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     err = np.zeros((M + 1, 3))
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-                  lengths, parents, innov, kappa, err, aim)  # fmt: skip
+                  lengths, parents, innov, kappa, err, aim, root_rho)  # fmt: skip
     return out
 
 
@@ -320,6 +321,12 @@ class PositionQuantiser:
     rho: float = 0.5
     bits: int = 0  # no fixed bit depth: codes are residuals of any size
     exponent: float = SUBTREE_EXPONENT
+    root_rho: float | None = None
+
+    @property
+    def root_slope(self) -> float:
+        """The root channels' slope weight (``rho`` unless ``root_rho`` says otherwise)."""
+        return self.rho if self.root_rho is None else self.root_rho
 
     @property
     def n_channels(self) -> int:
@@ -376,6 +383,7 @@ class PositionQuantiser:
             *PARTNER_WEIGHTS,
             basis,
             *self._tree(),
+            float(self.root_slope),
         )
         return codes, out
 
@@ -396,4 +404,5 @@ class PositionQuantiser:
             *PARTNER_WEIGHTS,
             np.zeros((0, self.n_bones, 5)),
             *self._tree(),
+            float(self.root_slope),
         )

@@ -119,6 +119,10 @@ def iter_streams(path: str | os.PathLike):
 
 
 def _take(f, n: int, where: str, what: str) -> bytes:
+    """The next ``n`` bytes of ``f``, refused before anything is allocated when the file does not
+    hold them (a record length may claim up to 64 MiB)."""
+    if n > os.fstat(f.fileno()).st_size - f.tell():
+        raise MotionDataError(where, None, f"truncated sequence: {what} missing")
     data = f.read(n)
     if len(data) != n:
         raise MotionDataError(where, None, f"truncated sequence: {what} missing")

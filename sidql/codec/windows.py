@@ -23,6 +23,9 @@ Units: frames, bytes, seconds; errors in millimetres and radians.
 
 from __future__ import annotations
 
+import os
+import queue
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -103,6 +106,56 @@ def windows(clips, window: int = WINDOW_FRAMES, overlap: int = OVERLAP_FRAMES):
     yield P, V, parents, dt, source, start, True
 
 
+def read_ahead(items, depth: int = 1):
+    """The items of the iterator ``items``, each made by a thread of its own while the caller
+    works on the one before (reading and charting the next window overlap the encoding of this
+    one: the encoder's compiled kernels release the GIL). At most ``depth`` items wait; an
+    exception of ``items`` is raised where its item would have come; a caller that stops early
+    stops (and closes) ``items``. Without a second core, ``items`` itself."""
+    if (os.cpu_count() or 1) < 2:
+        yield from items
+        return
+    done, stop = object(), threading.Event()
+    box: queue.Queue = queue.Queue(maxsize=depth)
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                box.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce():
+        try:
+            for item in items:
+                if not put((item, None)):
+                    break
+            else:
+                put((done, None))
+        except BaseException as e:  # handed to the caller, raised there
+            put((None, e))
+        finally:
+            close = getattr(items, "close", None)  # a generator: its files closed now
+            if close is not None:
+                close()
+
+    worker = threading.Thread(target=produce, name="read-ahead", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, error = box.get()
+            if error is not None:
+                raise error
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join()
+
+
 def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
                    overlap=OVERLAP_FRAMES, **kwargs) -> TakeEncoding:  # fmt: skip
     """Encode the take ``clips`` window by window into the binary file object ``f``: one
@@ -115,7 +168,7 @@ def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
     """
     writer, parts, reconstructions, first = None, [], {}, None
     overlap = min(overlap, window // 2)
-    for P, V, parents, dt, source, start, last in windows(clips, window, overlap):
+    for P, V, parents, dt, source, start, last in read_ahead(windows(clips, window, overlap)):
         n = len(P)
         fps = 1.0 / dt
         single = last and writer is None

@@ -15,11 +15,18 @@ from sidql.commands.usage import (
 )
 from sim.simulate.dataset import synthesize
 from sim.simulate.export import DATASET_ID, DEFAULT_ID, export_minari
-from sim.simulate.generate import ALL_KINDS, KINDS, SYNTH_CONTROLLERS, SYNTH_DEFAULT_CONTROLLER
+from sim.simulate.generate import (
+    ALL_KINDS,
+    CLIP_SECONDS,
+    KINDS,
+    SYNTH_CONTROLLERS,
+    SYNTH_DEFAULT_CONTROLLER,
+)
 
 DESCRIPTION = (
-    "Track real trials under --data with a controller in MuJoCo's forward simulation (time warps, "
-    "body scaling, gain changes, pushes), make the figure fall and recover, or track procedural "
+    "Track real trials under --data with a controller in MuJoCo's forward simulation (by default "
+    "eval --simulate's sampler; time warps, body scaling, gain changes, pushes), make the figure "
+    "fall and recover, or track procedural "
     "motion; the body has human strength and no help unless --assist asks for it (procedural "
     "clips are tracked with help, recorded); write OUT/<kind>/<kind>_NNNNN.npz in the `sidql "
     "dataset` format plus OUT/index.json "
@@ -44,9 +51,14 @@ def register(p) -> None:
         "procedural: sinusoids tracked with up to 1 body weight of recorded root assistance)",
     )
     p.add_argument(
-        "--controller", choices=SYNTH_CONTROLLERS[:2], default=SYNTH_DEFAULT_CONTROLLER,
-        help="controller of the real-motion kinds (default: the plain tracker; --samples N: the "
-        "sampling tracker, eval --simulate's default, about 20x the cost)",
+        "--controller", choices=SYNTH_CONTROLLERS, default=None,
+        help=f"controller of the real-motion kinds (default: {SYNTH_DEFAULT_CONTROLLER}, eval "
+        "--simulate's, with no assistance; plain: the plain tracker, about a twentieth of the "
+        "sampler's cost, which falls in nearly every clip)",
+    )  # fmt: skip
+    p.add_argument(
+        "--threads", type=positive(int), default=1, metavar="N",
+        help="threads for the sampler's rollouts in each worker (the clips do not depend on it)",
     )  # fmt: skip
     p.add_argument(
         "--assist", type=float, default=0.0, metavar="BW",
@@ -54,7 +66,11 @@ def register(p) -> None:
         "real-motion kinds (recorded per tick; default 0: none)",
     )  # fmt: skip
     p.add_argument(
-        "--seconds", type=positive(float), default=4.0, metavar="S", help="clip length [s]"
+        "--seconds",
+        type=positive(float),
+        default=CLIP_SECONDS,
+        metavar="S",
+        help="clip length [s] (default: the protocol's 60 frames at 30 fps)",
     )
     p.add_argument("--fps", type=cmu_rate, default=30.0, help="clip rate (divides 120)")
     add_workers(p, "the simulations")
@@ -89,6 +105,8 @@ def run(args) -> int:
         raise UsageError("--fps must divide 120 and a clip (--seconds x --fps) hold 2 frames")
     if args.max_assistance is not None and not args.max_assistance >= 0:
         raise UsageError(f"--max-assistance must be >= 0 body weights; got {args.max_assistance}")
+    if args.samples and args.controller not in (None, "sampling"):
+        raise UsageError(f"--samples is the sampler's; not for --controller {args.controller}")
     if not 0 <= args.assist <= 1 or (args.assist and (args.samples or args.controller != "plain")):
         raise UsageError(
             f"--assist must be 0 .. 1 body weights, with the plain tracker; got {args.assist}"
@@ -101,7 +119,7 @@ def run(args) -> int:
     s = synthesize(
         data, args.out, args.n, seed=args.seed, kinds=tuple(args.kinds),
         seconds=args.seconds, fps=args.fps, samples=args.samples or 0,
-        controller=args.controller, assist=args.assist,
+        controller=args.controller, assist=args.assist, threads=args.threads,
         workers=args.workers, ray=args.ray,
         progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
     )  # fmt: skip

@@ -240,13 +240,14 @@ def add_samples(
     parser: argparse.ArgumentParser, lead: str, *, old_option: str | None = None
 ) -> None:
     """``--samples N``: track with the sampling tracker (``sim.simulate.sampling``), N rollouts per
-    window; without it the plain tracker. ``lead`` begins the help (what is tracked, and when);
+    window; without it the command's default controller. ``lead`` begins the help (what is tracked, and when);
     optionally an old spelling (``eval --simulate-samples``)."""
     parser.add_argument(
         "--samples", type=positive(int), default=None, metavar="N",
         help=f"{lead} with the sampling tracker (sim/simulate/sampling.py): N rollouts per 0.1 s "
-        "window, each judged 0.4 s on, and no assistance at all; without it the plain tracker. "
-        "Its cost per simulated second: docs/results/synth_sampled.md",
+        "window, each judged 0.3 s on, and no assistance at all; without it the default "
+        "controller (the sampler at its default count). Its cost per simulated second: "
+        "docs/results/synth.md",
     )  # fmt: skip
     if old_option:
         parser.add_argument(old_option, dest="samples", type=positive(int), metavar="N",

@@ -68,25 +68,50 @@ def _fill_costs(X, R, linear, C, lo, hi, bounds):
 @numba.njit(cache=True, fastmath=_FAST, inline="always")
 def _entry_cost(X, R, dX, i, j, linear, bound):
     """``C[i, j]`` of :func:`_cost_matrix` (``dX``: (D,) scratch), or inf if it exceeds
-    ``bound``: with a finite bound the frames are first summed from the middle out (where a
-    segment's error is largest), stopping once over it; an entry kept is then summed again in
-    frame order, so it is the same number whatever the bound."""
+    ``bound``. The frames are summed from the middle out (where a segment's error is largest):
+    the middle one, then four at a time (one pass over the channels for four frames), then the
+    last few one by one; after each pass the sum so far is compared with the bound and the
+    entry abandoned once over it. Whatever the bound, an entry kept is the same sum in the
+    same order, so the same number."""
     for d in range(X.shape[1]):
         dX[d] = X[j, d] - X[i, d]
     L = j - i
-    if bound < np.inf:  # any frames' sum is a lower bound: the middle ones first (the largest)
-        part = 0.0
-        for t in range(L - 1):
-            n = i + L // 2 + ((t + 1) // 2 if t % 2 else -((t + 1) // 2))
-            part += _frame_cost(X, R, dX, i, j, n, linear)
-            if part > bound:
-                return np.inf
-    total = 0.0
-    for n in range(i + 1, j):
-        total += _frame_cost(X, R, dX, i, j, n, linear)
+    mid = i + L // 2
+    total = _frame_cost(X, R, dX, i, j, mid, linear)  # frame t = 0: mid, alone (abandons most)
+    if total > bound:
+        return np.inf
+    t = 1
+    while t + 4 <= L - 1:  # frames t..t + 3: mid + 1, mid - 1, mid + 2, mid - 2, ...
+        lo, hi = mid - (t + 1) // 2, mid + (t + 1) // 2  # frames hi, lo, hi + 1, lo - 1
+        total += _four_frames_cost(X, R, dX, i, j, lo, hi, linear)
         if total > bound:
             return np.inf
-    return total
+        t += 4
+    while t < L - 1:
+        total += _frame_cost(X, R, dX, i, j, mid + ((t + 1) // 2 if t % 2 else -(t // 2)), linear)
+        t += 1
+    return np.inf if total > bound else total
+
+
+@numba.njit(cache=True, fastmath=_FAST, inline="always")
+def _four_frames_cost(X, R, dX, i, j, lo, hi, linear):
+    """Summed |angle error| [rad] of frames lo, hi, lo - 1, hi + 1 of segment (i, j), in one
+    pass over the channels (the loop vectorises over them; four frames share its loads)."""
+    L = j - i
+    a0, b0, c0 = segment_weights(lo, i, L, linear)
+    a1, b1, c1 = segment_weights(hi, i, L, linear)
+    a2, b2, c2 = segment_weights(lo - 1, i, L, linear)
+    a3, b3, c3 = segment_weights(hi + 1, i, L, linear)
+    acc = 0.0
+    for d in range(X.shape[1]):
+        xi, dx, ri, rj = X[i, d], dX[d], R[i, d], R[j, d]
+        acc += (
+            abs(wrap_angle((xi - X[lo, d]) + a0 * dx + b0 * ri + c0 * rj))
+            + abs(wrap_angle((xi - X[hi, d]) + a1 * dx + b1 * ri + c1 * rj))
+            + abs(wrap_angle((xi - X[lo - 1, d]) + a2 * dx + b2 * ri + c2 * rj))
+            + abs(wrap_angle((xi - X[hi + 1, d]) + a3 * dx + b3 * ri + c3 * rj))
+        )
+    return acc
 
 
 @numba.njit(cache=True, fastmath=_FAST, inline="always")

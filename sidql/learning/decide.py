@@ -119,7 +119,7 @@ def encoder_weights(net: KeyframeQNet) -> tuple:
 def encode_clip(feats, mean, std, w_in, b_in, conv_w, conv_b, dil, w_ctx, b_ctx, w_proj,
                  b_proj, w_glob, b_glob):  # fmt: skip
     """:meth:`KeyframeQNet.encode` of one clip followed by the head's ``proj`` and ``glob``
-    layers, in float64.
+    layers, in float64, as matrix products (BLAS through numba: one thread at these sizes).
 
     Args:
         feats: (N, C) float32 per-frame features; the weights as :func:`encoder_weights` lays them.
@@ -127,64 +127,24 @@ def encode_clip(feats, mean, std, w_in, b_in, conv_w, conv_b, dil, w_ctx, b_ctx,
         proj (N, 4K): the head's per-frame projections; glob (K,): its clip-wide term.
     """
     n, c = feats.shape
-    h = b_in.shape[0]
-    x = np.empty((n, h))
-    xin = np.empty(c + 1)
+    xin = np.empty((n, c + 1))
     for t in range(n):
         for i in range(c):
-            xin[i] = (feats[t, i] - mean[i]) / std[i]
-        xin[c] = -1.0 + 2.0 * t / (n - 1) if n > 1 else -1.0
-        for o in range(h):
-            x[t, o] = b_in[o]
-        for i in range(c + 1):
-            v = xin[i]
-            for o in range(h):
-                x[t, o] += w_in[i, o] * v
-        for o in range(h):
-            x[t, o] = max(x[t, o], 0.0)
-    y = np.empty((n, h))
+            xin[t, i] = (feats[t, i] - mean[i]) / std[i]
+        xin[t, c] = -1.0 + 2.0 * t / (n - 1) if n > 1 else -1.0
+    x = np.maximum(np.dot(xin, w_in) + b_in, 0.0)
     for layer in range(conv_b.shape[0]):
         d = dil[layer]
-        for t in range(n):
-            for o in range(h):
-                y[t, o] = conv_b[layer, o]
-            for tap in range(3):
-                s = t + (tap - 1) * d
-                if s < 0 or s >= n:
-                    continue
-                for i in range(h):
-                    v = x[s, i]
-                    for o in range(h):
-                        y[t, o] += conv_w[layer, tap, i, o] * v
-        for t in range(n):
-            for o in range(h):
-                x[t, o] += max(y[t, o], 0.0)
-    m = np.zeros(h)
-    for t in range(n):
-        for i in range(h):
-            m[i] += x[t, i]
-    m /= n
-    ctx = b_ctx.copy()
-    for i in range(h):
-        for o in range(h):
-            ctx[o] += w_ctx[i, o] * m[i]
-    for o in range(h):
-        ctx[o] = max(ctx[o], 0.0)
+        y = np.dot(x, conv_w[layer, 1]) + conv_b[layer]  # tap 1: frame t itself
+        if d < n:  # tap 0 reads frame t - d, tap 2 frame t + d (zero padding outside)
+            y[d:] += np.dot(x[: n - d], conv_w[layer, 0])
+            y[: n - d] += np.dot(x[d:], conv_w[layer, 2])
+        x += np.maximum(y, 0.0)
+    m = x.sum(axis=0) / n
+    ctx = np.maximum(np.dot(m, w_ctx) + b_ctx, 0.0)
     # enc = x + ctx; its clip mean is m + ctx
-    k4 = b_proj.shape[0]
-    proj = np.empty((n, k4))
-    for t in range(n):
-        for o in range(k4):
-            proj[t, o] = b_proj[o]
-        for i in range(h):
-            v = x[t, i] + ctx[i]
-            for o in range(k4):
-                proj[t, o] += w_proj[i, o] * v
-    glob = b_glob.copy()
-    for i in range(h):
-        v = m[i] + ctx[i]
-        for o in range(glob.shape[0]):
-            glob[o] += w_glob[i, o] * v
+    proj = np.dot(x + ctx, w_proj) + b_proj
+    glob = np.dot(m + ctx, w_glob) + b_glob
     return proj, glob
 
 
@@ -223,8 +183,11 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
     adv = np.zeros(n)
     prior = np.zeros(n)
     seq, length = greedy_sequences(cost, max(W - 3, 0) if use_prior else 0)
-    z = np.zeros(k)
     zsum = np.zeros(k)
+    zs = np.empty((n, k))
+    rows = np.empty(n, np.int64)
+    seg_best = np.zeros(n)
+    w1t = np.ascontiguousarray(w1.T)
     for step in range(W - 2):
         rem = W - 2 - step
         e = _segments(mask, cost, s0, new_left, new_right)
@@ -232,9 +195,9 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
             prior = rollout_values_seq(cost, mask, rem, seq, length)
         _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_right, left,
                           right, g1, base)  # fmt: skip
-        top1, top2 = _two_best(mask, new_right, g1)
-        adv_mean, value = _advantages(mask, left, right, g1, base, ws, rem, top1, top2, w1, b1,
-                                      w2, b2, wv1, bv1, wv2, bv2, z, zsum, adv)  # fmt: skip
+        top1, top2 = _two_best(mask, new_right, g1, seg_best)
+        adv_mean, value = _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1,
+                                      w2, b2, wv1, bv1, wv2, bv2, zs, zsum, rows, adv)  # fmt: skip
         best_a = _best_action(mask, g1, adv, prior, value, adv_mean, e, rem, use_prior)
         mask[best_a] = True
     return np.flatnonzero(mask)
@@ -301,8 +264,9 @@ def _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_ri
 
 
 @numba.njit(cache=True, fastmath=True)
-def _two_best(mask, new_right, g1):
-    """The best reward per segment, and the two best segments' (-inf where none)."""
+def _two_best(mask, new_right, g1, seg_best):
+    """The best reward per segment into ``seg_best`` (N,), at the segment's first keyframe,
+    and the two best segments' (-inf where none)."""
     n = mask.shape[0]
     top1 = -np.inf
     top2 = -np.inf
@@ -312,6 +276,7 @@ def _two_best(mask, new_right, g1):
         best = -np.inf
         for a in range(i + 1, new_right[i + 1]):
             best = max(best, g1[a])
+        seg_best[i] = best
         if best > top1:
             top2 = top1
             top1 = best
@@ -321,38 +286,40 @@ def _two_best(mask, new_right, g1):
 
 
 @numba.njit(cache=True, fastmath=True)
-def _advantages(mask, left, right, g1, base, ws, rem, top1, top2, w1, b1, w2, b2, wv1, bv1, wv2,
-                bv2, z, zsum, adv):  # fmt: skip
+def _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1, w2, b2, wv1, bv1,
+                wv2, bv2, zs, zsum, rows, adv):  # fmt: skip
     """The advantage MLP of every free frame into ``adv`` (N,) and the value MLP over their
-    mean hidden input; returns (mean advantage, value)."""
+    mean hidden input; returns (mean advantage, value). ``seg_best``: each segment's best
+    reward (:func:`_two_best`); ``w1t``: the advantage MLP's first layer as (in, out), applied
+    to every free frame in one matrix product; ``zs`` (N, K), ``zsum`` (K,), ``rows`` (N,):
+    scratch."""
     n = mask.shape[0]
     k = base.shape[1]
     hdim = b1.shape[0]
     n_free = 0
-    adv_sum = 0.0
     zsum[:] = 0.0
     for a in range(n):
         if mask[a]:
             continue
-        n_free += 1
-        own = -np.inf
-        for m in range(left[a] + 1, right[a]):
-            own = max(own, g1[m])
+        own = seg_best[left[a]]
         other = top2 if own >= top1 else top1
         if not np.isfinite(other) or other < 0.0:
             other = 0.0
         for j in range(k):
             v = base[a, j] + ws[j, 3] * rem / n + ws[j, 10] * other
-            z[j] = v if v > 0.0 else 0.0
-            zsum[j] += z[j]
+            zs[n_free, j] = v if v > 0.0 else 0.0
+            zsum[j] += zs[n_free, j]
+        rows[n_free] = a
+        n_free += 1
+    hid = np.dot(zs[:n_free], w1t)  # (free frames, H)
+    adv_sum = 0.0
+    for f in range(n_free):
         out = b2
         for i in range(hdim):
-            acc = b1[i]
-            for j in range(k):
-                acc += w1[i, j] * z[j]
-            if acc > 0.0:
-                out += w2[i] * acc
-        adv[a] = out
+            h = hid[f, i] + b1[i]
+            if h > 0.0:
+                out += w2[i] * h
+        adv[rows[f]] = out
         adv_sum += out
     value = bv2
     for i in range(hdim):

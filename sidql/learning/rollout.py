@@ -23,14 +23,16 @@ import numpy as np
 @numba.njit(cache=True)
 def greedy_sequences(cost, kmax):
     """Every segment's own greedy gains: ``seq[l, r, :length[l, r]]`` are the rewards (unnormalised)
-    of the first keyframes greedy adds strictly inside (l, r), in order, at most ``kmax``.
+    of the first keyframes greedy adds strictly inside (l, r), in order, at most ``kmax``
+    (``seq`` is (N, N, kmax + 1): -inf follows the last gain).
 
     Segments evolve independently, so greedy over several segments takes, each time, the segment
     whose own next gain is largest: ``seq(l, r) = [g(l, r)] + merge(seq(l, m), seq(m, r))`` with m
     the best split; built bottom-up over segment lengths in O(N^2 (N + kmax)).
     """
     n = cost.shape[0]
-    seq = np.zeros((n, n, kmax))
+    seq = np.empty((n, n, kmax + 1))  # one more: -inf after the last gain, so merges need no
+    seq[:, :, 0] = -np.inf  # test of which run is exhausted (gains are finite)
     length = np.zeros((n, n), np.int64)
     for span in range(2, n):
         for l in range(0, n - span):
@@ -44,58 +46,57 @@ def greedy_sequences(cost, kmax):
                     m = j
             if kmax == 0:
                 continue
-            seq[l, r, 0] = best
-            cnt = 1
+            out = seq[l, r]
+            a = seq[l, m]
+            b = seq[m, r]
+            out[0] = best
             i1 = 0
             i2 = 0
-            n1 = length[l, m]
-            n2 = length[m, r]
-            while cnt < kmax and (i1 < n1 or i2 < n2):
-                if i2 >= n2 or (i1 < n1 and seq[l, m, i1] >= seq[m, r, i2]):
-                    seq[l, r, cnt] = seq[l, m, i1]
-                    i1 += 1
-                else:
-                    seq[l, r, cnt] = seq[m, r, i2]
-                    i2 += 1
-                cnt += 1
-            length[l, r] = cnt
+            count = 1 + min(kmax - 1, length[l, m] + length[m, r])
+            for cnt in range(1, count):  # branch-free: a wins ties, -inf ends a run
+                va = a[i1]
+                vb = b[i2]
+                take_a = va >= vb
+                out[cnt] = va if take_a else vb
+                i1 += take_a
+                i2 += 1 - take_a
+            out[count] = -np.inf
+            length[l, r] = count
     return seq, length
 
 
 @numba.njit(cache=True)
-def _merge(seqs, lens, count, k, out):
-    """The first ``k`` values (at most) of the head-merge of ``count`` descending sequences
-    ``seqs`` (rows, ``lens`` long) into ``out``; returns how many."""
-    pos = np.zeros(count, np.int64)
+def _merge2(a, n1, b, n2, k, out):
+    """The first ``k`` values (at most) of the head-merge of the descending sequences ``a[:n1]``
+    and ``b[:n2]`` (the largest head each time, ties to ``a``) into ``out``, which must not be
+    either of them; returns how many."""
+    i1 = 0
+    i2 = 0
     t = 0
     while t < k:
         best = -np.inf
         bi = -1
-        for i in range(count):
-            if pos[i] < lens[i] and seqs[i, pos[i]] > best:
-                best = seqs[i, pos[i]]
-                bi = i
+        if i1 < n1 and a[i1] > best:
+            best = a[i1]
+            bi = 0
+        if i2 < n2 and b[i2] > best:
+            best = b[i2]
+            bi = 1
         if bi < 0:
             break
         out[t] = best
-        pos[bi] += 1
+        if bi == 0:
+            i1 += 1
+        else:
+            i2 += 1
         t += 1
     return t
 
 
 @numba.njit(cache=True)
-def _pair(a, a_len, b, b_len, two, lens2):
-    """Rows ``a[:a_len]`` and ``b[:b_len]`` into ``two`` (2, width) and their lengths into
-    ``lens2``, for :func:`_merge` (the first row wins ties)."""
-    two[0, :a_len] = a[:a_len]
-    two[1, :b_len] = b[:b_len]
-    lens2[0] = a_len
-    lens2[1] = b_len
-
-
-@numba.njit(cache=True)
 def rollout_values_seq(cost, mask, rem, seq, length):
-    """As :func:`rollout_values`, from the tables of :func:`greedy_sequences` (``kmax >= rem``)."""
+    """As :func:`rollout_values`, from the tables of :func:`greedy_sequences` (``kmax >= rem``;
+    its runs end with -inf)."""
     n = cost.shape[0]
     keys = np.flatnonzero(mask)
     nk = len(keys)
@@ -114,61 +115,48 @@ def rollout_values_seq(cost, mask, rem, seq, length):
     after = np.zeros((nk, width))
     before_len = np.zeros(nk, np.int64)
     after_len = np.zeros(nk, np.int64)
-    two = np.zeros((2, width))
-    lens2 = np.zeros(2, np.int64)
     for j in range(nk - 1):
-        _pair(before[j], before_len[j], seq[keys[j], keys[j + 1]], length[keys[j], keys[j + 1]],
-              two, lens2)  # fmt: skip
-        before_len[j + 1] = _merge(two, lens2, 2, k, before[j + 1])
+        l0, r0 = keys[j], keys[j + 1]
+        before_len[j + 1] = _merge2(before[j], before_len[j], seq[l0, r0], length[l0, r0], k,
+                                    before[j + 1])  # fmt: skip
     for j in range(nk - 2, -1, -1):
-        _pair(seq[keys[j], keys[j + 1]], length[keys[j], keys[j + 1]], after[j + 1],
-              after_len[j + 1], two, lens2)  # fmt: skip
-        after_len[j] = _merge(two, lens2, 2, k, after[j])
-    others = np.zeros((nk - 1, k))
-    others_len = np.zeros(nk - 1, np.int64)
+        l0, r0 = keys[j], keys[j + 1]
+        after_len[j] = _merge2(seq[l0, r0], length[l0, r0], after[j + 1], after_len[j + 1], k,
+                               after[j])  # fmt: skip
+    others = np.empty((nk - 1, k + 1))  # each run ended by -inf, as greedy_sequences' are
     for j in range(nk - 1):
-        _pair(before[j], before_len[j], after[j + 1], after_len[j + 1], two, lens2)
-        others_len[j] = _merge(two, lens2, 2, k, others[j])
+        used = _merge2(before[j], before_len[j], after[j + 1], after_len[j + 1], k, others[j])
+        others[j, used] = -np.inf
     for j in range(nk - 1):
         l0 = keys[j]
         r0 = keys[j + 1]
         for a in range(l0 + 1, r0):
-            total = _merge3_sum(others[j], others_len[j], seq[l0, a], length[l0, a], seq[a, r0],
-                                length[a, r0], k)  # fmt: skip
-            out[a] = total / s0
+            out[a] = _merge3_sum(others[j], seq[l0, a], seq[a, r0], k) / s0
     return out
 
 
 @numba.njit(cache=True)
-def _merge3_sum(s0, n0, s1, n1, s2, n2, k):
-    """Sum of the first ``k`` values of the head-merge (:func:`_merge`'s picks: the largest head,
-    ties to the earlier sequence) of ``s0[:n0]``, ``s1[:n1]``, ``s2[:n2]``, in the order picked,
-    without copying them."""
+def _merge3_sum(s0, s1, s2, k):
+    """Sum of the first ``k`` values of the head-merge (the largest head each time, ties to the
+    earlier sequence) of three descending runs, each ended by -inf (fewer when all three end),
+    in the order picked, without copying them; branch-free picks."""
     i0 = 0
     i1 = 0
     i2 = 0
     total = 0.0
     for _ in range(k):
-        best = -np.inf
-        bi = -1
-        if i0 < n0 and s0[i0] > best:
-            best = s0[i0]
-            bi = 0
-        if i1 < n1 and s1[i1] > best:
-            best = s1[i1]
-            bi = 1
-        if i2 < n2 and s2[i2] > best:
-            best = s2[i2]
-            bi = 2
-        if bi < 0:
+        v0 = s0[i0]
+        v1 = s1[i1]
+        v2 = s2[i2]
+        take0 = v0 >= v1 and v0 >= v2
+        take1 = not take0 and v1 >= v2
+        best = v0 if take0 else (v1 if take1 else v2)
+        if best == -np.inf:
             break
         total += best
-        if bi == 0:
-            i0 += 1
-        elif bi == 1:
-            i1 += 1
-        else:
-            i2 += 1
+        i0 += take0
+        i1 += take1
+        i2 += not (take0 or take1)
     return total
 
 

@@ -78,6 +78,28 @@ def parse_bvh(path: str | os.PathLike, *, motion: bool = True) -> Bvh:
     return parser.finish()
 
 
+def iter_bvh(path: str | os.PathLike, *, max_bytes: int = MAX_BVH_BYTES):
+    """Read a BVH file a chunk of frames at a time: yields :class:`Bvh` pieces (the hierarchy,
+    frame time and ``motion_line`` of the file, ``values`` the rows of one text chunk,
+    :data:`sim.files.TEXT_CHUNK_BYTES`), frame after frame, with the same bounds, checks and
+    one-line errors as :func:`parse_bvh` of the whole file. Memory: one chunk's rows, whatever
+    the file's length. A caller that stops early closes the file (a generator).
+
+    Raises:
+        MotionDataError: as :func:`parse_bvh` (a defect is raised when its chunk is read: the
+            pieces before it have been yielded; a truncated MOTION after the last piece).
+    """
+    path = str(path)
+    with open_regular(path, max_bytes) as f:
+        parser = _BvhParser(path, os.fstat(f.fileno()).st_size, True, stream=True)
+        for first_line, lines in text_lines(f, path, max_bytes):
+            parser.feed(first_line, lines)
+            if parser.state == "frames" and parser.row > parser.base:
+                yield parser.piece(parser.values[: parser.row - parser.base])
+                parser.base = parser.row
+    parser.finish()
+
+
 def number(token: str, path: str, line: int, what: str, bound: float) -> float:
     """``token`` as a finite float of magnitude at most ``bound`` (a strict ASCII decimal)."""
     if not _NUMBER_RE.match(token):
@@ -97,8 +119,10 @@ class _BvhParser:
     blanks (numpy then refuses every token the strict grammar :data:`NUMBER` refuses, tested),
     else line by line, each token matched against :data:`NUMBER`, naming the line."""
 
-    def __init__(self, path: str, size: int, motion: bool):
+    def __init__(self, path: str, size: int, motion: bool, stream: bool = False):
         self.path, self.size, self.want_motion = path, size, motion
+        self.stream = stream  # the frames a chunk at a time (:func:`iter_bvh`), never whole
+        self.base = 0  # the frame of ``values``' first row
         self.state = "hierarchy"
         self.tokens: list[tuple[str, int]] = []
         self.chars = 0
@@ -189,7 +213,7 @@ class _BvhParser:
                 self.header_line,
                 f"Frames: {N:,} of {C} channels cannot fit in a file of {self.size:,} bytes",
             )
-        self.values = np.empty((N, C))
+        self.values = np.empty((0 if self.stream else N, C))
         self.bound = np.array(
             [MAX_OFFSET if c.endswith("position") else MAX_DEGREES
              for j in self.joints for c in j.channels]
@@ -201,6 +225,9 @@ class _BvhParser:
         if not self.want_motion:
             return
         n, N = len(lines), self.n_frames
+        if self.stream:  # this chunk's rows only: at most one a line, none past 'Frames:'
+            self.base = self.row
+            self.values = np.empty((max(min(n, N - self.row), 0), self.values.shape[1]))
         last = n
         while last > 0 and not lines[last - 1].strip():
             last -= 1  # trailing blank lines (the file's end, or the chunk's)
@@ -216,7 +243,7 @@ class _BvhParser:
                     and values.shape == (last, self.values.shape[1])
                     and _within(values, self.bound)
                 ):
-                    self.values[self.row : self.row + last] = values
+                    self.values[self.row - self.base : self.row - self.base + last] = values
                     self.row += last
                     return
         for k, line in enumerate(lines):
@@ -236,7 +263,7 @@ class _BvhParser:
                 f"frame {self.row + 1} has {len(tokens)} values; the hierarchy has {C} channels",
             )
         what = f"frame {self.row + 1}"
-        self.values[self.row] = [
+        self.values[self.row - self.base] = [
             number(t, path, ln, what, b) for t, b in zip(tokens, self.bound, strict=True)
         ]
         self.row += 1
@@ -253,17 +280,21 @@ class _BvhParser:
             want = "'Frames: N'" if self.n_frames is None else "'Frame Time: seconds'"
             raise MotionDataError(path, self.last_line, f"MOTION section ends before {want}")
         values = self.values
-        if not self.want_motion:
+        if not self.want_motion or self.stream:
             values = np.zeros((0, sum(len(j.channels) for j in self.joints)))
-        elif self.row < self.n_frames:
+        if self.want_motion and self.row < self.n_frames:
             raise MotionDataError(
                 path,
                 self.last_line,
                 f"truncated MOTION: {self.row:,} frames of the {self.n_frames:,} that "
                 f"'Frames:' (line {self.header_line}) declares",
             )
+        return self.piece(values)
+
+    def piece(self, values: np.ndarray) -> Bvh:
+        """The file's hierarchy and frame time with the motion table ``values``."""
         return Bvh(
-            path=path,
+            path=self.path,
             joints=tuple(self.joints),
             frame_time=float(self.frame_time),
             values=values,

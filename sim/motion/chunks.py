@@ -1,9 +1,11 @@
 """A trial read, retargeted and resampled a chunk of frames at a time (bounded memory, any length).
 
 :func:`stream_clips` yields consecutive :class:`~sim.motion.clip.Clip` pieces of an ASF + AMC
-trial at ``fps`` on the subject's own skeleton: frame ``n`` of the concatenated pieces is frame
-``n`` of ``load_motion(asf, amc, fps=fps, derivatives=False)``. The AMC is read by
-:func:`sim.acclaim.amc.iter_amc` (one text chunk at a time), and each piece is retargeted with
+trial, or of a BVH file, at ``fps`` on the subject's own skeleton: frame ``n`` of the
+concatenated pieces is frame ``n`` of ``load_motion(asf, amc, fps=fps, derivatives=False)``. The
+AMC is read by :func:`sim.acclaim.amc.iter_amc`, the BVH by :func:`sim.bvh.stream.iter_take`
+(one text chunk at a time; a BVH whose rate ``fps`` does not divide is refused: it must be
+resampled whole, :func:`~sim.motion.ingest.load_motion`), and each piece is retargeted with
 :data:`MARGIN` source frames of context on each side, so its joint velocities (central
 differences, never across a pose jump) see the same neighbours as in the whole take. A take of at
 most ``chunk_frames`` output frames plus the margin is retargeted in one piece, exactly as
@@ -26,11 +28,14 @@ import numpy as np
 
 from sim.acclaim.amc import MAX_STREAMED_AMC_BYTES, iter_amc
 from sim.acclaim.records import Motion
+from sim.bvh.reader import parse_bvh
+from sim.bvh.records import MAX_BVH_BYTES
+from sim.bvh.stream import iter_take
 from sim.errors import UsageError
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.ingest import clip_from_qpos, resample_step
 from sim.motion.retarget import motion_to_qpos
-from sim.motion.trial import CMU_FPS, subject_model
+from sim.motion.trial import CMU_FPS, subject_model, trial_files
 
 #: Source frames of context on each side of a piece (pose-jump windows and velocity stencils).
 MARGIN = 64
@@ -43,7 +48,7 @@ def stream_clips(
     fps: float = 30.0,
     chunk_frames: int = 1800,
     source_fps: float = CMU_FPS,
-    max_bytes: int = MAX_STREAMED_AMC_BYTES,
+    max_bytes: int | None = None,
     velocities: bool = True,
 ):
     """Yield the trial as consecutive clips of ``chunk_frames`` frames at ``fps`` (the last one
@@ -51,14 +56,30 @@ def stream_clips(
     up), no source derivatives (see the module docstring); ``velocities=False``: positions only,
     velocities zero (:func:`~sim.motion.ingest.clip_from_qpos`).
 
+    Args:
+        asf, amc: the subject's skeleton and motion, or a BVH file as either (or both; its
+            length unit detected, y up); ``source_fps``: the AMC's rate (a BVH's is its own).
+        max_bytes: the largest file read; None: the format's (AMC
+            :data:`~sim.acclaim.amc.MAX_STREAMED_AMC_BYTES`, BVH
+            :data:`~sim.bvh.records.MAX_BVH_BYTES`, the whole-file reader's bound).
+
     Raises:
         MotionDataError: malformed files (naming file and line), when the bad chunk is read.
         UsageError: an output rate that does not divide the source rate; ``chunk_frames`` < 1.
     """
+    bvh = trial_files(asf, amc)
+    if bvh is not None:
+        source_fps = parse_bvh(bvh, motion=False).fps  # the hierarchy and header only
     step = resample_step(source_fps, fps)
     if chunk_frames < 1:
         raise UsageError(f"chunk_frames must be >= 1; got {chunk_frames}")
-    subject, model = subject_model(asf)
+    subject, model = subject_model(bvh or asf)
+    if bvh is None:
+        source = iter_amc(amc, subject, max_bytes=max_bytes or MAX_STREAMED_AMC_BYTES)
+    else:
+        takes = iter_take(bvh, max_bytes=max_bytes or MAX_BVH_BYTES)
+        source = (take.motion for take in takes)
+    amc = bvh or amc
     names, parents = point_names(subject), point_parents(subject)
     data = mujoco.MjData(model)
     margin = -(-MARGIN // step) * step  # whole output frames
@@ -82,7 +103,7 @@ def stream_clips(
         count = -(-(stop - done) // step)
         return replace(clip.slice(first, first + count), start_frame=done)
 
-    for piece in iter_amc(amc, subject, max_bytes=max_bytes):
+    for piece in source:
         pieces.append(piece)
         end += piece.n_frames
         while end > done + size + margin:  # a whole piece with its margins, and more

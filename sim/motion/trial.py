@@ -23,6 +23,7 @@ from sim.acclaim.writer import write_amc, write_asf
 from sim.bvh.convert import to_acclaim
 from sim.bvh.reader import parse_bvh
 from sim.bvh.records import MAX_BVH_BYTES
+from sim.bvh.stream import read_skeleton as bvh_skeleton
 from sim.bvh.writer import write_bvh
 from sim.errors import MotionDataError, UsageError
 from sim.files import read_regular
@@ -39,13 +40,14 @@ def is_bvh(path: str | os.PathLike | None) -> bool:
 
 
 def read_skeleton(path: str | os.PathLike, *, unit: str | None = None, up: str = "y") -> Skeleton:
-    """The skeleton of an ASF file or of a BVH file (``unit``, ``up``: :func:`sim.bvh.convert.to_acclaim`).
+    """The skeleton of an ASF file or of a BVH file (``unit``, ``up``: :func:`sim.bvh.convert.to_acclaim`;
+    the BVH read a chunk at a time, :func:`sim.bvh.stream.read_skeleton`).
 
     Raises:
         MotionDataError: a malformed or unreadable file (one line naming file and line).
     """
     if is_bvh(path):
-        return to_acclaim(parse_bvh(path), unit=unit, up=up).skeleton
+        return bvh_skeleton(path, unit=unit, up=up)
     return parse_asf(path)
 
 

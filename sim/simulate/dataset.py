@@ -35,6 +35,7 @@ from sim.motion.dataset import DatasetSummary, find_trials
 from sim.motion.trial import read_trial
 from sim.simulate.generate import (
     ALL_KINDS,
+    CLIP_SECONDS,
     KINDS,
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
@@ -44,6 +45,7 @@ from sim.simulate.generate import (
 )
 from sim.simulate.journal import JOURNAL, clip_name, open_journal  # noqa: F401 (JOURNAL: its name)
 from sim.simulate.journal import read as read_journal
+from sim.simulate.validate import chosen_controller
 
 
 def readable_trials(
@@ -93,11 +95,12 @@ def iter_tasks(
     *,
     seed: int = 0,
     kinds: tuple[str, ...] = KINDS,
-    seconds: float = 4.0,
+    seconds: float = CLIP_SECONDS,
     fps: float = 30.0,
     samples: int = 0,
-    controller: str = "plain",
+    controller: str = SYNTH_DEFAULT_CONTROLLER,
     assist: float = 0.0,
+    threads: int = 1,
 ) -> Iterator[SynthTask]:
     """The plan: an endless stream of tasks cycling through ``kinds``; real-motion kinds take
     ``trials`` in seeded shuffled rounds (every trial once per round). Every prefix is the same
@@ -113,7 +116,8 @@ def iter_tasks(
                 order = [trials[j] for j in rng.permutation(len(trials))]
             t = order.pop()
             asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
-        yield SynthTask(kind, seed, i, asf, amc, seconds, fps, samples, controller, assist)
+        yield SynthTask(kind, seed, i, asf, amc, seconds, fps, samples, controller, assist,
+                        threads)  # fmt: skip
         i += 1
 
 
@@ -123,10 +127,10 @@ def plan_tasks(
     *,
     seed: int = 0,
     kinds: tuple[str, ...] = KINDS,
-    seconds: float = 4.0,
+    seconds: float = CLIP_SECONDS,
     fps: float = 30.0,
     samples: int = 0,
-    controller: str = "plain",
+    controller: str = SYNTH_DEFAULT_CONTROLLER,
     assist: float = 0.0,
 ) -> tuple[list[SynthTask], list[dict]]:
     """The first ``n`` tasks of the plan (:func:`iter_tasks`) and the skipped trials."""
@@ -143,11 +147,12 @@ def synthesize(
     *,
     seed: int = 0,
     kinds: tuple[str, ...] = KINDS,
-    seconds: float = 4.0,
+    seconds: float = CLIP_SECONDS,
     fps: float = 30.0,
     samples: int = 0,
-    controller: str = SYNTH_DEFAULT_CONTROLLER,
+    controller: str | None = None,
     assist: float = 0.0,
+    threads: int = 1,
     workers: int | None = None,
     ray: str | None = None,
     progress: bool = True,
@@ -165,9 +170,13 @@ def synthesize(
     ``summary.rejected`` counts, per kind, the clips over the budget before the last one kept
     (also in ``index.json``).
 
-    ``controller``: of the real-motion kinds (``sim.simulate.generate.SynthTask``; ``samples`` >
-    0: the sampling tracker); ``assist``: their root assistance bound [body weight], 0 (none)
-    unless asked for (with the plain tracker only).
+    ``controller``: of the real-motion kinds (``sim.simulate.generate.SYNTH_CONTROLLERS``;
+    None: ``SYNTH_DEFAULT_CONTROLLER``, ``eval --simulate``'s, the sampler); ``samples``: the
+    sampler's rollouts per window (0: its default count, ``sim.simulate.validate.
+    chosen_controller``; > 0 with no ``controller``: the sampler); both are resolved here and
+    recorded in the journal and the index. ``threads``: the sampler's rollout threads in each
+    worker (the clips do not depend on it). ``assist``: the real-motion kinds' root assistance
+    bound [body weight], 0 (none) unless asked for (with the plain tracker only).
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
@@ -176,11 +185,16 @@ def synthesize(
         raise UsageError(f"the number of clips must be a whole number >= 1; got {n!r}")
     require_positive(seconds, "seconds")
     require_positive(fps, "fps")
-    if controller not in SYNTH_CONTROLLERS[:2]:
-        raise UnknownNameError("controller", controller, SYNTH_CONTROLLERS[:2])
-    if not 0 <= assist <= 1 or (assist and (samples or controller != "plain")):
+    if controller is not None and controller not in SYNTH_CONTROLLERS:
+        raise UnknownNameError("controller", controller, SYNTH_CONTROLLERS)
+    if samples and controller not in (None, "sampling"):
+        raise UsageError(f"{samples} samples: only the sampling controller samples")
+    controller, samples = chosen_controller(samples, controller)
+    if not 0 <= assist <= 1 or (assist and controller != "plain"):
         raise UsageError(f"assistance {assist} BW: 0 .. 1, and only for the plain tracker")
-    task = {"samples": samples, "controller": controller, "assist": float(assist)}
+    require_positive(threads, "threads")
+    task = {"samples": samples, "controller": controller, "assist": float(assist),
+            "threads": int(threads)}  # fmt: skip
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
@@ -191,6 +205,8 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task_kw, workers, r
     start = time.perf_counter()
     out_dir = Path(out_dir)
     trials, skipped_inputs = readable_trials(root, kinds, workers=workers, ray=ray)
+    threads = task_kw["threads"]
+    task_kw = {k: v for k, v in task_kw.items() if k != "threads"}
     params = {
         "source": None if root is None else str(Path(root).resolve()),
         "n": n, "seed": seed, "kinds": list(kinds), "seconds": seconds, "fps": fps,
@@ -208,7 +224,8 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task_kw, workers, r
         return len(kept) >= n
 
     def pending_tasks() -> Iterator[SynthTask]:
-        stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps, **task_kw)
+        stream = iter_tasks(trials, seed=seed, kinds=kinds, seconds=seconds, fps=fps,
+                            threads=threads, **task_kw)  # fmt: skip
         for task in stream:
             if task.index >= limit or enough():
                 return

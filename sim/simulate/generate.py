@@ -1,12 +1,14 @@
 """Synthetic clips from MuJoCo's forward simulation, in the ``sidql dataset`` clip format.
 
-Kinds (each clip's parameters are drawn from ``numpy.random.default_rng(seed)``):
+Clips last :data:`CLIP_SECONDS` (the protocol's 60 frames at 30 fps) unless a task says
+otherwise. Kinds (each clip's parameters are drawn from its own seed, :func:`episode_rng`):
 
-* ``track``: perturbed tracking of a real trial: the most active of 4 random windows
-  (:func:`most_active_window`) time-warped 0.5-2x (a third log-uniform over 0.5-2x, two thirds
-  uniform over 1.25-2x: velocity-rich on purpose), body size 0.85-1.15x (mass
-  scaling with its cube), controller stiffness 0.6-1.5x, 0-2 pushes of 100-300 N for 0.1-0.2 s
-  on the thorax or the pelvis (impulse recorded);
+* ``track``: perturbed tracking of a real trial: the fastest of 4 random windows
+  (:func:`fastest_window`) time-warped 1-1.6x (:data:`TRACK_SPEED`: velocity-rich on purpose,
+  never slower than recorded unless the trial is too short to fill the clip), body size
+  0.85-1.15x (mass scaling with its cube), controller stiffness 0.6-1.5x, 0-1 push in a 2 s
+  clip, 0-2 in 4 s (:data:`PUSH_SECONDS`) of 100-300 N for 0.1-0.2 s on the thorax or the
+  pelvis (impulse recorded);
 * ``fall``: falls and recoveries: a real trial sped up 1-2x, a push for 0.2 s and the controller
   weakened from the push on, then restored (the recovery attempt); one severity s ~ U(0, 1) sets
   the push (250-900 N), the weakening (to 60-5 % of its effort) and its length (0.3-1.5 s), so
@@ -45,9 +47,13 @@ from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
 from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
+from sim.simulate.validate import CONTROLLERS, chosen_controller
 from sim.simulate.wholebody import track_wholebody
 
 KINDS = ("track", "fall")  # the default mix: real motion, no assistance
+#: [s] a clip's length unless asked otherwise: the protocol's 60 frames at 30 fps (the length
+#: the controller's figures are measured on; longer clips fall more often)
+CLIP_SECONDS = 2.0
 # a clip is "physical" when its mean root assistance force is within this share of its body
 # weight and its mean root assistance torque within this share of body weight x 1 m
 PHYSICAL_BUDGET = 0.05
@@ -91,14 +97,22 @@ REAL_KINDS = ("track", "fall", "follow")
 # whole body weight, recorded per tick and per frame; the real-motion kinds get none unless a
 # task asks for it (``SynthTask.assist``)
 PROCEDURAL_ASSIST = 1.0
-#: windows drawn per clip of a kind, the most active kept (:func:`most_active_window`): the
-#: ``track`` kind is velocity-rich on purpose, the others take one window at random
+#: windows drawn per clip of a kind, the fastest kept (:func:`fastest_window`): the ``track``
+#: kind is velocity-rich on purpose, the others take one window at random
 WINDOW_CANDIDATES = {"track": 4}
-#: controllers of the real-motion kinds (``sampling``: ``SynthTask.samples`` > 0)
-SYNTH_CONTROLLERS = ("plain", "wholebody", "sampling")
-#: ``synth``'s controller without ``--samples``: the plain tracker, not eval's default sampler,
-#: whose cost (about 20x per clip) a data run asks for explicitly with ``--samples N``
-SYNTH_DEFAULT_CONTROLLER = "plain"
+#: [s] the ``track`` kind draws 0 to 1 + (its length // this) pushes: 0-1 in a 2 s clip, 0-2
+#: in 4 s (a short clip is not pushed more often than a long one)
+PUSH_SECONDS = 4.0
+#: the ``track`` kind's time warp, uniform over this range: faster than recorded (a source too
+#: short to fill a clip at the drawn warp is played at the fastest warp that fills it)
+TRACK_SPEED = (1.0, 1.6)
+#: controllers of the real-motion kinds: ``eval --simulate``'s (``sim.simulate.validate``)
+SYNTH_CONTROLLERS = CONTROLLERS
+#: the controller of the real-motion kinds unless a task names one: ``eval --simulate``'s
+#: default (``sim.simulate.validate.chosen_controller``: the sampler, at its default count of
+#: rollouts), no assistance; the plain tracker costs about a twentieth of it but falls in
+#: nearly every clip (docs/results/synth.md)
+SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -120,23 +134,32 @@ class SynthTask:
     index: int
     asf: str | None = None
     amc: str | None = None
-    seconds: float = 4.0
+    seconds: float = CLIP_SECONDS
     fps: float = 30.0
-    samples: int = 0  # > 0: real-motion kinds use the sampling tracker, no assistance
-    controller: str = "plain"  # of the real-motion kinds without samples: plain or wholebody
+    samples: int = 0  # the sampler's rollouts per window; 0: its default count
+    controller: str = SYNTH_DEFAULT_CONTROLLER  # of the real-motion kinds (SYNTH_CONTROLLERS)
     assist: float = 0.0  # root assistance bound [body weight] of the real-motion kinds: none
+    threads: int = 1  # the sampler's rollouts run on this many threads (same result for any)
 
 
-def task_controller(task: SynthTask) -> str:
-    """The controller that tracks ``task``: the plain tracker for procedural motion (its
-    assistance), else the sampling tracker when ``task.samples`` > 0, else ``task.controller``."""
+def task_controller(task: SynthTask) -> tuple[str, int]:
+    """The controller that tracks ``task`` and its sample count (0 but for the sampler): the
+    plain tracker for procedural motion (its assistance), else ``task.controller`` (the
+    sampler at ``task.samples`` rollouts per window, its default count where 0:
+    ``sim.simulate.validate.chosen_controller``).
+
+    Raises:
+        UnknownNameError: an unknown controller.
+        UsageError: samples asked of a controller that does not sample.
+    """
     if task.kind == "procedural":
-        return "plain"
-    if task.samples:
-        return "sampling"
-    if task.controller not in SYNTH_CONTROLLERS[:2]:
-        raise UnknownNameError("controller", task.controller, SYNTH_CONTROLLERS[:2])
-    return task.controller
+        return "plain", 0
+    if task.controller not in SYNTH_CONTROLLERS:
+        raise UnknownNameError("controller", task.controller, SYNTH_CONTROLLERS)
+    if task.samples and task.controller != "sampling":
+        raise UsageError(f"{task.samples} samples: only the sampling controller samples, not "
+                         f"{task.controller!r}")  # fmt: skip
+    return chosen_controller(task.samples, task.controller)
 
 
 def episode_seed(task: SynthTask) -> int:
@@ -157,15 +180,12 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
     """The generation parameters of ``task`` (JSON-ready), drawn from ``rng``."""
     p: dict = {"kind": task.kind, "seed": episode_seed(task), "run_seed": task.seed}
     if task.kind == "track":
-        # velocity-rich on purpose: a third log-uniform over 0.5-2x, two thirds 1.25-2x
-        slow = rng.random() < 1 / 3
-        p["speed"] = float(
-            np.exp(rng.uniform(np.log(0.5), np.log(2.0))) if slow else rng.uniform(1.25, 2.0)
-        )
+        # velocity-rich on purpose, never slower than recorded (TRACK_SPEED)
+        p["speed"] = float(rng.uniform(*TRACK_SPEED))
         p["scale"] = float(rng.uniform(0.85, 1.15))
         p["gain"] = float(rng.uniform(0.6, 1.5))
         pushes = []
-        for _ in range(int(rng.integers(0, 3))):
+        for _ in range(int(rng.integers(0, 2 + int(task.seconds // PUSH_SECONDS)))):
             d = rng.normal(size=2)
             d /= np.linalg.norm(d)
             mag = rng.uniform(100, 300)
@@ -210,7 +230,7 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         raise UnknownNameError("kind", task.kind, ALL_KINDS)
     if not 0 <= task.assist <= 1:
         raise UsageError(f"assistance {task.assist} body weights: expected 0 .. 1")
-    p["controller"] = task_controller(task)
+    p["controller"] = task_controller(task)[0]
     if p["controller"] == "wholebody":  # its feedback gains are its own: no stiffness factor
         p["gain"] = 1.0
     p["assist_limit"] = PROCEDURAL_ASSIST if task.kind == "procedural" else float(task.assist)
@@ -288,7 +308,8 @@ def reference_motion(
             f" time warp: shorter than one {task.seconds:g} s clip"
         )  # fmt: skip
     starts = rng.integers(0, len(warped) - n + 1, WINDOW_CANDIDATES.get(task.kind, 1))
-    start = int(starts[0]) if len(starts) == 1 else most_active_window(warped, n, starts)
+    start = int(starts[0]) if len(starts) == 1 else fastest_window(body_points(model, warped),
+                                                                   n, starts)  # fmt: skip
     p["source"] = str(task.amc)
     p["start_tick"] = start
     window = warped[start : start + n]
@@ -298,15 +319,26 @@ def reference_motion(
     return flat_soles(model, on_floor(model, window))
 
 
-def most_active_window(qpos: np.ndarray, n: int, starts: np.ndarray) -> int:
-    """Of the windows ``qpos[s : s + n]`` (qpos (T, nq) at any rate), the start ``s`` of
-    ``starts`` whose hinges move most: the largest sum of |hinge angle change| [rad] over the
-    window (the first of equals)."""
-    step = np.abs(np.diff(qpos[:, 7:], axis=0)).sum(axis=1)  # (T - 1,) per tick
-    total = np.concatenate([[0.0], np.cumsum(step)])
+def fastest_window(points: np.ndarray, n: int, starts: np.ndarray) -> int:
+    """Of the windows ``points[s : s + n]`` (points (T, P, 3) [m] sampled at one rate), the
+    start ``s`` of ``starts`` whose points move fastest: the largest 95th percentile, over the
+    window's samples and points, of each point's step between consecutive samples (its speed
+    times the sampling interval: the rate cancels); the first of equals."""
+    step = np.linalg.norm(np.diff(points, axis=0), axis=-1)  # (T - 1, P)
     starts = np.asarray(starts, dtype=np.int64)
-    motion = total[starts + n - 1] - total[starts]
-    return int(starts[int(np.argmax(motion))])
+    score = [np.percentile(step[s : s + n - 1], 95) for s in starts]
+    return int(starts[int(np.argmax(score))])
+
+
+def body_points(model, qpos: np.ndarray) -> np.ndarray:
+    """(T, B - 1, 3) [m] the origin of every body but the world at each ``qpos`` (T, nq)."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), model.nbody - 1, 3))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[t] = data.xpos[1:]
+    return out
 
 
 def simulate_episode(
@@ -328,13 +360,14 @@ def simulate_episode(
     if p["controller"] == "wholebody":
         return track_wholebody(model, ref, **tracking)
     if p["controller"] == "sampling":  # the body's own doing, or a fall
+        samples = task_controller(task)[1]
         p["sampling"] = {
-            "samples": task.samples,
+            "samples": samples,
             "lookahead": LOOKAHEAD,
             "root_xy_weight": CostWeights().root_xy,
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
-        kw = {"samples": task.samples, "seed": p["sampling"]["seed"]}
+        kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads}
         return sample_track(model, ref, **kw, **tracking)
     return track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
 
@@ -439,5 +472,7 @@ def simulated_clip(model, skeleton, qpos, qvel, fps: float, source: str) -> Clip
 
 
 def task_dict(task: SynthTask) -> dict:
-    """JSON-ready copy of ``task``."""
-    return asdict(task)
+    """JSON-ready copy of ``task`` without ``threads`` (how it runs, not what it gives)."""
+    d = asdict(task)
+    del d["threads"]
+    return d

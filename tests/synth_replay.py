@@ -1,0 +1,84 @@
+"""The replay oracle of synthetic episodes (shared by the synth tests): MuJoCo alone steps the
+stored actions and wrenches on the stored MJCF's model from the stored first state."""
+
+from __future__ import annotations
+
+import json
+
+import mujoco
+import numpy as np
+
+from sim.model.mass import DEFAULT_BODY_MASS_KG
+from sim.motion.clip import load_extra, load_npz
+from sim.simulate.episode import array_text
+from sim.simulate.model import human_torque_limit
+
+REAL = ("track", "fall", "follow")
+PER_KIND = 20
+SECONDS = 1.0  # long enough for the pushes of track (from 0.3 s) and many of fall (0.5-1.5 s)
+
+
+def oracle_replay(labels: dict, limits: np.ndarray):
+    """Step the stored actions and wrenches one physics step at a time on the stored MJCF's
+    model (MuJoCo alone, nothing of ours); return the states before each action and after the
+    last, and the largest |hinge actuator torque| over its limit seen at any step."""
+    model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
+    data = mujoco.MjData(model)
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    mujoco.mj_setState(model, data, labels["sim_initial_state"], spec)
+    actions = labels["sim_actions"]
+    qpos, qvel, worst = [], [], 0.0
+    for k in range(len(actions)):
+        qpos.append(data.qpos.copy())
+        qvel.append(data.qvel.copy())
+        data.ctrl[:] = actions[k]
+        data.xfrc_applied[:] = labels["sim_xfrc_applied"][k]
+        data.qfrc_applied[:] = labels["sim_qfrc_applied"][k]
+        for _ in range(int(labels["sim_frame_skip"])):
+            mujoco.mj_step(model, data)
+            worst = max(worst, float(np.max(np.abs(data.actuator_force) / limits)))
+    qpos.append(data.qpos.copy())
+    qvel.append(data.qvel.copy())
+    return np.array(qpos), np.array(qvel), worst, model
+
+
+def check_replays(out, written, kinds) -> dict:
+    """Every clip of ``written`` replays bit for bit within the human limits (the assertions
+    below); returns counts of what the clips held."""
+    count = {k: 0 for k in kinds} | {"pushed": 0, "assisted": 0, "strong": 0, "weakened": 0}
+    for r in written:
+        path = out / r["file"]
+        labels, clip = load_extra(path, "sim_"), load_npz(path)
+        generation = json.loads(array_text(labels["sim_generation"]))
+        assert generation == r["generation"]  # the episode carries its own parameters
+        mass = DEFAULT_BODY_MASS_KG * generation["scale"] ** 3
+        names = clip.joint_names
+        limits = np.array([human_torque_limit(n, mass) for n in names])
+        q, v, worst, model = oracle_replay(labels, limits)
+        assert np.array_equal(q, labels["sim_tick_qpos"]), r["file"]
+        assert np.array_equal(v, labels["sim_tick_qvel"]), r["file"]
+        T = len(labels["sim_actions"])
+        assert T == round(SECONDS * 120) and int(labels["sim_frame_skip"]) == 4
+        assert np.array_equal(q[: 4 * clip.n_frames : 4], clip.qpos)  # the clip's frames
+        # human strength: the body's limits are the table's (never times a gain), and no
+        # physics step of the replay applied more
+        assert [model.actuator(i).name for i in range(model.nu)] == list(names)
+        body = model.actuator_forcerange[:, 1]  # (the MJCF's 6 digits, rounded down)
+        assert np.all(body <= limits) and np.all(body >= limits * (1 - 1e-5))
+        assert np.array_equal(labels["sim_torque_limit"], model.actuator_forcerange[:, 1])
+        assert worst <= 1 + 1e-12
+        lo, hi = model.actuator_ctrlrange.T  # actions in the documented, bounded space
+        assert np.all((labels["sim_actions"] >= lo) & (labels["sim_actions"] <= hi))
+        # no help unless asked for: only the procedural kind asks (and is labelled so)
+        helped = bool(np.any(labels["sim_qfrc_applied"]))
+        assert (generation["assist_limit"] > 0) == (r["subject"] == "procedural")
+        assert not helped or generation["assist_limit"] > 0
+        count[r["subject"]] += 1
+        count["pushed"] += bool(np.any(labels["sim_xfrc_applied"]))
+        count["assisted"] += helped
+        count["strong"] += generation["gain"] > 1.2
+        count["weakened"] += any(w["start"] < SECONDS - 0.1 for w in generation["weakenings"])
+    assert all(count[k] >= PER_KIND for k in kinds), count
+    seeds = [r["generation"]["seed"] for r in written]
+    assert len(set(seeds)) == len(seeds)  # a seed per episode, not the run's
+    return count
