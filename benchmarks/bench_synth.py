@@ -94,6 +94,9 @@ EARLIER = {
         ("sampler, 32 samples, 2 s clips, 1-1.6x, the fastest windows, 0-2 pushes per track "
          "clip", "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 20 "
          "--workers 1 --no-speed --keep /tmp/synthx/new`", 20, 9, 1.25, 430, 235),
+        ("sampler, 32 samples, no balance feedback, 2 s clips, 0-1 pushes per track clip",
+         "2026-11-26", "`python benchmarks/bench_synth.py --data /work/shared/cmu --n 20 "
+         "--workers 1 --no-speed --keep /tmp/synthx/push2`", 20, 9, 1.19, 409, 235),
     ],
     "synth_sampled": [
         ("sampler, 64 samples", "2026-11-25", "`python benchmarks/bench_synth.py --data "

@@ -46,7 +46,7 @@ from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
 from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
-from sim.simulate.sampling import LOOKAHEAD, CostWeights, sample_track
+from sim.simulate.sampling import BALANCE, LOOKAHEAD, CostWeights, sample_track
 from sim.simulate.validate import CONTROLLERS, chosen_controller
 from sim.simulate.wholebody import track_wholebody
 
@@ -365,6 +365,7 @@ def simulate_episode(
             "samples": samples,
             "lookahead": LOOKAHEAD,
             "root_xy_weight": CostWeights().root_xy,
+            "balance": asdict(BALANCE) if BALANCE is not None else None,
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
         kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads}
