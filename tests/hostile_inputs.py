@@ -359,7 +359,13 @@ def _sidq_case(seeds: Seeds, rng) -> Case:
         packed = lzma.compress(bytes(raw), format=lzma.FORMAT_ALONE, filters=filt)
         new = data[:at] + struct.pack("<I", w) + packed + data[-4:]
         ops = [f"{op}:{len(raw)}:{w}"]
-    if rng.randrange(10) < 8:
+    return _stream_case(rng, "sidq", new, ops)
+
+
+def _stream_case(rng, kind: str, new: bytes, ops: list, fixable: bool = True) -> Case:
+    """The case of a damaged stream ``new`` as ``s.sidq``: its CRC made right again in 8 of 10
+    (where ``fixable``), or the file swapped for a special one (a link, a folder, ...)."""
+    if rng.randrange(10) < 8 and fixable:
         new = _fix_crc(new)
         ops.append("crc")
     files = {"s.sidq": new}
@@ -367,7 +373,7 @@ def _sidq_case(seeds: Seeds, rng) -> Case:
     if special:
         files["s.sidq"] = special
         ops.append(f"special:{special[-1]}")
-    return Case("sidq", files, "s.sidq", ops)
+    return Case(kind, files, "s.sidq", ops)
 
 
 # --- clip .npz -----------------------------------------------------------------------------------

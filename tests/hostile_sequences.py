@@ -21,7 +21,7 @@ import struct
 import zlib
 
 import numpy as np
-from hostile_inputs import Case, _fix_crc, _long_stream, _pick, _sidq_case, _special
+from hostile_inputs import Case, _long_stream, _pick, _sidq_case, _stream_case
 
 U32 = (0, 1, 2, 23, 255, 1 << 16, (64 << 20) + 1, (1 << 31) - 1, (1 << 32) - 1)
 
@@ -111,15 +111,7 @@ def sidm_case(seeds, rng) -> Case:
     else:  # cut, or a tail
         cut = rng.randrange(len(data))
         new = data[:cut] if rng.randrange(2) else data + bytes(1 + rng.randrange(64))
-    if rng.randrange(10) < 8 and len(new) > 4:
-        new = _fix_crc(new)
-        ops.append("crc")
-    files = {"s.sidq": new}
-    special = _special(rng)
-    if special:
-        files["s.sidq"] = special
-        ops.append(f"special:{special[-1]}")
-    return Case("sidm", files, "s.sidq", ops)
+    return _stream_case(rng, "sidm", new, ops, fixable=len(new) > 4)
 
 
 def read_sidm(path, folder, _args) -> list:
