@@ -15,11 +15,12 @@ from keyframe_synth import piecewise_clip, smooth_clip
 
 from sidql.codec import format as sidq
 from sidql.codec.decode import decode_to_reconstruction, decoded_chart, reconstruct_stream
+from sidql.codec.dpcm import RDO_BAND
 from sidql.codec.encode import encode_series
 from sidql.codec.entropy import decode_integers, encode_integers, estimate_size
 from sidql.codec.plan import plan, position_band_costs, position_weights, subtree_sizes
 from sidql.codec.positions import chart_points, position_errors
-from sidql.codec.quantise import RDO_BAND, PositionQuantiser
+from sidql.codec.quantise import PositionQuantiser
 from sidql.commands.main import main
 from sidql.keyframes.spherical import chart, protocol_indices
 from sim.errors import MotionDataError, UnmetTargetError, UsageError

@@ -42,7 +42,7 @@ PREDICTOR = 0.5
 #: measured best against 0.5 and 0.75 on the CMU trials of ``../shared``.
 ROOT_PREDICTOR = 1.0
 #: each bone's keyframe value aims from its decoded parent point at its true point (see
-#: :func:`sidql.codec.quantise._dpcm`): errors stop piling up down the chain.
+#: :func:`sidql.codec.dpcm.dpcm`): errors stop piling up down the chain.
 AIM = True
 #: the subtree size's exponent in the quantiser's levers with aiming (k / 16 in the stream):
 #: 1/8 measured best against 1/16, 1/4 and 3/8 on the CMU trials of ``../shared`` with the

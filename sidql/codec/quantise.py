@@ -22,17 +22,17 @@ Every dequantised value is computed in float64 from the stored float32 parameter
 function on both sides, so the encoder knows exactly what the decoder will see.
 
 :class:`PositionQuantiser` is the position coding's (coding 2): a step per channel from its effect
-on point positions, values predicted along the keyframes in closed loop (:func:`_dpcm`, one
-compiled function for both directions), integer residuals of any size.
+on point positions, values predicted along the keyframes in closed loop (:mod:`sidql.codec.dpcm`,
+one compiled function for both directions), integer residuals of any size.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
+from sidql.codec.dpcm import PARTNER_RATE, PARTNER_WEIGHTS, dpcm
 from sidql.codec.plan import subtree_sizes
 from sim.errors import UsageError
 
@@ -154,134 +154,11 @@ def fit_quantiser(
     return Quantiser(n_bones, lo, step, rate_step, bits)
 
 
-#: phi of a bone is quantised with a step divided by ``max(sin(theta), SIN_FLOOR)`` (its effect on
-#: positions), capped at :data:`MAX_PHI_STEP` [rad] so the azimuth stays continuous near a pole.
-SIN_FLOOR = 0.05
-MAX_PHI_STEP = 0.5
-
-
 #: exponent of the subtree size n_b in a channel's lever (see :class:`PositionQuantiser`) when
 #: the stream does not say (version 2 streams): with each value quantised on its own, the errors
 #: of the bones above a point add like independent noise, so a point's error grows with the
 #: square root of their number. Version 3 streams carry their exponent.
 SUBTREE_EXPONENT = 0.5
-#: the partner predictor (see :func:`_dpcm`): its adaptation rate and the range of its weights.
-PARTNER_RATE = 0.5
-#: the encoder rounds a residual whose magnitude is a power of two one step towards zero (one
-#: bit-length class down, a bit or more saved) when that moves the value by at most 0.5 + this
-#: many steps; 0.1 measured best against 0, 0.2 and 0.3 on the CMU trials of ``../shared``.
-RDO_BAND = 0.1
-PARTNER_WEIGHTS = (-0.5, 1.5)
-
-
-@numba.njit(cache=True)
-def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-              lengths, parents, innov, kappa, err, aim, root_rho):  # fmt: skip
-    """Keyframe w of :func:`_dpcm`: channels root first, then bone by bone (parents first),
-    theta before phi. With ``aim``, ``err`` (J, 3) holds the decoded points' errors [m] to first
-    order, and a bone's targets are its true angles minus its parent point's error along the
-    bone's theta and phi directions (``basis[w, b]``) over its length (and sin theta, floored at
-    SIN_FLOOR, for phi), each change capped at 0.5 rad."""
-    D = codes.shape[1]
-    P = partners.shape[1]
-    ratio = 0.0
-    if w >= 2:
-        ratio = min((keys[w] - keys[w - 1]) / (keys[w - 1] - keys[w - 2]), 2.0)
-    target_phi = 0.0
-    for i in range(D):
-        d = 2 * M + i if i < 3 else (i - 3) // 2 + M * ((i - 3) % 2)
-        pred = 0.0
-        if w == 1:
-            pred = out[0, d]
-        elif w >= 2:
-            slope = root_rho if d >= 2 * M else rho
-            pred = out[w - 1, d] + slope * ratio * (out[w - 1, d] - out[w - 2, d])
-        temporal = pred
-        norm = 1e-8
-        for j in range(P):
-            pc = partners[d, j]
-            if w >= 1 and pc >= 0:
-                pred += kappa[d, j] * innov[pc]
-                norm += innov[pc] * innov[pc]
-        step = scale[d]
-        if M <= d < 2 * M:
-            step = min(step / max(np.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
-        if encode:
-            target = values[w, d]
-            if aim and d < M:  # theta; phi's target comes with it
-                p = parents[d + 1]
-                L = max(lengths[d], 1e-6)
-                g = basis[w, d]
-                e0, e1, e2 = err[p, 0], err[p, 1], err[p, 2]
-                dt = -(e0 * g[0] + e1 * g[1] + e2 * g[2]) / L
-                dp = -(e0 * g[3] + e1 * g[4]) / (L * max(-g[2], SIN_FLOOR))
-                target += min(max(dt, -0.5), 0.5)
-                target_phi = values[w, M + d] + min(max(dp, -0.5), 0.5)
-            elif aim and d < 2 * M:
-                target = target_phi
-            q = (target - pred) / step
-            r = np.int64(np.floor(q + 0.5))
-            a = abs(r)
-            if a > 0 and (a & (a - 1)) == 0 and a - abs(q) > 0.5 - RDO_BAND:
-                r -= 1 if r > 0 else -1  # one class down: a bit or more saved, little error
-            codes[w, d] = r
-        out[w, d] = pred + codes[w, d] * step
-        own = out[w, d] - temporal
-        for j in range(P):  # normalised least mean squares towards this keyframe's miss
-            pc = partners[d, j]
-            if w >= 1 and pc >= 0:
-                k = kappa[d, j] + mu * (own - (pred - temporal)) * innov[pc] / norm
-                kappa[d, j] = min(max(k, lo), hi)
-        innov[d] = own
-        if aim and d >= 2 * M:
-            err[0, d - 2 * M] = out[w, d] - values[w, d]
-        elif aim and d >= M:  # the bone's point: its parent's error plus its own turn
-            b = d - M
-            g = basis[w, b]
-            a = lengths[b] * (out[w, b] - values[w, b])
-            f = -lengths[b] * g[2] * (out[w, d] - values[w, d])
-            p = parents[b + 1]
-            err[b + 1, 0] = err[p, 0] + a * g[0] + f * g[3]
-            err[b + 1, 1] = err[p, 1] + a * g[1] + f * g[4]
-            err[b + 1, 2] = err[p, 2] + a * g[2]
-
-
-@numba.njit(cache=True, nogil=True)
-def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-          parents, root_rho):  # fmt: skip
-    """Closed-loop prediction and quantisation of keyframe values (both directions).
-
-    Keyframe w of channel d is predicted from the decoded keyframes before it,
-    ``t = x[w-1] + rho * (x[w-1] - x[w-2]) * gap_w / gap_{w-1}`` (the ratio capped at 2;
-    ``x[w-1]`` alone for w = 1, 0 for w = 0), plus ``kappa_d`` times the innovation
-    ``x - t`` its partner channel (``partners[d]``, decoded before it: the parent bone's same
-    angle) had at this keyframe (a bone tends to turn with its parent); ``kappa_d`` starts at 0
-    and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
-    The value is sent as ``r = round((x - p) / step)`` (or one nearer 0, :data:`RDO_BAND`); the
-    decoder rebuilds ``p + r step``.
-    ``step`` is ``scale[d]`` for theta and root channels and
-    ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being
-    the same keyframe's decoded theta of that bone (decoded first).
-
-    Channels are visited root first, then bone by bone (parents first), theta before phi: every
-    value a channel's prediction or step needs is decoded before it, so the decoded values do not
-    depend on the order. encode: fill ``codes``; with ``basis`` (W, M, 5) (see
-    :func:`aim_basis`; (0, M, 5): none) a bone's target is not its own angle but the direction
-    from its *decoded* parent point to its true point (to first order, :func:`_keyframe`), so
-    each bone corrects the error its ancestors left and errors do not pile up down the chain;
-    without, ``values``. Else read ``codes``. Returns the decoded (W, D) values.
-    """
-    W, D = codes.shape
-    M = n_bones
-    out = np.zeros((W, D))
-    innov = np.zeros(D)
-    kappa = np.zeros((D, partners.shape[1]))
-    aim = encode and basis.shape[0] == W
-    err = np.zeros((M + 1, 3))
-    for w in range(W):
-        _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-                  lengths, parents, innov, kappa, err, aim, root_rho)  # fmt: skip
-    return out
 
 
 def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
@@ -305,8 +182,8 @@ class PositionQuantiser:
     ``step / J^e`` (all J points move with the root), n_b the points at or below b and e =
     ``exponent`` (1/2 for errors that add along the chain like independent noise; the encoder
     aims each bone from its decoded parent point, which cancels most of that, and uses less).
-    Values are predicted along the keyframes (:func:`_dpcm`) and the integer residuals
-    range-coded (:mod:`sidql.codec.entropy`).
+    Values are predicted along the keyframes (:mod:`sidql.codec.dpcm`) and the integer
+    residuals range-coded (:mod:`sidql.codec.entropy`).
 
     Attributes:
         n_bones: M; lengths: (M,) bone lengths [m] as stored; parents: (M + 1,) parent indices.
@@ -360,8 +237,8 @@ class PositionQuantiser:
         """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values).
 
         ``aim``: each bone aims from its decoded parent point at its true point (see
-        :func:`_dpcm`) instead of quantising its own angles; ``basis``: ``aim_basis(values)``
-        if the caller has it."""
+        :mod:`sidql.codec.dpcm`) instead of quantising its own angles; ``basis``:
+        ``aim_basis(values)`` if the caller has it."""
         v = np.ascontiguousarray(values, dtype=np.float64)
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
@@ -370,7 +247,7 @@ class PositionQuantiser:
             basis = np.zeros((0, M, 5))
         elif basis is None:
             basis = aim_basis(v, M)
-        out = _dpcm(
+        out = dpcm(
             v,
             codes,
             k,
@@ -391,7 +268,7 @@ class PositionQuantiser:
         """(W, D) residual codes -> (W, D) decoded keyframe values [rad, rad, m]."""
         c = np.ascontiguousarray(codes, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
-        return _dpcm(
+        return dpcm(
             np.zeros(c.shape),
             c,
             k,
