@@ -16,14 +16,21 @@ from hypothesis import strategies as st
 from keyframe_synth import smooth_clip
 
 from sidql.codec import format as sidq
-from sidql.codec.contact_coding import encode_with_contacts, trial_contacts
+from sidql.codec.contact_coding import (
+    encode_with_contacts,
+    foot_track,
+    streamed_contacts,
+    trial_contacts,
+)
 from sidql.codec.contact_section import FLAG, MAX_SECTION_BYTES, FootContacts
-from sidql.codec.decode import reconstruct_stream, stream_to_clip
-from sidql.codec.encode import encode_series
+from sidql.codec.decode import decode_to_reconstruction, reconstruct_stream, stream_to_clip
+from sidql.codec.encode import encode_files, encode_series
+from sidql.codec.sequence import is_sequence, iter_streams
 from sidql.keyframes.contact_pinning import pin_feet
 from sidql.keyframes.physical_costs import physical_band, physical_costs, segment_inputs
 from sidql.keyframes.spherical import chart
 from sim.errors import MotionDataError, UnmetTargetError, UsageError
+from sim.motion.chunks import stream_clips
 from sim.motion.ingest import load_motion
 
 N = 150
@@ -213,3 +220,34 @@ def test_encode_command_with_physics_writes_a_stream_that_decodes(cmu_dir, tmp_p
     assert sidq.read(out).contacts is not None
     res = cli("encode", *trial, "--out", str(out), "--rate", "500", "--contacts", "--latency", "5")
     one_line_exit_2(res, "offline")
+
+
+def test_streamed_contacts_of_one_window_are_the_whole_take_paths_bytes(cmu_dir, tmp_path):
+    asf, amc = cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc"
+    enc = encode_files(asf, amc, tmp_path / "s.sidq", rate=600.0, contacts=streamed_contacts)
+    whole = encode_files(asf, amc, tmp_path / "w.sidq", rate=600.0, encoder=encode_with_contacts)
+    assert enc.streams == whole.streams == 1
+    assert (tmp_path / "s.sidq").read_bytes() == (tmp_path / "w.sidq").read_bytes()
+
+
+def test_streamed_contacts_over_windows_carry_the_whole_takes_floor_and_bits(cmu_dir, tmp_path):
+    asf, amc = cmu_dir / "01" / "01.asf", cmu_dir / "01" / "01_01.amc"  # 688 frames at 30 fps
+    clip = load_motion(asf, amc, fps=30.0, derivatives=False)
+    whole = trial_contacts(clip)
+    track = foot_track(stream_clips(asf, amc, fps=30.0, chunk_frames=50))
+    assert len(track.names) == 6 and track.n_frames == clip.n_frames
+    assert np.array_equal(trial_contacts(track).bits, whole.bits)
+    assert np.array_equal(trial_contacts(track).floor, whole.floor)
+    out = tmp_path / "s.sidq"
+    enc = encode_files(asf, amc, out, rate=900.0, window=200, contacts=streamed_contacts)
+    assert is_sequence(out) and enc.streams >= 3 and enc.n_frames == clip.n_frames
+    assert out.stat().st_size == enc.n_bytes <= 900.0 * clip.n_frames / 30.0
+    bits, start = [], 0
+    for stream in iter_streams(out):
+        assert np.array_equal(stream.contacts.floor, whole.floor)
+        assert np.array_equal(stream.contacts.bits, whole.bits[start : start + stream.n_frames])
+        bits.append(stream.contacts.bits[1:] if start else stream.contacts.bits)
+        start += stream.n_frames - 1  # consecutive streams share a frame
+    assert np.array_equal(np.concatenate(bits), whole.bits)
+    rec = decode_to_reconstruction(out)  # pinned stream by stream
+    assert rec.positions.shape == (clip.n_frames, 23, 3) and np.isfinite(rec.positions).all()

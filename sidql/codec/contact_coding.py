@@ -24,7 +24,7 @@ points against the trial's chart. Units: metres, seconds, bytes; world axes z up
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from sidql.keyframes.spherical import SphericalSeries, chart, chart_arrays
 from sidql.keyframes.unchart import positions_from_chart
 from sim.errors import UnmetTargetError, UsageError
 from sim.motion.clip import Clip
+from sim.physics.feet import SIDES
 
 
 def trial_contacts(clip: Clip, ground=None) -> FootContacts:
@@ -98,25 +99,92 @@ def encode_with_contacts(
     series = chart(clip)
     ground = sender_ground(clip)  # once per trial
     side = trial_contacts(clip, ground)
-    duration = series.n_frames * series.dt
-    left = None if rate is None else rate - side.n_bytes / duration
-    if left is not None and left <= 0:
-        raise UnmetTargetError(
-            f"{clip.source}: the foot contacts alone take {side.n_bytes / duration:.1f} B/s "
-            f"of the {rate:g} B/s budget"
-        )
     G = min(max_gap, sidq.MAX_GAP)
     extra = physical_cost_band(clip, series, G, ground, weight) if physics else None
-    enc = encode_series(
-        series, rate=left, max_gap=max_gap, where=clip.source, extra_cost=extra, **kwargs
-    )
-    stream = replace(enc.stream, contacts=side)
+    return encode_chart_with_contacts(
+        series, contacts=side, rate=rate, max_gap=max_gap, where=clip.source, extra_cost=extra,
+        **kwargs,
+    )  # fmt: skip
+
+
+def encode_chart_with_contacts(
+    series: SphericalSeries,
+    *,
+    contacts: FootContacts,
+    rate: float | None = None,
+    where: str = "",
+    latency: int = 0,
+    **kwargs,
+) -> Encoded:
+    """:func:`sidql.codec.encode.encode_series` of ``series`` with the foot-contact section
+    ``contacts`` (its bits: one row per frame of ``series``); ``rate`` [B/s] is the stream's,
+    section included. The errors reported are the decoded, pinned points'."""
+    if latency:
+        raise UsageError("foot contacts need an offline stream (latency 0)")
+    duration = series.n_frames * series.dt
+    left = None if rate is None else rate - contacts.n_bytes / duration
+    if left is not None and left <= 0:
+        raise UnmetTargetError(
+            f"{where}: the foot contacts alone take {contacts.n_bytes / duration:.1f} B/s "
+            f"of the {rate:g} B/s budget"
+        )
+    enc = encode_series(series, rate=left, where=where, **kwargs)
+    stream = replace(enc.stream, contacts=contacts)
     data = sidq.to_bytes(stream)
     q, mean_mm, p95_mm = pinned_errors(series, stream)
     return replace(
         enc, stream=stream, data=data, q=q, bytes_per_second=len(data) / duration,
         mean_error_mm=mean_mm, p95_error_mm=p95_mm,
     )  # fmt: skip
+
+
+#: The points the floor and the contact labels read: per foot the ankle, ball and toe tip
+#: (:func:`sim.physics.feet.sole`, :func:`sim.physics.contacts.motion_contacts`).
+FOOT_NAMES: tuple[str, ...] = tuple(s + p for s in SIDES for p in ("tibia", "foot", "toes"))
+
+
+@dataclass(frozen=True)
+class FootTrack:
+    """A take's foot points, every frame: what :func:`sender_ground` and
+    :func:`sender_contacts` read of a clip (the same floor and labels as on the whole clip).
+
+    Attributes:
+        names: (K,) point names (of :data:`FOOT_NAMES`); positions, velocities: (T, K, 3)
+            [m, m/s]; fps [1/s]; source: the file read.
+    """
+
+    names: tuple[str, ...]
+    positions: np.ndarray
+    velocities: np.ndarray
+    fps: float
+    source: str = ""
+
+    @property
+    def n_frames(self) -> int:
+        return self.positions.shape[0]
+
+
+def foot_track(clips) -> FootTrack:
+    """The :class:`FootTrack` of the take ``clips`` (consecutive clips, read one at a time:
+    6 points a frame are kept, 288 bytes, not the whole clip)."""
+    P, V, names, fps, source = [], [], (), 30.0, ""
+    for clip in clips:
+        idx = [i for i, n in enumerate(clip.names) if n in FOOT_NAMES]
+        names, fps, source = tuple(clip.names[i] for i in idx), clip.fps, clip.source
+        P.append(np.ascontiguousarray(clip.positions[:, idx]))
+        V.append(np.ascontiguousarray(clip.velocities[:, idx]))
+    if not P:
+        raise UsageError("a take needs at least one clip")
+    return FootTrack(names, np.concatenate(P), np.concatenate(V), fps, source)
+
+
+def streamed_contacts(clips):
+    """``(contacts, encode)`` of the take ``clips`` (a read of its own, with velocities): the
+    whole take's :class:`FootContacts` (floor estimated once on every frame, bits labelled on
+    it: the same as :func:`trial_contacts` of the whole clip) and the encoder of one window's
+    chart with its slice of them (:func:`encode_chart_with_contacts`), for
+    :func:`sidql.codec.windows.encode_windows`."""
+    return trial_contacts(foot_track(clips)), encode_chart_with_contacts
 
 
 def pinned_errors(series: SphericalSeries, stream: sidq.Stream) -> tuple[float, float, float]:

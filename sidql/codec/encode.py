@@ -184,6 +184,7 @@ def encode_files(
     fps: float = 30.0,
     window: int = WINDOW_FRAMES,
     encoder=None,
+    contacts=None,
     **kwargs,
 ) -> TakeEncoding:
     """Encode one CMU trial (ASF + AMC, or a BVH as ``asf``) into ``out``, written atomically.
@@ -198,37 +199,48 @@ def encode_files(
     skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
     options of :func:`encode_series`.
 
+    ``contacts(clips) -> (side, encode)`` (e.g.
+    :func:`sidql.codec.contact_coding.streamed_contacts`): the take is first read once more, with
+    velocities, for the whole take's side information ``side`` (its floor is estimated on every
+    frame), then encoded window by window by ``encode`` with each window's share of ``side``.
     ``encoder(clip, **kwargs) -> Encoded``: when given (e.g.
-    :func:`sidql.codec.contact_coding.encode_with_contacts`, whose floor is estimated on the whole
-    trial), the take is read whole (:func:`sim.motion.ingest.load_motion`) and encoded as one
-    stream by it: memory then grows with the take.
+    :func:`sidql.codec.contact_coding.encode_with_contacts` with the physical cost), the take is
+    read whole (:func:`sim.motion.ingest.load_motion`) and encoded as one stream by it: memory
+    then grows with the take.
     """
     amc = asf if amc is None and is_bvh(asf) else amc
     skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
-    try:
-        if encoder is not None or (is_bvh(amc) and not _divides(amc, fps)):
-            clips = [load_motion(asf, amc, fps=fps, derivatives=False)]
-        else:
-            resample_step(CMU_FPS if not is_bvh(amc) else _rate(amc), fps)  # before any frame
-            rates = not position_coded(
-                kwargs.get("max_q"), kwargs.get("latency", 0),
-                kwargs.get("reconstruction", "auto"), kwargs.get("objective", "position"),
-            )  # fmt: skip
-            clips = stream_clips(asf, amc, fps=fps, chunk_frames=READ_FRAMES, velocities=rates)
-    except MotionDataError:
-        raise
-    except ValueError as e:  # e.g. an output rate that does not divide the source rate
-        raise MotionDataError(str(amc), None, str(e)) from None
+    rates = not position_coded(
+        kwargs.get("max_q"), kwargs.get("latency", 0),
+        kwargs.get("reconstruction", "auto"), kwargs.get("objective", "position"),
+    )  # fmt: skip
+    clips = _take(asf, amc, fps, rates, whole=encoder is not None)
     if encoder is not None:
         enc = encoder(clips[0], skel_hash=skel, **kwargs)
         write_atomic(Path(out), lambda f: f.write(enc.data))
         return one_stream(enc)
+    encode, side = encode_series, None
+    if contacts is not None:
+        side, encode = contacts(_take(asf, amc, fps, True))
     done = []
 
     def write(f):
-        done.append(
-            encode_windows(f, clips, encode_series, window=window, skel_hash=skel, **kwargs)
-        )
+        done.append(encode_windows(f, clips, encode, window=window, skel_hash=skel,
+                                   contacts=side, **kwargs))  # fmt: skip
 
     write_atomic(Path(out), write)
     return done[0]
+
+
+def _take(asf, amc, fps: float, velocities: bool, whole: bool = False):
+    """The take's clips at ``fps``: streamed (:func:`sim.motion.chunks.stream_clips`), or one
+    clip of the whole take (``whole``, or a BVH whose rate ``fps`` does not divide)."""
+    try:
+        if whole or (is_bvh(amc) and not _divides(amc, fps)):
+            return [load_motion(asf, amc, fps=fps, derivatives=False)]
+        resample_step(CMU_FPS if not is_bvh(amc) else _rate(amc), fps)  # before any frame
+        return stream_clips(asf, amc, fps=fps, chunk_frames=READ_FRAMES, velocities=velocities)
+    except MotionDataError:
+        raise
+    except ValueError as e:  # e.g. an output rate that does not divide the source rate
+        raise MotionDataError(str(amc), None, str(e)) from None

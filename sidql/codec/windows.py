@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 import queue
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -157,7 +157,7 @@ def read_ahead(items, depth: int = 1):
 
 
 def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
-                   overlap=OVERLAP_FRAMES, **kwargs) -> TakeEncoding:  # fmt: skip
+                   overlap=OVERLAP_FRAMES, contacts=None, **kwargs) -> TakeEncoding:  # fmt: skip
     """Encode the take ``clips`` window by window into the binary file object ``f``: one
     ordinary stream when it is one window, else a sequence (:mod:`sidql.codec.sequence`).
 
@@ -165,6 +165,9 @@ def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
         encode: the encoder of one chart, :func:`sidql.codec.encode.encode_series`.
         rate: byte budget of the whole file [B/s], or None with ``max_q`` / ``max_error`` in
             ``kwargs``; every other keyword as ``encode`` takes it.
+        contacts: the whole take's foot-contact side information
+            (:class:`sidql.codec.contact_section.FootContacts`, a row of bits per frame) or
+            None; each window's encoder is given its frames' rows (``contacts=``).
     """
     writer, parts, reconstructions, first = None, [], {}, None
     overlap = min(overlap, window // 2)
@@ -179,6 +182,8 @@ def encode_windows(f, clips, encode, *, rate=None, window=WINDOW_FRAMES,
             spent = writer.size if writer is not None else overhead_bytes(0) - 12
             budget = rate * owned / fps - spent - 4 - (12 if last else 0)
             r = max(budget, 1.0) * fps / n
+        if contacts is not None:
+            kwargs["contacts"] = replace(contacts, bits=contacts.bits[start : start + n])
         enc = encode(chart_arrays(P, V, parents, dt), rate=r, where=where, **kwargs)
         del P, V
         first = enc if first is None else first

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from sidql.codec.contact_coding import encode_with_contacts
+from sidql.codec.contact_coding import encode_with_contacts, streamed_contacts
 from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.codec.windows import WINDOW_FRAMES
@@ -74,13 +74,14 @@ def register(p) -> None:
         "--contacts",
         action="store_true",
         help="send the foot-contact bits and floor (offline): the decoder pins each foot in "
-        "contact (docs/codec.md)",
+        "contact (docs/codec.md); the take is read twice (the floor and the bits first, on "
+        "every frame), memory stays bounded",
     )
     p.add_argument(
         "--physics",
         action="store_true",
         help="also choose keyframes with the physical cost (implies --contacts; --rate or "
-        "--max-error, linear or catmull_rom)",
+        "--max-error, linear or catmull_rom; the take is read and encoded whole)",
     )
     p.set_defaults(func=run, parser=p)
 
@@ -94,7 +95,6 @@ def run(args) -> int:
         args.parser.error("--max-error needs an offline stream (--latency 0), not hermite")
     if (args.contacts or args.physics) and args.latency:
         args.parser.error("--contacts and --physics need an offline stream (--latency 0)")
-    contacts = args.contacts or args.physics
     enc = encode_files(
         args.asf,
         args.amc,
@@ -107,7 +107,8 @@ def run(args) -> int:
         latency=args.latency,
         max_gap=args.max_gap,
         window=args.window,
-        encoder=partial(encode_with_contacts, physics=args.physics) if contacts else None,
+        encoder=partial(encode_with_contacts, physics=True) if args.physics else None,
+        contacts=streamed_contacts if args.contacts and not args.physics else None,
     )
     print_summary(enc, args.physics)
     print(f"wrote {args.out}")
@@ -125,8 +126,9 @@ def print_summary(enc, physics: bool = False) -> None:
     print(f"keyframes     {enc.keyframes} ({recon}, latency {s.latency})")
     if s.contacts is not None:
         what = "physics-aware keyframes, " * physics + "feet pinned"
-        print(f"foot contacts {s.contacts.n_bytes} bytes ({what}; the figures below are after the "
-              "pinning, a --max-error or --max-q target is met before it)")  # fmt: skip
+        first = "" if enc.streams == 1 else " in the first stream"
+        print(f"foot contacts {s.contacts.n_bytes} bytes{first} ({what}; the figures below are "
+              "after the pinning, a --max-error or --max-q target is met before it)")  # fmt: skip
     streams = "" if enc.streams == 1 else f", a sequence of {enc.streams} streams"
     print(f"size          {enc.n_bytes} bytes, {enc.bytes_per_second:.1f} B/s{streams}")
     print(f"Q             {enc.q:.5f} rad (decoded, quantisation included)")
