@@ -1,7 +1,8 @@
 """Codec memory and speed at any length: ``sidql encode --rate 942`` of long takes in a child process.
 
     python benchmarks/bench_codec_memory.py [--data ../shared/cmu] [--minutes 2.5 5 10 30 60]
-        [--baseline-minutes 2.5 5 10] [--repeats 2]
+        [--baseline-minutes 2.5 5 10] [--bvh-minutes 5 10] [--contacts-minutes 5 10 30]
+        [--repeats 2]
 
 Takes are written to a temporary folder (never the repository) from real trials of ``--data``
 played forwards and backwards (no jumps): ``01_02`` (a walk and climb) at every length of
@@ -19,6 +20,10 @@ The walk take of every length of ``--bvh-minutes`` is also written as BVH (``sid
 encoded from it (``sidql encode F.bvh --rate 942``) against the same baseline; a BVH over the
 reader's bound (:data:`sim.bvh.records.MAX_BVH_BYTES`, 64 MiB: about 9 minutes of CMU's
 skeleton) is refused, in one line, and said so.
+
+The walk take of every length of ``--contacts-minutes`` is also encoded with its foot contacts
+(``sidql encode ... --contacts``), against the whole-take path that command had before (the take
+read whole, one stream) at the lengths of ``--baseline-minutes``.
 
 The cost of windowing in bytes is measured on the trials of ``--data`` (all shorter than one
 window): each is encoded whole and in 300-frame windows (several cuts per trial) at a mean
@@ -53,6 +58,7 @@ VIGOROUS_MINUTES = 5.0
 AMC_DECODE_MINUTES = 10.0  # the longest take also decoded to AMC, and encoded at these targets:
 OTHER_TARGETS = ("--max-error 1", "--rate 3000", "--max-q 0.003")
 TARGET_MB = 300
+PYCACHE = os.path.join(tempfile.gettempdir(), "sidql-bench-pycache")
 
 BASELINE = """
 import sys
@@ -67,6 +73,15 @@ asf, amc, out, rate = sys.argv[1:5]
 clip = load_motion(asf, amc, fps=30.0, derivatives=False)
 enc = encode_series(chart(clip), rate=float(rate), skel_hash=skeleton_hash(read_skeleton(asf)))
 write_atomic(Path(out), lambda f: f.write(enc.data))
+"""
+#: the whole-take path of ``sidql encode --contacts`` before it was streamed: the take read whole,
+#: its floor and bits on the whole clip, one stream
+BASELINE_CONTACTS = """
+import sys
+from sidql.codec.contact_coding import encode_with_contacts
+from sidql.codec.encode import encode_files
+asf, amc, out, rate = sys.argv[1:5]
+encode_files(asf, amc, out, rate=float(rate), encoder=encode_with_contacts)
 """
 
 
@@ -105,7 +120,10 @@ def write_take(asf: Path, amc: Path, frames: int, out: Path) -> Path:
 
 def measured(cmd: list[str]) -> dict:
     """``cmd`` in a child process: wall [s], cpu [s], peak [MB] (from ``wait4``)."""
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    # bytecode cached (in the temporary folder, not the repository), as an installed package's
+    # is: a shell that says not to write it would otherwise compile every module on every run
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONPYCACHEPREFIX=PYCACHE)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(p.pid, 0)
@@ -177,6 +195,47 @@ def bvh_page(bvh_rows) -> str:
     return "\n".join(lines)
 
 
+def contacts_row(sidql: list, asf: Path, amc: Path, tmp: Path, baseline: bool) -> dict:
+    """``sidql encode --contacts`` of the take, and (``baseline``) the whole-take path."""
+    out = str(tmp / "contacts.sidq")
+    cmd = [*sidql, "encode", str(asf), str(amc), "--out", out, "--rate", RATE, "--contacts"]
+    row = {"new": measured(cmd), "bytes": Path(out).stat().st_size, "old": None}
+    if baseline:
+        old = [sys.executable, "-c", BASELINE_CONTACTS, str(asf), str(amc), str(tmp / "o.sidq"),
+               RATE]  # fmt: skip
+        row["old"] = measured(old)
+    return row
+
+
+def contacts_page(rows) -> str:
+    """The ``--contacts`` table (see the module docstring)."""
+    if not rows:
+        return ""
+    lines = [
+        "", "",
+        f"Foot contacts: `sidql encode --rate {RATE} --contacts` (the take read twice: its foot "
+        "points for the floor and the bits, then window by window) against the whole-take path "
+        "it had before (`encode_with_contacts` of the whole clip, one stream):",
+        "",
+        "| take | minutes | peak MB | wall s | CPU s | x real time (CPU) | file bytes "
+        "| baseline peak MB | baseline wall s | baseline CPU s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for minutes, seconds, r in rows:
+        new, old = r["new"], r["old"]
+        base = (f"| {old['peak']:.0f} | {old['wall']:.1f} | {old['cpu']:.1f}" if old
+                else "| not run | - | -")  # fmt: skip
+        lines.append(
+            f"| 01_02 walk | {minutes:g} | {new['peak']:.0f} | {new['wall']:.1f} | "
+            f"{new['cpu']:.1f} | {seconds / new['cpu']:.0f}x | {r['bytes']:,} {base} |"
+        )
+    worst = max(r["new"]["peak"] for _, _, r in rows)
+    lines += ["", f"`--contacts` peak at most **{worst:.0f} MB** (aim: at most {TARGET_MB} MB: "
+              f"{'met' if worst <= TARGET_MB else '**not met**'}); its foot points grow with the "
+              "take (288 bytes a frame, 31 MB an hour at 30 fps)."]  # fmt: skip
+    return "\n".join(lines)
+
+
 def window_cost(data: Path) -> dict:
     """Bytes at 2 mm and mean error at 942 B/s of every trial of ``data``: whole against 300-frame
     windows."""
@@ -216,6 +275,7 @@ def main(argv=None) -> int:
     ap.add_argument("--minutes", type=float, nargs="+", default=[2.5, 5.0, 10.0, 30.0, 60.0])
     ap.add_argument("--baseline-minutes", type=float, nargs="+", default=[2.5, 5.0, 10.0])
     ap.add_argument("--bvh-minutes", type=float, nargs="*", default=[5.0, 10.0])
+    ap.add_argument("--contacts-minutes", type=float, nargs="*", default=[5.0, 10.0, 30.0])
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--vigorous-minutes", type=float, default=VIGOROUS_MINUTES)
     ap.add_argument("--no-write", action="store_true")
@@ -224,7 +284,7 @@ def main(argv=None) -> int:
     baseline = [sys.executable, "-c", BASELINE]
     load_start = os.getloadavg()
     amc_take, targets = None, []
-    mem_rows, speed_rows, bvh_rows = [], [], []
+    mem_rows, speed_rows, bvh_rows, contact_rows = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
 
@@ -251,6 +311,9 @@ def main(argv=None) -> int:
                              Path(out).stat().st_size))  # fmt: skip
             if minutes in args.bvh_minutes:
                 bvh_rows.append((minutes, bvh_row(sidql, baseline, asf, amc, tmp)))
+            if minutes in args.contacts_minutes:
+                row = contacts_row(sidql, asf, amc, tmp, minutes in args.baseline_minutes)
+                contact_rows.append((minutes, seconds, row))
             if last is not None:
                 os.unlink(last)
             last = amc
@@ -282,7 +345,7 @@ def main(argv=None) -> int:
             os.unlink(amc)
     cost = window_cost(args.data)
     text = page(args, mem_rows, speed_rows, decoded, targets, cost, load_start, os.getloadavg())
-    text += bvh_page(bvh_rows)
+    text += bvh_page(bvh_rows) + contacts_page(contact_rows)
     print(text)
     if not args.no_write:
         print("wrote", write_results("codec_memory", "Codec memory and speed at any length", text,

@@ -12,6 +12,8 @@ start-up, reading, retargeting, charting, encoding at 30 fps, writing) in a chil
 wall and CPU (user + system) times come from ``wait4``; best of ``--repeats``, the runs of this
 checkout and of the baseline interleaved so that both see the same load. Start-up is measured
 the same way on a 2-second take (imports and the compiled kernels' loading, a fixed cost).
+Bytecode is cached in a temporary folder (``bench_codec_memory.measured``), as an installed
+package's is, even where the shell says not to write it.
 
 ``--baseline-rev``: a git revision of this repository (``git archive`` into the temporary
 folder, its kernels compiled there by a first run) whose command line runs the same takes; the
@@ -39,6 +41,9 @@ from results import write_results  # noqa: E402
 SOURCE_FPS = 120.0
 RATE = "942"
 TARGET_X = 100
+#: takes this checkout encodes in windows where an older baseline encoded them whole (their
+#: bytes differ by design)
+WINDOWED = ("walk --contacts",)
 
 
 def checkout(rev: str, folder: Path) -> Path:
@@ -153,8 +158,11 @@ def page(args, takes, rows, identical, load_start, load_end) -> str:
             b = rows[kind]["baseline"]
             bx = "-" if kind == "start-up" else (
                 f"{seconds / b['wall']:.0f}x / {seconds / b['cpu']:.0f}x")  # fmt: skip
+            same = "yes" if identical[kind] else "**no**"
+            if not identical[kind] and kind in WINDOWED:
+                same = "no: windows now (a sequence of streams)"
             line += (f" {b['wall']:.2f} | {b['cpu']:.2f} | {bx} | {b['cpu'] / r['cpu']:.2f}x | "
-                     f"{'yes' if identical[kind] else '**no**'} |")  # fmt: skip
+                     f"{same} |")  # fmt: skip
         lines.append(line)
     kinds = list(TAKES)
     cpu = min(takes[k][1] / rows[k]["this"]["cpu"] for k in kinds)
@@ -169,7 +177,10 @@ def page(args, takes, rows, identical, load_start, load_end) -> str:
         f"kernels' loading) is {start:.2f} s of CPU of each run. The encoder searches its "
         "reconstructions side by side in threads and reads the next window while it encodes "
         "one, so wall time may be below CPU time where a core is free; under load it is not. "
-        "A BVH and `--contacts` read the whole take (their peak memory grows with it).",
+        "A BVH is read a chunk at a time; `--contacts` reads the take twice (its foot points "
+        "for the floor and the bits, then window by window), so its peak memory no longer grows "
+        "with the take, and its 5-minute take is a sequence of streams where a baseline that "
+        "read it whole wrote one (a take of one window: the same bytes, tested).",
     ]
     return "\n".join(lines)
 

@@ -12,7 +12,6 @@ Units: metres inside, millimetres in the targets and figures; bytes, bytes per s
 from __future__ import annotations
 
 import os
-from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -24,6 +23,7 @@ from sidql.codec.plan import plan, position_band_costs
 from sidql.codec.position_format import channel_kinds, coded_rows
 from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser, aim_basis
+from sidql.codec.shared_cache import SharedCache
 from sidql.keyframes.spherical import POINTS, SphericalSeries
 from sim.errors import UnmetTargetError
 
@@ -52,9 +52,11 @@ LEVER_EXPONENT = 0.125
 #: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
 #: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
 FRAME_CAP = 3.0
-#: bytes of coded plans a search keeps, the least recently used dropped first (at least the last
+#: bytes of coded plans kept per search, the least recently used dropped first (at least the last
 #: two): each holds (W, D) codes and decoded values, 0.7 MB at W = 900 keyframes (11 kept), so
 #: memory does not grow with the take when it is encoded whole; repeats are rare past the last few.
+#: A chart's searches share theirs (:mod:`sidql.codec.shared_cache`): the densest and the
+#: sparsest plans at a step are every reconstruction's.
 CODED_BYTES = 8 << 20
 
 
@@ -64,7 +66,7 @@ class _PositionSearch:
     Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
     the range coder itself runs only on the few plans that may be kept."""
 
-    def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf):
+    def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf, coded=None):
         self.series, self.recon, self.build = series, recon, build
         values, _ = series.channels()
         self.values = values
@@ -78,7 +80,7 @@ class _PositionSearch:
         if extra_cost is not None:  # e.g. the physical cost (sidql.codec.contact_coding) [m]
             self.C = self.C + extra_cost[:, : G + 1]
         self.plans: dict = {}
-        self.coded: OrderedDict = OrderedDict()  # at most CODED_BYTES, least recent first
+        self.coded = _coded_cache(1) if coded is None else coded  # may be other searches' too
         self.last = None  # log lam of the previous search's answer
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
@@ -97,17 +99,13 @@ class _PositionSearch:
     def code(self, lam: float, step: float):
         keys = self.keys(lam)
         key = (hash(keys.tobytes()), len(keys), step)  # nearby multipliers often share a plan
-        if key in self.coded:
-            self.coded.move_to_end(key)
-            return self.coded[key]
-        q = self.quantiser(step)
-        codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
-        self.coded[key] = (keys, q, codes, kv)
-        held = sum(c.nbytes + v.nbytes for _, _, c, v in self.coded.values())
-        while len(self.coded) > 2 and held > CODED_BYTES:
-            _, _, c, v = self.coded.popitem(last=False)[1]
-            held -= c.nbytes + v.nbytes
-        return self.coded[key]
+
+        def make():
+            q = self.quantiser(step)
+            codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
+            return keys, q, codes, kv
+
+        return self.coded.get(key, make)
 
     def estimate(self, keys, codes) -> float:
         return self.header + estimate_size(coded_rows(keys, codes))
@@ -233,8 +231,11 @@ def encode_positions(
     duration = series.n_frames / fps
     G = min(max_gap, sidq.MAX_GAP)
     cap = FRAME_CAP * max_error if max_error is not None else np.inf
+    coded = _coded_cache(len(recons))  # the codes do not depend on the reconstruction
     searches = {
-        r: _PositionSearch(series, r, G, _builder(series, r, fps, skel_hash), extra_cost, cap)
+        r: _PositionSearch(
+            series, r, G, _builder(series, r, fps, skel_hash), extra_cost, cap, coded
+        )  # fmt: skip
         for r in recons
     }
     if max_error is not None:
@@ -255,6 +256,11 @@ def encode_positions(
     summary = {f"{r}/position": (1000.0 * c[3].mean(), int(round(c[4]))) for r, c in cands.items()}
     summary[f"{recon}/position"] = (enc.mean_error_mm, len(data))
     return enc, summary
+
+
+def _coded_cache(searches: int) -> SharedCache:
+    """The coded plans of ``searches`` searches of one chart: :data:`CODED_BYTES` each."""
+    return SharedCache(searches * CODED_BYTES, lambda r: r[2].nbytes + r[3].nbytes)
 
 
 def _builder(series: SphericalSeries, recon: str, fps: float, skel_hash: bytes):
