@@ -114,8 +114,10 @@ def _run(kernel, values, keys, q, encode, codes=None, aim=True):
     basis = aim_basis(values, M) if aim and encode else np.zeros((0, M, 5))
     lengths, parents = q._tree()
     args = (values, codes, keys, q.scales(), M, q.rho, encode, q.partners())
+    rows = np.arange(len(keys))
     if kernel is dpcm:
-        out = dpcm(*args, PARTNER_RATE, *PARTNER_WEIGHTS, basis, lengths, parents, q.root_slope)
+        out = dpcm(*args, PARTNER_RATE, *PARTNER_WEIGHTS, basis, lengths, parents, q.root_slope,
+                   rows)  # fmt: skip
         return codes, out
     return oracle(*args, basis, lengths, parents, q.root_slope)
 
@@ -162,3 +164,13 @@ def test_visit_order_puts_parents_first_and_groups_depths():
 def test_unordered_parents_fall_back_to_index_order():
     bones, starts = depth_order(np.array([-1, 2, 0]))  # point 1's parent comes after it
     assert list(bones) == [0, 1] and list(starts) == [0, 1, 2]
+
+
+def test_keyframes_read_in_place_by_rows_code_as_gathered_ones():
+    values, _, q = _case(7, protocol_parent_indices(), W=60)
+    keys = np.array([0, 3, 4, 9, 17, 18, 30, 41, 59])
+    basis = aim_basis(values, q.n_bones)
+    a = q.encode_keyframes(values[keys], keys, True, basis[keys])
+    b = q.encode_keyframes(values, keys, True, basis, rows=keys)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert np.array_equal(q.decode_keyframes(b[0], keys), b[1])

@@ -89,11 +89,12 @@ def visit_order(parents):
 
 @numba.njit(cache=True)
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-              lengths, parents, innov, kappa, err, aim, root_rho, order, target_phi):  # fmt: skip
+              lengths, parents, innov, kappa, err, aim, root_rho, order, target_phi,
+              v):  # fmt: skip
     """Keyframe w of :func:`dpcm`: channels in ``order`` (:func:`visit_order`). With ``aim``,
     ``err`` (J, 3) holds the decoded points' errors [m] to first order, and a bone's targets
     are its true angles minus its parent point's error along the bone's theta and phi
-    directions (``basis[w, b]``) over its length (and sin theta, floored at SIN_FLOOR, for
+    directions (``basis[v, b]``) over its length (and sin theta, floored at SIN_FLOOR, for
     phi), each change capped at 0.5 rad."""
     D = codes.shape[1]
     P = partners.shape[1]
@@ -119,16 +120,16 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
         if M <= d < 2 * M:
             step = min(step / max(np.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
         if encode:
-            target = values[w, d]
+            target = values[v, d]
             if aim and d < M:  # theta; phi's target comes with it
                 p = parents[d + 1]
                 L = max(lengths[d], 1e-6)
                 e0, e1, e2 = err[p, 0], err[p, 1], err[p, 2]
-                g0, g1, g2 = basis[w, d, 0], basis[w, d, 1], basis[w, d, 2]
+                g0, g1, g2 = basis[v, d, 0], basis[v, d, 1], basis[v, d, 2]
                 dt = -(e0 * g0 + e1 * g1 + e2 * g2) / L
-                dp = -(e0 * basis[w, d, 3] + e1 * basis[w, d, 4]) / (L * max(-g2, SIN_FLOOR))
+                dp = -(e0 * basis[v, d, 3] + e1 * basis[v, d, 4]) / (L * max(-g2, SIN_FLOOR))
                 target += min(max(dt, -0.5), 0.5)
-                target_phi[d] = values[w, M + d] + min(max(dp, -0.5), 0.5)
+                target_phi[d] = values[v, M + d] + min(max(dp, -0.5), 0.5)
             elif aim and d < 2 * M:
                 target = target_phi[d - M]
             q = (target - pred) / step
@@ -148,35 +149,38 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
                 kappa[d, j] = min(max(k, lo), hi)
         innov[d] = own
         if aim and d >= 2 * M:
-            err[0, d - 2 * M] = out[w, d] - values[w, d]
+            err[0, d - 2 * M] = out[w, d] - values[v, d]
         elif aim and d >= M:  # the bone's point: its parent's error plus its own turn
             b = d - M
-            g0, g1, g2 = basis[w, b, 0], basis[w, b, 1], basis[w, b, 2]
-            a = lengths[b] * (out[w, b] - values[w, b])
-            f = -lengths[b] * g2 * (out[w, d] - values[w, d])
+            g0, g1, g2 = basis[v, b, 0], basis[v, b, 1], basis[v, b, 2]
+            a = lengths[b] * (out[w, b] - values[v, b])
+            f = -lengths[b] * g2 * (out[w, d] - values[v, d])
             p = parents[b + 1]
-            err[b + 1, 0] = err[p, 0] + a * g0 + f * basis[w, b, 3]
-            err[b + 1, 1] = err[p, 1] + a * g1 + f * basis[w, b, 4]
+            err[b + 1, 0] = err[p, 0] + a * g0 + f * basis[v, b, 3]
+            err[b + 1, 1] = err[p, 1] + a * g1 + f * basis[v, b, 4]
             err[b + 1, 2] = err[p, 2] + a * g2
 
 
 @numba.njit(cache=True, nogil=True)
 def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-         parents, root_rho):  # fmt: skip
+         parents, root_rho, rows):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (see the module docstring).
 
     Args:
-        values: (W, 2 M + 3) keyframe values [theta | phi | root] (encode) or unused.
+        values: (N, 2 M + 3) values [theta | phi | root] (encode) or unused; keyframe w's are
+            row ``rows[w]`` (e.g. the whole chart's, ``rows`` the keyframes).
         codes: (W, 2 M + 3) int64 residuals: filled (encode) or read.
         keys: (W,) keyframe indices [frames]; scale: (2 M + 3,) channel steps before phi's
             sin theta division; partners: (2 M + 3, P) partner channels (-1: none).
-        basis: (W, M, 5) (see :func:`sidql.codec.quantise.aim_basis`; (0, M, 5): none). With it
+        basis: (N, M, 5) (see :func:`sidql.codec.quantise.aim_basis`, rows as ``values``;
+            (0, M, 5): none). With it
             (encode only) a bone's target is not its own angles but the direction from its
             *decoded* parent point to its true point, to first order: its true angles minus
             the parent point's error along the bone's theta and phi directions over its length
             (and sin theta, floored at SIN_FLOOR, for phi), each change capped at 0.5 rad; so
             each bone corrects the error its ancestors left.
         lengths: (M,) bone lengths [m]; parents: (M + 1,) point parents (-1: root).
+        rows: (W,) int64 row of ``values`` and ``basis`` of each keyframe.
 
     Returns the decoded (W, 2 M + 3) values.
     """
@@ -185,12 +189,12 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
     out = np.zeros((W, D))
     innov = np.zeros(D)
     kappa = np.zeros((D, partners.shape[1]))
-    aim = encode and basis.shape[0] == W
+    aim = encode and basis.shape[0] > 0
     err = np.zeros((M + 1, 3))
     order = visit_order(parents)
     target_phi = np.zeros(M)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi,
                   basis, lengths, parents, innov, kappa, err, aim, root_rho, order,
-                  target_phi)  # fmt: skip
+                  target_phi, rows[w])  # fmt: skip
     return out

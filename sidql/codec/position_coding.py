@@ -69,7 +69,7 @@ class _PositionSearch:
     def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf, coded=None):
         self.series, self.recon, self.build = series, recon, build
         values, _ = series.channels()
-        self.values = values
+        self.values = np.ascontiguousarray(values, dtype=np.float64)  # read in place by rows
         self.lengths = sidq.position_lengths(series.lengths)
         self.truth = chart_points(values, series.lengths, series.parents)
         self.basis = aim_basis(values, series.n_bones)
@@ -102,7 +102,7 @@ class _PositionSearch:
 
         def make():
             q = self.quantiser(step)
-            codes, kv = q.encode_keyframes(self.values[keys], keys, AIM, self.basis[keys])
+            codes, kv = q.encode_keyframes(self.values, keys, AIM, self.basis, rows=keys)
             return keys, q, codes, kv
 
         return self.coded.get(key, make)

@@ -233,15 +233,19 @@ class PositionQuantiser:
             np.ascontiguousarray(self.parents, dtype=np.int64),
         )
 
-    def encode_keyframes(self, values: np.ndarray, keys: np.ndarray, aim: bool = False, basis=None):
+    def encode_keyframes(
+        self, values: np.ndarray, keys: np.ndarray, aim: bool = False, basis=None, rows=None
+    ):
         """(W, D) keyframe values -> ((W, D) int64 residual codes, (W, D) decoded values).
 
         ``aim``: each bone aims from its decoded parent point at its true point (see
         :mod:`sidql.codec.dpcm`) instead of quantising its own angles; ``basis``:
-        ``aim_basis(values)`` if the caller has it."""
+        ``aim_basis(values)`` if the caller has it. ``rows``: (W,) the keyframes' rows of
+        ``values`` and ``basis`` when they are a whole chart's (N, D), (N, M, 5) (no copies)."""
         v = np.ascontiguousarray(values, dtype=np.float64)
-        codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
+        r = np.arange(len(k)) if rows is None else np.ascontiguousarray(rows, dtype=np.int64)
+        codes = np.zeros((len(k), v.shape[1]), dtype=np.int64)
         M = self.n_bones
         if not aim:
             basis = np.zeros((0, M, 5))
@@ -258,9 +262,10 @@ class PositionQuantiser:
             self.partners(),
             PARTNER_RATE,
             *PARTNER_WEIGHTS,
-            basis,
+            np.ascontiguousarray(basis, dtype=np.float64),
             *self._tree(),
             float(self.root_slope),
+            r,
         )
         return codes, out
 
@@ -282,4 +287,5 @@ class PositionQuantiser:
             np.zeros((0, self.n_bones, 5)),
             *self._tree(),
             float(self.root_slope),
+            np.arange(len(k)),
         )
