@@ -57,8 +57,11 @@ def checkout(rev: str, folder: Path) -> Path:
 
 
 def encoder(code: Path) -> list[str]:
-    """The command line of the checkout at ``code`` (its own modules first on the path)."""
-    return ["env", f"PYTHONPATH={code}", sys.executable, "-m", "sidql.commands.main", "encode"]
+    """The command line of the checkout at ``code`` (its own modules first on the path; ``-P``:
+    not the working folder's, which ``-m`` would otherwise put first, so that a baseline run
+    from this repository's root would run this checkout)."""
+    return ["env", f"PYTHONPATH={code}", sys.executable, "-P", "-m", "sidql.commands.main",
+            "encode"]  # fmt: skip
 
 
 def best_of(runs: list[dict]) -> dict:
