@@ -176,7 +176,7 @@ PARTNER_WEIGHTS = (-0.5, 1.5)
 
 @numba.njit(cache=True)
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-              lengths, parents, innov, kappa, err, aim, root_rho):  # fmt: skip
+              lengths, parents, innov, kappa, err, aim, root_rho, kstep):  # fmt: skip
     """Keyframe w of :func:`_dpcm`: channels root first, then bone by bone (parents first),
     theta before phi. With ``aim``, ``err`` (J, 3) holds the decoded points' errors [m] to first
     order, and a bone's targets are its true angles minus its parent point's error along the
@@ -203,7 +203,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             if w >= 1 and pc >= 0:
                 pred += kappa[d, j] * innov[pc]
                 norm += innov[pc] * innov[pc]
-        step = scale[d]
+        step = scale[d] * kstep[w]
         if M <= d < 2 * M:
             step = min(step / max(np.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
         if encode:
@@ -248,7 +248,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
 
 @numba.njit(cache=True, nogil=True)
 def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-          parents, root_rho):  # fmt: skip
+          parents, root_rho, kstep):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
@@ -259,9 +259,10 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
     The value is sent as ``r = round((x - p) / step)`` (or one nearer 0, :data:`RDO_BAND`); the
     decoder rebuilds ``p + r step``.
-    ``step`` is ``scale[d]`` for theta and root channels and
-    ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being
-    the same keyframe's decoded theta of that bone (decoded first).
+    ``step`` is ``scale[d] kstep[w]`` for theta and root channels and
+    ``min(scale[d] kstep[w] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi,
+    theta_hat being the same keyframe's decoded theta of that bone (decoded first); ``kstep``
+    (W,): the keyframe's step factor (:func:`keyframe_steps`).
 
     Channels are visited root first, then bone by bone (parents first), theta before phi: every
     value a channel's prediction or step needs is decoded before it, so the decoded values do not
@@ -280,8 +281,27 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     err = np.zeros((M + 1, 3))
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-                  lengths, parents, innov, kappa, err, aim, root_rho)  # fmt: skip
+                  lengths, parents, innov, kappa, err, aim, root_rho, kstep)  # fmt: skip
     return out
+
+
+def keyframe_steps(keys: np.ndarray, gap_exponent: float) -> np.ndarray:
+    """(W,) each keyframe's step factor ``(mean_w / w_w)^g``: ``w_w = (gap before + gap after)
+    / 2`` [frames] is about how many frames its value moves (the hat of the curves between
+    keyframes; a gap of 1 beyond either end) and ``mean_w = N / W`` their mean, so a keyframe
+    that a long gap leans on gets a finer step and one among dense keyframes a coarser one.
+    g = k / 4 for k in 0..4; every factor comes from integers by one division and square roots
+    (correctly rounded in IEEE 754), so every machine decodes alike; 1 for g = 0."""
+    k = np.asarray(keys, dtype=np.int64)
+    W = len(k)
+    quarters = int(round(4 * gap_exponent))
+    if quarters == 0 or W < 2:
+        return np.ones(W)
+    gaps = np.diff(k)
+    both = np.r_[1, gaps] + np.r_[gaps, 1]  # 2 w_w, integers
+    ratio = (2.0 * (int(k[-1] - k[0]) + 1)) / (W * both.astype(np.float64))  # mean_w / w_w
+    root = np.sqrt(ratio)
+    return {1: np.sqrt(root), 2: root, 3: root * np.sqrt(root), 4: ratio}[quarters]
 
 
 def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
@@ -312,6 +332,10 @@ class PositionQuantiser:
         n_bones: M; lengths: (M,) bone lengths [m] as stored; parents: (M + 1,) parent indices.
         step: the position step [m] (float32 in the stream); rho: the predictor's slope weight.
         exponent: e, the subtree size's exponent in the levers (k / 16 for k in 0..16).
+        root_rho: the root channels' slope weight (None: ``rho``).
+        gap_exponent: g, each keyframe's step times :func:`keyframe_steps` (k / 4 for k in 0..4).
+        partner: whether a channel's prediction adds its parent bone's innovation (versions 2
+            to 4; version 5 leaves it out: with aiming it cost bytes).
     """
 
     n_bones: int
@@ -322,6 +346,8 @@ class PositionQuantiser:
     bits: int = 0  # no fixed bit depth: codes are residuals of any size
     exponent: float = SUBTREE_EXPONENT
     root_rho: float | None = None
+    gap_exponent: float = 0.0
+    partner: bool = True
 
     @property
     def root_slope(self) -> float:
@@ -346,6 +372,8 @@ class PositionQuantiser:
         M = self.n_bones
         p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
         out = np.full((2 * M + 3, 1), -1, dtype=np.int64)
+        if not self.partner:
+            return out
         out[:M, 0] = np.where(p >= 0, p, -1)
         out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
         return out
@@ -384,6 +412,7 @@ class PositionQuantiser:
             basis,
             *self._tree(),
             float(self.root_slope),
+            keyframe_steps(k, self.gap_exponent),
         )
         return codes, out
 
@@ -405,4 +434,5 @@ class PositionQuantiser:
             np.zeros((0, self.n_bones, 5)),
             *self._tree(),
             float(self.root_slope),
+            keyframe_steps(k, self.gap_exponent),
         )
