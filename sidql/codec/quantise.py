@@ -176,7 +176,7 @@ PARTNER_WEIGHTS = (-0.5, 1.5)
 
 @numba.njit(cache=True)
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-              lengths, parents, innov, kappa, err, aim, root_rho, kstep):  # fmt: skip
+              lengths, parents, innov, kappa, err, aim, root_rho, kstep, firsts):  # fmt: skip
     """Keyframe w of :func:`_dpcm`: channels root first, then bone by bone (parents first),
     theta before phi. With ``aim``, ``err`` (J, 3) holds the decoded points' errors [m] to first
     order, and a bone's targets are its true angles minus its parent point's error along the
@@ -191,7 +191,9 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
     for i in range(D):
         d = 2 * M + i if i < 3 else (i - 3) // 2 + M * ((i - 3) % 2)
         pred = 0.0
-        if w == 1:
+        if w == 0 and firsts[d] >= 0:  # the first keyframe: the parent bone's same angle
+            pred = out[0, firsts[d]]
+        elif w == 1:
             pred = out[0, d]
         elif w >= 2:
             slope = root_rho if d >= 2 * M else rho
@@ -248,12 +250,13 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
 
 @numba.njit(cache=True, nogil=True)
 def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-          parents, root_rho, kstep):  # fmt: skip
+          parents, root_rho, kstep, firsts):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
     ``t = x[w-1] + rho * (x[w-1] - x[w-2]) * gap_w / gap_{w-1}`` (the ratio capped at 2;
-    ``x[w-1]`` alone for w = 1, 0 for w = 0), plus ``kappa_d`` times the innovation
+    ``x[w-1]`` alone for w = 1; for w = 0 the decoded first keyframe of channel ``firsts[d]``,
+    or 0 where that is -1), plus ``kappa_d`` times the innovation
     ``x - t`` its partner channel (``partners[d]``, decoded before it: the parent bone's same
     angle) had at this keyframe (a bone tends to turn with its parent); ``kappa_d`` starts at 0
     and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
@@ -281,7 +284,7 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     err = np.zeros((M + 1, 3))
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-                  lengths, parents, innov, kappa, err, aim, root_rho, kstep)  # fmt: skip
+                  lengths, parents, innov, kappa, err, aim, root_rho, kstep, firsts)  # fmt: skip
     return out
 
 
@@ -334,8 +337,9 @@ class PositionQuantiser:
         exponent: e, the subtree size's exponent in the levers (k / 16 for k in 0..16).
         root_rho: the root channels' slope weight (None: ``rho``).
         gap_exponent: g, each keyframe's step times :func:`keyframe_steps` (k / 4 for k in 0..4).
-        partner: whether a channel's prediction adds its parent bone's innovation (versions 2
-            to 4; version 5 leaves it out: with aiming it cost bytes).
+        partner: True (versions 2 to 4): each prediction adds the parent bone's innovation;
+            False (version 5): it does not (with aiming that cost bytes), and the first
+            keyframe of a bone is predicted from its parent's (:meth:`firsts`).
     """
 
     n_bones: int
@@ -366,17 +370,37 @@ class PositionQuantiser:
         s = np.float64(np.float32(self.step))
         return np.concatenate([s / lever, s / lever, np.full(3, s / n[0])])
 
-    def partners(self) -> np.ndarray:
-        """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
-        its own: the parent bone's same angle (-1: none; the root's children and the root)."""
+    def _parent_channels(self) -> np.ndarray:
+        """(2 M + 3,) per channel the parent bone's same angle (-1: none; the root's children
+        and the root)."""
         M = self.n_bones
         p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
-        out = np.full((2 * M + 3, 1), -1, dtype=np.int64)
-        if not self.partner:
-            return out
-        out[:M, 0] = np.where(p >= 0, p, -1)
-        out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
-        return out
+        return np.r_[np.where(p >= 0, p, -1), np.where(p >= 0, M + p, -1), -np.ones(3, np.int64)]
+
+    def partners(self) -> np.ndarray:
+        """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
+        its own (with ``partner``): the parent bone's same angle (-1: none)."""
+        out = self._parent_channels()[:, None]
+        return out if self.partner else np.full_like(out, -1)
+
+    def firsts(self) -> np.ndarray:
+        """(2 M + 3,) per channel, the channel whose decoded first keyframe predicts its own
+        (without ``partner``, version 5): the parent bone's same angle (-1: none, predicted 0)."""
+        out = self._parent_channels()
+        return np.full_like(out, -1) if self.partner else out
+
+    def same_branch(self, values: np.ndarray) -> np.ndarray:
+        """(W, D) ``values`` with each bone's phi moved by whole turns so that its first keyframe
+        lies within pi of its parent's (the points do not move; the first keyframe's residual,
+        predicted from the parent's phi, stays small)."""
+        v = np.array(values, dtype=np.float64)
+        M = self.n_bones
+        if self.partner or len(v) == 0:
+            return v
+        for b, pc in enumerate(self._parent_channels()[M : 2 * M]):  # parents before children
+            if pc >= 0:
+                v[:, M + b] += 2.0 * np.pi * np.round((v[0, pc] - v[0, M + b]) / (2.0 * np.pi))
+        return v
 
     def _tree(self):
         return (
@@ -390,7 +414,7 @@ class PositionQuantiser:
         ``aim``: each bone aims from its decoded parent point at its true point (see
         :func:`_dpcm`) instead of quantising its own angles; ``basis``: ``aim_basis(values)``
         if the caller has it."""
-        v = np.ascontiguousarray(values, dtype=np.float64)
+        v = np.ascontiguousarray(self.same_branch(values))
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
         M = self.n_bones
@@ -413,6 +437,7 @@ class PositionQuantiser:
             *self._tree(),
             float(self.root_slope),
             keyframe_steps(k, self.gap_exponent),
+            self.firsts(),
         )
         return codes, out
 
@@ -435,4 +460,5 @@ class PositionQuantiser:
             *self._tree(),
             float(self.root_slope),
             keyframe_steps(k, self.gap_exponent),
+            self.firsts(),
         )
