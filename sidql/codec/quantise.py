@@ -397,9 +397,13 @@ class PositionQuantiser:
         M = self.n_bones
         if self.partner or len(v) == 0:
             return v
-        for b, pc in enumerate(self._parent_channels()[M : 2 * M]):  # parents before children
+        first = v[0].tolist()
+        turns = [0.0] * M
+        for b, pc in enumerate(self._parent_channels()[M : 2 * M].tolist()):  # parents first
             if pc >= 0:
-                v[:, M + b] += 2.0 * np.pi * np.round((v[0, pc] - v[0, M + b]) / (2.0 * np.pi))
+                turns[b] = 2.0 * np.pi * round((first[pc] - first[M + b]) / (2.0 * np.pi))
+                first[M + b] += turns[b]
+        v[:, M : 2 * M] += turns
         return v
 
     def _tree(self):
