@@ -28,6 +28,7 @@ compiled function for both directions), integer residuals of any size.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -250,7 +251,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
 
 @numba.njit(cache=True, nogil=True)
 def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-          parents, root_rho, kstep, firsts):  # fmt: skip
+          parents, root_rho, quarters, firsts):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
@@ -264,8 +265,8 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     decoder rebuilds ``p + r step``.
     ``step`` is ``scale[d] kstep[w]`` for theta and root channels and
     ``min(scale[d] kstep[w] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi,
-    theta_hat being the same keyframe's decoded theta of that bone (decoded first); ``kstep``
-    (W,): the keyframe's step factor (:func:`keyframe_steps`).
+    theta_hat being the same keyframe's decoded theta of that bone (decoded first); ``kstep[w]``:
+    :func:`keyframe_steps` with g = ``quarters`` / 4.
 
     Channels are visited root first, then bone by bone (parents first), theta before phi: every
     value a channel's prediction or step needs is decoded before it, so the decoded values do not
@@ -282,6 +283,9 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     kappa = np.zeros((D, partners.shape[1]))
     aim = encode and basis.shape[0] == W
     err = np.zeros((M + 1, 3))
+    kstep = _steps(keys, quarters)
+    if encode:
+        values = _same_branch(values, firsts, M)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
                   lengths, parents, innov, kappa, err, aim, root_rho, kstep, firsts)  # fmt: skip
@@ -289,22 +293,57 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
 
 
 def keyframe_steps(keys: np.ndarray, gap_exponent: float) -> np.ndarray:
-    """(W,) each keyframe's step factor ``(mean_w / w_w)^g``: ``w_w = (gap before + gap after)
-    / 2`` [frames] is about how many frames its value moves (the hat of the curves between
-    keyframes; a gap of 1 beyond either end) and ``mean_w = N / W`` their mean, so a keyframe
-    that a long gap leans on gets a finer step and one among dense keyframes a coarser one.
-    g = k / 4 for k in 0..4; every factor comes from integers by one division and square roots
-    (correctly rounded in IEEE 754), so every machine decodes alike; 1 for g = 0."""
-    k = np.asarray(keys, dtype=np.int64)
-    W = len(k)
-    quarters = int(round(4 * gap_exponent))
+    """(W,) each keyframe's step factor ``(mean_w / w_w)^g``, ``w_w = (gap before + gap after) / 2``
+    (1 beyond either end) the frames its value moves, ``mean_w = N / W``; g = k / 4, k in 0..4.
+    From integers by a division and square roots (correctly rounded): every machine agrees."""
+    return _steps(np.ascontiguousarray(keys, dtype=np.int64), int(round(4 * gap_exponent)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _steps(keys, quarters):
+    """:func:`keyframe_steps` with g = quarters / 4."""
+    W = keys.shape[0]
+    out = np.ones(W)
     if quarters == 0 or W < 2:
-        return np.ones(W)
-    gaps = np.diff(k)
-    both = np.r_[1, gaps] + np.r_[gaps, 1]  # 2 w_w, integers
-    ratio = (2.0 * (int(k[-1] - k[0]) + 1)) / (W * both.astype(np.float64))  # mean_w / w_w
-    root = np.sqrt(ratio)
-    return {1: np.sqrt(root), 2: root, 3: root * np.sqrt(root), 4: ratio}[quarters]
+        return out
+    frames = 2.0 * (keys[W - 1] - keys[0] + 1)
+    for w in range(W):
+        both = (keys[w] - keys[w - 1] if w > 0 else 1) + (keys[w + 1] - keys[w] if w < W - 1 else 1)
+        ratio = frames / (W * np.float64(both))  # mean_w / w_w; 2 w_w = both, integers
+        root = np.sqrt(ratio)
+        if quarters == 1:
+            out[w] = np.sqrt(root)
+        elif quarters == 2:
+            out[w] = root
+        elif quarters == 3:
+            out[w] = root * np.sqrt(root)
+        else:
+            out[w] = ratio
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _same_branch(values, firsts, M):
+    """(W, D) ``values``, each bone's phi moved by whole turns so that its first keyframe lies
+    within pi of its parent's (``firsts``; parents before children): the points do not move and
+    the first keyframe's residual, predicted from the parent's phi, stays small. ``values``
+    itself when nothing moves."""
+    if values.shape[0] == 0:
+        return values
+    first = values[0].copy()
+    turn = np.zeros(M)
+    for b in range(M):
+        pc = firsts[M + b]
+        if pc >= 0:
+            turn[b] = 2.0 * np.pi * np.rint((first[pc] - first[M + b]) / (2.0 * np.pi))
+            first[M + b] += turn[b]
+    if not np.any(turn != 0.0):
+        return values
+    out = values.copy()
+    for w in range(values.shape[0]):
+        for b in range(M):
+            out[w, M + b] += turn[b]
+    return out
 
 
 def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
@@ -316,6 +355,16 @@ def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
     st, ct = np.sin(v[:, :M]), np.cos(v[:, :M])
     sp, cp = np.sin(v[:, M : 2 * M]), np.cos(v[:, M : 2 * M])
     return np.ascontiguousarray(np.stack([ct * cp, ct * sp, -st, -sp, cp], axis=-1))
+
+
+@functools.lru_cache(maxsize=64)
+def _parent_channels(parents: tuple) -> np.ndarray:
+    """(2 M + 3,) per channel the parent bone's same angle (-1: none); read-only, shared."""
+    p = np.asarray(parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
+    M = len(p)
+    out = np.r_[np.where(p >= 0, p, -1), np.where(p >= 0, M + p, -1), -np.ones(3, np.int64)]
+    out.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
@@ -373,9 +422,7 @@ class PositionQuantiser:
     def _parent_channels(self) -> np.ndarray:
         """(2 M + 3,) per channel the parent bone's same angle (-1: none; the root's children
         and the root)."""
-        M = self.n_bones
-        p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
-        return np.r_[np.where(p >= 0, p, -1), np.where(p >= 0, M + p, -1), -np.ones(3, np.int64)]
+        return _parent_channels(tuple(np.asarray(self.parents, dtype=np.int64).tolist())).copy()
 
     def partners(self) -> np.ndarray:
         """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
@@ -389,23 +436,6 @@ class PositionQuantiser:
         out = self._parent_channels()
         return np.full_like(out, -1) if self.partner else out
 
-    def same_branch(self, values: np.ndarray) -> np.ndarray:
-        """(W, D) ``values`` with each bone's phi moved by whole turns so that its first keyframe
-        lies within pi of its parent's (the points do not move; the first keyframe's residual,
-        predicted from the parent's phi, stays small)."""
-        v = np.array(values, dtype=np.float64)
-        M = self.n_bones
-        if self.partner or len(v) == 0:
-            return v
-        first = v[0].tolist()
-        turns = [0.0] * M
-        for b, pc in enumerate(self._parent_channels()[M : 2 * M].tolist()):  # parents first
-            if pc >= 0:
-                turns[b] = 2.0 * np.pi * round((first[pc] - first[M + b]) / (2.0 * np.pi))
-                first[M + b] += turns[b]
-        v[:, M : 2 * M] += turns
-        return v
-
     def _tree(self):
         return (
             np.ascontiguousarray(self.lengths, dtype=np.float64),
@@ -418,7 +448,7 @@ class PositionQuantiser:
         ``aim``: each bone aims from its decoded parent point at its true point (see
         :func:`_dpcm`) instead of quantising its own angles; ``basis``: ``aim_basis(values)``
         if the caller has it."""
-        v = np.ascontiguousarray(self.same_branch(values))
+        v = np.ascontiguousarray(values, dtype=np.float64)
         codes = np.zeros(v.shape, dtype=np.int64)
         k = np.ascontiguousarray(keys, dtype=np.int64)
         M = self.n_bones
@@ -440,7 +470,7 @@ class PositionQuantiser:
             basis,
             *self._tree(),
             float(self.root_slope),
-            keyframe_steps(k, self.gap_exponent),
+            int(round(4 * self.gap_exponent)),
             self.firsts(),
         )
         return codes, out
@@ -463,6 +493,6 @@ class PositionQuantiser:
             np.zeros((0, self.n_bones, 5)),
             *self._tree(),
             float(self.root_slope),
-            keyframe_steps(k, self.gap_exponent),
+            int(round(4 * self.gap_exponent)),
             self.firsts(),
         )
