@@ -18,9 +18,10 @@ from sidql.codec.dpcm import (
     SIN_FLOOR,
     depth_order,
     dpcm,
+    same_branch,
     visit_order,
 )
-from sidql.codec.quantise import PositionQuantiser, aim_basis
+from sidql.codec.quantise import PositionQuantiser, aim_basis, keyframe_steps
 from sidql.keyframes.spherical import protocol_parent_indices
 
 
@@ -29,10 +30,13 @@ def _clamp(x, lo, hi):
 
 
 def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths, parents,
-           root_rho):  # fmt: skip
+           root_rho, gap_exponent, firsts):  # fmt: skip
     """The kernel written out in Python, channels root first then bone by bone (index order,
     parents first), theta before phi. Returns (codes, decoded values)."""
     mu, lo, hi = PARTNER_RATE, *PARTNER_WEIGHTS
+    kstep = keyframe_steps(keys, gap_exponent)
+    if encode:
+        values = same_branch(values, firsts, M, np.arange(len(keys)))
     W, D = codes.shape
     codes = codes.copy()
     out = np.zeros((W, D))
@@ -45,7 +49,9 @@ def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths,
         for i in range(D):
             d = 2 * M + i if i < 3 else (i - 3) // 2 + M * ((i - 3) % 2)
             pred = 0.0
-            if w == 1:
+            if w == 0 and firsts[d] >= 0:
+                pred = out[0, firsts[d]]
+            elif w == 1:
                 pred = out[0, d]
             elif w >= 2:
                 slope = root_rho if d >= 2 * M else rho
@@ -55,7 +61,7 @@ def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths,
                 if w >= 1 and pc >= 0:
                     pred += kappa[d, j] * innov[pc]
                     norm += innov[pc] * innov[pc]
-            step = scale[d]
+            step = scale[d] * kstep[w]
             if M <= d < 2 * M:
                 step = min(step / max(math.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
             if encode:
@@ -96,7 +102,7 @@ def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths,
     return codes, out
 
 
-def _case(seed: int, parents: np.ndarray, W: int = 40):
+def _case(seed: int, parents: np.ndarray, W: int = 40, v5: bool = True):
     rng = np.random.default_rng(seed)
     M = len(parents) - 1
     keys = np.cumsum(rng.integers(1, 6, W))
@@ -104,7 +110,8 @@ def _case(seed: int, parents: np.ndarray, W: int = 40):
     values = np.concatenate([np.pi / 2 + 1.2 * np.sin(t[:, :M]), 3.0 * t[:, M:]], axis=1)
     lengths = rng.uniform(0.05, 0.5, M)
     q = PositionQuantiser(M, lengths, parents, float(np.float32(rng.uniform(2e-4, 3e-2))), 0.5,
-                          exponent=0.125, root_rho=1.0)  # fmt: skip
+                          exponent=0.125, root_rho=1.0, gap_exponent=0.25 * v5,
+                          partner=not v5)  # fmt: skip
     return values, keys, q
 
 
@@ -115,11 +122,12 @@ def _run(kernel, values, keys, q, encode, codes=None, aim=True):
     lengths, parents = q._tree()
     args = (values, codes, keys, q.scales(), M, q.rho, encode, q.partners())
     rows = np.arange(len(keys))
+    quarters, firsts = int(round(4 * q.gap_exponent)), q.firsts()
     if kernel is dpcm:
         out = dpcm(*args, PARTNER_RATE, *PARTNER_WEIGHTS, basis, lengths, parents, q.root_slope,
-                   rows)  # fmt: skip
+                   quarters, firsts, rows)  # fmt: skip
         return codes, out
-    return oracle(*args, basis, lengths, parents, q.root_slope)
+    return oracle(*args, basis, lengths, parents, q.root_slope, q.gap_exponent, firsts)
 
 
 CHAIN = np.array([-1, 0, 1, 2, 3])
@@ -128,9 +136,10 @@ BUSHY = np.array([-1, 0, 0, 1, 1, 2, 0, 6, 3])
 
 @pytest.mark.parametrize("parents", [protocol_parent_indices(), CHAIN, BUSHY])
 @pytest.mark.parametrize("aim", [True, False])
-def test_kernel_matches_bone_by_bone_oracle(parents, aim):
+@pytest.mark.parametrize("v5", [True, False])
+def test_kernel_matches_bone_by_bone_oracle(parents, aim, v5):
     for seed in range(3):
-        values, keys, q = _case(seed, np.asarray(parents, dtype=np.int64))
+        values, keys, q = _case(seed, np.asarray(parents, dtype=np.int64), v5=v5)
         codes, out = _run(dpcm, values, keys, q, True, aim=aim)
         ref_codes, ref_out = _run(oracle, values, keys, q, True, aim=aim)
         assert np.abs(codes).max() > 1  # the residuals are not all trivial

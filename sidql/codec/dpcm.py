@@ -10,7 +10,9 @@ by normalised least mean squares (rate ``mu``, kept in [lo, hi]). The value is s
 ``r = round((x - p) / step)`` (or one nearer 0, :data:`RDO_BAND`); the decoder rebuilds
 ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
 ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being the
-same keyframe's decoded theta of that bone.
+same keyframe's decoded theta of that bone, each times the keyframe's factor (:func:`steps`,
+version 5). In version 5 there is no partner term (``partners`` all -1) and a channel's first
+keyframe is predicted from its parent bone's same angle (``firsts``) instead of 0.
 
 Every value a channel's prediction, step or target needs is decoded before it: its own channel
 at the keyframes before, its bone's theta (for phi) and its parent bone (partner innovation, the
@@ -90,7 +92,7 @@ def visit_order(parents):
 @numba.njit(cache=True)
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
               lengths, parents, innov, kappa, err, aim, root_rho, order, target_phi,
-              v):  # fmt: skip
+              v, kstep, firsts):  # fmt: skip
     """Keyframe w of :func:`dpcm`: channels in ``order`` (:func:`visit_order`). With ``aim``,
     ``err`` (J, 3) holds the decoded points' errors [m] to first order, and a bone's targets
     are its true angles minus its parent point's error along the bone's theta and phi
@@ -104,7 +106,9 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
     for i in range(D):
         d = order[i]
         pred = 0.0
-        if w == 1:
+        if w == 0 and firsts[d] >= 0:  # the first keyframe: the parent bone's same angle
+            pred = out[0, firsts[d]]
+        elif w == 1:
             pred = out[0, d]
         elif w >= 2:
             slope = root_rho if d >= 2 * M else rho
@@ -116,7 +120,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             if w >= 1 and pc >= 0:
                 pred += kappa[d, j] * innov[pc]
                 norm += innov[pc] * innov[pc]
-        step = scale[d]
+        step = scale[d] * kstep[w]
         if M <= d < 2 * M:
             step = min(step / max(np.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
         if encode:
@@ -163,7 +167,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
 
 @numba.njit(cache=True, nogil=True)
 def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-         parents, root_rho, rows):  # fmt: skip
+         parents, root_rho, quarters, firsts, rows):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (see the module docstring).
 
     Args:
@@ -180,6 +184,10 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
             (and sin theta, floored at SIN_FLOOR, for phi), each change capped at 0.5 rad; so
             each bone corrects the error its ancestors left.
         lengths: (M,) bone lengths [m]; parents: (M + 1,) point parents (-1: root).
+        quarters: 4 g, each keyframe's step times :func:`steps` (version 5; 0: none).
+        firsts: (2 M + 3,) the channel whose decoded first keyframe predicts each channel's
+            (version 5: the parent bone's same angle; -1: predicted 0). Encoding, each bone's
+            phi is first moved by whole turns onto its parent's branch (:func:`same_branch`).
         rows: (W,) int64 row of ``values`` and ``basis`` of each keyframe.
 
     Returns the decoded (W, 2 M + 3) values.
@@ -193,8 +201,59 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
     err = np.zeros((M + 1, 3))
     order = visit_order(parents)
     target_phi = np.zeros(M)
+    kstep = steps(keys, quarters)
+    if encode:
+        values = same_branch(values, firsts, M, rows)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi,
                   basis, lengths, parents, innov, kappa, err, aim, root_rho, order,
-                  target_phi, rows[w])  # fmt: skip
+                  target_phi, rows[w], kstep, firsts)  # fmt: skip
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def steps(keys, quarters):
+    """(W,) each keyframe's step factor ``(mean_w / w_w)^g`` with g = quarters / 4
+    (:func:`sidql.codec.quantise.keyframe_steps`); ``keys``: (W,) int64 keyframes."""
+    W = keys.shape[0]
+    out = np.ones(W)
+    if quarters == 0 or W < 2:
+        return out
+    frames = 2.0 * (keys[W - 1] - keys[0] + 1)
+    for w in range(W):
+        both = (keys[w] - keys[w - 1] if w > 0 else 1) + (keys[w + 1] - keys[w] if w < W - 1 else 1)
+        ratio = frames / (W * np.float64(both))  # mean_w / w_w; 2 w_w = both, integers
+        root = np.sqrt(ratio)
+        if quarters == 1:
+            out[w] = np.sqrt(root)
+        elif quarters == 2:
+            out[w] = root
+        elif quarters == 3:
+            out[w] = root * np.sqrt(root)
+        else:
+            out[w] = ratio
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def same_branch(values, firsts, M, rows):
+    """(N, D) ``values``, each bone's phi moved by whole turns so that its first keyframe (row
+    ``rows[0]``) lies within pi of its parent's (``firsts``; parents before children): the
+    points do not move and the first keyframe's residual, predicted from the parent's phi,
+    stays small. ``values`` itself when nothing moves."""
+    if rows.shape[0] == 0:
+        return values
+    first = values[rows[0]].copy()
+    turn = np.zeros(M)
+    for b in range(M):
+        pc = firsts[M + b]
+        if pc >= 0:
+            turn[b] = 2.0 * np.pi * np.rint((first[pc] - first[M + b]) / (2.0 * np.pi))
+            first[M + b] += turn[b]
+    if not np.any(turn != 0.0):
+        return values
+    out = values.copy()
+    for n in range(values.shape[0]):
+        for b in range(M):
+            out[n, M + b] += turn[b]
     return out

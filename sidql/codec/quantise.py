@@ -28,11 +28,12 @@ one compiled function for both directions), integer residuals of any size.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
-from sidql.codec.dpcm import PARTNER_RATE, PARTNER_WEIGHTS, dpcm
+from sidql.codec.dpcm import PARTNER_RATE, PARTNER_WEIGHTS, dpcm, steps
 from sidql.codec.plan import subtree_sizes
 from sim.errors import UsageError
 
@@ -161,6 +162,13 @@ def fit_quantiser(
 SUBTREE_EXPONENT = 0.5
 
 
+def keyframe_steps(keys: np.ndarray, gap_exponent: float) -> np.ndarray:
+    """(W,) each keyframe's step factor ``(mean_w / w_w)^g``, ``w_w = (gap before + gap after) / 2``
+    (1 beyond either end) the frames its value moves, ``mean_w = N / W``; g = k / 4, k in 0..4.
+    From integers by a division and square roots (correctly rounded): every machine agrees."""
+    return steps(np.ascontiguousarray(keys, dtype=np.int64), int(round(4 * gap_exponent)))
+
+
 def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
     """(W, M, 5) per bone the unit vectors (CMU axes) a point moves along when the bone's theta
     and phi grow: ``(cos t cos p, cos t sin p, -sin t)`` and ``(-sin p, cos p)`` (its z is 0), of
@@ -170,6 +178,16 @@ def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
     st, ct = np.sin(v[:, :M]), np.cos(v[:, :M])
     sp, cp = np.sin(v[:, M : 2 * M]), np.cos(v[:, M : 2 * M])
     return np.ascontiguousarray(np.stack([ct * cp, ct * sp, -st, -sp, cp], axis=-1))
+
+
+@functools.lru_cache(maxsize=64)
+def _parent_channels(parents: tuple) -> np.ndarray:
+    """(2 M + 3,) per channel the parent bone's same angle (-1: none); read-only, shared."""
+    p = np.asarray(parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
+    M = len(p)
+    out = np.r_[np.where(p >= 0, p, -1), np.where(p >= 0, M + p, -1), -np.ones(3, np.int64)]
+    out.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
@@ -182,13 +200,18 @@ class PositionQuantiser:
     ``step / J^e`` (all J points move with the root), n_b the points at or below b and e =
     ``exponent`` (1/2 for errors that add along the chain like independent noise; the encoder
     aims each bone from its decoded parent point, which cancels most of that, and uses less).
-    Values are predicted along the keyframes (:mod:`sidql.codec.dpcm`) and the integer
-    residuals range-coded (:mod:`sidql.codec.entropy`).
+    Values are predicted along the keyframes (:mod:`sidql.codec.dpcm`) and the integer residuals
+    range-coded (:mod:`sidql.codec.entropy`).
 
     Attributes:
         n_bones: M; lengths: (M,) bone lengths [m] as stored; parents: (M + 1,) parent indices.
         step: the position step [m] (float32 in the stream); rho: the predictor's slope weight.
         exponent: e, the subtree size's exponent in the levers (k / 16 for k in 0..16).
+        root_rho: the root channels' slope weight (None: ``rho``).
+        gap_exponent: g, each keyframe's step times :func:`keyframe_steps` (k / 4 for k in 0..4).
+        partner: True (versions 2 to 4): each prediction adds the parent bone's innovation;
+            False (version 5): it does not (with aiming that cost bytes), and the first
+            keyframe of a bone is predicted from its parent's (:meth:`firsts`).
     """
 
     n_bones: int
@@ -199,6 +222,8 @@ class PositionQuantiser:
     bits: int = 0  # no fixed bit depth: codes are residuals of any size
     exponent: float = SUBTREE_EXPONENT
     root_rho: float | None = None
+    gap_exponent: float = 0.0
+    partner: bool = True
 
     @property
     def root_slope(self) -> float:
@@ -217,15 +242,22 @@ class PositionQuantiser:
         s = np.float64(np.float32(self.step))
         return np.concatenate([s / lever, s / lever, np.full(3, s / n[0])])
 
+    def _parent_channels(self) -> np.ndarray:
+        """(2 M + 3,) per channel the parent bone's same angle (-1: none; the root's children
+        and the root)."""
+        return _parent_channels(tuple(np.asarray(self.parents, dtype=np.int64).tolist())).copy()
+
     def partners(self) -> np.ndarray:
         """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
-        its own: the parent bone's same angle (-1: none; the root's children and the root)."""
-        M = self.n_bones
-        p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
-        out = np.full((2 * M + 3, 1), -1, dtype=np.int64)
-        out[:M, 0] = np.where(p >= 0, p, -1)
-        out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
-        return out
+        its own (with ``partner``): the parent bone's same angle (-1: none)."""
+        out = self._parent_channels()[:, None]
+        return out if self.partner else np.full_like(out, -1)
+
+    def firsts(self) -> np.ndarray:
+        """(2 M + 3,) per channel, the channel whose decoded first keyframe predicts its own
+        (without ``partner``, version 5): the parent bone's same angle (-1: none, predicted 0)."""
+        out = self._parent_channels()
+        return np.full_like(out, -1) if self.partner else out
 
     def _tree(self):
         return (
@@ -265,6 +297,8 @@ class PositionQuantiser:
             np.ascontiguousarray(basis, dtype=np.float64),
             *self._tree(),
             float(self.root_slope),
+            int(round(4 * self.gap_exponent)),
+            self.firsts(),
             r,
         )
         return codes, out
@@ -287,5 +321,7 @@ class PositionQuantiser:
             np.zeros((0, self.n_bones, 5)),
             *self._tree(),
             float(self.root_slope),
+            int(round(4 * self.gap_exponent)),
+            self.firsts(),
             np.arange(len(k)),
         )
