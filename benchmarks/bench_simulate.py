@@ -64,6 +64,19 @@ for _n in (16, 24, 28, 32, 48, 64):
         "position",
     )
 
+for _w in (2, 5, 10, 20, 50):  # candidates: foot holding in the cost (sim.simulate.footholding)
+    CONTROLLERS[f"hold{_w}"] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, foot holding {_w}",
+        {"controller": "sampling", "samples": 28, "search": {"weights": CostWeights(hold=_w)}},
+        "position",
+    )
+for _e in (1, 4, 8):  # candidates: elite reuse (search_offsets(elite=...))
+    CONTROLLERS[f"elite{_e}"] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, {_e} elite",
+        {"controller": "sampling", "samples": 28, "search": {"elite": _e}},
+        "position",
+    )
+
 
 def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict[str, list[dict]]:
     """Per controller name (:data:`CONTROLLERS`), the figures of

@@ -49,6 +49,14 @@ from sim.simulate.controller import (
 )
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
+from sim.simulate.footholding import (
+    CONTACT_HEIGHT,
+    reference_soles,
+    slide_cost,
+    sole_bottoms,
+    sole_ids,
+    sole_lowest,
+)
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
@@ -87,6 +95,12 @@ class CostWeights:
     #: a fall (``sim.simulate.falls``) in the rollout, doubled if at its start; 0: the rollouts
     #: do not look for falls and run to their end (the sampler as first built)
     fall: float = 1e4
+    #: foot holding (``sim.simulate.footholding.slide_cost``) over the window's ticks: a stance
+    #: sole sliding faster than the reference's [m^2/s^2]; 0: not looked at
+    hold: float = 0.0
+    #: foot holding also costs a simulated sole that touches the floor where the reference lifts
+    #: it (a dragged foot); False: stance soles only
+    hold_contact: bool = True
 
 
 @dataclass(frozen=True)
@@ -196,6 +210,8 @@ class _Problem:
     fall_ref: object | None
     kp: np.ndarray | None = None
     balance: object | None = None
+    soles: np.ndarray | None = None  # (2,) sole geom ids where foot holding is costed
+    ref_soles: tuple | None = None  # footholding.reference_soles: (T, 2, 2) xy, (T, 2) stance
 
 
 def _problem(
@@ -206,9 +222,11 @@ def _problem(
     pushes: tuple[Push, ...],
     falls: bool = True,
     balance: Balance | None = None,
+    hold: bool = False,
 ) -> _Problem:
     """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
-    rollouts look for falls (``fall_ref`` set) or not (None)."""
+    rollouts look for falls (``fall_ref`` set) or not (None); ``hold``: they record the soles
+    for the foot-holding cost (where the body has soles)."""
     nu = model.nu
     ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     kp = model.actuator_gainprm[:, 0].copy()
@@ -224,6 +242,7 @@ def _problem(
     for k in range(ref_qpos.shape[0]):
         data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
         ref_feat.append(features(model, data, ee_ids, foot_ids))
+    soles = sole_ids(model) if hold else None
     return _Problem(
         base=base,
         ref_qvel=ref_qvel,
@@ -236,6 +255,8 @@ def _problem(
         fall_ref=fall_reference(model, ref_qpos) if falls else None,
         kp=kp,
         balance=None if balance is None else balance_plan(model, ref_qpos, ref_qvel, balance),
+        soles=soles,
+        ref_soles=None if soles is None else reference_soles(model, ref_qpos, soles),
     )
 
 
@@ -243,7 +264,9 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     """Roll ``data`` (set to the parent's state) on with hinge offset ``off`` (nu,) [rad] from
     tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
     ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
-    ``keep`` = (state row, qpos row, state spec). A rollout that falls (``sim.simulate.falls``,
+    ``keep`` = (state row, qpos row, state spec, soles), ``soles`` None or the sole boxes'
+    positions (k1 - k0, 2, 3) and orientations (k1 - k0, 2, 9) written after each tick of the
+    window (``prob.soles``; as the tick's last substep computed them). A rollout that falls (``sim.simulate.falls``,
     checked after every tick where ``prob.fall_ref`` is set) stops at the fall or at the
     window's end, whichever is later.
 
@@ -252,7 +275,7 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     """
     k0, k1, k2 = ticks
     pushes, weakenings = perturb
-    state, qpos, spec = keep
+    state, qpos, spec, soles = keep
     T = len(prob.base)
     fell = False
     fb = np.zeros(model.nu)
@@ -265,6 +288,11 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
             target += held_torques(model, data, prob.balance, k, fb) / prob.kp
         set_controls(model, data, target, weakening_factor(weakenings, t))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
+        if soles is not None and k < k1:
+            soles[0][k - k0], soles[1][k - k0] = (
+                data.geom_xpos[prob.soles],
+                data.geom_xmat[prob.soles],
+            )
         if k == k1 - 1:  # the window's end: the state kept
             mujoco.mj_getState(model, data, state, spec)
             qpos[:] = data.qpos
@@ -299,17 +327,30 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     ``datas`` (one ``MjData`` per thread of ``pool``; ``pool`` None: one run): every rollout
     starts from a full state, so the result does not depend on the split."""
     states, weights, perturb, spec = search
-    k0, _, k2 = ticks
+    k0, k1, k2 = ticks
     T = len(prob.base)
     cost = np.empty(len(offs))
+    hold = prob.soles is not None and weights.hold > 0
+    if hold:  # the reference's soles one tick on: a tick's record is its state's end
+        later = np.minimum(np.arange(k0, k1) + 1, T - 1)
+        ref_xy, stance = prob.ref_soles[0][later], prob.ref_soles[1][later]
+        size = model.geom_size[prob.soles]
 
     def run(chunk: np.ndarray, data) -> None:
+        soles = (np.empty((k1 - k0, 2, 3)), np.empty((k1 - k0, 2, 9))) if hold else None
         for s in chunk:
             mujoco.mj_setState(model, data, states[parents[s]], spec)
-            keep_at = (out[0][s], out[1][s], spec)
+            keep_at = (out[0][s], out[1][s], spec, soles)
             end = _rollout(model, data, prob, offs[s], ticks, perturb, keep_at)
             f = features(model, data, prob.ee_ids, prob.foot_ids)
             cost[s] = window_cost(f, prob.ref_feat[min(abs(end), T - 1)], weights, prob.hinge_w)
+            if hold:
+                xy = sole_bottoms(soles[0], soles[1], size[:, 2])[..., :2]
+                touch = None
+                if weights.hold_contact:
+                    touch = sole_lowest(soles[0], soles[1], size) <= CONTACT_HEIGHT
+                slid = slide_cost(xy, ref_xy, stance, 1.0 / CONTROL_HZ, touch)
+                cost[s] += weights.hold * slid
             if end < 0:  # fell: a later fall costs less
                 cost[s] += weights.fall * (1.0 + (k2 + end) / max(1, k2 - k0))
 
@@ -358,6 +399,7 @@ def search_offsets(
     threads: int = 1,
     recentre: float = 0.0,
     balance: Balance | None = BALANCE,
+    elite: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
@@ -380,6 +422,9 @@ def search_offsets(
             the result is the same for any number.
         balance: the balance feedback (``sim.simulate.balance``) every rollout adds to its
             targets (and ``sample_track``'s replay); None: none.
+        elite: candidates (of the ``elite`` cheapest kept states, one each) that go on with
+            their parent's last offset unchanged, neither shrunk by ``persistence`` nor noised:
+            the correction its lookahead was judged with (0: every candidate sampled).
 
     Returns:
         ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
@@ -393,8 +438,9 @@ def search_offsets(
     data = datas[0]
     _check_window(window, balance)
     prob = _problem(
-        model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance
-    )
+        model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
+        hold=weights.hold > 0,
+    )  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     size = mujoco.mj_stateSize(model, spec)
     states = _first_state(model, data, ref_qpos[0], prob.ref_qvel[0], spec)
@@ -409,6 +455,8 @@ def search_offsets(
             parents = np.arange(samples) % len(states)
             centre = (1.0 - recentre) * last[parents] + recentre * last[0]  # [0]: the cheapest
             offs = persistence * centre + prob.sigma * rng.standard_normal((samples, nu))
+            n_elite = min(int(elite), len(states), samples)
+            offs[:n_elite] = last[parents[:n_elite]]
             search = states, weights, (pushes, weakenings), spec
             cost = _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool)
             new_costs = costs[parents] + cost
