@@ -11,6 +11,7 @@ import pytest
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.balance import STANCE_HEIGHT
 from sim.simulate.footholding import (
+    as_slice,
     reference_soles,
     slide_cost,
     sole_bottoms,
@@ -130,3 +131,22 @@ def test_search_with_foot_holding_is_deterministic_and_another_search(trial_on_f
     c, _ = search_offsets(model, ref, weights=CostWeights(hold=0.0), **kw)
     assert np.array_equal(a, b) and np.array_equal(ra, rb)
     assert not np.array_equal(a, c)  # the term changes which candidates are kept
+
+
+def test_many_motions_at_once_cost_what_each_costs_alone():
+    rng = np.random.default_rng(0)
+    K = 7
+    ref = _still(K)
+    sims = ref + 0.01 * rng.standard_normal((5, K, 2, 2))
+    stance = rng.random((K, 2)) > 0.3
+    touch = rng.random((5, K, 2)) > 0.5
+    many = slide_cost(sims, ref, stance, DT, touch)
+    assert many.shape == (5,) and many.max() > 0
+    for i in range(5):
+        assert many[i] == pytest.approx(slide_cost(sims[i], ref, stance, DT, touch[i]), rel=1e-12)
+
+
+@pytest.mark.parametrize("ids", [(6, 13), (13, 6), (0, 1), (3, 0), (1, 0)])
+def test_as_slice_picks_the_rows_fancy_indexing_picks(ids):
+    rows = np.arange(40.0).reshape(20, 2)
+    np.testing.assert_array_equal(rows[as_slice(np.array(ids))], rows[list(ids)])

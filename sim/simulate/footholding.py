@@ -37,6 +37,14 @@ def sole_ids(model) -> np.ndarray | None:
     return None if min(ids) < 0 else np.array(ids)
 
 
+def as_slice(ids: np.ndarray) -> slice:
+    """The basic slice that picks rows ``ids`` (2,) (distinct, >= 0) in their order: a view
+    where fancy indexing would copy (the sampler reads the soles after every tick)."""
+    a, b = int(ids[0]), int(ids[1])
+    stop = b + (1 if b > a else -1)
+    return slice(a, None if stop < 0 else stop, b - a)
+
+
 def sole_bottoms(xpos: np.ndarray, xmat: np.ndarray, half_height: np.ndarray) -> np.ndarray:
     """(..., 2, 3) the bottom centres [m] of boxes at ``xpos`` (..., 2, 3) with orientations
     ``xmat`` (..., 2, 9) (row-major, MuJoCo's ``geom_xmat``) and half heights ``half_height``
@@ -75,17 +83,23 @@ def slide_cost(
     stance: np.ndarray,
     dt: float,
     contact: np.ndarray | None = None,
-) -> float:
-    """The foot-holding cost [m^2/s^2] (module docstring) of soles at ``sim_xy`` (K, 2, 2)
+) -> float | np.ndarray:
+    """The foot-holding cost [m^2/s^2] (module docstring) of soles at ``sim_xy`` (..., K, 2, 2)
     against the reference's ``ref_xy`` (K, 2, 2) over K ticks of ``dt`` [s], the reference
     standing on each sole where ``stance`` (K, 2) is True and the simulated sole touching the
-    floor where ``contact`` (K, 2) is True (None: stance steps only); 0 for K < 2."""
-    if len(sim_xy) < 2:
-        return 0.0
-    v_sim = np.linalg.norm(np.diff(sim_xy, axis=0), axis=-1) / dt  # (K-1, 2)
-    v_ref = np.linalg.norm(np.diff(ref_xy, axis=0), axis=-1) / dt
+    floor where ``contact`` (..., K, 2) is True (None: stance steps only); 0 for K < 2.
+
+    Returns:
+        a float for one motion (``sim_xy`` (K, 2, 2)), else one cost per leading index (...).
+    """
+    K = sim_xy.shape[-3]
+    if K < 2:
+        return 0.0 if sim_xy.ndim == 3 else np.zeros(sim_xy.shape[:-3])
+    v_sim = np.linalg.norm(np.diff(sim_xy, axis=-3), axis=-1) / dt  # (..., K-1, 2)
+    v_ref = np.linalg.norm(np.diff(ref_xy, axis=0), axis=-1) / dt  # (K-1, 2)
     held = stance[1:] & stance[:-1]
     allowed = np.where(held, v_ref, 0.0)
-    counted = held if contact is None else held | (contact[1:] & contact[:-1])
+    counted = held if contact is None else held | (contact[..., 1:, :] & contact[..., :-1, :])
     excess = np.where(counted, np.maximum(0.0, v_sim - allowed), 0.0)
-    return float(np.sum(excess**2) / (len(sim_xy) - 1))
+    cost = np.sum(excess**2, axis=(-2, -1)) / (K - 1)
+    return float(cost) if sim_xy.ndim == 3 else cost

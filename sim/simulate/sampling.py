@@ -51,6 +51,7 @@ from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.footholding import (
     CONTACT_HEIGHT,
+    as_slice,
     reference_soles,
     slide_cost,
     sole_bottoms,
@@ -210,7 +211,7 @@ class _Problem:
     fall_ref: object | None
     kp: np.ndarray | None = None
     balance: object | None = None
-    soles: np.ndarray | None = None  # (2,) sole geom ids where foot holding is costed
+    soles: slice | None = None  # the sole geoms' rows where foot holding is costed
     ref_soles: tuple | None = None  # footholding.reference_soles: (T, 2, 2) xy, (T, 2) stance
 
 
@@ -242,7 +243,7 @@ def _problem(
     for k in range(ref_qpos.shape[0]):
         data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
         ref_feat.append(features(model, data, ee_ids, foot_ids))
-    soles = sole_ids(model) if hold else None
+    ids = sole_ids(model) if hold else None
     return _Problem(
         base=base,
         ref_qvel=ref_qvel,
@@ -255,8 +256,8 @@ def _problem(
         fall_ref=fall_reference(model, ref_qpos) if falls else None,
         kp=kp,
         balance=None if balance is None else balance_plan(model, ref_qpos, ref_qvel, balance),
-        soles=soles,
-        ref_soles=None if soles is None else reference_soles(model, ref_qpos, soles),
+        soles=None if ids is None else as_slice(ids),
+        ref_soles=None if ids is None else reference_soles(model, ref_qpos, ids),
     )
 
 
@@ -329,28 +330,19 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     states, weights, perturb, spec = search
     k0, k1, k2 = ticks
     T = len(prob.base)
-    cost = np.empty(len(offs))
+    S = len(offs)
+    cost = np.empty(S)
     hold = prob.soles is not None and weights.hold > 0
-    if hold:  # the reference's soles one tick on: a tick's record is its state's end
-        later = np.minimum(np.arange(k0, k1) + 1, T - 1)
-        ref_xy, stance = prob.ref_soles[0][later], prob.ref_soles[1][later]
-        size = model.geom_size[prob.soles]
+    soles = (np.empty((S, k1 - k0, 2, 3)), np.empty((S, k1 - k0, 2, 9))) if hold else None
 
     def run(chunk: np.ndarray, data) -> None:
-        soles = (np.empty((k1 - k0, 2, 3)), np.empty((k1 - k0, 2, 9))) if hold else None
         for s in chunk:
             mujoco.mj_setState(model, data, states[parents[s]], spec)
-            keep_at = (out[0][s], out[1][s], spec, soles)
+            rec = (soles[0][s], soles[1][s]) if hold else None
+            keep_at = (out[0][s], out[1][s], spec, rec)
             end = _rollout(model, data, prob, offs[s], ticks, perturb, keep_at)
             f = features(model, data, prob.ee_ids, prob.foot_ids)
             cost[s] = window_cost(f, prob.ref_feat[min(abs(end), T - 1)], weights, prob.hinge_w)
-            if hold:
-                xy = sole_bottoms(soles[0], soles[1], size[:, 2])[..., :2]
-                touch = None
-                if weights.hold_contact:
-                    touch = sole_lowest(soles[0], soles[1], size) <= CONTACT_HEIGHT
-                slid = slide_cost(xy, ref_xy, stance, 1.0 / CONTROL_HZ, touch)
-                cost[s] += weights.hold * slid
             if end < 0:  # fell: a later fall costs less
                 cost[s] += weights.fall * (1.0 + (k2 + end) / max(1, k2 - k0))
 
@@ -359,7 +351,23 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
         run(chunks[0], datas[0])
     else:
         list(pool.map(run, chunks, datas))
+    if hold:
+        cost += weights.hold * _hold_costs(model, prob, weights, ticks, soles)
     return cost
+
+
+def _hold_costs(model, prob: _Problem, weights: CostWeights, ticks, soles) -> np.ndarray:
+    """(S,) the foot-holding cost (``sim.simulate.footholding.slide_cost``) of each candidate's
+    window from its soles' records ``soles`` = (positions (S, K, 2, 3), orientations (S, K, 2,
+    9)) after each of the window's K ticks, against the reference's soles a tick later (a
+    tick's record is the state at its end, less its last substep)."""
+    k0, k1, _ = ticks
+    later = np.minimum(np.arange(k0, k1) + 1, len(prob.base) - 1)
+    ref_xy, stance = prob.ref_soles[0][later], prob.ref_soles[1][later]
+    size = model.geom_size[prob.soles]
+    xy = sole_bottoms(soles[0], soles[1], size[:, 2])[..., :2]
+    touch = sole_lowest(soles[0], soles[1], size) <= CONTACT_HEIGHT
+    return slide_cost(xy, ref_xy, stance, 1.0 / CONTROL_HZ, touch if weights.hold_contact else None)
 
 
 def _check_window(window: int, balance: Balance | None) -> None:
