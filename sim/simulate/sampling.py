@@ -97,7 +97,10 @@ class CostWeights:
     #: do not look for falls and run to their end (the sampler as first built)
     fall: float = 1e4
     #: foot holding (``sim.simulate.footholding.slide_cost``) over the window's ticks: a stance
-    #: sole sliding faster than the reference's [m^2/s^2]; 0: not looked at
+    #: sole sliding faster than the reference's [m^2/s^2]; 0: not looked at. Off by default: on
+    #: the 22 clips of ``bench_simulate.py --controllers`` at 28 samples, 5 held the feet of the
+    #: clips that stayed up (skating lower in 9 of 13) but fell in 0.41 of the clips against
+    #: 0.27 (docs/results/simulate_default.md)
     hold: float = 0.0
     #: foot holding also costs a simulated sole that touches the floor where the reference lifts
     #: it (a dragged foot); False: stance soles only
@@ -370,6 +373,19 @@ def _hold_costs(model, prob: _Problem, weights: CostWeights, ticks, soles) -> np
     return slide_cost(xy, ref_xy, stance, 1.0 / CONTROL_HZ, touch if weights.hold_contact else None)
 
 
+def _proposals(rng, last: np.ndarray, parents: np.ndarray, sigma: np.ndarray, how) -> np.ndarray:
+    """(S, nu) the candidates' offsets [rad]: from each parent's last offset (``last`` (K, nu),
+    the cheapest kept state first; ``parents`` (S,)), moved by ``recentre`` towards the
+    cheapest's, shrunk by ``persistence``, plus noise of ``sigma`` (nu,); the first ``elite``
+    go on with their parent's offset unchanged. ``how`` = (persistence, recentre, elite)."""
+    persistence, recentre, elite = how
+    centre = (1.0 - recentre) * last[parents] + recentre * last[0]
+    offs = persistence * centre + sigma * rng.standard_normal((len(parents), last.shape[1]))
+    n_elite = min(int(elite), len(last), len(parents))
+    offs[:n_elite] = last[parents[:n_elite]]
+    return offs
+
+
 def _check_window(window: int, balance: Balance | None) -> None:
     """Refuse windows that start between two updates of the balance feedback (a rollout could
     not start where the replay holds torques computed before it)."""
@@ -430,9 +446,8 @@ def search_offsets(
             the result is the same for any number.
         balance: the balance feedback (``sim.simulate.balance``) every rollout adds to its
             targets (and ``sample_track``'s replay); None: none.
-        elite: candidates (of the ``elite`` cheapest kept states, one each) that go on with
-            their parent's last offset unchanged, neither shrunk by ``persistence`` nor noised:
-            the correction its lookahead was judged with (0: every candidate sampled).
+        elite: candidates (one per kept state, the cheapest first) that go on with their
+            parent's last offset as its lookahead was judged (no shrinking, no noise).
 
     Returns:
         ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
@@ -443,28 +458,23 @@ def search_offsets(
     T, nu = ref_qpos.shape[0], model.nu
     rng = np.random.default_rng(seed)
     datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
-    data = datas[0]
     _check_window(window, balance)
     prob = _problem(
-        model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
+        model, ref_qpos, datas[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
         hold=weights.hold > 0,
     )  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    size = mujoco.mj_stateSize(model, spec)
-    states = _first_state(model, data, ref_qpos[0], prob.ref_qvel[0], spec)
+    states = _first_state(model, datas[0], ref_qpos[0], prob.ref_qvel[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    out = np.empty((samples, size)), np.empty((samples, model.nq))
+    out = np.empty((samples, states.shape[1])), np.empty((samples, model.nq))
     pool = ThreadPoolExecutor(len(datas)) if len(datas) > 1 else None
     try:
         for k0 in range(0, T, window):
             ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
             parents = np.arange(samples) % len(states)
-            centre = (1.0 - recentre) * last[parents] + recentre * last[0]  # [0]: the cheapest
-            offs = persistence * centre + prob.sigma * rng.standard_normal((samples, nu))
-            n_elite = min(int(elite), len(states), samples)
-            offs[:n_elite] = last[parents[:n_elite]]
+            offs = _proposals(rng, last, parents, prob.sigma, (persistence, recentre, elite))
             search = states, weights, (pushes, weakenings), spec
             cost = _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool)
             new_costs = costs[parents] + cost
