@@ -163,7 +163,7 @@ def test_a_rollout_stops_where_the_plain_tracker_falls(model, walk_ref):
     data.qpos[:], data.qvel[:] = walk_ref[0], prob.ref_qvel[0]
     mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    keep = np.empty(mujoco.mj_stateSize(model, spec)), np.empty(model.nq), spec
+    keep = np.empty(mujoco.mj_stateSize(model, spec)), np.empty(model.nq), spec, None
     end = _rollout(model, data, prob, np.zeros(model.nu), (0, 12, len(walk_ref)), ((), ()), keep)
     assert end < 0 and abs(-end - plain.fall_tick) <= 1
     assert data.time == pytest.approx(-end * 4 * model.opt.timestep)  # stopped at the fall
