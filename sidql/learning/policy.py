@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from sidql.keyframes.segment_costs import clip_stacked_costs
+from sidql.keyframes.segment_costs import clip_stacked
+from sidql.keyframes.single_costs import single_costs
 from sidql.learning.decide import decide_clip, encode_clip, encoder_weights, head_weights
 from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import PRIORS, KeyframeQNet, masked_q
@@ -153,9 +154,10 @@ class Policy:
         return np.nonzero(mask.numpy())[1].reshape(b, W).astype(np.int64)
 
     def select(self, clip, W: int) -> np.ndarray:
-        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart and costs in one compiled
-        pass, features, :meth:`decide`)."""
-        angles, rates, cost = clip_stacked_costs(clip, "hermite")
+        """(W,) keyframes of a :class:`sim.motion.clip.Clip`: the chart, its features, its Hermite
+        segment costs in single precision (:mod:`sidql.keyframes.single_costs`: :meth:`decide`
+        rounds them to float32 anyway), :meth:`decide`."""
+        angles, rates = clip_stacked(clip)
         features = stacked_features(angles, rates)
         c = int(self.net.config["n_features"])
         if features.shape[-1] != c:  # a policy trained on clips of another skeleton
@@ -163,7 +165,7 @@ class Policy:
                 self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
                 f"of {angles.shape[1] // 2} bones give {features.shape[-1]}",
             )  # fmt: skip
-        return self.decide(features[None], cost[None], W)[0]
+        return self.decide(features[None], single_costs(angles, rates)[None], W)[0]
 
 
 def load_policy(path: str | os.PathLike | None = None) -> Policy:

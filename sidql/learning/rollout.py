@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath={"nnan", "nsz"})
 def greedy_sequences(cost, kmax):
     """Every segment's own greedy gains: ``seq[l, r, :length[l, r]]`` are the rewards (unnormalised)
     of the first keyframes greedy adds strictly inside (l, r), in order, at most ``kmax``
@@ -34,18 +34,13 @@ def greedy_sequences(cost, kmax):
     seq = np.empty((n, n, kmax + 1))  # one more: -inf after the last gain, so merges need no
     seq[:, :, 0] = -np.inf  # test of which run is exhausted (gains are finite)
     length = np.zeros((n, n), np.int64)
+    if kmax == 0:
+        return seq, length
+    cost_t = np.ascontiguousarray(cost.T)  # column r as a row: both loads of a split in order
     for span in range(2, n):
         for l in range(0, n - span):
             r = l + span
-            best = -np.inf
-            m = -1
-            for j in range(l + 1, r):
-                g = cost[l, r] - cost[l, j] - cost[j, r]
-                if g > best:
-                    best = g
-                    m = j
-            if kmax == 0:
-                continue
+            best, m = _best_split_of(cost, cost_t, l, r)
             out = seq[l, r]
             a = seq[l, m]
             b = seq[m, r]
@@ -63,6 +58,38 @@ def greedy_sequences(cost, kmax):
             out[count] = -np.inf
             length[l, r] = count
     return seq, length
+
+
+@numba.njit(cache=True, fastmath={"nnan", "nsz"}, inline="always")
+def _best_split_of(cost, cost_t, l, r):
+    """(g, j): the largest ``g = C[l, r] - C[l, j] - C[j, r]`` over l < j < r and the first j
+    that reaches it (``cost_t``: C transposed, so that C[j, r] is read in order). Two passes
+    over the same arithmetic, the first a plain maximum (four chains of compares at once), so
+    the result is that of one pass keeping the first strict improvement."""
+    c_lr = cost[l, r]
+    b0 = b1 = b2 = b3 = -np.inf  # four running maxima: four independent chains of compares
+    j = l + 1
+    while j + 4 <= r:
+        g0 = c_lr - cost[l, j] - cost_t[r, j]
+        g1 = c_lr - cost[l, j + 1] - cost_t[r, j + 1]
+        g2 = c_lr - cost[l, j + 2] - cost_t[r, j + 2]
+        g3 = c_lr - cost[l, j + 3] - cost_t[r, j + 3]
+        b0 = g0 if g0 > b0 else b0
+        b1 = g1 if g1 > b1 else b1
+        b2 = g2 if g2 > b2 else b2
+        b3 = g3 if g3 > b3 else b3
+        j += 4
+    while j < r:
+        g0 = c_lr - cost[l, j] - cost_t[r, j]
+        b0 = g0 if g0 > b0 else b0
+        j += 1
+    best = max(max(b0, b1), max(b2, b3))
+    if best == -np.inf:  # none finite: no split, as a strict improvement over -inf finds none
+        return best, -1
+    for j in range(l + 1, r):
+        if c_lr - cost[l, j] - cost_t[r, j] == best:
+            return best, j
+    return best, -1
 
 
 @numba.njit(cache=True)
