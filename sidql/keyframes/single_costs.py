@@ -83,7 +83,8 @@ def _wrapped(v):
 
 @numba.njit(cache=True, fastmath=_FAST)
 def single_cost_matrix(E, R, H):
-    """(N, N) float64 Hermite segment costs [rad] from :func:`differences`' tables (E with
+    """(N, N) Hermite segment costs [rad], float32 values held in float64, from
+    :func:`differences`' tables (E with
     ``E[i, n] = x_i - x_n``; the curve's error at frame n is ``E[i, n] - h01 E[i, j] + h10 r_i +
     h11 r_j``; H: :func:`weight_table` of N). Entries with j < i + 2 are 0. Four frames share
     one pass over the channels."""
@@ -115,14 +116,15 @@ def single_cost_matrix(E, R, H):
                     acc += _wrapped(E[i, n, d] - a0 * E[i, j, d] + b0 * R[i, d] + c0 * R[j, d])
                 total += acc
                 n += 1
-            C[i, j] = total
+            C[i, j] = np.float32(total)  # what the policy reads (decide rounds its costs so)
     return C
 
 
 def single_costs(X: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """(N, N) float64 Hermite segment costs [rad] of (N, D) angles X [rad] and rates times dt R
+    """(N, N) Hermite segment costs [rad] of (N, D) angles X [rad] and rates times dt R
     [rad/frame] (:func:`sidql.keyframes.segment_costs.stacked`'s layout), computed in single
-    precision (see the module docstring)."""
+    precision (see the module docstring) and rounded to float32, held in a float64 array (what
+    :meth:`sidql.learning.policy.Policy.decide` makes of any costs it is given)."""
     E, R32 = differences(np.ascontiguousarray(X, np.float64), np.ascontiguousarray(R, np.float64))
     return single_cost_matrix(E, R32, _weights_of(len(E)))
 

@@ -155,17 +155,26 @@ class Policy:
 
     def select(self, clip, W: int) -> np.ndarray:
         """(W,) keyframes of a :class:`sim.motion.clip.Clip`: the chart, its features, its Hermite
-        segment costs in single precision (:mod:`sidql.keyframes.single_costs`: :meth:`decide`
-        rounds them to float32 anyway), :meth:`decide`."""
+        segment costs in single precision (:mod:`sidql.keyframes.single_costs`, rounded to
+        float32 as :meth:`decide` rounds any costs), then :meth:`decide`'s two kernels.
+
+        Raises:
+            UsageError: W out of [2, N]. ModelFileError: the policy takes other features.
+        """
         angles, rates = clip_stacked(clip)
         features = stacked_features(angles, rates)
-        c = int(self.net.config["n_features"])
+        n, c = features.shape[0], int(self.net.config["n_features"])
         if features.shape[-1] != c:  # a policy trained on clips of another skeleton
             raise ModelFileError(
                 self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
                 f"of {angles.shape[1] // 2} bones give {features.shape[-1]}",
             )  # fmt: skip
-        return self.decide(features[None], single_costs(angles, rates)[None], W)[0]
+        if not 2 <= W <= n:
+            raise UsageError(f"W must be in [2, {n}]; got {W}")
+        enc_w, head_w = self._weights()
+        proj, glob = encode_clip(features, *enc_w)
+        cost = single_costs(angles, rates)
+        return decide_clip(proj, glob, cost, int(W), self.uses_prior, *head_w)
 
 
 def load_policy(path: str | os.PathLike | None = None) -> Policy:
