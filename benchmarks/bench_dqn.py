@@ -213,7 +213,7 @@ def main() -> int:
         from results import write_results
 
         print("wrote", write_results("dqn_decision", "DQN decision time, quiet and busy", text,
-                                     command="python benchmarks/bench_dqn.py"))  # fmt: skip
+                                     command=" ".join(["python benchmarks/bench_dqn.py", *sys.argv[1:]])))  # fmt: skip
     return 0
 
 

@@ -205,7 +205,7 @@ def main() -> int:
         from results import write_results
 
         print("wrote", write_results("keyframes_speed", "Keyframe selection speed", text,
-                                     command="python benchmarks/bench_keyframes.py"))  # fmt: skip
+                                     command=" ".join(["python benchmarks/bench_keyframes.py", *sys.argv[1:]])))  # fmt: skip
     return 0
 
 
