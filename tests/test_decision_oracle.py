@@ -83,3 +83,17 @@ def test_single_precision_costs_are_the_numpy_sum_to_a_few_parts_in_a_million(cl
         assert np.array_equal(got == 0, want == 0)  # the same entries are empty
         np.testing.assert_allclose(got, want, rtol=2e-6, atol=0)
         assert not np.array_equal(got, want)  # it is single precision (else this test is moot)
+
+
+def test_compiled_features_equal_the_numpy_formula_bit_for_bit(clips):
+    """The policy's inputs: theta, phi minus its clip mean, the rates, as float32 (numpy here)."""
+    from sidql.learning.tasks import stacked_features
+
+    for clip in clips:
+        X, R = stacked(chart(clip))
+        m = X.shape[1] // 2
+        phi = X[:, m:] - X[:, m:].mean(axis=0, keepdims=True)
+        want = np.concatenate([X[:, :m], phi, R], axis=1).astype(np.float32)
+        got = stacked_features(X, R)
+        assert got.dtype == np.float32
+        assert np.array_equal(got.view(np.int32), want.view(np.int32))

@@ -7,10 +7,10 @@ The same sum as :mod:`sidql.keyframes.segment_costs`::
 
 but each frame's sum over the channels runs in float32, eight channels a vector instruction
 (twice float64's), four frames a pass over the channels, and the frames' sums are added in
-float64. The angle differences
-``x_i - x_n`` are formed in float64 before they are rounded (one (N, N, D) float32 table), so a
-short segment's small errors keep float32's relative precision (about 1e-7 of each term) rather
-than an absolute 1e-7 rad from rounding the angles themselves. The result is not the float64
+float64. The angle differences ``x_i - x_n`` are formed in float64 before they are rounded (per
+segment start i, into an (N, D) float32 scratch that stays in the first-level cache), so a short
+segment's small errors keep float32's relative precision (about 1e-7 of each term) rather than an
+absolute 1e-7 rad from rounding the angles themselves. The result is not the float64
 matrix to the last bit: under 1e-6 of an entry on real clips (tests/test_decision_oracle.py
 checks 2e-6, and that the policy's decisions on these costs are those it takes on the float64
 matrix; benchmarks/bench_dqn.py checks the decisions on every clip and keyframe count).
@@ -35,24 +35,15 @@ _HALF = np.float32(0.5)
 
 
 @numba.njit(cache=True)
-def differences(X, R):
-    """The float32 tables the kernel reads, from (N, D) float64 angles X [rad] and rates R
-    [rad/frame]: E (N, N, Dp) with ``E[i, n] = x_i - x_n`` for n > i (formed in float64, then
-    rounded; not written for n <= i) and
-    R (N, Dp), D padded with zeros to Dp, a multiple of :data:`LANES`."""
-    N, D = X.shape
-    Dp = (D + LANES - 1) // LANES * LANES
-    E = np.empty((N, N, Dp), np.float32)  # the kernel reads n > i only: the rest left as is
-    R32 = np.zeros((N, Dp), np.float32)
+def padded_rates(R):
+    """(N, Dp) float32 rates from (N, D) float64 ``R`` [rad/frame], D padded with zeros to Dp, a
+    multiple of :data:`LANES`."""
+    N, D = R.shape
+    R32 = np.zeros((N, (D + LANES - 1) // LANES * LANES), np.float32)
     for i in range(N):
         for d in range(D):
             R32[i, d] = R[i, d]
-        for n in range(i + 1, N):
-            for d in range(D):
-                E[i, n, d] = X[i, d] - X[n, d]
-            for d in range(D, Dp):
-                E[i, n, d] = 0.0
-    return E, R32
+    return R32
 
 
 @numba.njit(cache=True)
@@ -82,15 +73,23 @@ def _wrapped(v):
 
 
 @numba.njit(cache=True, fastmath=_FAST)
-def single_cost_matrix(E, R, H):
-    """(N, N) Hermite segment costs [rad], float32 values held in float64, from
-    :func:`differences`' tables (E with
-    ``E[i, n] = x_i - x_n``; the curve's error at frame n is ``E[i, n] - h01 E[i, j] + h10 r_i +
-    h11 r_j``; H: :func:`weight_table` of N). Entries with j < i + 2 are 0. Four frames share
-    one pass over the channels."""
-    N, _, Dp = E.shape
+def single_cost_matrix(X, R, H):
+    """(N, N) Hermite segment costs [rad], float32 values held in float64, from (N, D) float64
+    angles X [rad], :func:`padded_rates` R and :func:`weight_table` H of N. Entries with
+    j < i + 2 are 0.
+
+    Per segment start i, the differences ``E[n] = x_i - x_n`` (n > i) are formed in float64 and
+    rounded into one (N, Dp) float32 scratch (pad channels 0); the curve's error at frame n of
+    segment (i, j) is then ``E[n] - h01 E[j] + h10 r_i + h11 r_j``. Four frames share one pass
+    over the channels."""
+    N, D = X.shape
+    Dp = R.shape[1]
     C = np.zeros((N, N))
+    E = np.zeros((N, Dp), np.float32)
     for i in range(N):
+        for n in range(i + 1, N):
+            for d in range(D):
+                E[n, d] = X[i, d] - X[n, d]
         for j in range(i + 2, N):
             L = j - i
             total = 0.0
@@ -102,18 +101,18 @@ def single_cost_matrix(E, R, H):
                 a3, b3, c3 = _weights(H, n + 3, i, L)
                 acc = np.float32(0.0)
                 for d in range(Dp):
-                    e, ri, rj = E[i, j, d], R[i, d], R[j, d]
-                    acc += (_wrapped(E[i, n, d] - a0 * e + b0 * ri + c0 * rj)
-                            + _wrapped(E[i, n + 1, d] - a1 * e + b1 * ri + c1 * rj)
-                            + _wrapped(E[i, n + 2, d] - a2 * e + b2 * ri + c2 * rj)
-                            + _wrapped(E[i, n + 3, d] - a3 * e + b3 * ri + c3 * rj))  # fmt: skip
+                    e, ri, rj = E[j, d], R[i, d], R[j, d]
+                    acc += (_wrapped(E[n, d] - a0 * e + b0 * ri + c0 * rj)
+                            + _wrapped(E[n + 1, d] - a1 * e + b1 * ri + c1 * rj)
+                            + _wrapped(E[n + 2, d] - a2 * e + b2 * ri + c2 * rj)
+                            + _wrapped(E[n + 3, d] - a3 * e + b3 * ri + c3 * rj))  # fmt: skip
                 total += acc
                 n += 4
             while n < j:
                 a0, b0, c0 = _weights(H, n, i, L)
                 acc = np.float32(0.0)
                 for d in range(Dp):
-                    acc += _wrapped(E[i, n, d] - a0 * E[i, j, d] + b0 * R[i, d] + c0 * R[j, d])
+                    acc += _wrapped(E[n, d] - a0 * E[j, d] + b0 * R[i, d] + c0 * R[j, d])
                 total += acc
                 n += 1
             C[i, j] = np.float32(total)  # what the policy reads (decide rounds its costs so)
@@ -125,8 +124,9 @@ def single_costs(X: np.ndarray, R: np.ndarray) -> np.ndarray:
     [rad/frame] (:func:`sidql.keyframes.segment_costs.stacked`'s layout), computed in single
     precision (see the module docstring) and rounded to float32, held in a float64 array (what
     :meth:`sidql.learning.policy.Policy.decide` makes of any costs it is given)."""
-    E, R32 = differences(np.ascontiguousarray(X, np.float64), np.ascontiguousarray(R, np.float64))
-    return single_cost_matrix(E, R32, _weights_of(len(E)))
+    X = np.ascontiguousarray(X, np.float64)
+    R32 = padded_rates(np.ascontiguousarray(R, np.float64))
+    return single_cost_matrix(X, R32, _weights_of(len(X)))
 
 
 @lru_cache(maxsize=8)
