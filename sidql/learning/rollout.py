@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, fastmath={"nnan", "nsz"})
+@numba.njit(cache=True)
 def greedy_sequences(cost, kmax):
     """Every segment's own greedy gains: ``seq[l, r, :length[l, r]]`` are the rewards (unnormalised)
     of the first keyframes greedy adds strictly inside (l, r), in order, at most ``kmax``
@@ -36,11 +36,11 @@ def greedy_sequences(cost, kmax):
     length = np.zeros((n, n), np.int64)
     if kmax == 0:
         return seq, length
-    cost_t = np.ascontiguousarray(cost.T)  # column r as a row: both loads of a split in order
+    G, M = best_splits(cost)
     for span in range(2, n):
         for l in range(0, n - span):
             r = l + span
-            best, m = _best_split_of(cost, cost_t, l, r)
+            best, m = G[l, r], M[l, r]
             out = seq[l, r]
             a = seq[l, m]
             b = seq[m, r]
@@ -60,36 +60,30 @@ def greedy_sequences(cost, kmax):
     return seq, length
 
 
-@numba.njit(cache=True, fastmath={"nnan", "nsz"}, inline="always")
-def _best_split_of(cost, cost_t, l, r):
-    """(g, j): the largest ``g = C[l, r] - C[l, j] - C[j, r]`` over l < j < r and the first j
-    that reaches it (``cost_t``: C transposed, so that C[j, r] is read in order). Two passes
-    over the same arithmetic, the first a plain maximum (four chains of compares at once), so
-    the result is that of one pass keeping the first strict improvement."""
-    c_lr = cost[l, r]
-    b0 = b1 = b2 = b3 = -np.inf  # four running maxima: four independent chains of compares
-    j = l + 1
-    while j + 4 <= r:
-        g0 = c_lr - cost[l, j] - cost_t[r, j]
-        g1 = c_lr - cost[l, j + 1] - cost_t[r, j + 1]
-        g2 = c_lr - cost[l, j + 2] - cost_t[r, j + 2]
-        g3 = c_lr - cost[l, j + 3] - cost_t[r, j + 3]
-        b0 = g0 if g0 > b0 else b0
-        b1 = g1 if g1 > b1 else b1
-        b2 = g2 if g2 > b2 else b2
-        b3 = g3 if g3 > b3 else b3
-        j += 4
-    while j < r:
-        g0 = c_lr - cost[l, j] - cost_t[r, j]
-        b0 = g0 if g0 > b0 else b0
-        j += 1
-    best = max(max(b0, b1), max(b2, b3))
-    if best == -np.inf:  # none finite: no split, as a strict improvement over -inf finds none
-        return best, -1
-    for j in range(l + 1, r):
-        if c_lr - cost[l, j] - cost_t[r, j] == best:
-            return best, j
-    return best, -1
+@numba.njit(cache=True)
+def best_splits(cost):
+    """(G, M) (N, N): ``G[l, r]`` the largest gain ``C[l, r] - C[l, j] - C[j, r]`` over
+    l < j < r and ``M[l, r]`` the first j reaching it (-inf and -1 where r < l + 2 or no gain
+    is finite).
+
+    The splits j run in the outer loop, in increasing order, and the segment ends r in the
+    inner one, along rows l and j of C: a gain replaces ``G[l, r]`` only if strictly larger, so
+    the first j wins a tie, as in a scan over j per segment; the same arithmetic, written as
+    selects on slices indexed from 0 so that the inner loop vectorises."""
+    n = cost.shape[0]
+    G = np.full((n, n), -np.inf)
+    M = np.full((n, n), -1, np.int64)
+    for l in range(n):
+        for j in range(l + 1, n - 1):
+            c_lj = cost[l, j]
+            g_l, m_l = G[l, j + 1 :], M[l, j + 1 :]
+            c_l, c_j = cost[l, j + 1 :], cost[j, j + 1 :]
+            for t in range(n - j - 1):
+                g = c_l[t] - c_lj - c_j[t]
+                better = g > g_l[t]
+                g_l[t] = g if better else g_l[t]
+                m_l[t] = j if better else m_l[t]
+    return G, M
 
 
 @numba.njit(cache=True)
