@@ -591,7 +591,9 @@ def plain_greedy_sequence(cost, l, r, k):
 @pytest.mark.parametrize("ties", [False, True])
 def test_greedy_sequences_are_greedy_simulated_segment_by_segment(ties):
     """The tabulated sequences equal a plain simulation, ties included (costs on a coarse grid
-    make many splits equal: the first split reaching the best gain must be the one taken)."""
+    make many splits equal: the first split reaching the best gain must be the one taken; their
+    sums are exact). Elsewhere the gains may differ in the last bit: numba compiles a kernel
+    first called from a fastmath kernel (the decision's) with its flags, and caches it so."""
     from sidql.learning.rollout import greedy_sequences
 
     rng = np.random.default_rng(7)
@@ -603,4 +605,5 @@ def test_greedy_sequences_are_greedy_simulated_segment_by_segment(ties):
     for l in range(n):
         for r in range(l + 2, n):
             want = plain_greedy_sequence(cost, l, r, k)
-            assert seq[l, r, : length[l, r]].tolist() == want, (l, r)
+            got = seq[l, r, : length[l, r]].tolist()
+            assert got == (want if ties else pytest.approx(want, rel=1e-12, abs=1e-12)), (l, r)
