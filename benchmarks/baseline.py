@@ -1,13 +1,13 @@
 """Another commit's ``select``, timed in the same run as today's (``--baseline REV`` of
 bench_dqn.py and bench_keyframes.py).
 
-``with Baseline(rev, data, n_clips) as base: base.median_ms("dqn", 5)`` exports ``sim/`` and
+``with Baseline(rev, data, n_clips) as base: base.times_ms("dqn", 5, clip)`` exports ``sim/`` and
 ``sidql/`` of commit ``rev`` (``git archive``) into a temporary folder and starts one Python
 process on that code (this file, ``--serve``), which loads the same clips the benchmarks load
-(:func:`same_clips`) with its own reader and times ``methods.select`` per request: CPU time of
-that process (``time.process_time``) and wall time, median over clips and repeats after one
-warm-up call (its numba kernels compile into the temporary folder, outside the timings). The
-parent asks for each figure right after timing its own, so both see the same load.
+(:func:`same_clips`) with its own reader and times ``methods.select`` on one clip per request:
+CPU time of that process (``time.process_time``) and wall time, after one warm-up call per
+method and W (its numba kernels compile into the temporary folder, outside the timings). The
+parent asks for each clip right after timing its own on that clip, so both see the same load.
 """
 
 from __future__ import annotations
@@ -62,16 +62,15 @@ class Baseline:
         ).stdout.strip()  # fmt: skip
         return self
 
-    def median_ms(self, method: str, W: int, repeats: int = 5) -> tuple[float, float]:
-        """(CPU ms, wall ms) per clip of the baseline's ``select(method, clip, W)``: median over
-        its clips x ``repeats`` single calls."""
-        self._proc.stdin.write(json.dumps([method, int(W), int(repeats)]) + "\n")
+    def times_ms(self, method: str, W: int, clip: int, repeats: int = 5) -> list:
+        """[(CPU ms, wall ms)] of ``repeats`` single calls of the baseline's
+        ``select(method, clips[clip], W)`` (the clip's index in :func:`same_clips`)."""
+        self._proc.stdin.write(json.dumps([method, int(W), int(clip), int(repeats)]) + "\n")
         self._proc.stdin.flush()
         line = self._proc.stdout.readline()
         if not line:
             raise RuntimeError(f"the baseline process ({self.rev}) ended early")
-        cpu, wall = json.loads(line)
-        return float(cpu), float(wall)
+        return [tuple(t) for t in json.loads(line)]
 
     def __exit__(self, *exc) -> None:
         self._proc.stdin.close()
@@ -86,24 +85,24 @@ def _bytes(data: bytes):
 
 
 def serve(data: str, n_clips: int) -> None:
-    """The baseline side: one JSON request a line, ``[method, W, repeats]``, one answer a line,
-    ``[median CPU ms, median wall ms]``."""
-    import numpy as np
-
+    """The baseline side: one JSON request a line, ``[method, W, clip index, repeats]``, one
+    answer a line, ``[[CPU ms, wall ms], ...]`` per call (the first request of a method and W
+    warms it up first, untimed)."""
     from sidql.keyframes import methods
 
     clips = same_clips(data, n_clips)
+    warm = set()
     for line in sys.stdin:
-        method, W, repeats = json.loads(line)
-        methods.select(method, clips[0], W)  # compile and warm up
+        method, W, index, repeats = json.loads(line)
+        if (method, W) not in warm:
+            methods.select(method, clips[0], W)  # compile and warm up
+            warm.add((method, W))
         got = []
-        for clip in clips:
-            for _ in range(repeats):
-                c, w = time.process_time(), time.perf_counter()
-                methods.select(method, clip, W)
-                got.append((time.process_time() - c, time.perf_counter() - w))
-        cpu, wall = 1e3 * np.median(np.array(got), axis=0)
-        print(json.dumps([cpu, wall]), flush=True)
+        for _ in range(repeats):
+            c, w = time.process_time(), time.perf_counter()
+            methods.select(method, clips[index], W)
+            got.append((1e3 * (time.process_time() - c), 1e3 * (time.perf_counter() - w)))
+        print(json.dumps(got), flush=True)
 
 
 if __name__ == "__main__" and sys.argv[1:2] == ["--serve"]:

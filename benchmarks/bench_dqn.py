@@ -189,7 +189,7 @@ def main() -> int:
             f"average {os.getloadavg()[0]:.1f} before this table. A 'before' row is a path "
             "`select` took before, timed in the same run (after rows share today's kernels); "
             "a 'baseline' row is `select` of the commit named (`--baseline`, its own code in "
-            "another process, asked right after this process's rows of that W). "
+            "another process, timed on each clip right after this process's rows). "
             "On this machine wall time also counts the time the process waits for a core.",
             "",
             e2e,

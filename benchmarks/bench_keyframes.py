@@ -194,8 +194,8 @@ def main() -> int:
         "the all-W table cut at W), median of single calls, CPU and wall time of one thread, "
         "same clips; the before / after ratios are against the same work without `select`'s "
         "checks (`clip_optimal_keyframes`); a 'baseline' row is `select` of the commit named "
-        "(`--baseline`, its own code in another process, asked right after this process's "
-        "rows of that W):",
+        "(`--baseline`, its own code in another process, timed on each clip right after "
+        "this process's rows):",
         "",
         e2e,
     ]

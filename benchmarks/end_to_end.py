@@ -104,7 +104,7 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True,
                      baseline=None) -> str:  # fmt: skip
     """Markdown table: per W and column, median CPU and wall ms per clip, and the
     before / after ratios of the same run; with ``baseline`` (a :class:`baseline.Baseline`)
-    also its ``select`` per method, asked right after this process's columns of that W."""
+    also its ``select`` per method, on each clip right after this process's columns of it."""
     policy = None
     if with_dqn:
         from sidql.learning.policy import load_policy
@@ -119,15 +119,15 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True,
         for fn in columns(clips[0], W, policy, with_dqn).values():
             fn()  # compile and warm up
         got: dict[str, list] = {}
-        for clip in clips:
+        base_methods = () if baseline is None else ("optimal", "dqn")[: 2 if with_dqn else 1]
+        for index, clip in enumerate(clips):
             for name, fn in columns(clip, W, policy, with_dqn).items():
                 got.setdefault(name, []).extend(_timed(fn) for _ in range(repeats))
-        med = {k: np.median(np.array(v), axis=0) for k, v in got.items()}
-        if baseline is not None:
-            for m in ("optimal", "dqn") if with_dqn else ("optimal",):
-                med[f"{m} baseline: select (end to end) at {baseline.short}"] = np.array(
-                    baseline.median_ms(m, W, repeats)
+            for m in base_methods:
+                got.setdefault(f"{m} baseline: select (end to end) at {baseline.short}", []).extend(
+                    baseline.times_ms(m, W, index, repeats)
                 )
+        med = {k: np.median(np.array(v), axis=0) for k, v in got.items()}
         for name, (cpu, wall) in med.items():
             lines.append(f"| {W} | {name} | {cpu:.3f} | {wall:.3f} |")
         for m, aim in (("optimal", 0.7), ("dqn", 1.0)):
