@@ -1,4 +1,4 @@
-"""The position coding (coding 2, .sidq versions 2 and 3): range coder, position quantiser, the
+"""The position coding (coding 2, .sidq versions 2 to 5): range coder, position quantiser, the
 encoder's error measure against the decoder, targets, the container and hostile bytes."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from sidql.codec.encode import encode_series
 from sidql.codec.entropy import decode_integers, encode_integers, estimate_size
 from sidql.codec.plan import plan, position_band_costs, position_weights, subtree_sizes
 from sidql.codec.positions import chart_points, position_errors
-from sidql.codec.quantise import RDO_BAND, PositionQuantiser
+from sidql.codec.quantise import RDO_BAND, PositionQuantiser, keyframe_steps
 from sidql.commands.main import main
 from sidql.keyframes.spherical import chart, protocol_indices
 from sim.errors import MotionDataError, UnmetTargetError, UsageError
@@ -306,22 +306,91 @@ def test_container_round_trip(encoded):
     assert np.array_equal(a, b)
 
 
-@pytest.mark.parametrize("version", [2, 3])
-def test_version_2_and_3_streams_still_decode(encoded, version):
+@pytest.mark.parametrize("version", [2, 3, 4])
+def test_version_2_to_4_streams_still_decode(encoded, version):
     s = encoded.stream
-    q = replace(s.quantiser, root_rho=None)  # versions 2 and 3: the root predicted like angles
-    old = replace(s, quantiser=replace(q, exponent=0.5) if version == 2 else q)
+    # versions 2 to 4: the parent's innovation in the prediction, one step for all keyframes
+    q = replace(s.quantiser, partner=True, gap_exponent=0.0)
+    if version < 4:  # versions 2 and 3: the root predicted like angles
+        q = replace(q, root_rho=None, exponent=0.5 if version == 2 else q.exponent)
+    old = replace(s, quantiser=q)
     data = sidq.to_bytes(old, position_version=version)
-    assert data[4] == version and len(data) != len(sidq.to_bytes(old))  # another coded block
+    assert data[4] == version and len(data) != len(encoded.data)  # another coded block
     back = sidq.from_bytes(data, "old.sidq")
-    assert back.quantiser.exponent == old.quantiser.exponent and back.quantiser.root_rho is None
+    assert back.quantiser.exponent == q.exponent and back.quantiser.root_rho == q.root_rho
+    assert back.quantiser.partner and back.quantiser.gap_exponent == 0
     assert np.array_equal(back.pose_codes, old.pose_codes)
-    assert np.array_equal(decoded_chart(back)["values"], decoded_chart(old)["values"])
+    values = decoded_chart(back)["values"]
+    assert np.array_equal(values, decoded_chart(old)["values"])
+    # the same codes read as version 5 (no partner term, steps by gap) are other values
+    as_v5 = decoded_chart(replace(s, pose_codes=old.pose_codes))["values"]
+    assert not np.array_equal(values, as_v5)
 
 
 def test_a_version_the_quantiser_does_not_fit_is_not_written(encoded):
     with pytest.raises(UsageError, match="cannot carry"):
         sidq.to_bytes(encoded.stream, position_version=3)  # its root slope is not rho
+    with pytest.raises(UsageError, match="cannot carry"):
+        sidq.to_bytes(encoded.stream, position_version=4)  # its steps follow the gaps
+    q4 = replace(encoded.stream.quantiser, partner=True, gap_exponent=0.0)
+    with pytest.raises(UsageError, match="cannot carry"):  # version 5 has no partner term
+        sidq.to_bytes(replace(encoded.stream, quantiser=q4), position_version=5)
+
+
+def test_keyframe_steps_follow_the_frames_each_keyframe_moves():
+    """Keyframes 0, 1, 3, 7 of 8 frames move (1 + 1) / 2, (1 + 2) / 2, (2 + 4) / 2 and
+    (4 + 1) / 2 frames, 2 on average: their steps are (2 / w)^g."""
+    keys = np.array([0, 1, 3, 7])
+    w = np.array([1.0, 1.5, 3.0, 2.5])
+    for g in (0.25, 0.5, 0.75, 1.0):
+        assert np.allclose(keyframe_steps(keys, g), (2.0 / w) ** g, rtol=1e-15)
+    assert np.array_equal(keyframe_steps(keys, 0.0), np.ones(4))
+    assert np.array_equal(keyframe_steps(np.arange(9), 0.25), np.ones(9))  # every frame: 1
+
+
+def test_a_first_keyframe_is_predicted_from_the_parent_bone_on_any_branch(series):
+    """Version 5: a bone's first keyframe is predicted from its parent's decoded angles, so a
+    chain that starts straight costs next to nothing past its first bone (predicted from 0, as
+    before, hundreds of steps), and a phi moved by whole turns codes to the same residuals and
+    the same points."""
+    M = series.n_bones
+    values, _ = series.channels()
+    keys = np.arange(0, 150, 5)
+    q = PositionQuantiser(M, series.lengths, series.parents, 0.004, 0.5, exponent=0.125,
+                          root_rho=1.0, partner=False)  # fmt: skip
+    bones = [b for b in range(M) if series.parents[b + 1] > 0]  # bones with a parent bone
+    straight = values[keys].copy()
+    for b in bones:  # every bone with a parent bone points like it, on the grid of 0
+        p = series.parents[b + 1] - 1
+        straight[:, b], straight[:, M + b] = straight[:, p], straight[:, M + p]
+    codes, _ = q.encode_keyframes(straight, keys)
+    old, _ = replace(q, partner=True).encode_keyframes(straight, keys)
+    chained = [d for b in bones for d in (b, M + b)]
+    assert np.abs(codes[0, chained]).max() <= 1 and np.median(np.abs(old[0, chained])) > 50
+    turned = values[keys].copy()
+    turned[:, M + 3] += 4 * np.pi  # a whole number of turns on one bone's phi
+    c1, v1 = q.encode_keyframes(values[keys], keys)
+    c2, v2 = q.encode_keyframes(turned, keys)
+    assert np.array_equal(c1, c2)
+    assert np.allclose(q.decode_keyframes(c2, keys), v1, atol=1e-9)
+
+
+def test_a_keyframe_a_long_gap_leans_on_is_quantised_finer(series):
+    """With a gap exponent the same values at the same step are rebuilt closer where the gaps
+    around a keyframe are long, and coarser where they are short."""
+    values, _ = series.channels()
+    keys = np.r_[np.arange(0, 40), np.arange(40, 150, 10), 149]
+    keys = np.unique(keys)
+    M = series.n_bones
+    q = PositionQuantiser(M, series.lengths, series.parents, 0.01, 0.5, exponent=0.125,
+                          root_rho=1.0, partner=False)  # fmt: skip
+    err = {}
+    for g in (0.0, 0.5):
+        _, kv = replace(q, gap_exponent=g).encode_keyframes(values[keys], keys)
+        err[g] = np.abs(kv[:, 2 * M :] - values[keys, 2 * M :]).mean(axis=1)  # the root [m]
+    dense, sparse = keys < 38, (keys > 45) & (keys < 140)
+    assert err[0.5][sparse].mean() < 0.8 * err[0.0][sparse].mean()
+    assert err[0.5][dense].mean() > 1.1 * err[0.0][dense].mean()
 
 
 #: a version-2 stream written by the version-2 encoder (24 frames of ``smooth_clip(N=24, seed=3)``
@@ -370,6 +439,32 @@ def test_a_stream_of_the_version_4_encoder_decodes_bit_for_bit():
     assert hashlib.sha256(values.tobytes()).hexdigest() == V4_CHART_SHA256
 
 
+#: a version-5 stream written by the version-5 encoder (``smooth_clip(N=24, seed=3)`` at 4 mm),
+#: and the SHA-256 of the float64 chart its decoder rebuilt: the bit stream stays decodable
+V5_STREAM = bytes.fromhex(
+    "534944510502020000000000f041000000000000000000efc36556b6047f26ba57835d3a787458cc4c8d32df"
+    "d6194f5f1ab720a67d8c89a118cd97a5ac89cb8c13a2f05ba69bc43b040208010500000000194d323b6aa2f8"
+    "6addcc4143a86d11e3ffb38be1fe861cfd99d57f37c09616f24330185b5c41db09006de83098cb8f215ecbcf"
+    "bff480715a88aeb48bae92a8449066abdac9bdc41347cef5aa7bc513c6819743698748aa8d1bd6e66e3743d1"
+    "7e932652deb9a1b8ab056f892d74142720aa0de5dd4eb048dec2ea0d8b179e927e65e9c0c5e1c8f0beba9fd8"
+    "54aa4cf19b5387e9211ae23bd2a1675dd2abf517e125f10f570275f180340016f4fc735dd3bf10683cc8a132"
+    "74f97f9cf700f1f29dd2"
+)
+V5_CHART_SHA256 = "e54c7d9301815f0a4a45277f143805901274b56ca9a163d06a6134539b985ff8"
+
+
+def test_a_stream_of_the_version_5_encoder_decodes_bit_for_bit():
+    import hashlib
+
+    s = sidq.from_bytes(V5_STREAM, "v5.sidq")
+    q = s.quantiser
+    assert V5_STREAM[4] == 5 and q.gap_exponent == 0.25 and not q.partner
+    assert q.root_rho == 1.0 and q.exponent == 0.125
+    values = np.ascontiguousarray(decoded_chart(s)["values"])
+    assert hashlib.sha256(values.tobytes()).hexdigest() == V5_CHART_SHA256
+    assert sidq.to_bytes(s) == V5_STREAM
+
+
 def test_a_root_at_constant_velocity_costs_no_residuals_after_two_keyframes():
     """The root channels are predicted by linear extrapolation (rho_root = 1): a pelvis gliding
     at constant velocity through a still pose leaves zero residuals from the third keyframe on;
@@ -388,12 +483,15 @@ def test_a_root_at_constant_velocity_costs_no_residuals_after_two_keyframes():
     assert np.abs(half[2:, 2 * M :]).min() > 0
 
 
-@pytest.mark.parametrize("offset, what", [(1, "lever exponent"), (2, "root predictor")])
-def test_a_bad_lever_exponent_or_root_predictor_is_one_line(encoded, offset, what):
+@pytest.mark.parametrize(
+    "offset, what", [(1, "lever exponent"), (2, "root predictor"), (3, "gap exponent")]
+)
+def test_a_bad_lever_exponent_root_predictor_or_gap_exponent_is_one_line(encoded, offset, what):
     raw = bytearray(encoded.data[:-4])
     at = 23 + 1 + 2 * 22 + 4 + offset  # header, length unit and codes, step, then rho
     q = encoded.stream.quantiser
-    assert raw[4] == 4 and raw[at] == round((16 * q.exponent, 8 * q.root_slope)[offset - 1])
+    byte = (16 * q.exponent, 8 * q.root_slope, 4 * q.gap_exponent)[offset - 1]
+    assert raw[4] == 5 and raw[at] == round(byte)
     raw[at] = 17
     raw += struct.pack("<I", zlib.crc32(bytes(raw)))
     with pytest.raises(MotionDataError, match=rf"^bad\.sidq: bad position step .*{what} 17"):

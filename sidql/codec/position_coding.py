@@ -52,6 +52,10 @@ LEVER_EXPONENT = 0.125
 #: with ``max_error`` E, no segment whose inner frames' first-order mean error bound passes
 #: FRAME_CAP x E is planned (:func:`sidql.codec.plan.position_band_costs`): the error tail.
 FRAME_CAP = 3.0
+#: each keyframe's step times ``(mean w / w)^g`` with w the frames its value moves
+#: (:func:`sidql.codec.quantise.keyframe_steps`; version 5): 1/4 measured best against 0, 1/2
+#: and 3/4 on the CMU trials of ``../shared`` (with 1/2 the same bytes, a heavier tail).
+GAP_EXPONENT = 0.25
 #: bytes of coded plans a search keeps, the least recently used dropped first (at least the last
 #: two): each holds (W, D) codes and decoded values, 0.7 MB at W = 900 keyframes (11 kept), so
 #: memory does not grow with the take when it is encoded whole; repeats are rare past the last few.
@@ -86,7 +90,8 @@ class _PositionSearch:
         M = self.series.n_bones
         return PositionQuantiser(
             M, self.lengths, self.series.parents, float(np.float32(step)), PREDICTOR,
-            exponent=LEVER_EXPONENT, root_rho=ROOT_PREDICTOR,
+            exponent=LEVER_EXPONENT, root_rho=ROOT_PREDICTOR, gap_exponent=GAP_EXPONENT,
+            partner=False,
         )  # fmt: skip
 
     def keys(self, lam: float) -> np.ndarray:

@@ -1,11 +1,13 @@
-"""Coding 2's fields of a ``.sidq`` stream (versions 2 to 4): the bone lengths, the quantiser's
+"""Coding 2's fields of a ``.sidq`` stream (versions 2 to 5): the bone lengths, the quantiser's
 parameters and the range-coded block of keyframe residuals, written and read.
 
 Specified in ``docs/codec.md`` ("Versions 2 to 4"); :mod:`sidql.codec.format` reads the rest of
 the container (header, points, checksum) and calls these. Version 4 adds the root channels' own
 slope weight and codes the D residual channels with contexts shared by kind (theta, phi, root)
 and chosen by each integer's expected magnitude (:func:`sidql.codec.entropy.encode_integers`'s
-``kinds``); versions 2 and 3 (one context set per channel) are still read.
+``kinds``); versions 2 and 3 (one context set per channel) are still read. Version 5 drops the
+parent-innovation term of the prediction and scales each keyframe's step by how many frames its
+value moves (:func:`sidql.codec.quantise.keyframe_steps`, the exponent in one more byte).
 """
 
 from __future__ import annotations
@@ -19,8 +21,11 @@ from sidql.codec.quantise import PositionQuantiser
 from sim.errors import MotionDataError, UsageError
 
 #: coding 2 as written, and as read (2: no lever exponent byte, 1/2 implied; 2 and 3: no root
-#: slope byte, the root predicted like the angles, and one context set per channel)
-VERSION_POSITION, POSITION_VERSIONS = 4, (2, 3, 4)
+#: slope byte, the root predicted like the angles, and one context set per channel; 2 to 4: the
+#: parent bone's innovation in the prediction, one step for every keyframe)
+VERSION_POSITION, POSITION_VERSIONS = 5, (2, 3, 4, 5)
+#: the largest gap exponent byte (version 5: the exponent x 4)
+MAX_GAP_QUARTERS = 4
 #: the largest magnitude a decoded coding-2 keyframe value may have [rad or m].
 MAX_DECODED_VALUE = 1e6
 #: reconstructions coding 2 carries (no rates are sent).
@@ -76,17 +81,21 @@ def block_bytes(
 
 def quantiser_bytes(q: PositionQuantiser, version: int = VERSION_POSITION) -> bytes:
     """The position step (float32), the slope weight x 8, then (version 3 on) the lever exponent
-    x 16 and (version 4) the root's slope weight x 8, uint8 each. Older versions are written for
-    tests of the readers only; one that cannot say ``q`` is refused."""
+    x 16, (version 4 on) the root's slope weight x 8 and (version 5) the gap exponent x 4, uint8
+    each. Older versions are written for tests of the readers only; one that cannot say ``q``
+    is refused."""
     if (
         version not in POSITION_VERSIONS
         or (version < 4 and q.root_slope != q.rho)
         or (version < 3 and q.exponent != 0.5)
+        or (version < 5 and (q.gap_exponent != 0 or not q.partner))
+        or (version >= 5 and q.partner)
     ):
         raise UsageError(f"version {version} cannot carry this quantiser")
     out = struct.pack("<fB", q.step, round(q.rho * 8))
     out += bytes([round(q.exponent * 16)]) if version >= 3 else b""
-    return out + (bytes([round(q.root_slope * 8)]) if version >= 4 else b"")
+    out += bytes([round(q.root_slope * 8)]) if version >= 4 else b""
+    return out + (bytes([round(q.gap_exponent * 4)]) if version >= 5 else b"")
 
 
 def read_quantiser(take, version: int, where: str, M: int, lengths, parents) -> PositionQuantiser:
@@ -95,14 +104,21 @@ def read_quantiser(take, version: int, where: str, M: int, lengths, parents) -> 
     step, rho8 = struct.unpack("<fB", take(5, "position step"))
     lever16 = take(1, "lever exponent")[0] if version >= 3 else 8  # version 2: 1/2
     root8 = take(1, "root predictor")[0] if version >= 4 else rho8
-    if not (np.isfinite(step) and step > 0) or max(rho8, root8) > 16 or lever16 > 16:
+    gap4 = take(1, "gap exponent")[0] if version >= 5 else 0
+    if (
+        not (np.isfinite(step) and step > 0)
+        or max(rho8, root8) > 16
+        or lever16 > 16
+        or gap4 > MAX_GAP_QUARTERS
+    ):
         raise MotionDataError(
             where, None, f"bad position step {step}, predictor {rho8}, lever exponent "
-            f"{lever16} or root predictor {root8}",
+            f"{lever16}, root predictor {root8} or gap exponent {gap4}",
         )  # fmt: skip
     return PositionQuantiser(
         M, lengths, parents, float(step), rho8 / 8.0, exponent=lever16 / 16,
-        root_rho=root8 / 8.0 if version >= 4 else None,
+        root_rho=root8 / 8.0 if version >= 4 else None, gap_exponent=gap4 / 4,
+        partner=version < 5,
     )  # fmt: skip
 
 

@@ -28,6 +28,7 @@ compiled function for both directions), integer residuals of any size.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -176,7 +177,7 @@ PARTNER_WEIGHTS = (-0.5, 1.5)
 
 @numba.njit(cache=True)
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-              lengths, parents, innov, kappa, err, aim, root_rho):  # fmt: skip
+              lengths, parents, innov, kappa, err, aim, root_rho, kstep, firsts):  # fmt: skip
     """Keyframe w of :func:`_dpcm`: channels root first, then bone by bone (parents first),
     theta before phi. With ``aim``, ``err`` (J, 3) holds the decoded points' errors [m] to first
     order, and a bone's targets are its true angles minus its parent point's error along the
@@ -191,7 +192,9 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
     for i in range(D):
         d = 2 * M + i if i < 3 else (i - 3) // 2 + M * ((i - 3) % 2)
         pred = 0.0
-        if w == 1:
+        if w == 0 and firsts[d] >= 0:  # the first keyframe: the parent bone's same angle
+            pred = out[0, firsts[d]]
+        elif w == 1:
             pred = out[0, d]
         elif w >= 2:
             slope = root_rho if d >= 2 * M else rho
@@ -203,7 +206,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             if w >= 1 and pc >= 0:
                 pred += kappa[d, j] * innov[pc]
                 norm += innov[pc] * innov[pc]
-        step = scale[d]
+        step = scale[d] * kstep[w]
         if M <= d < 2 * M:
             step = min(step / max(np.sin(out[w, d - M]), SIN_FLOOR), MAX_PHI_STEP)
         if encode:
@@ -248,20 +251,22 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
 
 @numba.njit(cache=True, nogil=True)
 def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-          parents, root_rho):  # fmt: skip
+          parents, root_rho, quarters, firsts):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (both directions).
 
     Keyframe w of channel d is predicted from the decoded keyframes before it,
     ``t = x[w-1] + rho * (x[w-1] - x[w-2]) * gap_w / gap_{w-1}`` (the ratio capped at 2;
-    ``x[w-1]`` alone for w = 1, 0 for w = 0), plus ``kappa_d`` times the innovation
+    ``x[w-1]`` alone for w = 1; for w = 0 the decoded first keyframe of channel ``firsts[d]``,
+    or 0 where that is -1), plus ``kappa_d`` times the innovation
     ``x - t`` its partner channel (``partners[d]``, decoded before it: the parent bone's same
     angle) had at this keyframe (a bone tends to turn with its parent); ``kappa_d`` starts at 0
     and follows the channel by normalised least mean squares (rate ``mu``, kept in [lo, hi]).
     The value is sent as ``r = round((x - p) / step)`` (or one nearer 0, :data:`RDO_BAND`); the
     decoder rebuilds ``p + r step``.
-    ``step`` is ``scale[d]`` for theta and root channels and
-    ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being
-    the same keyframe's decoded theta of that bone (decoded first).
+    ``step`` is ``scale[d] kstep[w]`` for theta and root channels and
+    ``min(scale[d] kstep[w] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi,
+    theta_hat being the same keyframe's decoded theta of that bone (decoded first); ``kstep[w]``:
+    :func:`keyframe_steps` with g = ``quarters`` / 4.
 
     Channels are visited root first, then bone by bone (parents first), theta before phi: every
     value a channel's prediction or step needs is decoded before it, so the decoded values do not
@@ -278,9 +283,66 @@ def _dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi
     kappa = np.zeros((D, partners.shape[1]))
     aim = encode and basis.shape[0] == W
     err = np.zeros((M + 1, 3))
+    kstep = _steps(keys, quarters)
+    if encode:
+        values = _same_branch(values, firsts, M)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
-                  lengths, parents, innov, kappa, err, aim, root_rho)  # fmt: skip
+                  lengths, parents, innov, kappa, err, aim, root_rho, kstep, firsts)  # fmt: skip
+    return out
+
+
+def keyframe_steps(keys: np.ndarray, gap_exponent: float) -> np.ndarray:
+    """(W,) each keyframe's step factor ``(mean_w / w_w)^g``, ``w_w = (gap before + gap after) / 2``
+    (1 beyond either end) the frames its value moves, ``mean_w = N / W``; g = k / 4, k in 0..4.
+    From integers by a division and square roots (correctly rounded): every machine agrees."""
+    return _steps(np.ascontiguousarray(keys, dtype=np.int64), int(round(4 * gap_exponent)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _steps(keys, quarters):
+    """:func:`keyframe_steps` with g = quarters / 4."""
+    W = keys.shape[0]
+    out = np.ones(W)
+    if quarters == 0 or W < 2:
+        return out
+    frames = 2.0 * (keys[W - 1] - keys[0] + 1)
+    for w in range(W):
+        both = (keys[w] - keys[w - 1] if w > 0 else 1) + (keys[w + 1] - keys[w] if w < W - 1 else 1)
+        ratio = frames / (W * np.float64(both))  # mean_w / w_w; 2 w_w = both, integers
+        root = np.sqrt(ratio)
+        if quarters == 1:
+            out[w] = np.sqrt(root)
+        elif quarters == 2:
+            out[w] = root
+        elif quarters == 3:
+            out[w] = root * np.sqrt(root)
+        else:
+            out[w] = ratio
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _same_branch(values, firsts, M):
+    """(W, D) ``values``, each bone's phi moved by whole turns so that its first keyframe lies
+    within pi of its parent's (``firsts``; parents before children): the points do not move and
+    the first keyframe's residual, predicted from the parent's phi, stays small. ``values``
+    itself when nothing moves."""
+    if values.shape[0] == 0:
+        return values
+    first = values[0].copy()
+    turn = np.zeros(M)
+    for b in range(M):
+        pc = firsts[M + b]
+        if pc >= 0:
+            turn[b] = 2.0 * np.pi * np.rint((first[pc] - first[M + b]) / (2.0 * np.pi))
+            first[M + b] += turn[b]
+    if not np.any(turn != 0.0):
+        return values
+    out = values.copy()
+    for w in range(values.shape[0]):
+        for b in range(M):
+            out[w, M + b] += turn[b]
     return out
 
 
@@ -293,6 +355,16 @@ def aim_basis(values: np.ndarray, n_bones: int) -> np.ndarray:
     st, ct = np.sin(v[:, :M]), np.cos(v[:, :M])
     sp, cp = np.sin(v[:, M : 2 * M]), np.cos(v[:, M : 2 * M])
     return np.ascontiguousarray(np.stack([ct * cp, ct * sp, -st, -sp, cp], axis=-1))
+
+
+@functools.lru_cache(maxsize=64)
+def _parent_channels(parents: tuple) -> np.ndarray:
+    """(2 M + 3,) per channel the parent bone's same angle (-1: none); read-only, shared."""
+    p = np.asarray(parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
+    M = len(p)
+    out = np.r_[np.where(p >= 0, p, -1), np.where(p >= 0, M + p, -1), -np.ones(3, np.int64)]
+    out.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
@@ -312,6 +384,11 @@ class PositionQuantiser:
         n_bones: M; lengths: (M,) bone lengths [m] as stored; parents: (M + 1,) parent indices.
         step: the position step [m] (float32 in the stream); rho: the predictor's slope weight.
         exponent: e, the subtree size's exponent in the levers (k / 16 for k in 0..16).
+        root_rho: the root channels' slope weight (None: ``rho``).
+        gap_exponent: g, each keyframe's step times :func:`keyframe_steps` (k / 4 for k in 0..4).
+        partner: True (versions 2 to 4): each prediction adds the parent bone's innovation;
+            False (version 5): it does not (with aiming that cost bytes), and the first
+            keyframe of a bone is predicted from its parent's (:meth:`firsts`).
     """
 
     n_bones: int
@@ -322,6 +399,8 @@ class PositionQuantiser:
     bits: int = 0  # no fixed bit depth: codes are residuals of any size
     exponent: float = SUBTREE_EXPONENT
     root_rho: float | None = None
+    gap_exponent: float = 0.0
+    partner: bool = True
 
     @property
     def root_slope(self) -> float:
@@ -340,15 +419,22 @@ class PositionQuantiser:
         s = np.float64(np.float32(self.step))
         return np.concatenate([s / lever, s / lever, np.full(3, s / n[0])])
 
+    def _parent_channels(self) -> np.ndarray:
+        """(2 M + 3,) per channel the parent bone's same angle (-1: none; the root's children
+        and the root)."""
+        return _parent_channels(tuple(np.asarray(self.parents, dtype=np.int64).tolist())).copy()
+
     def partners(self) -> np.ndarray:
         """(2 M + 3, 1) per channel, the channel decoded before it whose innovation predicts
-        its own: the parent bone's same angle (-1: none; the root's children and the root)."""
-        M = self.n_bones
-        p = np.asarray(self.parents, dtype=np.int64)[1:] - 1  # parent bone of each bone
-        out = np.full((2 * M + 3, 1), -1, dtype=np.int64)
-        out[:M, 0] = np.where(p >= 0, p, -1)
-        out[M : 2 * M, 0] = np.where(p >= 0, M + p, -1)
-        return out
+        its own (with ``partner``): the parent bone's same angle (-1: none)."""
+        out = self._parent_channels()[:, None]
+        return out if self.partner else np.full_like(out, -1)
+
+    def firsts(self) -> np.ndarray:
+        """(2 M + 3,) per channel, the channel whose decoded first keyframe predicts its own
+        (without ``partner``, version 5): the parent bone's same angle (-1: none, predicted 0)."""
+        out = self._parent_channels()
+        return np.full_like(out, -1) if self.partner else out
 
     def _tree(self):
         return (
@@ -384,6 +470,8 @@ class PositionQuantiser:
             basis,
             *self._tree(),
             float(self.root_slope),
+            int(round(4 * self.gap_exponent)),
+            self.firsts(),
         )
         return codes, out
 
@@ -405,4 +493,6 @@ class PositionQuantiser:
             np.zeros((0, self.n_bones, 5)),
             *self._tree(),
             float(self.root_slope),
+            int(round(4 * self.gap_exponent)),
+            self.firsts(),
         )
