@@ -2,6 +2,7 @@
 measured in the same run (greedy and the exact optimum on the same cost matrices).
 
     python benchmarks/bench_dqn.py [--data ../shared/cmu] [--keyframes 15] [--policy FILE]
+        [--baseline REV] [--check-clips 0]
 
 The policy needs the clip's features and its segment-cost matrix; the cost matrix (also what
 greedy and optimal need) is timed separately and reported alongside. Without data the benchmark
@@ -19,6 +20,7 @@ thread pool would, oversubscribing the cores). Targets: at most 1 ms per clip fo
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import time
@@ -59,6 +61,30 @@ def grouped_ms(fn, n: int, size: int = 1, repeat: int = 5) -> float:
     return 1e3 * float(np.mean(times))
 
 
+def decisions_check(policy, data) -> str:
+    """One line: whether ``Policy.select`` (single-precision costs) decides as :meth:`decide` on
+    the float64 segment-cost matrix, on every 60-frame clip of ``data`` and every W = 2..N-1."""
+    from sidql.keyframes.segment_costs import clip_stacked_costs
+    from sidql.learning.tasks import stacked_features
+    from sim.motion.dataset import find_trials
+    from sim.motion.ingest import load_clips
+
+    clips = [c for t in find_trials(data) for c in load_clips(t.asf, t.amc) if c.n_frames == 60]
+    differ = total = 0
+    for clip in clips:
+        X, R, cost = clip_stacked_costs(clip)
+        feats = stacked_features(X, R)[None]
+        for W in range(2, clip.n_frames):
+            want = policy.decide(feats, cost[None], W)[0]
+            differ += not np.array_equal(policy.select(clip, W), want)
+            total += 1
+    return (
+        f"Decisions: `select` (segment costs in single precision) against the same policy on "
+        f"the float64 cost matrix, every 60-frame clip of {data} ({len(clips)}) x W = 2..59: "
+        f"{differ} of {total} decisions differ."
+    )
+
+
 def _uptime() -> str:
     """The load averages ``uptime`` prints (1, 5, 15 min)."""
     return ", ".join(f"{x:.2f}" for x in os.getloadavg())
@@ -71,6 +97,11 @@ def main() -> int:
     parser.add_argument("--policy", default=None, help="policy file (default: the shipped one)")
     parser.add_argument("--load", type=int, default=2, help="spinning processes for 'busy'")
     parser.add_argument("--clips", type=int, default=30, help="clips for the end-to-end table")
+    parser.add_argument(
+        "--baseline",
+        default=None,
+        help="a commit whose select to time in the same run (benchmarks/baseline.py)",
+    )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args()
     # torch keeps its default threads: the decision path itself must not depend on them
@@ -138,13 +169,16 @@ def main() -> int:
         "slow down far more: its threads oversubscribe the cores)."
     )
     if Path(args.data).is_dir():
+        from baseline import Baseline, same_clips
         from end_to_end import busy_table, end_to_end_table
 
-        from sim.motion.dataset import find_trials
-        from sim.motion.ingest import load_clips
-
-        clips = [c for t in find_trials(args.data) for c in load_clips(t.asf, t.amc)[:2]]
-        clips = [c for c in clips if c.n_frames == 60][: args.clips]
+        clips = same_clips(args.data, args.clips)
+        lines += ["", decisions_check(policy, args.data)]
+        with contextlib.ExitStack() as stack:
+            base = None
+            if args.baseline:
+                base = stack.enter_context(Baseline(args.baseline, args.data, args.clips))
+            e2e = end_to_end_table(clips, args.keyframes, baseline=base)
         lines += [
             "",
             "## End to end, as `eval` measures it",
@@ -153,10 +187,12 @@ def main() -> int:
             f"{len(clips)} 60-frame clips of {args.data} (two per trial), one thread, median "
             f"of single calls (5 per clip); CPU time of this process and wall time; load "
             f"average {os.getloadavg()[0]:.1f} before this table. A 'before' row is a path "
-            "`select` took before, timed in the same run (after rows share today's kernels). "
+            "`select` took before, timed in the same run (after rows share today's kernels); "
+            "a 'baseline' row is `select` of the commit named (`--baseline`, its own code in "
+            "another process, timed on each clip right after this process's rows). "
             "On this machine wall time also counts the time the process waits for a core.",
             "",
-            end_to_end_table(clips, args.keyframes),
+            e2e,
             "",
             f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
             "",
@@ -177,7 +213,7 @@ def main() -> int:
         from results import write_results
 
         print("wrote", write_results("dqn_decision", "DQN decision time, quiet and busy", text,
-                                     command="python benchmarks/bench_dqn.py"))  # fmt: skip
+                                     command=" ".join(["python benchmarks/bench_dqn.py", *sys.argv[1:]])))  # fmt: skip
     return 0
 
 

@@ -1,6 +1,7 @@
 """Keyframe-selection speed on 60-frame clips, as ratios against baselines measured in the same run.
 
     python benchmarks/bench_keyframes.py [--data ../shared/cmu] [--clips 20] [--repeats 5]
+        [--baseline REV]
 
 Per clip, single-threaded (median over clips of the best of ``--repeats`` runs):
 
@@ -45,15 +46,9 @@ from sim.paths import default_data_dir  # noqa: E402
 def load(data: Path, n_clips: int):
     """Real 60-frame clips from ``data`` (spread over trials), or synthetic ones if absent."""
     if (data / "MANIFEST.tsv").exists():
-        from sim.motion.dataset import find_trials
-        from sim.motion.ingest import load_clips
+        from baseline import same_clips
 
-        clips = []
-        for t in find_trials(data):
-            clips.extend(load_clips(t.asf, t.amc)[:2])
-            if len(clips) >= n_clips:
-                break
-        return clips[:n_clips], f"{data} (real CMU)"
+        return same_clips(data, n_clips), f"{data} (real CMU)"
     from sim.motion.synthetic import synthetic_motion
 
     clips = synthetic_motion(seconds=2.0 * n_clips, seed=0).split(60)[:n_clips]
@@ -97,6 +92,11 @@ def main() -> int:
     p.add_argument("--no-write", action="store_true", help="print only")
     p.add_argument("--clips", type=int, default=20)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument(
+        "--baseline",
+        default=None,
+        help="a commit whose select to time in the same run (benchmarks/baseline.py)",
+    )
     args = p.parse_args()
     try:
         import torch
@@ -175,7 +175,16 @@ def main() -> int:
         f"0.7 ms); greedy at W = 5 and 15: {med['greedy, W = 5']:.3f} and "
         f"{med['greedy, W = 15']:.3f} ms (aim: under 1 ms).",
     ]
+    import contextlib
+
+    from baseline import Baseline
     from end_to_end import end_to_end_table
+
+    with contextlib.ExitStack() as stack:
+        base = None
+        if args.baseline:
+            base = stack.enter_context(Baseline(args.baseline, args.data, args.clips))
+        e2e = end_to_end_table(clips, (5, 15), args.repeats, with_dqn=False, baseline=base)
 
     lines += [
         "",
@@ -184,9 +193,11 @@ def main() -> int:
         "it replaced (the same steps as separate calls with the programme's walk back in Python; "
         "the all-W table cut at W), median of single calls, CPU and wall time of one thread, "
         "same clips; the before / after ratios are against the same work without `select`'s "
-        "checks (`clip_optimal_keyframes`):",
+        "checks (`clip_optimal_keyframes`); a 'baseline' row is `select` of the commit named "
+        "(`--baseline`, its own code in another process, timed on each clip right after "
+        "this process's rows):",
         "",
-        end_to_end_table(clips, (5, 15), args.repeats, with_dqn=False),
+        e2e,
     ]
     text = "\n".join(lines)
     print(text)
@@ -194,7 +205,7 @@ def main() -> int:
         from results import write_results
 
         print("wrote", write_results("keyframes_speed", "Keyframe selection speed", text,
-                                     command="python benchmarks/bench_keyframes.py"))  # fmt: skip
+                                     command=" ".join(["python benchmarks/bench_keyframes.py", *sys.argv[1:]])))  # fmt: skip
     return 0
 
 

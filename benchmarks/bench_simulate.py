@@ -36,7 +36,7 @@ from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noq
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.simulate.model import sim_model  # noqa: E402
-from sim.simulate.sampling import CostWeights  # noqa: E402
+from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.validate import ForwardValidation  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
@@ -52,17 +52,36 @@ CONTROLLERS = {
     ),
     "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
 }
+#: the sampler before foot holding and elite reuse (``CostWeights.hold`` 0, no elite)
+BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0}
 for _n in (16, 24, 28, 32, 48, 64):
     CONTROLLERS[f"falls{_n}"] = (  # falls in the cost, no balance feedback
         f"sampler, {_n} samples, falls in its cost",
-        {"controller": "sampling", "samples": _n, "search": {"balance": None}},
+        {"controller": "sampling", "samples": _n, "search": {"balance": None, **BEFORE_HOLD}},
         "position",
     )
-    CONTROLLERS[f"balance{_n}"] = (  # the sampler as it is now (sim.simulate.sampling's defaults)
+    CONTROLLERS[f"balance{_n}"] = (  # and the balance feedback (eval's default before hold)
         f"sampler, {_n} samples, falls in its cost, balance feedback",
+        {"controller": "sampling", "samples": _n, "search": BEFORE_HOLD},
+        "position",
+    )
+    CONTROLLERS[f"default{_n}"] = (  # the sampler as it is now (sim.simulate.sampling's defaults)
+        f"sampler, {_n} samples, its defaults now: falls in its cost, balance feedback, foot "
+        f"holding {CostWeights().hold:g}, {search_offsets.__kwdefaults__['elite']} elite",
         {"controller": "sampling", "samples": _n},
         "position",
     )
+for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footholding) ...
+    for _e in (0, 1, 4, 8):  # ... and elite reuse (search_offsets(elite=...))
+        _name = (f"hold{_w}" if _w else "") + (f"elite{_e}" if _e else "")
+        if _name:
+            CONTROLLERS[_name] = (
+                f"sampler, 28 samples, falls in its cost, balance feedback, foot holding {_w}, "
+                f"{_e} elite",
+                {"controller": "sampling", "samples": 28,
+                 "search": {"weights": CostWeights(hold=_w), "elite": _e}},
+                "position",
+            )  # fmt: skip
 
 
 def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict[str, list[dict]]:

@@ -34,7 +34,12 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
         optimum_cost_matrix,
         solve,
     )
-    from sidql.keyframes.segment_costs import clip_stacked_costs, segment_cost_matrix
+    from sidql.keyframes.segment_costs import (
+        clip_stacked,
+        clip_stacked_costs,
+        segment_cost_matrix,
+    )
+    from sidql.keyframes.single_costs import single_costs
     from sidql.keyframes.spherical import chart
     from sidql.learning.tasks import clip_features, stacked_features
 
@@ -73,7 +78,13 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
             "dqn: select (end to end)": lambda: methods.select("dqn", clip, W),
             "dqn: Policy.select": lambda: policy.select(clip, W),
             "dqn before: Policy.select as it was (chart, features, costs, decide)": before,
-            "  dqn part: chart + full costs (one pass)": lambda: clip_stacked_costs(clip),
+            "  dqn part: chart": lambda: clip_stacked(clip),
+            "  dqn part: segment costs, single precision (what select uses)": lambda: single_costs(
+                X, R
+            ),
+            "  dqn part: chart + float64 costs (one pass, what select used)": lambda: (
+                clip_stacked_costs(clip)
+            ),
             "  dqn part: features": lambda: stacked_features(X, R),
             "  dqn part: decide (encoder + head)": lambda: policy.decide(
                 feats[None], cost[None], W
@@ -89,9 +100,11 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
     return cols
 
 
-def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> str:
+def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True,
+                     baseline=None) -> str:  # fmt: skip
     """Markdown table: per W and column, median CPU and wall ms per clip, and the
-    before / after ratios of the same run."""
+    before / after ratios of the same run; with ``baseline`` (a :class:`baseline.Baseline`)
+    also its ``select`` per method, on each clip right after this process's columns of it."""
     policy = None
     if with_dqn:
         from sidql.learning.policy import load_policy
@@ -106,9 +119,14 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> 
         for fn in columns(clips[0], W, policy, with_dqn).values():
             fn()  # compile and warm up
         got: dict[str, list] = {}
-        for clip in clips:
+        base_methods = () if baseline is None else ("optimal", "dqn")[: 2 if with_dqn else 1]
+        for index, clip in enumerate(clips):
             for name, fn in columns(clip, W, policy, with_dqn).items():
                 got.setdefault(name, []).extend(_timed(fn) for _ in range(repeats))
+            for m in base_methods:
+                got.setdefault(f"{m} baseline: select (end to end) at {baseline.short}", []).extend(
+                    baseline.times_ms(m, W, index, repeats)
+                )
         med = {k: np.median(np.array(v), axis=0) for k, v in got.items()}
         for name, (cpu, wall) in med.items():
             lines.append(f"| {W} | {name} | {cpu:.3f} | {wall:.3f} |")
@@ -127,9 +145,16 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True) -> 
                 if k.startswith(f"{m} before")
             )
             verdict = "met" if med[after][0] <= aim else "UNMET"
+            base = next((k for k in med if k.startswith(f"{m} baseline")), None)
+            against = (
+                f"; after / baseline {med[after][0] / med[base][0]:.2f}x CPU, "
+                f"{med[after][1] / med[base][1]:.2f}x wall (baseline {med[base][0]:.3f} ms CPU)"
+                if base
+                else ""
+            )
             notes.append(
                 f"W = {W}, {m}: end to end {med[after][0]:.3f} ms CPU per clip (aim: at most "
-                f"{aim} ms, quiet: {verdict}); before / after in this run ({ratios})."
+                f"{aim} ms, quiet: {verdict}){against}; before / after in this run ({ratios})."
             )
     return "\n".join(lines + [""] + notes)
 

@@ -1,6 +1,6 @@
-"""The fast decision paths (compiled segment costs, the pruned optimum, the compiled policy) take
-the same decisions as plain reference code on real clips: segment costs summed in numpy frame by
-frame, the full programme over them, and the torch network."""
+"""The fast decision paths (compiled segment costs, the pruned optimum, the compiled policy on
+single-precision costs) take the same decisions as plain reference code on real clips: segment
+costs summed in numpy frame by frame, the full programme over them, and the torch network."""
 
 from __future__ import annotations
 
@@ -67,6 +67,33 @@ def test_the_dqn_method_decides_as_the_torch_network_over_numpy_costs(clips):
         series = chart(clip)
         feats = clip_features(series)[None].astype(np.float32)
         costs = numpy_costs(*stacked(series))[None]
-        for W in (3, 5, 15):
+        for W in (2, 3, 4, 5, 8, 12, 15, 20, 30, 45, 59):
             want = policy.decide_torch(feats, costs, W)[0]
             assert np.array_equal(methods.select("dqn", clip, W), want), W
+
+
+def test_single_precision_costs_are_the_numpy_sum_to_a_few_parts_in_a_million(clips):
+    from sidql.keyframes.single_costs import single_costs
+
+    for clip in clips:
+        X, R = stacked(chart(clip))
+        want = numpy_costs(X, R)
+        got = single_costs(X, R)
+        assert got.dtype == np.float64 and got.shape == want.shape
+        assert np.array_equal(got == 0, want == 0)  # the same entries are empty
+        np.testing.assert_allclose(got, want, rtol=2e-6, atol=0)
+        assert not np.array_equal(got, want)  # it is single precision (else this test is moot)
+
+
+def test_compiled_features_equal_the_numpy_formula_bit_for_bit(clips):
+    """The policy's inputs: theta, phi minus its clip mean, the rates, as float32 (numpy here)."""
+    from sidql.learning.tasks import stacked_features
+
+    for clip in clips:
+        X, R = stacked(chart(clip))
+        m = X.shape[1] // 2
+        phi = X[:, m:] - X[:, m:].mean(axis=0, keepdims=True)
+        want = np.concatenate([X[:, :m], phi, R], axis=1).astype(np.float32)
+        got = stacked_features(X, R)
+        assert got.dtype == np.float32
+        assert np.array_equal(got.view(np.int32), want.view(np.int32))

@@ -109,3 +109,36 @@ def test_catmull_rom_optimum_equals_brute_force_enumeration():
         assert len(k) == W and k[0] == 0 and k[-1] == n - 1
         assert table.q(W) == pytest.approx(best, rel=1e-12)
         assert q_error(small, k, "catmull_rom") == pytest.approx(best, rel=1e-12)
+
+
+def plain_programme(C, w_max):
+    """The programme of the module docstring as a scan over predecessors per frame, in Python:
+    (D, P) with P the least predecessor reaching the minimum (-1 where all are inf)."""
+    N = len(C)
+    D = np.full((w_max + 1, N), np.inf)
+    P = np.full((w_max + 1, N), -1)
+    D[1, 0] = 0.0
+    for w in range(2, w_max + 1):
+        for j in range(w - 1, N):
+            for i in range(w - 2, j):
+                if D[w - 1, i] + C[i, j] < D[w, j]:
+                    D[w, j], P[w, j] = D[w - 1, i] + C[i, j], i
+    return D, P
+
+
+@pytest.mark.parametrize("kind", ["plain", "ties", "infs"])
+def test_the_programme_equals_a_plain_scan_ties_and_infs_included(kind):
+    from sidql.keyframes.optimal import _dp
+
+    rng = np.random.default_rng({"plain": 1, "ties": 2, "infs": 3}[kind])
+    for _ in range(20):
+        n = int(rng.integers(2, 25))
+        w_max = int(rng.integers(2, n + 1))
+        C = np.triu(rng.uniform(0, 1, (n, n)), 1)
+        if kind == "ties":
+            C = np.round(C * 3) / 3  # many equal sums: the least predecessor must win
+        if kind == "infs":
+            C[rng.uniform(size=C.shape) < 0.6] = np.inf
+        D, P = _dp(C, w_max)
+        want_D, want_P = plain_programme(C, w_max)
+        assert np.array_equal(D, want_D) and np.array_equal(P, want_P)

@@ -163,7 +163,7 @@ def test_a_rollout_stops_where_the_plain_tracker_falls(model, walk_ref):
     data.qpos[:], data.qvel[:] = walk_ref[0], prob.ref_qvel[0]
     mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    keep = np.empty(mujoco.mj_stateSize(model, spec)), np.empty(model.nq), spec
+    keep = np.empty(mujoco.mj_stateSize(model, spec)), np.empty(model.nq), spec, None
     end = _rollout(model, data, prob, np.zeros(model.nu), (0, 12, len(walk_ref)), ((), ()), keep)
     assert end < 0 and abs(-end - plain.fall_tick) <= 1
     assert data.time == pytest.approx(-end * 4 * model.opt.timestep)  # stopped at the fall
@@ -193,3 +193,19 @@ def test_recentred_search_is_deterministic_and_another_search(model, walk_ref):
     centred = search_offsets(model, ref, recentre=1.0, **kw)[0]
     again = search_offsets(model, ref, recentre=1.0, **kw)[0]
     assert np.array_equal(centred, again) and not np.array_equal(plain, centred)
+
+
+def test_elites_go_on_with_their_parents_offset(model, walk_ref):
+    """Every candidate an elite: each goes on with its parent's offset, which starts at zero, so
+    the search never leaves the uncorrected targets whatever the noise (the replay is then
+    ``track`` with the balance feedback, bit for bit); one elite in six is another search."""
+    ref = walk_ref[:48]
+    kw = dict(window=12, lookahead=12, torque_sigma=0.3, seed=5)
+    offsets, _ = search_offsets(model, ref, samples=2, keep=2, elite=2, **kw)
+    assert not offsets.any()
+    r = sample_track(model, ref, samples=2, keep=2, elite=2, **kw)
+    b = track(model, ref, assist_limit=0.0, balance=BALANCE)
+    assert np.array_equal(r.qpos, b.qpos)
+    plain, _ = search_offsets(model, ref, samples=6, keep=2, **kw)
+    one, _ = search_offsets(model, ref, samples=6, keep=2, elite=1, **kw)
+    assert plain.any() and not np.array_equal(plain, one)

@@ -32,22 +32,35 @@ from sim.errors import UnknownNameError, UsageError, require_type
 
 @numba.njit(cache=True)
 def _dp(C, w_max):
+    """(D, P) over (N, N) costs C for w = 1..w_max: ``D[w, j]`` as in the module docstring and
+    ``P[w, j]`` the least i reaching it (-1 where none is below inf).
+
+    The predecessors i run in the outer loop, in increasing order, and the frames j in the inner
+    one, along row i of C: each candidate replaces ``D[w, j]`` only if strictly smaller, so the
+    least i wins a tie, as in a scan over i per j; the same sums and comparisons, written as
+    selects so that the inner loop vectorises."""
     N = C.shape[0]
     D = np.full((w_max + 1, N), np.inf)
     P = np.full((w_max + 1, N), -1, dtype=np.int64)
     D[1, 0] = 0.0
     for w in range(2, w_max + 1):
-        for j in range(w - 1, N):
-            best = np.inf
-            arg = -1
-            for i in range(w - 2, j):
-                v = D[w - 1, i] + C[i, j]
-                if v < best:
-                    best = v
-                    arg = i
-            D[w, j] = best
-            P[w, j] = arg
+        Dw = D[w]
+        Pw = P[w]
+        for i in range(w - 2, N - 1):
+            _relax(Dw, Pw, C[i], D[w - 1, i], i, max(i + 1, w - 1), N)
     return D, P
+
+
+@numba.njit(cache=True, inline="always")
+def _relax(Dw, Pw, row, d, i, lo, hi):
+    """``Dw[j], Pw[j] = d + row[j], i`` where that is strictly smaller, for lo <= j < hi (on
+    slices indexed from 0, so that the compiler knows no index wraps and vectorises)."""
+    Dj, Pj, cj = Dw[lo:hi], Pw[lo:hi], row[lo:hi]
+    for t in range(hi - lo):
+        v = d + cj[t]
+        better = v < Dj[t]
+        Dj[t] = v if better else Dj[t]
+        Pj[t] = i if better else Pj[t]
 
 
 @numba.njit(cache=True)

@@ -12,12 +12,12 @@ from __future__ import annotations
 import os
 import warnings
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 import torch
 
-from sidql.keyframes.segment_costs import clip_stacked_costs
+from sidql.keyframes.segment_costs import clip_stacked
+from sidql.keyframes.single_costs import single_costs
 from sidql.learning.decide import decide_clip, encode_clip, encoder_weights, head_weights
 from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import PRIORS, KeyframeQNet, masked_q
@@ -153,17 +153,27 @@ class Policy:
         return np.nonzero(mask.numpy())[1].reshape(b, W).astype(np.int64)
 
     def select(self, clip, W: int) -> np.ndarray:
-        """(W,) keyframes of a :class:`sim.motion.clip.Clip` (chart and costs in one compiled
-        pass, features, :meth:`decide`)."""
-        angles, rates, cost = clip_stacked_costs(clip, "hermite")
+        """(W,) keyframes of a :class:`sim.motion.clip.Clip`: the chart, its features, its Hermite
+        segment costs in single precision (:mod:`sidql.keyframes.single_costs`, rounded to
+        float32 as :meth:`decide` rounds any costs), then :meth:`decide`'s two kernels.
+
+        Raises:
+            UsageError: W out of [2, N]. ModelFileError: the policy takes other features.
+        """
+        angles, rates = clip_stacked(clip)
         features = stacked_features(angles, rates)
-        c = int(self.net.config["n_features"])
+        n, c = features.shape[0], int(self.net.config["n_features"])
         if features.shape[-1] != c:  # a policy trained on clips of another skeleton
             raise ModelFileError(
                 self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
                 f"of {angles.shape[1] // 2} bones give {features.shape[-1]}",
             )  # fmt: skip
-        return self.decide(features[None], cost[None], W)[0]
+        if not 2 <= W <= n:
+            raise UsageError(f"W must be in [2, {n}]; got {W}")
+        enc_w, head_w = self._weights()
+        proj, glob = encode_clip(features, *enc_w)
+        cost = single_costs(angles, rates)
+        return decide_clip(proj, glob, cost, int(W), self.uses_prior, *head_w)
 
 
 def load_policy(path: str | os.PathLike | None = None) -> Policy:
@@ -175,9 +185,9 @@ def load_policy(path: str | os.PathLike | None = None) -> Policy:
         ModelFileError: the file is refused (holds other objects, another format or version, or
             weights that do not fit the network it declares); one line naming the file.
     """
-    path = Path(path or os.environ.get("SIDQL_POLICY") or DEFAULT_POLICY)
-    try:  # one system call per decision (the dqn method calls this every time)
-        st = path.stat()
+    path = os.fspath(path or os.environ.get("SIDQL_POLICY") or DEFAULT_POLICY)
+    try:  # one system call per decision (the dqn method calls this every time); plain os
+        st = os.stat(path)  # calls, not pathlib: a few microseconds, not tens, between kernels
     except OSError:
         raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`") from None
     return _load(os.path.abspath(path), st.st_mtime_ns, st.st_ino)

@@ -34,18 +34,13 @@ def greedy_sequences(cost, kmax):
     seq = np.empty((n, n, kmax + 1))  # one more: -inf after the last gain, so merges need no
     seq[:, :, 0] = -np.inf  # test of which run is exhausted (gains are finite)
     length = np.zeros((n, n), np.int64)
+    if kmax == 0:
+        return seq, length
+    G, M = best_splits(cost)
     for span in range(2, n):
         for l in range(0, n - span):
             r = l + span
-            best = -np.inf
-            m = -1
-            for j in range(l + 1, r):
-                g = cost[l, r] - cost[l, j] - cost[j, r]
-                if g > best:
-                    best = g
-                    m = j
-            if kmax == 0:
-                continue
+            best, m = G[l, r], M[l, r]
             out = seq[l, r]
             a = seq[l, m]
             b = seq[m, r]
@@ -63,6 +58,32 @@ def greedy_sequences(cost, kmax):
             out[count] = -np.inf
             length[l, r] = count
     return seq, length
+
+
+@numba.njit(cache=True)
+def best_splits(cost):
+    """(G, M) (N, N): ``G[l, r]`` the largest gain ``C[l, r] - C[l, j] - C[j, r]`` over
+    l < j < r and ``M[l, r]`` the first j reaching it (-inf and -1 where r < l + 2 or no gain
+    is finite).
+
+    The splits j run in the outer loop, in increasing order, and the segment ends r in the
+    inner one, along rows l and j of C: a gain replaces ``G[l, r]`` only if strictly larger, so
+    the first j wins a tie, as in a scan over j per segment; the same arithmetic, written as
+    selects on slices indexed from 0 so that the inner loop vectorises."""
+    n = cost.shape[0]
+    G = np.full((n, n), -np.inf)
+    M = np.full((n, n), -1, np.int64)
+    for l in range(n):
+        for j in range(l + 1, n - 1):
+            c_lj = cost[l, j]
+            g_l, m_l = G[l, j + 1 :], M[l, j + 1 :]
+            c_l, c_j = cost[l, j + 1 :], cost[j, j + 1 :]
+            for t in range(n - j - 1):
+                g = c_l[t] - c_lj - c_j[t]
+                better = g > g_l[t]
+                g_l[t] = g if better else g_l[t]
+                m_l[t] = j if better else m_l[t]
+    return G, M
 
 
 @numba.njit(cache=True)

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 from tqdm import tqdm
 
@@ -211,10 +212,29 @@ def clip_features(series) -> np.ndarray:
 def stacked_features(angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """:func:`clip_features` from the chart as :func:`sidql.keyframes.segment_costs.stacked`
     lays it out: (N, 2M) angles [theta | phi] [rad] and (N, 2M) rates times dt [rad/frame]."""
-    m = angles.shape[1] // 2
-    phi = angles[:, m:]
-    phi = phi - phi.mean(axis=0, keepdims=True)
-    return np.concatenate([angles[:, :m], phi, rates], axis=1).astype(np.float32)
+    return _stacked_features(np.ascontiguousarray(angles, dtype=np.float64),
+                             np.ascontiguousarray(rates, dtype=np.float64))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _stacked_features(angles, rates):
+    """:func:`stacked_features` compiled, with numpy's arithmetic: phi's mean over frames summed
+    in frame order from the first (as ``mean(axis=0)`` sums a frame-major array), divided by N."""
+    n, d = angles.shape
+    m = d // 2
+    mean = angles[0, m:].copy()
+    for t in range(1, n):
+        for k in range(m):
+            mean[k] += angles[t, m + k]
+    mean /= n
+    out = np.empty((n, d + rates.shape[1]), np.float32)
+    for t in range(n):
+        for k in range(m):
+            out[t, k] = angles[t, k]
+            out[t, m + k] = angles[t, m + k] - mean[k]
+        for k in range(rates.shape[1]):
+            out[t, d + k] = rates[t, k]
+    return out
 
 
 def clip_task(clip, *, subject: str = "", physics: bool = False) -> KeyframeTask:

@@ -49,6 +49,15 @@ from sim.simulate.controller import (
 )
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
+from sim.simulate.footholding import (
+    CONTACT_HEIGHT,
+    as_slice,
+    reference_soles,
+    slide_cost,
+    sole_bottoms,
+    sole_ids,
+    sole_lowest,
+)
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
@@ -87,6 +96,15 @@ class CostWeights:
     #: a fall (``sim.simulate.falls``) in the rollout, doubled if at its start; 0: the rollouts
     #: do not look for falls and run to their end (the sampler as first built)
     fall: float = 1e4
+    #: foot holding (``sim.simulate.footholding.slide_cost``) over the window's ticks: a stance
+    #: sole sliding faster than the reference's [m^2/s^2]; 0: not looked at. Off by default: on
+    #: the 22 clips of ``bench_simulate.py --controllers`` at 28 samples, 5 held the feet of the
+    #: clips that stayed up (skating lower in 9 of 13) but fell in 0.41 of the clips against
+    #: 0.27 (docs/results/simulate_default.md)
+    hold: float = 0.0
+    #: foot holding also costs a simulated sole that touches the floor where the reference lifts
+    #: it (a dragged foot); False: stance soles only
+    hold_contact: bool = True
 
 
 @dataclass(frozen=True)
@@ -196,6 +214,8 @@ class _Problem:
     fall_ref: object | None
     kp: np.ndarray | None = None
     balance: object | None = None
+    soles: slice | None = None  # the sole geoms' rows where foot holding is costed
+    ref_soles: tuple | None = None  # footholding.reference_soles: (T, 2, 2) xy, (T, 2) stance
 
 
 def _problem(
@@ -206,9 +226,11 @@ def _problem(
     pushes: tuple[Push, ...],
     falls: bool = True,
     balance: Balance | None = None,
+    hold: bool = False,
 ) -> _Problem:
     """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
-    rollouts look for falls (``fall_ref`` set) or not (None)."""
+    rollouts look for falls (``fall_ref`` set) or not (None); ``hold``: they record the soles
+    for the foot-holding cost (where the body has soles)."""
     nu = model.nu
     ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     kp = model.actuator_gainprm[:, 0].copy()
@@ -224,6 +246,7 @@ def _problem(
     for k in range(ref_qpos.shape[0]):
         data.qpos[:], data.qvel[:] = ref_qpos[k], ref_qvel[k]
         ref_feat.append(features(model, data, ee_ids, foot_ids))
+    ids = sole_ids(model) if hold else None
     return _Problem(
         base=base,
         ref_qvel=ref_qvel,
@@ -236,6 +259,8 @@ def _problem(
         fall_ref=fall_reference(model, ref_qpos) if falls else None,
         kp=kp,
         balance=None if balance is None else balance_plan(model, ref_qpos, ref_qvel, balance),
+        soles=None if ids is None else as_slice(ids),
+        ref_soles=None if ids is None else reference_soles(model, ref_qpos, ids),
     )
 
 
@@ -243,7 +268,9 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     """Roll ``data`` (set to the parent's state) on with hinge offset ``off`` (nu,) [rad] from
     tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
     ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
-    ``keep`` = (state row, qpos row, state spec). A rollout that falls (``sim.simulate.falls``,
+    ``keep`` = (state row, qpos row, state spec, soles), ``soles`` None or the sole boxes'
+    positions (k1 - k0, 2, 3) and orientations (k1 - k0, 2, 9) written after each tick of the
+    window (``prob.soles``; as the tick's last substep computed them). A rollout that falls (``sim.simulate.falls``,
     checked after every tick where ``prob.fall_ref`` is set) stops at the fall or at the
     window's end, whichever is later.
 
@@ -252,7 +279,7 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     """
     k0, k1, k2 = ticks
     pushes, weakenings = perturb
-    state, qpos, spec = keep
+    state, qpos, spec, soles = keep
     T = len(prob.base)
     fell = False
     fb = np.zeros(model.nu)
@@ -265,6 +292,11 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
             target += held_torques(model, data, prob.balance, k, fb) / prob.kp
         set_controls(model, data, target, weakening_factor(weakenings, t))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
+        if soles is not None and k < k1:
+            soles[0][k - k0], soles[1][k - k0] = (
+                data.geom_xpos[prob.soles],
+                data.geom_xmat[prob.soles],
+            )
         if k == k1 - 1:  # the window's end: the state kept
             mujoco.mj_getState(model, data, state, spec)
             qpos[:] = data.qpos
@@ -299,14 +331,18 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     ``datas`` (one ``MjData`` per thread of ``pool``; ``pool`` None: one run): every rollout
     starts from a full state, so the result does not depend on the split."""
     states, weights, perturb, spec = search
-    k0, _, k2 = ticks
+    k0, k1, k2 = ticks
     T = len(prob.base)
-    cost = np.empty(len(offs))
+    S = len(offs)
+    cost = np.empty(S)
+    hold = prob.soles is not None and weights.hold > 0
+    soles = (np.empty((S, k1 - k0, 2, 3)), np.empty((S, k1 - k0, 2, 9))) if hold else None
 
     def run(chunk: np.ndarray, data) -> None:
         for s in chunk:
             mujoco.mj_setState(model, data, states[parents[s]], spec)
-            keep_at = (out[0][s], out[1][s], spec)
+            rec = (soles[0][s], soles[1][s]) if hold else None
+            keep_at = (out[0][s], out[1][s], spec, rec)
             end = _rollout(model, data, prob, offs[s], ticks, perturb, keep_at)
             f = features(model, data, prob.ee_ids, prob.foot_ids)
             cost[s] = window_cost(f, prob.ref_feat[min(abs(end), T - 1)], weights, prob.hinge_w)
@@ -318,7 +354,36 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
         run(chunks[0], datas[0])
     else:
         list(pool.map(run, chunks, datas))
+    if hold:
+        cost += weights.hold * _hold_costs(model, prob, weights, ticks, soles)
     return cost
+
+
+def _hold_costs(model, prob: _Problem, weights: CostWeights, ticks, soles) -> np.ndarray:
+    """(S,) the foot-holding cost (``sim.simulate.footholding.slide_cost``) of each candidate's
+    window from its soles' records ``soles`` = (positions (S, K, 2, 3), orientations (S, K, 2,
+    9)) after each of the window's K ticks, against the reference's soles a tick later (a
+    tick's record is the state at its end, less its last substep)."""
+    k0, k1, _ = ticks
+    later = np.minimum(np.arange(k0, k1) + 1, len(prob.base) - 1)
+    ref_xy, stance = prob.ref_soles[0][later], prob.ref_soles[1][later]
+    size = model.geom_size[prob.soles]
+    xy = sole_bottoms(soles[0], soles[1], size[:, 2])[..., :2]
+    touch = sole_lowest(soles[0], soles[1], size) <= CONTACT_HEIGHT
+    return slide_cost(xy, ref_xy, stance, 1.0 / CONTROL_HZ, touch if weights.hold_contact else None)
+
+
+def _proposals(rng, last: np.ndarray, parents: np.ndarray, sigma: np.ndarray, how) -> np.ndarray:
+    """(S, nu) the candidates' offsets [rad]: from each parent's last offset (``last`` (K, nu),
+    the cheapest kept state first; ``parents`` (S,)), moved by ``recentre`` towards the
+    cheapest's, shrunk by ``persistence``, plus noise of ``sigma`` (nu,); the first ``elite``
+    go on with their parent's offset unchanged. ``how`` = (persistence, recentre, elite)."""
+    persistence, recentre, elite = how
+    centre = (1.0 - recentre) * last[parents] + recentre * last[0]
+    offs = persistence * centre + sigma * rng.standard_normal((len(parents), last.shape[1]))
+    n_elite = min(int(elite), len(last), len(parents))
+    offs[:n_elite] = last[parents[:n_elite]]
+    return offs
 
 
 def _check_window(window: int, balance: Balance | None) -> None:
@@ -358,6 +423,7 @@ def search_offsets(
     threads: int = 1,
     recentre: float = 0.0,
     balance: Balance | None = BALANCE,
+    elite: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
@@ -380,6 +446,8 @@ def search_offsets(
             the result is the same for any number.
         balance: the balance feedback (``sim.simulate.balance``) every rollout adds to its
             targets (and ``sample_track``'s replay); None: none.
+        elite: candidates (one per kept state, the cheapest first) that go on with their
+            parent's last offset as its lookahead was judged (no shrinking, no noise).
 
     Returns:
         ``offsets`` (T, nu) [rad], and ``window_qpos`` (W, nq): on the chosen path, the rolled
@@ -390,25 +458,23 @@ def search_offsets(
     T, nu = ref_qpos.shape[0], model.nu
     rng = np.random.default_rng(seed)
     datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
-    data = datas[0]
     _check_window(window, balance)
     prob = _problem(
-        model, ref_qpos, data, torque_sigma, pushes, falls=weights.fall > 0, balance=balance
-    )
+        model, ref_qpos, datas[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
+        hold=weights.hold > 0,
+    )  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    size = mujoco.mj_stateSize(model, spec)
-    states = _first_state(model, data, ref_qpos[0], prob.ref_qvel[0], spec)
+    states = _first_state(model, datas[0], ref_qpos[0], prob.ref_qvel[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    out = np.empty((samples, size)), np.empty((samples, model.nq))
+    out = np.empty((samples, states.shape[1])), np.empty((samples, model.nq))
     pool = ThreadPoolExecutor(len(datas)) if len(datas) > 1 else None
     try:
         for k0 in range(0, T, window):
             ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
             parents = np.arange(samples) % len(states)
-            centre = (1.0 - recentre) * last[parents] + recentre * last[0]  # [0]: the cheapest
-            offs = persistence * centre + prob.sigma * rng.standard_normal((samples, nu))
+            offs = _proposals(rng, last, parents, prob.sigma, (persistence, recentre, elite))
             search = states, weights, (pushes, weakenings), spec
             cost = _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool)
             new_costs = costs[parents] + cost

@@ -47,11 +47,11 @@ CONTROLLERS = ("plain", "sampling", "wholebody")
 #: ``--samples``: the sampler with falls in its cost and the balance feedback
 #: (``sim.simulate.sampling.BALANCE``) at :data:`DEFAULT_SAMPLES`, because within the budget of
 #: 5 CPU s per simulated second it beats the other controllers on falls and error
-#: (``docs/results/simulate_default.md`` and ``simulate_controllers.md``, 22 clips: 0.27 falls,
-#: 113 mm root-relative, 322 mm global error, 4.98 CPU s per simulated s; the sampler without
-#: the feedback at 32 samples in the same run: 0.32, 138, 466 mm, 4.67; the plain tracker 0.95,
-#: 316, 694 mm;
-#: the whole-body QP 0.91, 362, 665 mm)
+#: (``docs/synthetic.md``, ``docs/results/simulate_default.md`` and ``simulate_controllers.md``,
+#: 22 clips: 0.27 falls, 113 mm root-relative, 322 mm global error, 4.98 CPU s per simulated s
+#: (5.19 on a machine loaded 7-9); the sampler without the feedback at 32 samples in one run
+#: with it: 0.32, 138, 466 mm, 4.67; the plain tracker 0.95, 316, 694 mm; the whole-body QP
+#: 0.91, 362, 665 mm; foot holding or elite reuse added: docs/synthetic.md, not kept)
 DEFAULT_CONTROLLER = "sampling"
 #: the sampler's rollouts per window where it is chosen without a count (with the feedback,
 #: 32 cost 5.22 CPU s per simulated s: over the budget)

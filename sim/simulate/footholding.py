@@ -1,0 +1,105 @@
+"""Foot holding: what a sampled rollout pays for sliding a foot the reference stands on.
+
+Foot skating in contact (``sim.simulate.validate.ForwardValidation.skating``) is the horizontal
+speed of a sole's bottom centre while it touches the floor. The sampler's other cost terms look
+at one instant and at the root and pose; none of them sees a stance foot slide. This term does:
+over the ticks of a window, each sole's horizontal speed in excess of what it may move::
+
+    slide = sum_k sum_feet counted_k max(0, |d sim_k| / dt - allowed_k)^2 / (K - 1)
+
+[m^2/s^2] (``d x_k = x_k+1 - x_k``: the sole's horizontal step over tick k; ``dt``: the tick
+[s]; K ticks). A step counts where the reference stands on that foot at both of its ends (it
+may move as fast as the reference's sole, ``allowed_k = |d ref_k| / dt``), or where the
+simulated sole touches the floor at both ends (its lowest corner at most :data:`CONTACT_HEIGHT`
+high) while the reference lifts it (a dragged foot: ``allowed_k = 0``). Zero on the reference
+itself (its soles touch the floor only where it stands on them) and wherever the simulated
+foot moves no faster than allowed; it grows with the square of the excess speed, and never
+asks a stance foot for less sliding than the motion itself has. Units: metres, seconds, z up,
+floor at z = 0.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from sim.simulate.balance import STANCE_HEIGHT
+from sim.simulate.model import SOLE_GEOMS
+
+#: [m] a simulated sole whose lowest corner is at most this high touches the floor (the contact
+#: height of skating's estimator, ``sim.simulate.validate.SKATE_CONTACT``)
+CONTACT_HEIGHT = 0.01
+
+
+def sole_ids(model) -> np.ndarray | None:
+    """(2,) geom ids of the (left, right) sole boxes; None where the body has no soles."""
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in SOLE_GEOMS]
+    return None if min(ids) < 0 else np.array(ids)
+
+
+def as_slice(ids: np.ndarray) -> slice:
+    """The basic slice that picks rows ``ids`` (2,) (distinct, >= 0) in their order: a view
+    where fancy indexing would copy (the sampler reads the soles after every tick)."""
+    a, b = int(ids[0]), int(ids[1])
+    stop = b + (1 if b > a else -1)
+    return slice(a, None if stop < 0 else stop, b - a)
+
+
+def sole_bottoms(xpos: np.ndarray, xmat: np.ndarray, half_height: np.ndarray) -> np.ndarray:
+    """(..., 2, 3) the bottom centres [m] of boxes at ``xpos`` (..., 2, 3) with orientations
+    ``xmat`` (..., 2, 9) (row-major, MuJoCo's ``geom_xmat``) and half heights ``half_height``
+    (2,) [m] along their local z: the centre minus half the height along the box's z axis."""
+    z_axis = xmat[..., [2, 5, 8]]  # the third column of each rotation
+    return xpos - half_height[:, None] * z_axis
+
+
+def sole_lowest(xpos: np.ndarray, xmat: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """(..., 2) the height [m] of the lowest corner of boxes at ``xpos`` (..., 2, 3) with
+    orientations ``xmat`` (..., 2, 9) and half sizes ``size`` (2, 3) [m]."""
+    return xpos[..., 2] - np.sum(np.abs(xmat[..., 6:9]) * size, axis=-1)
+
+
+def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Of a reference ``ref_qpos`` (T, nq), per tick and sole (left, right): the horizontal
+    bottom centre (T, 2, 2) [m] and whether the reference stands on it (T, 2) (the box's lowest
+    corner at most ``sim.simulate.balance.STANCE_HEIGHT`` high)."""
+    data = mujoco.MjData(model)
+    T = len(ref_qpos)
+    xy = np.empty((T, 2, 2))
+    stance = np.zeros((T, 2), dtype=bool)
+    size = model.geom_size[ids]  # (2, 3) half sizes
+    for t in range(T):
+        data.qpos[:] = ref_qpos[t]
+        mujoco.mj_kinematics(model, data)
+        xmat = data.geom_xmat[ids]
+        xy[t] = sole_bottoms(data.geom_xpos[ids], xmat, size[:, 2])[:, :2]
+        stance[t] = sole_lowest(data.geom_xpos[ids], xmat, size) <= STANCE_HEIGHT
+    return xy, stance
+
+
+def slide_cost(
+    sim_xy: np.ndarray,
+    ref_xy: np.ndarray,
+    stance: np.ndarray,
+    dt: float,
+    contact: np.ndarray | None = None,
+) -> float | np.ndarray:
+    """The foot-holding cost [m^2/s^2] (module docstring) of soles at ``sim_xy`` (..., K, 2, 2)
+    against the reference's ``ref_xy`` (K, 2, 2) over K ticks of ``dt`` [s], the reference
+    standing on each sole where ``stance`` (K, 2) is True and the simulated sole touching the
+    floor where ``contact`` (..., K, 2) is True (None: stance steps only); 0 for K < 2.
+
+    Returns:
+        a float for one motion (``sim_xy`` (K, 2, 2)), else one cost per leading index (...).
+    """
+    K = sim_xy.shape[-3]
+    if K < 2:
+        return 0.0 if sim_xy.ndim == 3 else np.zeros(sim_xy.shape[:-3])
+    v_sim = np.linalg.norm(np.diff(sim_xy, axis=-3), axis=-1) / dt  # (..., K-1, 2)
+    v_ref = np.linalg.norm(np.diff(ref_xy, axis=0), axis=-1) / dt  # (K-1, 2)
+    held = stance[1:] & stance[:-1]
+    allowed = np.where(held, v_ref, 0.0)
+    counted = held if contact is None else held | (contact[..., 1:, :] & contact[..., :-1, :])
+    excess = np.where(counted, np.maximum(0.0, v_sim - allowed), 0.0)
+    cost = np.sum(excess**2, axis=(-2, -1)) / (K - 1)
+    return float(cost) if sim_xy.ndim == 3 else cost
