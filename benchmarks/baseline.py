@@ -38,7 +38,8 @@ class Baseline:
     """A process running commit ``rev``'s code on the clips of ``data`` (see the module doc)."""
 
     def __init__(self, rev: str, data, n_clips: int):
-        self.rev, self.data, self.n_clips = rev, str(data), int(n_clips)
+        # absolute: the baseline process runs in its own temporary folder
+        self.rev, self.data, self.n_clips = rev, str(Path(data).resolve()), int(n_clips)
 
     def __enter__(self) -> Baseline:
         self._tmp = tempfile.TemporaryDirectory(prefix="sidql-baseline-")
