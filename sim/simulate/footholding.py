@@ -26,8 +26,8 @@ import numpy as np
 from sim.simulate.balance import STANCE_HEIGHT
 from sim.simulate.model import SOLE_GEOMS
 
-#: [m] a simulated sole whose lowest corner is at most this high touches the floor (the contact
-#: height of skating's estimator, ``sim.simulate.validate.SKATE_CONTACT``)
+#: [m] a simulated sole whose lowest corner is at most this high touches the floor (skating's
+#: estimator, ``sim.simulate.validate.SKATE_CONTACT``, is this height)
 CONTACT_HEIGHT = 0.01
 
 

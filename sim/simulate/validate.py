@@ -23,7 +23,8 @@ import numpy as np
 
 from sim.errors import UsageError
 from sim.simulate.controller import track
-from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS, sim_model, total_mass
+from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
+from sim.simulate.model import CONTROL_HZ, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
     contact_consistent,
@@ -56,8 +57,9 @@ DEFAULT_CONTROLLER = "sampling"
 #: the sampler's rollouts per window where it is chosen without a count (with the feedback,
 #: 32 cost 5.22 CPU s per simulated s: over the budget)
 DEFAULT_SAMPLES = 28
-#: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator)
-SKATE_CONTACT = 0.01
+#: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator; the
+#: sampler's foot holding uses the same height)
+SKATE_CONTACT = CONTACT_HEIGHT
 
 
 def chosen_controller(samples: int = 0, controller: str | None = None) -> tuple[str, int]:
@@ -211,8 +213,8 @@ class ForwardValidation:
         horizontal speed of each sole box's bottom centre over the frames where its lowest
         corner is at most :data:`SKATE_CONTACT` high (central differences); NaN without soles
         or without contact: None. One geometric estimator for simulated and reference motion alike."""
-        soles = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in SOLE_GEOMS]
-        if min(soles) < 0 or len(qpos) < 3:
+        soles = sole_ids(self.model)
+        if soles is None or len(qpos) < 3:
             return None
         low = np.empty((len(qpos), 2, 3))
         for t, q in enumerate(qpos):
