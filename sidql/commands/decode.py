@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from sidql.codec.decode import decode_file
+from sim.jit import start_numba
 
 DESCRIPTION = (
     "Rebuild every frame of the trial at the stream's rate from its keyframes. .npz: the 23 "
@@ -25,6 +26,7 @@ def register(p) -> None:
 
 
 def run(args) -> int:
+    start_numba()
     path = decode_file(args.stream, args.out, asf=args.asf)
     print(f"wrote {path}")
     return 0

@@ -9,6 +9,7 @@ from sidql.codec.encode import CHOICES, encode_files
 from sidql.codec.plan import DEFAULT_MAX_GAP
 from sidql.codec.windows import WINDOW_FRAMES
 from sidql.commands.usage import add_trial, positive
+from sim.jit import start_numba
 
 DESCRIPTION = (
     "Chart the trial's 22 bones and root at --fps, choose keyframes by dynamic programming (max "
@@ -95,6 +96,7 @@ def run(args) -> int:
         args.parser.error("--max-error needs an offline stream (--latency 0), not hermite")
     if (args.contacts or args.physics) and args.latency:
         args.parser.error("--contacts and --physics need an offline stream (--latency 0)")
+    start_numba()
     enc = encode_files(
         args.asf,
         args.amc,
