@@ -491,3 +491,64 @@ def test_huge_tokens_give_a_bounded_message_that_survives_pickling(tmp_path):
         parse_amc(write(tmp_path, "t.amc", text), skel)
     assert len(err.value.problem) <= MotionDataError.MAX_PROBLEM
     assert str(pickle.loads(pickle.dumps(err.value))) == str(err.value)
+
+
+def _frames_edited(cmu_dir, tmp_path, edits: dict[int, str]) -> tuple[Path, list[str]]:
+    """02_01.amc with line ``i`` (0-based) replaced by ``edits[i]`` (LF line breaks)."""
+    lines = (cmu_dir / "02" / "02_01.amc").read_text().splitlines()
+    for i, text in edits.items():
+        lines[i] = text
+    path = tmp_path / "edited.amc"
+    path.write_text("\n".join(lines) + "\n")
+    return path, lines
+
+
+def _bone_lines(cmu_dir, bone: str) -> list[int]:
+    lines = (cmu_dir / "02" / "02_01.amc").read_text().splitlines()
+    return [i for i, ln in enumerate(lines) if ln.startswith(bone + " ")]
+
+
+def test_lines_whose_miscounts_cancel_out_are_refused_on_the_first(cmu_dir, tmp_path):
+    # one line with a value too many, a later one of the same bone with one too few: the
+    # chunk's totals match, each line's count does not (the fast path must not take it)
+    skel = parse_asf(cmu_dir / "02" / "02.asf")
+    rows = _bone_lines(cmu_dir, "lfemur")
+    a, b = rows[100], rows[140]
+    original = (cmu_dir / "02" / "02_01.amc").read_text().splitlines()
+
+    def more(k):
+        return original[k] + " 1.5"
+
+    def fewer(k):
+        return " ".join(original[k].split()[:-1])
+
+    for edits, bad, got in (
+        ({a: more(a), b: fewer(b)}, a, 4),
+        ({a: fewer(a), b: more(b)}, a, 2),
+        ({b: more(b)}, b, 4),  # only a value too many
+    ):
+        path, _ = _frames_edited(cmu_dir, tmp_path, edits)
+        with pytest.raises(MotionDataError, match=rf"'lfemur' needs 3 values, got {got}") as err:
+            parse_amc(path, skel)
+        assert err.value.line == bad + 1
+
+
+@pytest.mark.parametrize("blank", ["\t", "  ", "\x1f", "\xa0"])
+def test_values_split_by_other_blanks_read_as_with_single_spaces(cmu_dir, tmp_path, blank):
+    # one line's values split by another blank, a later line with values too many: the
+    # chunk's count of spaces matches, each line's count of values does not
+    skel = parse_asf(cmu_dir / "02" / "02.asf")
+    lines = (cmu_dir / "02" / "02_01.amc").read_text().splitlines()
+    i, j = _bone_lines(cmu_dir, "lfemur")[50:52]
+    name, *values = lines[i].split()
+    spread = name + " " + blank.join(values)
+    extra = 1 if blank == "  " else 2  # as many spaces as the blanks took (a run: one)
+    path, _ = _frames_edited(cmu_dir, tmp_path, {i: spread, j: lines[j] + " 7.5" * extra})
+    with pytest.raises(MotionDataError, match=rf"'lfemur' needs 3 values, got {3 + extra}") as err:
+        parse_amc(path, skel)
+    assert err.value.line == j + 1
+    path, _ = _frames_edited(cmu_dir, tmp_path, {i: spread})
+    edited = parse_amc(path, skel)
+    whole = parse_amc(cmu_dir / "02" / "02_01.amc", skel)
+    np.testing.assert_array_equal(edited.angles["lfemur"], whole.angles["lfemur"])
+    np.testing.assert_array_equal(edited.root, whole.root)

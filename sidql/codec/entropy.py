@@ -21,6 +21,9 @@ some integers (caught by the container's checksum) and never reads out of bounds
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 import numba
 import numpy as np
 
@@ -65,6 +68,13 @@ def _prior() -> np.ndarray:
 
 
 _PRIOR = _prior()
+
+#: the blocks :func:`encode_integers` coded last, by their inputs (all of them, compared whole):
+#: a caller that sizes a block and then writes it (the position coding) codes it once. At most
+#: :data:`_KEEP` kept (a block of 900 keyframes: about 0.4 MB).
+_KEEP = 4
+_CODED: OrderedDict = OrderedDict()
+_LOCK = threading.Lock()
 
 
 @numba.njit(cache=True, inline="always")
@@ -348,7 +358,18 @@ def encode_integers(
     if v.size and np.abs(v).max() >= (1 << MAX_CLASS):
         raise UsageError(f"residual beyond 2^{MAX_CLASS}")
     g, n = _groups(group, v.shape[1])
-    return bytes(_encode_kernel(v, g, n, _PRIOR, _kinds(kinds, v.shape[0])))
+    k = _kinds(kinds, v.shape[0])
+    key = (v.shape, v.tobytes(), g.tobytes(), k.tobytes())
+    with _LOCK:
+        if key in _CODED:
+            _CODED.move_to_end(key)
+            return _CODED[key]
+    data = bytes(_encode_kernel(v, g, n, _PRIOR, k))
+    with _LOCK:
+        _CODED[key] = data
+        while len(_CODED) > _KEEP:
+            _CODED.popitem(last=False)
+    return data
 
 
 def decode_integers(

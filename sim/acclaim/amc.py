@@ -302,10 +302,11 @@ class _AmcParser:
                 if any(line != name for line in slot):
                     return start
                 continue
-            n = len(prefix)
-            try:  # numpy's C reader; a wrong count or a bad token raises
+            if not _counted(joined, T * count):
+                return start
+            try:  # numpy's C reader, the name column skipped; a bad token or a short line raises
                 values = np.loadtxt(
-                    [line[n:] for line in slot], dtype=np.float64, ndmin=2, comments=None
+                    slot, dtype=np.float64, ndmin=2, comments=None, usecols=range(1, count + 1)
                 )
             except (ValueError, IndexError):
                 return start
@@ -394,3 +395,15 @@ def _within(values: np.ndarray, bound: list[float]) -> bool:
     b = np.asarray(bound)
     # min/max reduce without temporaries; nan propagates
     return bool((values.max(axis=0) <= b).all() and (values.min(axis=0) >= -b).all())
+
+
+def _counted(joined: str, spaces: int) -> bool:
+    """Whether the lines of ``joined`` are ASCII with spaces as their only blanks (no tab or unit
+    separator: inside a line, the other ASCII characters ``str.split`` and numpy split on) and
+    ``spaces`` spaces in all. Such a line has at least as many spaces as tokens less one, so when
+    numpy finds at least ``1 + count`` tokens on each of ``T`` lines and they hold ``T count``
+    spaces, every line has exactly ``1 + count`` tokens: its name and ``count`` values."""
+    return (
+        joined.isascii() and "\t" not in joined and "\x1f" not in joined
+        and joined.count(" ") == spaces
+    )  # fmt: skip
