@@ -155,7 +155,7 @@ def select(
     options = {"reconstruction": reconstruction or RECONSTRUCTION[name], "memo": memo}
     kw = {p: options[p] for p in _TAKES.get(name, ())}
     k = np.asarray(fn(clip, W, seed=seed, **kw), dtype=np.int64)
-    if k.shape != (W,) or k[0] != 0 or k[-1] != N - 1 or np.any(np.diff(k) <= 0):
+    if k.shape != (W,) or k[0] != 0 or k[-1] != N - 1 or (k[1:] <= k[:-1]).any():
         raise UsageError(f"method {name!r} returned bad keyframes {k.tolist()} for W={W}")
     return k
 
