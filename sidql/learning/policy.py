@@ -192,7 +192,14 @@ def load_policy(path: str | os.PathLike | None = None) -> Policy:
         st = os.stat(path)  # calls, not pathlib: a few microseconds, not tens, between kernels
     except OSError:
         raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`") from None
-    return _load(os.path.abspath(path), st.st_mtime_ns, st.st_ino)
+    full = _normalised(path) if os.path.isabs(path) else os.path.abspath(path)
+    return _load(full, st.st_mtime_ns, st.st_ino)
+
+
+@lru_cache(maxsize=16)
+def _normalised(path: str) -> str:
+    """``os.path.abspath`` of an absolute path (no working folder in it), once per path."""
+    return os.path.normpath(path)
 
 
 #: Stated limits of a policy file's network config: width, input channels, temporal layers and
