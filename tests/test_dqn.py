@@ -445,6 +445,37 @@ def test_the_decision_kernel_reads_named_modules_and_refuses_a_changed_head(task
             pytest.fail(f"{what} was not caught")
 
 
+def test_the_decision_reads_the_weights_the_network_holds_now(tasks):
+    """The kernels' weights are cached per network and read again after any change: a weight
+    written in place, a layer replaced (at the top or inside ``convs``), another network."""
+    from sidql.learning.decide import encoder_weights, head_weights
+
+    def same(got, net):
+        want = (encoder_weights(net), head_weights(net))
+        flat = lambda w: [np.asarray(x) for part in w for x in part]  # noqa: E731
+        return all(np.array_equal(a, b) for a, b in zip(flat(got), flat(want), strict=True))
+
+    c = tasks[0].features.shape[-1]
+    net = KeyframeQNet(c, hidden=16)
+    policy = Policy(net, (5,), {})
+    first = policy._weights()
+    assert policy._weights() is first and same(first, net)  # unchanged: the cached arrays
+    changes = [
+        lambda: net.adv_out.bias.add_(1.0),
+        lambda: net.convs[2].weight.mul_(-1.0),
+        lambda: setattr(net, "glob", torch.nn.Linear(16, 16)),
+        lambda: net.convs.__setitem__(1, torch.nn.Conv1d(16, 16, 3, padding=2, dilation=2)),
+        lambda: setattr(policy, "net", KeyframeQNet(c, hidden=16)),
+    ]
+    for change in changes:
+        before = policy._weights()
+        with torch.no_grad():
+            change()
+        got = policy._weights()
+        assert got is not before and same(got, policy.net)
+        assert policy._weights() is got
+
+
 def test_import_of_the_method_registry_does_not_import_the_policy_or_torch():
     code = (
         "import sys, sidql.keyframes.methods as m; "

@@ -55,6 +55,25 @@ def test_register_adds_a_method_and_select_checks_its_output(clip):
             methods.select("every_other_test", clip, 4)
     finally:
         del methods.METHODS["every_other_test"]
+    last = clip.n_frames - 1
+    bad = {
+        "unsorted": [0, 7, 5, last], "repeated": [0, 5, 5, last], "first not 0": [1, 5, 7, last],
+        "too few": [0, 5, last], "too many": [0, 3, 5, 7, last], "two rows": [[0, 5], [7, last]],
+        "one number": 0,
+    }  # fmt: skip
+    for what, keys in bad.items():
+        methods.register("bad_test")(lambda c, W, *, seed=0, keys=keys: np.array(keys))
+        try:
+            with pytest.raises(UsageError, match="bad keyframes"):
+                methods.select("bad_test", clip, 4)
+                pytest.fail(f"{what} was not caught")
+        finally:
+            del methods.METHODS["bad_test"]
+    methods.register("good_test")(lambda c, W, *, seed=0: np.array([0, 5, 7, last]))
+    try:
+        assert methods.select("good_test", clip, 4).tolist() == [0, 5, 7, last]
+    finally:
+        del methods.METHODS["good_test"]
 
 
 def test_lazy_methods_are_imported_on_demand(clip, tmp_path, monkeypatch):

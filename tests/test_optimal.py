@@ -142,3 +142,8 @@ def test_the_programme_equals_a_plain_scan_ties_and_infs_included(kind):
         D, P = _dp(C, w_max)
         want_D, want_P = plain_programme(C, w_max)
         assert np.array_equal(D, want_D) and np.array_equal(P, want_P)
+        reach = int(rng.integers(2, n + 1))  # a band: the entries beyond it inf, not read
+        band = np.where(np.subtract.outer(np.arange(n), np.arange(n)) > -reach, C, np.inf)
+        want_D, want_P = plain_programme(band, w_max)
+        D, P = _dp(band, w_max, reach)
+        assert np.array_equal(D, want_D) and np.array_equal(P, want_P)

@@ -31,9 +31,11 @@ from sim.errors import UnknownNameError, UsageError, require_type
 
 
 @numba.njit(cache=True)
-def _dp(C, w_max):
+def _dp(C, w_max, reach=0):
     """(D, P) over (N, N) costs C for w = 1..w_max: ``D[w, j]`` as in the module docstring and
-    ``P[w, j]`` the least i reaching it (-1 where none is below inf).
+    ``P[w, j]`` the least i reaching it (-1 where none is below inf). With ``reach`` > 0 the
+    entries with ``j - i >= reach`` are taken to be inf and not read (the same D and P if they
+    are: an inf candidate never replaces anything).
 
     The predecessors i run in the outer loop, in increasing order, and the frames j in the inner
     one, along row i of C: each candidate replaces ``D[w, j]`` only if strictly smaller, so the
@@ -47,7 +49,8 @@ def _dp(C, w_max):
         Dw = D[w]
         Pw = P[w]
         for i in range(w - 2, N - 1):
-            _relax(Dw, Pw, C[i], D[w - 1, i], i, max(i + 1, w - 1), N)
+            hi = N if reach <= 0 else min(N, i + reach)
+            _relax(Dw, Pw, C[i], D[w - 1, i], i, max(i + 1, w - 1), hi)
     return D, P
 
 
@@ -221,7 +224,7 @@ def _optimum_costs(X, R, linear, W):
             for d in range(D):
                 dX[d] = X[j, d] - X[i, d]
             lb[i, j] = _frame_cost(X, R, dX, i, j, i + (j - i) // 2, linear)
-    U = _dp(Cb, W)[0][W, N - 1] * (1.0 + 1e-9)  # feasible: (band - 1) (W - 1) >= N - 1
+    U = _dp(Cb, W, band)[0][W, N - 1] * (1.0 + 1e-9)  # feasible: (band - 1) (W - 1) >= N - 1
     head = _dp(lb, W)[0]  # head[w, i] <= least cost of frames 0..i, w keyframes, the last i
     tail = _dp(lb[::-1, ::-1].T.copy(), W)[0]  # the same for frames j..N-1 from the end
     for i in range(N):

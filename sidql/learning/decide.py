@@ -11,7 +11,7 @@ import numpy as np
 from torch import nn
 
 from sidql.learning.qnet import N_SCALARS, KeyframeQNet
-from sidql.learning.rollout import greedy_sequences, rollout_values_seq
+from sidql.learning.rollout import best_splits, greedy_sequences_of, rollout_values_seq
 from sim.errors import ArgumentTypeError
 
 #: The modules of :class:`KeyframeQNet` the decision kernels know: the encoder's layers (mirrored
@@ -182,7 +182,8 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
     base = np.zeros((n, k))
     adv = np.zeros(n)
     prior = np.zeros(n)
-    seq, length = greedy_sequences(cost, max(W - 3, 0) if use_prior else 0)
+    gain2, split = best_splits(cost)  # the segment features' second gains, the prior's tables
+    seq, length = greedy_sequences_of(gain2, split, max(W - 3, 0) if use_prior else 0)
     zsum = np.zeros(k)
     zs = np.empty((n, k))
     rows = np.empty(n, np.int64)
@@ -194,7 +195,7 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
         if use_prior:
             prior = rollout_values_seq(cost, mask, rem, seq, length)
         _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_right, left,
-                          right, g1, base)  # fmt: skip
+                          right, g1, base, gain2)  # fmt: skip
         top1, top2 = _two_best(mask, new_right, g1, seg_best)
         adv_mean, value = _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1,
                                       w2, b2, wv1, bv1, wv2, bv2, zs, zsum, rows, adv)  # fmt: skip
@@ -227,9 +228,11 @@ def _segments(mask, cost, s0, new_left, new_right):
 
 @numba.njit(cache=True, fastmath=True)
 def _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_right, left, right,
-                      g1, base):  # fmt: skip
+                      g1, base, gain2):  # fmt: skip
     """The segment features of the free frames whose segment changed: their reward ``g1`` (N,)
-    and the part of the head's scalar layer that depends on the segment, ``base`` (N, K)."""
+    and the part of the head's scalar layer that depends on the segment, ``base`` (N, K).
+    ``gain2``: (N, N) each segment's best split gain (:func:`sidql.learning.rollout.best_splits`,
+    -inf where none): the second-step gains left and right of a frame, floored at 0."""
     n = cost.shape[0]
     k = glob.shape[0]
     for a in range(n):
@@ -243,12 +246,8 @@ def _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_ri
         c_la = cost[l, a]
         c_ar = cost[a, r]
         g1[a] = (c_lr - c_la - c_ar) / s0
-        g2l = 0.0
-        for m in range(l + 1, a):
-            g2l = max(g2l, c_la - cost[l, m] - cost[m, a])
-        g2r = 0.0
-        for m in range(a + 1, r):
-            g2r = max(g2r, c_ar - cost[a, m] - cost[m, r])
+        g2l = max(0.0, gain2[l, a])  # max(0, C[l, a] - C[l, m] - C[m, a] over l < m < a)
+        g2r = max(0.0, gain2[a, r])
         s_0 = (a - l) / n
         s_1 = (r - a) / n
         s_2 = (r - l) / n

@@ -32,25 +32,26 @@ from sim.paths import package_file
 DEFAULT_POLICY = package_file("sidql", "data/policy.pt")
 
 
-def _weight_key(net: KeyframeQNet) -> tuple:
-    """Identity and in-place version of every tensor of ``net``, and every module's identity:
-    changes whenever a weight or module is replaced or written (optimiser steps and
-    ``load_state_dict`` write in place, bumping the version). A plain walk over the module
-    dicts: a tenth of the cost of ``named_parameters`` (which a decision would pay per clip)."""
-    key = [id(net)]
-    stack = [net]
-    while stack:  # plain loops and appends: about 10 us for the shipped network
+def _module_dicts(net: KeyframeQNet) -> tuple[list, list]:
+    """Every module's parameter, buffer and child dicts in ``net``, and its tensors: what
+    :func:`_weight_key` reads (one walk, made again only when the key changes)."""
+    dicts, tensors, stack = [], [], [net]
+    while stack:
         m = stack.pop()
-        for group in (m._parameters, m._buffers):
-            for t in group.values():
-                if t is not None:
-                    key.append(id(t))
-                    key.append(t._version)
-        for c in m._modules.values():
-            if c is not None:
-                key.append(id(c))
-                stack.append(c)
-    return tuple(key)
+        dicts += (m._parameters, m._buffers, m._modules)
+        tensors += [t for g in (m._parameters, m._buffers) for t in g.values() if t is not None]
+        stack += [c for c in m._modules.values() if c is not None]
+    return dicts, tensors
+
+
+def _weight_key(net: KeyframeQNet, dicts: list, tensors: list) -> tuple:
+    """Identity of everything the module dicts of ``net`` hold and the in-place version of its
+    tensors (``dicts`` and ``tensors`` from :func:`_module_dicts` of the same network): changes
+    whenever a weight or module is replaced or added (a dict that was walked holds another
+    object: its parent's) or written (optimiser steps and ``load_state_dict`` write in place,
+    bumping the version). Two flat comprehensions: a few microseconds a decision."""
+    ids = [id(v) for d in dicts for v in d.values()]
+    return (id(net), *ids, *[t._version for t in tensors])
 
 
 class Policy:
@@ -101,12 +102,13 @@ class Policy:
     def _weights(self) -> tuple:
         """(encoder, head) weights for the kernels, read again whenever a tensor of the network
         was replaced or written (training changes the network between decisions)."""
-        key = _weight_key(self.net)
-        if getattr(self, "_weights_key", None) != key:
-            self._cached_weights = (encoder_weights(self.net), head_weights(self.net))
-            # the key holds ids: keep the objects alive so that no new tensor can reuse one
-            self._weights_key, self._keyed = key, (*self.net.parameters(), *self.net.buffers(),
-                                                   *self.net.modules())  # fmt: skip
+        net, walk = self.net, getattr(self, "_walk", None)
+        if walk is None or walk[0] is not net or _weight_key(*walk) != self._weights_key:
+            # the walk holds the dicts and so every object whose id is in the key: alive, no
+            # new tensor or module can reuse one of their ids
+            self._walk = walk = (net, *_module_dicts(net))
+            self._weights_key = _weight_key(*walk)
+            self._cached_weights = (encoder_weights(net), head_weights(net))
         return self._cached_weights
 
     def _check(self, features, costs, W):
@@ -190,7 +192,14 @@ def load_policy(path: str | os.PathLike | None = None) -> Policy:
         st = os.stat(path)  # calls, not pathlib: a few microseconds, not tens, between kernels
     except OSError:
         raise FileNotFoundError(f"no policy at {path}; train one with `sidql train`") from None
-    return _load(os.path.abspath(path), st.st_mtime_ns, st.st_ino)
+    full = _normalised(path) if os.path.isabs(path) else os.path.abspath(path)
+    return _load(full, st.st_mtime_ns, st.st_ino)
+
+
+@lru_cache(maxsize=16)
+def _normalised(path: str) -> str:
+    """``os.path.abspath`` of an absolute path (no working folder in it), once per path."""
+    return os.path.normpath(path)
 
 
 #: Stated limits of a policy file's network config: width, input channels, temporal layers and

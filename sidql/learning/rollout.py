@@ -30,13 +30,23 @@ def greedy_sequences(cost, kmax):
     whose own next gain is largest: ``seq(l, r) = [g(l, r)] + merge(seq(l, m), seq(m, r))`` with m
     the best split; built bottom-up over segment lengths in O(N^2 (N + kmax)).
     """
-    n = cost.shape[0]
+    if kmax == 0:
+        n = cost.shape[0]
+        return np.full((n, n, 1), -np.inf), np.zeros((n, n), np.int64)
+    G, M = best_splits(cost)
+    return greedy_sequences_of(G, M, kmax)
+
+
+@numba.njit(cache=True)
+def greedy_sequences_of(G, M, kmax):
+    """:func:`greedy_sequences` from the segments' best splits ``(G, M)`` of
+    :func:`best_splits` (a caller that also needs them computes them once)."""
+    n = G.shape[0]
     seq = np.empty((n, n, kmax + 1))  # one more: -inf after the last gain, so merges need no
     seq[:, :, 0] = -np.inf  # test of which run is exhausted (gains are finite)
     length = np.zeros((n, n), np.int64)
     if kmax == 0:
         return seq, length
-    G, M = best_splits(cost)
     for span in range(2, n):
         for l in range(0, n - span):
             r = l + span
