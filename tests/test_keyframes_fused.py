@@ -45,7 +45,9 @@ def test_optimum_costs_keep_the_optimum_of_the_full_matrix(reconstruction, walk_
         for W in range(2, clip.n_frames + 1):
             C = optimum_cost_matrix(clip, W, reconstruction)
             kept = np.isfinite(C)
-            assert np.array_equal(C[kept], full[kept])  # the entries kept are the same numbers
+            # the entries kept are the same numbers, up to the last bit: two fastmath kernels
+            # compiled apart (one fresh, one from numba's disk cache) may round differently
+            np.testing.assert_allclose(C[kept], full[kept], rtol=1e-12, atol=0)
             pruned_any |= not kept.all()
             keys = clip_optimal_keyframes(clip, W, reconstruction)
             assert np.array_equal(keys, table.keyframes(W)), W
