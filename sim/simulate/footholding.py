@@ -14,8 +14,14 @@ simulated sole touches the floor at both ends (its lowest corner at most :data:`
 high) while the reference lifts it (a dragged foot: ``allowed_k = 0``). Zero on the reference
 itself (its soles touch the floor only where it stands on them) and wherever the simulated
 foot moves no faster than allowed; it grows with the square of the excess speed, and never
-asks a stance foot for less sliding than the motion itself has. Units: metres, seconds, z up,
-floor at z = 0.
+asks a stance foot for less sliding than the motion itself has.
+
+A foot may be given up when balance needs a step (``supported``, :func:`capture_supported`): a
+step then counts only where the body's capture point (``com + v_com / omega``, ``omega =
+sqrt(g / z_com)``: where the centre of mass comes to rest over a point foot, Pratt et al. 2006)
+lies inside the support polygon (the convex hull of the bottom corners of the soles touching
+the floor) at both of its ends; where it leaves it, no sole is held. Units: metres, seconds,
+z up, floor at z = 0.
 """
 
 from __future__ import annotations
@@ -83,11 +89,13 @@ def slide_cost(
     stance: np.ndarray,
     dt: float,
     contact: np.ndarray | None = None,
+    supported: np.ndarray | None = None,
 ) -> float | np.ndarray:
     """The foot-holding cost [m^2/s^2] (module docstring) of soles at ``sim_xy`` (..., K, 2, 2)
     against the reference's ``ref_xy`` (K, 2, 2) over K ticks of ``dt`` [s], the reference
     standing on each sole where ``stance`` (K, 2) is True and the simulated sole touching the
-    floor where ``contact`` (..., K, 2) is True (None: stance steps only); 0 for K < 2.
+    floor where ``contact`` (..., K, 2) is True (None: stance steps only); where ``supported``
+    (..., K) is given, only the steps with it True at both ends count; 0 for K < 2.
 
     Returns:
         a float for one motion (``sim_xy`` (K, 2, 2)), else one cost per leading index (...).
@@ -100,6 +108,46 @@ def slide_cost(
     held = stance[1:] & stance[:-1]
     allowed = np.where(held, v_ref, 0.0)
     counted = held if contact is None else held | (contact[..., 1:, :] & contact[..., :-1, :])
+    if supported is not None:
+        counted = counted & (supported[..., 1:] & supported[..., :-1])[..., None]
     excess = np.where(counted, np.maximum(0.0, v_sim - allowed), 0.0)
     cost = np.sum(excess**2, axis=(-2, -1)) / (K - 1)
     return float(cost) if sim_xy.ndim == 3 else cost
+
+
+def sole_corners(xpos: np.ndarray, xmat: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """(..., 2, 4, 3) the four corners [m] of the bottom face (local -z) of boxes at ``xpos``
+    (..., 2, 3) with orientations ``xmat`` (..., 2, 9) (row-major) and half sizes ``size`` (2,
+    3) [m]."""
+    signs = np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, -1.0], [-1.0, 1.0]])  # (4, 2) x, y
+    local = np.concatenate(  # (2, 4, 3) per box
+        [signs * size[:, None, :2], np.broadcast_to(-size[:, None, 2:], (2, 4, 1))], axis=-1
+    )
+    R = xmat.reshape(*xmat.shape[:-1], 3, 3)  # (..., 2, 3, 3)
+    return xpos[..., None, :] + np.einsum("...ij,...cj->...ci", R, local)
+
+
+def capture_supported(
+    com: np.ndarray, corners: np.ndarray, touch: np.ndarray, dt: float, g: float = 9.81
+) -> np.ndarray:
+    """(..., K) whether the capture point lies strictly inside the support polygon at each of K
+    ticks ``dt`` [s] apart: centre of mass ``com`` (..., K, 3) [m] (its velocity: the finite
+    difference of consecutive ticks, the first tick taking the second's; 0 for K = 1), the soles'
+    bottom corners ``corners`` (..., K, 2, 4, 3) [m], of which those of soles touching the floor
+    (``touch`` (..., K, 2)) make the polygon; False where none touches.
+
+    A point lies outside the convex hull of points ``c_j`` (or on its edge) exactly when a
+    line through it along one of ``d_i = c_i - p`` has every ``d_j`` on one side."""
+    v = np.zeros_like(com)
+    if com.shape[-2] > 1:
+        v[..., 1:, :] = np.diff(com, axis=-2) / dt
+        v[..., 0, :] = v[..., 1, :]
+    omega = np.sqrt(g / np.maximum(com[..., 2:], 1e-3))
+    p = com[..., :2] + v[..., :2] / omega  # (..., K, 2) the capture point
+    d = corners[..., :2].reshape(*corners.shape[:-3], 8, 2) - p[..., None, :]  # (..., K, 8, 2)
+    valid = np.repeat(touch, 4, axis=-1)  # (..., K, 8)
+    cross = d[..., :, None, 0] * d[..., None, :, 1] - d[..., :, None, 1] * d[..., None, :, 0]
+    cross = np.where(valid[..., None, :], cross, 0.0)  # (..., K, 8 i, 8 j)
+    one_side = np.all(cross >= 0.0, axis=-1) | np.all(cross <= 0.0, axis=-1)
+    outside = np.any(valid & one_side, axis=-1)
+    return valid.any(axis=-1) & ~outside
