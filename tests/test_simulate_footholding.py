@@ -18,6 +18,7 @@ from sim.simulate.footholding import (
     sole_bottoms,
     sole_ids,
     sole_lowest,
+    window_hold_costs,
 )
 from sim.simulate.footholding import sole_corners as footholding_corners
 from sim.simulate.model import CONTROL_HZ, sim_model
@@ -232,3 +233,36 @@ def test_search_with_feet_given_up_is_another_search_and_replays(trial_on_floor,
     c, _ = search_offsets(model, ref, weights=CostWeights(hold=200.0), **kw)
     assert np.array_equal(a, b) and np.array_equal(ra, rb)
     assert not np.array_equal(a, c)
+
+
+def test_a_window_gives_the_feet_up_only_where_asked():
+    """Flat soles on the floor (lowest corner at 0), the left sliding at 0.5 m/s, the centre of
+    mass 1 m in front of both (its capture point outside the support): held, it pays 0.25;
+    released by the capture point, nothing; released only where the reference's capture point
+    is inside its support, it pays where the reference's is outside too (the motion itself
+    steps there) and nothing where the reference's is inside."""
+    S, K = 3, 12
+    size = np.array([[0.045, 0.13, 0.01], [0.045, 0.13, 0.01]])
+    pos = np.zeros((S, K, 2, 3))
+    pos[..., 1, 1] = 0.3
+    pos[..., 2] = 0.01  # the box's centre a half height up: its bottom on the floor
+    pos[:, :, 0, 0] += 0.5 * DT * np.arange(K)
+    mat = np.broadcast_to(np.eye(3).reshape(9), (S, K, 2, 9))
+    com = np.broadcast_to([1.0, 0.15, 0.9], (S, K, 3))
+    ref_xy = _still(K)
+    stance = np.ones((K, 2), dtype=bool)
+    out = np.zeros(K, dtype=bool)
+    records = (pos, mat, com)
+
+    def cost(release, ref_up):
+        ref = (ref_xy, stance, ref_up)
+        return window_hold_costs(records, size, ref, DT, True, release)
+
+    np.testing.assert_allclose(cost((False, False), out), 0.25, rtol=1e-12)
+    np.testing.assert_allclose(cost((True, False), out), 0.0, atol=0)
+    np.testing.assert_allclose(cost((True, True), out), 0.25, rtol=1e-12)
+    np.testing.assert_allclose(cost((True, True), ~out), 0.0, atol=0)
+    inside = np.broadcast_to([0.0, 0.15, 0.9], (S, K, 3))  # over the soles: held anyway
+    ref = (ref_xy, stance, ~out)
+    held = window_hold_costs((pos, mat, inside), size, ref, DT, True, (True, True))
+    np.testing.assert_allclose(held, 0.25, rtol=1e-12)  # a mass at rest over its feet

@@ -30,7 +30,7 @@ import mujoco
 import numpy as np
 
 from sim.simulate.balance import STANCE_HEIGHT
-from sim.simulate.model import SOLE_GEOMS
+from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS
 
 #: [m] a simulated sole whose lowest corner is at most this high touches the floor (skating's
 #: estimator, ``sim.simulate.validate.SKATE_CONTACT``, is this height)
@@ -65,22 +65,32 @@ def sole_lowest(xpos: np.ndarray, xmat: np.ndarray, size: np.ndarray) -> np.ndar
     return xpos[..., 2] - np.sum(np.abs(xmat[..., 6:9]) * size, axis=-1)
 
 
-def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Of a reference ``ref_qpos`` (T, nq), per tick and sole (left, right): the horizontal
-    bottom centre (T, 2, 2) [m] and whether the reference stands on it (T, 2) (the box's lowest
-    corner at most ``sim.simulate.balance.STANCE_HEIGHT`` high)."""
+def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray, capture: bool = False) -> tuple:
+    """Of a reference ``ref_qpos`` (T, nq at ``CONTROL_HZ``), per tick and sole (left, right):
+    the horizontal bottom centre (T, 2, 2) [m] and whether the reference stands on it (T, 2)
+    (the box's lowest corner at most ``sim.simulate.balance.STANCE_HEIGHT`` high); with
+    ``capture``, third, whether its capture point lies inside the soles it stands on (T,)
+    (:func:`capture_supported`)."""
     data = mujoco.MjData(model)
     T = len(ref_qpos)
-    xy = np.empty((T, 2, 2))
-    stance = np.zeros((T, 2), dtype=bool)
+    xpos, xmat, com = np.empty((T, 2, 3)), np.empty((T, 2, 9)), np.empty((T, 3))
     size = model.geom_size[ids]  # (2, 3) half sizes
     for t in range(T):
         data.qpos[:] = ref_qpos[t]
         mujoco.mj_kinematics(model, data)
-        xmat = data.geom_xmat[ids]
-        xy[t] = sole_bottoms(data.geom_xpos[ids], xmat, size[:, 2])[:, :2]
-        stance[t] = sole_lowest(data.geom_xpos[ids], xmat, size) <= STANCE_HEIGHT
-    return xy, stance
+        xpos[t], xmat[t] = data.geom_xpos[ids], data.geom_xmat[ids]
+        if capture:
+            mujoco.mj_comPos(model, data)
+            com[t] = data.subtree_com[1]
+    xy = sole_bottoms(xpos, xmat, size[:, 2])[..., :2]
+    stance = sole_lowest(xpos, xmat, size) <= STANCE_HEIGHT
+    if not capture:
+        return xy, stance
+    return (
+        xy,
+        stance,
+        capture_supported(com, sole_corners(xpos, xmat, size), stance, 1 / CONTROL_HZ),
+    )
 
 
 def slide_cost(
@@ -151,3 +161,31 @@ def capture_supported(
     one_side = np.all(cross >= 0.0, axis=-1) | np.all(cross <= 0.0, axis=-1)
     outside = np.any(valid & one_side, axis=-1)
     return valid.any(axis=-1) & ~outside
+
+
+def window_hold_costs(
+    records: tuple, size: np.ndarray, ref: tuple, dt: float, contact: bool, release: tuple
+) -> np.ndarray:
+    """(S,) the foot-holding cost (:func:`slide_cost`) of S rollouts' windows of K ticks.
+
+    Args:
+        records: the sole boxes' positions (S, K, 2, 3) [m] and orientations (S, K, 2, 9)
+            and the centre of mass (S, K, 3) [m] after each tick.
+        size: (2, 3) the sole boxes' half sizes [m].
+        ref: the reference at those ticks (:func:`reference_soles` with ``capture``): sole
+            centres (K, 2, 2) [m], stance (K, 2), capture point supported (K,).
+        dt: the tick [s].
+        contact: also cost a sole that touches the floor where the reference lifts it.
+        release: (capture, versus_reference): ``capture`` gives the feet up at ticks where the
+            rollout's capture point leaves its support (:func:`capture_supported`); with
+            ``versus_reference`` only where the reference's is inside its own.
+    """
+    pos, mat, com = records
+    xy = sole_bottoms(pos, mat, size[:, 2])[..., :2]
+    touch = sole_lowest(pos, mat, size) <= CONTACT_HEIGHT
+    up = None
+    if release[0]:
+        up = capture_supported(com, sole_corners(pos, mat, size), touch, dt)
+        if release[1]:
+            up = up | ~ref[2]
+    return slide_cost(xy, ref[0], ref[1], dt, touch if contact else None, up)

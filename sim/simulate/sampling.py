@@ -49,17 +49,7 @@ from sim.simulate.controller import (
 )
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
-from sim.simulate.footholding import (
-    CONTACT_HEIGHT,
-    as_slice,
-    capture_supported,
-    reference_soles,
-    slide_cost,
-    sole_bottoms,
-    sole_corners,
-    sole_ids,
-    sole_lowest,
-)
+from sim.simulate.footholding import as_slice, reference_soles, sole_ids, window_hold_costs
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
@@ -110,6 +100,8 @@ class CostWeights:
     #: foot holding gives the feet up where balance needs a step: only ticks with the capture
     #: point inside the support polygon count (``footholding.capture_supported``)
     hold_capture: bool = False
+    #: with ``hold_capture``: only where the reference's capture point is inside its support
+    hold_capture_ref: bool = False
 
 
 @dataclass(frozen=True)
@@ -220,7 +212,7 @@ class _Problem:
     kp: np.ndarray | None = None
     balance: object | None = None
     soles: slice | None = None  # the sole geoms' rows where foot holding is costed
-    ref_soles: tuple | None = None  # footholding.reference_soles: (T, 2, 2) xy, (T, 2) stance
+    ref_soles: tuple | None = None  # footholding.reference_soles, capture=True
 
 
 def _problem(
@@ -265,7 +257,7 @@ def _problem(
         kp=kp,
         balance=None if balance is None else balance_plan(model, ref_qpos, ref_qvel, balance),
         soles=None if ids is None else as_slice(ids),
-        ref_soles=None if ids is None else reference_soles(model, ref_qpos, ids),
+        ref_soles=None if ids is None else reference_soles(model, ref_qpos, ids, capture=True),
     )
 
 
@@ -366,22 +358,14 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
 
 
 def _hold_costs(model, prob: _Problem, weights: CostWeights, ticks, soles) -> np.ndarray:
-    """(S,) the foot-holding cost (``sim.simulate.footholding.slide_cost``) of each candidate's
-    window from its soles' records ``soles`` = (positions (S, K, 2, 3), orientations (S, K, 2,
-    9), centre of mass (S, K, 3)) after each of the window's K ticks, against the reference's
-    soles a tick later (a tick's record is the state at its end, less its last substep)."""
-    k0, k1, _ = ticks
-    later = np.minimum(np.arange(k0, k1) + 1, len(prob.base) - 1)
-    ref_xy, stance = prob.ref_soles[0][later], prob.ref_soles[1][later]
+    """(S,) ``footholding.window_hold_costs`` of the window ``ticks`` from the soles' records
+    ``soles`` (:func:`_rollout`), against the reference a tick later (a tick's record is the
+    state at its end, less its last substep)."""
+    later = np.minimum(np.arange(ticks[0], ticks[1]) + 1, len(prob.base) - 1)
+    ref = tuple(r[later] for r in prob.ref_soles)
+    release = weights.hold_capture, weights.hold_capture_ref
     size = model.geom_size[prob.soles]
-    xy = sole_bottoms(soles[0], soles[1], size[:, 2])[..., :2]
-    touch = sole_lowest(soles[0], soles[1], size) <= CONTACT_HEIGHT
-    up = None
-    if weights.hold_capture:
-        corners = sole_corners(soles[0], soles[1], size)
-        up = capture_supported(soles[2], corners, touch, 1.0 / CONTROL_HZ)
-    contact = touch if weights.hold_contact else None
-    return slide_cost(xy, ref_xy, stance, 1.0 / CONTROL_HZ, contact, up)
+    return window_hold_costs(soles, size, ref, 1.0 / CONTROL_HZ, weights.hold_contact, release)
 
 
 def _proposals(rng, last: np.ndarray, parents: np.ndarray, sigma: np.ndarray, how) -> np.ndarray:
