@@ -87,6 +87,10 @@ for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footh
 
 #: swing-foot placement (``sim.simulate.balance.Balance(c_d, c_v)``: the capture point's error)
 STEP = Balance(c_d=1.0, c_v=0.3)
+STEP_HALF = Balance(c_d=0.5, c_v=0.15)
+#: foot holding 5 given up where the body's capture point leaves its support and the reference's
+#: does not
+CAPTURE_REF = CostWeights(hold=5.0, hold_capture=True, hold_capture_ref=True)
 for _name, _label, _search in (
     ("step", "swing-foot placement", {"balance": STEP}),
     (
@@ -98,6 +102,19 @@ for _name, _label, _search in (
         "stepholdcap5",
         "swing-foot placement, foot holding 5 off while the capture point leaves the support",
         {"balance": STEP, "weights": CostWeights(hold=5.0, hold_capture=True)},
+    ),
+    ("stephalf", "swing-foot placement at half the gains", {"balance": STEP_HALF}),
+    (
+        "holdcapref5",
+        "foot holding 5 off while the capture point leaves the support where the reference's "
+        "does not",
+        {"weights": CAPTURE_REF},
+    ),
+    (
+        "stepholdcapref5",
+        "swing-foot placement, foot holding 5 off while the capture point leaves the support "
+        "where the reference's does not",
+        {"balance": STEP, "weights": CAPTURE_REF},
     ),
 ):
     CONTROLLERS[_name] = (
