@@ -35,6 +35,7 @@ from sidql.evaluation.tables import simulate_markdown  # noqa: E402
 from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
+from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.model import sim_model  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.validate import ForwardValidation  # noqa: E402
@@ -82,6 +83,45 @@ for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footh
                  "search": {"weights": CostWeights(hold=_w), "elite": _e}},
                 "position",
             )  # fmt: skip
+
+
+#: swing-foot placement (``sim.simulate.balance.Balance(c_d, c_v)``: the capture point's error)
+STEP = Balance(c_d=1.0, c_v=0.3)
+STEP_HALF = Balance(c_d=0.5, c_v=0.15)
+#: foot holding 5 given up where the body's capture point leaves its support and the reference's
+#: does not
+CAPTURE_REF = CostWeights(hold=5.0, hold_capture=True, hold_capture_ref=True)
+for _name, _label, _search in (
+    ("step", "swing-foot placement", {"balance": STEP}),
+    (
+        "holdcap5",
+        "foot holding 5 off while the capture point leaves the support",
+        {"weights": CostWeights(hold=5.0, hold_capture=True)},
+    ),
+    (
+        "stepholdcap5",
+        "swing-foot placement, foot holding 5 off while the capture point leaves the support",
+        {"balance": STEP, "weights": CostWeights(hold=5.0, hold_capture=True)},
+    ),
+    ("stephalf", "swing-foot placement at half the gains", {"balance": STEP_HALF}),
+    (
+        "holdcapref5",
+        "foot holding 5 off while the capture point leaves the support where the reference's "
+        "does not",
+        {"weights": CAPTURE_REF},
+    ),
+    (
+        "stepholdcapref5",
+        "swing-foot placement, foot holding 5 off while the capture point leaves the support "
+        "where the reference's does not",
+        {"balance": STEP, "weights": CAPTURE_REF},
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
+        {"controller": "sampling", "samples": 28, "search": {**BEFORE_HOLD, **_search}},
+        "position",
+    )  # fmt: skip
 
 
 def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict[str, list[dict]]:

@@ -4,6 +4,8 @@ sampled rollout with it is replayed state for state."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import mujoco
 import numpy as np
 import pytest
@@ -134,3 +136,70 @@ def test_torques_are_held_between_updates_and_windows_must_start_on_one(model, w
         search_offsets(model, ref[:24], samples=2, window=9, balance=Balance(every=2))
     with pytest.raises(SidqlError, match="positive"):
         Balance(every=0)
+
+
+def test_swing_foot_placement_moves_the_swing_ankle_by_the_offset_asked_for(model, walk):
+    """Single stance, the root 0.1 m/s too fast along x and -0.05 along y: the placement term
+    alone (c_v 0.3 s) turns only the swing hip, and its targets (torque over stiffness) applied
+    as hinge angles move the swing ankle by about dp = 0.3 * (0.1, -0.05) m horizontally (by
+    forward kinematics, the lever of a thigh that is not vertical and a finite turn allowed
+    for), nothing in double stance, nothing on the reference, and nothing by default."""
+    ref, qvel = walk
+    assert balance_plan(model, ref, qvel, Balance()).step is None
+    gains = Balance(k_rot=0.0, d_rot=0.0, k_com=0.0, d_com=0.0, c_d=1.0, c_v=0.3)
+    plan = balance_plan(model, ref, qvel, gains)
+    kp = model.actuator_gainprm[:, 0]
+    dv = np.array([0.1, -0.05])
+    data = mujoco.MjData(model)
+    single = np.flatnonzero(plan.stance.sum(axis=1) == 1)
+    for k in single[:: max(1, single.size // 6)]:
+        data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+        assert np.abs(balance_torques(model, data, plan, k, np.zeros(model.nu))).max() < 1e-6
+        data.qvel[:2] += dv
+        tau = balance_torques(model, data, plan, k, np.zeros(model.nu))
+        side = "lr"[int(np.argmin(plan.stance[k]))]
+        moved = np.flatnonzero(tau)
+        assert moved.size and all(
+            model.actuator(int(a)).name.startswith(side + "femur") for a in moved
+        )
+        foot = model.body(side + "foot").id
+        mujoco.mj_kinematics(model, data)
+        before = data.xpos[foot, :2].copy()
+        for a in moved:
+            data.qpos[model.jnt_qposadr[model.actuator_trnid[a, 0]]] += tau[a] / kp[a]
+        mujoco.mj_kinematics(model, data)
+        shift, want = data.xpos[foot, :2] - before, 0.3 * dv
+        assert np.linalg.norm(shift - want) < 0.25 * np.linalg.norm(want)
+    k = _stance_tick(plan, both=True)
+    data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+    data.qvel[:2] += dv
+    assert np.abs(balance_torques(model, data, plan, k, np.zeros(model.nu))).max() == 0.0
+
+
+def test_swing_foot_placement_follows_the_centre_of_mass_offset(model, walk):
+    """c_d alone: a reference whose centre of mass sits 0.04 m less far along y from its stance
+    foot than the body's (the body's offset 0.04 m too large) moves the swing ankle about
+    c_d * 0.04 = 0.02 m along y; the whole body translated asks for nothing (the offset is taken
+    from the stance foot)."""
+    ref, qvel = walk
+    gains = Balance(k_rot=0.0, d_rot=0.0, k_com=0.0, d_com=0.0, c_d=0.5, c_v=0.0)
+    plan = balance_plan(model, ref, qvel, gains)
+    k = _stance_tick(plan, both=False)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+    data.qpos[:2] += [0.3, -0.2]  # a translation: no error
+    np.testing.assert_allclose(
+        balance_torques(model, data, plan, k, np.zeros(model.nu)), 0, atol=1e-6
+    )
+    shifted = dataclasses.replace(plan, com_off=plan.com_off - [0.0, 0.04])
+    tau = balance_torques(model, data, shifted, k, np.zeros(model.nu))
+    foot = model.body("lr"[int(np.argmin(plan.stance[k]))] + "foot").id
+    mujoco.mj_kinematics(model, data)
+    before = data.xpos[foot, :2].copy()
+    for a in np.flatnonzero(tau):
+        data.qpos[model.jnt_qposadr[model.actuator_trnid[a, 0]]] += (
+            tau[a] / model.actuator_gainprm[a, 0]
+        )
+    mujoco.mj_kinematics(model, data)
+    want = np.array([0.0, 0.02])
+    assert np.linalg.norm(data.xpos[foot, :2] - before - want) < 0.25 * np.linalg.norm(want)

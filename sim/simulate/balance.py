@@ -14,7 +14,16 @@ tick, torques on the hinges of the legs the reference stands on:
   mass back over the feet by its error against the reference's, ``M_c = -(k_com z x e_c +
   d_com z x de_c)`` [N m] (``e_c``: the horizontal centre of mass minus the stance feet's mid-point,
   less the reference's [m]; ``de_c``: the root's horizontal velocity less the reference's [m/s]),
-  produced by the stance ankles (``-A^+ M_c`` over their ``foot_rx``/``foot_rz`` axes).
+  produced by the stance ankles (``-A^+ M_c`` over their ``foot_rx``/``foot_rz`` axes);
+* **swing-foot placement** (SIMBICON's other half; off unless ``c_d`` or ``c_v`` is set): while
+  the reference stands on one foot only, the other (swing) hip's targets turn its thigh so that
+  the swing foot lands ``dp = c_d e_c + c_v de_c`` [m] further (horizontal) than the
+  reference's: the thigh's rotation ``r = (dp x z) / L`` [rad] (``L``: hip to ankle [m]; a
+  rotation ``r`` moves the ankle below the hip by ``r x (-L z) = dp``), spread over the hip's
+  hinges as ``dq = (A A^T + lambda I)^-1 A r`` (``A``: their world axes as rows) and sent as
+  the torque ``kp dq`` (the hinges' stiffness), i.e. a target offset of ``dq``. With ``c_d`` 1
+  and ``c_v`` ``1 / omega`` (``omega = sqrt(g / z_com)``, about 0.3 s) the foot follows the
+  capture point's error.
 
 A state feedback and nothing else: it reads ``qpos``/``qvel`` only (kinematics recomputed), so
 the same state gives the same torques and a sampled rollout and its replay stay one computation.
@@ -55,6 +64,12 @@ class Balance:
     k_com: float = 1.0
     d_com: float = 0.3
     every: int = 2
+    #: swing-foot placement: metres of placement per metre of centre-of-mass error and per
+    #: m/s of root velocity error [s]; 0 and 0: none (the default: on the 22 clips of
+    #: ``bench_simulate.py --controllers`` at 28 samples, 1 and 0.3 s kept the same clips up
+    #: with 125 mm root-relative error against 113; docs/synthetic.md)
+    c_d: float = 0.0
+    c_v: float = 0.0
 
     def __post_init__(self):
         if int(self.every) < 1:
@@ -85,6 +100,9 @@ class BalancePlan:
     feet: np.ndarray
     gains: tuple[float, float, float, float]
     every: int = 1
+    #: swing-foot placement (c_d [m/m], c_v [s]) and the hip hinges' stiffness (2, 3) [N m/rad]
+    #: (0 where masked) and the thigh body ids (2,); None: no placement
+    step: tuple | None = None
 
 
 def _hinges(model, side: str, bone: str) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +178,17 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
             gains.d_com * gains.k_com * mgh,
         ),
         every=int(gains.every),
+        step=_step_plan(model, aids, mask, gains),
     )
+
+
+def _step_plan(model, aids: np.ndarray, mask: np.ndarray, gains: Balance) -> tuple | None:
+    """``BalancePlan.step`` of actuators ``aids`` (2, 2, 3) masked by ``mask``."""
+    if gains.c_d == 0.0 and gains.c_v == 0.0:
+        return None
+    kp = model.actuator_gainprm[aids[:, 0], 0] * mask[:, 0]
+    thighs = np.array([model.body(f"{s}femur").id for s in "lr"])
+    return (float(gains.c_d), float(gains.c_v)), kp, thighs
 
 
 def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> np.ndarray:
@@ -189,7 +217,24 @@ def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> 
     XXt = X @ np.swapaxes(X, -1, -2) + _DAMPED
     tau = np.linalg.solve(XXt, X @ M[..., None])
     out[plan.aids[plan.valid]] = -tau.reshape(-1)[plan.valid.reshape(-1)]
+    if plan.step is not None and w.sum() == 1.0 and w.max() == 1.0:  # one stance foot
+        swing = int(np.argmin(w))
+        _place_swing_foot(data, plan, swing, k, mid, X[swing, 0], XXt[swing, 0], out)
     return out
+
+
+def _place_swing_foot(data, plan, side: int, k: int, mid, X, XXt, out) -> None:
+    """Add to ``out`` the swing hip's placement torques (module docstring) of leg ``side``;
+    ``X`` (3, 3) its hip hinges' world axes (masked rows 0), ``XXt`` the damped ``X X^T``."""
+    (c_d, c_v), kp, thighs = plan.step
+    e_c = data.subtree_com[1, :2] - mid[:2] - plan.com_off[k]  # [m]
+    de_c = data.qvel[:2] - plan.vel[k]  # [m/s]
+    dp = c_d * e_c + c_v * de_c
+    hip_to_ankle = data.xpos[plan.feet[side]] - data.xpos[thighs[side]]
+    r = np.array([dp[1], -dp[0], 0.0]) / max(np.linalg.norm(hip_to_ankle), 1e-3)  # dp x z
+    dq = np.linalg.solve(XXt, X @ r)
+    valid = plan.valid[side, 0]
+    out[plan.aids[side, 0][valid]] += (kp[side] * dq)[valid]
 
 
 def held_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> np.ndarray:
