@@ -35,6 +35,7 @@ from sidql.evaluation.tables import simulate_markdown  # noqa: E402
 from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
+from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.model import sim_model  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.validate import ForwardValidation  # noqa: E402
@@ -82,6 +83,27 @@ for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footh
                  "search": {"weights": CostWeights(hold=_w), "elite": _e}},
                 "position",
             )  # fmt: skip
+
+#: candidates against the root's drift, each on the default (28 samples, balance feedback):
+#: ``bdrift<k>`` the balance feedback's velocity target leads by k [1/s] times the root's
+#: horizontal position error (``Balance.k_drift``); ``xy<w>`` the cost's root position weight
+#: (``CostWeights.root_xy``, 20 by default); ``vdrift<w>`` the cost's root velocity weight w
+#: with its target leading by 1/s times the position error (``CostWeights.drift_rate``)
+DRIFT = {
+    **{f"bdrift{_k:g}": ({"balance": Balance(k_drift=_k)}, f"balance drift {_k:g}/s")
+       for _k in (0.5, 1, 2, 4)},
+    **{f"xy{_w}": ({"weights": CostWeights(root_xy=_w)}, f"root position weight {_w}")
+       for _w in (50, 100, 200)},
+    **{f"vdrift{_w}": ({"weights": CostWeights(root_vel=_w, drift_rate=1.0)},
+                       f"root velocity weight {_w}, leading by 1/s times the drift")
+       for _w in (2, 5, 10)},
+}  # fmt: skip
+for _name, (_search, _label) in DRIFT.items():
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
+        {"controller": "sampling", "samples": 28, "search": _search},
+        "position",
+    )
 
 
 def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict[str, list[dict]]:

@@ -14,7 +14,11 @@ tick, torques on the hinges of the legs the reference stands on:
   mass back over the feet by its error against the reference's, ``M_c = -(k_com z x e_c +
   d_com z x de_c)`` [N m] (``e_c``: the horizontal centre of mass minus the stance feet's mid-point,
   less the reference's [m]; ``de_c``: the root's horizontal velocity less the reference's [m/s]),
-  produced by the stance ankles (``-A^+ M_c`` over their ``foot_rx``/``foot_rz`` axes).
+  produced by the stance ankles (``-A^+ M_c`` over their ``foot_rx``/``foot_rz`` axes);
+* **drift** (``Balance.k_drift``, off by default): the velocity target of ``de_c`` leads by
+  ``k_drift`` times the root's horizontal position error (the reference's less the simulated,
+  at most ``drift_max`` long), so the centre of mass is asked to move back towards the
+  reference's path: ``de_c = v - v_ref - k_drift clip(p_ref - p)``.
 
 A state feedback and nothing else: it reads ``qpos``/``qvel`` only (kinematics recomputed), so
 the same state gives the same torques and a sampled rollout and its replay stay one computation.
@@ -30,6 +34,7 @@ import mujoco
 import numpy as np
 
 from sim.errors import UsageError
+from sim.simulate.drift import drift_lead
 from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS, G, total_mass
 
 #: [m] a reference foot (sole or toe box) whose lowest point is at most this high is in stance
@@ -55,10 +60,19 @@ class Balance:
     k_com: float = 1.0
     d_com: float = 0.3
     every: int = 2
+    #: [1/s] the root's horizontal position error (reference less simulated) added to the
+    #: velocity target of the centre-of-mass term; 0: off (the feedback before it)
+    k_drift: float = 0.0
+    #: [m] the position error is clipped to this length
+    drift_max: float = 0.3
 
     def __post_init__(self):
         if int(self.every) < 1:
             raise UsageError(f"Balance.every must be a positive tick count; got {self.every}")
+        if self.k_drift < 0 or self.drift_max < 0:
+            raise UsageError(
+                f"Balance.k_drift and drift_max must be >= 0; got {self.k_drift}, {self.drift_max}"
+            )
 
 
 @dataclass(frozen=True)
@@ -70,7 +84,8 @@ class BalancePlan:
     driven, per side (left, right) and group (hip, ankle), up to three each: joint ids and
     actuator ids (2, 2, 3) (a missing hinge repeats the first, masked out by ``mask`` (2, 2,
     3); ``valid`` its bool); the foot body ids (2,); the gains in SI units (k_rot [N m/rad], d_rot [N m s/rad],
-    k_com [N], d_com [N s])."""
+    k_com [N], d_com [N s]); the root's horizontal position (T, 2) [m] and the drift term's
+    ``(k_drift, drift_max)`` where it is on."""
 
     quat: np.ndarray
     angvel: np.ndarray
@@ -85,6 +100,8 @@ class BalancePlan:
     feet: np.ndarray
     gains: tuple[float, float, float, float]
     every: int = 1
+    xy: np.ndarray | None = None  # (T, 2) the root's horizontal position [m]; None: no drift term
+    drift: tuple[float, float] = (0.0, 0.0)  # k_drift [1/s], drift_max [m]
 
 
 def _hinges(model, side: str, bone: str) -> tuple[np.ndarray, np.ndarray]:
@@ -160,6 +177,8 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
             gains.d_com * gains.k_com * mgh,
         ),
         every=int(gains.every),
+        xy=ref_qpos[:, :2].copy() if gains.k_drift > 0 else None,
+        drift=(float(gains.k_drift), float(gains.drift_max)),
     )
 
 
@@ -180,6 +199,8 @@ def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> 
     rot = data.xmat[1].reshape(3, 3) @ (k_rot * e + d_rot * de)  # world [N m]
     mid = w @ data.xpos[plan.feet] / w.sum()
     f = k_com * ((data.subtree_com[1, :2] - mid[:2]) - plan.com_off[k])
+    if plan.xy is not None:  # the velocity target leads by the root's position error
+        f -= d_com * drift_lead(plan.xy[k], data.qpos[:2], *plan.drift)
     f += d_com * (data.qvel[:2] - plan.vel[k])  # (2,) horizontal [N]
     M = np.empty((2, 2, 3))  # per side and group (hip, ankle): the moment asked for [N m]
     M[:, 0] = w[:, None] * rot
