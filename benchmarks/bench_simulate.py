@@ -97,6 +97,15 @@ DRIFT = {
     **{f"vdrift{_w}": ({"weights": CostWeights(root_vel=_w, drift_rate=1.0)},
                        f"root velocity weight {_w}, leading by 1/s times the drift")
        for _w in (2, 5, 10)},
+    "bdrift2x5": ({"balance": Balance(k_drift=2.0, drift_max=0.5)},
+                  "balance drift 2/s up to 0.5 m"),
+    **{f"bdrift{_k}dead{_d:g}": ({"balance": Balance(k_drift=_k, drift_max=0.3 + _d,
+                                                      drift_dead=_d)},
+                                 f"balance drift {_k}/s beyond {_d:g} m")
+       for _k in (2, 4) for _d in (0.05, 0.1)},
+    "bdrift2v2": ({"balance": Balance(k_drift=2.0),
+                   "weights": CostWeights(root_vel=2.0, drift_rate=1.0)},
+                  "balance drift 2/s, root velocity weight 2 leading by 1/s times the drift"),
 }  # fmt: skip
 for _name, (_search, _label) in DRIFT.items():
     CONTROLLERS[_name] = (

@@ -175,3 +175,17 @@ def test_drift_term_leads_the_velocity_target_by_the_root_position_error(model, 
         assert forward > 0.2 * np.linalg.norm(on_leg) * np.linalg.norm(r)
     with pytest.raises(SidqlError, match="k_drift"):
         Balance(k_drift=-1.0)
+
+
+def test_drift_lead_is_clipped_and_has_a_dead_zone():
+    """``sim.simulate.drift.drift_lead``, by hand: the error (reference less simulated) times
+    the rate; longer than ``max_len``: that long; ``dead``: shortened by it, nothing within."""
+    from sim.simulate.drift import drift_lead
+
+    ref, sim = np.zeros(2), np.array([0.3, 0.4])  # error (-0.3, -0.4), 0.5 m long
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 1.0), [-0.6, -0.8])
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 0.25), [-0.3, -0.4])
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 1.0, dead=0.1), [-0.48, -0.64])
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 0.35, dead=0.1), [-0.3, -0.4])
+    np.testing.assert_array_equal(drift_lead(ref, sim, 2.0, 1.0, dead=0.6), [0.0, 0.0])
+    np.testing.assert_array_equal(drift_lead(ref, sim, 0.0, 1.0), [0.0, 0.0])

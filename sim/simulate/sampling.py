@@ -95,7 +95,8 @@ class CostWeights:
     root_vel: float = 0.5  # root linear velocity [m^2/s^2]
     #: [1/s] the root velocity term's horizontal target leads by this times the root's
     #: horizontal position error (reference less simulated, clipped to ``drift_max`` [m]): a
-    #: candidate heading back to the reference's path costs less; 0: off
+    #: candidate heading back to the reference's path costs less; 0: off (screened on 5
+    #: clips only, no better: docs/synthetic.md)
     drift_rate: float = 0.0
     drift_max: float = 0.3
     fallen: float = 1e4  # root below half its reference height
