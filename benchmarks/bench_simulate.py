@@ -53,12 +53,13 @@ CONTROLLERS = {
     ),
     "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
 }
-#: the sampler before foot holding and elite reuse (``CostWeights.hold`` 0, no elite)
-BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0}
+#: the sampler before foot holding, elite reuse and the drift lead (``CostWeights.hold`` 0, no
+#: elite, the balance feedback ``Balance()`` without ``k_drift``)
+BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0, "balance": Balance()}
 for _n in (16, 24, 28, 32, 48, 64):
     CONTROLLERS[f"falls{_n}"] = (  # falls in the cost, no balance feedback
         f"sampler, {_n} samples, falls in its cost",
-        {"controller": "sampling", "samples": _n, "search": {"balance": None, **BEFORE_HOLD}},
+        {"controller": "sampling", "samples": _n, "search": {**BEFORE_HOLD, "balance": None}},
         "position",
     )
     CONTROLLERS[f"balance{_n}"] = (  # and the balance feedback (eval's default before hold)
@@ -80,7 +81,7 @@ for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footh
                 f"sampler, 28 samples, falls in its cost, balance feedback, foot holding {_w}, "
                 f"{_e} elite",
                 {"controller": "sampling", "samples": 28,
-                 "search": {"weights": CostWeights(hold=_w), "elite": _e}},
+                 "search": {"weights": CostWeights(hold=_w), "elite": _e, "balance": Balance()}},
                 "position",
             )  # fmt: skip
 
@@ -110,7 +111,7 @@ DRIFT = {
 for _name, (_search, _label) in DRIFT.items():
     CONTROLLERS[_name] = (
         f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
-        {"controller": "sampling", "samples": 28, "search": _search},
+        {"controller": "sampling", "samples": 28, "search": {"balance": Balance(), **_search}},
         "position",
     )
 

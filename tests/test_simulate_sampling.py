@@ -235,3 +235,29 @@ def test_drift_rate_leads_the_root_velocity_target_by_the_position_error():
     assert window_cost(back, ref, w, hinge_w) == pytest.approx(20 * 0.01)
     far = moved(np.array([0.0, 0.5]))  # 50 cm aside: the lead 2 x 0.3 m/s towards the path
     assert window_cost(far, ref, w, hinge_w) == pytest.approx(20 * 0.25 + 5 * 0.6**2)
+
+
+def test_forward_validation_tracks_with_the_drift_lead_unless_its_search_names_a_feedback(
+    model, walk_ref, monkeypatch
+):
+    """eval's sampler gets ``DEFAULT_BALANCE`` (the feedback with the drift lead); a search that
+    names its own feedback (or none) keeps it."""
+    import sim.simulate.validate as validate
+    from sim.simulate.balance import Balance
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(model, ref, **kw):
+        seen.append(kw.get("balance", "absent"))
+        raise Stop
+
+    monkeypatch.setattr(validate, "sample_track", fake)
+    qpos = walk_ref[::4][:8]  # 30 fps
+    for search in ({}, {"balance": None}, {"balance": Balance()}):
+        with pytest.raises(Stop):
+            validate.ForwardValidation(model, ("root",), samples=2, search=search).run(qpos, 30.0)
+    assert seen == [validate.DEFAULT_BALANCE, None, Balance()]
+    assert validate.DEFAULT_BALANCE.k_drift > 0 and BALANCE.k_drift == 0  # synth keeps its own
