@@ -61,9 +61,10 @@ class Balance:
     d_com: float = 0.3
     every: int = 2
     #: [1/s] the root's horizontal position error (reference less simulated) added to the
-    #: velocity target of the centre-of-mass term; 0: off (the feedback before it). Off by
-    #: default: on the 22 clips of ``bench_simulate.py --controllers`` at 28 samples, 2 fell in
-    #: 0.32 of the clips against 0.27, 110 / 319 mm against 113 / 322 (docs/synthetic.md)
+    #: velocity target of the centre-of-mass term; 0: off (the feedback before it). On the 22
+    #: clips of ``bench_simulate.py --controllers`` at 28 samples, 2 fell in 0.32 of the clips
+    #: against 0.27 (110 / 319 mm against 113 / 322); 2 beyond 0.1 m (``drift_dead``) in 0.27,
+    #: 105 / 272 mm: eval's default (``sim.simulate.validate.DEFAULT_BALANCE``; docs/synthetic.md)
     k_drift: float = 0.0
     #: [m] the position error is clipped to this length
     drift_max: float = 0.3
