@@ -53,12 +53,13 @@ CONTROLLERS = {
     ),
     "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
 }
-#: the sampler before foot holding and elite reuse (``CostWeights.hold`` 0, no elite)
-BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0}
+#: the sampler before foot holding, elite reuse and the drift lead (``CostWeights.hold`` 0, no
+#: elite, the balance feedback ``Balance()`` without ``k_drift``)
+BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0, "balance": Balance()}
 for _n in (16, 24, 28, 32, 48, 64):
     CONTROLLERS[f"falls{_n}"] = (  # falls in the cost, no balance feedback
         f"sampler, {_n} samples, falls in its cost",
-        {"controller": "sampling", "samples": _n, "search": {"balance": None, **BEFORE_HOLD}},
+        {"controller": "sampling", "samples": _n, "search": {**BEFORE_HOLD, "balance": None}},
         "position",
     )
     CONTROLLERS[f"balance{_n}"] = (  # and the balance feedback (eval's default before hold)
@@ -80,9 +81,39 @@ for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footh
                 f"sampler, 28 samples, falls in its cost, balance feedback, foot holding {_w}, "
                 f"{_e} elite",
                 {"controller": "sampling", "samples": 28,
-                 "search": {"weights": CostWeights(hold=_w), "elite": _e}},
+                 "search": {"weights": CostWeights(hold=_w), "elite": _e, "balance": Balance()}},
                 "position",
             )  # fmt: skip
+
+#: candidates against the root's drift, each on the default (28 samples, balance feedback):
+#: ``bdrift<k>`` the balance feedback's velocity target leads by k [1/s] times the root's
+#: horizontal position error (``Balance.k_drift``); ``xy<w>`` the cost's root position weight
+#: (``CostWeights.root_xy``, 20 by default); ``vdrift<w>`` the cost's root velocity weight w
+#: with its target leading by 1/s times the position error (``CostWeights.drift_rate``)
+DRIFT = {
+    **{f"bdrift{_k:g}": ({"balance": Balance(k_drift=_k)}, f"balance drift {_k:g}/s")
+       for _k in (0.5, 1, 2, 4)},
+    **{f"xy{_w}": ({"weights": CostWeights(root_xy=_w)}, f"root position weight {_w}")
+       for _w in (50, 100, 200)},
+    **{f"vdrift{_w}": ({"weights": CostWeights(root_vel=_w, drift_rate=1.0)},
+                       f"root velocity weight {_w}, leading by 1/s times the drift")
+       for _w in (2, 5, 10)},
+    "bdrift2x5": ({"balance": Balance(k_drift=2.0, drift_max=0.5)},
+                  "balance drift 2/s up to 0.5 m"),
+    **{f"bdrift{_k}dead{_d:g}": ({"balance": Balance(k_drift=_k, drift_max=0.3 + _d,
+                                                      drift_dead=_d)},
+                                 f"balance drift {_k}/s beyond {_d:g} m")
+       for _k in (2, 4) for _d in (0.05, 0.1)},
+    "bdrift2v2": ({"balance": Balance(k_drift=2.0),
+                   "weights": CostWeights(root_vel=2.0, drift_rate=1.0)},
+                  "balance drift 2/s, root velocity weight 2 leading by 1/s times the drift"),
+}  # fmt: skip
+for _name, (_search, _label) in DRIFT.items():
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
+        {"controller": "sampling", "samples": 28, "search": {"balance": Balance(), **_search}},
+        "position",
+    )
 
 
 #: swing-foot placement (``sim.simulate.balance.Balance(c_d, c_v)``: the capture point's error)

@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from sim.errors import SidqlError
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.balance import Balance, balance_plan, balance_torques
 from sim.simulate.controller import track
@@ -117,7 +118,6 @@ def test_torques_are_held_between_updates_and_windows_must_start_on_one(model, w
     """``every`` 2: at an odd tick the torques are the previous even tick's, whatever the state
     now; a search whose windows would start between two updates is refused (its rollouts could
     not start where the replay holds a torque computed before them)."""
-    from sim.errors import SidqlError
     from sim.simulate.balance import held_torques
 
     ref, qvel = walk
@@ -203,3 +203,58 @@ def test_swing_foot_placement_follows_the_centre_of_mass_offset(model, walk):
     mujoco.mj_kinematics(model, data)
     want = np.array([0.0, 0.02])
     assert np.linalg.norm(data.xpos[foot, :2] - before - want) < 0.25 * np.linalg.norm(want)
+
+
+def test_drift_term_leads_the_velocity_target_by_the_root_position_error(model, walk):
+    """``k_drift``: zero on the reference; a body translated by ``d`` off the reference's path
+    (no other error) gets nothing from the feedback without the term (it reads the centre of
+    mass against the feet only), and with it the torques a root velocity ``k_drift d`` faster
+    slower would get without it (``v - (v_ref + k_drift (p_ref - p))``); a translation longer than ``drift_max`` acts as one of that length;
+    a body behind the walk has its centre of mass turned forward."""
+    ref, qvel = walk
+    gains = Balance(k_rot=0.0, d_rot=0.0, k_com=1.0, d_com=0.3, k_drift=2.0, drift_max=0.2)
+    plain = Balance(k_rot=0.0, d_rot=0.0, k_com=1.0, d_com=0.3)
+    plan, plan0 = balance_plan(model, ref, qvel, gains), balance_plan(model, ref, qvel, plain)
+    k = _stance_tick(plan, both=True)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = ref[k], qvel[k]
+    np.testing.assert_allclose(balance_torques(model, data, plan, k, np.zeros(model.nu)), 0.0,
+                               atol=1e-6)  # fmt: skip
+    ahead = qvel[k, :2] / np.linalg.norm(qvel[k, :2])
+    d = -0.1 * ahead  # [m] 10 cm behind the reference's root
+    data.qpos[:2] += d
+    np.testing.assert_allclose(balance_torques(model, data, plan0, k, np.zeros(model.nu)), 0.0,
+                               atol=1e-6)  # fmt: skip
+    tau = balance_torques(model, data, plan, k, np.zeros(model.nu))
+    data.qpos[:2], data.qvel[:2] = ref[k, :2], qvel[k, :2] + 2.0 * d  # v_ref - k_drift (-d)
+    np.testing.assert_allclose(tau, balance_torques(model, data, plan0, k, np.zeros(model.nu)),
+                               rtol=1e-9, atol=1e-9)  # fmt: skip
+    data.qpos[:2], data.qvel[:2] = ref[k, :2] + 5.0 * d, qvel[k, :2]  # 50 cm: clipped to 20
+    far = balance_torques(model, data, plan, k, np.zeros(model.nu))
+    data.qpos[:2] = ref[k, :2] + 2.0 * d
+    np.testing.assert_allclose(far, balance_torques(model, data, plan, k, np.zeros(model.nu)),
+                               rtol=1e-9, atol=1e-9)  # fmt: skip
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    for side in "lr":
+        ids = [a for a in np.flatnonzero(tau) if model.actuator(int(a)).name.startswith(side)]
+        on_leg = -sum(tau[a] * data.xaxis[model.actuator_trnid[a, 0]] for a in ids)
+        r = data.subtree_com[1] - data.xpos[model.body(f"{side}foot").id]
+        forward = np.cross(on_leg, r) @ np.append(ahead, 0.0)
+        assert forward > 0.2 * np.linalg.norm(on_leg) * np.linalg.norm(r)
+    with pytest.raises(SidqlError, match="k_drift"):
+        Balance(k_drift=-1.0)
+
+
+def test_drift_lead_is_clipped_and_has_a_dead_zone():
+    """``sim.simulate.drift.drift_lead``, by hand: the error (reference less simulated) times
+    the rate; longer than ``max_len``: that long; ``dead``: shortened by it, nothing within."""
+    from sim.simulate.drift import drift_lead
+
+    ref, sim = np.zeros(2), np.array([0.3, 0.4])  # error (-0.3, -0.4), 0.5 m long
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 1.0), [-0.6, -0.8])
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 0.25), [-0.3, -0.4])
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 1.0, dead=0.1), [-0.48, -0.64])
+    np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 0.35, dead=0.1), [-0.3, -0.4])
+    np.testing.assert_array_equal(drift_lead(ref, sim, 2.0, 1.0, dead=0.6), [0.0, 0.0])
+    np.testing.assert_array_equal(drift_lead(ref, sim, 0.0, 1.0), [0.0, 0.0])

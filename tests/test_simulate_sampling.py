@@ -209,3 +209,55 @@ def test_elites_go_on_with_their_parents_offset(model, walk_ref):
     plain, _ = search_offsets(model, ref, samples=6, keep=2, **kw)
     one, _ = search_offsets(model, ref, samples=6, keep=2, elite=1, **kw)
     assert plain.any() and not np.array_equal(plain, one)
+
+
+def test_drift_rate_leads_the_root_velocity_target_by_the_position_error():
+    """``CostWeights.drift_rate``: zero on the reference; a root ``d`` off the reference's path
+    and as fast as the reference pays ``root_xy |d|^2`` plus ``root_vel (rate |d|)^2`` (its
+    velocity target leads by ``rate (ref - sim)``), the lead's length clipped to ``rate
+    drift_max``; a root already heading back at that lead pays for the position only."""
+    from sim.simulate.sampling import CostWeights, Features, window_cost
+
+    ref = Features(z=0.9, xy=np.array([1.0, 2.0]), quat=np.array([1.0, 0.0, 0.0, 0.0]),
+                   hinges=np.zeros(3), ee=np.zeros((2, 3)), balance=np.zeros(2),
+                   vel=np.array([1.2, 0.0, 0.1]))  # fmt: skip
+    w = CostWeights(drift_rate=2.0, drift_max=0.3, root_vel=5.0)
+    hinge_w = np.full(3, 1 / 3)
+    assert window_cost(ref, ref, w, hinge_w) == 0.0
+
+    def moved(d, dv=(0.0, 0.0, 0.0)):
+        return Features(**{**ref.__dict__, "xy": ref.xy + d, "vel": ref.vel + np.array(dv)})
+
+    behind = moved(np.array([-0.1, 0.0]))  # 10 cm behind, as fast: target 0.2 m/s faster
+    assert window_cost(behind, ref, w, hinge_w) == pytest.approx(20 * 0.01 + 5 * 0.2**2)
+    assert window_cost(behind, ref, CostWeights(), hinge_w) == pytest.approx(20 * 0.01)
+    back = moved(np.array([-0.1, 0.0]), (0.2, 0.0, 0.0))  # heading back at the lead
+    assert window_cost(back, ref, w, hinge_w) == pytest.approx(20 * 0.01)
+    far = moved(np.array([0.0, 0.5]))  # 50 cm aside: the lead 2 x 0.3 m/s towards the path
+    assert window_cost(far, ref, w, hinge_w) == pytest.approx(20 * 0.25 + 5 * 0.6**2)
+
+
+def test_forward_validation_tracks_with_the_drift_lead_unless_its_search_names_a_feedback(
+    model, walk_ref, monkeypatch
+):
+    """eval's sampler gets ``DEFAULT_BALANCE`` (the feedback with the drift lead); a search that
+    names its own feedback (or none) keeps it."""
+    import sim.simulate.validate as validate
+    from sim.simulate.balance import Balance
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(model, ref, **kw):
+        seen.append(kw.get("balance", "absent"))
+        raise Stop
+
+    monkeypatch.setattr(validate, "sample_track", fake)
+    qpos = walk_ref[::4][:8]  # 30 fps
+    for search in ({}, {"balance": None}, {"balance": Balance()}):
+        with pytest.raises(Stop):
+            validate.ForwardValidation(model, ("root",), samples=2, search=search).run(qpos, 30.0)
+    assert seen == [validate.DEFAULT_BALANCE, None, Balance()]
+    assert validate.DEFAULT_BALANCE.k_drift > 0 and BALANCE.k_drift == 0  # synth keeps its own

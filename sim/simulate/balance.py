@@ -24,6 +24,10 @@ tick, torques on the hinges of the legs the reference stands on:
   the torque ``kp dq`` (the hinges' stiffness), i.e. a target offset of ``dq``. With ``c_d`` 1
   and ``c_v`` ``1 / omega`` (``omega = sqrt(g / z_com)``, about 0.3 s) the foot follows the
   capture point's error.
+* **drift** (``Balance.k_drift``, off by default): the velocity target of ``de_c`` leads by
+  ``k_drift`` times the root's horizontal position error (the reference's less the simulated,
+  at most ``drift_max`` long, less ``drift_dead``), so the centre of mass is asked to move
+  back towards the reference's path: ``de_c = v - v_ref - k_drift clip(p_ref - p)``.
 
 A state feedback and nothing else: it reads ``qpos``/``qvel`` only (kinematics recomputed), so
 the same state gives the same torques and a sampled rollout and its replay stay one computation.
@@ -39,6 +43,7 @@ import mujoco
 import numpy as np
 
 from sim.errors import UsageError
+from sim.simulate.drift import drift_lead
 from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS, G, total_mass
 
 #: [m] a reference foot (sole or toe box) whose lowest point is at most this high is in stance
@@ -70,10 +75,25 @@ class Balance:
     #: with 125 mm root-relative error against 113; docs/synthetic.md)
     c_d: float = 0.0
     c_v: float = 0.0
+    #: [1/s] the root's horizontal position error (reference less simulated) added to the
+    #: velocity target of the centre-of-mass term; 0: off (the feedback before it). On the 22
+    #: clips of ``bench_simulate.py --controllers`` at 28 samples, 2 fell in 0.32 of the clips
+    #: against 0.27 (110 / 319 mm against 113 / 322); 2 beyond 0.1 m (``drift_dead``) in 0.27,
+    #: 105 / 272 mm: eval's default (``sim.simulate.validate.DEFAULT_BALANCE``; docs/synthetic.md)
+    k_drift: float = 0.0
+    #: [m] the position error is clipped to this length
+    drift_max: float = 0.3
+    #: [m] and then shortened by this (an error of at most this asks nothing)
+    drift_dead: float = 0.0
 
     def __post_init__(self):
         if int(self.every) < 1:
             raise UsageError(f"Balance.every must be a positive tick count; got {self.every}")
+        if min(self.k_drift, self.drift_max, self.drift_dead) < 0:
+            raise UsageError(
+                f"Balance.k_drift, drift_max and drift_dead must be >= 0; got {self.k_drift}, "
+                f"{self.drift_max}, {self.drift_dead}"
+            )
 
 
 @dataclass(frozen=True)
@@ -85,7 +105,8 @@ class BalancePlan:
     driven, per side (left, right) and group (hip, ankle), up to three each: joint ids and
     actuator ids (2, 2, 3) (a missing hinge repeats the first, masked out by ``mask`` (2, 2,
     3); ``valid`` its bool); the foot body ids (2,); the gains in SI units (k_rot [N m/rad], d_rot [N m s/rad],
-    k_com [N], d_com [N s])."""
+    k_com [N], d_com [N s]); the root's horizontal position (T, 2) [m] and the drift term's
+    ``(k_drift, drift_max, drift_dead)`` where it is on."""
 
     quat: np.ndarray
     angvel: np.ndarray
@@ -103,6 +124,8 @@ class BalancePlan:
     #: swing-foot placement (c_d [m/m], c_v [s]) and the hip hinges' stiffness (2, 3) [N m/rad]
     #: (0 where masked) and the thigh body ids (2,); None: no placement
     step: tuple | None = None
+    xy: np.ndarray | None = None  # (T, 2) the root's horizontal position [m]; None: no drift term
+    drift: tuple[float, float, float] = (0.0, 0.0, 0.0)  # k_drift [1/s], max, dead [m]
 
 
 def _hinges(model, side: str, bone: str) -> tuple[np.ndarray, np.ndarray]:
@@ -179,6 +202,8 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
         ),
         every=int(gains.every),
         step=_step_plan(model, aids, mask, gains),
+        xy=ref_qpos[:, :2].copy() if gains.k_drift > 0 else None,
+        drift=(float(gains.k_drift), float(gains.drift_max), float(gains.drift_dead)),
     )
 
 
@@ -208,6 +233,8 @@ def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> 
     rot = data.xmat[1].reshape(3, 3) @ (k_rot * e + d_rot * de)  # world [N m]
     mid = w @ data.xpos[plan.feet] / w.sum()
     f = k_com * ((data.subtree_com[1, :2] - mid[:2]) - plan.com_off[k])
+    if plan.xy is not None:  # the velocity target leads by the root's position error
+        f -= d_com * drift_lead(plan.xy[k], data.qpos[:2], *plan.drift)
     f += d_com * (data.qvel[:2] - plan.vel[k])  # (2,) horizontal [N]
     M = np.empty((2, 2, 3))  # per side and group (hip, ankle): the moment asked for [N m]
     M[:, 0] = w[:, None] * rot

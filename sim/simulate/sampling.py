@@ -47,6 +47,7 @@ from sim.simulate.controller import (
     track,
     weakening_factor,
 )
+from sim.simulate.drift import drift_lead
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.footholding import as_slice, reference_soles, sole_ids, window_hold_costs
@@ -84,6 +85,12 @@ class CostWeights:
     end_effectors: float = 10.0  # end-effector positions relative to the root [m^2], mean
     balance: float = 50.0  # CoM minus the ankles' mid-point, horizontal [m^2]
     root_vel: float = 0.5  # root linear velocity [m^2/s^2]
+    #: [1/s] the root velocity term's horizontal target leads by this times the root's
+    #: horizontal position error (reference less simulated, clipped to ``drift_max`` [m]): a
+    #: candidate heading back to the reference's path costs less; 0: off (screened on 5
+    #: clips only, no better: docs/synthetic.md)
+    drift_rate: float = 0.0
+    drift_max: float = 0.3
     fallen: float = 1e4  # root below half its reference height
     #: a fall (``sim.simulate.falls``) in the rollout, doubled if at its start; 0: the rollouts
     #: do not look for falls and run to their end (the sampler as first built)
@@ -153,7 +160,9 @@ def window_cost(sim: Features, ref: Features, w: CostWeights, hinge_w: np.ndarra
     c += w.sink * max(0.0, ref.z - w.sink_margin - sim.z)
     c += w.end_effectors * float(np.mean(np.sum((sim.ee - ref.ee) ** 2, axis=1)))
     c += w.balance * float(np.sum((sim.balance - ref.balance) ** 2))
-    c += w.root_vel * float(np.sum((sim.vel - ref.vel) ** 2))
+    dv = sim.vel - ref.vel
+    dv[:2] -= drift_lead(ref.xy, sim.xy, w.drift_rate, w.drift_max)  # zeros where it is off
+    c += w.root_vel * float(np.sum(dv**2))
     if ref.z > 0.5 and sim.z < 0.5 * ref.z:
         c += w.fallen
     return c

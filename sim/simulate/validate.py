@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from sim.errors import UsageError
+from sim.simulate.balance import Balance
 from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
 from sim.simulate.model import CONTROL_HZ, sim_model, total_mass
@@ -45,15 +46,23 @@ SIMULATE_KEYS = (
 SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
 CONTROLLERS = ("plain", "sampling", "wholebody")
 #: the controller of ``eval --physics --simulate`` and ``report --simulate`` without
-#: ``--samples``: the sampler with falls in its cost and the balance feedback
-#: (``sim.simulate.sampling.BALANCE``) at :data:`DEFAULT_SAMPLES`, because within the budget of
-#: 5 CPU s per simulated second it beats the other controllers on falls and error
+#: ``--samples``: the sampler with falls in its cost and the balance feedback with the drift
+#: lead (:data:`DEFAULT_BALANCE`) at :data:`DEFAULT_SAMPLES`, because within the budget of 5 CPU
+#: s per simulated second it beats the other controllers on falls and error
 #: (``docs/synthetic.md``, ``docs/results/simulate_default.md`` and ``simulate_controllers.md``,
-#: 22 clips: 0.27 falls, 113 mm root-relative, 322 mm global error, 4.98 CPU s per simulated s
-#: (5.19 on a machine loaded 7-9); the sampler without the feedback at 32 samples in one run
-#: with it: 0.32, 138, 466 mm, 4.67; the plain tracker 0.95, 316, 694 mm; the whole-body QP
-#: 0.91, 362, 665 mm; foot holding or elite reuse added: docs/synthetic.md, not kept)
+#: 22 clips: 0.27 falls, 105 mm root-relative, 272 mm global error; without the drift lead 0.27,
+#: 113, 322 mm at 4.85-4.98 CPU s per simulated s, with it 0.99x that in one run; the sampler
+#: without the feedback at 32 samples: 0.32, 138, 466 mm; the plain tracker 0.95, 316, 694 mm;
+#: the whole-body QP 0.91, 362, 665 mm; foot holding or elite reuse added: not kept)
 DEFAULT_CONTROLLER = "sampling"
+#: the sampler's balance feedback here unless ``search`` names one: ``sampling.BALANCE`` with
+#: the drift lead (``sim.simulate.drift``): the root velocity target leads by 2/s times the root's
+#: horizontal position error beyond 0.1 m (clipped at 0.4 m). On the 22 clips, in one run with
+#: the feedback without it: the same 6 falls, 105 against 113 mm root-relative, 272 against 322
+#: mm global error, 0.99x the CPU (docs/results/simulate_default.md); per clip within the
+#: sampler's chaos (lower global error in 7 of the 16 clips both keep up, higher in 5).
+#: ``synth`` keeps ``sampling.BALANCE`` (not measured there)
+DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
 #: the sampler's rollouts per window where it is chosen without a count (with the feedback,
 #: 32 cost 5.22 CPU s per simulated s: over the budget)
 DEFAULT_SAMPLES = 28
@@ -83,7 +92,8 @@ class ForwardValidation:
         controller: ``"plain"``, ``"sampling"`` or ``"wholebody"``; None: the sampler if
             ``samples`` is given, else :data:`DEFAULT_CONTROLLER`.
         search: further keywords of the sampler's search (``sim.simulate.sampling.
-            search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults.
+            search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults, but for
+            ``balance``: :data:`DEFAULT_BALANCE` unless ``search`` names one.
         threads: the sampler's rollouts run on this many threads (the same result for any).
     """
 
@@ -182,8 +192,9 @@ class ForwardValidation:
         orig = self.reference(original_qpos, fps, floor)  # the same floor and feet
         every = int(round(CONTROL_HZ / fps))
         if self.controller == "sampling":
+            search = {"balance": DEFAULT_BALANCE, **self.search}
             r = sample_track(self.model, ref, samples=self.samples, record_every=every,
-                             threads=self.threads, **self.search)  # fmt: skip
+                             threads=self.threads, **search)  # fmt: skip
         elif self.controller == "wholebody":
             r = track_wholebody(self.model, ref, record_every=every)
         else:
