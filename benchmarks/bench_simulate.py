@@ -67,9 +67,10 @@ for _n in (16, 24, 28, 32, 48, 64):
         {"controller": "sampling", "samples": _n, "search": BEFORE_HOLD},
         "position",
     )
-    CONTROLLERS[f"default{_n}"] = (  # the sampler as it is now (sim.simulate.sampling's defaults)
-        f"sampler, {_n} samples, its defaults now: falls in its cost, balance feedback, foot "
-        f"holding {CostWeights().hold:g}, {search_offsets.__kwdefaults__['elite']} elite",
+    CONTROLLERS[f"default{_n}"] = (  # the sampler as eval runs it now (validate's defaults)
+        f"sampler, {_n} samples, eval's defaults now: falls in its cost, balance feedback with "
+        f"the drift lead, foot holding {CostWeights().hold:g}, "
+        f"{search_offsets.__kwdefaults__['elite']} elite",
         {"controller": "sampling", "samples": _n},
         "position",
     )
