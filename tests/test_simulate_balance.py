@@ -38,6 +38,20 @@ def _stance_tick(plan, both: bool) -> int:
     return int(ticks[0])
 
 
+def _legs_lean(model, data, tau: np.ndarray, direction: np.ndarray) -> dict[str, tuple]:
+    """Per side: how far the moment ``tau`` puts on that leg's hinges turns the centre of mass
+    along ``direction`` (3,), and the scale ``|moment| |com - foot|`` to compare it with."""
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    out = {}
+    for side in "lr":
+        ids = [a for a in np.flatnonzero(tau) if model.actuator(int(a)).name.startswith(side)]
+        on_leg = -sum(tau[a] * data.xaxis[model.actuator_trnid[a, 0]] for a in ids)
+        r = data.subtree_com[1] - data.xpos[model.body(f"{side}foot").id]
+        out[side] = (np.cross(on_leg, r) @ direction, np.linalg.norm(on_leg) * np.linalg.norm(r))
+    return out
+
+
 def test_no_torque_on_the_reference_itself(model, walk):
     ref, qvel = walk
     plan = balance_plan(model, ref, qvel, Balance())
@@ -92,13 +106,8 @@ def test_ankles_push_a_forward_centre_of_mass_back(model, walk):
     data.qvel[:3] += 0.5 * ahead  # [m/s] too fast
     tau = balance_torques(model, data, plan, k, np.zeros(model.nu))
     assert all("foot" in model.actuator(int(a)).name for a in np.flatnonzero(tau))
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)
-    for side in "lr":
-        ids = [a for a in np.flatnonzero(tau) if model.actuator(int(a)).name.startswith(side)]
-        on_leg = -sum(tau[a] * data.xaxis[model.actuator_trnid[a, 0]] for a in ids)
-        r = data.subtree_com[1] - data.xpos[model.body(f"{side}foot").id]
-        assert np.cross(on_leg, r) @ ahead < -0.2 * np.linalg.norm(on_leg) * np.linalg.norm(r)
+    for turn, scale in _legs_lean(model, data, tau, ahead).values():
+        assert turn < -0.2 * scale
 
 
 def test_a_search_with_balance_is_replayed_state_for_state(model, walk):
@@ -234,14 +243,8 @@ def test_drift_term_leads_the_velocity_target_by_the_root_position_error(model, 
     data.qpos[:2] = ref[k, :2] + 2.0 * d
     np.testing.assert_allclose(far, balance_torques(model, data, plan, k, np.zeros(model.nu)),
                                rtol=1e-9, atol=1e-9)  # fmt: skip
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)
-    for side in "lr":
-        ids = [a for a in np.flatnonzero(tau) if model.actuator(int(a)).name.startswith(side)]
-        on_leg = -sum(tau[a] * data.xaxis[model.actuator_trnid[a, 0]] for a in ids)
-        r = data.subtree_com[1] - data.xpos[model.body(f"{side}foot").id]
-        forward = np.cross(on_leg, r) @ np.append(ahead, 0.0)
-        assert forward > 0.2 * np.linalg.norm(on_leg) * np.linalg.norm(r)
+    for turn, scale in _legs_lean(model, data, tau, np.append(ahead, 0.0)).values():
+        assert turn > 0.2 * scale
     with pytest.raises(SidqlError, match="k_drift"):
         Balance(k_drift=-1.0)
 
