@@ -19,6 +19,7 @@ change them.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -156,34 +157,133 @@ for _name, _label, _search in (
     )  # fmt: skip
 
 
-def controller_rows(cases, names: list[str], log=None, threads: int = 1) -> dict[str, list[dict]]:
-    """Per controller name (:data:`CONTROLLERS`), the figures of
-    ``ForwardValidation.run`` for the original motion (its IK fit) of every case, one process
-    (the sampler's rollouts on ``threads`` threads; its CPU time counts every thread's)."""
-    setup = physics_setup(cases)
-    bodies: dict = {}
-    out: dict[str, list[dict]] = {n: [] for n in names}
-    for i, c in enumerate(cases):
-        qpos = setup[c.clip.source].analyse(c.clip)["per_frame"]["qpos"]
-        for n in names:
-            _, kw, actuators = CONTROLLERS[n]
-            if (c.asf, n) not in bodies:
-                skeleton = subject_model(c.asf)[0]
-                model = sim_model(skeleton, actuators=actuators)
-                bodies[c.asf, n] = ForwardValidation(
-                    model, _protocol_names(c.clip), threads=threads, **kw
-                )
-            t0 = time.process_time()
-            w0 = time.perf_counter()
-            row = bodies[c.asf, n].run(qpos, c.clip.fps)  # the fits above are not timed
-            seconds = c.clip.n_frames / c.clip.fps
-            cpu = (time.process_time() - t0) / seconds
-            wall = (time.perf_counter() - w0) / seconds
-            out[n].append({"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
-                           "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall})  # fmt: skip
-            if log:
-                log(f"{i + 1}/{len(cases)} {n} {out[n][-1]}")
+def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
+    """Per controller name, the figures of ``ForwardValidation.run`` on case ``c``'s original
+    motion (its IK fit from ``setup``, :func:`physics_setup`); ``bodies`` caches each subject's
+    body per controller."""
+    qpos = setup[c.clip.source].analyse(c.clip)["per_frame"]["qpos"]
+    out = {}
+    for n in names:
+        _, kw, actuators = CONTROLLERS[n][:3]
+        model_kw = CONTROLLERS[n][3] if len(CONTROLLERS[n]) > 3 else {}
+        if (c.asf, n) not in bodies:
+            skeleton = subject_model(c.asf)[0]
+            model = sim_model(skeleton, actuators=actuators, **model_kw)
+            bodies[c.asf, n] = ForwardValidation(
+                model, _protocol_names(c.clip), threads=threads, **kw
+            )
+        t0 = time.process_time()
+        w0 = time.perf_counter()
+        row = bodies[c.asf, n].run(qpos, c.clip.fps)  # the fits above are not timed
+        seconds = c.clip.n_frames / c.clip.fps
+        cpu = (time.process_time() - t0) / seconds
+        wall = (time.perf_counter() - w0) / seconds
+        out[n] = {"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
+                  "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall}  # fmt: skip
     return out
+
+
+_WORKER: dict = {"setup": {}, "bodies": {}}  # a pool worker's fits per trial, bodies per subject
+
+
+def _clip_task(item) -> dict[str, dict]:
+    """One clip in a pool worker: ``item`` = (case, every case of its trial, names, threads);
+    the trial's physics set up once per worker from all its clips, as one process would."""
+    c, trial_cases, names, threads = item
+    if c.clip.source not in _WORKER["setup"]:
+        _WORKER["setup"].update(physics_setup(trial_cases))
+    return _clip_rows(c, _WORKER["setup"], names, _WORKER["bodies"], threads)
+
+
+def controller_rows(
+    cases, names: list[str], log=None, threads: int = 1, workers: int = 1
+) -> dict[str, list[dict]]:
+    """Per controller name (:data:`CONTROLLERS`), the figures of
+    ``ForwardValidation.run`` for the original motion (its IK fit) of every case, in case
+    order: in one process (the sampler's rollouts on ``threads`` threads; its CPU time counts
+    every thread's), or one clip per task on ``workers`` processes (the same figures: every
+    controller is deterministic and each trial's physics is set up from all its clips)."""
+    out: dict[str, list[dict]] = {n: [] for n in names}
+    if workers <= 1:
+        setup, bodies = physics_setup(cases), {}
+        per_clip = (_clip_rows(c, setup, names, bodies, threads) for c in cases)
+        done = enumerate(per_clip)
+    else:
+        by_trial: dict[str, list] = {}
+        for c in cases:
+            by_trial.setdefault(c.clip.source, []).append(c)
+        items = [(c, by_trial[c.clip.source], names, threads) for c in cases]
+        done = _pool_rows(items, workers)
+    got: dict[int, dict] = {}
+    for i, rows in done:
+        got[i] = rows
+        if log:
+            for n in names:
+                log(f"{i + 1}/{len(cases)} {n} {rows[n]}", rows[n] | {"controller": n})
+    for i in sorted(got):
+        for n in names:
+            out[n].append(got[i][n])
+    return out
+
+
+def _pool_rows(items: list, workers: int):
+    """(position, rows) of :func:`_clip_task` per item as the clips finish; a clip whose
+    simulation failed is reported and left out."""
+    from sim.batch import iter_batch
+
+    for i, outcome in iter_batch(_clip_task, items, workers=workers, progress=False):
+        if outcome.ok:
+            yield i, outcome.result
+        else:
+            print(f"clip {i} failed: {outcome.error}", flush=True)
+
+
+def jsonl_log(path: str | None):
+    """A log function printing each row, and appending it as a JSON line to ``path`` (a new
+    file, not followed through a link) where given: a long run's rows survive its end."""
+    import json
+
+    fd = None
+    if path:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+
+    def log(message: str, row: dict | None = None) -> None:
+        print(message, flush=True)
+        if fd is not None and row is not None:
+            os.write(fd, (json.dumps(row) + "\n").encode())
+
+    return log
+
+
+def paired_markdown(rows: dict[str, list[dict]]) -> str:
+    """Each controller against the first, paired over the clips both ran
+    (``sidql.evaluation.significance.paired_bootstrap``: the mean difference, its 95 %
+    interval over 10,000 resamples of the clips): falls, root-relative and global error, and
+    the median per-clip change of each error."""
+    from sidql.evaluation.significance import paired_bootstrap
+
+    names = list(rows)
+    base = {r["clip"]: r for r in rows[names[0]]}
+    head = (
+        f"Against the first row ({CONTROLLERS[names[0]][0]}), paired over the clips both ran: "
+        "mean difference [95 % interval]; the median per-clip change.\n\n"
+        "| controller | clips | falls | root-relative [mm] | median change | global [mm] | "
+        "median change |\n|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for n in names[1:]:
+        both = [(r, base[r["clip"]]) for r in rows[n] if r["clip"] in base]
+        cells = [CONTROLLERS[n][0], str(len(both))]
+        for key in ("sim_fell", "sim_error_local_mm", "sim_error_mm"):
+            a = np.array([r[key] for r, _ in both], dtype=float)
+            b = np.array([q[key] for _, q in both], dtype=float)
+            t = paired_bootstrap(a, b)
+            fmt = "+.2f" if key == "sim_fell" else "+.0f"
+            cells.append(f"{t['mean_diff']:{fmt}} [{t['ci_low']:{fmt}}, {t['ci_high']:{fmt}}]")
+            if key != "sim_fell":
+                cells.append(f"{np.median(a - b) if a.size else float('nan'):+.0f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return head + "\n".join(lines) + "\n"
 
 
 def controllers_markdown(rows: dict[str, list[dict]]) -> str:
@@ -238,8 +338,8 @@ def main() -> None:
     )
     ap.add_argument(
         "--controllers", nargs="+", choices=sorted(CONTROLLERS), default=None,
-        help="compare these controllers on the original motion only (one process; writes "
-        "docs/results/simulate_controllers.md)",
+        help="compare these controllers on the original motion only (one clip per process on "
+        "--workers; writes docs/results/simulate_controllers.md or --page)",
     )  # fmt: skip
     ap.add_argument(
         "--threads", type=int, default=1,
@@ -248,6 +348,10 @@ def main() -> None:
     ap.add_argument(
         "--page", default="simulate_controllers",
         help="with --controllers: the docs/results page written (default simulate_controllers)",
+    )  # fmt: skip
+    ap.add_argument(
+        "--log", default=None,
+        help="with --controllers: also append every clip's row as a JSON line to this new file",
     )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
@@ -258,17 +362,17 @@ def main() -> None:
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
     cases = cases[:: args.every][: args.max_clips]
     if args.controllers:
-        rows = controller_rows(
-            cases, args.controllers, log=lambda m: print(m, flush=True), threads=args.threads
-        )
+        rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
+                               threads=args.threads, workers=args.workers)  # fmt: skip
         limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
         text = (
             f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
             f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
             "IK fit on the subject's skeleton) tracked by each controller with no assistance; a "
             "fall as `sim.simulate.falls` defines it; CPU time of every thread "
-            f"(--threads {args.threads}).\n\n"
+            f"(--threads {args.threads}; one clip per process on --workers {args.workers}).\n\n"
             + controllers_markdown(rows)
+            + ("\n" + paired_markdown(rows) if len(rows) > 1 else "")
             + f"\nWall time {time.perf_counter() - t0:.0f} s (loading and fits included).\n"
         )
         print(text)
