@@ -19,6 +19,7 @@ change them.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -39,7 +40,7 @@ from sim.paths import default_data_dir  # noqa: E402
 from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.model import sim_model  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
-from sim.simulate.validate import ForwardValidation  # noqa: E402
+from sim.simulate.validate import DEFAULT_BALANCE, ForwardValidation  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
 #: balance feedback
@@ -155,6 +156,29 @@ for _name, _label, _search in (
         {"controller": "sampling", "samples": 28, "search": {**BEFORE_HOLD, **_search}},
         "position",
     )  # fmt: skip
+
+
+#: candidates on eval's default (``default28``: 28 samples, the balance feedback with the drift
+#: lead, ``sim.simulate.validate.DEFAULT_BALANCE``): ``cc28`` tracks the contact-consistent
+#: reference (no floor lift, stance soles on z = 0; ``ForwardValidation(contact_reference=
+#: True)``; measured against the same lifted points as the default); ``feetdrift28`` reads the
+#: drift lead's position error at the stance feet instead of the root (``Balance.drift_feet``);
+#: ``ccfeetdrift28`` both
+FEET_DRIFT = {"balance": dataclasses.replace(DEFAULT_BALANCE, drift_feet=True)}
+for _name, _label, _kw in (
+    ("cc28", "the contact-consistent reference", {"contact_reference": True}),
+    ("feetdrift28", "the drift lead read at the stance feet", {"search": FEET_DRIFT}),
+    (
+        "ccfeetdrift28",
+        "the contact-consistent reference, the drift lead read at the stance feet",
+        {"contact_reference": True, "search": FEET_DRIFT},
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults with {_label}",
+        {"controller": "sampling", "samples": 28, **_kw},
+        "position",
+    )
 
 
 def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
