@@ -113,3 +113,11 @@ def test_figures_are_measured_against_the_lifted_points_whatever_is_tracked(
     np.testing.assert_allclose(refs[3][:, 2] - refs[2][:, 2], -0.03, atol=1e-12)  # contact
     low, stance = _stance(bodies[1].model, refs[2])
     assert np.median(np.abs(low[stance])) < 0.002  # the original's tracked soles on z = 0
+
+
+def test_the_option_goes_to_other_processes(bodies):
+    import pickle
+
+    lifted, contact = bodies
+    assert not pickle.loads(pickle.dumps(lifted)).contact
+    assert pickle.loads(pickle.dumps(contact)).contact
