@@ -202,6 +202,7 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         cpu = (time.process_time() - t0) / seconds
         wall = (time.perf_counter() - w0) / seconds
         out[n] = {"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
+                  "sim_unstable": int(bodies[c.asf, n].last_unstable),
                   "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall}  # fmt: skip
     return out
 
@@ -333,7 +334,10 @@ def controllers_markdown(rows: dict[str, list[dict]]) -> str:
             f"| {med('sim_error_mm'):.0f} | {med('sim_skate_mm_s'):.0f} "
             f"| {med('sim_skate_ref_mm_s'):.0f} | {cpu:.2f} |"
         )
-    return head + "\n".join(lines) + "\n"
+    unstable = {n: sum(r.get("sim_unstable", 0) for r in rs) for n, rs in rows.items()}
+    note = "".join(f"\n{CONTROLLERS[n][0]}: MuJoCo flagged a diverging acceleration in {k} "
+                   "clips.\n" for n, k in unstable.items() if k)  # fmt: skip
+    return head + "\n".join(lines) + "\n" + note
 
 
 def main() -> None:

@@ -210,6 +210,7 @@ class ForwardValidation:
         else:
             r = track(self.model, ref, assist_limit=0.0, record_every=every)
         self.last_qpos = r.qpos  # the simulated states (F, nq) of the last run: for pictures
+        self.last_unstable = bool(r.unstable)  # MuJoCo flagged a diverging acceleration in it
         sim = self.points(r.qpos)
         n = len(sim)
         target = self.points(ref[::every][:n])
