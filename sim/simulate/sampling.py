@@ -438,12 +438,10 @@ def search_offsets(
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
 
     Args:
-        samples: candidate rollouts per window (in all, over the kept states).
-        keep: states kept after each window.
+        samples: rollouts per window (in all, over the kept states); keep: states kept after each.
         window: control ticks per window (12: 0.1 s).
         torque_sigma: noise of an offset, as a share of its joint's peak torque.
-        noise_deflection: [rad] > 0: over the stiffness capped at peak torque over this angle
-            (a stiffer body searches the same angles); 0: over the body's own stiffness.
+        noise_deflection: [rad] > 0: that share over the stiffness capped at peak torque / it.
         persistence: share of the parent's offset a child starts from.
         lookahead: control ticks each candidate is rolled on past its window (same offset)
             before its cost is taken: a correction that only delays a fall costs what the fall
