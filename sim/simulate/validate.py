@@ -27,7 +27,7 @@ from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
-from sim.simulate.model import CONTROL_HZ, sim_model, total_mass
+from sim.simulate.model import CONTROL_HZ, Gains, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
     contact_consistent,
@@ -69,6 +69,14 @@ DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
 #: the sampler's rollouts per window where it is chosen without a count (with the feedback,
 #: 32 cost 5.22 CPU s per simulated s: over the budget)
 DEFAULT_SAMPLES = 28
+#: the position actuators' feedback gains of the body ``eval --simulate`` and ``report
+#: --simulate`` track with (:func:`validation_model`): bandwidth and stiffness cap are the
+#: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these
+DEFAULT_GAINS = Gains()
+#: [rad] the sampler's ``noise_deflection`` here unless ``search`` names one (0: its noise a
+#: share of peak torque over the body's stiffness; a stiffer body's ``min_deflection`` before
+#: it: the noise keeps the angles it had on that body)
+DEFAULT_NOISE_DEFLECTION = 0.0
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator; the
 #: sampler's foot holding uses the same height)
 SKATE_CONTACT = CONTACT_HEIGHT
@@ -96,7 +104,8 @@ class ForwardValidation:
             ``samples`` is given, else :data:`DEFAULT_CONTROLLER`.
         search: further keywords of the sampler's search (``sim.simulate.sampling.
             search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults, but for
-            ``balance``: :data:`DEFAULT_BALANCE` unless ``search`` names one.
+            ``balance`` and ``noise_deflection``: :data:`DEFAULT_BALANCE` and
+            :data:`DEFAULT_NOISE_DEFLECTION` unless ``search`` names them.
         threads: the sampler's rollouts run on this many threads (the same result for any).
         contact_reference: the plain tracker and the sampler track the contact-consistent
             reference (no floor lift, stance soles on z = 0, as the whole-body QP always does)
@@ -239,7 +248,8 @@ class ForwardValidation:
             tracked = self.reference(qpos, fps, floor, shift, contact=True)
         every = int(round(CONTROL_HZ / fps))
         if self.controller == "sampling":
-            search = {"balance": DEFAULT_BALANCE, **self.search}
+            search = {"balance": DEFAULT_BALANCE, "noise_deflection": DEFAULT_NOISE_DEFLECTION,
+                      **self.search}  # fmt: skip
             r = sample_track(self.model, tracked, samples=self.samples, record_every=every,
                              threads=self.threads, **search)  # fmt: skip
         elif self.controller == "wholebody":
@@ -247,6 +257,7 @@ class ForwardValidation:
         else:
             r = track(self.model, tracked, assist_limit=0.0, record_every=every)
         self.last_qpos = r.qpos  # the simulated states (F, nq) of the last run: for pictures
+        self.last_unstable = bool(r.unstable)  # MuJoCo flagged a diverging acceleration in it
         sim = self.points(r.qpos)
         n = len(sim)
         target = self.points(ref[::every][:n])
@@ -295,14 +306,22 @@ def forward_validation(
     contact_reference: bool = False,
     **body,
 ) -> ForwardValidation:
-    """The :class:`ForwardValidation` of ``skeleton``'s simulated body (``sim_model(skeleton,
-    **body)`` with the actuators its controller needs) on points ``names``: ``samples`` > 0 the
+    """The :class:`ForwardValidation` of ``skeleton``'s simulated body
+    (:func:`validation_model`: ``sim_model(skeleton, **body)`` with :data:`DEFAULT_GAINS` and
+    the actuators its controller needs) on points ``names``: ``samples`` > 0 the
     sampling tracker with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`,
     the sampler at :data:`DEFAULT_SAMPLES`); ``contact_reference``: it tracks the
     contact-consistent reference (:class:`ForwardValidation`)."""
     controller, _ = chosen_controller(samples, controller)
     actuators = "motor" if controller == "wholebody" else "position"
-    model = sim_model(skeleton, actuators=actuators, **body)
+    model = validation_model(skeleton, actuators=actuators, **body)
     return ForwardValidation(
         model, names, samples=samples, controller=controller, contact_reference=contact_reference
     )
+
+
+def validation_model(skeleton, *, actuators: str = "position", **body) -> mujoco.MjModel:
+    """``skeleton``'s simulated body as forward validation builds it: ``sim_model(skeleton,
+    actuators=actuators, **body)`` with the feedback gains :data:`DEFAULT_GAINS` unless
+    ``body`` names ``gains``."""
+    return sim_model(skeleton, actuators=actuators, **{"gains": DEFAULT_GAINS, **body})
