@@ -244,24 +244,33 @@ def _clip_task(item) -> dict[str, dict]:
 
 
 def controller_rows(
-    cases, names: list[str], log=None, threads: int = 1, workers: int = 1
+    cases,
+    names: list[str],
+    log=None,
+    threads: int = 1,
+    workers: int = 1,
+    deadline: float | None = None,
 ) -> dict[str, list[dict]]:
     """Per controller name (:data:`CONTROLLERS`), the figures of
     ``ForwardValidation.run`` for the original motion (its IK fit) of every case, in case
     order: in one process (the sampler's rollouts on ``threads`` threads; its CPU time counts
     every thread's), or one clip per task on ``workers`` processes (the same figures: every
-    controller is deterministic and each trial's physics is set up from all its clips)."""
+    controller is deterministic and each trial's physics is set up from all its clips).
+    ``deadline`` [s of wall time from the call]: no clip is started after it (every
+    controller still runs on each clip started, so the rows stay paired); the clips are then
+    taken every fifth first (:func:`spread_order`), so those done spread over the trials."""
     out: dict[str, list[dict]] = {n: [] for n in names}
     if workers <= 1:
         setup, bodies = physics_setup(cases), {}
-        per_clip = (_clip_rows(c, setup, names, bodies, threads) for c in cases)
-        done = enumerate(per_clip)
+        order = spread_order(len(cases)) if deadline else range(len(cases))
+        done = _in_time(((i, _clip_rows(cases[i], setup, names, bodies, threads))
+                         for i in order), deadline)  # fmt: skip
     else:
         by_trial: dict[str, list] = {}
         for c in cases:
             by_trial.setdefault(c.clip.source, []).append(c)
         items = [(c, by_trial[c.clip.source], names, threads) for c in cases]
-        done = _pool_rows(items, workers)
+        done = _pool_rows(items, workers, deadline)
     got: dict[int, dict] = {}
     for i, rows in done:
         got[i] = rows
@@ -274,12 +283,40 @@ def controller_rows(
     return out
 
 
-def _pool_rows(items: list, workers: int):
-    """(position, rows) of :func:`_clip_task` per item as the clips finish; a clip whose
-    simulation failed is reported and left out."""
+def spread_order(n: int, stride: int = 5) -> list[int]:
+    """The positions 0..n-1, every ``stride``-th first (0, 5, 10, ..., then 1, 6, ...): any
+    prefix of the clips spreads over the trials (the first n / 5 are ``--every 5``'s clips)."""
+    return sorted(range(n), key=lambda i: (i % stride, i))
+
+
+def _in_time(pairs, deadline: float | None):
+    """``pairs`` (lazily) until ``deadline`` seconds have passed since the first was asked."""
+    t0 = time.perf_counter()
+    for pair in pairs:
+        yield pair
+        if deadline is not None and time.perf_counter() - t0 > deadline:
+            return
+
+
+def _pool_rows(items: list, workers: int, deadline: float | None = None):
+    """(position, rows) of :func:`_clip_task` per item as the clips finish, none started after
+    ``deadline`` seconds (then in :func:`spread_order`); a clip whose simulation failed is
+    reported and left out."""
     from sim.batch import iter_batch
 
-    for i, outcome in iter_batch(_clip_task, items, workers=workers, progress=False):
+    order = spread_order(len(items)) if deadline else range(len(items))
+    t0 = time.perf_counter()
+
+    def started():  # items handed to the pool lazily: none after the deadline
+        for i in order:
+            if deadline is not None and time.perf_counter() - t0 > deadline:
+                return
+            yield items[i]
+
+    tasks = list(order)  # the pool numbers items by their place in the stream
+    for k, outcome in iter_batch(_clip_task, started(), workers=workers, progress=False,
+                                 in_flight=workers):  # fmt: skip
+        i = tasks[k]
         if outcome.ok:
             yield i, outcome.result
         else:
@@ -404,6 +441,11 @@ def main() -> None:
         "--log", default=None,
         help="with --controllers: also append every clip's row as a JSON line to this new file",
     )  # fmt: skip
+    ap.add_argument(
+        "--deadline", type=float, default=None, metavar="S",
+        help="with --controllers: start no clip after S seconds (every fifth clip first); the "
+        "page says how many were done",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     if not args.page.replace("_", "").isalnum():
@@ -414,8 +456,15 @@ def main() -> None:
     cases = cases[:: args.every][: args.max_clips]
     if args.controllers:
         rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
-                               threads=args.threads, workers=args.workers)  # fmt: skip
+                               threads=args.threads, workers=args.workers,
+                               deadline=args.deadline)  # fmt: skip
         limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
+        done = len(next(iter(rows.values())))
+        if done < len(cases):
+            limited += (
+                f"; {done} of these {len(cases)} clips done within --deadline "
+                f"{args.deadline:g} s (every fifth clip first, then the next fifth)"
+            )
         text = (
             f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
             f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
