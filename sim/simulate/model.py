@@ -165,8 +165,7 @@ def sim_spec(
     torque limit like every joint). ``actuators``: ``"position"`` (PD servos with ``gains``,
     output clamped to the human limit) or ``"motor"`` (``ctrl`` is the torque [N m], clamped to
     the human limit); the armature is the same in both, so both are one body. ``lean``: MuJoCo
-    skips the stages this body has nothing for (:data:`LEAN_DISABLED`): the same simulation bit
-    for bit, about 7 % cheaper per step (``benchmarks/bench_simulate_step.py``).
+    skips the stages this body has nothing for (:data:`LEAN_DISABLED`; the same motion).
     """
     if actuators not in ("position", "motor"):
         raise UsageError(f"unknown actuators {actuators!r}; known: 'position', 'motor'")
@@ -174,8 +173,7 @@ def sim_spec(
     spec = mujoco.MjSpec.from_string(build_mjcf(skeleton, body_mass_kg=body_mass_kg))
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    if lean:
-        spec.option.disableflags |= LEAN_DISABLED
+    spec.option.disableflags |= LEAN_DISABLED if lean else 0
     for g in spec.geoms:
         if g.name == "floor":
             g.contype, g.conaffinity = FLOOR_BITS
