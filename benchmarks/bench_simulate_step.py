@@ -6,10 +6,10 @@ Usage::
     python benchmarks/bench_simulate_step.py --data ../shared/cmu [--clips 07_01@0 05_06@240]
         [--samples 28] [--reps 3] [--no-write]
 
-Per clip (2 s of a CMU trial at 120 Hz on the canonical humanoid, the reference as ``eval
---simulate`` tracks it: ``ForwardValidation.reference``), the sampler of ``eval`` (its defaults,
-``--samples``) tracks it once; the states of that run (every control tick, just before its
-physics steps) are then
+Per clip (2 s of a CMU trial at 120 Hz on the canonical humanoid, body and reference as ``eval
+--simulate`` builds them: ``validate.validation_model``, ``ForwardValidation.reference``), the
+sampler as ``eval`` runs it (:data:`SEARCH`, ``--samples``) tracks it once; the states of that
+run (every control tick, just before its physics steps) are then
 
 * stepped ``SUBSTEPS`` times by the default body and by the lean one in turn, ``--reps`` times
   each, the least CPU time per state kept (robust to a shared machine's load): microseconds per
@@ -44,12 +44,19 @@ from sim.simulate.balance import balance_plan, balance_torques  # noqa: E402
 from sim.simulate.controller import set_controls  # noqa: E402
 from sim.simulate.falls import fall_reference, has_fallen  # noqa: E402
 from sim.simulate.feedforward import reference_feedforward  # noqa: E402
-from sim.simulate.model import CONTROL_HZ, SUBSTEPS, sim_model  # noqa: E402
+from sim.simulate.model import CONTROL_HZ, SUBSTEPS  # noqa: E402
 from sim.simulate.reference import trial_qpos  # noqa: E402
 from sim.simulate.sampling import sample_track  # noqa: E402
-from sim.simulate.validate import DEFAULT_BALANCE, ForwardValidation  # noqa: E402
+from sim.simulate.validate import (  # noqa: E402
+    DEFAULT_BALANCE,
+    DEFAULT_NOISE_DEFLECTION,
+    ForwardValidation,
+    validation_model,
+)
 
 BODIES = ("default", "lean")
+#: the sampler's search keywords as ``ForwardValidation.run`` passes them
+SEARCH = {"balance": DEFAULT_BALANCE, "noise_deflection": DEFAULT_NOISE_DEFLECTION}
 STAGES = (  # MuJoCo's timers shown, per physics step
     ("position", "mjTIMER_POSITION"), ("  kinematics", "mjTIMER_POS_KINEMATICS"),
     ("  inertia", "mjTIMER_POS_INERTIA"), ("  collision", "mjTIMER_POS_COLLISION"),
@@ -84,7 +91,7 @@ def tick_states(model, ref: np.ndarray, samples: int) -> tuple[np.ndarray, np.nd
             ticks.append(k)
 
     t0 = time.process_time()
-    sample_track(model, ref, samples=samples, record_every=1, recorder=rec, balance=DEFAULT_BALANCE)
+    sample_track(model, ref, samples=samples, record_every=1, recorder=rec, **SEARCH)
     return np.array(states), np.array(ticks), time.process_time() - t0
 
 
@@ -172,7 +179,7 @@ def tracking_costs(models: dict, ref: np.ndarray, samples: int, reps: int) -> di
         for n in list(models)[:: 1 if r % 2 == 0 else -1]:
             m = models[n]
             t0 = time.process_time()
-            r = sample_track(m, ref, samples=samples, record_every=1, balance=DEFAULT_BALANCE)
+            r = sample_track(m, ref, samples=samples, record_every=1, **SEARCH)
             cpu[n].append((time.process_time() - t0) / (len(ref) / CONTROL_HZ))
             motion[n] = r.qpos
     first = next(iter(motion.values()))
@@ -222,7 +229,7 @@ def main() -> None:
     args = ap.parse_args()
     command = "python benchmarks/bench_simulate_step.py " + " ".join(sys.argv[1:])
     skeleton = canonical_skeleton()
-    models = {n: sim_model(skeleton, lean=n == "lean") for n in BODIES}
+    models = {n: validation_model(skeleton, lean=n == "lean") for n in BODIES}
     parts = []
     for clip in args.clips:
         try:
