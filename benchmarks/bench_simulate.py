@@ -77,6 +77,16 @@ for _n in (16, 24, 28, 32, 48, 64):
         {"controller": "sampling", "samples": _n},
         "position",
     )
+#: eval's sampler on the lean body (``sim_model(lean=True)``: the same motion bit for bit,
+#: cheaper steps): ``fast28`` at eval's 28 samples, ``fast<n>`` more samples for about the
+#: old cost (``benchmarks/bench_simulate_step.py``)
+for _n in (28, 32, 36, 40):
+    CONTROLLERS[f"fast{_n}"] = (
+        f"sampler, {_n} samples, eval's defaults now, lean body",
+        {"controller": "sampling", "samples": _n},
+        "position",
+        {"lean": True},
+    )
 for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footholding) ...
     for _e in (0, 1, 4, 8):  # ... and elite reuse (search_offsets(elite=...))
         _name = (f"hold{_w}" if _w else "") + (f"elite{_e}" if _e else "")
