@@ -191,3 +191,13 @@ for _name, _label, _kw in (
         {"controller": "sampling", "samples": 28, **_kw},
         "position",
     )
+
+#: the stiffer controller and the drift lead at the stance feet together (``stiff0.1`` and
+#: ``feetdrift28``, each better than eval's default on root-relative error in a 4-clip smoke run)
+CONTROLLERS["stiff0.1feet"] = (
+    "sampler, 28 samples, eval's defaults, stiffness cap 0.1 rad, the drift lead read at the "
+    "stance feet",
+    {"controller": "sampling", "samples": 28, "search": FEET_DRIFT},
+    "position",
+    {"gains": Gains(min_deflection=0.1)},
+)
