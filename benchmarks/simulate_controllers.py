@@ -192,12 +192,31 @@ for _name, _label, _kw in (
         "position",
     )
 
-#: the stiffer controller and the drift lead at the stance feet together (``stiff0.1`` and
-#: ``feetdrift28``, each better than eval's default on root-relative error in a 4-clip smoke run)
-CONTROLLERS["stiff0.1feet"] = (
-    "sampler, 28 samples, eval's defaults, stiffness cap 0.1 rad, the drift lead read at the "
-    "stance feet",
-    {"controller": "sampling", "samples": 28, "search": FEET_DRIFT},
-    "position",
-    {"gains": Gains(min_deflection=0.1)},
-)
+#: the stiffer controllers further (a 2-clip smoke run: 12 Hz lowered the root-relative error
+#: most) and with the drift lead at the stance feet
+for _name, _gains, _search, _label in (
+    (
+        "stiff0.05w16",
+        Gains(min_deflection=0.05, omega=2 * np.pi * 16.0),
+        {},
+        "stiffness cap 0.05 rad, 16 Hz bandwidth",
+    ),
+    (
+        "stiff0.1w12feet",
+        Gains(min_deflection=0.1, omega=2 * np.pi * 12.0),
+        FEET_DRIFT,
+        "stiffness cap 0.1 rad, 12 Hz bandwidth, the drift lead read at the stance feet",
+    ),
+    (
+        "stiff0.1feet",
+        Gains(min_deflection=0.1),
+        FEET_DRIFT,
+        "stiffness cap 0.1 rad, the drift lead read at the stance feet",
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults, {_label}",
+        {"controller": "sampling", "samples": 28, "search": _search},
+        "position",
+        {"gains": _gains},
+    )  # fmt: skip
