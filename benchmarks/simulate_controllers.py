@@ -179,6 +179,11 @@ for _name, _label, _search in (
 FEET_DRIFT = {"balance": dataclasses.replace(DEFAULT_BALANCE, drift_feet=True)}
 for _name, _label, _kw in (
     ("cc28", "the contact-consistent reference", {"contact_reference": True}),
+    (
+        "lifted28",
+        "the lifted reference (eval's default before the contact-consistent one)",
+        {"contact_reference": False},
+    ),
     ("feetdrift28", "the drift lead read at the stance feet", {"search": FEET_DRIFT}),
     (
         "ccfeetdrift28",
@@ -220,3 +225,9 @@ for _name, _gains, _search, _label in (
         "position",
         {"gains": _gains},
     )  # fmt: skip
+
+#: every candidate but eval's own defaults (``default<n>``) keeps the reference it was measured
+#: with: the lifted one, eval's default before the contact-consistent one
+for _name, _entry in CONTROLLERS.items():
+    if not _name.startswith("default") and "contact_reference" not in _entry[1]:
+        _entry[1]["contact_reference"] = False
