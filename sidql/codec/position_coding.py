@@ -18,9 +18,9 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.encoded import Encoded, measure, where_prefix
-from sidql.codec.entropy import encode_integers, estimate_size
+from sidql.codec.entropy import encode_integers
 from sidql.codec.plan import plan, position_band_costs
-from sidql.codec.position_format import channel_kinds, coded_rows
+from sidql.codec.position_format import channel_kinds, coded_rows, estimated_block
 from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser, aim_basis
 from sidql.codec.shared_cache import SharedCache
@@ -67,7 +67,8 @@ CODED_BYTES = 8 << 20
 class _PositionSearch:
     """Keyframes and step sizes of one reconstruction under coding 2 (position-coded).
 
-    Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
+    Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`,
+    :func:`~sidql.codec.position_format.estimated_block`);
     the range coder itself runs only on the few plans that may be kept."""
 
     def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf, coded=None):
@@ -113,7 +114,7 @@ class _PositionSearch:
         return self.coded.get(key, make)
 
     def estimate(self, keys, codes) -> float:
-        return self.header + estimate_size(coded_rows(keys, codes))
+        return self.header + estimated_block(keys, codes)
 
     def size(self, keys, codes) -> int:
         kinds = channel_kinds(self.series.n_bones)
