@@ -19,6 +19,7 @@ change them.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -37,14 +38,15 @@ from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noq
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.simulate.balance import Balance  # noqa: E402
-from sim.simulate.model import sim_model  # noqa: E402
+from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
-from sim.simulate.validate import ForwardValidation  # noqa: E402
+from sim.simulate.validate import DEFAULT_BALANCE, ForwardValidation, validation_model  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
 #: balance feedback
 FIRST_SAMPLER = {"weights": CostWeights(fall=0.0), "lookahead": 48, "balance": None}
-#: ``--controllers`` names: (label, ForwardValidation keywords, actuators)
+#: ``--controllers`` names: (label, ForwardValidation keywords, actuators[, the body's
+#: ``sim_model`` keywords: ``validate.validation_model``'s, eval's gains unless they name some])
 CONTROLLERS = {
     "plain": ("plain tracker", {"controller": "plain"}, "position"),
     "sampling64": (
@@ -118,6 +120,28 @@ for _name, (_search, _label) in DRIFT.items():
     )
 
 
+#: stiffer controllers on eval's default (``default28``), the torque limits the human ones in
+#: all: ``stiff<d>`` caps each hinge's stiffness at its peak torque over d [rad]
+#: (``Gains.min_deflection``, 0.25 by default), ``w12`` at 12 Hz bandwidth instead of 8, ``rad``
+#: with the sampler's noise in the default body's angles (``noise_deflection`` 0.25: the
+#: offsets' spread stays what it was in radians, not shrunk by the stiffer joints)
+_RAD = {"noise_deflection": MIN_DEFLECTION}
+STIFF = {
+    "stiff0.1": (Gains(min_deflection=0.1), {}, "stiffness cap 0.1 rad"),
+    "stiff0.05": (Gains(min_deflection=0.05), {}, "stiffness cap 0.05 rad"),
+    "stiff0.1w12": (Gains(min_deflection=0.1, omega=2 * np.pi * 12.0), {},
+                    "stiffness cap 0.1 rad, 12 Hz bandwidth"),
+    "stiff0.1rad": (Gains(min_deflection=0.1), _RAD,
+                    "stiffness cap 0.1 rad, sampler noise in the 0.25 rad body's angles"),
+}  # fmt: skip
+for _name, (_gains, _search, _label) in STIFF.items():
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults, {_label}",
+        {"controller": "sampling", "samples": 28, "search": _search},
+        "position",
+        {"gains": _gains},
+    )
+
 #: swing-foot placement (``sim.simulate.balance.Balance(c_d, c_v)``: the capture point's error)
 STEP = Balance(c_d=1.0, c_v=0.3)
 STEP_HALF = Balance(c_d=0.5, c_v=0.15)
@@ -157,6 +181,29 @@ for _name, _label, _search in (
     )  # fmt: skip
 
 
+#: candidates on eval's default (``default28``: 28 samples, the balance feedback with the drift
+#: lead, ``sim.simulate.validate.DEFAULT_BALANCE``): ``cc28`` tracks the contact-consistent
+#: reference (no floor lift, stance soles on z = 0; ``ForwardValidation(contact_reference=
+#: True)``; measured against the same lifted points as the default); ``feetdrift28`` reads the
+#: drift lead's position error at the stance feet instead of the root (``Balance.drift_feet``);
+#: ``ccfeetdrift28`` both
+FEET_DRIFT = {"balance": dataclasses.replace(DEFAULT_BALANCE, drift_feet=True)}
+for _name, _label, _kw in (
+    ("cc28", "the contact-consistent reference", {"contact_reference": True}),
+    ("feetdrift28", "the drift lead read at the stance feet", {"search": FEET_DRIFT}),
+    (
+        "ccfeetdrift28",
+        "the contact-consistent reference, the drift lead read at the stance feet",
+        {"contact_reference": True, "search": FEET_DRIFT},
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults with {_label}",
+        {"controller": "sampling", "samples": 28, **_kw},
+        "position",
+    )
+
+
 def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
     """Per controller name, the figures of ``ForwardValidation.run`` on case ``c``'s original
     motion (its IK fit from ``setup``, :func:`physics_setup`); ``bodies`` caches each subject's
@@ -168,7 +215,7 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         model_kw = CONTROLLERS[n][3] if len(CONTROLLERS[n]) > 3 else {}
         if (c.asf, n) not in bodies:
             skeleton = subject_model(c.asf)[0]
-            model = sim_model(skeleton, actuators=actuators, **model_kw)
+            model = validation_model(skeleton, actuators=actuators, **model_kw)
             bodies[c.asf, n] = ForwardValidation(
                 model, _protocol_names(c.clip), threads=threads, **kw
             )
@@ -179,6 +226,7 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         cpu = (time.process_time() - t0) / seconds
         wall = (time.perf_counter() - w0) / seconds
         out[n] = {"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
+                  "sim_unstable": int(bodies[c.asf, n].last_unstable),
                   "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall}  # fmt: skip
     return out
 
@@ -310,7 +358,10 @@ def controllers_markdown(rows: dict[str, list[dict]]) -> str:
             f"| {med('sim_error_mm'):.0f} | {med('sim_skate_mm_s'):.0f} "
             f"| {med('sim_skate_ref_mm_s'):.0f} | {cpu:.2f} |"
         )
-    return head + "\n".join(lines) + "\n"
+    unstable = {n: sum(r.get("sim_unstable", 0) for r in rs) for n, rs in rows.items()}
+    note = "".join(f"\n{CONTROLLERS[n][0]}: MuJoCo flagged a diverging acceleration in {k} "
+                   "clips.\n" for n, k in unstable.items() if k)  # fmt: skip
+    return head + "\n".join(lines) + "\n" + note
 
 
 def main() -> None:

@@ -8,16 +8,22 @@ import mujoco
 import numpy as np
 import pytest
 
+from sim.errors import UsageError
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.controller import ActuatorEdits, Weakening, track
 from sim.simulate.model import (
+    CONTROL_HZ,
     HUMAN_PEAK_TORQUE,
     MIN_DEFLECTION,
     SUBSTEPS,
+    TARGET_SPEED,
     Gains,
     human_torque_limit,
     sim_model,
 )
+
+#: stiffer controllers than the default: a smaller stiffness cap, and a higher bandwidth too
+STIFF = [Gains(min_deflection=0.05), Gains(min_deflection=0.1, omega=2 * np.pi * 12.0)]
 
 
 @pytest.fixture(scope="module")
@@ -71,6 +77,73 @@ def test_torque_limits_are_the_human_table_whatever_the_gain(factor):
         mujoco.mj_step(scaled, data)
         assert np.all(np.abs(data.actuator_force) <= table * (1 + 1e-12))
     assert np.abs(data.actuator_force).max() > 0.999 * table.min()
+
+
+@pytest.mark.parametrize("gains", [Gains(), *STIFF])
+def test_stiffness_is_the_bandwidth_capped_at_the_limit_over_the_deflection(model, gains):
+    """kp = min(omega^2 I, limit / min_deflection) per hinge (I: the hinge's reflected inertia
+    at rest, the mass matrix's diagonal, read off the default body, whose armature is the
+    plain model's), kv = 2 zeta sqrt(kp I) (the damping ratio kept under the cap), armature at
+    least kp h^2, and the control range the joint's widened by (limit + kv TARGET_SPEED) / kp;
+    the default gains are the default body, bit for bit."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    M = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, M)
+    inertia = np.diag(M)[6:]
+    body = sim_model(canonical_skeleton(), gains=gains)
+    lim = body.actuator_forcerange[:, 1]
+    kp = body.actuator_gainprm[:, 0]
+    kv = -body.actuator_biasprm[:, 2]
+    np.testing.assert_allclose(kp, np.minimum(gains.omega**2 * inertia, lim / gains.min_deflection))
+    np.testing.assert_allclose(kv, 2 * gains.zeta * np.sqrt(kp * inertia))
+    h = 1.0 / (CONTROL_HZ * SUBSTEPS)
+    assert np.all(body.dof_armature[6:] >= kp * h**2 * (1 - 1e-12))
+    reach = (lim + kv * TARGET_SPEED) / kp
+    jrange = body.jnt_range[body.actuator_trnid[:, 0]]
+    np.testing.assert_allclose(body.actuator_ctrlrange[:, 0], jrange[:, 0] - reach)
+    np.testing.assert_allclose(body.actuator_ctrlrange[:, 1], jrange[:, 1] + reach)
+    if gains == Gains():
+        for field in ("actuator_gainprm", "actuator_biasprm", "actuator_ctrlrange",
+                      "dof_armature", "actuator_forcerange"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(body, field), getattr(model, field))
+        assert gains.min_deflection == MIN_DEFLECTION
+    else:  # stiffer where the cap held: the hips and the trunk
+        stiffer = kp > model.actuator_gainprm[:, 0] * 1.5
+        assert {"lfemur_rx", "lowerback_rx"} <= {
+            body.actuator(i).name for i in np.where(stiffer)[0]
+        }
+
+
+def test_a_stiffness_cap_must_be_a_positive_angle():
+    for bad in (0.0, -0.1, float("nan")):
+        with pytest.raises(UsageError):
+            Gains(min_deflection=bad)
+
+
+@pytest.mark.parametrize("gains", STIFF)
+def test_a_stiffer_controller_applies_at_most_the_human_limit(gains):
+    """A stiffer controller is no stronger body: every joint driven past its limit (both signs,
+    a target far beyond the stiffness's reach) applies at most the human table's torque, and
+    reaches it."""
+    body = sim_model(canonical_skeleton(), gains=gains)
+    table = np.array([human_torque_limit(body.actuator(i).name) for i in range(body.nu)])
+    np.testing.assert_array_equal(body.actuator_forcerange[:, 1], table)
+    data = mujoco.MjData(body)
+    kp = body.actuator_gainprm[:, 0]
+    dof = body.jnt_dofadr[body.actuator_trnid[:, 0]]
+    reached = np.zeros(body.nu)
+    for sign in (1.0, -1.0):
+        mujoco.mj_resetData(body, data)
+        data.qpos[2] = 2.0  # in the air
+        for _ in range(60):
+            data.ctrl[:] = data.qpos[7:] + sign * (3.0 + 10 * table / kp)
+            mujoco.mj_step(body, data)
+            assert np.all(np.abs(data.actuator_force) <= table * (1 + 1e-12))
+            assert np.all(np.abs(data.qfrc_actuator[dof]) <= table * (1 + 1e-9))
+            reached = np.maximum(reached, np.abs(data.actuator_force) / table)
+        assert np.all(np.isfinite(data.qpos))
+    assert reached.min() > 0.999
 
 
 def test_motor_actuators_clamp_torque_to_the_human_limit():

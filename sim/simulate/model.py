@@ -54,7 +54,7 @@ from sim.model.mass import DEFAULT_BODY_MASS_KG
 CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
-MIN_DEFLECTION = 0.25  # [rad] the smallest angle error that asks for a joint's peak torque
+MIN_DEFLECTION = 0.25  # [rad] default: the smallest angle error that asks for a peak torque
 # [rad/s] a position actuator's control range is its joint's range widened by (limit + kv *
 # TARGET_SPEED) / kp: a target that far out asks for the peak torque from anywhere in the range
 # while the joint moves towards it at up to this speed (faster, the damping takes a share)
@@ -113,13 +113,20 @@ FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's default impedance
 @dataclass(frozen=True)
 class Gains:
     """Tracking gains of the position actuators' feedback: hinge bandwidth ``omega`` [rad/s] and
-    damping ratio; root ones likewise. Feedback gains belong to the controller; the torque
-    limits (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them."""
+    damping ratio; root ones likewise; ``min_deflection`` [rad] caps each hinge's stiffness at
+    its torque limit over it (the smallest angle error that asks for the peak torque; smaller:
+    a stiffer controller). Feedback gains belong to the controller; the torque limits
+    (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them."""
 
     omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
     root_omega: float = 2 * np.pi * 2.0
     root_zeta: float = 1.0
+    min_deflection: float = MIN_DEFLECTION
+
+    def __post_init__(self):
+        if not self.min_deflection > 0:
+            raise UsageError(f"min_deflection must be positive; got {self.min_deflection}")
 
     def scaled(self, factor: float) -> Gains:
         """Stiffness scaled by ``factor`` (bandwidth by its square root); the torque limits stay
@@ -198,7 +205,7 @@ def sim_spec(
         kp = gains.omega**2 * inertia[j - 1]
         raised = max(1.0, stance / kp) if name[1:] in ANKLE_JOINTS else 1.0
         kp *= raised
-        cap = min(1.0, limit / MIN_DEFLECTION / kp)  # human stiffness; damping ratio kept
+        cap = min(1.0, limit / gains.min_deflection / kp)  # the controller's cap; zeta kept
         kp *= cap
         kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(raised * cap)
         if actuators == "motor":
