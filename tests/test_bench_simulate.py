@@ -18,11 +18,10 @@ from sim.simulate.validate import validation_model
 BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
 
 
-@pytest.fixture(scope="module")
-def bench():
+def _load(name: str):
     sys.path.insert(0, str(BENCH))
     try:
-        spec = importlib.util.spec_from_file_location("bench_simulate", BENCH / "bench_simulate.py")
+        spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
     finally:
@@ -30,13 +29,23 @@ def bench():
     return module
 
 
-def test_stiff_candidates_are_eval_default_with_a_stiffer_body_of_human_strength(bench):
+@pytest.fixture(scope="module")
+def bench():
+    return _load("bench_simulate")
+
+
+@pytest.fixture(scope="module")
+def candidates():
+    return _load("simulate_controllers")
+
+
+def test_stiff_candidates_are_eval_default_with_a_stiffer_body_of_human_strength(candidates):
     skeleton = canonical_skeleton()
     base = validation_model(skeleton)
-    default = bench.CONTROLLERS["default28"]
-    assert len(bench.STIFF) <= 4
-    for name in bench.STIFF:
-        label, kw, actuators, body = bench.CONTROLLERS[name]
+    default = candidates.CONTROLLERS["default28"]
+    assert len(candidates.STIFF) <= 4
+    for name in candidates.STIFF:
+        label, kw, actuators, body = candidates.CONTROLLERS[name]
         assert kw["controller"] == default[1]["controller"] and kw["samples"] == 28
         assert actuators == "position" and set(body) == {"gains"}
         assert body["gains"].min_deflection < MIN_DEFLECTION
@@ -45,7 +54,9 @@ def test_stiff_candidates_are_eval_default_with_a_stiffer_body_of_human_strength
         np.testing.assert_array_equal(model.actuator_forcerange[:, 1], table)
         kp, kp0 = model.actuator_gainprm[:, 0], base.actuator_gainprm[:, 0]
         assert np.all(kp >= kp0) and np.any(kp > 1.5 * kp0)
-    assert bench.CONTROLLERS["stiff0.1rad"][1]["search"] == {"noise_deflection": MIN_DEFLECTION}
+    assert candidates.CONTROLLERS["stiff0.1rad"][1]["search"] == {
+        "noise_deflection": MIN_DEFLECTION
+    }
 
 
 def test_the_table_says_where_a_simulation_went_unstable(bench):

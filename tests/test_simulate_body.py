@@ -32,6 +32,11 @@ def model():
 
 
 @pytest.fixture(scope="module")
+def lean_model():
+    return sim_model(canonical_skeleton(), lean=True)
+
+
+@pytest.fixture(scope="module")
 def walk_ref(trial_on_floor, model):
     return trial_on_floor(model, "02_01")[:120]
 
@@ -162,10 +167,13 @@ def test_motor_actuators_clamp_torque_to_the_human_limit():
     np.testing.assert_allclose(data.actuator_force, 0.3 * table)
 
 
-def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(model):
+@pytest.mark.parametrize("body", ["model", "lean_model"])
+def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(body, request):
     """Each control asks for several times the joint's peak torque (a target 3 rad off plus a
     huge feed-forward, both signs); the torque MuJoCo applies (``actuator_force`` and the
-    actuator part of ``qfrc_actuator``) reaches the limit and never exceeds it."""
+    actuator part of ``qfrc_actuator``) reaches the limit and never exceeds it (the lean body
+    too)."""
+    model = request.getfixturevalue(body)
     data = mujoco.MjData(model)
     lim = model.actuator_forcerange[:, 1]
     kp = model.actuator_gainprm[:, 0]
@@ -294,12 +302,15 @@ def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
             assert all(np.array_equal(a[k], b[k]) for k in a.files)
 
 
-def test_non_adjacent_bodies_collide_and_near_ones_do_not(model):
+@pytest.mark.parametrize("body", ["model", "lean_model"])
+def test_non_adjacent_bodies_collide_and_near_ones_do_not(body, request):
     """Legs driven to cross stop at each other: the shins' and thighs' overlap in the simulation
     stays at the contact softness, while the pose they were driven to overlaps by several cm;
-    in the rest pose nothing touches (pairs meeting at a joint are excluded)."""
+    in the rest pose nothing touches (pairs meeting at a joint are excluded). The lean body
+    too."""
     from sim.simulate.model import self_collision_exclusions
 
+    model = request.getfixturevalue(body)
     data = mujoco.MjData(model)
     data.qpos[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]
     data.qpos[2] = 2.0

@@ -89,7 +89,7 @@ def test_figures_are_measured_against_the_lifted_points_whatever_is_tracked(
         tracked["ref"] = ref
         lift = bodies[0].reference(tracked["qpos"], 30.0, tracked["floor"], contact=False)
         states = lift[::record_every]
-        return SimpleNamespace(qpos=states, fell=False, fall_frame=-1,
+        return SimpleNamespace(qpos=states, fell=False, fall_frame=-1, unstable=False,
                                joint_torque=np.zeros((len(states), model.nu)))  # fmt: skip
 
     monkeypatch.setattr(validate, "track", perfect)

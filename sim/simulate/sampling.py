@@ -25,7 +25,8 @@ number of ``threads`` the rollouts run on.
 
 Cost: ``samples`` rollouts of up to ``window + lookahead`` ticks per window plus one replay:
 with the balance feedback about 4.9 CPU s per simulated second at 28 samples, 5.2 at 32
-(without it 4.4 at 32; ``docs/results/simulate_controllers.md``).
+(without it 4.4 at 32; ``docs/results/simulate_controllers.md``); on ``sim_model(lean=True)``
+0.90-0.94 times that, the same motion (``docs/results/simulate_step.md``).
 """
 
 from __future__ import annotations
