@@ -214,7 +214,7 @@ def _optimum_costs(X, R, linear, W):
     band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
     C = np.zeros((N, N))
     bounds = np.full((N, N), np.inf)
-    _fill_costs(X, R, linear, C, 2, band, bounds)
+    _fill_costs(X, R, linear, C, 2, band, bounds, np.empty((0, 0)))
     Cb = C.copy()  # the band alone: its optimum U bounds the true one
     lb = C.copy()  # a lower bound of every entry: exact in the band, one middle frame outside
     dX = np.empty(D)
@@ -233,7 +233,7 @@ def _optimum_costs(X, R, linear, W):
             for w in range(1, W):
                 rest = min(rest, head[w, i] + tail[W - w, N - 1 - j])
             bounds[i, j] = U - rest
-    _fill_costs(X, R, linear, C, band, N, bounds)
+    _fill_costs(X, R, linear, C, band, N, bounds, lb)  # lb: their middle frames' costs
     return C
 
 

@@ -44,7 +44,7 @@ def _cost_matrix(X, R, linear):
     """
     N = X.shape[0]
     C = np.zeros((N, N))
-    _fill_costs(X, R, linear, C, 2, N, np.full((N, N), np.inf))
+    _fill_costs(X, R, linear, C, 2, N, np.full((N, N), np.inf), np.empty((0, 0)))
     return C
 
 
@@ -54,22 +54,25 @@ _FAST = {"reassoc", "contract", "nsz", "arcp", "afn"}
 
 
 @numba.njit(cache=True, fastmath=_FAST)
-def _fill_costs(X, R, linear, C, lo, hi, bounds):
+def _fill_costs(X, R, linear, C, lo, hi, bounds, first):
     """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``
     (:func:`_entry_cost` with bound ``bounds[i, j]``; every caller passes an (N, N) array, so
-    all run one compiled loop and keep the same numbers)."""
+    all run one compiled loop and keep the same numbers). ``first``: (N, N) the middle frame's
+    cost of each entry (:func:`_frame_cost`) where the caller knows it already, else (0, 0)."""
     N, D = X.shape
     dX = np.empty(D)
+    known = first.shape[0] > 0
     for i in range(N):
         for j in range(i + max(lo, 2), min(i + hi, N)):
-            C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j])
+            mid_cost = first[i, j] if known else -1.0
+            C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j], mid_cost)
 
 
 @numba.njit(cache=True, fastmath=_FAST, inline="always")
-def _entry_cost(X, R, dX, i, j, linear, bound):
+def _entry_cost(X, R, dX, i, j, linear, bound, mid_cost=-1.0):
     """``C[i, j]`` of :func:`_cost_matrix` (``dX``: (D,) scratch), or inf if it exceeds
     ``bound``. The frames are summed from the middle out (where a segment's error is largest):
-    the middle one, then four at a time (one pass over the channels for four frames), then the
+    the middle one (``mid_cost``, its :func:`_frame_cost`, where known: >= 0), then four at a time (one pass over the channels for four frames), then the
     last few one by one; after each pass the sum so far is compared with the bound and the
     entry abandoned once over it. Whatever the bound, an entry kept is the same sum in the
     same order, so the same number."""
@@ -77,7 +80,9 @@ def _entry_cost(X, R, dX, i, j, linear, bound):
         dX[d] = X[j, d] - X[i, d]
     L = j - i
     mid = i + L // 2
-    total = _frame_cost(X, R, dX, i, j, mid, linear)  # frame t = 0: mid, alone (abandons most)
+    total = mid_cost  # frame t = 0: mid, alone (abandons most)
+    if total < 0.0:
+        total = _frame_cost(X, R, dX, i, j, mid, linear)
     if total > bound:
         return np.inf
     t = 1

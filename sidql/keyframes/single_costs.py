@@ -126,11 +126,11 @@ def single_costs(X: np.ndarray, R: np.ndarray) -> np.ndarray:
     :meth:`sidql.learning.policy.Policy.decide` makes of any costs it is given)."""
     X = np.ascontiguousarray(X, np.float64)
     R32 = padded_rates(np.ascontiguousarray(R, np.float64))
-    return single_cost_matrix(X, R32, _weights_of(len(X)))
+    return single_cost_matrix(X, R32, weights_of(len(X)))
 
 
 @lru_cache(maxsize=8)
-def _weights_of(N: int) -> np.ndarray:
+def weights_of(N: int) -> np.ndarray:
     """:func:`weight_table` of N, made once per clip length (read only)."""
     H = weight_table(N)
     H.flags.writeable = False
