@@ -11,7 +11,7 @@ import numpy as np
 from torch import nn
 
 from sidql.keyframes.segment_costs import _clip_stacked_chart
-from sidql.keyframes.single_costs import padded_rates, single_cost_matrix
+from sidql.keyframes.single_costs import single_cost_matrix, turn_rates
 from sidql.learning.qnet import N_SCALARS, KeyframeQNet
 from sidql.learning.rollout import best_splits, greedy_sequences_of, rollout_values_seq
 from sidql.learning.tasks import _stacked_features
@@ -168,7 +168,7 @@ def select_clip(positions, velocities, idx, parents, dt, sin_eps, H, W, use_prio
     if not ok:
         return np.empty(0, np.int64), False
     proj, glob = encode_clip(_stacked_features(X, R), *enc_w)
-    cost = single_cost_matrix(X, padded_rates(R), H)
+    cost = single_cost_matrix(X, turn_rates(R), H)
     return decide_clip(proj, glob, cost, W, use_prior, *head_w), True
 
 
