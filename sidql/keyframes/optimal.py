@@ -19,6 +19,8 @@ import numpy as np
 from sidql.keyframes.segment_costs import (
     _FAST,
     SEPARABLE,
+    TURN,
+    TWO_PI,
     _fill_costs,
     _frame_cost,
     catmull_rom_costs,
@@ -211,6 +213,7 @@ def _optimum_costs(X, R, linear, W):
     ``sidql/keyframes/__pycache__/*.nb*`` after one (tests/test_keyframes_fused.py checks the
     numbers against the full matrix)."""
     N, D = X.shape
+    X, R = X * TURN, R * TURN  # the kernels' unit (turns), back to radians at the end
     band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
     C = np.zeros((N, N))
     bounds = np.full((N, N), np.inf)
@@ -234,7 +237,7 @@ def _optimum_costs(X, R, linear, W):
                 rest = min(rest, head[w, i] + tail[W - w, N - 1 - j])
             bounds[i, j] = U - rest
     _fill_costs(X, R, linear, C, band, N, bounds, lb)  # lb: their middle frames' costs
-    return C
+    return C * TWO_PI
 
 
 def optimal_keyframes(
