@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results import write_results  # noqa: E402
+from simulate_controllers import CONTROLLERS  # noqa: E402
 
 from sidql.evaluation.cases import load_cases  # noqa: E402
 from sidql.evaluation.evaluate import evaluate  # noqa: E402
@@ -36,125 +38,7 @@ from sidql.evaluation.tables import simulate_markdown  # noqa: E402
 from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
-from sim.simulate.balance import Balance  # noqa: E402
-from sim.simulate.model import sim_model  # noqa: E402
-from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
-from sim.simulate.validate import ForwardValidation  # noqa: E402
-
-#: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
-#: balance feedback
-FIRST_SAMPLER = {"weights": CostWeights(fall=0.0), "lookahead": 48, "balance": None}
-#: ``--controllers`` names: (label, ForwardValidation keywords, actuators)
-CONTROLLERS = {
-    "plain": ("plain tracker", {"controller": "plain"}, "position"),
-    "sampling64": (
-        "sampler, 64 samples (as first built)",
-        {"controller": "sampling", "samples": 64, "search": FIRST_SAMPLER},
-        "position",
-    ),
-    "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
-}
-#: the sampler before foot holding, elite reuse and the drift lead (``CostWeights.hold`` 0, no
-#: elite, the balance feedback ``Balance()`` without ``k_drift``)
-BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0, "balance": Balance()}
-for _n in (16, 24, 28, 32, 48, 64):
-    CONTROLLERS[f"falls{_n}"] = (  # falls in the cost, no balance feedback
-        f"sampler, {_n} samples, falls in its cost",
-        {"controller": "sampling", "samples": _n, "search": {**BEFORE_HOLD, "balance": None}},
-        "position",
-    )
-    CONTROLLERS[f"balance{_n}"] = (  # and the balance feedback (eval's default before hold)
-        f"sampler, {_n} samples, falls in its cost, balance feedback",
-        {"controller": "sampling", "samples": _n, "search": BEFORE_HOLD},
-        "position",
-    )
-    CONTROLLERS[f"default{_n}"] = (  # the sampler as eval runs it now (validate's defaults)
-        f"sampler, {_n} samples, eval's defaults now: falls in its cost, balance feedback with "
-        f"the drift lead, foot holding {CostWeights().hold:g}, "
-        f"{search_offsets.__kwdefaults__['elite']} elite",
-        {"controller": "sampling", "samples": _n},
-        "position",
-    )
-for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footholding) ...
-    for _e in (0, 1, 4, 8):  # ... and elite reuse (search_offsets(elite=...))
-        _name = (f"hold{_w}" if _w else "") + (f"elite{_e}" if _e else "")
-        if _name:
-            CONTROLLERS[_name] = (
-                f"sampler, 28 samples, falls in its cost, balance feedback, foot holding {_w}, "
-                f"{_e} elite",
-                {"controller": "sampling", "samples": 28,
-                 "search": {"weights": CostWeights(hold=_w), "elite": _e, "balance": Balance()}},
-                "position",
-            )  # fmt: skip
-
-#: candidates against the root's drift, each on the default (28 samples, balance feedback):
-#: ``bdrift<k>`` the balance feedback's velocity target leads by k [1/s] times the root's
-#: horizontal position error (``Balance.k_drift``); ``xy<w>`` the cost's root position weight
-#: (``CostWeights.root_xy``, 20 by default); ``vdrift<w>`` the cost's root velocity weight w
-#: with its target leading by 1/s times the position error (``CostWeights.drift_rate``)
-DRIFT = {
-    **{f"bdrift{_k:g}": ({"balance": Balance(k_drift=_k)}, f"balance drift {_k:g}/s")
-       for _k in (0.5, 1, 2, 4)},
-    **{f"xy{_w}": ({"weights": CostWeights(root_xy=_w)}, f"root position weight {_w}")
-       for _w in (50, 100, 200)},
-    **{f"vdrift{_w}": ({"weights": CostWeights(root_vel=_w, drift_rate=1.0)},
-                       f"root velocity weight {_w}, leading by 1/s times the drift")
-       for _w in (2, 5, 10)},
-    "bdrift2x5": ({"balance": Balance(k_drift=2.0, drift_max=0.5)},
-                  "balance drift 2/s up to 0.5 m"),
-    **{f"bdrift{_k}dead{_d:g}": ({"balance": Balance(k_drift=_k, drift_max=0.3 + _d,
-                                                      drift_dead=_d)},
-                                 f"balance drift {_k}/s beyond {_d:g} m")
-       for _k in (2, 4) for _d in (0.05, 0.1)},
-    "bdrift2v2": ({"balance": Balance(k_drift=2.0),
-                   "weights": CostWeights(root_vel=2.0, drift_rate=1.0)},
-                  "balance drift 2/s, root velocity weight 2 leading by 1/s times the drift"),
-}  # fmt: skip
-for _name, (_search, _label) in DRIFT.items():
-    CONTROLLERS[_name] = (
-        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
-        {"controller": "sampling", "samples": 28, "search": {"balance": Balance(), **_search}},
-        "position",
-    )
-
-
-#: swing-foot placement (``sim.simulate.balance.Balance(c_d, c_v)``: the capture point's error)
-STEP = Balance(c_d=1.0, c_v=0.3)
-STEP_HALF = Balance(c_d=0.5, c_v=0.15)
-#: foot holding 5 given up where the body's capture point leaves its support and the reference's
-#: does not
-CAPTURE_REF = CostWeights(hold=5.0, hold_capture=True, hold_capture_ref=True)
-for _name, _label, _search in (
-    ("step", "swing-foot placement", {"balance": STEP}),
-    (
-        "holdcap5",
-        "foot holding 5 off while the capture point leaves the support",
-        {"weights": CostWeights(hold=5.0, hold_capture=True)},
-    ),
-    (
-        "stepholdcap5",
-        "swing-foot placement, foot holding 5 off while the capture point leaves the support",
-        {"balance": STEP, "weights": CostWeights(hold=5.0, hold_capture=True)},
-    ),
-    ("stephalf", "swing-foot placement at half the gains", {"balance": STEP_HALF}),
-    (
-        "holdcapref5",
-        "foot holding 5 off while the capture point leaves the support where the reference's "
-        "does not",
-        {"weights": CAPTURE_REF},
-    ),
-    (
-        "stepholdcapref5",
-        "swing-foot placement, foot holding 5 off while the capture point leaves the support "
-        "where the reference's does not",
-        {"balance": STEP, "weights": CAPTURE_REF},
-    ),
-):
-    CONTROLLERS[_name] = (
-        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
-        {"controller": "sampling", "samples": 28, "search": {**BEFORE_HOLD, **_search}},
-        "position",
-    )  # fmt: skip
+from sim.simulate.validate import ForwardValidation, validation_model  # noqa: E402
 
 
 def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
@@ -168,7 +52,7 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         model_kw = CONTROLLERS[n][3] if len(CONTROLLERS[n]) > 3 else {}
         if (c.asf, n) not in bodies:
             skeleton = subject_model(c.asf)[0]
-            model = sim_model(skeleton, actuators=actuators, **model_kw)
+            model = validation_model(skeleton, actuators=actuators, **model_kw)
             bodies[c.asf, n] = ForwardValidation(
                 model, _protocol_names(c.clip), threads=threads, **kw
             )
@@ -179,6 +63,7 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         cpu = (time.process_time() - t0) / seconds
         wall = (time.perf_counter() - w0) / seconds
         out[n] = {"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
+                  "sim_unstable": int(bodies[c.asf, n].last_unstable),
                   "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall}  # fmt: skip
     return out
 
@@ -196,24 +81,33 @@ def _clip_task(item) -> dict[str, dict]:
 
 
 def controller_rows(
-    cases, names: list[str], log=None, threads: int = 1, workers: int = 1
+    cases,
+    names: list[str],
+    log=None,
+    threads: int = 1,
+    workers: int = 1,
+    deadline: float | None = None,
 ) -> dict[str, list[dict]]:
     """Per controller name (:data:`CONTROLLERS`), the figures of
     ``ForwardValidation.run`` for the original motion (its IK fit) of every case, in case
     order: in one process (the sampler's rollouts on ``threads`` threads; its CPU time counts
     every thread's), or one clip per task on ``workers`` processes (the same figures: every
-    controller is deterministic and each trial's physics is set up from all its clips)."""
+    controller is deterministic and each trial's physics is set up from all its clips).
+    ``deadline`` [s of wall time from the call]: no clip is started after it (every
+    controller still runs on each clip started, so the rows stay paired); the clips are then
+    taken every fifth first (:func:`spread_order`), so those done spread over the trials."""
     out: dict[str, list[dict]] = {n: [] for n in names}
     if workers <= 1:
         setup, bodies = physics_setup(cases), {}
-        per_clip = (_clip_rows(c, setup, names, bodies, threads) for c in cases)
-        done = enumerate(per_clip)
+        order = spread_order(len(cases)) if deadline else range(len(cases))
+        done = _in_time(((i, _clip_rows(cases[i], setup, names, bodies, threads))
+                         for i in order), deadline)  # fmt: skip
     else:
         by_trial: dict[str, list] = {}
         for c in cases:
             by_trial.setdefault(c.clip.source, []).append(c)
         items = [(c, by_trial[c.clip.source], names, threads) for c in cases]
-        done = _pool_rows(items, workers)
+        done = _pool_rows(items, workers, deadline)
     got: dict[int, dict] = {}
     for i, rows in done:
         got[i] = rows
@@ -226,12 +120,40 @@ def controller_rows(
     return out
 
 
-def _pool_rows(items: list, workers: int):
-    """(position, rows) of :func:`_clip_task` per item as the clips finish; a clip whose
-    simulation failed is reported and left out."""
+def spread_order(n: int, stride: int = 5) -> list[int]:
+    """The positions 0..n-1, every ``stride``-th first (0, 5, 10, ..., then 1, 6, ...): any
+    prefix of the clips spreads over the trials (the first n / 5 are ``--every 5``'s clips)."""
+    return sorted(range(n), key=lambda i: (i % stride, i))
+
+
+def _in_time(pairs, deadline: float | None):
+    """``pairs`` (lazily) until ``deadline`` seconds have passed since the first was asked."""
+    t0 = time.perf_counter()
+    for pair in pairs:
+        yield pair
+        if deadline is not None and time.perf_counter() - t0 > deadline:
+            return
+
+
+def _pool_rows(items: list, workers: int, deadline: float | None = None):
+    """(position, rows) of :func:`_clip_task` per item as the clips finish, none started after
+    ``deadline`` seconds (then in :func:`spread_order`); a clip whose simulation failed is
+    reported and left out."""
     from sim.batch import iter_batch
 
-    for i, outcome in iter_batch(_clip_task, items, workers=workers, progress=False):
+    order = spread_order(len(items)) if deadline else range(len(items))
+    t0 = time.perf_counter()
+
+    def started():  # items handed to the pool lazily: none after the deadline
+        for i in order:
+            if deadline is not None and time.perf_counter() - t0 > deadline:
+                return
+            yield items[i]
+
+    tasks = list(order)  # the pool numbers items by their place in the stream
+    for k, outcome in iter_batch(_clip_task, started(), workers=workers, progress=False,
+                                 in_flight=workers):  # fmt: skip
+        i = tasks[k]
         if outcome.ok:
             yield i, outcome.result
         else:
@@ -310,7 +232,10 @@ def controllers_markdown(rows: dict[str, list[dict]]) -> str:
             f"| {med('sim_error_mm'):.0f} | {med('sim_skate_mm_s'):.0f} "
             f"| {med('sim_skate_ref_mm_s'):.0f} | {cpu:.2f} |"
         )
-    return head + "\n".join(lines) + "\n"
+    unstable = {n: sum(r.get("sim_unstable", 0) for r in rs) for n, rs in rows.items()}
+    note = "".join(f"\n{CONTROLLERS[n][0]}: MuJoCo flagged a diverging acceleration in {k} "
+                   "clips.\n" for n, k in unstable.items() if k)  # fmt: skip
+    return head + "\n".join(lines) + "\n" + note
 
 
 def main() -> None:
@@ -353,6 +278,11 @@ def main() -> None:
         "--log", default=None,
         help="with --controllers: also append every clip's row as a JSON line to this new file",
     )  # fmt: skip
+    ap.add_argument(
+        "--deadline", type=float, default=None, metavar="S",
+        help="with --controllers: start no clip after S seconds (every fifth clip first); the "
+        "page says how many were done",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     if not args.page.replace("_", "").isalnum():
@@ -363,8 +293,15 @@ def main() -> None:
     cases = cases[:: args.every][: args.max_clips]
     if args.controllers:
         rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
-                               threads=args.threads, workers=args.workers)  # fmt: skip
+                               threads=args.threads, workers=args.workers,
+                               deadline=args.deadline)  # fmt: skip
         limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
+        done = len(next(iter(rows.values())))
+        if done < len(cases):
+            limited += (
+                f"; {done} of these {len(cases)} clips done within --deadline "
+                f"{args.deadline:g} s (every fifth clip first, then the next fifth)"
+            )
         text = (
             f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
             f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "

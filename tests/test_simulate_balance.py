@@ -261,3 +261,43 @@ def test_drift_lead_is_clipped_and_has_a_dead_zone():
     np.testing.assert_allclose(drift_lead(ref, sim, 2.0, 0.35, dead=0.1), [-0.3, -0.4])
     np.testing.assert_array_equal(drift_lead(ref, sim, 2.0, 1.0, dead=0.6), [0.0, 0.0])
     np.testing.assert_array_equal(drift_lead(ref, sim, 0.0, 1.0), [0.0, 0.0])
+
+
+def test_drift_at_the_feet_reads_where_the_stance_feet_stand(model, walk):
+    """``drift_feet``: the lead reads the stance feet's mid-point against the reference's
+    instead of the root. Zero on the reference; a translated body gets the root's lead; a body
+    whose root stays on the reference's but whose left hip turns (both feet in stance) gets none
+    from the root's and, from the feet's, the torques the plain feedback gives at a root
+    velocity ``k_drift`` times the feet's offset faster (the offset computed here from the
+    feet's positions)."""
+    ref, qvel = walk
+    base = dict(k_rot=0.0, d_rot=0.0, k_com=1.0, d_com=0.3)
+    feet = Balance(**base, k_drift=2.0, drift_max=1.0, drift_feet=True)
+    root = Balance(**base, k_drift=2.0, drift_max=1.0)
+    plans = {g: balance_plan(model, ref, qvel, g) for g in (feet, root, Balance(**base))}
+    k = _stance_tick(plans[feet], both=True)
+    data = mujoco.MjData(model)
+
+    def tau(gains, q, v):
+        data.qpos[:], data.qvel[:] = q, v
+        return balance_torques(model, data, plans[gains], k, np.zeros(model.nu))
+
+    def mid(q):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        return data.xpos[[model.body("lfoot").id, model.body("rfoot").id], :2].mean(axis=0)
+
+    np.testing.assert_allclose(tau(feet, ref[k], qvel[k]), 0.0, atol=1e-6)
+    moved = ref[k].copy()
+    moved[:2] += (0.05, -0.08)
+    np.testing.assert_allclose(tau(feet, moved, qvel[k]), tau(root, moved, qvel[k]), atol=1e-9)
+    bent = ref[k].copy()
+    bent[model.jnt_qposadr[model.joint("lfemur_rx").id]] += 0.3
+    offset = mid(bent) - mid(ref[k])
+    assert np.linalg.norm(offset) > 0.03  # the feet moved, the root did not
+    plain = Balance(**base)
+    faster = qvel[k].copy()
+    faster[:2] += 2.0 * offset
+    np.testing.assert_allclose(tau(root, bent, qvel[k]), tau(plain, bent, qvel[k]), atol=1e-9)
+    np.testing.assert_allclose(tau(feet, bent, qvel[k]), tau(plain, bent, faster), atol=1e-9)
+    assert np.abs(tau(feet, bent, qvel[k]) - tau(root, bent, qvel[k])).max() > 1.0

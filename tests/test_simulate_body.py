@@ -8,21 +8,32 @@ import mujoco
 import numpy as np
 import pytest
 
+from sim.errors import UsageError
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.controller import ActuatorEdits, Weakening, track
 from sim.simulate.model import (
+    CONTROL_HZ,
     HUMAN_PEAK_TORQUE,
     MIN_DEFLECTION,
     SUBSTEPS,
+    TARGET_SPEED,
     Gains,
     human_torque_limit,
     sim_model,
 )
 
+#: stiffer controllers than the default: a smaller stiffness cap, and a higher bandwidth too
+STIFF = [Gains(min_deflection=0.05), Gains(min_deflection=0.1, omega=2 * np.pi * 12.0)]
+
 
 @pytest.fixture(scope="module")
 def model():
     return sim_model(canonical_skeleton())
+
+
+@pytest.fixture(scope="module")
+def lean_model():
+    return sim_model(canonical_skeleton(), lean=True)
 
 
 @pytest.fixture(scope="module")
@@ -73,6 +84,73 @@ def test_torque_limits_are_the_human_table_whatever_the_gain(factor):
     assert np.abs(data.actuator_force).max() > 0.999 * table.min()
 
 
+@pytest.mark.parametrize("gains", [Gains(), *STIFF])
+def test_stiffness_is_the_bandwidth_capped_at_the_limit_over_the_deflection(model, gains):
+    """kp = min(omega^2 I, limit / min_deflection) per hinge (I: the hinge's reflected inertia
+    at rest, the mass matrix's diagonal, read off the default body, whose armature is the
+    plain model's), kv = 2 zeta sqrt(kp I) (the damping ratio kept under the cap), armature at
+    least kp h^2, and the control range the joint's widened by (limit + kv TARGET_SPEED) / kp;
+    the default gains are the default body, bit for bit."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    M = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, M)
+    inertia = np.diag(M)[6:]
+    body = sim_model(canonical_skeleton(), gains=gains)
+    lim = body.actuator_forcerange[:, 1]
+    kp = body.actuator_gainprm[:, 0]
+    kv = -body.actuator_biasprm[:, 2]
+    np.testing.assert_allclose(kp, np.minimum(gains.omega**2 * inertia, lim / gains.min_deflection))
+    np.testing.assert_allclose(kv, 2 * gains.zeta * np.sqrt(kp * inertia))
+    h = 1.0 / (CONTROL_HZ * SUBSTEPS)
+    assert np.all(body.dof_armature[6:] >= kp * h**2 * (1 - 1e-12))
+    reach = (lim + kv * TARGET_SPEED) / kp
+    jrange = body.jnt_range[body.actuator_trnid[:, 0]]
+    np.testing.assert_allclose(body.actuator_ctrlrange[:, 0], jrange[:, 0] - reach)
+    np.testing.assert_allclose(body.actuator_ctrlrange[:, 1], jrange[:, 1] + reach)
+    if gains == Gains():
+        for field in ("actuator_gainprm", "actuator_biasprm", "actuator_ctrlrange",
+                      "dof_armature", "actuator_forcerange"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(body, field), getattr(model, field))
+        assert gains.min_deflection == MIN_DEFLECTION
+    else:  # stiffer where the cap held: the hips and the trunk
+        stiffer = kp > model.actuator_gainprm[:, 0] * 1.5
+        assert {"lfemur_rx", "lowerback_rx"} <= {
+            body.actuator(i).name for i in np.where(stiffer)[0]
+        }
+
+
+def test_a_stiffness_cap_must_be_a_positive_angle():
+    for bad in (0.0, -0.1, float("nan")):
+        with pytest.raises(UsageError):
+            Gains(min_deflection=bad)
+
+
+@pytest.mark.parametrize("gains", STIFF)
+def test_a_stiffer_controller_applies_at_most_the_human_limit(gains):
+    """A stiffer controller is no stronger body: every joint driven past its limit (both signs,
+    a target far beyond the stiffness's reach) applies at most the human table's torque, and
+    reaches it."""
+    body = sim_model(canonical_skeleton(), gains=gains)
+    table = np.array([human_torque_limit(body.actuator(i).name) for i in range(body.nu)])
+    np.testing.assert_array_equal(body.actuator_forcerange[:, 1], table)
+    data = mujoco.MjData(body)
+    kp = body.actuator_gainprm[:, 0]
+    dof = body.jnt_dofadr[body.actuator_trnid[:, 0]]
+    reached = np.zeros(body.nu)
+    for sign in (1.0, -1.0):
+        mujoco.mj_resetData(body, data)
+        data.qpos[2] = 2.0  # in the air
+        for _ in range(60):
+            data.ctrl[:] = data.qpos[7:] + sign * (3.0 + 10 * table / kp)
+            mujoco.mj_step(body, data)
+            assert np.all(np.abs(data.actuator_force) <= table * (1 + 1e-12))
+            assert np.all(np.abs(data.qfrc_actuator[dof]) <= table * (1 + 1e-9))
+            reached = np.maximum(reached, np.abs(data.actuator_force) / table)
+        assert np.all(np.isfinite(data.qpos))
+    assert reached.min() > 0.999
+
+
 def test_motor_actuators_clamp_torque_to_the_human_limit():
     """``actuators="motor"``: ``ctrl`` is the torque, clamped to the same human limits."""
     motor = sim_model(canonical_skeleton(), actuators="motor")
@@ -89,10 +167,13 @@ def test_motor_actuators_clamp_torque_to_the_human_limit():
     np.testing.assert_allclose(data.actuator_force, 0.3 * table)
 
 
-def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(model):
+@pytest.mark.parametrize("body", ["model", "lean_model"])
+def test_every_joint_driven_past_its_limit_applies_at_most_the_limit(body, request):
     """Each control asks for several times the joint's peak torque (a target 3 rad off plus a
     huge feed-forward, both signs); the torque MuJoCo applies (``actuator_force`` and the
-    actuator part of ``qfrc_actuator``) reaches the limit and never exceeds it."""
+    actuator part of ``qfrc_actuator``) reaches the limit and never exceeds it (the lean body
+    too)."""
+    model = request.getfixturevalue(body)
     data = mujoco.MjData(model)
     lim = model.actuator_forcerange[:, 1]
     kp = model.actuator_gainprm[:, 0]
@@ -221,12 +302,15 @@ def test_max_assistance_keeps_only_clips_within_the_budget(tmp_path):
             assert all(np.array_equal(a[k], b[k]) for k in a.files)
 
 
-def test_non_adjacent_bodies_collide_and_near_ones_do_not(model):
+@pytest.mark.parametrize("body", ["model", "lean_model"])
+def test_non_adjacent_bodies_collide_and_near_ones_do_not(body, request):
     """Legs driven to cross stop at each other: the shins' and thighs' overlap in the simulation
     stays at the contact softness, while the pose they were driven to overlaps by several cm;
-    in the rest pose nothing touches (pairs meeting at a joint are excluded)."""
+    in the rest pose nothing touches (pairs meeting at a joint are excluded). The lean body
+    too."""
     from sim.simulate.model import self_collision_exclusions
 
+    model = request.getfixturevalue(body)
     data = mujoco.MjData(model)
     data.qpos[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]
     data.qpos[2] = 2.0

@@ -261,3 +261,73 @@ def test_forward_validation_tracks_with_the_drift_lead_unless_its_search_names_a
             validate.ForwardValidation(model, ("root",), samples=2, search=search).run(qpos, 30.0)
     assert seen == [validate.DEFAULT_BALANCE, None, Balance()]
     assert validate.DEFAULT_BALANCE.k_drift > 0 and BALANCE.k_drift == 0  # synth keeps its own
+
+
+def _standing(model, ticks: int = 24) -> np.ndarray:
+    """(ticks, nq) the rest pose upright, 1 m up (a reference that needs no data)."""
+    ref = np.tile(model.qpos0, (ticks, 1))
+    ref[:, 2] = 1.0
+    ref[:, 3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # y up -> z up
+    return ref
+
+
+def test_noise_deflection_keeps_the_default_bodys_angles_on_a_stiffer_body(model):
+    """The offsets' noise is a share of peak torque over the stiffness: a stiffer body (cap 0.1
+    rad) gets smaller angles where its stiffness grew; with ``noise_deflection`` 0.25 (the
+    default cap) the stiffer body's noise is the default body's, joint by joint."""
+    import mujoco
+
+    from sim.simulate.model import MIN_DEFLECTION, Gains
+    from sim.simulate.sampling import _problem
+
+    stiff = sim_model(canonical_skeleton(), gains=Gains(min_deflection=0.1))
+    ref = _standing(model)
+    base = _problem(model, ref, mujoco.MjData(model), 0.3, (), falls=False).sigma
+    own = _problem(stiff, ref, mujoco.MjData(stiff), 0.3, (), falls=False).sigma
+    kept = _problem(stiff, ref, mujoco.MjData(stiff), 0.3, (), falls=False,
+                    noise_deflection=MIN_DEFLECTION).sigma  # fmt: skip
+    grew = stiff.actuator_gainprm[:, 0] > model.actuator_gainprm[:, 0] * 1.5
+    assert (grew & (base > 0)).sum() >= 6  # the hips and the spine
+    ratio = model.actuator_gainprm[:, 0] / stiff.actuator_gainprm[:, 0]
+    np.testing.assert_allclose(own, base * ratio)  # the same torque share: smaller angles
+    np.testing.assert_allclose(kept, base)
+    lim = model.actuator_forcerange[:, 1]
+    assert np.all(base <= 0.3 * lim / model.actuator_gainprm[:, 0] + 1e-12)
+
+
+def test_forward_validation_builds_its_body_with_the_default_gains(monkeypatch):
+    """eval's and report's body (``forward_validation``) has ``validate.DEFAULT_GAINS`` (one
+    place to change them), unless the caller names gains; its sampler gets
+    ``DEFAULT_NOISE_DEFLECTION`` unless its search names one."""
+    import sim.simulate.validate as validate
+    from sim.simulate.model import Gains
+
+    skeleton = canonical_skeleton()
+    stiff = Gains(min_deflection=0.1)
+    monkeypatch.setattr(validate, "DEFAULT_GAINS", stiff)
+    fv = validate.forward_validation(skeleton, ("root",))
+    want = sim_model(skeleton, gains=stiff).actuator_gainprm[:, 0]
+    np.testing.assert_array_equal(fv.model.actuator_gainprm[:, 0], want)
+    named = validate.validation_model(skeleton, gains=Gains())
+    plain = sim_model(skeleton).actuator_gainprm[:, 0]
+    np.testing.assert_array_equal(named.actuator_gainprm[:, 0], plain)
+    assert not np.allclose(want, plain)
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(model, ref, **kw):
+        seen.append(kw.get("noise_deflection", "absent"))
+        raise Stop
+
+    monkeypatch.setattr(validate, "sample_track", fake)
+    monkeypatch.setattr(validate, "DEFAULT_NOISE_DEFLECTION", 0.25)
+    ref = _standing(fv.model, 8)
+    for search in ({}, {"noise_deflection": 0.0}):
+        with pytest.raises(Stop):
+            validate.ForwardValidation(fv.model, ("root",), samples=2, search=search).run(
+                ref, 120.0
+            )
+    assert seen == [0.25, 0.0]

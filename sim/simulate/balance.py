@@ -27,7 +27,10 @@ tick, torques on the hinges of the legs the reference stands on:
 * **drift** (``Balance.k_drift``, off by default): the velocity target of ``de_c`` leads by
   ``k_drift`` times the root's horizontal position error (the reference's less the simulated,
   at most ``drift_max`` long, less ``drift_dead``), so the centre of mass is asked to move
-  back towards the reference's path: ``de_c = v - v_ref - k_drift clip(p_ref - p)``.
+  back towards the reference's path: ``de_c = v - v_ref - k_drift clip(p_ref - p)``; with
+  ``Balance.drift_feet`` ``p`` is the mid-point of the feet the reference stands on (the
+  simulated body's same feet, against the reference's) instead of the root: where the body
+  stands rather than where its pelvis leans.
 
 A state feedback and nothing else: it reads ``qpos``/``qvel`` only (kinematics recomputed), so
 the same state gives the same torques and a sampled rollout and its replay stay one computation.
@@ -85,6 +88,10 @@ class Balance:
     drift_max: float = 0.3
     #: [m] and then shortened by this (an error of at most this asks nothing)
     drift_dead: float = 0.0
+    #: the drift's position error measured at the mid-point of the stance feet (the feet the
+    #: reference stands on, ``BalancePlan.feet``) rather than the root: off by default (a
+    #: posture offset of the pelvis over feet that stand where the reference's do asks nothing)
+    drift_feet: bool = False
 
     def __post_init__(self):
         if int(self.every) < 1:
@@ -105,8 +112,9 @@ class BalancePlan:
     driven, per side (left, right) and group (hip, ankle), up to three each: joint ids and
     actuator ids (2, 2, 3) (a missing hinge repeats the first, masked out by ``mask`` (2, 2,
     3); ``valid`` its bool); the foot body ids (2,); the gains in SI units (k_rot [N m/rad], d_rot [N m s/rad],
-    k_com [N], d_com [N s]); the root's horizontal position (T, 2) [m] and the drift term's
-    ``(k_drift, drift_max, drift_dead)`` where it is on."""
+    k_com [N], d_com [N s]); the root's horizontal position (T, 2) [m] (with ``drift_feet`` the
+    stance feet's mid-point) and the drift term's ``(k_drift, drift_max, drift_dead)`` where it
+    is on."""
 
     quat: np.ndarray
     angvel: np.ndarray
@@ -126,6 +134,7 @@ class BalancePlan:
     step: tuple | None = None
     xy: np.ndarray | None = None  # (T, 2) the root's horizontal position [m]; None: no drift term
     drift: tuple[float, float, float] = (0.0, 0.0, 0.0)  # k_drift [1/s], max, dead [m]
+    drift_feet: bool = False  # xy is the stance feet's mid-point, compared with the body's
 
 
 def _hinges(model, side: str, bone: str) -> tuple[np.ndarray, np.ndarray]:
@@ -162,6 +171,7 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
     T = len(ref_qpos)
     stance = np.zeros((T, 2), dtype=bool)
     com_off = np.zeros((T, 2))
+    mid = np.zeros((T, 2))  # the stance feet's mid-point (both feet where none stands)
     for t in range(T):
         data.qpos[:] = ref_qpos[t]
         mujoco.mj_kinematics(model, data)
@@ -171,7 +181,8 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
                 bool(geoms[s]) and min(_bottom(model, data, g) for g in geoms[s]) <= STANCE_HEIGHT
             )
         on = stance[t] if stance[t].any() else np.ones(2, dtype=bool)
-        com_off[t] = (data.subtree_com[1] - data.xpos[feet[on]].mean(axis=0))[:2]
+        mid[t] = data.xpos[feet[on]].mean(axis=0)[:2]
+        com_off[t] = data.subtree_com[1, :2] - mid[t]
     mgh = total_mass(model) * G
     jids, aids = np.zeros((2, 2, 3), dtype=int), np.zeros((2, 2, 3), dtype=int)
     mask = np.zeros((2, 2, 3))
@@ -202,8 +213,9 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
         ),
         every=int(gains.every),
         step=_step_plan(model, aids, mask, gains),
-        xy=ref_qpos[:, :2].copy() if gains.k_drift > 0 else None,
+        xy=(mid if gains.drift_feet else ref_qpos[:, :2].copy()) if gains.k_drift > 0 else None,
         drift=(float(gains.k_drift), float(gains.drift_max), float(gains.drift_dead)),
+        drift_feet=bool(gains.drift_feet),
     )
 
 
@@ -233,8 +245,9 @@ def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> 
     rot = data.xmat[1].reshape(3, 3) @ (k_rot * e + d_rot * de)  # world [N m]
     mid = w @ data.xpos[plan.feet] / w.sum()
     f = k_com * ((data.subtree_com[1, :2] - mid[:2]) - plan.com_off[k])
-    if plan.xy is not None:  # the velocity target leads by the root's position error
-        f -= d_com * drift_lead(plan.xy[k], data.qpos[:2], *plan.drift)
+    if plan.xy is not None:  # the velocity target leads by the root's (feet's) position error
+        at = mid[:2] if plan.drift_feet else data.qpos[:2]
+        f -= d_com * drift_lead(plan.xy[k], at, *plan.drift)
     f += d_com * (data.qvel[:2] - plan.vel[k])  # (2,) horizontal [N]
     M = np.empty((2, 2, 3))  # per side and group (hip, ankle): the moment asked for [N m]
     M[:, 0] = w[:, None] * rot

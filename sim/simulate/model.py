@@ -54,7 +54,7 @@ from sim.model.mass import DEFAULT_BODY_MASS_KG
 CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
-MIN_DEFLECTION = 0.25  # [rad] the smallest angle error that asks for a joint's peak torque
+MIN_DEFLECTION = 0.25  # [rad] default: the smallest angle error that asks for a peak torque
 # [rad/s] a position actuator's control range is its joint's range widened by (limit + kv *
 # TARGET_SPEED) / kp: a target that far out asks for the peak torque from anywhere in the range
 # while the joint moves towards it at up to this speed (faster, the damping takes a share)
@@ -113,13 +113,20 @@ FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's default impedance
 @dataclass(frozen=True)
 class Gains:
     """Tracking gains of the position actuators' feedback: hinge bandwidth ``omega`` [rad/s] and
-    damping ratio; root ones likewise. Feedback gains belong to the controller; the torque
-    limits (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them."""
+    damping ratio; root ones likewise; ``min_deflection`` [rad] caps each hinge's stiffness at
+    its torque limit over it (the smallest angle error that asks for the peak torque; smaller:
+    a stiffer controller). Feedback gains belong to the controller; the torque limits
+    (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them."""
 
     omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
     root_omega: float = 2 * np.pi * 2.0
     root_zeta: float = 1.0
+    min_deflection: float = MIN_DEFLECTION
+
+    def __post_init__(self):
+        if not self.min_deflection > 0:
+            raise UsageError(f"min_deflection must be positive; got {self.min_deflection}")
 
     def scaled(self, factor: float) -> Gains:
         """Stiffness scaled by ``factor`` (bandwidth by its square root); the torque limits stay
@@ -149,6 +156,7 @@ def sim_spec(
     soles: bool = True,
     stance_ankles: bool = False,
     actuators: str = "position",
+    lean: bool = False,
 ) -> mujoco.MjSpec:
     """The ``MjSpec`` of :func:`sim_model` (``spec.to_xml()``: the MJCF a dataset stores).
 
@@ -163,7 +171,8 @@ def sim_spec(
     ankle hinges (``foot_rx``, ``foot_rz``) at least :func:`stance_stiffness` (capped by the
     torque limit like every joint). ``actuators``: ``"position"`` (PD servos with ``gains``,
     output clamped to the human limit) or ``"motor"`` (``ctrl`` is the torque [N m], clamped to
-    the human limit); the armature is the same in both, so both are one body.
+    the human limit); the armature is the same in both, so both are one body. ``lean``: MuJoCo
+    skips the stages this body has nothing for (:data:`LEAN_DISABLED`; the same motion).
     """
     if actuators not in ("position", "motor"):
         raise UsageError(f"unknown actuators {actuators!r}; known: 'position', 'motor'")
@@ -171,6 +180,7 @@ def sim_spec(
     spec = mujoco.MjSpec.from_string(build_mjcf(skeleton, body_mass_kg=body_mass_kg))
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.disableflags |= LEAN_DISABLED if lean else 0
     for g in spec.geoms:
         if g.name == "floor":
             g.contype, g.conaffinity = FLOOR_BITS
@@ -198,7 +208,7 @@ def sim_spec(
         kp = gains.omega**2 * inertia[j - 1]
         raised = max(1.0, stance / kp) if name[1:] in ANKLE_JOINTS else 1.0
         kp *= raised
-        cap = min(1.0, limit / MIN_DEFLECTION / kp)  # human stiffness; damping ratio kept
+        cap = min(1.0, limit / gains.min_deflection / kp)  # the controller's cap; zeta kept
         kp *= cap
         kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(raised * cap)
         if actuators == "motor":
@@ -220,6 +230,20 @@ def sim_spec(
     return spec
 
 
+_D = mujoco.mjtDisableBit
+#: what ``sim_spec(lean=True)`` switches off, none of which changes this body's motion: island
+#: discovery (one kinematic tree: whatever touches, the constraints form one island), the
+#: collision mid-phase (a cull within body pairs of one to three geoms: the same contacts),
+#: and the stages for what the body has none of: equality constraints, friction loss, joint
+#: springs, sensors. Joint damping, limits, contacts and self-collision stay.
+LEAN_DISABLED = int(
+    _D.mjDSBL_ISLAND
+    | _D.mjDSBL_MIDPHASE
+    | _D.mjDSBL_EQUALITY
+    | _D.mjDSBL_FRICTIONLOSS
+    | _D.mjDSBL_SPRING
+    | _D.mjDSBL_SENSOR
+)
 ANKLE_JOINTS = ("foot_rx", "foot_rz")  # the ankle (plantar/dorsiflexion) and subtalar hinges
 STANCE_MARGIN = 1.2  # ankle stiffness over the body's toppling stiffness m g h
 

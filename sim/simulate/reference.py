@@ -214,6 +214,23 @@ STANCE_GAP = 0.03
 CONSISTENT_SMOOTH_S = 0.05
 
 
+def contact_shift(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
+    """(T,) [m] the vertical shift :func:`contact_consistent` takes off ``qpos`` (T, nq, its
+    floor near z = 0): in stance (the lowest sole point within :data:`STANCE_GAP`) that point's
+    height, interpolated between stance frames (flight), smoothed by a Gaussian of
+    :data:`CONSISTENT_SMOOTH_S`; zeros for a motion that never stands. Another motion shifted
+    by it stands on the same floor as ``qpos`` (a reconstruction on its original's)."""
+    low = lowest_foot_point(model, qpos)
+    stance = low <= STANCE_GAP
+    if not stance.any():
+        return np.zeros(len(qpos))
+    t = np.arange(len(qpos))
+    shift = np.interp(t, t[stance], low[stance])
+    if len(qpos) > 1:
+        shift = gaussian_filter1d(shift, CONSISTENT_SMOOTH_S * rate, mode="nearest")
+    return shift
+
+
 def contact_consistent(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
     """A copy of ``qpos`` (T, nq, its floor near z = 0, e.g. from :func:`on_floor` with no lift)
     shifted vertically frame by frame so that in stance the lower sole (its lowest surface
@@ -221,15 +238,8 @@ def contact_consistent(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarr
     the reference stands on it, instead of hovering or sinking by the floor estimate's error.
     A frame is in stance when its lowest sole point is within :data:`STANCE_GAP`; between
     stance frames (flight) the shift is interpolated; the shift is then smoothed by a Gaussian
-    of :data:`CONSISTENT_SMOOTH_S` (no jumps). A motion that never stands comes back as is."""
-    low = lowest_foot_point(model, qpos)
-    stance = low <= STANCE_GAP
+    of :data:`CONSISTENT_SMOOTH_S` (no jumps): :func:`contact_shift`. A motion that never
+    stands comes back as is."""
     out = qpos.copy()
-    if not stance.any():
-        return out
-    t = np.arange(len(qpos))
-    shift = np.interp(t, t[stance], low[stance])
-    if len(qpos) > 1:
-        shift = gaussian_filter1d(shift, CONSISTENT_SMOOTH_S * rate, mode="nearest")
-    out[:, 2] -= shift
+    out[:, 2] -= contact_shift(model, qpos, rate)
     return out

@@ -8,24 +8,25 @@ the ``keep`` best simulation states reached so far, ``samples`` candidate correc
 are tried: per window one offset [rad] per corrected hinge (:data:`CORRECTED`; the legs and
 the trunk), the parent's previous offset times ``persistence`` plus Gaussian noise of standard
 deviation ``torque_sigma`` times the joint's torque limit over its stiffness (the offset that
-asks ``torque_sigma`` of the joint's peak torque). Each candidate runs through the window with
-the same torque-limited actuators, perturbations, balance feedback (``sim.simulate.balance``,
-:data:`BALANCE`: stance hips and ankles keep the pelvis upright and the centre of mass over the
-feet, a function of the state alone) and no assistance, then on for ``lookahead``
-more ticks with the same offset; its cost there (:func:`window_cost`: a correction that only
-delays a fall costs what the fall costs) is added to its parent's, and the ``keep`` cheapest
-states, taken at the window's end, go on. A fall as ``sim.simulate.falls`` defines it (a part
-other than the feet on the floor, or the head low) is looked for after every tick of a rollout:
-the rollout stops there (or at its window's end, whose state is kept) and pays
-``CostWeights.fall``, more the earlier it fell. At the end the cheapest sequence of
-offsets is replayed by ``track(..., offsets=...)``, so the result is an ordinary
-:class:`sim.simulate.tracking.Tracking` of one simulation (the replay is the same
+asks ``torque_sigma`` of its peak torque; or over a capped one, ``noise_deflection``). Each
+candidate runs through the window with the same torque-limited actuators, perturbations,
+balance feedback (``sim.simulate.balance``, :data:`BALANCE`: stance hips and ankles keep the
+pelvis upright and the centre of mass over the feet, a function of the state alone) and no
+assistance, then on for ``lookahead`` more ticks with the same offset; its cost there
+(:func:`window_cost`: a correction that only delays a fall costs what the fall costs) is added
+to its parent's, and the ``keep`` cheapest states, taken at the window's end, go on. A fall
+as ``sim.simulate.falls`` defines it (a part other than the feet on the floor, or the head low)
+is looked for after every tick of a rollout: the rollout stops there (or at its window's end,
+whose state is kept) and pays ``CostWeights.fall``, more the earlier it fell. At the end the
+cheapest sequence of offsets is replayed by ``track(..., offsets=...)``, so the result is an
+ordinary :class:`sim.simulate.tracking.Tracking` of one simulation (the replay is the same
 deterministic computation as the sampled rollout). Deterministic given ``seed``, whatever the
 number of ``threads`` the rollouts run on.
 
 Cost: ``samples`` rollouts of up to ``window + lookahead`` ticks per window plus one replay:
 with the balance feedback about 4.9 CPU s per simulated second at 28 samples, 5.2 at 32
-(without it 4.4 at 32; ``docs/results/simulate_controllers.md``).
+(without it 4.4 at 32; ``docs/results/simulate_controllers.md``); on ``sim_model(lean=True)``
+0.90-0.94 times that, the same motion (``docs/results/simulate_step.md``).
 """
 
 from __future__ import annotations
@@ -234,6 +235,7 @@ def _problem(
     falls: bool = True,
     balance: Balance | None = None,
     hold: bool = False,
+    noise_deflection: float = 0.0,
 ) -> _Problem:
     """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
     rollouts look for falls (``fall_ref`` set) or not (None); ``hold``: they record the soles
@@ -245,7 +247,9 @@ def _problem(
     base = ref_qpos[:, 7:] + lead * ref_qvel[:, 6:] + ref_force[:, 6:] / kp  # (T, nu) targets
     names = [model.actuator(a).name for a in range(nu)]
     corrected = np.array([_bone(n) in CORRECTED for n in names])
-    sigma = np.where(corrected, torque_sigma * model.actuator_forcerange[:, 1] / kp, 0.0)
+    lim = model.actuator_forcerange[:, 1]
+    stiff = np.minimum(kp, lim / noise_deflection) if noise_deflection else kp
+    sigma = np.where(corrected, torque_sigma * lim / stiff, 0.0)
     sub = model.body_subtreemass[model.jnt_bodyid[model.actuator_trnid[:, 0]]]
     ee_ids = np.array([model.body(n).id for n in END_EFFECTORS])
     foot_ids = np.array([model.body(n).id for n in ("lfoot", "rfoot")])
@@ -429,15 +433,16 @@ def search_offsets(
     recentre: float = 0.0,
     balance: Balance | None = BALANCE,
     elite: int = 0,
+    noise_deflection: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) without assistance, found by sampling rollouts (the module docstring).
 
     Args:
-        samples: candidate rollouts per window (in all, over the kept states).
-        keep: states kept after each window.
+        samples: rollouts per window (in all, over the kept states); keep: states kept after each.
         window: control ticks per window (12: 0.1 s).
         torque_sigma: noise of an offset, as a share of its joint's peak torque.
+        noise_deflection: [rad] > 0: that share over the stiffness capped at peak torque / it.
         persistence: share of the parent's offset a child starts from.
         lookahead: control ticks each candidate is rolled on past its window (same offset)
             before its cost is taken: a correction that only delays a fall costs what the fall
@@ -466,7 +471,7 @@ def search_offsets(
     _check_window(window, balance)
     prob = _problem(
         model, ref_qpos, datas[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
-        hold=weights.hold > 0,
+        hold=weights.hold > 0, noise_deflection=noise_deflection,
     )  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(model, datas[0], ref_qpos[0], prob.ref_qvel[0], spec)

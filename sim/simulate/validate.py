@@ -13,7 +13,9 @@ own height errors stay in it.
 Controllers (``ForwardValidation(controller=...)``): ``"plain"`` (``track``), ``"sampling"``
 (``sim.simulate.sampling``) and ``"wholebody"`` (``sim.simulate.wholebody``'s inverse-dynamics
 QP; it needs the torque-actuated body, ``sim_model(..., actuators="motor")``, and tracks a
-contact-consistent reference: no floor lift, stance soles laid on the floor).
+contact-consistent reference: no floor lift, stance soles laid on the floor). The plain
+tracker and the sampler track a reference lifted by ``FLOOR_LIFT`` unless asked for the
+contact-consistent one (``ForwardValidation(contact_reference=True)``).
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
-from sim.simulate.model import CONTROL_HZ, sim_model, total_mass
+from sim.simulate.model import CONTROL_HZ, Gains, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
     contact_consistent,
+    contact_shift,
     flat_soles,
     floor_track,
     time_warp,
@@ -66,6 +69,18 @@ DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
 #: the sampler's rollouts per window where it is chosen without a count (with the feedback,
 #: 32 cost 5.22 CPU s per simulated s: over the budget)
 DEFAULT_SAMPLES = 28
+#: the position actuators' feedback gains of the body ``eval --simulate`` and ``report
+#: --simulate`` track with (:func:`validation_model`): bandwidth and stiffness cap are the
+#: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these
+DEFAULT_GAINS = Gains()
+#: [rad] the sampler's ``noise_deflection`` here unless ``search`` names one (0: its noise a
+#: share of peak torque over the body's stiffness; a stiffer body's ``min_deflection`` before
+#: it: the noise keeps the angles it had on that body)
+DEFAULT_NOISE_DEFLECTION = 0.0
+#: the body is stepped lean (``sim_model(lean=True)``: MuJoCo skips the stages this body has
+#: nothing for; the same motion bit for bit, 0.85-0.94x the CPU per simulated second:
+#: docs/results/simulate_step.md)
+DEFAULT_LEAN = True
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator; the
 #: sampler's foot holding uses the same height)
 SKATE_CONTACT = CONTACT_HEIGHT
@@ -93,8 +108,13 @@ class ForwardValidation:
             ``samples`` is given, else :data:`DEFAULT_CONTROLLER`.
         search: further keywords of the sampler's search (``sim.simulate.sampling.
             search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults, but for
-            ``balance``: :data:`DEFAULT_BALANCE` unless ``search`` names one.
+            ``balance`` and ``noise_deflection``: :data:`DEFAULT_BALANCE` and
+            :data:`DEFAULT_NOISE_DEFLECTION` unless ``search`` names them.
         threads: the sampler's rollouts run on this many threads (the same result for any).
+        contact_reference: the plain tracker and the sampler track the contact-consistent
+            reference (no floor lift, stance soles on z = 0, as the whole-body QP always does)
+            instead of the lifted one (the default); the figures are measured as with the
+            lifted one (:meth:`run`).
     """
 
     def __init__(
@@ -105,6 +125,7 @@ class ForwardValidation:
         controller: str | None = None,
         search: dict | None = None,
         threads: int = 1,
+        contact_reference: bool = False,
     ):
         controller, samples = chosen_controller(samples, controller)
         if controller not in CONTROLLERS:
@@ -120,13 +141,15 @@ class ForwardValidation:
         self.controller = controller
         self.search = dict(search or {})
         self.threads = int(threads)
+        #: the tracked reference is contact-consistent (always for the whole-body QP)
+        self.contact = bool(contact_reference) or controller == "wholebody"
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
 
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
         args = self.model, self.names, self.samples, self.controller, self.search, self.threads
-        return (ForwardValidation, args)
+        return (ForwardValidation, (*args, self.contact))
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -138,18 +161,39 @@ class ForwardValidation:
                 out[t, k] = self.data.xpos[self._root] if s < 0 else self.data.site_xpos[s]
         return out
 
-    def reference(self, qpos: np.ndarray, fps: float, floor: np.ndarray | None = None):
+    def reference(
+        self,
+        qpos: np.ndarray,
+        fps: float,
+        floor: np.ndarray | None = None,
+        shift: np.ndarray | None = None,
+        *,
+        contact: bool | None = None,
+    ):
         """``qpos`` (T, nq) at ``fps`` resampled at the control rate and shifted vertically by
         ``floor`` ((T', ,) the original's floor track, from :meth:`floor_of`; default its own),
         its soles near the floor laid flat where the model has soles
-        (``sim.simulate.reference.flat_soles``)."""
+        (``sim.simulate.reference.flat_soles``); then lifted by ``FLOOR_LIFT``, or, where
+        ``contact`` (default: the reference this body tracks), lowered by ``shift`` ((T',)
+        [m], :meth:`stance_shift` of the original; default its own), so that the stance soles
+        stand on z = 0 (``contact_consistent``)."""
         ref = time_warp(self.model, qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(ref) if floor is None else floor
-        if self.controller == "wholebody":  # feet meet the floor: no lift, stance soles on it
+        if self.contact if contact is None else contact:  # no lift, stance soles on the floor
             ref[:, 2] -= floor
-            return contact_consistent(self.model, flat_soles(self.model, ref))
+            ref = flat_soles(self.model, ref)
+            ref[:, 2] -= contact_shift(self.model, ref) if shift is None else shift
+            return ref
         ref[:, 2] -= floor - FLOOR_LIFT
         return flat_soles(self.model, ref)
+
+    def stance_shift(self, qpos: np.ndarray, fps: float, floor: np.ndarray) -> np.ndarray:
+        """(T',) [m] the contact-consistent shift (``contact_shift``) of ``qpos`` (T, nq at
+        ``fps``) on ``floor`` (T',), its soles laid flat: what :meth:`reference` takes off a
+        contact-consistent reference after the floor."""
+        ref = time_warp(self.model, qpos, fps, 1.0, CONTROL_HZ)
+        ref[:, 2] -= floor
+        return contact_shift(self.model, flat_soles(self.model, ref))
 
     def skating_reference(self, ref: np.ndarray) -> np.ndarray:
         """The tracked motion as :meth:`skating` measures it: ``ref`` (T, nq, from
@@ -171,7 +215,9 @@ class ForwardValidation:
         """Track ``qpos`` (T, nq, at ``fps``) without assistance; the figures of
         :data:`SIMULATE_KEYS` (JSON-ready):
 
-        * ``sim_error_mm``: mean distance [mm] of the simulated points to the tracked motion's;
+        * ``sim_error_mm``: mean distance [mm] of the simulated points to the tracked motion's
+          (placed as :meth:`reference` places it without ``contact``, lifted, for the plain
+          tracker and the sampler even where they track the contact-consistent one);
         * ``sim_error_original_mm``: the same against ``original_qpos`` (the motion itself when
           None);
         * ``sim_error_local_mm``: as ``sim_error_mm`` with each frame's points relative to the
@@ -188,18 +234,34 @@ class ForwardValidation:
         original_qpos = qpos if original_qpos is None else original_qpos
         orig = time_warp(self.model, original_qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(orig)
-        ref = self.reference(qpos, fps, floor)
-        orig = self.reference(original_qpos, fps, floor)  # the same floor and feet
+        # The yardstick: the motion and the original on the original's floor, with the same
+        # feet (``ref``, ``orig``): lifted for the plain tracker and the sampler, contact-
+        # consistent for the QP, whatever they track. With ``contact_reference`` the body
+        # tracks the motion lowered by the original's stance shift instead (``tracked``: its
+        # stance soles on z = 0 and a reconstruction's own height errors kept, as the floor
+        # track keeps them), but its errors are still measured against the lifted ``ref`` and
+        # ``orig`` and its skating against the same ``skating_reference(ref)``: every figure
+        # is taken against the same points and floor as the lifted reference's run, so the two
+        # compare clip by clip (the root-relative error does not see a vertical shift at all).
+        lifted = self.controller != "wholebody"
+        ref = self.reference(qpos, fps, floor, contact=not lifted)
+        orig = self.reference(original_qpos, fps, floor, contact=not lifted)  # same floor, feet
+        tracked = ref
+        if self.contact and lifted:
+            shift = self.stance_shift(original_qpos, fps, floor)
+            tracked = self.reference(qpos, fps, floor, shift, contact=True)
         every = int(round(CONTROL_HZ / fps))
         if self.controller == "sampling":
-            search = {"balance": DEFAULT_BALANCE, **self.search}
-            r = sample_track(self.model, ref, samples=self.samples, record_every=every,
+            search = {"balance": DEFAULT_BALANCE, "noise_deflection": DEFAULT_NOISE_DEFLECTION,
+                      **self.search}  # fmt: skip
+            r = sample_track(self.model, tracked, samples=self.samples, record_every=every,
                              threads=self.threads, **search)  # fmt: skip
         elif self.controller == "wholebody":
-            r = track_wholebody(self.model, ref, record_every=every)
+            r = track_wholebody(self.model, tracked, record_every=every)
         else:
-            r = track(self.model, ref, assist_limit=0.0, record_every=every)
+            r = track(self.model, tracked, assist_limit=0.0, record_every=every)
         self.last_qpos = r.qpos  # the simulated states (F, nq) of the last run: for pictures
+        self.last_unstable = bool(r.unstable)  # MuJoCo flagged a diverging acceleration in it
         sim = self.points(r.qpos)
         n = len(sim)
         target = self.points(ref[::every][:n])
@@ -240,13 +302,31 @@ class ForwardValidation:
 
 
 def forward_validation(
-    skeleton, names, *, samples: int = 0, controller: str | None = None, **body
+    skeleton,
+    names,
+    *,
+    samples: int = 0,
+    controller: str | None = None,
+    contact_reference: bool = False,
+    **body,
 ) -> ForwardValidation:
-    """The :class:`ForwardValidation` of ``skeleton``'s simulated body (``sim_model(skeleton,
-    **body)`` with the actuators its controller needs) on points ``names``: ``samples`` > 0 the
+    """The :class:`ForwardValidation` of ``skeleton``'s simulated body
+    (:func:`validation_model`: ``sim_model(skeleton, **body)`` with :data:`DEFAULT_GAINS` and
+    the actuators its controller needs) on points ``names``: ``samples`` > 0 the
     sampling tracker with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`,
-    the sampler at :data:`DEFAULT_SAMPLES`)."""
+    the sampler at :data:`DEFAULT_SAMPLES`); ``contact_reference``: it tracks the
+    contact-consistent reference (:class:`ForwardValidation`)."""
     controller, _ = chosen_controller(samples, controller)
     actuators = "motor" if controller == "wholebody" else "position"
-    model = sim_model(skeleton, actuators=actuators, **body)
-    return ForwardValidation(model, names, samples=samples, controller=controller)
+    model = validation_model(skeleton, actuators=actuators, **body)
+    return ForwardValidation(
+        model, names, samples=samples, controller=controller, contact_reference=contact_reference
+    )
+
+
+def validation_model(skeleton, *, actuators: str = "position", **body) -> mujoco.MjModel:
+    """``skeleton``'s simulated body as forward validation builds it: ``sim_model(skeleton,
+    actuators=actuators, **body)`` with the feedback gains :data:`DEFAULT_GAINS` and
+    :data:`DEFAULT_LEAN` unless ``body`` names them."""
+    defaults = {"gains": DEFAULT_GAINS, "lean": DEFAULT_LEAN}
+    return sim_model(skeleton, actuators=actuators, **{**defaults, **body})

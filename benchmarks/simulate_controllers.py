@@ -1,0 +1,222 @@
+"""The controllers ``benchmarks/bench_simulate.py --controllers`` compares, by name: eval's
+default (``default28``) and every candidate tried against it (docs/synthetic.md, "The
+controllers, measured", says what each gave).
+
+``CONTROLLERS[name]`` = (label, ``ForwardValidation`` keywords, actuators[, the body's
+``sim_model`` keywords]).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sim.simulate.balance import Balance  # noqa: E402
+from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
+from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
+from sim.simulate.validate import DEFAULT_BALANCE  # noqa: E402
+
+#: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
+#: balance feedback
+FIRST_SAMPLER = {"weights": CostWeights(fall=0.0), "lookahead": 48, "balance": None}
+#: ``--controllers`` names: (label, ForwardValidation keywords, actuators[, the body's
+#: ``sim_model`` keywords: ``validate.validation_model``'s, eval's gains unless they name some])
+CONTROLLERS = {
+    "plain": ("plain tracker", {"controller": "plain"}, "position"),
+    "sampling64": (
+        "sampler, 64 samples (as first built)",
+        {"controller": "sampling", "samples": 64, "search": FIRST_SAMPLER},
+        "position",
+    ),
+    "wholebody": ("whole-body QP", {"controller": "wholebody"}, "motor"),
+}
+#: the sampler before foot holding, elite reuse and the drift lead (``CostWeights.hold`` 0, no
+#: elite, the balance feedback ``Balance()`` without ``k_drift``)
+BEFORE_HOLD = {"weights": CostWeights(hold=0.0), "elite": 0, "balance": Balance()}
+for _n in (16, 24, 28, 32, 48, 64):
+    CONTROLLERS[f"falls{_n}"] = (  # falls in the cost, no balance feedback
+        f"sampler, {_n} samples, falls in its cost",
+        {"controller": "sampling", "samples": _n, "search": {**BEFORE_HOLD, "balance": None}},
+        "position",
+    )
+    CONTROLLERS[f"balance{_n}"] = (  # and the balance feedback (eval's default before hold)
+        f"sampler, {_n} samples, falls in its cost, balance feedback",
+        {"controller": "sampling", "samples": _n, "search": BEFORE_HOLD},
+        "position",
+    )
+    CONTROLLERS[f"default{_n}"] = (  # the sampler as eval runs it now (validate's defaults)
+        f"sampler, {_n} samples, eval's defaults now: falls in its cost, balance feedback with "
+        f"the drift lead, foot holding {CostWeights().hold:g}, "
+        f"{search_offsets.__kwdefaults__['elite']} elite",
+        {"controller": "sampling", "samples": _n},
+        "position",
+    )
+#: eval's sampler on the lean body (``sim_model(lean=True)``: the same motion bit for bit,
+#: cheaper steps): ``fast28`` at eval's 28 samples, ``fast<n>`` more samples for about the
+#: old cost (``benchmarks/bench_simulate_step.py``)
+for _n in (28, 32, 36, 40):
+    CONTROLLERS[f"fast{_n}"] = (
+        f"sampler, {_n} samples, eval's defaults now, lean body",
+        {"controller": "sampling", "samples": _n},
+        "position",
+        {"lean": True},
+    )
+for _w in (0, 2, 5, 10, 20, 50):  # candidates: foot holding (sim.simulate.footholding) ...
+    for _e in (0, 1, 4, 8):  # ... and elite reuse (search_offsets(elite=...))
+        _name = (f"hold{_w}" if _w else "") + (f"elite{_e}" if _e else "")
+        if _name:
+            CONTROLLERS[_name] = (
+                f"sampler, 28 samples, falls in its cost, balance feedback, foot holding {_w}, "
+                f"{_e} elite",
+                {"controller": "sampling", "samples": 28,
+                 "search": {"weights": CostWeights(hold=_w), "elite": _e, "balance": Balance()}},
+                "position",
+            )  # fmt: skip
+
+#: candidates against the root's drift, each on the default (28 samples, balance feedback):
+#: ``bdrift<k>`` the balance feedback's velocity target leads by k [1/s] times the root's
+#: horizontal position error (``Balance.k_drift``); ``xy<w>`` the cost's root position weight
+#: (``CostWeights.root_xy``, 20 by default); ``vdrift<w>`` the cost's root velocity weight w
+#: with its target leading by 1/s times the position error (``CostWeights.drift_rate``)
+DRIFT = {
+    **{f"bdrift{_k:g}": ({"balance": Balance(k_drift=_k)}, f"balance drift {_k:g}/s")
+       for _k in (0.5, 1, 2, 4)},
+    **{f"xy{_w}": ({"weights": CostWeights(root_xy=_w)}, f"root position weight {_w}")
+       for _w in (50, 100, 200)},
+    **{f"vdrift{_w}": ({"weights": CostWeights(root_vel=_w, drift_rate=1.0)},
+                       f"root velocity weight {_w}, leading by 1/s times the drift")
+       for _w in (2, 5, 10)},
+    "bdrift2x5": ({"balance": Balance(k_drift=2.0, drift_max=0.5)},
+                  "balance drift 2/s up to 0.5 m"),
+    **{f"bdrift{_k}dead{_d:g}": ({"balance": Balance(k_drift=_k, drift_max=0.3 + _d,
+                                                      drift_dead=_d)},
+                                 f"balance drift {_k}/s beyond {_d:g} m")
+       for _k in (2, 4) for _d in (0.05, 0.1)},
+    "bdrift2v2": ({"balance": Balance(k_drift=2.0),
+                   "weights": CostWeights(root_vel=2.0, drift_rate=1.0)},
+                  "balance drift 2/s, root velocity weight 2 leading by 1/s times the drift"),
+}  # fmt: skip
+for _name, (_search, _label) in DRIFT.items():
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
+        {"controller": "sampling", "samples": 28, "search": {"balance": Balance(), **_search}},
+        "position",
+    )
+
+
+#: stiffer controllers on eval's default (``default28``), the torque limits the human ones in
+#: all: ``stiff<d>`` caps each hinge's stiffness at its peak torque over d [rad]
+#: (``Gains.min_deflection``, 0.25 by default), ``w12`` at 12 Hz bandwidth instead of 8, ``rad``
+#: with the sampler's noise in the default body's angles (``noise_deflection`` 0.25: the
+#: offsets' spread stays what it was in radians, not shrunk by the stiffer joints)
+_RAD = {"noise_deflection": MIN_DEFLECTION}
+STIFF = {
+    "stiff0.1": (Gains(min_deflection=0.1), {}, "stiffness cap 0.1 rad"),
+    "stiff0.05": (Gains(min_deflection=0.05), {}, "stiffness cap 0.05 rad"),
+    "stiff0.1w12": (Gains(min_deflection=0.1, omega=2 * np.pi * 12.0), {},
+                    "stiffness cap 0.1 rad, 12 Hz bandwidth"),
+    "stiff0.1rad": (Gains(min_deflection=0.1), _RAD,
+                    "stiffness cap 0.1 rad, sampler noise in the 0.25 rad body's angles"),
+}  # fmt: skip
+for _name, (_gains, _search, _label) in STIFF.items():
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults, {_label}",
+        {"controller": "sampling", "samples": 28, "search": _search},
+        "position",
+        {"gains": _gains},
+    )
+
+#: swing-foot placement (``sim.simulate.balance.Balance(c_d, c_v)``: the capture point's error)
+STEP = Balance(c_d=1.0, c_v=0.3)
+STEP_HALF = Balance(c_d=0.5, c_v=0.15)
+#: foot holding 5 given up where the body's capture point leaves its support and the reference's
+#: does not
+CAPTURE_REF = CostWeights(hold=5.0, hold_capture=True, hold_capture_ref=True)
+for _name, _label, _search in (
+    ("step", "swing-foot placement", {"balance": STEP}),
+    (
+        "holdcap5",
+        "foot holding 5 off while the capture point leaves the support",
+        {"weights": CostWeights(hold=5.0, hold_capture=True)},
+    ),
+    (
+        "stepholdcap5",
+        "swing-foot placement, foot holding 5 off while the capture point leaves the support",
+        {"balance": STEP, "weights": CostWeights(hold=5.0, hold_capture=True)},
+    ),
+    ("stephalf", "swing-foot placement at half the gains", {"balance": STEP_HALF}),
+    (
+        "holdcapref5",
+        "foot holding 5 off while the capture point leaves the support where the reference's "
+        "does not",
+        {"weights": CAPTURE_REF},
+    ),
+    (
+        "stepholdcapref5",
+        "swing-foot placement, foot holding 5 off while the capture point leaves the support "
+        "where the reference's does not",
+        {"balance": STEP, "weights": CAPTURE_REF},
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, falls in its cost, balance feedback, {_label}",
+        {"controller": "sampling", "samples": 28, "search": {**BEFORE_HOLD, **_search}},
+        "position",
+    )  # fmt: skip
+
+
+#: candidates on eval's default (``default28``: 28 samples, the balance feedback with the drift
+#: lead, ``sim.simulate.validate.DEFAULT_BALANCE``): ``cc28`` tracks the contact-consistent
+#: reference (no floor lift, stance soles on z = 0; ``ForwardValidation(contact_reference=
+#: True)``; measured against the same lifted points as the default); ``feetdrift28`` reads the
+#: drift lead's position error at the stance feet instead of the root (``Balance.drift_feet``);
+#: ``ccfeetdrift28`` both
+FEET_DRIFT = {"balance": dataclasses.replace(DEFAULT_BALANCE, drift_feet=True)}
+for _name, _label, _kw in (
+    ("cc28", "the contact-consistent reference", {"contact_reference": True}),
+    ("feetdrift28", "the drift lead read at the stance feet", {"search": FEET_DRIFT}),
+    (
+        "ccfeetdrift28",
+        "the contact-consistent reference, the drift lead read at the stance feet",
+        {"contact_reference": True, "search": FEET_DRIFT},
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults with {_label}",
+        {"controller": "sampling", "samples": 28, **_kw},
+        "position",
+    )
+
+#: the stiffer controllers further (a 2-clip smoke run: 12 Hz lowered the root-relative error
+#: most) and with the drift lead at the stance feet
+for _name, _gains, _search, _label in (
+    (
+        "stiff0.05w16",
+        Gains(min_deflection=0.05, omega=2 * np.pi * 16.0),
+        {},
+        "stiffness cap 0.05 rad, 16 Hz bandwidth",
+    ),
+    (
+        "stiff0.1w12feet",
+        Gains(min_deflection=0.1, omega=2 * np.pi * 12.0),
+        FEET_DRIFT,
+        "stiffness cap 0.1 rad, 12 Hz bandwidth, the drift lead read at the stance feet",
+    ),
+    (
+        "stiff0.1feet",
+        Gains(min_deflection=0.1),
+        FEET_DRIFT,
+        "stiffness cap 0.1 rad, the drift lead read at the stance feet",
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults, {_label}",
+        {"controller": "sampling", "samples": 28, "search": _search},
+        "position",
+        {"gains": _gains},
+    )  # fmt: skip

@@ -1,0 +1,68 @@
+"""``benchmarks/bench_simulate.py``'s stiffer-controller candidates: each is eval's default
+sampler on a body whose feedback is stiffer and whose torque limits are the human ones; the
+controllers' table says where MuJoCo flagged an unstable simulation."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.model.humanoid import canonical_skeleton
+from sim.simulate.model import MIN_DEFLECTION, human_torque_limit
+from sim.simulate.validate import validation_model
+
+BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
+
+
+def _load(name: str):
+    sys.path.insert(0, str(BENCH))
+    try:
+        spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCH))
+    return module
+
+
+@pytest.fixture(scope="module")
+def bench():
+    return _load("bench_simulate")
+
+
+@pytest.fixture(scope="module")
+def candidates():
+    return _load("simulate_controllers")
+
+
+def test_stiff_candidates_are_eval_default_with_a_stiffer_body_of_human_strength(candidates):
+    skeleton = canonical_skeleton()
+    base = validation_model(skeleton)
+    default = candidates.CONTROLLERS["default28"]
+    assert len(candidates.STIFF) <= 4
+    for name in candidates.STIFF:
+        label, kw, actuators, body = candidates.CONTROLLERS[name]
+        assert kw["controller"] == default[1]["controller"] and kw["samples"] == 28
+        assert actuators == "position" and set(body) == {"gains"}
+        assert body["gains"].min_deflection < MIN_DEFLECTION
+        model = validation_model(skeleton, actuators=actuators, **body)
+        table = [human_torque_limit(model.actuator(i).name) for i in range(model.nu)]
+        np.testing.assert_array_equal(model.actuator_forcerange[:, 1], table)
+        kp, kp0 = model.actuator_gainprm[:, 0], base.actuator_gainprm[:, 0]
+        assert np.all(kp >= kp0) and np.any(kp > 1.5 * kp0)
+    assert candidates.CONTROLLERS["stiff0.1rad"][1]["search"] == {
+        "noise_deflection": MIN_DEFLECTION
+    }
+
+
+def test_the_table_says_where_a_simulation_went_unstable(bench):
+    row = {"sim_fell": 0, "sim_error_local_mm": 50.0, "sim_error_mm": 80.0,
+           "sim_skate_mm_s": 100.0, "sim_skate_ref_mm_s": 90.0, "sim_cpu_s_per_s": 5.0}  # fmt: skip
+    calm = bench.controllers_markdown({"stiff0.1": [row, row]})
+    assert "diverging" not in calm
+    text = bench.controllers_markdown({"stiff0.1": [row, {**row, "sim_unstable": 1}]})
+    assert "diverging acceleration in 1 clips" in text

@@ -1,0 +1,123 @@
+"""The reference the plain tracker and the sampler track (``sim.simulate.validate.
+ForwardValidation(contact_reference=...)``): the lifted one by default, unchanged; the
+contact-consistent one on request, its stance soles on the simulated floor (z = 0), while every
+figure is still measured against the lifted reference's points."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import sim.simulate.validate as validate
+from sim.model.humanoid import canonical_skeleton
+from sim.simulate.model import CONTROL_HZ
+from sim.simulate.reference import FLOOR_LIFT, flat_soles, lowest_foot_point, time_warp
+
+NAMES = ("root", "lfoot", "rfoot", "head")
+
+
+@pytest.fixture(scope="module")
+def bodies():
+    """(lifted, contact): the plain tracker's forward validation without and with
+    ``contact_reference`` (the reference is the same for the sampler; the plain tracker is cheap)."""
+    skeleton = canonical_skeleton()
+    return (
+        validate.forward_validation(skeleton, NAMES, controller="plain"),
+        validate.forward_validation(skeleton, NAMES, controller="plain", contact_reference=True),
+    )
+
+
+@pytest.fixture(scope="module")
+def walk(trial_on_floor, bodies):
+    """(qpos (T, nq) at 30 fps: 3 s of the walk 02_01, floor (T',) under it at the control rate)."""
+    qpos = trial_on_floor(bodies[0].model, "02_01")[:360:4]
+    return qpos, bodies[0].floor_of(time_warp(bodies[0].model, qpos, 30.0, 1.0, CONTROL_HZ))
+
+
+def _stance(model, ref) -> np.ndarray:
+    """(T,) the lowest sole point [m] of ``ref`` and whether it stands (within 3 cm)."""
+    low = lowest_foot_point(model, ref)
+    return low, low <= 0.03
+
+
+def test_the_default_reference_is_the_lifted_one_unchanged(bodies, walk):
+    """The default: resampled, lowered by the floor, lifted 1 cm, soles laid flat (built here
+    from its parts), and its stance soles hover about the lift above z = 0."""
+    lifted, _ = bodies
+    qpos, floor = walk
+    ref = lifted.reference(qpos, 30.0, floor)
+    expected = time_warp(lifted.model, qpos, 30.0, 1.0, CONTROL_HZ)
+    expected[:, 2] -= floor - FLOOR_LIFT
+    np.testing.assert_array_equal(ref, flat_soles(lifted.model, expected))
+    low, stance = _stance(lifted.model, ref)
+    assert stance.mean() > 0.5 and np.median(low[stance]) > FLOOR_LIFT / 2
+
+
+def test_the_contact_reference_stands_its_stance_soles_on_the_floor(bodies, walk):
+    """With ``contact_reference`` the stance soles touch z = 0 (within 2 mm, where the lifted
+    ones hover about 1 cm); only the height and the ankles (laid flat 1 cm lower) differ from
+    the lifted reference, and the height by the lift and the floor estimate's error (cm)."""
+    lifted, contact = bodies
+    qpos, floor = walk
+    a, b = lifted.reference(qpos, 30.0, floor), contact.reference(qpos, 30.0, floor)
+    low, stance = _stance(contact.model, b)
+    assert stance.mean() > 0.5 and np.median(np.abs(low[stance])) < 0.002
+    ankles = [contact.model.jnt_qposadr[contact.model.joint(f"{s}foot_{a}").id]
+              for s in "lr" for a in ("rx", "rz")]  # fmt: skip
+    same = np.setdiff1d(np.arange(qpos.shape[1]), [2, *ankles])
+    np.testing.assert_array_equal(a[:, same], b[:, same])
+    dz = a[:, 2] - b[:, 2]
+    assert 0.5 * FLOOR_LIFT < np.median(dz) < 3 * FLOOR_LIFT and np.abs(dz).max() < 0.05
+    # the contact reference asked of the lifted body gives the same
+    np.testing.assert_array_equal(lifted.reference(qpos, 30.0, floor, contact=True), b)
+
+
+def test_figures_are_measured_against_the_lifted_points_whatever_is_tracked(
+    bodies, walk, monkeypatch
+):
+    """A tracker that ends exactly in the lifted reference's states has no error whichever
+    reference it was given: the errors and the skating's reference do not move with the
+    option. The tracked contact-consistent reference of a reconstruction 3 cm too low is
+    lowered by the original's shift: it stays 3 cm below the original's (its own height error
+    kept, as the floor track keeps it)."""
+    qpos, _ = walk
+    tracked = {}
+
+    def perfect(model, ref, *, assist_limit, record_every):
+        tracked["ref"] = ref
+        lift = bodies[0].reference(tracked["qpos"], 30.0, tracked["floor"], contact=False)
+        states = lift[::record_every]
+        return SimpleNamespace(qpos=states, fell=False, fall_frame=-1, unstable=False,
+                               joint_torque=np.zeros((len(states), model.nu)))  # fmt: skip
+
+    monkeypatch.setattr(validate, "track", perfect)
+    low_recon = qpos.copy()
+    low_recon[:, 2] -= 0.03
+    figures, refs = [], []
+    for body in bodies:
+        for motion in (qpos, low_recon):
+            orig = time_warp(body.model, qpos, 30.0, 1.0, CONTROL_HZ)
+            tracked.update(qpos=motion, floor=body.floor_of(orig))
+            figures.append(body.run(motion, 30.0, original_qpos=qpos))
+            refs.append(tracked["ref"])
+    for f in figures:
+        assert f["sim_error_mm"] == pytest.approx(0.0, abs=1e-9)
+        assert f["sim_error_local_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert figures[0]["sim_error_original_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert figures[1]["sim_error_original_mm"] == pytest.approx(30.0, abs=0.5)
+    for i in range(2):  # the same figures with the option
+        assert figures[i] == figures[i + 2]
+    np.testing.assert_allclose(refs[1][:, 2] - refs[0][:, 2], -0.03, atol=1e-12)  # lifted
+    np.testing.assert_allclose(refs[3][:, 2] - refs[2][:, 2], -0.03, atol=1e-12)  # contact
+    low, stance = _stance(bodies[1].model, refs[2])
+    assert np.median(np.abs(low[stance])) < 0.002  # the original's tracked soles on z = 0
+
+
+def test_the_option_goes_to_other_processes(bodies):
+    import pickle
+
+    lifted, contact = bodies
+    assert not pickle.loads(pickle.dumps(lifted)).contact
+    assert pickle.loads(pickle.dumps(contact)).contact
