@@ -237,6 +237,24 @@ def test_drift_rate_leads_the_root_velocity_target_by_the_position_error():
     assert window_cost(far, ref, w, hinge_w) == pytest.approx(20 * 0.25 + 5 * 0.6**2)
 
 
+def _spy_on_the_sampler(monkeypatch, key: str):
+    """``validate.sample_track`` replaced by a spy that records its keyword ``key`` ("absent"
+    where not given) and raises the returned exception type: (the record, the type)."""
+    import sim.simulate.validate as validate
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(model, ref, **kw):
+        seen.append(kw.get(key, "absent"))
+        raise Stop
+
+    monkeypatch.setattr(validate, "sample_track", fake)
+    return seen, Stop
+
+
 def test_forward_validation_tracks_with_the_drift_lead_unless_its_search_names_a_feedback(
     model, walk_ref, monkeypatch
 ):
@@ -245,16 +263,7 @@ def test_forward_validation_tracks_with_the_drift_lead_unless_its_search_names_a
     import sim.simulate.validate as validate
     from sim.simulate.balance import Balance
 
-    seen = []
-
-    class Stop(Exception):
-        pass
-
-    def fake(model, ref, **kw):
-        seen.append(kw.get("balance", "absent"))
-        raise Stop
-
-    monkeypatch.setattr(validate, "sample_track", fake)
+    seen, Stop = _spy_on_the_sampler(monkeypatch, "balance")
     qpos = walk_ref[::4][:8]  # 30 fps
     for search in ({}, {"balance": None}, {"balance": Balance()}):
         with pytest.raises(Stop):
@@ -313,16 +322,7 @@ def test_forward_validation_builds_its_body_with_the_default_gains(monkeypatch):
     np.testing.assert_array_equal(named.actuator_gainprm[:, 0], plain)
     assert not np.allclose(want, plain)
 
-    seen = []
-
-    class Stop(Exception):
-        pass
-
-    def fake(model, ref, **kw):
-        seen.append(kw.get("noise_deflection", "absent"))
-        raise Stop
-
-    monkeypatch.setattr(validate, "sample_track", fake)
+    seen, Stop = _spy_on_the_sampler(monkeypatch, "noise_deflection")
     monkeypatch.setattr(validate, "DEFAULT_NOISE_DEFLECTION", 0.25)
     ref = _standing(fv.model, 8)
     for search in ({}, {"noise_deflection": 0.0}):
