@@ -15,7 +15,7 @@ from sidql.codec.windows import encode_windows
 from sidql.commands.main import main
 from sim.bvh.convert import to_acclaim
 from sim.bvh.reader import iter_bvh, parse_bvh
-from sim.bvh.stream import iter_take, read_skeleton
+from sim.bvh.stream import first_skeleton, iter_take, read_skeleton
 from sim.errors import MotionDataError
 from sim.motion.chunks import stream_clips
 from sim.motion.ingest import load_motion
@@ -72,6 +72,23 @@ def test_a_defect_deep_in_the_file_is_the_whole_files_one_line_error(walk_bvh, t
     path.write_text("\n".join(walk_bvh.read_text().splitlines()[:-200]) + "\n")
     message, before = _same_error(path)
     assert "truncated MOTION" in message and before > 3
+
+
+def test_the_first_chunks_skeleton_is_the_whole_files_and_a_later_defect_still_stops_encode(
+    walk_bvh, tmp_path, capsys
+):
+    assert repr(first_skeleton(walk_bvh)) == repr(read_skeleton(walk_bvh))
+    lines = walk_bvh.read_text().splitlines()
+    bad = len(lines) - 300  # far past the first text chunk
+    lines[bad] = " ".join(lines[bad].split()[:3] + ["oops"] + lines[bad].split()[4:])
+    path = tmp_path / "bad.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    assert skeleton_hash(first_skeleton(path)) == skeleton_hash(read_skeleton(walk_bvh))  # fine
+    message, _ = _same_error(path)
+    out = tmp_path / "bad.sidq"
+    assert main(["encode", str(path), "--out", str(out), "--rate", "942"]) == 2
+    assert message in capsys.readouterr().err and not out.exists()
+    assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
 
 
 def test_a_position_channel_that_drifts_over_chunks_is_refused_as_in_the_whole_file(tmp_path):

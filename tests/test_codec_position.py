@@ -19,6 +19,7 @@ from sidql.codec.dpcm import RDO_BAND
 from sidql.codec.encode import encode_series
 from sidql.codec.entropy import decode_integers, encode_integers, estimate_size
 from sidql.codec.plan import plan, position_band_costs, position_weights, subtree_sizes
+from sidql.codec.position_format import coded_rows, estimated_block
 from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser, keyframe_steps
 from sidql.commands.main import main
@@ -109,6 +110,22 @@ def test_range_coder_beats_lzma_and_the_size_model_is_close():
     real = len(encode_integers(v))
     assert real < len(lzma.compress(v.astype("<i2").tobytes(), preset=9 | lzma.PRESET_EXTREME))
     assert abs(estimate_size(v) / real - 1.0) < 0.05
+
+
+def test_the_size_model_of_a_block_read_in_place_is_that_of_its_rows_bit_for_bit():
+    rng = np.random.default_rng(4)
+    for W in (1, 2, 37, 900):
+        keys = np.sort(rng.choice(4 * W, W, replace=False))
+        codes = np.rint(rng.laplace(0.0, rng.uniform(0.5, 3000.0), (W, 47))).astype(np.int64)
+        rows = coded_rows(keys, codes)
+        assert estimated_block(keys, codes) == estimate_size(rows)  # the same float
+        bits = 0.0  # the model written out: per row, sign and lower bits plus the classes' entropy
+        for row in rows:
+            k = np.array([int(abs(x)).bit_length() for x in row])
+            n = np.bincount(k).astype(float)
+            n = n[n > 0]
+            bits += k.sum() - (n * np.log2(n / W)).sum()
+        assert estimated_block(keys, codes) == pytest.approx(bits / 8.0, rel=1e-12, abs=1e-9)
 
 
 def test_shared_contexts_by_expected_magnitude_code_bursty_channels_in_fewer_bytes():

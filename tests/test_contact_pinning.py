@@ -10,6 +10,9 @@ from sidql.keyframes import reconstructions
 from sidql.keyframes.contact_pinning import (
     BLEND_S,
     LEGS,
+    _rolled,
+    _steps,
+    blend_offsets,
     decode_floor,
     decode_runs,
     encode_floor,
@@ -226,6 +229,42 @@ def test_blends_in_and_out_smoothly():
     # the fade is monotone: the offset shrinks away from the run
     before = np.linalg.norm(off[20 - w - 1 : 20], axis=-1)
     assert np.all(np.diff(before) >= -1e-12)
+
+
+def test_rolled_offsets_hold_the_lowest_sole_sphere_still_and_vanish_at_the_anchor():
+    rng = np.random.default_rng(7)
+    bottoms = rng.normal(size=(40, 3, 3))
+    low = rng.integers(0, 3, size=40)
+    a, e = 5, 31
+    fwd, back = _steps(bottoms, low, a, e)
+    for k in (0, 9, e - a - 1):
+        out = _rolled(fwd, back, k)
+        assert out.shape == (e - a, 2) and np.array_equal(out[k], [0.0, 0.0])
+        for t in range(a + 1, e):  # the sphere lowest at the later (after) / earlier frame
+            s = low[t] if t > a + k else low[t - 1]
+            moved = bottoms[t, s, :2] + out[t - a] - (bottoms[t - 1, s, :2] + out[t - 1 - a])
+            assert np.allclose(moved, 0.0, atol=1e-12)
+
+
+def test_blend_offsets_fade_each_run_by_a_smoothstep_and_normalise_overlaps():
+    contact = np.zeros(30, bool)
+    contact[5:9] = contact[14:16] = True
+    offsets = np.arange(90.0).reshape(30, 3)
+    width = 4
+    out = blend_offsets(offsets, contact, width)
+    assert np.array_equal(out[contact], offsets[contact])
+
+    def fade(d):  # 1 - smoothstep(d / (width + 1))
+        x = min(d / (width + 1), 1.0)
+        return 1.0 - x * x * (3.0 - 2.0 * x)
+
+    for t in np.flatnonzero(~contact):
+        ends, starts = [e for e in (8, 15) if e < t], [s for s in (5, 14) if s > t]
+        terms = [(fade(t - ends[-1]), offsets[ends[-1]])] if ends else []
+        terms += [(fade(starts[0] - t), offsets[starts[0]])] if starts else []
+        total = sum((w * o for w, o in terms), np.zeros(3))
+        weight = sum(w for w, _ in terms)
+        assert np.allclose(out[t], total / max(1.0, weight), rtol=1e-12, atol=1e-12)
 
 
 def test_contacts_reconstruction_counts_its_bits_and_keeps_bone_lengths():

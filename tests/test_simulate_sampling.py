@@ -331,3 +331,41 @@ def test_forward_validation_builds_its_body_with_the_default_gains(monkeypatch):
                 ref, 120.0
             )
     assert seen == [0.25, 0.0]
+
+
+def test_a_rollout_that_diverges_stops_and_is_never_kept(model, walk_ref):
+    """MuJoCo resets a diverging state to the model's initial pose and goes on; a rollout that
+    diverges stops at that tick, and its candidate costs DIVERGED_COST, so the search never
+    keeps a reset (teleported) state. The plain tracker reports it as unstable."""
+    import mujoco
+
+    from sim.simulate.sampling import (
+        DIVERGED_COST,
+        CostWeights,
+        _candidate_costs,
+        _problem,
+        _rollout,
+    )
+    from sim.simulate.tracking import divergences
+
+    data = mujoco.MjData(model)
+    prob = _problem(model, walk_ref, data, 0.3, ())
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    states = np.empty((2, mujoco.mj_stateSize(model, spec)))
+    for i, speed in enumerate((None, 1e12)):  # a sane state and one that must diverge
+        mujoco.mj_resetData(model, data)
+        data.qpos[:], data.qvel[:] = walk_ref[0], prob.ref_qvel[0]
+        if speed is not None:
+            data.qvel[6:] = speed
+        mujoco.mj_getState(model, data, states[i], spec)
+    keep = np.empty(states.shape[1]), np.empty(model.nq), spec, None
+    for _ in range(2):  # MuJoCo's reset clears its counts: a second divergence is seen too
+        mujoco.mj_setState(model, data, states[1], spec)
+        end = _rollout(model, data, prob, np.zeros(model.nu), (0, 12, 48), ((), ()), keep)
+        assert divergences(data) > 0 and end == -1  # stopped at its first tick
+    offs = np.zeros((2, model.nu))
+    out = np.empty((2, states.shape[1])), np.empty((2, model.nq))
+    search = (states, CostWeights(), ((), ()), spec)
+    cost = _candidate_costs(model, [data], prob, search, np.array([0, 1]), offs, (0, 12, 48),
+                            out, None)  # fmt: skip
+    assert cost[1] == DIVERGED_COST and cost[0] < DIVERGED_COST / 1e6

@@ -160,7 +160,7 @@ def test_forward_validation_builds_the_body_its_controller_needs():
 
 
 def test_skating_is_measured_on_one_reference_whatever_the_controller(trial_on_floor):
-    """The skating's reference of the sampler (its tracked motion lifted by the floor lift)
+    """The skating's reference of the sampler (the lifted reference, its yardstick)
     and of the QP (contact-consistent already) stand alike: stance soles on z = 0 (the
     simulated floor), where the lifted reference's soles hover and the contact threshold
     would pick other frames; the two differ only by the ankles ``flat_soles`` turned (a sole
@@ -174,13 +174,13 @@ def test_skating_is_measured_on_one_reference_whatever_the_controller(trial_on_f
     qp = forward_validation(skeleton, names, controller="wholebody")
     qpos = trial_on_floor(sampled.model, "02_01")[:360:4]  # 3 s at 30 fps
     floor = sampled.floor_of(qpos.repeat(4, axis=0)[: 4 * len(qpos) - 3])
-    a = sampled.skating_reference(sampled.reference(qpos, 30.0, floor))
+    a = sampled.skating_reference(sampled.reference(qpos, 30.0, floor, contact=False))
     b = qp.skating_reference(qp.reference(qpos, 30.0, floor))
     assert np.median(np.abs(a[:, 2] - b[:, 2])) < 0.003
     for ref in (a, b):
         low = lowest_foot_point(sampled.model, ref)
         stance = low <= 0.03
         assert stance.mean() > 0.5 and np.median(np.abs(low[stance])) < 0.002  # on the floor
-    lifted = lowest_foot_point(sampled.model, sampled.reference(qpos, 30.0, floor))
+    lifted = lowest_foot_point(sampled.model, sampled.reference(qpos, 30.0, floor, contact=False))
     assert np.median(lifted[stance]) > FLOOR_LIFT / 2  # the lifted one hovers
     assert (low <= SKATE_CONTACT).sum() > (lifted <= SKATE_CONTACT).sum()

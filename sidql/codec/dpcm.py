@@ -23,7 +23,9 @@ every bone two steps down, and so on. The bones of one depth are independent of 
 which lets the processor work on several at once (the chain of one keyframe is as long as the
 tree is deep, not as its bone count); the stream is the same as visiting them one bone at a time.
 A parent list whose parents do not precede their children (never in a stream: the reader
-refuses it) is visited bone by bone in index order.
+refuses it) is visited bone by bone in index order. The encoder's usual case (aiming, no partner
+channels, parents first) runs a copy of the loop without the branches the other cases need
+(:func:`_aimed`): the same operations on the same values, so the same codes, bit for bit.
 
 Units: radians (theta, phi), metres (root, lengths, point errors).
 """
@@ -196,6 +198,12 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
     """
     W, D = codes.shape
     M = n_bones
+    kstep = steps(keys, quarters)
+    if encode and basis.shape[0] > 0 and _tree_ordered(parents) and np.all(partners < 0):
+        values = same_branch(values, firsts, M, rows)
+        bones, _ = depth_order(parents)
+        return _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho,
+                      kstep, firsts, rows, bones)  # fmt: skip
     out = np.zeros((W, D))
     innov = np.zeros(D)
     kappa = np.zeros((D, partners.shape[1]))
@@ -203,13 +211,95 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
     err = np.zeros((M + 1, 3))
     order = visit_order(parents)
     target_phi = np.zeros(M)
-    kstep = steps(keys, quarters)
     if encode:
         values = same_branch(values, firsts, M, rows)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi,
                   basis, lengths, parents, innov, kappa, err, aim, root_rho, order,
                   target_phi, rows[w], kstep, firsts)  # fmt: skip
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _code(target, pred, step):
+    """The residual code of ``target`` predicted by ``pred`` at ``step``: rounded, one class
+    down where :data:`RDO_BAND` allows (as :func:`_keyframe` codes)."""
+    q = (target - pred) / step
+    r = np.int64(np.floor(q + 0.5))
+    a = abs(r)
+    down = (a > 0) & ((a & (a - 1)) == 0) & (a - abs(q) > 0.5 - RDO_BAND)
+    return r - np.int64(down) * (np.int64(r > 0) - np.int64(r < 0))
+
+
+@numba.njit(cache=True, nogil=True)
+def _tree_ordered(parents):
+    """Whether ``parents`` (M + 1,) has the root first and every parent before its child."""
+    if parents[0] >= 0:
+        return False
+    for j in range(1, parents.shape[0]):
+        if parents[j] < 0 or parents[j] >= j:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho, kstep, firsts,
+           rows, bones):  # fmt: skip
+    """:func:`dpcm` encoding with aiming, without partner channels (version 5), parents before
+    children (``bones``: :func:`depth_order`'s): the arithmetic of :func:`_keyframe`, value by
+    value in the same order, without its branches. Each keyframe's temporal predictions come
+    first (they read the keyframes before it only), then the root's channels and the bones by
+    depth, each bone's theta then its phi (the bones of one depth do not read each other).
+    Returns the decoded (W, 2 M + 3) values; ``codes`` filled."""
+    W, D = codes.shape
+    out = np.zeros((W, D))
+    err = np.zeros((M + 1, 3))
+    pred = np.zeros(D)
+    for w in range(W):
+        v = rows[w]
+        ks = kstep[w]
+        if w >= 2:
+            ratio = min((keys[w] - keys[w - 1]) / (keys[w - 1] - keys[w - 2]), 2.0)
+            for d in range(D):
+                slope = root_rho if d >= 2 * M else rho
+                pred[d] = out[w - 1, d] + slope * ratio * (out[w - 1, d] - out[w - 2, d])
+        elif w == 1:
+            for d in range(D):
+                pred[d] = out[0, d]
+        for c in range(3):
+            d = 2 * M + c
+            if w == 0:
+                pred[d] = out[0, firsts[d]] if firsts[d] >= 0 else 0.0
+            step = scale[d] * ks
+            codes[w, d] = _code(values[v, d], pred[d], step)
+            out[w, d] = pred[d] + codes[w, d] * step
+            err[0, c] = out[w, d] - values[v, d]
+        for b in bones:
+            d = M + b
+            if w == 0:
+                pred[b] = out[0, firsts[b]] if firsts[b] >= 0 else 0.0
+                pred[d] = out[0, firsts[d]] if firsts[d] >= 0 else 0.0
+            p = parents[b + 1]
+            L = max(lengths[b], 1e-6)
+            e0, e1, e2 = err[p, 0], err[p, 1], err[p, 2]
+            g0, g1, g2, g3, g4 = basis[v, b, 0], basis[v, b, 1], basis[v, b, 2], basis[v, b, 3], \
+                basis[v, b, 4]  # fmt: skip
+            dt = -(e0 * g0 + e1 * g1 + e2 * g2) / L
+            dp = -(e0 * g3 + e1 * g4) / (L * max(-g2, SIN_FLOOR))
+            target = values[v, b]
+            target += min(max(dt, -0.5), 0.5)
+            target_phi = values[v, d] + min(max(dp, -0.5), 0.5)
+            step = scale[b] * ks
+            codes[w, b] = _code(target, pred[b], step)
+            out[w, b] = pred[b] + codes[w, b] * step
+            step = min(scale[d] * ks / max(np.sin(out[w, b]), SIN_FLOOR), MAX_PHI_STEP)
+            codes[w, d] = _code(target_phi, pred[d], step)
+            out[w, d] = pred[d] + codes[w, d] * step
+            a = lengths[b] * (out[w, b] - values[v, b])
+            f = -lengths[b] * g2 * (out[w, d] - values[v, d])
+            err[b + 1, 0] = err[p, 0] + a * g0 + f * g3
+            err[b + 1, 1] = err[p, 1] + a * g1 + f * g4
+            err[b + 1, 2] = err[p, 2] + a * g2
     return out
 
 

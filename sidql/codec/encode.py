@@ -37,7 +37,7 @@ from sim.motion.chunks import stream_clips
 from sim.motion.clip import Clip
 from sim.motion.ingest import load_motion, resample_step
 from sim.motion.resample import grid_rate
-from sim.motion.trial import CMU_FPS, is_bvh, read_skeleton
+from sim.motion.trial import CMU_FPS, head_skeleton, is_bvh
 
 CHOICES: tuple[str, ...] = ("auto",) + CURVES
 #: Frames (at the stream rate) read, retargeted and charted at a time by :func:`encode_files`.
@@ -209,7 +209,7 @@ def encode_files(
     then grows with the take.
     """
     amc = asf if amc is None and is_bvh(asf) else amc
-    skel = skeleton_hash(read_skeleton(amc if is_bvh(amc) else asf))
+    skel = skeleton_hash(head_skeleton(amc if is_bvh(amc) else asf))  # a BVH: its first chunk
     rates = not position_coded(
         kwargs.get("max_q"), kwargs.get("latency", 0),
         kwargs.get("reconstruction", "auto"), kwargs.get("objective", "position"),

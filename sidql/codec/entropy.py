@@ -394,29 +394,45 @@ def decode_integers(
 _BIT_LENGTH = np.array([int(a).bit_length() for a in range(1 << 12)], dtype=np.int64)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _row_bits(row, counts, total):
+    """``total`` plus the estimated bits of one channel ``row`` (W,) (``counts``: scratch)."""
+    W = row.shape[0]
+    counts[:] = 0
+    for w in range(W):
+        a = abs(row[w])
+        if a < _BIT_LENGTH.shape[0]:
+            k = _BIT_LENGTH[a]
+        else:
+            k = 0
+            while a > 0:
+                k += 1
+                a >>= 1
+        counts[k] += 1
+        if k > 0:
+            total += k  # sign and the k - 1 bits below the leading one
+    for k in range(MAX_CLASS + 1):
+        if counts[k] > 0:
+            n = np.float64(counts[k])
+            total -= n * np.log2(n / W)
+    return total
+
+
 @numba.njit(cache=True, nogil=True)
 def _estimate_bits(values):
-    C, W = values.shape
-    total = 0.0
     counts = np.zeros(MAX_CLASS + 1, dtype=np.int64)
-    for c in range(C):
-        counts[:] = 0
-        for w in range(W):
-            a = abs(values[c, w])
-            if a < _BIT_LENGTH.shape[0]:
-                k = _BIT_LENGTH[a]
-            else:
-                k = 0
-                while a > 0:
-                    k += 1
-                    a >>= 1
-            counts[k] += 1
-            if k > 0:
-                total += k  # sign and the k - 1 bits below the leading one
-        for k in range(MAX_CLASS + 1):
-            if counts[k] > 0:
-                n = np.float64(counts[k])
-                total -= n * np.log2(n / W)
+    total = 0.0
+    for c in range(values.shape[0]):
+        total = _row_bits(values[c], counts, total)
+    return total
+
+
+@numba.njit(cache=True, nogil=True)
+def _estimate_bits_split(first, rest):
+    counts = np.zeros(MAX_CLASS + 1, dtype=np.int64)
+    total = _row_bits(first, counts, 0.0)
+    for c in range(rest.shape[0]):
+        total = _row_bits(rest[c], counts, total)
     return total
 
 
@@ -427,3 +443,10 @@ def estimate_size(values: np.ndarray) -> float:
     O(C W), several times faster than coding."""
     v = np.ascontiguousarray(values, dtype=np.int64)
     return float(_estimate_bits(v)) / 8.0
+
+
+def estimate_split(first: np.ndarray, rest: np.ndarray) -> float:
+    """:func:`estimate_size` of the (C, W) array whose first row is ``first`` (W,) and whose
+    others are ``rest`` (C - 1, W), the same float, without building it: ``rest`` may be a view
+    (e.g. the transpose of a (W, C - 1) array), read in place. Both int64."""
+    return float(_estimate_bits_split(first, rest)) / 8.0

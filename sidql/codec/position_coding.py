@@ -18,9 +18,9 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.encoded import Encoded, measure, where_prefix
-from sidql.codec.entropy import encode_integers, estimate_size
+from sidql.codec.entropy import encode_integers
 from sidql.codec.plan import plan, position_band_costs
-from sidql.codec.position_format import channel_kinds, coded_rows
+from sidql.codec.position_format import channel_kinds, coded_rows, estimated_block
 from sidql.codec.positions import chart_points, position_errors
 from sidql.codec.quantise import PositionQuantiser, aim_basis
 from sidql.codec.shared_cache import SharedCache
@@ -67,16 +67,16 @@ CODED_BYTES = 8 << 20
 class _PositionSearch:
     """Keyframes and step sizes of one reconstruction under coding 2 (position-coded).
 
-    Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`);
+    Sizes during the searches come from a size model (:func:`~sidql.codec.entropy.estimate_size`,
+    :func:`~sidql.codec.position_format.estimated_block`);
     the range coder itself runs only on the few plans that may be kept."""
 
-    def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf, coded=None):
+    def __init__(self, series, recon, G, build, extra_cost=None, frame_cap_mm=np.inf, coded=None,
+                 chart=None):  # fmt: skip
         self.series, self.recon, self.build = series, recon, build
-        values, _ = series.channels()
-        self.values = np.ascontiguousarray(values, dtype=np.float64)  # read in place by rows
+        self.values, self.truth, self.basis = _chart_arrays(series) if chart is None else chart
+        values = self.values
         self.lengths = sidq.position_lengths(series.lengths)
-        self.truth = chart_points(values, series.lengths, series.parents)
-        self.basis = aim_basis(values, series.n_bones)
         self.C = position_band_costs(
             values, values, None, G, recon, self.lengths, series.parents,
             frame_cap_mm=frame_cap_mm,
@@ -113,7 +113,7 @@ class _PositionSearch:
         return self.coded.get(key, make)
 
     def estimate(self, keys, codes) -> float:
-        return self.header + estimate_size(coded_rows(keys, codes))
+        return self.header + estimated_block(keys, codes)
 
     def size(self, keys, codes) -> int:
         kinds = channel_kinds(self.series.n_bones)
@@ -237,9 +237,10 @@ def encode_positions(
     G = min(max_gap, sidq.MAX_GAP)
     cap = FRAME_CAP * max_error if max_error is not None else np.inf
     coded = _coded_cache(len(recons))  # the codes do not depend on the reconstruction
+    arrays = _chart_arrays(series)  # nor do the values, true points and aiming directions
     searches = {
         r: _PositionSearch(
-            series, r, G, _builder(series, r, fps, skel_hash), extra_cost, cap, coded
+            series, r, G, _builder(series, r, fps, skel_hash), extra_cost, cap, coded, arrays
         )  # fmt: skip
         for r in recons
     }
@@ -261,6 +262,15 @@ def encode_positions(
     summary = {f"{r}/position": (1000.0 * c[3].mean(), int(round(c[4]))) for r, c in cands.items()}
     summary[f"{recon}/position"] = (enc.mean_error_mm, len(data))
     return enc, summary
+
+
+def _chart_arrays(series: SphericalSeries):
+    """(values (N, 2 M + 3) contiguous, read in place by rows; true points (N, J, 3) [m];
+    aiming directions (N, M, 5)) of a chart: what every reconstruction's search reads."""
+    values, _ = series.channels()
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    truth = chart_points(values, series.lengths, series.parents)
+    return values, truth, aim_basis(values, series.n_bones)
 
 
 def _coded_cache(searches: int) -> SharedCache:

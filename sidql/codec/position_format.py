@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from sidql.codec.entropy import decode_integers, encode_integers
+from sidql.codec.entropy import decode_integers, encode_integers, estimate_split
 from sidql.codec.quantise import PositionQuantiser
 from sim.errors import MotionDataError, UsageError
 
@@ -68,6 +68,17 @@ def coded_rows(keys: np.ndarray, pose_codes: np.ndarray) -> np.ndarray:
     k = np.asarray(keys, dtype=np.int64)
     gaps = np.diff(k, prepend=k[:1])
     return np.vstack([np.diff(gaps, prepend=0)[None], np.asarray(pose_codes, np.int64).T])
+
+
+def estimated_block(keys: np.ndarray, pose_codes: np.ndarray) -> float:
+    """``estimate_size(coded_rows(keys, pose_codes))`` [bytes], the same float, with the codes
+    (W, D) int64 read in place."""
+    k = np.asarray(keys, dtype=np.int64)
+    gaps = np.diff(k, prepend=k[:1])
+    codes = np.asarray(pose_codes)
+    if codes.dtype != np.int64:
+        codes = codes.astype(np.int64)
+    return estimate_split(np.diff(gaps, prepend=0), codes.T)
 
 
 def block_bytes(

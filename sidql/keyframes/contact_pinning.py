@@ -224,32 +224,43 @@ def blend_offsets(offsets: np.ndarray, contact: np.ndarray, width: int) -> np.nd
         return out
     starts = np.array([a for a, _ in spans])
     ends = np.array([e - 1 for _, e in spans])
-    for t in np.flatnonzero(~contact):
-        total, weight = np.zeros(3), 0.0
-        i = np.searchsorted(ends, t) - 1  # last run ending before t
-        if i >= 0:
-            x = 1.0 - _smoothstep((t - ends[i]) / (width + 1))
-            total += x * offsets[ends[i]]
-            weight += x
-        j = np.searchsorted(starts, t)  # first run starting after t
-        if j < len(starts):
-            x = 1.0 - _smoothstep((starts[j] - t) / (width + 1))
-            total += x * offsets[starts[j]]
-            weight += x
-        out[t] = total / max(1.0, weight)
+    t = np.flatnonzero(~contact)
+    total, weight = np.zeros((len(t), 3)), np.zeros(len(t))
+    i = np.searchsorted(ends, t) - 1  # last run ending before t
+    before = i >= 0
+    x = 1.0 - _smoothstep((t[before] - ends[i[before]]) / (width + 1))
+    total[before] += x[:, None] * offsets[ends[i[before]]]
+    weight[before] += x
+    j = np.searchsorted(starts, t)  # first run starting after t
+    after = j < len(starts)
+    x = 1.0 - _smoothstep((starts[j[after]] - t[after]) / (width + 1))
+    total[after] += x[:, None] * offsets[starts[j[after]]]
+    weight[after] += x
+    out[t] = total / np.maximum(1.0, weight)[:, None]
     return out
 
 
-def _rolled(bottoms: np.ndarray, low: np.ndarray, a: int, e: int, t0: int) -> np.ndarray:
-    """(e - a, 2) horizontal offsets [m] over frames ``[a, e)`` that keep the foot's lowest sole
-    sphere (``low`` (N,) its index per frame) from moving horizontally, 0 at frame ``t0``."""
-    out = np.zeros((e - a, 2))
-    for t in range(t0 + 1, e):  # the sphere lowest at t does not move from t - 1
-        step = bottoms[t, low[t], :2] - bottoms[t - 1, low[t], :2]
-        out[t - a] = out[t - 1 - a] - step
-    for t in range(t0 - 1, a - 1, -1):
-        step = bottoms[t + 1, low[t], :2] - bottoms[t, low[t], :2]
-        out[t - a] = out[t + 1 - a] + step
+def _steps(bottoms: np.ndarray, low: np.ndarray, a: int, e: int):
+    """The horizontal steps [m] of a foot's lowest sole sphere over frames ``[a, e)``, (e - a - 1,
+    2) each: ``fwd[k]``, the sphere lowest at frame a + k + 1 from frame a + k to it; ``back[k]``,
+    the sphere lowest at frame a + k from it to frame a + k + 1."""
+    t = np.arange(a + 1, e)
+    fwd = bottoms[t, low[t], :2] - bottoms[t - 1, low[t], :2]
+    back = bottoms[t, low[t - 1], :2] - bottoms[t - 1, low[t - 1], :2]
+    return fwd, back
+
+
+def _rolled(fwd: np.ndarray, back: np.ndarray, k: int) -> np.ndarray:
+    """(L, 2) horizontal offsets [m] over the L frames of a run (its :func:`_steps` ``fwd``,
+    ``back``) that keep the foot's lowest sole sphere from moving horizontally, 0 at the run's
+    frame ``k``: after it each frame's offset is the one before less ``fwd``, before it the one
+    after plus ``back`` (running sums from 0, added in that order)."""
+    out = np.zeros((len(fwd) + 1, 2))
+    zero = np.zeros((1, 2))
+    if k < len(fwd):
+        out[k + 1 :] = np.subtract.accumulate(np.concatenate([zero, fwd[k:]]), axis=0)[1:]
+    if k > 0:
+        out[:k][::-1] = np.add.accumulate(np.concatenate([zero, back[:k][::-1]]), axis=0)[1:]
     return out
 
 
@@ -284,11 +295,12 @@ def foot_offsets(
         inside = keys[(keys >= a) & (keys < e)]
         t = np.arange(a, e)
         if not len(inside):
-            out[a:e, :2] = _rolled(bottoms, low, a, e, a)
+            out[a:e, :2] = _rolled(*_steps(bottoms, low, a, e), 0)
             out[a:e, 2] = (z[a] if floor is None else floor[a:e]) - z[a:e]
             continue
         out[a:e, 2] = np.interp(t, inside, z[inside]) - z[a:e]
-        anchors = [_rolled(bottoms, low, a, e, int(k)) for k in inside]
+        fwd, back = _steps(bottoms, low, a, e)
+        anchors = [_rolled(fwd, back, int(k) - a) for k in inside]
         pos = np.clip(np.searchsorted(inside, t, side="right") - 1, 0, len(inside) - 1)
         nxt = np.minimum(pos + 1, len(inside) - 1)
         span = np.maximum(inside[nxt] - inside[pos], 1)

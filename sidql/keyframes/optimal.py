@@ -19,6 +19,8 @@ import numpy as np
 from sidql.keyframes.segment_costs import (
     _FAST,
     SEPARABLE,
+    TURN,
+    TWO_PI,
     _fill_costs,
     _frame_cost,
     catmull_rom_costs,
@@ -211,10 +213,11 @@ def _optimum_costs(X, R, linear, W):
     ``sidql/keyframes/__pycache__/*.nb*`` after one (tests/test_keyframes_fused.py checks the
     numbers against the full matrix)."""
     N, D = X.shape
+    X, R = X * TURN, R * TURN  # the kernels' unit (turns), back to radians at the end
     band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
     C = np.zeros((N, N))
     bounds = np.full((N, N), np.inf)
-    _fill_costs(X, R, linear, C, 2, band, bounds)
+    _fill_costs(X, R, linear, C, 2, band, bounds, np.empty((0, 0)))
     Cb = C.copy()  # the band alone: its optimum U bounds the true one
     lb = C.copy()  # a lower bound of every entry: exact in the band, one middle frame outside
     dX = np.empty(D)
@@ -233,8 +236,8 @@ def _optimum_costs(X, R, linear, W):
             for w in range(1, W):
                 rest = min(rest, head[w, i] + tail[W - w, N - 1 - j])
             bounds[i, j] = U - rest
-    _fill_costs(X, R, linear, C, band, N, bounds)
-    return C
+    _fill_costs(X, R, linear, C, band, N, bounds, lb)  # lb: their middle frames' costs
+    return C * TWO_PI
 
 
 def optimal_keyframes(

@@ -39,13 +39,15 @@ SEPARABLE: tuple[str, ...] = ("hermite", "linear")
 def _cost_matrix(X, R, linear):
     """X: (N, D) angles [rad]; R: (N, D) rates times dt [rad/frame]; linear: bool.
 
-    The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01); the wrap
-    (:func:`sim.model.angles.wrap_angle`) is branch-free, so the inner loop vectorises.
+    The curve is written ``x_i + h01 (x_j - x_i) + h10 r_i + h11 r_j`` (h00 = 1 - h01) and its
+    error summed in turns (angles over 2 pi: the wrap, :func:`_turn_wrap`, is then a floor and a
+    subtraction, branch-free, so the inner loop vectorises), the sums turned back into radians
+    at the end.
     """
     N = X.shape[0]
     C = np.zeros((N, N))
-    _fill_costs(X, R, linear, C, 2, N, np.full((N, N), np.inf))
-    return C
+    _fill_costs(X * TURN, R * TURN, linear, C, 2, N, np.full((N, N), np.inf), np.empty((0, 0)))
+    return C * TWO_PI
 
 
 #: fastmath without "no infinities / no NaNs" (the bound of :func:`_fill_costs` may be inf):
@@ -54,22 +56,25 @@ _FAST = {"reassoc", "contract", "nsz", "arcp", "afn"}
 
 
 @numba.njit(cache=True, fastmath=_FAST)
-def _fill_costs(X, R, linear, C, lo, hi, bounds):
+def _fill_costs(X, R, linear, C, lo, hi, bounds, first):
     """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``
     (:func:`_entry_cost` with bound ``bounds[i, j]``; every caller passes an (N, N) array, so
-    all run one compiled loop and keep the same numbers)."""
+    all run one compiled loop and keep the same numbers). ``first``: (N, N) the middle frame's
+    cost of each entry (:func:`_frame_cost`) where the caller knows it already, else (0, 0)."""
     N, D = X.shape
     dX = np.empty(D)
+    known = first.shape[0] > 0
     for i in range(N):
         for j in range(i + max(lo, 2), min(i + hi, N)):
-            C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j])
+            mid_cost = first[i, j] if known else -1.0
+            C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j], mid_cost)
 
 
 @numba.njit(cache=True, fastmath=_FAST, inline="always")
-def _entry_cost(X, R, dX, i, j, linear, bound):
+def _entry_cost(X, R, dX, i, j, linear, bound, mid_cost=-1.0):
     """``C[i, j]`` of :func:`_cost_matrix` (``dX``: (D,) scratch), or inf if it exceeds
     ``bound``. The frames are summed from the middle out (where a segment's error is largest):
-    the middle one, then four at a time (one pass over the channels for four frames), then the
+    the middle one (``mid_cost``, its :func:`_frame_cost`, where known: >= 0), then four at a time (one pass over the channels for four frames), then the
     last few one by one; after each pass the sum so far is compared with the bound and the
     entry abandoned once over it. Whatever the bound, an entry kept is the same sum in the
     same order, so the same number."""
@@ -77,7 +82,9 @@ def _entry_cost(X, R, dX, i, j, linear, bound):
         dX[d] = X[j, d] - X[i, d]
     L = j - i
     mid = i + L // 2
-    total = _frame_cost(X, R, dX, i, j, mid, linear)  # frame t = 0: mid, alone (abandons most)
+    total = mid_cost  # frame t = 0: mid, alone (abandons most)
+    if total < 0.0:
+        total = _frame_cost(X, R, dX, i, j, mid, linear)
     if total > bound:
         return np.inf
     t = 1
@@ -106,10 +113,10 @@ def _four_frames_cost(X, R, dX, i, j, lo, hi, linear):
     for d in range(X.shape[1]):
         xi, dx, ri, rj = X[i, d], dX[d], R[i, d], R[j, d]
         acc += (
-            abs(wrap_angle((xi - X[lo, d]) + a0 * dx + b0 * ri + c0 * rj))
-            + abs(wrap_angle((xi - X[hi, d]) + a1 * dx + b1 * ri + c1 * rj))
-            + abs(wrap_angle((xi - X[lo - 1, d]) + a2 * dx + b2 * ri + c2 * rj))
-            + abs(wrap_angle((xi - X[hi + 1, d]) + a3 * dx + b3 * ri + c3 * rj))
+            abs(_turn_wrap((xi - X[lo, d]) + a0 * dx + b0 * ri + c0 * rj))
+            + abs(_turn_wrap((xi - X[hi, d]) + a1 * dx + b1 * ri + c1 * rj))
+            + abs(_turn_wrap((xi - X[lo - 1, d]) + a2 * dx + b2 * ri + c2 * rj))
+            + abs(_turn_wrap((xi - X[hi + 1, d]) + a3 * dx + b3 * ri + c3 * rj))
         )
     return acc
 
@@ -121,9 +128,20 @@ def _frame_cost(X, R, dX, i, j, n, linear):
     acc = 0.0
     for d in range(X.shape[1]):
         v = (X[i, d] - X[n, d]) + h01 * dX[d] + h10 * R[i, d] + h11 * R[j, d]
-        v = wrap_angle(v)
-        acc += abs(v)
+        acc += abs(_turn_wrap(v))
     return acc
+
+
+#: Turns per radian and radians per turn: the kernels of :func:`_fill_costs` work in turns, where
+#: the wrap is the signed distance to the nearest integer.
+TURN = 1.0 / (2.0 * np.pi)
+TWO_PI = 2.0 * np.pi
+
+
+@numba.njit(cache=True, fastmath=_FAST, inline="always")
+def _turn_wrap(v):
+    """An angle [turns] wrapped into [-1/2, 1/2) (:func:`sim.model.angles.wrap_angle` in turns)."""
+    return v - np.floor(v + 0.5)
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")

@@ -5,15 +5,17 @@ The same sum as :mod:`sidql.keyframes.segment_costs`::
 
     C[i, j] = sum over frames i < n < j, channels d, of |wrap(x_i - x_n + h01 (x_j - x_i) + h10 r_i + h11 r_j)|
 
-but each frame's sum over the channels runs in float32, eight channels a vector instruction
-(twice float64's), four frames a pass over the channels, and the frames' sums are added in
-float64. The angle differences ``x_i - x_n`` are formed in float64 before they are rounded (per
+computed in turns (angles over 2 pi, so that the wrap is the distance to the nearest integer) and
+in float32, eight channels a vector instruction (twice float64's), four frames a pass over the
+channels. The angle differences ``x_i - x_n`` are formed in float64 before they are rounded (per
 segment start i, into an (N, D) float32 scratch that stays in the first-level cache), so a short
 segment's small errors keep float32's relative precision (about 1e-7 of each term) rather than an
-absolute 1e-7 rad from rounding the angles themselves. The result is not the float64
-matrix to the last bit: under 1e-6 of an entry on real clips (tests/test_decision_oracle.py
-checks 2e-6, and that the policy's decisions on these costs are those it takes on the float64
-matrix; benchmarks/bench_dqn.py checks the decisions on every clip and keyframe count).
+absolute 1e-7 rad from rounding the angles themselves. Each channel sums its terms over the
+segment's frames in float32; the channels' sums are added and turned back into radians at the
+end. The result is not the float64 matrix to the last bit: at most about 1.3e-6 of an entry on
+real clips (tests/test_decision_oracle.py checks 2e-6, and that the policy's decisions on these
+costs are those it takes on the float64 matrix; benchmarks/bench_dqn.py checks the decisions on
+every clip and keyframe count).
 """
 
 from __future__ import annotations
@@ -23,26 +25,32 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from sidql.keyframes.segment_costs import _FAST, hermite_basis
+from sidql.keyframes.segment_costs import hermite_basis
 
 #: The channel count is padded to a multiple of this (zero channels add |wrap(0)| = 0): whole
 #: vectors, no scalar remainder loop.
 LANES = 8
 
-_TWO_PI = np.float32(2.0 * np.pi)
-_INV_TWO_PI = np.float32(1.0 / (2.0 * np.pi))
-_HALF = np.float32(0.5)
+#: The arithmetic of :func:`single_cost_matrix`: fastmath but for "reassoc" (which would fold
+#: :func:`_turn_distance`'s rounding away; the sums it needs reordered are written per channel).
+_CONTRACT = {"contract", "nsz", "arcp", "afn"}
+
+#: 1.5 * 2^23: ``(v + _ROUND) - _ROUND`` is v rounded to the nearest integer in float32 (|v| <
+#: 2^22).
+_ROUND = np.float32(1.5 * 2**23)
+
+_TURN = 1.0 / (2.0 * np.pi)
 
 
 @numba.njit(cache=True)
-def padded_rates(R):
-    """(N, Dp) float32 rates from (N, D) float64 ``R`` [rad/frame], D padded with zeros to Dp, a
-    multiple of :data:`LANES`."""
+def turn_rates(R):
+    """(N, Dp) float32 rates [turns/frame] from (N, D) float64 ``R`` [rad/frame], divided by
+    2 pi in float64 before rounding, D padded with zeros to Dp, a multiple of :data:`LANES`."""
     N, D = R.shape
     R32 = np.zeros((N, (D + LANES - 1) // LANES * LANES), np.float32)
     for i in range(N):
         for d in range(D):
-            R32[i, d] = R[i, d]
+            R32[i, d] = R[i, d] * _TURN
     return R32
 
 
@@ -66,57 +74,65 @@ def _weights(H, n, i, L):
     return H[L, n - i, 0], H[L, n - i, 1], H[L, n - i, 2]
 
 
-@numba.njit(cache=True, fastmath=_FAST, inline="always")
-def _wrapped(v):
-    """|wrap(v)| in float32 (:func:`sim.model.angles.wrap_angle`'s formula)."""
-    return abs(v - _TWO_PI * np.floor(v * _INV_TWO_PI + _HALF))
+@numba.njit(cache=True, fastmath=_CONTRACT, inline="always")
+def _turn_distance(v):
+    """|wrap(v)| in turns: the distance of float32 ``v`` [turns] to the nearest integer."""
+    return abs(v - ((v + _ROUND) - _ROUND))
 
 
-@numba.njit(cache=True, fastmath=_FAST)
+@numba.njit(cache=True, fastmath=_CONTRACT)
 def single_cost_matrix(X, R, H):
     """(N, N) Hermite segment costs [rad], float32 values held in float64, from (N, D) float64
-    angles X [rad], :func:`padded_rates` R and :func:`weight_table` H of N. Entries with
+    angles X [rad], :func:`turn_rates` R and :func:`weight_table` H of N. Entries with
     j < i + 2 are 0.
 
-    Per segment start i, the differences ``E[n] = x_i - x_n`` (n > i) are formed in float64 and
-    rounded into one (N, Dp) float32 scratch (pad channels 0); the curve's error at frame n of
-    segment (i, j) is then ``E[n] - h01 E[j] + h10 r_i + h11 r_j``. Four frames share one pass
-    over the channels."""
+    Per segment start i, the differences ``E[n] = (x_i - x_n) / 2 pi`` (n > i) are formed in
+    float64 and rounded into one (N, Dp) float32 scratch (pad channels 0); the curve's error at
+    frame n of segment (i, j) is then ``E[n] - h01 E[j] + h10 r_i + h11 r_j`` [turns]. Four
+    frames share one pass over the channels; each channel's sum over the frames is kept in
+    ``acc`` (Dp,) (elementwise, so the passes vectorise without reordering any sum)."""
     N, D = X.shape
     Dp = R.shape[1]
     C = np.zeros((N, N))
     E = np.zeros((N, Dp), np.float32)
+    acc = np.empty(Dp, np.float32)
     for i in range(N):
         for n in range(i + 1, N):
             for d in range(D):
-                E[n, d] = X[i, d] - X[n, d]
+                E[n, d] = (X[i, d] - X[n, d]) * _TURN
         for j in range(i + 2, N):
             L = j - i
-            total = 0.0
+            acc[:] = 0.0
             n = i + 1
             while n + 4 <= j:
                 a0, b0, c0 = _weights(H, n, i, L)
                 a1, b1, c1 = _weights(H, n + 1, i, L)
                 a2, b2, c2 = _weights(H, n + 2, i, L)
                 a3, b3, c3 = _weights(H, n + 3, i, L)
-                acc = np.float32(0.0)
                 for d in range(Dp):
                     e, ri, rj = E[j, d], R[i, d], R[j, d]
-                    acc += (_wrapped(E[n, d] - a0 * e + b0 * ri + c0 * rj)
-                            + _wrapped(E[n + 1, d] - a1 * e + b1 * ri + c1 * rj)
-                            + _wrapped(E[n + 2, d] - a2 * e + b2 * ri + c2 * rj)
-                            + _wrapped(E[n + 3, d] - a3 * e + b3 * ri + c3 * rj))  # fmt: skip
-                total += acc
+                    acc[d] += (_turn_distance(E[n, d] - a0 * e + b0 * ri + c0 * rj)
+                               + _turn_distance(E[n + 1, d] - a1 * e + b1 * ri + c1 * rj)) + (
+                               _turn_distance(E[n + 2, d] - a2 * e + b2 * ri + c2 * rj)
+                               + _turn_distance(E[n + 3, d] - a3 * e + b3 * ri + c3 * rj))  # fmt: skip
                 n += 4
             while n < j:
                 a0, b0, c0 = _weights(H, n, i, L)
-                acc = np.float32(0.0)
                 for d in range(Dp):
-                    acc += _wrapped(E[n, d] - a0 * E[j, d] + b0 * R[i, d] + c0 * R[j, d])
-                total += acc
+                    acc[d] += _turn_distance(E[n, d] - a0 * E[j, d] + b0 * R[i, d] + c0 * R[j, d])
                 n += 1
-            C[i, j] = np.float32(total)  # what the policy reads (decide rounds its costs so)
+            C[i, j] = np.float32(_lanes_sum(acc) * (2.0 * np.pi))  # what the policy reads
     return C
+
+
+@numba.njit(cache=True, fastmath=_CONTRACT, inline="always")
+def _lanes_sum(acc):
+    """The sum of ``acc`` (Dp,), Dp a multiple of :data:`LANES`: the blocks of LANES added
+    elementwise into the first, then its lanes pairwise."""
+    for b in range(LANES, acc.shape[0], LANES):
+        for q in range(LANES):
+            acc[q] += acc[b + q]
+    return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]))
 
 
 def single_costs(X: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -125,12 +141,12 @@ def single_costs(X: np.ndarray, R: np.ndarray) -> np.ndarray:
     precision (see the module docstring) and rounded to float32, held in a float64 array (what
     :meth:`sidql.learning.policy.Policy.decide` makes of any costs it is given)."""
     X = np.ascontiguousarray(X, np.float64)
-    R32 = padded_rates(np.ascontiguousarray(R, np.float64))
-    return single_cost_matrix(X, R32, _weights_of(len(X)))
+    R32 = turn_rates(np.ascontiguousarray(R, np.float64))
+    return single_cost_matrix(X, R32, weights_of(len(X)))
 
 
 @lru_cache(maxsize=8)
-def _weights_of(N: int) -> np.ndarray:
+def weights_of(N: int) -> np.ndarray:
     """:func:`weight_table` of N, made once per clip length (read only)."""
     H = weight_table(N)
     H.flags.writeable = False

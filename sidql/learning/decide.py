@@ -10,8 +10,11 @@ import numba
 import numpy as np
 from torch import nn
 
+from sidql.keyframes.segment_costs import _clip_stacked_chart
+from sidql.keyframes.single_costs import single_cost_matrix, turn_rates
 from sidql.learning.qnet import N_SCALARS, KeyframeQNet
 from sidql.learning.rollout import best_splits, greedy_sequences_of, rollout_values_seq
+from sidql.learning.tasks import _stacked_features
 from sim.errors import ArgumentTypeError
 
 #: The modules of :class:`KeyframeQNet` the decision kernels know: the encoder's layers (mirrored
@@ -146,6 +149,27 @@ def encode_clip(feats, mean, std, w_in, b_in, conv_w, conv_b, dil, w_ctx, b_ctx,
     proj = np.dot(x + ctx, w_proj) + b_proj
     glob = np.dot(m + ctx, w_glob) + b_glob
     return proj, glob
+
+
+@numba.njit(cache=True)
+def select_clip(positions, velocities, idx, parents, dt, sin_eps, H, W, use_prior, enc_w, head_w):
+    """:meth:`sidql.learning.policy.Policy.select` in one compiled call, the same kernels in
+    the same order: the chart of the points ``idx`` of (N, J, 3) ``positions`` [m] and
+    ``velocities`` [m/s] (:func:`sidql.keyframes.segment_costs.clip_stacked`), its features,
+    the encoder (:func:`encode_clip`), the single-precision segment costs
+    (:func:`sidql.keyframes.single_costs.single_cost_matrix`, ``H`` its weight table of N) and
+    the head (:func:`decide_clip`); ``enc_w``, ``head_w``: :func:`encoder_weights`,
+    :func:`head_weights`. One call instead of six: a decision waits for no Python in between.
+
+    Returns:
+        ((W,) int64 keyframes, True), or (empty, False) if a point is not finite.
+    """
+    X, R, ok = _clip_stacked_chart(positions, velocities, idx, parents, dt, sin_eps)
+    if not ok:
+        return np.empty(0, np.int64), False
+    proj, glob = encode_clip(_stacked_features(X, R), *enc_w)
+    cost = single_cost_matrix(X, turn_rates(R), H)
+    return decide_clip(proj, glob, cost, W, use_prior, *head_w), True
 
 
 @numba.njit(cache=True, fastmath=True)

@@ -16,15 +16,20 @@ from functools import lru_cache
 import numpy as np
 import torch
 
-from sidql.keyframes.segment_costs import clip_stacked
-from sidql.keyframes.single_costs import single_costs
-from sidql.learning.decide import decide_clip, encode_clip, encoder_weights, head_weights
+from sidql.keyframes.single_costs import weights_of
+from sidql.keyframes.spherical import SIN_EPS, protocol_maps
+from sidql.learning.decide import (
+    decide_clip,
+    encode_clip,
+    encoder_weights,
+    head_weights,
+    select_clip,
+)
 from sidql.learning.files import POLICY_FORMAT, load_payload
 from sidql.learning.qnet import PRIORS, KeyframeQNet, masked_q
 from sidql.learning.rollout import rollout_values_batch
 from sidql.learning.settings import current_fields
-from sidql.learning.tasks import stacked_features
-from sim.errors import ModelFileError, UsageError
+from sim.errors import ModelFileError, MotionDataError, UsageError
 from sim.files import MAX_POLICY_BYTES
 from sim.paths import package_file
 
@@ -157,25 +162,29 @@ class Policy:
     def select(self, clip, W: int) -> np.ndarray:
         """(W,) keyframes of a :class:`sim.motion.clip.Clip`: the chart, its features, its Hermite
         segment costs in single precision (:mod:`sidql.keyframes.single_costs`, rounded to
-        float32 as :meth:`decide` rounds any costs), then :meth:`decide`'s two kernels.
+        float32 as :meth:`decide` rounds any costs), then :meth:`decide`'s two kernels, all in
+        one compiled call (:func:`sidql.learning.decide.select_clip`).
 
         Raises:
             UsageError: W out of [2, N]. ModelFileError: the policy takes other features.
+            MotionDataError: as :func:`sidql.keyframes.spherical.chart`.
         """
-        angles, rates = clip_stacked(clip)
-        features = stacked_features(angles, rates)
-        n, c = features.shape[0], int(self.net.config["n_features"])
-        if features.shape[-1] != c:  # a policy trained on clips of another skeleton
-            raise ModelFileError(
+        idx, parents = protocol_maps(clip)
+        n, bones = clip.n_frames, len(idx) - 1
+        c = int(self.net.config["n_features"])
+        if 4 * bones != c:  # a policy trained on clips of another skeleton (features: angles
+            raise ModelFileError(  # theta, phi and their rates per bone, stacked_features)
                 self.meta.get("file"), None, f"the policy takes {c} features per frame; clips "
-                f"of {angles.shape[1] // 2} bones give {features.shape[-1]}",
+                f"of {bones} bones give {4 * bones}",
             )  # fmt: skip
         if not 2 <= W <= n:
             raise UsageError(f"W must be in [2, {n}]; got {W}")
         enc_w, head_w = self._weights()
-        proj, glob = encode_clip(features, *enc_w)
-        cost = single_costs(angles, rates)
-        return decide_clip(proj, glob, cost, int(W), self.uses_prior, *head_w)
+        keys, ok = select_clip(clip.positions, clip.velocities, idx, parents, float(clip.dt),
+                               SIN_EPS, weights_of(n), int(W), self.uses_prior, enc_w, head_w)  # fmt: skip
+        if not ok:
+            raise MotionDataError(clip.source or None, None, "non-finite positions or velocities")
+        return keys
 
 
 def load_policy(path: str | os.PathLike | None = None) -> Policy:

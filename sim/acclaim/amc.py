@@ -16,6 +16,7 @@ import warnings
 
 import numpy as np
 
+from sim.acclaim.frames import read_run
 from sim.acclaim.records import MAX_DEGREES, MAX_METRES, ROOT_CHANNELS, Motion, Skeleton
 from sim.acclaim.tokens import float_list, known_names
 from sim.errors import MotionDataError, MotionDataWarning
@@ -106,7 +107,8 @@ class _AmcParser:
     """The AMC body as a state machine fed a chunk of lines at a time.
 
     Frames go to per-bone arrays: runs of frames laid out exactly like the first frame are
-    converted by numpy a chunk at a time (the fast path); anything else goes line by line (the
+    converted a chunk at a time (the fast path: one compiled pass, :mod:`sim.acclaim.frames`,
+    where it converts every value exactly, else numpy's reader, bone by bone); anything else goes line by line (the
     checked path), which names the offending line. Both accept the same files and give the same
     values: the fast path only takes what it can verify, and hands any doubt to the checked path.
     """
@@ -276,6 +278,8 @@ class _AmcParser:
         L = len(names) + 1
         if (stop - start) % L:
             return start
+        if self._compiled(lines[start:stop]):
+            return stop
         T = (stop - start) // L
         number_lines = lines[start:stop:L]
         digits = "".join(number_lines)
@@ -318,6 +322,26 @@ class _AmcParser:
             self.columns[name].append(values)
         self.n += T
         return stop
+
+    def _compiled(self, run: list[str]) -> bool:
+        """Read the frames of ``run`` in one compiled pass (:func:`sim.acclaim.frames.read_run`)
+        when it takes them and every value is within bounds; whether it did."""
+        counts = tuple(self.layout[name] for name in self.names)
+        values = read_run(run, self.names, counts, self.first + self.n)
+        if values is None:
+            return False
+        bounds = [b for name, k in zip(self.names, counts, strict=True) if k
+                  for b in self.bounds[name]]  # fmt: skip
+        if not _within(values, bounds):
+            return False
+        self._flush()
+        col = 0
+        for name, k in zip(self.names, counts, strict=True):
+            if k:
+                self.columns[name].append(values[:, col : col + k])
+                col += k
+        self.n += len(values)
+        return True
 
     # -- the result ------------------------------------------------------------------------------
 

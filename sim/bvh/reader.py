@@ -41,6 +41,7 @@ from sim.bvh.records import (
     Bvh,
     Joint,
 )
+from sim.decimals import parse_table
 from sim.errors import MotionDataError
 from sim.files import excerpt, open_regular, text_lines
 
@@ -115,7 +116,8 @@ def number(token: str, path: str, line: int, what: str, bound: float) -> float:
 class _BvhParser:
     """The file as a state machine fed a chunk of lines at a time: the hierarchy's tokens are
     gathered until ``MOTION``, then the two header lines, then the frames: a chunk at a time
-    through numpy's C reader when it holds nothing but digits, signs, points, ``e``/``E`` and
+    by a compiled pass when it converts them all exactly (:mod:`sim.decimals`), else through
+    numpy's C reader when it holds nothing but digits, signs, points, ``e``/``E`` and
     blanks (numpy then refuses every token the strict grammar :data:`NUMBER` refuses, tested),
     else line by line, each token matched against :data:`NUMBER`, naming the line."""
 
@@ -233,6 +235,8 @@ class _BvhParser:
             last -= 1  # trailing blank lines (the file's end, or the chunk's)
         if 0 < last and self.row + last <= N:
             block = lines[:last]
+            if self._compiled(block):
+                return
             if not "".join(block).translate(_NUMBER_CHARS):  # digits, signs, points, e, blanks
                 try:  # numpy's C reader: a ragged row or a malformed number raises
                     values = np.loadtxt(block, dtype=np.float64, ndmin=2, comments=None)
@@ -248,6 +252,18 @@ class _BvhParser:
                     return
         for k, line in enumerate(lines):
             self._frame_line(first_line + k, line)
+
+    def _compiled(self, block: list[str]) -> bool:
+        """Read the rows of ``block`` in one compiled pass (:func:`sim.decimals.parse_table`:
+        exact decimals, blanks between them) when it takes them all and they are within bounds;
+        whether it did (if not, numpy's reader and then the lines one by one read them)."""
+        C = self.values.shape[1]
+        values = parse_table("\n".join(block), len(block), C) if C else None
+        if values is None or not _within(values, self.bound):
+            return False
+        self.values[self.row - self.base : self.row - self.base + len(block)] = values
+        self.row += len(block)
+        return True
 
     def _frame_line(self, ln: int, line: str) -> None:
         tokens = line.split()

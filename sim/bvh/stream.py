@@ -13,7 +13,8 @@ and every piece's skeleton is the whole file's. Two facts of the whole file make
   it is read.
 
 Every other step of the conversion (the root's translation and rotation, the joints' angles)
-is frame by frame. :func:`read_skeleton` is the whole file's skeleton, read this way.
+is frame by frame. :func:`read_skeleton` is the whole file's skeleton, read this way;
+:func:`first_skeleton` the same for a valid file, its first chunk alone read.
 
 Units as :mod:`sim.bvh.convert`: lengths [m], angles [deg], y-up axes.
 """
@@ -74,6 +75,19 @@ def read_skeleton(path: str | os.PathLike, *, unit: str | None = None, up: str =
     for take in iter_take(path, unit=unit, up=up):
         skeleton = take.skeleton if skeleton is None else skeleton
     return skeleton
+
+
+def first_skeleton(path: str | os.PathLike, *, unit: str | None = None, up: str = "y") -> Skeleton:
+    """:func:`read_skeleton` of a valid file from its hierarchy and first chunk of frames only
+    (the skeleton depends on nothing else); a defect further on is raised, with the same one-line
+    error, by whatever reads the frames next (:func:`iter_take`)."""
+    takes = iter_take(path, unit=unit, up=up)
+    try:
+        for take in takes:
+            return take.skeleton
+    finally:
+        takes.close()
+    return read_skeleton(path, unit=unit, up=up)  # no frames: as the whole file's read says
 
 
 class _FixedChannels:

@@ -19,6 +19,7 @@ whatever the take's length.
 
 from __future__ import annotations
 
+import itertools
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -35,7 +36,7 @@ from sim.errors import UsageError
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.ingest import clip_from_qpos, resample_step
 from sim.motion.retarget import motion_to_qpos
-from sim.motion.trial import CMU_FPS, subject_model, trial_files
+from sim.motion.trial import CMU_FPS, skeleton_model, subject_model, trial_files
 
 #: Source frames of context on each side of a piece (pose-jump windows and velocity stencils).
 MARGIN = 64
@@ -73,12 +74,17 @@ def stream_clips(
     step = resample_step(source_fps, fps)
     if chunk_frames < 1:
         raise UsageError(f"chunk_frames must be >= 1; got {chunk_frames}")
-    subject, model = subject_model(bvh or asf)
     if bvh is None:
+        subject, model = subject_model(asf)
         source = iter_amc(amc, subject, max_bytes=max_bytes or MAX_STREAMED_AMC_BYTES)
-    else:
+    else:  # the skeleton of the first piece is the whole file's: the file is read once
         takes = iter_take(bvh, max_bytes=max_bytes or MAX_BVH_BYTES)
-        source = (take.motion for take in takes)
+        first = next(takes, None)
+        if first is None:
+            subject, model = subject_model(bvh)
+        else:
+            subject, model = skeleton_model(first.skeleton, str(Path(bvh).resolve()))
+        source = (take.motion for take in itertools.chain([first] if first else [], takes))
     amc = bvh or amc
     names, parents = point_names(subject), point_parents(subject)
     data = mujoco.MjData(model)

@@ -110,13 +110,12 @@ def clip_from_qpos(
         if not np.isfinite(qvel).all():
             raise MotionDataError(source or None, None, "non-finite joint velocities (qvel)")
         pos, vel, xquat, omega = point_kinematics(
-            model, data, qpos[frames], qvel, body_ids, site_ids
-        )
+            model, data, qpos[frames], qvel if velocities or derivatives else None, body_ids,
+            site_ids,
+        )  # fmt: skip
         src_vel = acc = noise = None
         if derivatives:
-            every = point_kinematics(
-                model, data, qpos, np.zeros((len(qpos), model.nv)), body_ids, site_ids
-            )[0]
+            every = point_kinematics(model, data, qpos, None, body_ids, site_ids)[0]
             cuts = point_cuts(model, jumps, body_ids)
             src_vel, acc = point_derivatives(every, source_fps, frames, cuts=cuts)
             noise = derivative_noise(len(qpos), frames, cuts=cuts)

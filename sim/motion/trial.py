@@ -23,6 +23,7 @@ from sim.acclaim.writer import write_amc, write_asf
 from sim.bvh.convert import to_acclaim
 from sim.bvh.reader import parse_bvh
 from sim.bvh.records import MAX_BVH_BYTES
+from sim.bvh.stream import first_skeleton
 from sim.bvh.stream import read_skeleton as bvh_skeleton
 from sim.bvh.writer import write_bvh
 from sim.errors import MotionDataError, UsageError
@@ -103,9 +104,25 @@ def subject_model(path: str | os.PathLike, *, unit: str | None = None, up: str =
     return _bvh_model(str(Path(path).resolve()), hashlib.sha256(data).hexdigest(), unit, up)
 
 
+def head_skeleton(path: str | os.PathLike) -> Skeleton:
+    """:func:`read_skeleton` of a valid file, a BVH's frames read no further than its first chunk
+    (:func:`sim.bvh.stream.first_skeleton`: a defect further on is raised by the reading of the
+    frames that follows, e.g. :func:`sim.motion.chunks.stream_clips`)."""
+    return first_skeleton(path) if is_bvh(path) else parse_asf(path)
+
+
 @lru_cache(maxsize=16)
 def _bvh_model(path: str, digest: str, unit: str | None, up: str):
-    skeleton = read_skeleton(path, unit=unit, up=up)
+    return skeleton_model(read_skeleton(path, unit=unit, up=up), path)
+
+
+def skeleton_model(skeleton: Skeleton, path: str | os.PathLike):
+    """(skeleton, MjModel) of the humanoid of a BVH file's ``skeleton`` (read from ``path``,
+    named in errors), uncached.
+
+    Raises:
+        MotionDataError: a skeleton MuJoCo refuses.
+    """
     try:
         return skeleton, mujoco.MjModel.from_xml_string(humanoid.build_mjcf(skeleton))
     except ValueError as e:  # MuJoCo's compiler; MotionDataError (also a ValueError) passes

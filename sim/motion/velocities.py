@@ -380,13 +380,15 @@ def point_kinematics(model, data, qpos, qvel, body_ids, site_ids):
     """Positions, velocities and body orientations along a trajectory.
 
     Args:
-        qpos: (T, nq); qvel: (T, nv).
+        qpos: (T, nq); qvel: (T, nv) (None: at rest; the velocities are zeros and not computed).
         body_ids: (J,) body of each point; site_ids: (J,) site at each point (-1: the body origin).
 
     Returns:
         positions (T, J, 3) [m], velocities (T, J, 3) [m/s], body quaternions (T, J, 4) ``wxyz``,
         body angular velocities (T, J, 3) [rad/s], all in the world frame.
     """
+    if qvel is None:
+        return _point_poses(model, data, qpos, body_ids, site_ids)
     T = qpos.shape[0]
     body_ids = np.asarray(body_ids)
     site_ids = np.asarray(site_ids)
@@ -413,3 +415,25 @@ def point_kinematics(model, data, qpos, qvel, body_ids, site_ids):
     v = cvel[:, body_ids]
     vel = v[..., 3:] + np.cross(v[..., :3], pos - com[:, root_of])
     return pos, vel, xquat[:, body_ids], v[..., :3]
+
+
+def _point_poses(model, data, qpos, body_ids, site_ids):
+    """:func:`point_kinematics` at rest: positions and orientations, zero velocities."""
+    T = qpos.shape[0]
+    body_ids = np.asarray(body_ids)
+    site_ids = np.asarray(site_ids)
+    has_site = site_ids >= 0
+    xpos = np.empty((T, model.nbody, 3))
+    xquat = np.empty((T, model.nbody, 4))
+    site_xpos = np.empty((T, model.nsite, 3))
+    data.qvel[:] = 0.0
+    for t in range(T):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        xpos[t] = data.xpos
+        xquat[t] = data.xquat
+        site_xpos[t] = data.site_xpos
+    pos = xpos[:, body_ids]
+    pos[:, has_site] = site_xpos[:, site_ids[has_site]]
+    zero = np.zeros((T, len(body_ids), 3))
+    return pos, zero, xquat[:, body_ids], zero.copy()

@@ -53,22 +53,18 @@ from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.footholding import as_slice, reference_soles, sole_ids, window_hold_costs
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
+from sim.simulate.tracking import clear_divergences, divergences
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
 CORRECTED = ("femur", "tibia", "foot", "toes", "lowerback", "upperback", "thorax")
-#: control ticks (0.3 s) a candidate is rolled on past its window before it is judged. Measured
-#: on 15 time-warped 4 s track clips of ``synth`` at 64 samples, falls not yet in the cost: 0 /
-#: 12 / 24 / 48 ticks kept 0 / 2 / 1 / 8 up; at 48, the root pull of :class:`CostWeights`
-#: (``root_xy`` 20) kept 7 up with about half the drift (2 s of 07_01: 1.37 -> 0.80 m of root
-#: error); judging at the window's end as well kept 2 of the first 8 up, against 4. With falls
-#: in the cost, on 8 of the 22 clips of ``bench_simulate.py --controllers`` at 32 samples: 24 /
-#: 36 ticks fell in 4 / 2 of 8 (24 samples, 36 ticks: 3) (docs/synthetic.md)
+#: control ticks (0.3 s) a candidate is rolled on past its window before it is judged (0 to 72
+#: measured, with and without falls in the cost: docs/synthetic.md, "Looking ahead")
 LOOKAHEAD = 36
 #: the balance feedback (``sim.simulate.balance``) every rollout and the replay add by default
-#: (``balance=None``: none, the sampler before it). On the 22 clips of ``bench_simulate.py
-#: --controllers`` at 32 samples: falls 0.32 -> 0.27, root-relative error 138 -> 127 mm, global
-#: 466 -> 383 mm, CPU 1.18x (docs/results/simulate_controllers.md)
+#: (``balance=None``: none, the sampler before it; measured: docs/synthetic.md)
 BALANCE = Balance()
+#: a candidate whose simulation diverged (MuJoCo reset its state) costs this: never kept
+DIVERGED_COST = 1e15
 #: bodies whose positions relative to the root enter the cost
 END_EFFECTORS = ("lfoot", "rfoot", "ltoes", "rtoes", "lhand", "rhand", "head")
 
@@ -87,9 +83,8 @@ class CostWeights:
     balance: float = 50.0  # CoM minus the ankles' mid-point, horizontal [m^2]
     root_vel: float = 0.5  # root linear velocity [m^2/s^2]
     #: [1/s] the root velocity term's horizontal target leads by this times the root's
-    #: horizontal position error (reference less simulated, clipped to ``drift_max`` [m]): a
-    #: candidate heading back to the reference's path costs less; 0: off (screened on 5
-    #: clips only, no better: docs/synthetic.md)
+    #: horizontal position error (reference less simulated, clipped to ``drift_max`` [m]); 0:
+    #: off (screened on 5 clips only, no better: docs/synthetic.md)
     drift_rate: float = 0.0
     drift_max: float = 0.3
     fallen: float = 1e4  # root below half its reference height
@@ -97,10 +92,8 @@ class CostWeights:
     #: do not look for falls and run to their end (the sampler as first built)
     fall: float = 1e4
     #: foot holding (``sim.simulate.footholding.slide_cost``) over the window's ticks: a stance
-    #: sole sliding faster than the reference's [m^2/s^2]; 0: not looked at. Off by default: on
-    #: the 22 clips of ``bench_simulate.py --controllers`` at 28 samples, 5 held the feet of the
-    #: clips that stayed up (skating lower in 9 of 13) but fell in 0.41 of the clips against
-    #: 0.27 (docs/results/simulate_default.md)
+    #: sole sliding faster than the reference's [m^2/s^2]; 0: not looked at (off: it held the
+    #: feet but fell more, docs/synthetic.md)
     hold: float = 0.0
     #: foot holding also costs a simulated sole that touches the floor where the reference lifts
     #: it (a dragged foot); False: stance soles only
@@ -287,9 +280,11 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     window's end, whichever is later.
 
     Returns:
-        the tick ``data`` is left at, negated where the body fell (``-k``, k >= 1).
+        the tick ``data`` is left at, negated where the body fell (``-k``, k >= 1) or the
+        simulation diverged (:func:`~sim.simulate.tracking.divergences`; stopped there).
     """
     k0, k1, k2 = ticks
+    clear_divergences(data)
     pushes, weakenings = perturb
     state, qpos, spec, soles = keep
     T = len(prob.base)
@@ -304,6 +299,8 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
             target += held_torques(model, data, prob.balance, k, fb) / prob.kp
         set_controls(model, data, target, weakening_factor(weakenings, t))
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
+        if divergences(data):  # MuJoCo reset the state: no motion goes on from it
+            return -(k + 1)
         if soles is not None and k < k1:
             i = k - k0
             soles[0][i], soles[1][i] = data.geom_xpos[prob.soles], data.geom_xmat[prob.soles]
@@ -340,7 +337,8 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     fell. ``search`` = (kept states, weights, perturbations, state spec); ``out`` = (window-end
     states (S, size), qpos (S, nq)), written. The candidates are split in contiguous runs over
     ``datas`` (one ``MjData`` per thread of ``pool``; ``pool`` None: one run): every rollout
-    starts from a full state, so the result does not depend on the split."""
+    starts from a full state, so the result does not depend on the split. A rollout that
+    diverged costs :data:`DIVERGED_COST`."""
     states, weights, perturb, spec = search
     k0, k1, k2 = ticks
     T = len(prob.base)
@@ -356,6 +354,9 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
             rec = (soles[0][s], soles[1][s], soles[2][s]) if hold else None
             keep_at = (out[0][s], out[1][s], spec, rec)
             end = _rollout(model, data, prob, offs[s], ticks, perturb, keep_at)
+            if divergences(data):  # never kept: its window-end state is a reset
+                cost[s] = DIVERGED_COST
+                continue
             f = features(model, data, prob.ee_ids, prob.foot_ids)
             cost[s] = window_cost(f, prob.ref_feat[min(abs(end), T - 1)], weights, prob.hinge_w)
             if end < 0:  # fell: a later fall costs less

@@ -46,8 +46,9 @@ class Tracking:
             control ticks (self-collision keeps it small).
         contact_penetration: (F,) deepest floor contact penetration [m] at the recorded ticks, 0
             where nothing touches the floor (the steady figure: its median over contact frames).
-        unstable: MuJoCo flagged a diverging acceleration (it then resets the state, so the
-            recorded motion jumps: such a simulation is not a motion).
+        unstable: MuJoCo flagged a diverging position, velocity or acceleration
+            (:func:`divergences`; it then resets the state, so the recorded motion jumps: such a
+            simulation is not a motion).
     """
 
     qpos: np.ndarray
@@ -177,10 +178,30 @@ class TrackRecord:
             penetration=self.deepest,
             self_penetration=self.deepest_self,
             contact_penetration=self.depth,
-            unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
+            unstable=divergences(data) > 0,
             actions=self.ctrl,
             joint_torque=self.torque,
             foot_force=self.foot,
             fall_frame=self.fall_frame,
             fall_tick=self.fall_tick,
         )
+
+
+#: MuJoCo's warnings of a diverging state: it resets ``data`` and counts the warning
+_DIVERGED = tuple(
+    int(w) for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL,
+                     mujoco.mjtWarning.mjWARN_BADQPOS)
+)  # fmt: skip
+
+
+def divergences(data) -> int:
+    """Whether MuJoCo found ``data``'s position, velocity or acceleration diverging (NaN, Inf
+    or huge) and reset it to the model's initial state since ``data`` was made or
+    :func:`clear_divergences` (> 0: it did; a reset clears the counts, so this is no tally)."""
+    return sum(data.warning[w].number for w in _DIVERGED)
+
+
+def clear_divergences(data) -> None:
+    """Zero ``data``'s counts of :func:`divergences` (before a rollout from a set state)."""
+    for w in _DIVERGED:
+        data.warning[w].number = 0

@@ -66,7 +66,7 @@ from sim.simulate.model import (
     rest_inertia,
     total_mass,
 )
-from sim.simulate.tracking import Tracking, foot_forces
+from sim.simulate.tracking import Tracking, divergences, foot_forces
 from sim.simulate.wholebody_reference import (
     WholeBodyReference,
     foot_box_ids,
@@ -423,7 +423,7 @@ def track_wholebody(
         qpos=rec_q, qvel=rec_v, assistance=np.zeros(F), assist_wrench=np.zeros((F, 6)),
         fell=fell, ticks=T, penetration=deepest, self_penetration=deepest_self,
         contact_penetration=rec_p,
-        unstable=data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0,
+        unstable=divergences(data) > 0,
         actions=rec_u, joint_torque=rec_tau, foot_force=rec_f, fall_frame=fall_frame,
         fall_tick=fall_tick,
     )  # fmt: skip
