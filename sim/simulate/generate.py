@@ -115,7 +115,8 @@ SYNTH_CONTROLLERS = CONTROLLERS
 SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 #: unless a task says otherwise: the sampler's balance feedback with eval's drift lead
 #: (``validate.DEFAULT_BALANCE``, else ``sampling.BALANCE``), its reference contact-consistent
-#: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion)
+#: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion). Off:
+#: on bench_synth's 20 clips none kept more up or met more targets (docs/synthetic.md)
 SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
 #: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True
 TASK_OPTIONS = ("drift", "contact_reference", "lean")
