@@ -133,3 +133,21 @@ def test_a_run_with_options_resumes_as_itself_only(optioned_run, cmu_dir, tmp_pa
     with pytest.raises(ValueError, match="other parameters"):
         synthesize(cmu_dir, run, 2, resume=True, **kw)  # without the options: another run
     assert synthesize(cmu_dir, run, 2, resume=True, **kw, **ALL_ON).written == written
+
+
+def test_the_cli_flags_reach_synthesize(cmu_dir, tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    import sidql.commands.synth as synth_cmd
+    from sidql.commands import main as cli
+
+    seen = {}
+
+    def fake(*args, **kw):
+        seen.update(kw)
+        return SimpleNamespace(written=[], skipped=[], seconds=0.0, rejected={})
+
+    monkeypatch.setattr(synth_cmd, "synthesize", fake)
+    argv = ["synth", "--data", str(cmu_dir), "--n", "1", "--out", str(tmp_path / "o")]
+    assert cli.main([*argv, "--drift", "--no-lean"]) in (0, None)
+    assert (seen["drift"], seen["contact_reference"], seen["lean"]) == (True, None, False)
