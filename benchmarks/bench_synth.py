@@ -65,8 +65,11 @@ from sim.simulate.generate import (  # noqa: E402
     CLIP_SECONDS,
     KINDS,
     PHYSICAL_BUDGET,
+    SYNTH_CONTACT_REFERENCE,
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
+    SYNTH_DRIFT,
+    SYNTH_LEAN,
 )
 from sim.simulate.model import G, sim_model  # noqa: E402
 from sim.simulate.reference import on_floor, trial_qpos  # noqa: E402
@@ -404,6 +407,15 @@ def main() -> None:
     ap.add_argument("--controller", default=None, choices=SYNTH_CONTROLLERS,
                     help="controller of the real-motion kinds (default: synth's, "
                     f"{SYNTH_DEFAULT_CONTROLLER}); another writes synth_<controller>.md")  # fmt: skip
+    for flag, default, what in (
+        ("drift", SYNTH_DRIFT, "the sampler's balance feedback with eval's drift lead"),
+        ("contact-reference", SYNTH_CONTACT_REFERENCE, "the sampler tracks the "
+         "contact-consistent reference (else lifted 1 cm)"),
+        ("lean", SYNTH_LEAN, "the body stepped lean (the same motion, cheaper steps)"),
+    ):  # fmt: skip
+        ap.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"{what} (default: synth's, {default}); another than synth's "
+                        "default writes synth_variant.md")  # fmt: skip
     ap.add_argument("--seconds", type=float, default=CLIP_SECONDS, help="clip length [s]")
     ap.add_argument("--no-speed", action="store_true",
                     help="skip the speed timings (synth_speed.md stays as it is)")  # fmt: skip
@@ -412,9 +424,16 @@ def main() -> None:
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
 
     controller, samples = chosen_controller(args.samples, args.controller)
-    page = ("synth" if (controller, samples) == chosen_controller()
+    chosen = (args.drift, args.contact_reference, args.lean)
+    defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN)
+    options = [d if v is None else v for v, d in zip(chosen, defaults, strict=True)]
+    page = ("synth_variant" if options != list(defaults)
+            else "synth" if (controller, samples) == chosen_controller()
             else "synth_sampled" if controller == "sampling" else f"synth_{controller}")  # fmt: skip
     run = controller + (f", {samples} samples" if samples else "")
+    if controller == "sampling":
+        run += ", " + ", ".join(w if on else f"no {w}" for w, on in zip(
+            ("drift lead", "contact-consistent reference", "lean body"), options, strict=True))  # fmt: skip
     label = f"`synthesize`: {run}"
     plot = args.plot if page == "synth" else args.plot.replace(".png", f"_{page[6:]}.png")
     with tempfile.TemporaryDirectory() as tmp:
@@ -423,7 +442,8 @@ def main() -> None:
             t0, c0 = time.perf_counter(), time.process_time()
             s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
                            kinds=tuple(args.kinds), samples=samples, controller=controller,
-                           seconds=args.seconds, progress=False)  # fmt: skip
+                           seconds=args.seconds, progress=False, drift=options[0],
+                           contact_reference=options[1], lean=options[2])  # fmt: skip
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             simulated = sum(r["frames"] for r in s.written) / 30.0
             cost = (
@@ -445,6 +465,8 @@ def main() -> None:
     if not args.no_write:
         title = ("Synthetic clips: physical share, speeds, skating, contacts" if page == "synth"
                  else f"Synthetic clips tracked by the {run} controller")  # fmt: skip
+        if page == "synth_variant":
+            args.no_speed = True  # the speed timings time the default's plain tracker
         write_results(page, title, table, command)
     if args.no_speed:
         return

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from argparse import BooleanOptionalAction
+
 from sidql.commands.usage import (
     UsageError,
     add_data,
@@ -19,8 +21,11 @@ from sim.simulate.generate import (
     ALL_KINDS,
     CLIP_SECONDS,
     KINDS,
+    SYNTH_CONTACT_REFERENCE,
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
+    SYNTH_DRIFT,
+    SYNTH_LEAN,
 )
 
 DESCRIPTION = (
@@ -82,6 +87,14 @@ def register(p) -> None:
         "to 20x --n tasks)",
     )  # fmt: skip
     add_samples(p, "track real trials (not procedural clips)")
+    for flag, default, what in (
+        ("drift", SYNTH_DRIFT, "the sampler's balance feedback with eval --simulate's drift lead"),
+        ("contact-reference", SYNTH_CONTACT_REFERENCE,
+         "the sampler tracks the contact-consistent reference (else lifted 1 cm)"),
+        ("lean", SYNTH_LEAN, "the body stepped lean (the same motion, cheaper steps)"),
+    ):  # fmt: skip
+        p.add_argument(f"--{flag}", action=BooleanOptionalAction, default=None,
+                       help=f"{what} (default: {'on' if default else 'off'}; recorded)")  # fmt: skip
     p.add_argument(
         "--resume", action="store_true",
         help="continue the run whose journal (OUT/journal.jsonl) is in --out: clips are stored "
@@ -122,6 +135,7 @@ def run(args) -> int:
         controller=args.controller, assist=args.assist, threads=args.threads,
         workers=args.workers, ray=args.ray,
         progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
+        drift=args.drift, contact_reference=args.contact_reference, lean=args.lean,
     )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "

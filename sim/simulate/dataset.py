@@ -37,8 +37,12 @@ from sim.simulate.generate import (
     ALL_KINDS,
     CLIP_SECONDS,
     KINDS,
+    SYNTH_CONTACT_REFERENCE,
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
+    SYNTH_DRIFT,
+    SYNTH_LEAN,
+    TASK_OPTIONS,
     SynthTask,
     generate,
     task_dict,
@@ -101,10 +105,12 @@ def iter_tasks(
     controller: str = SYNTH_DEFAULT_CONTROLLER,
     assist: float = 0.0,
     threads: int = 1,
+    **options: bool,
 ) -> Iterator[SynthTask]:
     """The plan: an endless stream of tasks cycling through ``kinds``; real-motion kinds take
     ``trials`` in seeded shuffled rounds (every trial once per round). Every prefix is the same
-    whatever length is read, so a longer run extends a shorter one."""
+    whatever length is read, so a longer run extends a shorter one. ``options``: of
+    ``generate.TASK_OPTIONS`` (``SynthTask``'s defaults where not named)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 2**20]))
     order: list = []
     i = 0
@@ -117,7 +123,7 @@ def iter_tasks(
             t = order.pop()
             asf, amc = os.path.abspath(t.asf), os.path.abspath(t.amc)  # Ray: any worker's folder
         yield SynthTask(kind, seed, i, asf, amc, seconds, fps, samples, controller, assist,
-                        threads)  # fmt: skip
+                        threads, **options)  # fmt: skip
         i += 1
 
 
@@ -159,6 +165,9 @@ def synthesize(
     max_assistance: float | None = None,
     max_tries: int = 20,
     resume: bool = False,
+    drift: bool | None = None,
+    contact_reference: bool | None = None,
+    lean: bool | None = None,
 ) -> DatasetSummary:
     """Generate ``n`` clips into ``out_dir`` (see the module docstring).
 
@@ -176,7 +185,9 @@ def synthesize(
     chosen_controller``; > 0 with no ``controller``: the sampler); both are resolved here and
     recorded in the journal and the index. ``threads``: the sampler's rollout threads in each
     worker (the clips do not depend on it). ``assist``: the real-motion kinds' root assistance
-    bound [body weight], 0 (none) unless asked for (with the plain tracker only).
+    bound [body weight], 0 (none) unless asked for (with the plain tracker only). ``drift``,
+    ``contact_reference``, ``lean``: ``SynthTask``'s options (None: ``generate.SYNTH_DRIFT``,
+    ``SYNTH_CONTACT_REFERENCE``, ``SYNTH_LEAN``), recorded in the journal and the index.
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
@@ -193,8 +204,10 @@ def synthesize(
     if not 0 <= assist <= 1 or (assist and controller != "plain"):
         raise UsageError(f"assistance {assist} BW: 0 .. 1, and only for the plain tracker")
     require_positive(threads, "threads")
+    chosen = zip(TASK_OPTIONS, (drift, contact_reference, lean),
+                 (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN), strict=True)  # fmt: skip
     task = {"samples": samples, "controller": controller, "assist": float(assist),
-            "threads": int(threads)}  # fmt: skip
+            "threads": int(threads), **{k: bool(d if v is None else v) for k, v, d in chosen}}  # fmt: skip
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
@@ -213,6 +226,7 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task_kw, workers, r
         "max_assistance": max_assistance, "max_tries": max_tries,
         **({"samples": task_kw["samples"]} if task_kw["samples"] else {}),
         "controller": task_kw["controller"], "assist": task_kw["assist"],
+        **{k: True for k in TASK_OPTIONS if task_kw[k]},  # absent: False (runs before them)
     }  # fmt: skip
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     done = read_journal(out_dir, params, trials) if resume else {}  # checked before any write
@@ -303,6 +317,7 @@ def _finish(out_dir: Path, done: dict, n: int, params: dict, summary, start) -> 
             **{k: params[k] for k in ("n", "seed", "kinds", "seconds", "max_assistance")},
             "samples": params.get("samples", 0),
             "controller": params["controller"], "assist": params["assist"],
+            **{k: params.get(k, False) for k in TASK_OPTIONS},
             "tasks_tried": last + 1, "rejected": rejected,
         },
         "trials": summary.written,

@@ -47,7 +47,7 @@ from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
 from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import BALANCE, LOOKAHEAD, CostWeights, sample_track
-from sim.simulate.validate import CONTROLLERS, chosen_controller
+from sim.simulate.validate import CONTROLLERS, DEFAULT_BALANCE, chosen_controller
 from sim.simulate.wholebody import track_wholebody
 
 KINDS = ("track", "fall")  # the default mix: real motion, no assistance
@@ -113,6 +113,13 @@ SYNTH_CONTROLLERS = CONTROLLERS
 #: rollouts), no assistance; the plain tracker costs about a twentieth of it but falls in
 #: nearly every clip (docs/results/synth.md)
 SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
+#: unless a task says otherwise: the sampler's balance feedback with eval's drift lead
+#: (``validate.DEFAULT_BALANCE``, else ``sampling.BALANCE``), its reference contact-consistent
+#: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion). Off:
+#: on bench_synth's 20 clips none kept more up or met more targets (docs/synthetic.md)
+SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
+#: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True
+TASK_OPTIONS = ("drift", "contact_reference", "lean")
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -140,6 +147,9 @@ class SynthTask:
     controller: str = SYNTH_DEFAULT_CONTROLLER  # of the real-motion kinds (SYNTH_CONTROLLERS)
     assist: float = 0.0  # root assistance bound [body weight] of the real-motion kinds: none
     threads: int = 1  # the sampler's rollouts run on this many threads (same result for any)
+    drift: bool = SYNTH_DRIFT  # the sampler's balance feedback with the drift lead
+    contact_reference: bool = SYNTH_CONTACT_REFERENCE  # the sampler's (else lifted 1 cm)
+    lean: bool = SYNTH_LEAN  # the body stepped lean (its MJCF says so)
 
 
 def task_controller(task: SynthTask) -> tuple[str, int]:
@@ -259,7 +269,8 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     p = draw_parameters(task, rng)
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
     actuators = "motor" if p["controller"] == "wholebody" else "position"
-    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"], actuators)
+    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"], actuators, task.lean)
+    p["lean"] = bool(task.lean)
     n = int(round(task.seconds * CONTROL_HZ))
     ref = reference_motion(task, p, model, n, rng)
     recorder = Recorder(model, mjcf, n, FRAME_SKIP)
@@ -283,8 +294,9 @@ def reference_motion(
 ) -> np.ndarray:
     """The (n, nq) reference the body tracks at ``CONTROL_HZ``: the procedural motion, or a
     window of the source trial time-warped by ``p["speed"]`` (lowered to the fastest warp that
-    still fills the clip) and set on the floor; records ``source`` (and ``start_tick``, drawn
-    from ``rng``) in ``p``.
+    still fills the clip) and set on the floor, lifted 1 cm or contact-consistent (the
+    whole-body QP's; the sampler's where ``task.contact_reference``); records ``source``,
+    ``reference`` (and ``start_tick``, drawn from ``rng``) in ``p``.
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
@@ -313,9 +325,12 @@ def reference_motion(
     p["source"] = str(task.amc)
     p["start_tick"] = start
     window = warped[start : start + n]
-    if p["controller"] == "wholebody":  # feet meet the floor: no lift, stance soles on it
+    c = p["controller"]
+    contact = c == "wholebody" or (c == "sampling" and bool(task.contact_reference))
+    p["reference"] = "contact-consistent" if contact else "lifted"
+    if contact:  # feet meet the floor: no lift, stance soles on it
         return contact_consistent(model, flat_soles(model, on_floor(model, window, lift=0.0)))
-    # the 1 cm lift, and soles near the floor laid flat (as ``eval --simulate`` tracks)
+    # the 1 cm lift, and soles near the floor laid flat
     return flat_soles(model, on_floor(model, window))
 
 
@@ -346,8 +361,9 @@ def simulate_episode(
     rng: np.random.Generator,
 ) -> Tracking:  # fmt: skip
     """Track ``ref`` (T, nq) with ``p``'s pushes and weakenings, every tick recorded by
-    ``recorder``, by ``p["controller"]``: the sampling tracker (no assistance; its settings and
-    seed, drawn from ``rng``, recorded in ``p``), the whole-body QP (no assistance) or the plain
+    ``recorder``, by ``p["controller"]``: the sampling tracker (no assistance; its settings,
+    balance feedback (with the drift lead where ``task.drift``) and seed, drawn from ``rng``,
+    recorded in ``p``), the whole-body QP (no assistance) or the plain
     tracker with ``p["assist_limit"]`` (0 for real motion unless the task asked for it)."""
     tracking = {  # what both trackers take: the perturbations and the clip rate
         "pushes": tuple(
@@ -361,14 +377,16 @@ def simulate_episode(
         return track_wholebody(model, ref, **tracking)
     if p["controller"] == "sampling":  # the body's own doing, or a fall
         samples = task_controller(task)[1]
+        balance = DEFAULT_BALANCE if task.drift else BALANCE
         p["sampling"] = {
             "samples": samples,
             "lookahead": LOOKAHEAD,
             "root_xy_weight": CostWeights().root_xy,
-            "balance": asdict(BALANCE) if BALANCE is not None else None,
+            "balance": asdict(balance) if balance is not None else None,
             "seed": int(rng.integers(0, 2**31 - 1)),
         }
-        kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads}
+        kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads,
+              "balance": balance}  # fmt: skip
         return sample_track(model, ref, **kw, **tracking)
     return track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
 
@@ -421,17 +439,18 @@ def episode_labels(p: dict, model, mjcf: str, result: Tracking, episode) -> dict
 
 
 def episode_model(
-    skeleton, scale: float, gain: float, actuators: str = "position"
+    skeleton, scale: float, gain: float, actuators: str = "position", lean: bool = False
 ) -> tuple[mujoco.MjModel, str, Gains]:
     """The simulated body of an episode: ``skeleton`` (already scaled by ``scale``) with mass
     scaling as its cube, the hinges' stiffness times ``gain`` (bandwidth times its square root;
     the torque limits are the human ones, never scaled, rounded down to the 6 digits an MJCF
-    keeps), ``actuators`` ``"position"`` or ``"motor"`` (``sim_spec``'s); the model compiled
+    keeps), ``actuators`` ``"position"`` or ``"motor"`` and ``lean`` (``sim_spec``'s, in the
+    MJCF's options); the model compiled
     from its MJCF (the model simulated, so the MJCF rebuilds it exactly), the MJCF itself and
     the gains."""
     gains = Gains().scaled(gain)
     spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains,
-                    actuators=actuators)  # fmt: skip
+                    actuators=actuators, lean=lean)  # fmt: skip
     for a in spec.actuators:  # the MJCF keeps 6 digits: round the limits down, never up
         a.forcerange = [-_down6(a.forcerange[1]), _down6(a.forcerange[1])]
         if actuators == "motor":  # a torque's control range is its limit
@@ -473,7 +492,8 @@ def simulated_clip(model, skeleton, qpos, qvel, fps: float, source: str) -> Clip
 
 
 def task_dict(task: SynthTask) -> dict:
-    """JSON-ready copy of ``task`` without ``threads`` (how it runs, not what it gives)."""
+    """JSON-ready copy of ``task`` without ``threads`` (how it runs, not what it gives), its
+    :data:`TASK_OPTIONS` only where True."""
     d = asdict(task)
     del d["threads"]
-    return d
+    return {k: v for k, v in d.items() if k not in TASK_OPTIONS or v}

@@ -24,7 +24,7 @@ from pathlib import Path, PurePosixPath
 from sim.errors import MotionDataError, UsageError
 from sim.files import excerpt, open_append, open_inside
 from sim.motion.clip import MAX_CLIP_FRAMES
-from sim.simulate.generate import SynthTask, task_dict
+from sim.simulate.generate import TASK_OPTIONS, SynthTask, task_dict
 
 JOURNAL = "journal.jsonl"
 #: A journal line (one task's record) longer than this is refused [bytes].
@@ -125,7 +125,8 @@ def _task_line(e, params: dict, sources: set, path: Path, number: int) -> tuple[
             raise bad(f"{what}: task {i} is not of a trial of the input folder")
     want = task_dict(SynthTask(kind, params["seed"], i, *source, params["seconds"],
                                params["fps"], params.get("samples", 0),
-                               params.get("controller", "plain"), params.get("assist", 0.0)))  # fmt: skip
+                               params.get("controller", "plain"), params.get("assist", 0.0),
+                               **{k: params.get(k, False) for k in TASK_OPTIONS}))  # fmt: skip
     if task != want:
         raise bad(f"{what}: not task {i} of this run")
     if what == "skipped":

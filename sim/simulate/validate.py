@@ -65,7 +65,7 @@ DEFAULT_CONTROLLER = "sampling"
 #: the feedback without it: the same 6 falls, 105 against 113 mm root-relative, 272 against 322
 #: mm global error, 0.99x the CPU (docs/results/simulate_default.md); per clip within the
 #: sampler's chaos (lower global error in 7 of the 16 clips both keep up, higher in 5).
-#: ``synth`` keeps ``sampling.BALANCE`` (not measured there)
+#: ``synth`` keeps ``sampling.BALANCE`` (20 clips: 10 up with the lead, 11 without; synthetic.md)
 DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
 #: the sampler's rollouts per window where it is chosen without a count (with the feedback,
 #: 32 cost 5.22 CPU s per simulated s: over the budget)
