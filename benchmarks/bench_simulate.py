@@ -127,7 +127,8 @@ def spread_order(n: int, stride: int = 5) -> list[int]:
 
 
 def _in_time(pairs, deadline: float | None):
-    """``pairs`` (lazily) until ``deadline`` seconds have passed since the first was asked."""
+    """``pairs`` (any items, lazily) until ``deadline`` seconds have passed since the first was
+    asked: none is asked for after it."""
     t0 = time.perf_counter()
     for pair in pairs:
         yield pair
@@ -142,16 +143,9 @@ def _pool_rows(items: list, workers: int, deadline: float | None = None):
     from sim.batch import iter_batch
 
     order = spread_order(len(items)) if deadline else range(len(items))
-    t0 = time.perf_counter()
-
-    def started():  # items handed to the pool lazily: none after the deadline
-        for i in order:
-            if deadline is not None and time.perf_counter() - t0 > deadline:
-                return
-            yield items[i]
-
+    started = _in_time((items[i] for i in order), deadline)  # lazily: none after the deadline
     tasks = list(order)  # the pool numbers items by their place in the stream
-    for k, outcome in iter_batch(_clip_task, started(), workers=workers, progress=False,
+    for k, outcome in iter_batch(_clip_task, started, workers=workers, progress=False,
                                  in_flight=workers):  # fmt: skip
         i = tasks[k]
         if outcome.ok:
