@@ -38,6 +38,7 @@ from sidql.evaluation.tables import simulate_markdown  # noqa: E402
 from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
+from sim.simulate.gainchoice import common_body  # noqa: E402
 from sim.simulate.validate import ForwardValidation, validation_model  # noqa: E402
 
 
@@ -49,10 +50,16 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
     out = {}
     for n in names:
         _, kw, actuators = CONTROLLERS[n][:3]
-        model_kw = CONTROLLERS[n][3] if len(CONTROLLERS[n]) > 3 else {}
+        model_kw = dict(CONTROLLERS[n][3]) if len(CONTROLLERS[n]) > 3 else {}
         if (c.asf, n) not in bodies:
             skeleton = subject_model(c.asf)[0]
-            model = validation_model(skeleton, actuators=actuators, **model_kw)
+            alternate = model_kw.pop("alternate_gains", ())  # gain sets chosen per window
+            model, *alts = common_body([
+                validation_model(skeleton, actuators=actuators, **{**model_kw, **g})
+                for g in ({}, *({"gains": a} for a in alternate))
+            ])  # fmt: skip
+            if alts:
+                kw = {**kw, "search": {**kw.get("search", {}), "alternates": tuple(alts)}}
             bodies[c.asf, n] = ForwardValidation(
                 model, _protocol_names(c.clip), threads=threads, **kw
             )

@@ -17,6 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sim.simulate.balance import Balance  # noqa: E402
+from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.validate import DEFAULT_BALANCE  # noqa: E402
@@ -224,6 +225,48 @@ for _name, _gains, _search, _label in (
         {"controller": "sampling", "samples": 28, "search": _search},
         "position",
         {"gains": _gains},
+    )  # fmt: skip
+
+#: stiffness where the pose is and not where the balance is, on eval's default (the
+#: contact-consistent reference): ``upper<d>[w<f>]`` the trunk, neck and arms capped at peak
+#: torque over d [rad] (at f Hz), the legs with the default gains (``Gains.legs``);
+#: ``ccstiff<d>w<f>`` the whole body so, beside them in the same run
+_W12 = 2 * np.pi * 12.0
+for _name, _gains, _label in (
+    ("upper0.1", Gains(min_deflection=0.1, legs=Gains()), "upper body capped at 0.1 rad"),
+    (
+        "upper0.1w12",
+        Gains(min_deflection=0.1, omega=_W12, legs=Gains()),
+        "upper body capped at 0.1 rad, 12 Hz",
+    ),
+    ("ccstiff0.1w12", Gains(min_deflection=0.1, omega=_W12), "stiffness cap 0.1 rad, 12 Hz"),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults, {_label}",
+        {"controller": "sampling", "samples": 28, "contact_reference": True},
+        "position",
+        {"gains": _gains},
+    )  # fmt: skip
+
+#: the gains chosen per window (``sim.simulate.gainchoice``) between the default and the stiff
+#: controller (cap 0.1 rad, 12 Hz), eval's default otherwise: ``mix<share>`` that share of each
+#: window's 28 candidates on the stiff gains; ``stifffb`` all on the stiff gains, a window whose
+#: candidates all fall tried again on the default ones; ``mix<share>fb`` both
+_STIFF = Gains(min_deflection=0.1, omega=_W12)
+for _name, _choice in (
+    ("mix0.5", GainChoice(share=0.5)),
+    ("mix0.25", GainChoice(share=0.25)),
+    ("mix0.75", GainChoice(share=0.75)),
+    ("stifffb", GainChoice(share=1.0, fallback=True)),
+    ("mix0.5fb", GainChoice(share=0.5, fallback=True)),
+):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults, {_choice.share:g} of the candidates on the "
+        f"stiff gains (0.1 rad, 12 Hz){', default gains where all fall' if _choice.fallback else ''}",
+        {"controller": "sampling", "samples": 28, "contact_reference": True,
+         "search": {"choice": _choice}},
+        "position",
+        {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
 
 #: every candidate but eval's own defaults (``default<n>``) keeps the reference it was measured

@@ -357,3 +357,23 @@ def test_a_fallen_body_stays_down_without_help(model, trial_on_floor):
     assert after < len(r.qpos) - 15
     assert r.qpos[after:, 2].max() < 0.35  # standing, the root is at ~0.9 m
     assert np.abs(r.assist_wrench[r.fall_frame + 1 :]).max() == 0.0
+
+
+def test_leg_gains_of_their_own_leave_the_rest_stiff_and_the_limits_human():
+    """``Gains(legs=...)``: the leg hinges (femur, tibia, foot, toes) take the legs' gains, every
+    other hinge the stiffer ones; the torque limits are the same in both."""
+    from sim.simulate.model import Gains
+
+    sk = canonical_skeleton()
+    stiff = Gains(min_deflection=0.1, omega=2 * np.pi * 12.0)
+    default, all_stiff = sim_model(sk), sim_model(sk, gains=stiff)
+    upper = sim_model(sk, gains=Gains(min_deflection=0.1, omega=2 * np.pi * 12.0, legs=Gains()))
+    names = [default.actuator(a).name for a in range(default.nu)]
+    leg = np.array([n[1:].split("_")[0] in ("femur", "tibia", "foot", "toes") for n in names])
+    assert leg.sum() == 14  # 2 x (femur 3, tibia 1, foot 2, toes 1)
+    kp = upper.actuator_gainprm[:, 0]
+    np.testing.assert_array_equal(kp[leg], default.actuator_gainprm[leg, 0])
+    np.testing.assert_array_equal(kp[~leg], all_stiff.actuator_gainprm[~leg, 0])
+    np.testing.assert_array_equal(upper.actuator_biasprm[leg, 2], default.actuator_biasprm[leg, 2])
+    assert (kp[~leg] > default.actuator_gainprm[~leg, 0]).all()
+    np.testing.assert_array_equal(upper.actuator_forcerange, default.actuator_forcerange)

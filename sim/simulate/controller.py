@@ -40,7 +40,7 @@ and ``qvel``, never differences. Inverse dynamics without contacts edits the mod
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -275,6 +275,20 @@ def _target(model, data, plan: _Plan, ref_qpos, k: int, offsets, balance) -> np.
     return target
 
 
+def _switched(model, plan: _Plan, switch, T: int) -> tuple[list, list, np.ndarray]:
+    """The models of ``switch`` = (models, choice), their plans (``plan`` with each model's
+    ``kp`` and ``kv / kp``) and the (T,) choice; ([model], [plan], zeros) where it is None."""
+    if switch is None:
+        return [model], [plan], np.zeros(T, dtype=int)
+    models = list(switch[0])
+    plans = [
+        replace(plan, kp=m.actuator_gainprm[:, 0].copy(),
+                lead=m.actuator_biasprm[:, 2] / m.actuator_biasprm[:, 1])
+        for m in models
+    ]  # fmt: skip
+    return models, plans, np.asarray(switch[1], dtype=int)
+
+
 def track(
     model,
     ref_qpos: np.ndarray,
@@ -288,13 +302,14 @@ def track(
     offsets: np.ndarray | None = None,
     balance: Balance | None = None,
     recorder=None,
+    switch: tuple | None = None,
 ) -> Tracking:
-    """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``.
+    """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``: a
+    :class:`sim.simulate.tracking.Tracking`, states at ticks 0, record_every, 2 record_every...
 
-    The simulation starts in the reference's first pose and velocity. ``model`` must come from
-    ``sim.simulate.model.sim_model`` (its actuators' gains are read; it is not edited). A fall is
-    ``sim.simulate.falls``'s, checked every control tick; ``fall_frame`` is the first recorded
-    frame at or after it.
+    Starts in the reference's first pose and velocity; ``model``: a ``sim_model`` (its
+    actuators' gains are read, never edited). A fall is ``sim.simulate.falls``'s, checked every
+    control tick; ``fall_frame`` is the first recorded frame at or after it.
 
     Args:
         gains: only its root gains are read here (the hinge gains live in ``model``'s actuators).
@@ -310,10 +325,8 @@ def track(
         recorder: called as ``recorder(k, data)`` at each control tick ``k`` just before its
             ``SUBSTEPS`` physics steps (controls and applied forces set) and as ``recorder(T,
             data)`` after the last (``sim.simulate.episode.Recorder``); None: none.
-
-    Returns:
-        :class:`sim.simulate.tracking.Tracking` with states at ticks ``0, record_every,
-        2 record_every, ...``.
+        switch: (models, choice (T,) ints): tick ``k`` runs on ``models[choice[k]]``,
+            ``model``'s body with other gains (``sim.simulate.gainchoice``); None: ``model``.
     """
     T = ref_qpos.shape[0]
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
@@ -322,8 +335,10 @@ def track(
     fell, fallen_pose = False, None
     dt = 1.0 / CONTROL_HZ
     bal = balance and (balance_plan(model, ref_qpos, plan.ref_qvel, balance), np.zeros(model.nu))
+    models, plans, which = _switched(model, plan, switch, T)
     for k in range(T):
         t = k * dt
+        model, plan = models[which[k]], plans[which[k]]  # this tick's gains (the same body)
         factor = weakening_factor(weakenings, t)
         if fell:  # down: the joints hold the pose of the fall with a lying body's tone
             factor = min(factor, FALLEN_TONE)

@@ -55,6 +55,7 @@ CONTROL_HZ = 120.0
 SUBSTEPS = 4
 G = 9.81
 MIN_DEFLECTION = 0.25  # [rad] default: the smallest angle error that asks for a peak torque
+LEG_BONES = ("femur", "tibia", "foot", "toes")  # the leg hinges' bones (``Gains.legs``)
 # [rad/s] a position actuator's control range is its joint's range widened by (limit + kv *
 # TARGET_SPEED) / kp: a target that far out asks for the peak torque from anywhere in the range
 # while the joint moves towards it at up to this speed (faster, the damping takes a share)
@@ -116,13 +117,15 @@ class Gains:
     damping ratio; root ones likewise; ``min_deflection`` [rad] caps each hinge's stiffness at
     its torque limit over it (the smallest angle error that asks for the peak torque; smaller:
     a stiffer controller). Feedback gains belong to the controller; the torque limits
-    (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them."""
+    (:data:`HUMAN_PEAK_TORQUE`) are the body's and no gain scales them. ``legs``: the leg
+    hinges' own gains (:data:`LEG_BONES`; their ``legs`` and root gains unused), None: these."""
 
     omega: float = 2 * np.pi * 8.0
     zeta: float = 1.0
     root_omega: float = 2 * np.pi * 2.0
     root_zeta: float = 1.0
     min_deflection: float = MIN_DEFLECTION
+    legs: Gains | None = None
 
     def __post_init__(self):
         if not self.min_deflection > 0:
@@ -132,6 +135,12 @@ class Gains:
         """Stiffness scaled by ``factor`` (bandwidth by its square root); the torque limits stay
         the human ones (a stiffer controller is no stronger body)."""
         return replace(self, omega=self.omega * np.sqrt(factor))
+
+    def of(self, joint: str) -> Gains:
+        """The gains of hinge ``joint`` (``"ltibia_rx"``): :attr:`legs` for a leg's, else these."""
+        bone = joint.rsplit("_", 1)[0]
+        leg = bone[:1] in "lr" and bone[1:] in LEG_BONES
+        return self.legs if leg and self.legs is not None else self
 
 
 def scaled_skeleton(skeleton: Skeleton, scale: float) -> Skeleton:
@@ -204,13 +213,13 @@ def sim_spec(
         a.name = name
         a.target = name
         a.trntype = mujoco.mjtTrn.mjTRN_JOINT
-        limit = human_torque_limit(name, body_mass_kg)  # the body's: no gain scales it
-        kp = gains.omega**2 * inertia[j - 1]
+        limit, g = human_torque_limit(name, body_mass_kg), gains.of(name)  # limit: no gain's
+        kp = g.omega**2 * inertia[j - 1]
         raised = max(1.0, stance / kp) if name[1:] in ANKLE_JOINTS else 1.0
         kp *= raised
-        cap = min(1.0, limit / gains.min_deflection / kp)  # the controller's cap; zeta kept
+        cap = min(1.0, limit / g.min_deflection / kp)  # the controller's cap; zeta kept
         kp *= cap
-        kv = 2 * gains.zeta * gains.omega * inertia[j - 1] * np.sqrt(raised * cap)
+        kv = 2 * g.zeta * g.omega * inertia[j - 1] * np.sqrt(raised * cap)
         if actuators == "motor":
             a.set_to_motor()
             a.ctrllimited = True

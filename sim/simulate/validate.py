@@ -28,6 +28,7 @@ from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
+from sim.simulate.gainchoice import choice_track
 from sim.simulate.model import CONTROL_HZ, Gains, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
@@ -115,7 +116,9 @@ class ForwardValidation:
         controller: ``"plain"``, ``"sampling"`` or ``"wholebody"``; None: the sampler if
             ``samples`` is given, else :data:`DEFAULT_CONTROLLER`.
         search: further keywords of the sampler's search (``sim.simulate.sampling.
-            search_offsets``: ``lookahead``, ``weights``, ...); None: its defaults, but for
+            search_offsets``: ``lookahead``, ``weights``, ...; with ``alternates``, models of
+            ``model``'s body with other gains, ``sim.simulate.gainchoice.choice_search``'s,
+            its gains chosen per window); None: its defaults, but for
             ``balance`` and ``noise_deflection``: :data:`DEFAULT_BALANCE` and
             :data:`DEFAULT_NOISE_DEFLECTION` unless ``search`` names them.
         threads: the sampler's rollouts run on this many threads (the same result for any).
@@ -265,8 +268,9 @@ class ForwardValidation:
         if self.controller == "sampling":
             search = {"balance": DEFAULT_BALANCE, "noise_deflection": DEFAULT_NOISE_DEFLECTION,
                       **self.search}  # fmt: skip
-            r = sample_track(self.model, tracked, samples=self.samples, record_every=every,
-                             threads=self.threads, **search)  # fmt: skip
+            tracker = choice_track if search.get("alternates") else sample_track  # gains chosen
+            r = tracker(self.model, tracked, samples=self.samples, record_every=every,
+                        threads=self.threads, **search)  # fmt: skip
         elif self.controller == "wholebody":
             r = track_wholebody(self.model, tracked, record_every=every)
         else:

@@ -1,0 +1,207 @@
+"""The sampler choosing, window by window, between feedback gains: a stiff controller where it
+tracks, the default one where the stiff one falls.
+
+A stiffer controller (``sim.simulate.model.Gains``: a smaller ``min_deflection``, a higher
+bandwidth) tracks the pose better wherever the body stays up, but has less give where the
+search's offsets are wrong and falls more (docs/synthetic.md, "The controllers, measured").
+Feedback gains are the controller's, not the body's: the same body (masses, armature, human
+torque limits) may be driven with either set from one 0.1 s window to the next. Here each
+window's candidates (:mod:`sim.simulate.sampling`'s rollouts) are rolled out with one of several
+gain sets, ``models`` (the same body compiled with each set's actuators; :func:`common_body`),
+the first the fallback (the default gains):
+
+* ``GainChoice.share`` of the ``samples`` candidates use ``models[1]``, the rest ``models[0]``;
+  the cost (falls included) picks among all of them, and a kept state goes on from the gains
+  it was reached with;
+* ``GainChoice.fallback``: where every candidate of a window falls (the cheapest pays
+  ``CostWeights.fall``), ``samples`` more are rolled out with ``models[0]`` from the same
+  parents and the kept states are chosen from both.
+
+A parent's offset [rad] carries over to a child on other gains as the same torque (times the
+parent's ``kp`` over the child's). The chosen offsets and gains are replayed by
+``sim.simulate.controller.track(..., switch=(models, choice))``: one ordinary simulation.
+Deterministic given ``seed``; with ``share`` 0 and no fallback it is ``sampling.search_offsets``
+bit for bit.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim.errors import UsageError
+from sim.simulate.balance import Balance
+from sim.simulate.controller import Tracking, track
+from sim.simulate.sampling import (
+    BALANCE,
+    LOOKAHEAD,
+    CostWeights,
+    _backtrack,
+    _candidate_costs,
+    _check_window,
+    _first_state,
+    _problem,
+)
+
+
+@dataclass(frozen=True)
+class GainChoice:
+    """How a window's candidates are spread over the gain sets (module docstring):
+    ``share`` (0..1) of them on ``models[1]``; ``fallback``: a window whose candidates all fall
+    is tried again with ``models[0]``."""
+
+    share: float = 0.5
+    fallback: bool = False
+
+    def __post_init__(self):
+        if not 0.0 <= self.share <= 1.0:
+            raise UsageError(f"GainChoice.share must be within 0..1; got {self.share}")
+
+
+def common_body(models) -> tuple:
+    """``models`` (the same skeleton compiled with different ``Gains``) made one body: each
+    hinge's armature the largest of theirs (``sim_spec`` raises it with ``kp`` for
+    stability), set in place, and the constants compiled from it (``mj_setConst``: the
+    constraint solver's ``dof_invweight0``) recomputed. Refuses models that differ in anything but the actuators'
+    gains and control ranges: sizes, masses or torque limits (the limits are anatomy)."""
+    first = models[0]
+    for m in models[1:]:
+        same = (m.nq, m.nv, m.nu, m.ngeom, m.nbody) == (
+            first.nq, first.nv, first.nu, first.ngeom, first.nbody
+        )  # fmt: skip
+        if not same or not (
+            np.array_equal(m.actuator_forcerange, first.actuator_forcerange)
+            and np.array_equal(m.body_mass, first.body_mass)
+        ):
+            raise UsageError("gain sets must share one body: sizes, masses and torque limits")
+    armature = np.max([m.dof_armature for m in models], axis=0)
+    for m in models:
+        m.dof_armature[:] = armature
+        mujoco.mj_setConst(m, mujoco.MjData(m))  # the constants that follow from it (invweight0)
+    return tuple(models)
+
+
+def _offsets(rng, last, last_set, parents, cand_set, probs, persistence) -> np.ndarray:
+    """(S, nu) the candidates' offsets [rad]: each parent's last offset (``last`` (K, nu), on
+    gains ``last_set`` (K,)) as the same torque on the candidate's gains ``cand_set`` (S,),
+    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``)."""
+    noise = rng.standard_normal((len(parents), last.shape[1]))
+    start = last[parents]
+    moved = last_set[parents] != cand_set
+    if moved.any():  # the same torque on the new gains
+        kp = np.array([p.kp for p in probs])
+        start[moved] *= kp[last_set[parents][moved]] / kp[cand_set[moved]]
+    sigma = np.array([p.sigma for p in probs])[cand_set]
+    return persistence * start + sigma * noise
+
+
+def _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool):
+    """(S,) each candidate's cost (``sampling._candidate_costs``), the candidates of each gain
+    set rolled out on its model; ``cand_set`` (S,) is sorted so each set's rows are one block
+    (``out``'s rows are written in place)."""
+    cost = np.empty(len(offs))
+    for j in np.unique(cand_set):
+        a, b = np.searchsorted(cand_set, [j, j + 1])
+        rows = (out[0][a:b], out[1][a:b])
+        cost[a:b] = _candidate_costs(
+            models[j], datas[j], probs[j], search, parents[a:b], offs[a:b], ticks, rows, pool
+        )
+    return cost
+
+
+def choice_search(
+    models,
+    ref_qpos: np.ndarray,
+    *,
+    choice: GainChoice = GainChoice(),
+    samples: int = 64,
+    keep: int = 8,
+    window: int = 12,
+    torque_sigma: float = 0.3,
+    persistence: float = 0.8,
+    lookahead: int = LOOKAHEAD,
+    seed: int = 0,
+    weights: CostWeights | None = None,
+    threads: int = 1,
+    balance: Balance | None = BALANCE,
+    noise_deflection: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
+    ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
+    sampling rollouts as ``sampling.search_offsets`` (the same arguments) with each window's
+    candidates spread over the gain sets by ``choice`` (module docstring).
+
+    Returns:
+        ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
+        ``window_qpos`` (W, nq): on the chosen path, the rolled out ``qpos`` at each window's
+        end (what the replay reaches there while the body is up).
+    """
+    weights = weights or CostWeights()
+    T, nu = ref_qpos.shape[0], models[0].nu
+    rng = np.random.default_rng(seed)
+    n_threads = max(1, min(int(threads), samples))
+    datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
+    _check_window(window, balance)
+    probs = [
+        _problem(m, ref_qpos, d[0], torque_sigma, (), falls=weights.fall > 0, balance=balance,
+                 noise_deflection=noise_deflection)
+        for m, d in zip(models, datas, strict=True)
+    ]  # fmt: skip
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
+    costs, last, last_set = np.zeros(1), np.zeros((1, nu)), np.zeros(1, dtype=int)
+    n_alt = int(round(choice.share * samples)) if len(models) > 1 else 0
+    cand_set = np.r_[np.zeros(samples - n_alt, int), np.ones(n_alt, int)]
+    size = states.shape[1]
+    history, set_history = [], []
+    pool = ThreadPoolExecutor(n_threads) if n_threads > 1 else None
+    try:
+        for k0 in range(0, T, window):
+            ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
+            parents = np.arange(samples) % len(states)
+            offs = _offsets(rng, last, last_set, parents, cand_set, probs, persistence)
+            search = states, weights, ((), ()), spec
+            out = np.empty((samples, size)), np.empty((samples, models[0].nq))
+            cost = _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool)
+            sets = cand_set
+            if choice.fallback and n_alt and weights.fall > 0 and cost.min() >= weights.fall:
+                fb_set = np.zeros(samples, int)  # every candidate fell: the default gains too
+                fb_offs = _offsets(rng, last, last_set, parents, fb_set, probs, persistence)
+                fb_out = np.empty((samples, size)), np.empty((samples, models[0].nq))
+                fb = _costs(models, datas, probs, search, parents, fb_offs, fb_set, ticks,
+                            fb_out, pool)  # fmt: skip
+                parents, offs, cost = np.r_[parents, parents], np.r_[offs, fb_offs], np.r_[cost, fb]
+                out = np.r_[out[0], fb_out[0]], np.r_[out[1], fb_out[1]]
+                sets = np.r_[cand_set, fb_set]
+            new_costs = costs[parents] + cost
+            best = np.argsort(new_costs, kind="stable")[:keep]
+            history.append((parents[best], offs[best], out[1][best].copy()))
+            chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
+            set_history.append((parents[best], chosen_sets, np.zeros((len(best), 1))))
+            states, costs = out[0][best].copy(), new_costs[best]
+            last, last_set = offs[best], sets[best]
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    offsets, window_qpos = _backtrack(history, T, window, nu, models[0].nq)
+    chosen, _ = _backtrack(set_history, T, window, 1, 1)
+    return offsets, chosen[:, 0].astype(int), window_qpos
+
+
+def choice_track(
+    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, **search
+) -> Tracking:
+    """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance on ``model`` and
+    ``alternates`` (the same body with other gains: :func:`common_body`), the hinge targets
+    corrected and the gains chosen per window by :func:`choice_search` (``search``: its
+    keyword arguments), then replayed: ``track(model, ref_qpos, offsets=..., switch=((model,
+    *alternates), sets), balance=...)``."""
+    models = (model, *alternates)
+    offsets, sets, _ = choice_search(models, ref_qpos, **search)
+    return track(
+        model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
+        balance=search.get("balance", BALANCE), switch=(models, sets),
+    )  # fmt: skip
