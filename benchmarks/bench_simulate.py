@@ -54,10 +54,9 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         if (c.asf, n) not in bodies:
             skeleton = subject_model(c.asf)[0]
             alternate = model_kw.pop("alternate_gains", ())  # gain sets chosen per window
-            model, *alts = common_body([
-                validation_model(skeleton, actuators=actuators, **{**model_kw, **g})
-                for g in ({}, *({"gains": a} for a in alternate))
-            ])  # fmt: skip
+            models = [validation_model(skeleton, actuators=actuators, **{**model_kw, **g})
+                      for g in ({}, *({"gains": a} for a in alternate))]  # fmt: skip
+            model, *alts = common_body(models) if alternate else models
             if alts:
                 kw = {**kw, "search": {**kw.get("search", {}), "alternates": tuple(alts)}}
             bodies[c.asf, n] = ForwardValidation(
@@ -257,6 +256,10 @@ def main() -> None:
         help="keep every N-th clip (a subset spread over the trials)",
     )
     ap.add_argument(
+        "--offset", type=int, default=0,
+        help="with --every: start at this clip (another subset: --every 5 --offset 2)",
+    )  # fmt: skip
+    ap.add_argument(
         "--samples",
         type=int,
         default=0,
@@ -291,12 +294,13 @@ def main() -> None:
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])
     t0 = time.perf_counter()
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
-    cases = cases[:: args.every][: args.max_clips]
+    cases = cases[args.offset :: args.every][: args.max_clips]
     if args.controllers:
         rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
                                threads=args.threads, workers=args.workers,
                                deadline=args.deadline)  # fmt: skip
         limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
+        limited += f", from clip {args.offset} (--offset)" if args.offset else ""
         done = len(next(iter(rows.values())))
         if done < len(cases):
             limited += (
@@ -325,6 +329,7 @@ def main() -> None:
     sampled = f" --samples {args.samples}" if args.samples else ""
     note = " (the sampling tracker, `sim.simulate.sampling`)" if args.samples else ""
     limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
+    limited += f", from clip {args.offset} (--offset)" if args.offset else ""
     if args.max_clips:
         limited += f", the first {args.max_clips} clips only (--max-clips)"
     text = (
