@@ -12,6 +12,8 @@ compared over all trials. Nothing here is in the format. The ideas:
   i.e. a KLT as a sequence of predictions), the matrix fitted by ridge least squares on the trials
   of the *other* subjects (all error targets) and measured on this subject's: a basis the decoder
   would hold, never measured on what it was fitted on.
+* **(a) ceilings**: the same matrix fitted on all the trials it is measured on, and the coding
+  gain a Gaussian model of the codes promises from decorrelating them (bits a value).
 * **(a) per stream**: the same with up to ``--partners`` partner channels per channel (coded before
   it, at the same keyframe or one either side), chosen greedily on the stream itself and sent:
   coefficients in 1/32 (8 bits), the partner (6 bits) and its keyframe shift (2 bits) counted.
@@ -232,17 +234,25 @@ def _lower_features(codes, c: int, shifts=(0,)) -> np.ndarray:
     return np.hstack(cols)
 
 
-def fixed_loso(streams, ridge: float = 1.0) -> dict:
+def _triangular(train, ridge: float) -> list[np.ndarray]:
+    """Per channel c >= 1 the ridge least-squares weights of channels 0..c-1's codes at the
+    same keyframe predicting c's, over the streams ``train`` (first keyframes left out)."""
+    A = []
+    for c in range(1, D):
+        X = np.vstack([_lower_features(s.codes, c)[1:] for s in train])
+        y = np.concatenate([s.codes[1:, c] for s in train]).astype(float)
+        A.append(np.linalg.solve(X.T @ X + ridge * np.eye(c), X.T @ y))
+    return A
+
+
+def fixed_triangular(streams, holdout: bool = True, ridge: float = 1.0) -> dict:
     """(a) fixed: {e: (bytes before, after)}, each subject's streams coded with the
-    lower-triangular predictor fitted on the other subjects' streams (every target)."""
+    lower-triangular predictor fitted on the other subjects' streams (every target), or with
+    ``holdout`` False on all streams (a ceiling no decoder could hold)."""
     out = {}
+    every = None if holdout else _triangular(streams, ridge)
     for subject in sorted({s.subject for s in streams}):
-        train = [s for s in streams if s.subject != subject]
-        A = []
-        for c in range(1, D):
-            X = np.vstack([_lower_features(s.codes, c)[1:] for s in train])
-            y = np.concatenate([s.codes[1:, c] for s in train]).astype(float)
-            A.append(np.linalg.solve(X.T @ X + ridge * np.eye(c), X.T @ y))
+        A = every or _triangular([s for s in streams if s.subject != subject], ridge)
         for s in streams:
             if s.subject == subject:
                 new = s.codes.copy()
@@ -251,6 +261,17 @@ def fixed_loso(streams, ridge: float = 1.0) -> dict:
                     new[1:, c] -= p[1:]
                 b = out.setdefault(s.e, [0, 0])
                 b[0], b[1] = b[0] + s.bytes, b[1] + coded_bytes(s.keys, new)
+    return out
+
+
+def gaussian_gain(streams) -> dict:
+    """{e: bits per value} a Gaussian model of the codes promises from decorrelating the 47
+    channels (the KLT's coding gain, covariance of all streams at e; first keyframes left out)."""
+    out = {}
+    for e in sorted({s.e for s in streams}):
+        X = np.vstack([s.codes[1:] for s in streams if s.e == e]).astype(float)
+        S = np.cov(X.T)
+        out[e] = 0.5 * (np.sum(np.log2(np.diag(S))) - np.linalg.slogdet(S)[1] / np.log(2)) / D
     return out
 
 
@@ -392,7 +413,12 @@ def main(argv=None) -> int:
         series = chart(clip)
         streams += [Stream(clip, series, e) for e in args.errors]
     print(f"{len(clips)} trials, {len({s.subject for s in streams})} subjects", flush=True)
-    _report("(a) fixed lower-triangular, leave one subject out", fixed_loso(streams))
+    for e, g in gaussian_gain(streams).items():
+        b = sum(s.bytes for s in streams if s.e == e)
+        n = sum(s.codes[1:].size for s in streams if s.e == e)
+        print(f"(a) Gaussian KLT gain, {e:g} mm: {g:.3f} bits a value of {8 * b / n:.2f}")
+    _report("(a) fixed lower-triangular, leave one subject out", fixed_triangular(streams))
+    _report("(a) fixed lower-triangular, fitted on all (ceiling)", fixed_triangular(streams, False))
     _report("(a) temporal, leave one subject out", temporal_loso(streams))
     _report(f"(a) per stream, up to {args.partners} partners", per_stream(streams, args.partners))
     _report("(b) phi contexts by theta", pair_contexts(streams), ("class", "class and sign"))
