@@ -261,7 +261,7 @@ for _name, _choice in (
     ("mix0.5fb", GainChoice(share=0.5, fallback=True)),
 ):
     CONTROLLERS[_name] = (
-        f"sampler, 28 samples, eval's defaults, {_choice.share:g} of the candidates on the "
+        f"sampler, 28 samples, eval's defaults, {_choice.share:.0%} of the candidates on the "
         f"stiff gains (0.1 rad, 12 Hz){', default gains where all fall' if _choice.fallback else ''}",
         {"controller": "sampling", "samples": 28, "contact_reference": True,
          "search": {"choice": _choice}},
