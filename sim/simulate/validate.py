@@ -73,7 +73,10 @@ DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
 DEFAULT_SAMPLES = 28
 #: the position actuators' feedback gains of the body ``eval --simulate`` and ``report
 #: --simulate`` track with (:func:`validation_model`): bandwidth and stiffness cap are the
-#: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these
+#: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these.
+#: Stiffer (0.1 rad, 12 Hz) on 64 clips: root-relative error 74 against 106 mm, but 3 clips
+#: lost and 1 kept up; chosen per window (``sim.simulate.gainchoice``): 2 lost, 1 kept
+#: (docs/synthetic.md): not the default
 DEFAULT_GAINS = Gains()
 #: [rad] the sampler's ``noise_deflection`` here unless ``search`` names one (0: its noise a
 #: share of peak torque over the body's stiffness; a stiffer body's ``min_deflection`` before
