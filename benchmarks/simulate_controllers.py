@@ -247,6 +247,15 @@ for _name, _gains, _label in (
         "position",
         {"gains": _gains},
     )  # fmt: skip
+#: ``ccstiff0.1w12rad``: the stiff controller with the sampler's noise in the default body's
+#: angles (``noise_deflection`` 0.25: the stiff body's offsets explore as widely in radians)
+CONTROLLERS["ccstiff0.1w12rad"] = (
+    "sampler, 28 samples, eval's defaults, stiffness cap 0.1 rad, 12 Hz, sampler noise in the "
+    "0.25 rad body's angles",
+    {"controller": "sampling", "samples": 28, "contact_reference": True, "search": _RAD},
+    "position",
+    {"gains": Gains(min_deflection=0.1, omega=_W12)},
+)
 
 #: the gains chosen per window (``sim.simulate.gainchoice``) between the default and the stiff
 #: controller (cap 0.1 rad, 12 Hz), eval's default otherwise: ``mix<share>`` that share of each
