@@ -342,17 +342,33 @@ def _screened_costs(X, R, H, W):
         j = P[w, j]
     head = _dp(lb, W)[0]  # head[w, i] <= least cost of frames 0..i, w keyframes, the last i
     tail = _dp(lb[::-1, ::-1].T.copy(), W)[0]  # the same for frames j..N-1 from the end
-    U *= 1.0 + 1e-9
+    _rest_bounds(bounds, head, tail, U * (1.0 + 1e-9), W)
     for i in range(N):
         for j in range(i + 2, N):
-            rest = np.inf
-            for w in range(1, W):
-                rest = min(rest, head[w, i] + tail[W - w, N - 1 - j])
-            keep = lb[i, j] + rest <= U
+            keep = lb[i, j] <= bounds[i, j]
             ruled_out[i, j] = -1.0 if keep else np.inf
-            bounds[i, j] = U - rest if keep else -np.inf
+            bounds[i, j] = bounds[i, j] if keep else -np.inf
     _fill_costs(X, R, False, C, 2, N, bounds, ruled_out)
     return C * TWO_PI
+
+
+@numba.njit(cache=True)
+def _rest_bounds(bounds, head, tail, U, W):
+    """``bounds[i, j] = U - rest(i, j)`` for j >= i + 2, ``rest(i, j) = min over w of
+    head[w, i] + tail[W - w, N - 1 - j]``: the least the clip costs outside segment (i, j)
+    (-inf where nothing can; rows of j, so that the loop over them vectorises)."""
+    N = bounds.shape[0]
+    tail_at = np.empty(N)  # tail[W - w] indexed by the segment's end j
+    bounds[:, :] = -np.inf
+    for w in range(1, W):
+        for j in range(N):
+            tail_at[j] = tail[W - w, N - 1 - j]
+        for i in range(N - 2):
+            h = head[w, i]
+            if h < np.inf:
+                b, t = bounds[i, i + 2 :], tail_at[i + 2 :]
+                for k in range(N - i - 2):
+                    b[k] = max(b[k], U - (h + t[k]))
 
 
 def optimal_keyframes(
