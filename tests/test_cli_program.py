@@ -19,6 +19,10 @@ import atexit, sys
 def report():
     print("exit handler ran; GL loaded:", "OpenGL" in sys.modules or "mujoco.egl" in sys.modules)
 atexit.register(report)
+class Torn:
+    def __del__(self):
+        print("torn down")
+kept = Torn()  # freed only by the interpreter's teardown
 from sidql.commands.main import program
 sys.argv = ["sidql", *sys.argv[1:]]
 program()
@@ -46,7 +50,10 @@ def test_a_codec_command_as_a_program_runs_exit_handlers_without_gl(cmu_dir, tmp
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     assert res.stdout.rstrip().endswith("exit handler ran; GL loaded: False"), res.stdout
-    assert out.is_file()
+    assert "torn down" not in res.stdout and out.is_file()
+    other = subprocess.run([sys.executable, "-c", PROBE, "--version"], capture_output=True,
+                           text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})  # fmt: skip
+    assert other.returncode == 0 and "torn down" in other.stdout  # any other way out: as ever
 
 
 def test_bad_input_to_a_codec_command_as_a_program_exits_2_with_one_line(tmp_path):
