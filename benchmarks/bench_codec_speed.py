@@ -118,8 +118,11 @@ def main(argv=None) -> int:
     text = page(args, takes, rows, identical, load_start, os.getloadavg())
     print(text)
     if not args.no_write:
-        command = "python benchmarks/bench_codec_speed.py" + (
-            f" --baseline-rev {' '.join(args.baseline_rev)}" if args.baseline_rev else ""
+        command = (
+            "python benchmarks/bench_codec_speed.py"
+            + (f" --repeats {args.repeats}" if args.repeats != 3 else "")
+            + (f" --minutes {args.minutes:g}" if args.minutes != 5.0 else "")
+            + (f" --baseline-rev {' '.join(args.baseline_rev)}" if args.baseline_rev else "")
         )
         path = write_results(
             "codec_speed", "Codec speed: 5-minute takes through the command line", text, command

@@ -29,6 +29,7 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
     replaced and their parts."""
     from sidql.keyframes import methods
     from sidql.keyframes.optimal import (
+        _banded_costs,
         clip_optimal_keyframes,
         clip_optimal_table,
         optimum_cost_matrix,
@@ -55,6 +56,9 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
             clip, w_max=W
         ).keyframes(W),
         "  optimal part: chart + costs it can use": lambda: optimum_cost_matrix(clip, W),
+        "  optimal part before: chart + the band's costs (the route before the screen, W <= 6)": (
+            lambda: _banded_costs(*clip_stacked(clip), False, W)
+        ),
     }
     C = optimum_cost_matrix(clip, W)
     cols["  optimal part: programme"] = lambda: solve(C, 22, W).keyframes(W)

@@ -552,6 +552,25 @@ def test_compiled_decisions_equal_the_torch_network_on_real_clips(cmu_dir):
         np.testing.assert_allclose(g, glob[i], rtol=1e-4, atol=1e-5)
 
 
+def test_the_compiled_encoder_equals_torch_on_clips_shorter_than_its_dilations():
+    """The taps side by side (one product a layer) pad with zeros as torch does, also where a
+    layer's dilation reaches past both ends of the clip (N <= d)."""
+    from sidql.learning.decide import encode_clip
+
+    policy = load_policy()
+    enc_w, _ = policy._weights()
+    c = policy.net.config["n_features"]
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 8, 9):
+        feats = rng.normal(size=(1, n, c)).astype(np.float32)
+        with torch.no_grad():
+            enc = policy.net.encode(torch.as_tensor(feats))
+            proj, glob = policy.net.proj(enc).numpy(), policy.net.glob(enc.mean(1)).numpy()
+        p, g = encode_clip(feats[0], *enc_w)
+        np.testing.assert_allclose(p, proj[0], rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(g, glob[0], rtol=1e-4, atol=1e-5)
+
+
 def test_the_old_name_of_the_keyframe_counts_still_works_and_warns(tmp_path, tasks):
     """``keyframes`` was a count in Args and Policy (and their files); it is ``keyframe_counts``
     now, ``keyframes`` being an index array everywhere else."""

@@ -1,4 +1,5 @@
-"""The optimum's chart and costs in one compiled pass give exactly the two-step results."""
+"""The optimum's chart and costs in one compiled pass give the two-step results (to the last bit
+of a fastmath kernel) and the same keyframes."""
 
 from __future__ import annotations
 
@@ -15,11 +16,15 @@ from sidql.keyframes.spherical import chart
 @pytest.mark.parametrize("reconstruction", ["hermite", "linear"])
 def test_one_pass_costs_equal_chart_then_costs(reconstruction, walk_clip):
     for clip in (smooth_clip(N=60, seed=4), walk_clip.slice(0, 60)):
+        # the same numbers up to the last bit: two fastmath kernels compiled apart (one fresh,
+        # one from numba's disk cache) may round differently
         fused = clip_cost_matrix(clip, reconstruction)
-        assert np.array_equal(fused, segment_cost_matrix(chart(clip), reconstruction))
+        two_step = segment_cost_matrix(chart(clip), reconstruction)
+        np.testing.assert_allclose(fused, two_step, rtol=1e-12, atol=0)
         a = clip_optimal_table(clip, reconstruction, w_max=20)
         b = optimal_table(chart(clip), reconstruction, w_max=20)
-        assert np.array_equal(a.cost, b.cost) and np.array_equal(a.pointers, b.pointers)
+        np.testing.assert_allclose(a.cost, b.cost, rtol=1e-12, atol=0)
+        assert np.array_equal(a.pointers, b.pointers)
 
 
 def test_optimal_method_uses_it_and_keeps_its_answers(walk_clip):

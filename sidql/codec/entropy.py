@@ -26,6 +26,7 @@ from collections import OrderedDict
 
 import numba
 import numpy as np
+from numba.cpython.unsafe.numbers import leading_zeros
 
 from sim.errors import UsageError
 
@@ -95,17 +96,18 @@ def _shift_low(low, cache, csize, pos, out):
     return low, cache, csize, pos
 
 
+# The coded bits are as good as random to the processor: they pick values with masks rather than
+# branches it would guess wrong half the time (the same integers).
 @numba.njit(cache=True, inline="always")
 def _bit(low, rng, cache, csize, pos, out, probs, i, bit):
     p = probs[i]
     bound = (rng >> _PROB_BITS) * p
-    if bit == 0:
-        rng = bound
-        probs[i] = p + (((1 << _PROB_BITS) - p) >> _MOVE)
-    else:
-        low += bound
-        rng -= bound
-        probs[i] = p - (p >> _MOVE)
+    one = -np.int64(bit)  # all ones for a 1 bit, else 0
+    low += bound & one
+    rng = bound ^ ((bound ^ (rng - bound)) & one)  # 0: bound; 1: rng - bound
+    up = p + (((1 << _PROB_BITS) - p) >> _MOVE)
+    down = p - (p >> _MOVE)
+    probs[i] = up ^ ((up ^ down) & one)
     while rng < _TOP:
         rng = (rng << 8) & _MASK32
         low, cache, csize, pos = _shift_low(low, cache, csize, pos, out)
@@ -115,8 +117,7 @@ def _bit(low, rng, cache, csize, pos, out, probs, i, bit):
 @numba.njit(cache=True, inline="always")
 def _direct(low, rng, cache, csize, pos, out, bit):
     rng = rng >> 1
-    if bit:
-        low += rng
+    low += rng & -np.int64(bit)
     while rng < _TOP:
         rng = (rng << 8) & _MASK32
         low, cache, csize, pos = _shift_low(low, cache, csize, pos, out)
@@ -134,32 +135,32 @@ def _initial_probs(contexts, prior):
 
 
 @numba.njit(cache=True, inline="always")
-def _context_base(c, w, group, n_groups, kinds, sc):
+def _context_base(c, w, group, n_groups, kinds, sc, k, n):
     """Index of the first context of integer (c, w): the channel's own set (per column group),
-    or with ``kinds[c] >= 0`` the set of its kind and its expected-magnitude bucket
-    (:func:`_bucket`)."""
-    k = kinds[c]
+    or with ``k = kinds[c] >= 0`` the set of its kind and its expected-magnitude bucket
+    (:func:`_bucket`; ``n = sc[1]``)."""
     if k < 0:
         return (c * n_groups + group[w]) * _PER_CHANNEL
     C = kinds.shape[0]
-    return (C * n_groups + k * SCALE_BUCKETS + _bucket(w, sc)) * _PER_CHANNEL
+    return (C * n_groups + k * SCALE_BUCKETS + _bucket(w, sc, n)) * _PER_CHANNEL
 
 
 @numba.njit(cache=True, inline="always")
-def _bucket(w, sc):
+def _bucket(w, sc, n):
     """The expected-magnitude bucket of column w of the current channel: log2 of the channel's
     running mean |r| times the column's activity (the mean surprise of the channels coded
     before it at this column, 1 if none), integers only (encoder and decoder agree on every
-    machine). ``sc``: [mean x 16, channels counted, column sums (W) of surprise x 256]."""
-    n = sc[1]
+    machine). ``sc``: [mean x 16, channels counted (``n``), column sums (W) of surprise x
+    256]."""
     act = 256 if n == 0 else sc[2 + w] // n
     sig = (sc[0] * act) >> 8
-    b = -2
-    t = sig + 4
-    while t > 0:
-        b += 1
-        t >>= 1
-    return min(max(b, 0), SCALE_BUCKETS - 1)
+    return min(max(_bit_length(sig + 4) - 2, 0), SCALE_BUCKETS - 1)
+
+
+@numba.njit(cache=True, inline="always")
+def _bit_length(a):
+    """The bit length of ``a`` >= 0 (0 for 0), as ``int.bit_length``: one instruction."""
+    return 64 - leading_zeros(np.int64(a))
 
 
 @numba.njit(cache=True, inline="always")
@@ -184,6 +185,8 @@ def _encode_kernel(values, group, n_groups, prior, kinds):
         prev_zero = 0
         prev_sign = 2
         sc[0] = _SCALE_START
+        kind, n = kinds[c], sc[1]  # read once: not told apart from the arrays written
+        shared = (C * n_groups + kind * SCALE_BUCKETS) * _PER_CHANNEL  # kind >= 0: its sets
         for w in range(W):
             # room for one more integer: at most _INTEGER_BYTES plus the bytes the cache holds
             # back (a badly predicted large residual costs far more than its 8 raw bytes)
@@ -191,9 +194,11 @@ def _encode_kernel(values, group, n_groups, prior, kinds):
                 bigger = np.empty(2 * out.shape[0] + csize + _INTEGER_BYTES, dtype=np.uint8)
                 bigger[:pos] = out[:pos]
                 out = bigger
-            base = _context_base(c, w, group, n_groups, kinds, sc)
             r = values[c, w]
-            if kinds[c] >= 0:
+            if kind < 0:
+                base = _context_base(c, w, group, n_groups, kinds, sc, kind, n)
+            else:  # _context_base's, its channel's part worked out once
+                base = shared + _bucket(w, sc, n) * _PER_CHANNEL
                 _after(w, abs(r), sc)
             if r == 0:
                 low, rng, cache, csize, pos = _bit(
@@ -212,11 +217,7 @@ def _encode_kernel(values, group, n_groups, prior, kinds):
             )
             prev_sign = neg
             a = -r if neg else r
-            k = 0
-            t = a
-            while t > 0:
-                k += 1
-                t >>= 1
+            k = _bit_length(a)
             for u in range(1, k):
                 low, rng, cache, csize, pos = _bit(
                     low, rng, cache, csize, pos, out, probs, base + _UNARY + u, 1
@@ -298,7 +299,7 @@ def _decode_kernel(data, C, W, group, n_groups, prior, kinds):
             sc[1] += 1
         sc[0] = _SCALE_START
         for w in range(W):
-            base = _context_base(c, w, group, n_groups, kinds, sc)
+            base = _context_base(c, w, group, n_groups, kinds, sc, kinds[c], sc[1])
             if _decode_bit(data, st, probs, base + _ZERO + prev_zero) == 0:
                 prev_zero = 1
                 prev_sign = 2

@@ -12,6 +12,7 @@ Units: metres inside, millimetres in the targets and figures; bytes, bytes per s
 from __future__ import annotations
 
 import os
+import weakref
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -86,6 +87,7 @@ class _PositionSearch:
         self.plans: dict = {}
         self.coded = _coded_cache(1) if coded is None else coded  # may be other searches' too
         self.last = None  # log lam of the previous search's answer
+        self.sized: dict = {}  # id(codes) -> (weak references to codes and keys, block bytes)
         self.header = len(sidq.header_bytes(build(np.array([0, 1]), self.quantiser(1e-3)))) + 8
 
     def quantiser(self, step: float) -> PositionQuantiser:
@@ -113,7 +115,13 @@ class _PositionSearch:
         return self.coded.get(key, make)
 
     def estimate(self, keys, codes) -> float:
-        return self.header + estimated_block(keys, codes)
+        """Estimated bytes of the coded plan ``(keys, codes)``: worked out once per plan the
+        search holds (it asks about each about twice; the same arrays, the same float)."""
+        hit = self.sized.get(id(codes))
+        if hit is None or hit[0]() is not codes or hit[1]() is not keys:
+            hit = (weakref.ref(codes), weakref.ref(keys), estimated_block(keys, codes))
+            self.sized[id(codes)] = hit
+        return self.header + hit[2]
 
     def size(self, keys, codes) -> int:
         kinds = channel_kinds(self.series.n_bones)

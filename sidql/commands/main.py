@@ -8,15 +8,21 @@ exit code. The one-line summary of each command is kept once, in :data:`COMMANDS
 :data:`COMMANDS`.
 
 Start-up stays short: only the module of the command being run is imported (its libraries, e.g.
-MuJoCo, torch or numba, load with it); ``sidql --help`` and an unknown command import none.
+MuJoCo, torch or numba, load with it); ``sidql --help`` and an unknown command import none. Run as
+a program (:func:`program`), the codec's commands (:data:`LEAN`) also skip what a process that
+ends when they return does not need (see :func:`program`).
 """
 
 from __future__ import annotations
 
+import atexit
+import gc
 import importlib
 import os
 import sys
+import threading
 import warnings
+from typing import NoReturn
 
 from sidql import __version__
 from sidql.commands.usage import ArgumentParser, HelpFormatter, one_line_warning
@@ -47,6 +53,16 @@ COMMANDS = {
     "synth": "simulate clips (tracking with perturbations, falls, procedural) in the dataset "
     "format with learning labels; stored as they arrive, resumable",
 }
+
+#: Commands that never render and leave no thread behind once they return (their files written and
+#: closed): run as a program they import MuJoCo without its GL context and end the process
+#: without the interpreter's teardown (:func:`program`).
+LEAN = frozenset({"encode", "decode"})
+#: The cyclic garbage collector's first threshold in a :data:`LEAN` command's process (Python's
+#: default: 700 allocations): start-up makes hundreds of thousands of long-lived objects (numba's
+#: and LLVM's), which collections walk again and again (measured on a 5-minute take: 0.07 s of
+#: CPU in collections at 10,000, 0.002 s at 200,000, the same peak memory).
+LEAN_GC_THRESHOLD = 200_000
 
 #: The module of each command (kept for callers that list them).
 COMMAND_MODULES = tuple(f"sidql.commands.{name}" for name in COMMANDS)
@@ -101,5 +117,33 @@ def main(argv: list[str] | None = None) -> int:
             return 2
 
 
+def program() -> NoReturn:
+    """``sidql`` as a program (the installed command, ``python -m sidql.commands.main``):
+    :func:`main` on ``sys.argv``, then exit with its code.
+
+    A :data:`LEAN` command's process is its own: MuJoCo is imported without its GL context
+    (``MUJOCO_GL=disable``: about 0.03 s of CPU), the cyclic collector runs less often
+    (:data:`LEAN_GC_THRESHOLD`: about 0.1 s), and once the command has returned with no other
+    thread alive, the process flushes its standard streams, runs its exit handlers and ends
+    (``os._exit``) without the interpreter's teardown, which frees numba's and LLVM's objects one
+    by one (0.25 s of CPU measured, a quarter of ``sidql encode``'s start-up). Any other command,
+    or a flush that fails, ends the ordinary way (``sys.exit``)."""
+    lean = _command_in(sys.argv[1:]) in LEAN
+    if lean and "mujoco" not in sys.modules:
+        os.environ["MUJOCO_GL"] = "disable"
+    if lean:
+        gc.set_threshold(LEAN_GC_THRESHOLD, *gc.get_threshold()[1:])
+    code = main()
+    if lean and threading.active_count() == 1:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        except (OSError, ValueError):  # e.g. a closed pipe: reported as Python reports it
+            sys.exit(code)
+        atexit._run_exitfuncs()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    program()

@@ -28,6 +28,7 @@ from sidql.keyframes.segment_costs import (
     clip_stacked,
     segment_cost_matrix,
 )
+from sidql.keyframes.single_costs import single_cost_matrix, turn_rates, weights_of
 from sidql.keyframes.spherical import M_BONES, SphericalSeries
 from sim.errors import UnknownNameError, UsageError, require_type
 
@@ -165,14 +166,14 @@ def clip_optimal_keyframes(clip, W: int, reconstruction: str = "hermite") -> np.
     X, R = clip_stacked(clip)
     if not 2 <= W <= X.shape[0]:
         raise UsageError(f"W must be in [2, {X.shape[0]}]; got {W}")
-    return _optimum_keyframes(X, R, reconstruction == "linear", int(W))
+    return _optimum_keyframes(X, R, reconstruction == "linear", int(W), weights_of(len(X)))
 
 
 @numba.njit(cache=True)
-def _optimum_keyframes(X, R, linear, W):
+def _optimum_keyframes(X, R, linear, W, H):
     """(W,) the optimum's keyframes from the stacked chart: :func:`_optimum_costs`, the
     programme (:func:`_dp`) and :meth:`OptimalTable.keyframes`' walk back, compiled."""
-    _, P = _dp(_optimum_costs(X, R, linear, W), W)
+    _, P = _dp(_optimum_costs(X, R, linear, W, H), W)
     out = np.empty(W, np.int64)
     out[W - 1] = X.shape[0] - 1
     for w in range(W, 1, -1):
@@ -194,6 +195,13 @@ def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.nda
     W-keyframe optimum, tie-breaking included, is the full matrix's; its optima for fewer
     keyframes are not.
 
+    For few keyframes (a wide band) and the Hermite reconstruction it screens instead
+    (:func:`_screened_costs`): U is the exact cost of the path the single-precision matrix
+    (:mod:`sidql.keyframes.single_costs`, cheaper than the band) finds best, the lower bounds
+    are that matrix's entries less their largest possible rounding error
+    (:func:`single_lower_bounds`), and only the entries that pass are summed in float64 (a
+    handful): the same argument, so the same optimum.
+
     Raises:
         MotionDataError: as :func:`sidql.keyframes.spherical.chart`. UsageError: W out of range.
     """
@@ -202,16 +210,31 @@ def optimum_cost_matrix(clip, W: int, reconstruction: str = "hermite") -> np.nda
     X, R = clip_stacked(clip)
     if not 2 <= W <= X.shape[0]:
         raise UsageError(f"W must be in [2, {X.shape[0]}]; got {W}")
-    return _optimum_costs(X, R, reconstruction == "linear", int(W))
+    return _optimum_costs(X, R, reconstruction == "linear", int(W), weights_of(len(X)))
 
 
-@numba.njit(cache=True, fastmath=_FAST)  # the flags of the kernels it shares
-def _optimum_costs(X, R, linear, W):
-    """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame].
+@numba.njit(cache=True)
+def _optimum_costs(X, R, linear, W, H):
+    """:func:`optimum_cost_matrix` from the stacked chart (N, D) ``X`` [rad], ``R`` [rad/frame]:
+    :func:`_screened_costs` where its single-precision matrix costs less than the band of
+    :func:`_banded_costs` (few keyframes: long segments, a wide band) and applies (Hermite),
+    else :func:`_banded_costs`.
 
     Its disk cache does not notice a change in segment_costs.py's kernels: clear
     ``sidql/keyframes/__pycache__/*.nb*`` after one (tests/test_keyframes_fused.py checks the
     numbers against the full matrix)."""
+    N = X.shape[0]
+    band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)
+    if not linear and band * band * SCREEN_SHARE >= N * N and _screenable(X, R):
+        return _screened_costs(X, R, H, W)
+    return _banded_costs(X, R, linear, W)
+
+
+@numba.njit(cache=True, fastmath=_FAST)  # the flags of the kernels it shares
+def _banded_costs(X, R, linear, W):
+    """:func:`optimum_cost_matrix` by a band of exact costs: the optimum over segments of at
+    most ``ceil(1.5 (N - 1) / (W - 1))`` frames bounds the optimum; lower bounds (the band's
+    costs, one middle frame outside it) bound the rest of the clip around each segment."""
     N, D = X.shape
     X, R = X * TURN, R * TURN  # the kernels' unit (turns), back to radians at the end
     band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)  # segments with j - i < band
@@ -238,6 +261,114 @@ def _optimum_costs(X, R, linear, W):
             bounds[i, j] = U - rest
     _fill_costs(X, R, linear, C, band, N, bounds, lb)  # lb: their middle frames' costs
     return C * TWO_PI
+
+
+#: :func:`_optimum_costs` screens with the single-precision matrix when the band of
+#: :func:`_banded_costs` spans more than 1 / sqrt(SCREEN_SHARE) of the clip (measured on 60-frame
+#: clips: the screen is the faster for W <= 6, the band for W >= 7).
+SCREEN_SHARE = 12.0
+
+#: Unit roundoff of float32: the rounding error of each of its operations, relative.
+_U32 = 2.0**-24
+
+
+@numba.njit(cache=True)
+def _screen_scales(X, R):
+    """(A, r): the widest spread of an angle channel of (N, D) ``X`` [turns over frames] and the
+    largest rate ``|R|`` [turns/frame]: what bounds every term of the single-precision sums."""
+    A = 0.0
+    for d in range(X.shape[1]):
+        A = max(A, (X[:, d].max() - X[:, d].min()) * TURN)
+    return A, np.abs(R).max() * TURN
+
+
+@numba.njit(cache=True)
+def _screenable(X, R):
+    """True where :func:`sidql.keyframes.single_costs.single_cost_matrix`'s rounding to the
+    nearest integer is exact for every term (terms of magnitude below 2^20 turns)."""
+    A, r = _screen_scales(X, R)
+    return 2.0 * A + 8.0 / 27.0 * X.shape[0] * r < 2.0**20
+
+
+@numba.njit(cache=True)
+def single_lower_bounds(X, R, C32):
+    """(N, N) lower bounds [turns] of the float64 Hermite costs (:func:`_cost_matrix`'s, in
+    turns) from the single-precision ones ``C32`` [rad] of
+    :func:`sidql.keyframes.single_costs.single_cost_matrix` of the same (N, D) ``X``, ``R``.
+
+    Each of the (L - 1) D terms of entry (i, j), ``|wrap(e_n - h01 e_j + h10 L r_i + h11 L
+    r_j)|``, is a 1-Lipschitz function of its argument, which float32 gets wrong by at most
+    13 roundings of its magnitude ``M <= 2 A + 8/27 L r`` (|h01| <= 1, |h10|, |h11| <= 4/27;
+    A, r: :func:`_screen_scales`); the sums of the non-negative terms add at most L + 12
+    roundings relative. The bound takes 16 and L + 16 (room for float64's own rounding, 2^-29
+    of these), and is clamped at 0."""
+    N, D = X.shape
+    A, r = _screen_scales(X, R)
+    lb = np.zeros((N, N))
+    for i in range(N):
+        for j in range(i + 2, N):
+            L = j - i
+            terms = (L - 1) * D * 16.0 * _U32 * (2.0 * A + 8.0 / 27.0 * L * r)
+            c = C32[i, j] * TURN
+            lb[i, j] = max(0.0, c - terms - (L + 16) * _U32 * (c + terms))
+    return lb
+
+
+@numba.njit(cache=True, fastmath=_FAST)  # the flags of the kernels it shares
+def _screened_costs(X, R, H, W):
+    """:func:`optimum_cost_matrix` (Hermite) screened by the single-precision matrix: its
+    programme's path, summed exactly, gives U; its lower bounds
+    (:func:`single_lower_bounds`) the least the rest of the clip costs around each segment;
+    only the segments within U of that are summed exactly (and abandoned once over it)."""
+    N = X.shape[0]
+    C32 = single_cost_matrix(X, turn_rates(R), H)
+    lb = single_lower_bounds(X, R, C32)
+    X, R = X * TURN, R * TURN  # the kernels' unit (turns), back to radians at the end
+    C = np.zeros((N, N))
+    ruled_out = np.full((N, N), np.inf)  # a known "middle frame" cost of inf: skipped at once
+    bounds = np.full((N, N), -np.inf)
+    P = _dp(C32, W)[1]
+    j = N - 1
+    for w in range(W, 1, -1):  # the path the single-precision programme takes, summed exactly
+        i = P[w, j]
+        ruled_out[i, j] = -1.0
+        bounds[i, j] = np.inf
+        j = i
+    _fill_costs(X, R, False, C, 2, N, bounds, ruled_out)
+    U = 0.0
+    j = N - 1
+    for w in range(W, 1, -1):
+        U += C[P[w, j], j]
+        j = P[w, j]
+    head = _dp(lb, W)[0]  # head[w, i] <= least cost of frames 0..i, w keyframes, the last i
+    tail = _dp(lb[::-1, ::-1].T.copy(), W)[0]  # the same for frames j..N-1 from the end
+    _rest_bounds(bounds, head, tail, U * (1.0 + 1e-9), W)
+    for i in range(N):
+        for j in range(i + 2, N):
+            keep = lb[i, j] <= bounds[i, j]
+            ruled_out[i, j] = -1.0 if keep else np.inf
+            bounds[i, j] = bounds[i, j] if keep else -np.inf
+    _fill_costs(X, R, False, C, 2, N, bounds, ruled_out)
+    return C * TWO_PI
+
+
+@numba.njit(cache=True)
+def _rest_bounds(bounds, head, tail, U, W):
+    """``bounds[i, j] = U - rest(i, j)`` for j >= i + 2, ``rest(i, j) = min over w of
+    head[w, i] + tail[W - w, N - 1 - j]``: the least the clip costs outside segment (i, j)
+    (-inf where nothing can; rows of j, so that the loop over them vectorises)."""
+    N = bounds.shape[0]
+    tail_at = np.empty(N)  # tail[W - w] indexed by the segment's end j
+    bounds[:, :] = -np.inf
+    for w in range(1, W):
+        for j in range(N):
+            tail_at[j] = tail[W - w, N - 1 - j]
+        for i in range(N - 2):
+            h = head[w, i]
+            if h < np.inf:
+                b, t = bounds[i, i + 2 :], tail_at[i + 2 :]
+                for k in range(N - i - 2):
+                    b[k] = max(b[k], U - (h + t[k]))
 
 
 def optimal_keyframes(

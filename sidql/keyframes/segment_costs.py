@@ -60,13 +60,17 @@ def _fill_costs(X, R, linear, C, lo, hi, bounds, first):
     """Write ``C[i, j]`` of :func:`_cost_matrix` for every segment with ``lo <= j - i < hi``
     (:func:`_entry_cost` with bound ``bounds[i, j]``; every caller passes an (N, N) array, so
     all run one compiled loop and keep the same numbers). ``first``: (N, N) the middle frame's
-    cost of each entry (:func:`_frame_cost`) where the caller knows it already, else (0, 0)."""
+    cost of each entry (:func:`_frame_cost`) where the caller knows it already (inf: an entry
+    it rules out, skipped; -1: not known), else (0, 0)."""
     N, D = X.shape
     dX = np.empty(D)
     known = first.shape[0] > 0
     for i in range(N):
         for j in range(i + max(lo, 2), min(i + hi, N)):
             mid_cost = first[i, j] if known else -1.0
+            if mid_cost > bounds[i, j]:  # known over its bound (inf: ruled out by the caller)
+                C[i, j] = np.inf
+                continue
             C[i, j] = _entry_cost(X, R, dX, i, j, linear, bounds[i, j], mid_cost)
 
 

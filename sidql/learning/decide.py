@@ -122,7 +122,8 @@ def encoder_weights(net: KeyframeQNet) -> tuple:
 def encode_clip(feats, mean, std, w_in, b_in, conv_w, conv_b, dil, w_ctx, b_ctx, w_proj,
                  b_proj, w_glob, b_glob):  # fmt: skip
     """:meth:`KeyframeQNet.encode` of one clip followed by the head's ``proj`` and ``glob``
-    layers, in float64, as matrix products (BLAS through numba: one thread at these sizes).
+    layers, in float64, as matrix products (BLAS through numba: one thread at these sizes);
+    each temporal layer's three taps as one product of the shifted frames side by side.
 
     Args:
         feats: (N, C) float32 per-frame features; the weights as :func:`encoder_weights` lays them.
@@ -130,19 +131,26 @@ def encode_clip(feats, mean, std, w_in, b_in, conv_w, conv_b, dil, w_ctx, b_ctx,
         proj (N, 4K): the head's per-frame projections; glob (K,): its clip-wide term.
     """
     n, c = feats.shape
+    h = b_in.shape[0]
     xin = np.empty((n, c + 1))
     for t in range(n):
         for i in range(c):
             xin[t, i] = (feats[t, i] - mean[i]) / std[i]
         xin[t, c] = -1.0 + 2.0 * t / (n - 1) if n > 1 else -1.0
     x = np.maximum(np.dot(xin, w_in) + b_in, 0.0)
+    taps = np.empty((n, 3 * h))  # [x(t - d) | x(t) | x(t + d)], zero padding outside
     for layer in range(conv_b.shape[0]):
         d = dil[layer]
-        y = np.dot(x, conv_w[layer, 1]) + conv_b[layer]  # tap 1: frame t itself
-        if d < n:  # tap 0 reads frame t - d, tap 2 frame t + d (zero padding outside)
-            y[d:] += np.dot(x[: n - d], conv_w[layer, 0])
-            y[: n - d] += np.dot(x[d:], conv_w[layer, 2])
-        x += np.maximum(y, 0.0)
+        for t in range(n):
+            for k in range(h):
+                taps[t, k] = x[t - d, k] if t >= d else 0.0
+                taps[t, h + k] = x[t, k]
+                taps[t, 2 * h + k] = x[t + d, k] if t + d < n else 0.0
+        y = np.dot(taps, conv_w[layer].reshape(3 * h, h))  # the three taps in one product
+        for t in range(n):
+            for k in range(h):
+                v = y[t, k] + conv_b[layer, k]
+                x[t, k] += v if v > 0.0 else 0.0
     m = x.sum(axis=0) / n
     ctx = np.maximum(np.dot(m, w_ctx) + b_ctx, 0.0)
     # enc = x + ctx; its clip mean is m + ctx

@@ -131,19 +131,34 @@ class _AmcParser:
         self.columns: dict[str, list[np.ndarray]] = {}  # bone -> (frames, dofs) pieces
         self.notes: list[str] = []
         self.taken = 0  # frames already handed out by :meth:`take`
+        self.held: list[str] = []  # the last frame-number line of a chunk and the lines after it
+        self.held_from = 0  # the number of held[0]
 
     # -- feeding ---------------------------------------------------------------------------------
 
     def feed(self, first_line: int, lines: list[str]) -> None:
-        """Read the next chunk of lines; ``first_line``: the number of ``lines[0]``."""
+        """Read the next chunk of lines; ``first_line``: the number of ``lines[0]``. The chunk's
+        last frame may go on in the next chunk: its lines wait for it (:attr:`held`), so that
+        frame is read with the next ones, by the fast path where it can."""
+        if self.held:  # the lines just before these
+            first_line, lines = self.held_from, self.held + lines
+            self.held = []
         i = 0
         if self.in_header:
             i = self._header(lines)
             if self.in_header:
                 return
-        last = len(lines) - 1  # the chunk's last frame may go on in the next chunk: not fast
+        last = len(lines) - 1
         while last > i and not _frame_number_line(lines[last]):
             last -= 1
+        if last > i:
+            self.held, self.held_from = lines[last:], first_line + last
+            lines = lines[:last]
+        self._lines(first_line, lines, i, last)
+
+    def _lines(self, first_line: int, lines: list[str], i: int, last: int) -> None:
+        """Read ``lines[i:]``: runs of whole frames before ``last`` by the fast path where they
+        are regular, the rest line by line."""
         fast = True
         while i < len(lines):
             if fast and self.names is not None and i < last and _frame_number_line(lines[i]):
@@ -359,6 +374,9 @@ class _AmcParser:
             raise MotionDataError(path, None, "empty file")
         if self.in_header:
             raise MotionDataError(path, None, "no frames")
+        if self.held:  # the file's last frame
+            held, self.held = self.held, []
+            self._lines(self.held_from, held, 0, 0)
         had_frame = self.current is not None or self.n > 0
         self._close(at_end=True)
         if not had_frame:

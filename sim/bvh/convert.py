@@ -109,6 +109,18 @@ def to_acclaim(bvh: Bvh, *, unit: str | None = None, up: str = "y") -> Take:
     return Take(skeleton=skeleton, motion=motion, fps=bvh.fps, unit=unit, up=up)
 
 
+def motion_like(bvh: Bvh, take: Take) -> Motion:
+    """``to_acclaim(bvh, unit=take.unit, up=take.up).motion`` for a ``bvh`` that ``take.skeleton``
+    is the skeleton of (the same hierarchy; the joints' position channels at the values they
+    had: a later piece of the same file), without building that skeleton again: the root's
+    motion and every bone's angles, the same arrays.
+
+    Raises:
+        MotionDataError: a root position over :data:`MAX_METRES`.
+    """
+    return _Builder(bvh, UNITS[take.unit], take.up).motion(take.skeleton)
+
+
 def bone_name(name: str) -> str:
     """A BVH joint name as a bone name: characters outside ``[A-Za-z0-9_.-]`` become ``_``, a
     leading digit, ``.`` or ``-`` gets a ``_`` before it, at most 57 characters, and the names the
@@ -130,7 +142,7 @@ class _Builder:
         self.bones: list[Bone] = []
         self.angles: dict[str, np.ndarray] = {}
         self.lines: dict[str, int] = {}
-        self.offsets = [self._offset(i) for i in range(len(bvh.joints))]
+        self.offsets: list[np.ndarray] = []
 
     def _offset(self, i: int) -> np.ndarray:
         """(3,) joint ``i``'s OFFSET, or its constant position channels in their place."""
@@ -153,6 +165,7 @@ class _Builder:
     def build(self) -> tuple[Skeleton, Motion]:
         bvh = self.bvh
         root = bvh.joints[0]
+        self.offsets = [self._offset(i) for i in range(len(bvh.joints))]
         for c in bvh.children.get(0, []):
             self._child(c, "root")
         skeleton = Skeleton(
@@ -167,6 +180,24 @@ class _Builder:
         )
         motion = Motion(path=bvh.path, root=self._root_motion(), angles=self.angles)
         return skeleton, motion
+
+    def motion(self, skeleton: Skeleton) -> Motion:
+        """The motion of ``skeleton``, built by :meth:`build` from a file of this hierarchy: a
+        bone with dofs is its joint's own (named by :func:`bone_name`), with its angles."""
+        joints = self.bvh.joints
+        own = {bone_name(j.name): i for i, j in enumerate(joints) if i and not j.end_site}
+        for b in skeleton.bones:
+            if b.dofs:
+                self._angles(b.name, own[b.name])
+        return Motion(path=self.bvh.path, root=self._root_motion(), angles=self.angles)
+
+    def _angles(self, name: str, i: int) -> None:
+        """Bone ``name``'s angles: joint ``i``'s rotation channels, in dof order (if any)."""
+        rotations = [c for c in self.bvh.joints[i].channels if c.endswith("rotation")]
+        if rotations:
+            self.angles[name] = np.column_stack(
+                [self.bvh.channel(i, c) for c in reversed(rotations)]
+            )
 
     def _child(self, c: int, parent: str) -> None:
         """Joint or End Site ``c`` below bone ``parent`` (whose end lies at ``c``'s parent): an ``_offset``/``_tip`` bone first when its OFFSET is not covered, then its own bone."""
@@ -221,7 +252,7 @@ class _Builder:
             )
         )  # fmt: skip
         if rotations:
-            self.angles[name] = np.column_stack([bvh.channel(i, c) for c in reversed(rotations)])
+            self._angles(name, i)
         return name
 
     def _root_motion(self) -> np.ndarray:

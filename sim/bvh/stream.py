@@ -13,7 +13,8 @@ and every piece's skeleton is the whole file's. Two facts of the whole file make
   it is read.
 
 Every other step of the conversion (the root's translation and rotation, the joints' angles)
-is frame by frame. :func:`read_skeleton` is the whole file's skeleton, read this way;
+is frame by frame: the skeleton is built from the first piece, and each later piece's motion
+alone is converted (:func:`sim.bvh.convert.motion_like`). :func:`read_skeleton` is the whole file's skeleton, read this way;
 :func:`first_skeleton` the same for a valid file, its first chunk alone read.
 
 Units as :mod:`sim.bvh.convert`: lengths [m], angles [deg], y-up axes.
@@ -27,7 +28,7 @@ from dataclasses import replace
 import numpy as np
 
 from sim.acclaim.records import Skeleton
-from sim.bvh.convert import to_acclaim
+from sim.bvh.convert import motion_like, to_acclaim
 from sim.bvh.reader import iter_bvh
 from sim.bvh.records import MAX_BVH_BYTES, Bvh
 from sim.errors import MotionDataError
@@ -49,14 +50,17 @@ def iter_take(
             when the chunk that holds the defect is read.
         UnknownNameError: an unknown ``unit`` or ``up``.
     """
-    first, fixed = None, None
+    first, fixed, made = None, None, None
     for piece in iter_bvh(path, max_bytes=max_bytes):
         if first is None:
             first, fixed = piece.values[:1].copy(), _FixedChannels(piece)
         fixed.check(piece)
         values = np.concatenate([first, piece.values])
         whole = Bvh(piece.path, piece.joints, piece.frame_time, values, piece.motion_line)
-        take = to_acclaim(whole, unit=unit, up=up)  # (not ``replace``: it shares ``children``)
+        if made is None:  # (not ``replace``: it shares ``children``)
+            take = made = to_acclaim(whole, unit=unit, up=up)
+        else:  # the skeleton is the first piece's: only the motion is new
+            take = replace(made, motion=motion_like(whole, made))
         motion = take.motion
         motion = replace(
             motion, root=motion.root[1:], angles={k: v[1:] for k, v in motion.angles.items()}
