@@ -25,6 +25,17 @@ def cmu_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def walk_bvh(cmu_dir, tmp_path_factory) -> Path:
+    """01_01 (2,751 frames at 120 fps, many text chunks) written as BVH by ``sidql convert``."""
+    from sidql.commands.main import main
+
+    bvh = tmp_path_factory.mktemp("bvh") / "walk.bvh"
+    assert main(["convert", str(cmu_dir / "01" / "01.asf"), str(cmu_dir / "01" / "01_01.amc"),
+                 str(bvh)]) == 0  # fmt: skip
+    return bvh
+
+
+@pytest.fixture(scope="session")
 def walk_clip(cmu_dir):
     """Subject 02's walk 02_01 at 30 fps on its own skeleton."""
     from sim.motion.ingest import load_motion

@@ -6,20 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sidql.commands.main import main
 from sim.bvh.convert import motion_like, to_acclaim
 from sim.bvh.reader import parse_bvh
 from sim.bvh.records import Bvh
 from sim.bvh.stream import iter_take
 from sim.errors import MotionDataError
-
-
-@pytest.fixture(scope="module")
-def walk_bvh(cmu_dir, tmp_path_factory):
-    bvh = tmp_path_factory.mktemp("bvh") / "walk.bvh"
-    assert main(["convert", str(cmu_dir / "01" / "01.asf"), str(cmu_dir / "01" / "01_01.amc"),
-                 str(bvh)]) == 0  # fmt: skip
-    return bvh
 
 
 def _frames(bvh: Bvh, a: int, b: int) -> Bvh:

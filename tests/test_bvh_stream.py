@@ -21,15 +21,6 @@ from sim.motion.chunks import stream_clips
 from sim.motion.ingest import load_motion
 
 
-@pytest.fixture(scope="module")
-def walk_bvh(cmu_dir, tmp_path_factory):
-    """01_01 (2,751 frames at 120 fps, many text chunks) written as BVH by ``sidql convert``."""
-    bvh = tmp_path_factory.mktemp("bvh") / "walk.bvh"
-    assert main(["convert", str(cmu_dir / "01" / "01.asf"), str(cmu_dir / "01" / "01_01.amc"),
-                 str(bvh)]) == 0  # fmt: skip
-    return bvh
-
-
 def test_bvh_pieces_join_to_the_whole_file_and_convert_as_it_does(walk_bvh):
     whole = parse_bvh(walk_bvh)
     pieces = list(iter_bvh(walk_bvh))
