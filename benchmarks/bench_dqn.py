@@ -2,15 +2,16 @@
 measured in the same run (greedy and the exact optimum on the same cost matrices).
 
     python benchmarks/bench_dqn.py [--data ../shared/cmu] [--keyframes 15] [--policy FILE]
-        [--baseline REV] [--check-clips 0]
+        [--baseline REV ...] [--rounds 5] [--eval-clips 107] [--clips 30]
 
 The policy needs the clip's features and its segment-cost matrix; the cost matrix (also what
 greedy and optimal need) is timed separately and reported alongside. Without data the benchmark
 uses synthetic tasks of the same shape (60 frames, 88 feature channels). With data it also
 reports the end-to-end time ``eval`` measures (chart + segment costs + decision, per clip, as
-``select`` runs it) beside its parts and the path it replaced (:mod:`end_to_end`): aims DQN at
-most 1 ms and the exact optimum at most 0.7 ms per clip, quiet, and at most 1.5x that with one
-more process spinning (measured in the same run). Every decision figure is
+``select`` runs it, timed by eval's own loop in a process per version of the code, the
+``--baseline`` commits' too, in alternating rounds: :mod:`decision_sides`), with a core busy,
+and its parts in this process (:mod:`end_to_end`): aims DQN at most 1 ms and the exact optimum
+at most 0.7 ms per clip, quiet, and at most 1.5x that with one more process spinning. Every decision figure is
 measured twice in the same run: on the machine as it is, and with ``--load`` extra processes
 spinning (:mod:`busy`); their ratio shows whether other work slows the decision down (torch's
 thread pool would, oversubscribing the cores). Targets: at most 1 ms per clip for W = 15 (paper:
@@ -90,17 +91,86 @@ def _uptime() -> str:
     return ", ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
+def end_to_end_sections(args) -> list[str]:
+    """The page's sections on what a caller of ``select`` waits for: end to end as eval times it
+    on this tree and on each ``--baseline`` (:mod:`decision_sides`), with a core busy, and the
+    parts in this process (:mod:`end_to_end`)."""
+    from baseline import same_clips
+    from decision_sides import Side, busy_rounds, busy_table, run_rounds, sides_table, warm
+    from end_to_end import end_to_end_table
+
+    methods, counts = ("optimal", "dqn"), args.keyframes
+    with contextlib.ExitStack() as stack:
+        sides = [stack.enter_context(Side(rev, args.data, args.eval_clips))
+                 for rev in (None, *args.baseline)]  # fmt: skip
+        warm(sides)
+        load0 = os.getloadavg()[0]
+        rounds = run_rounds(sides, methods, counts, args.rounds)
+        up1 = _uptime()
+        busy = busy_rounds(sides[0], methods, counts, args.rounds)
+        up2 = _uptime()
+    names = [s.name for s in sides]
+    parts = end_to_end_table(same_clips(args.data, args.clips), counts)
+    return [
+        "## End to end, as `eval` measures it",
+        "",
+        f"What a caller of `select` waits for per clip (chart, segment costs, decision), on the "
+        f"first {args.eval_clips} 60-frame clips `eval` cuts from {args.data}, one thread. Each "
+        f"version of the code ({', '.join(names)}) runs in its own process "
+        "(`benchmarks/decision_sides.py`), which times its own `select`: *eval's loop* is "
+        "`sidql eval`'s (clip by clip, method by method, W by W, one call timed, then the clip "
+        "scored before the next call; eval's warm-up only); the *hot loop* calls `select` 3 "
+        "times back to back per clip after a warm-up call; `evaluate` itself is eval's own "
+        "function, whose median decision time (wall) checks the first. The versions and loops "
+        f"take turns for {args.rounds} rounds (order of the versions reversed every other "
+        "round); a figure is the median over rounds of each round's median over clips, with "
+        "the range over rounds; a ratio is paired within rounds. Load average "
+        f"{load0:.1f} before this table.",
+        "",
+        sides_table(rounds, names, methods, counts),
+        "",
+        f"Load averages over 1, 5, 15 min (`uptime`) after this table: {up1}.",
+        "",
+        "## End to end with a core busy",
+        "",
+        f"Eval's loop on this tree, on the machine as it is (quiet) and with one more process "
+        f"spinning (busy), in turn for {args.rounds} rounds (which goes first alternating); "
+        "medians over rounds [range], ratios paired within rounds (aim: at most 1.5x the quiet "
+        "aim).",
+        "",
+        busy_table(busy, methods, counts),
+        "",
+        f"Load averages over 1, 5, 15 min (`uptime`) after this table: {up2}.",
+        "",
+        "## The parts, in this process",
+        "",
+        f"Where the time goes, {args.clips} 60-frame clips of {args.data} (two per trial), one "
+        "thread, in this benchmark's process: the columns of one clip timed one after the "
+        "other, each the median of 5 calls back to back (hot, as the hot loop above), in CPU "
+        "and wall time; 'before' rows are paths `select` took before (today's kernels).",
+        "",
+        parts,
+        "",
+        f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
+    ]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", default=str(default_data_dir() or ""))
     parser.add_argument("--keyframes", type=int, nargs="+", default=[5, 15])
     parser.add_argument("--policy", default=None, help="policy file (default: the shipped one)")
     parser.add_argument("--load", type=int, default=2, help="spinning processes for 'busy'")
-    parser.add_argument("--clips", type=int, default=30, help="clips for the end-to-end table")
+    parser.add_argument("--clips", type=int, default=30, help="clips for the table of parts")
+    parser.add_argument(
+        "--eval-clips", type=int, default=107, help="clips eval cuts, for the end-to-end tables"
+    )
+    parser.add_argument("--rounds", type=int, default=5, help="rounds of the end-to-end tables")
     parser.add_argument(
         "--baseline",
-        default=None,
-        help="a commit whose select to time in the same run (benchmarks/baseline.py)",
+        nargs="*",
+        default=[],
+        help="commits whose select to time in the same run (benchmarks/decision_sides.py)",
     )
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args()
@@ -169,44 +239,8 @@ def main() -> int:
         "slow down far more: its threads oversubscribe the cores)."
     )
     if Path(args.data).is_dir():
-        from baseline import Baseline, same_clips
-        from end_to_end import busy_table, end_to_end_table
-
-        clips = same_clips(args.data, args.clips)
-        lines += ["", decisions_check(policy, args.data)]
-        with contextlib.ExitStack() as stack:
-            base = None
-            if args.baseline:
-                base = stack.enter_context(Baseline(args.baseline, args.data, args.clips))
-            e2e = end_to_end_table(clips, args.keyframes, baseline=base)
-        lines += [
-            "",
-            "## End to end, as `eval` measures it",
-            "",
-            f"What a caller of `select` waits for per clip (chart, segment costs, decision), "
-            f"{len(clips)} 60-frame clips of {args.data} (two per trial), one thread, median "
-            f"of single calls (5 per clip); CPU time of this process and wall time; load "
-            f"average {os.getloadavg()[0]:.1f} before this table. A 'before' row is a path "
-            "`select` took before, timed in the same run (after rows share today's kernels); "
-            "a 'baseline' row is `select` of the commit named (`--baseline`, its own code in "
-            "another process, timed on each clip right after this process's rows). "
-            "On this machine wall time also counts the time the process waits for a core.",
-            "",
-            e2e,
-            "",
-            f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
-            "",
-            "## End to end with a core busy",
-            "",
-            f"The same `select` calls, {len(clips)} clips x 3, median per clip, on the machine as "
-            f"it is (before and after: 'quiet' is their mean), and with one more process "
-            f"spinning (aim: busy at most 1.5x quiet); load average {os.getloadavg()[0]:.1f} "
-            "before this table.",
-            "",
-            busy_table(clips, args.keyframes),
-            "",
-            f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
-        ]
+        lines += ["", decisions_check(policy, args.data), ""]
+        lines += end_to_end_sections(args)
     text = "\n".join(lines)
     print(text)
     if not args.no_write:

@@ -1,9 +1,10 @@
-"""The decision time a caller of ``select`` waits for, as ``sidql eval`` measures it (chart,
-segment costs and decision, one clip at a time), beside its parts and beside the path it
-replaced, all timed in the same run (shared by bench_dqn.py and bench_keyframes.py).
+"""The decision time a caller of ``select`` waits for (chart, segment costs and decision, one
+clip at a time), beside its parts and beside the path it replaced, all timed in the same run
+(shared by bench_dqn.py and bench_keyframes.py).
 
-Every figure is the median over clips and repeats of single calls (``eval`` reports the median
-over clips of one call each), in CPU time of this process (``time.process_time``: what other
+Every figure is the median over clips and repeats of single calls made back to back: hot
+(``eval`` times one call per clip after scoring the last, a few per cent slower; the figure as
+eval measures it is :mod:`decision_sides`'s), in CPU time of this process (``time.process_time``: what other
 processes on a loaded machine take is not counted, though their sharing of the caches and of
 the core's other hyperthread still is) and in wall time. The columns of one clip are timed
 one after the other before the next clip, so a change of load hits every column alike; a
@@ -161,36 +162,3 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True,
                 f"{aim} ms, quiet: {verdict}){against}; before / after in this run ({ratios})."
             )
     return "\n".join(lines + [""] + notes)
-
-
-def busy_table(clips, counts, n_busy: int = 1, repeats: int = 3) -> str:
-    """Markdown table: ``select``'s end-to-end CPU and wall ms per clip (median) for dqn and the
-    optimum, on the machine as it is, then with ``n_busy`` more processes spinning
-    (:func:`busy.busy`), then as it is again; busy over the mean of both quiet passes."""
-    from busy import busy
-
-    from sidql.keyframes import methods
-
-    def median_ms(name, W):
-        got = [
-            _timed(lambda c=c: methods.select(name, c, W)) for c in clips for _ in range(repeats)
-        ]
-        return np.median(np.array(got), axis=0)
-
-    lines = [
-        "| W | method | quiet CPU ms | busy CPU ms | busy / quiet CPU | quiet wall ms | "
-        "busy wall ms | busy / quiet wall |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for W in counts:
-        for name in ("optimal", "dqn"):
-            methods.select(name, clips[0], W)  # compile and warm up
-            first = median_ms(name, W)
-            with busy(n_busy):
-                loaded = median_ms(name, W)
-            quiet = (first + median_ms(name, W)) / 2
-            lines.append(
-                f"| {W} | {name} | {quiet[0]:.3f} | {loaded[0]:.3f} | {loaded[0] / quiet[0]:.2f}x "
-                f"| {quiet[1]:.3f} | {loaded[1]:.3f} | {loaded[1] / quiet[1]:.2f}x |"
-            )
-    return "\n".join(lines)
