@@ -6,8 +6,8 @@ The same sum as :mod:`sidql.keyframes.segment_costs`::
     C[i, j] = sum over frames i < n < j, channels d, of |wrap(x_i - x_n + h01 (x_j - x_i) + h10 r_i + h11 r_j)|
 
 computed in turns (angles over 2 pi, so that the wrap is the distance to the nearest integer) and
-in float32, eight channels a vector instruction (twice float64's), four frames a pass over the
-channels. The angle differences ``x_i - x_n`` are formed in float64 before they are rounded (per
+in float32, eight channels a vector instruction (sixteen with AVX-512; twice float64's), four
+frames a pass over the channels. The angle differences ``x_i - x_n`` are formed in float64 before they are rounded (per
 segment start i, into an (N, D) float32 scratch that stays in the first-level cache), so a short
 segment's small errors keep float32's relative precision (about 1e-7 of each term) rather than an
 absolute 1e-7 rad from rounding the angles themselves. Each channel sums its terms over the
@@ -26,6 +26,7 @@ import numba
 import numpy as np
 
 from sidql.keyframes.segment_costs import hermite_basis
+from sidql.keyframes.wide_vectors import wide_vectors
 
 #: The channel count is padded to a multiple of this (zero channels add |wrap(0)| = 0): whole
 #: vectors, no scalar remainder loop.
@@ -90,7 +91,9 @@ def single_cost_matrix(X, R, H):
     float64 and rounded into one (N, Dp) float32 scratch (pad channels 0); the curve's error at
     frame n of segment (i, j) is then ``E[n] - h01 E[j] + h10 r_i + h11 r_j`` [turns]. Four
     frames share one pass over the channels; each channel's sum over the frames is kept in
-    ``acc`` (Dp,) (elementwise, so the passes vectorise without reordering any sum)."""
+    ``acc`` (Dp,) (elementwise, so the passes vectorise without reordering any sum), in the
+    widest vectors the processor has (:mod:`sidql.keyframes.wide_vectors`: the same bits)."""
+    wide_vectors()
     N, D = X.shape
     Dp = R.shape[1]
     C = np.zeros((N, N))
