@@ -97,7 +97,7 @@ def end_to_end_sections(args) -> list[str]:
     parts in this process (:mod:`end_to_end`)."""
     from baseline import same_clips
     from decision_sides import Side, busy_rounds, busy_table, run_rounds, sides_table, warm
-    from end_to_end import end_to_end_table
+    from end_to_end import end_to_end_table, interleaving_table
 
     methods, counts = ("optimal", "dqn"), args.keyframes
     with contextlib.ExitStack() as stack:
@@ -110,7 +110,9 @@ def end_to_end_sections(args) -> list[str]:
         busy = busy_rounds(sides[0], methods, counts, args.rounds)
         up2 = _uptime()
     names = [s.name for s in sides]
-    parts = end_to_end_table(same_clips(args.data, args.clips), counts)
+    clips = same_clips(args.data, args.clips)
+    parts = end_to_end_table(clips, counts)
+    ways = interleaving_table(clips, counts, n_rounds=4)
     return [
         "## End to end, as `eval` measures it",
         "",
@@ -150,6 +152,18 @@ def end_to_end_sections(args) -> list[str]:
         "and wall time; 'before' rows are paths `select` took before (today's kernels).",
         "",
         parts,
+        "",
+        f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
+        "",
+        "## Interleaved or in blocks",
+        "",
+        "Why the end-to-end figures come from rounds: the same `select` calls in this process, "
+        "timed interleaved with the parts (as the table above) and in blocks (one method and W "
+        "over all clips), the two ways alternating in 4 rounds. The ratio within a round is "
+        "what interleaving costs; the spread between rounds is the machine's drift, which two "
+        "tables timed a minute apart would mistake for a difference between them.",
+        "",
+        ways,
         "",
         f"Load averages over 1, 5, 15 min (`uptime`) after this table: {_uptime()}.",
     ]

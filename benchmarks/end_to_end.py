@@ -162,3 +162,50 @@ def end_to_end_table(clips, counts, repeats: int = 5, with_dqn: bool = True,
                 f"{aim} ms, quiet: {verdict}){against}; before / after in this run ({ratios})."
             )
     return "\n".join(lines + [""] + notes)
+
+
+def interleaving_table(clips, counts, n_rounds: int = 4, repeats: int = 5) -> str:
+    """Markdown: ``select``'s end-to-end CPU ms (median over clips of the median of ``repeats``
+    calls back to back) timed two ways in this process, round after round: *interleaved* as
+    :func:`end_to_end_table` times it (every column of a clip, then the next clip) and *in
+    blocks* (one method and W over all clips, nothing in between); per round both, and their
+    ratio, so a difference between the two ways shows apart from the machine's drift."""
+    from sidql.keyframes import methods
+    from sidql.learning.policy import load_policy
+
+    policy = load_policy()
+    names = {"optimal": "optimal: select (end to end)", "dqn": "dqn: select (end to end)"}
+    per_round = []
+    for r in range(n_rounds):
+        got = {}
+        for W in counts:
+            for fn in columns(clips[0], W, policy, True).values():
+                fn()  # compile and warm up
+            ways = ("interleaved", "blocks") if r % 2 == 0 else ("blocks", "interleaved")
+            for way in ways:
+                for m in names:
+                    got[(way, m, W)] = []
+                if way == "blocks":
+                    for m in names:
+                        for clip in clips:
+                            got[(way, m, W)].append(np.median(
+                                [_timed(lambda c=clip, m=m, W=W: methods.select(m, c, W))[0]
+                                 for _ in range(repeats)]))  # fmt: skip
+                    continue
+                for clip in clips:
+                    for name, fn in columns(clip, W, policy, True).items():
+                        t = np.median([_timed(fn)[0] for _ in range(repeats)])
+                        for m, want in names.items():
+                            if name == want:
+                                got[(way, m, W)].append(t)
+        per_round.append({k: float(np.median(v)) for k, v in got.items()})
+    lines = [
+        "| round | W | method | interleaved CPU ms | in blocks CPU ms | interleaved / blocks |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r, got in enumerate(per_round, 1):
+        for W in counts:
+            for m in names:
+                a, b = got[("interleaved", m, W)], got[("blocks", m, W)]
+                lines.append(f"| {r} | {W} | {m} | {a:.3f} | {b:.3f} | {a / b:.2f}x |")
+    return "\n".join(lines)

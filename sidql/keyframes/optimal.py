@@ -319,7 +319,9 @@ def _screened_costs(X, R, H, W):
     """:func:`optimum_cost_matrix` (Hermite) screened by the single-precision matrix: its
     programme's path, summed exactly, gives U; its lower bounds
     (:func:`single_lower_bounds`) the least the rest of the clip costs around each segment;
-    only the segments within U of that are summed exactly (and abandoned once over it)."""
+    only the segments within U of that are summed exactly (and abandoned once over it). The
+    single-precision matrix runs in the processor's widest vectors
+    (:mod:`sidql.keyframes.wide_vectors`)."""
     N = X.shape[0]
     C32 = single_cost_matrix(X, turn_rates(R), H)
     lb = single_lower_bounds(X, R, C32)
