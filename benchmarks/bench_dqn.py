@@ -112,7 +112,7 @@ def end_to_end_sections(args) -> list[str]:
     names = [s.name for s in sides]
     clips = same_clips(args.data, args.clips)
     parts = end_to_end_table(clips, counts)
-    ways = interleaving_table(clips, counts, n_rounds=4)
+    ways = interleaving_table(clips, counts, n_rounds=8)
     return [
         "## End to end, as `eval` measures it",
         "",
@@ -159,7 +159,7 @@ def end_to_end_sections(args) -> list[str]:
         "",
         "Why the end-to-end figures come from rounds: the same `select` calls in this process, "
         "timed interleaved with the parts (as the table above) and in blocks (one method and W "
-        "over all clips), the two ways alternating in 4 rounds. The ratio within a round is "
+        "over all clips), the two ways alternating in 8 rounds. The ratio within a round is "
         "what interleaving costs; the spread between rounds is the machine's drift, which two "
         "tables timed a minute apart would mistake for a difference between them.",
         "",

@@ -208,4 +208,14 @@ def interleaving_table(clips, counts, n_rounds: int = 4, repeats: int = 5) -> st
             for m in names:
                 a, b = got[("interleaved", m, W)], got[("blocks", m, W)]
                 lines.append(f"| {r} | {W} | {m} | {a:.3f} | {b:.3f} | {a / b:.2f}x |")
-    return "\n".join(lines)
+    notes = []
+    for W in counts:
+        for m in names:
+            ratio = [g[("interleaved", m, W)] / g[("blocks", m, W)] for g in per_round]
+            blocks = [g[("blocks", m, W)] for g in per_round]
+            notes.append(
+                f"W = {W}, {m}: interleaved / blocks {np.median(ratio):.2f}x, median over "
+                f"rounds [{min(ratio):.2f}, {max(ratio):.2f}]; in blocks, slowest round / fastest "
+                f"round {max(blocks) / min(blocks):.2f}x."
+            )
+    return "\n".join(lines + [""] + notes)
