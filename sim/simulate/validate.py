@@ -336,6 +336,7 @@ def forward_validation(
     controller: str | None = None,
     contact_reference: bool | None = None,
     gain_choice: GainChoice | None = DEFAULT_GAIN_CHOICE,
+    threads: int = 1,
     **body,
 ) -> ForwardValidation:
     """The :class:`ForwardValidation` of ``skeleton``'s simulated body
@@ -345,7 +346,8 @@ def forward_validation(
     the sampler at :data:`DEFAULT_SAMPLES`); ``contact_reference``: it tracks the
     contact-consistent reference (:class:`ForwardValidation`). The sampler chooses its gains
     per window by ``gain_choice`` between the body's gains and :data:`STIFF_GAINS` (one body:
-    ``common_body``); None or a share of 0: the body's gains only."""
+    ``common_body``); None or a share of 0: the body's gains only; ``threads``: the sampler's
+    rollouts on that many threads (the same figures)."""
     controller, _ = chosen_controller(samples, controller)
     actuators = "motor" if controller == "wholebody" else "position"
     model = validation_model(skeleton, actuators=actuators, **body)
@@ -355,7 +357,7 @@ def forward_validation(
         model, stiff = common_body((model, stiff))
         search = {"alternates": (stiff,), "choice": gain_choice}
     return ForwardValidation(
-        model, names, samples=samples, controller=controller, search=search,
+        model, names, samples=samples, controller=controller, search=search, threads=threads,
         contact_reference=contact_reference,
     )  # fmt: skip
 
