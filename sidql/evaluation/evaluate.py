@@ -45,6 +45,7 @@ def evaluate(
     physics: bool = False,
     simulate: bool = False,
     simulate_samples: int = 0,
+    simulate_threads: int = 1,
     workers: int = 1,
     ray: str | None = None,
     chunk: int = 4,
@@ -69,13 +70,12 @@ def evaluate(
         holds method, keyframes, clips, mean_q, mean_q_hermite, mean_geodesic_deg, mpjpe_mm,
         velocity_error_mm_s, mean_li_error_mm, median_decision_ms; a per-clip row holds source,
         start_frame, method, keyframes, indices, q and the other scores. With ``physics`` every
-        row also carries the
-        :mod:`sim.physics` figures (result rows: means over clips, :data:`sidql.evaluation.scoring.PHYSICS_KEYS`), and one
+        row also carries the :mod:`sim.physics` figures (means over clips: ``PHYSICS_KEYS``), and one
         result row (and per-clip rows) for method ``original``, the clip itself (all frames
         kept: ``keyframes`` = clip length, errors 0). With ``simulate`` (needs ``physics``)
         every row also carries the forward-simulation figures of
-        :mod:`sim.simulate.validate` (result rows: means over clips); ``simulate_samples``:
-        rollouts per window of its sampling tracker (0: the plain tracker).
+        :mod:`sim.simulate.validate` (result rows: means over clips; ``simulate_samples``,
+        ``simulate_threads``: ``trial_physics.simulate_setup``'s ``samples``, ``threads``).
     """
     if simulate and not physics:
         raise UsageError("simulate needs physics (the IK fit it tracks)")
@@ -87,7 +87,7 @@ def evaluate(
         if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file
             methods.select(name, cases[0].clip, counts[0], seed=0)
     setup = physics_setup(cases) if physics else {}
-    bodies = simulate_setup(cases, simulate_samples) if simulate else {}
+    bodies = simulate_setup(cases, simulate_samples, simulate_threads) if simulate else {}
     if reconstruction is not None:
         reconstructions.get(reconstruction)  # fail early, listing the known ones
     items = _tasks(cases, chunk, setup, bodies)
