@@ -2,7 +2,7 @@
 measured in the same run (greedy and the exact optimum on the same cost matrices).
 
     python benchmarks/bench_dqn.py [--data ../shared/cmu] [--keyframes 15] [--policy FILE]
-        [--baseline REV ...] [--rounds 5] [--eval-clips 107] [--clips 30]
+        [--baseline REV ...] [--rounds 11] [--eval-clips 107] [--clips 30]
 
 The policy needs the clip's features and its segment-cost matrix; the cost matrix (also what
 greedy and optimal need) is timed separately and reported alongside. Without data the benchmark
@@ -179,7 +179,7 @@ def main() -> int:
     parser.add_argument(
         "--eval-clips", type=int, default=107, help="clips eval cuts, for the end-to-end tables"
     )
-    parser.add_argument("--rounds", type=int, default=5, help="rounds of the end-to-end tables")
+    parser.add_argument("--rounds", type=int, default=11, help="rounds of the end-to-end tables")
     parser.add_argument(
         "--baseline",
         nargs="*",
