@@ -58,7 +58,7 @@ def import_numba() -> None:
     for name in unseen:
         sys.modules[name] = None  # an import of it raises ImportError: "not installed"
     try:
-        import numba  # noqa: F401
+        import numba  # noqa: F401  # lazy: with SciPy and PyYAML hidden
     finally:
         for name in unseen:
             if sys.modules.get(name, 0) is None:
@@ -91,9 +91,9 @@ def start_numba() -> None:
         if _started:
             return
         _started = True
-        from numba.core.caching import FunctionCache
-        from numba.core.cpu import CPUContext
-        from numba.core.runtime import rtsys
+        from numba.core.caching import FunctionCache  # lazy: after import_numba
+        from numba.core.cpu import CPUContext  # lazy: after import_numba
+        from numba.core.runtime import rtsys  # lazy: after import_numba
 
         registries = CPUContext.load_additional_registries
         guard = getattr(FunctionCache, "_guard_against_spurious_io_errors", None)
