@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 
 # In a fresh interpreter: what the command line does (start numba, then run cached kernels), then
@@ -64,7 +66,7 @@ def run(code: str, cwd: Path = REPO) -> list[str]:
 # The plan's band costs (a parallel kernel whose compiled code calls numba's array
 # implementations) and the position coding's closed loop, on a chart made from a seeded walk of
 # angles; with START, numba started first. Prints a digest of the results, then which of numba's
-# implementations were loaded (polynomial: only ever loaded with all of them).
+# implementations and modules were loaded (polynomial: only ever loaded with all of them).
 KERNELS = """
 import hashlib, sys
 import numpy as np
@@ -85,15 +87,16 @@ h = hashlib.sha256()
 for a in (C, codes, values, q.decode_keyframes(codes, keys)):
     h.update(np.ascontiguousarray(a).tobytes())
 print(h.hexdigest())
-print("numba.np.polynomial.polynomial_core" in sys.modules, "scipy.linalg" in sys.modules)
+print("numba.np.polynomial.polynomial_core" in sys.modules, "scipy.linalg" in sys.modules,
+      "numba.np.arrayobj" in sys.modules)
 """
 
 
 def test_started_numba_runs_cached_kernels_without_its_implementations_and_the_same_results():
     plain = run(KERNELS.replace("START", ""))  # compiles the kernels where they are not cached
     started = run(KERNELS.replace("START", "from sim.jit import start_numba; start_numba()"))
-    assert plain[1] == "True True"  # numba's own loader: every implementation, and SciPy
-    assert started[:2] == [plain[0], "False False"]  # the same results; neither loaded
+    assert plain[1] == "True True True"  # numba's own loader: every implementation, SciPy
+    assert started[:2] == [plain[0], "False False False"]  # the same results; none loaded
 
 
 # numba imported as the program does it; then SciPy and PyYAML still import.
@@ -115,3 +118,48 @@ def test_numba_imported_without_scipy_and_yaml_which_still_import(tmp_path):
 def test_numba_reads_its_config_file_where_there_is_one(tmp_path):
     (tmp_path / ".numba_config.yaml").write_text("debug_cache: 0\n")
     assert run(IMPORT, cwd=tmp_path)[:2] == ["False True True", "scipy yaml"]
+
+
+# A kernel cached in its own folder (numba functions compiled into it: np.zeros, np.argsort),
+# run with numba started or not (START); prints its result and whether it came from the cache.
+CACHED = """
+import numpy as np
+START
+from kernel import sorted_twice
+x = np.array([3.0, 1.0, 2.0])
+print(sorted_twice(x).tolist(), sum(sorted_twice.stats.cache_hits.values()))
+"""
+KERNEL = """
+import numba
+import numpy as np
+
+@numba.njit(cache=True)
+def sorted_twice(x):
+    out = np.zeros(x.shape[0])
+    out[:] = 2.0 * x[np.argsort(x)]
+    return out
+"""
+
+
+@pytest.mark.parametrize("first, second", [("start", "plain"), ("plain", "start")])
+def test_a_cache_written_with_numba_started_or_not_loads_in_the_other(tmp_path, first, second):
+    (tmp_path / "kernel.py").write_text(KERNEL)
+    start = {"start": "from sim.jit import start_numba; start_numba()", "plain": ""}
+
+    def once(how: str) -> list[str]:
+        out = subprocess.run(
+            [sys.executable, "-c", CACHED.replace("START", start[how])],
+            cwd=tmp_path,
+            env={"PYTHONPATH": f"{REPO}:{tmp_path}", "PATH": "/usr/bin:/bin"},
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert out.returncode == 0, out.stderr
+        return out.stdout.split("\n")
+
+    assert once(first)[0] == "[2.0, 4.0, 6.0] 0"  # compiled and cached
+    cached = [p.read_bytes() for p in (tmp_path / "__pycache__").glob("kernel.*.nbc")]
+    assert cached and not any(b"sim.jit" in data for data in cached)  # numba's names only
+    assert once(second)[0] == "[2.0, 4.0, 6.0] 1"  # loaded from that cache
+    assert once(first)[0] == "[2.0, 4.0, 6.0] 1"
