@@ -1,5 +1,6 @@
 """The controllers ``benchmarks/bench_simulate.py --controllers`` compares, by name: eval's
-default (``default28``) and every candidate tried against it (docs/synthetic.md, "The
+default (``mix0.5``: the gains chosen per window), its default before (``default28``: the
+default gains only) and every candidate tried against them (docs/synthetic.md, "The
 controllers, measured", says what each gave).
 
 ``CONTROLLERS[name]`` = (label, ``ForwardValidation`` keywords, actuators[, the body's
@@ -20,7 +21,7 @@ from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
-from sim.simulate.validate import DEFAULT_BALANCE  # noqa: E402
+from sim.simulate.validate import DEFAULT_BALANCE, STIFF_GAINS  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
 #: balance feedback
@@ -50,9 +51,9 @@ for _n in (16, 24, 28, 32, 48, 64):
         {"controller": "sampling", "samples": _n, "search": BEFORE_HOLD},
         "position",
     )
-    CONTROLLERS[f"default{_n}"] = (  # the sampler as eval runs it now (validate's defaults)
-        f"sampler, {_n} samples, eval's defaults now: falls in its cost, balance feedback with "
-        f"the drift lead, foot holding {CostWeights().hold:g}, "
+    CONTROLLERS[f"default{_n}"] = (  # eval's sampler on the default gains only
+        f"sampler, {_n} samples, eval's defaults on the default gains only: falls in its cost, "
+        f"balance feedback with the drift lead, foot holding {CostWeights().hold:g}, "
         f"{search_offsets.__kwdefaults__['elite']} elite",
         {"controller": "sampling", "samples": _n},
         "position",
@@ -258,10 +259,11 @@ CONTROLLERS["ccstiff0.1w12rad"] = (
 )
 
 #: the gains chosen per window (``sim.simulate.gainchoice``) between the default and the stiff
-#: controller (cap 0.1 rad, 12 Hz), eval's default otherwise: ``mix<share>`` that share of each
+#: controller (cap 0.1 rad, 12 Hz), eval's default otherwise (``mix0.5`` is eval's default:
+#: ``sim.simulate.validate.DEFAULT_GAIN_CHOICE``): ``mix<share>`` that share of each
 #: window's 28 candidates on the stiff gains; ``stifffb`` all on the stiff gains, a window whose
 #: candidates all fall tried again on the default ones; ``mix<share>fb`` both
-_STIFF = Gains(min_deflection=0.1, omega=_W12)
+_STIFF = STIFF_GAINS  # eval's second gain set
 for _name, _choice in (
     ("mix0.5", GainChoice(share=0.5)),
     ("mix0.25", GainChoice(share=0.25)),

@@ -116,3 +116,19 @@ def test_forward_validation_chooses_gains_where_its_search_names_alternates(
     )
     validate.ForwardValidation(default, ("root",), samples=2).run(walk[::4][:8], 30.0)
     assert seen == [(stiff,)] and row["sim_fell"] == 0  # the plain sampler without them
+
+
+def test_eval_default_body_chooses_between_its_gains_and_the_stiff_ones():
+    from sim.simulate.validate import DEFAULT_GAIN_CHOICE, STIFF_GAINS, forward_validation
+
+    sk = canonical_skeleton()
+    fv = forward_validation(sk, ("root",))
+    (stiff,) = fv.search["alternates"]
+    assert fv.search["choice"] == DEFAULT_GAIN_CHOICE and DEFAULT_GAIN_CHOICE.share == 0.5
+    want = sim_model(sk, gains=STIFF_GAINS, lean=True)
+    np.testing.assert_array_equal(stiff.actuator_gainprm, want.actuator_gainprm)
+    np.testing.assert_array_equal(fv.model.dof_armature, stiff.dof_armature)  # one body
+    np.testing.assert_array_equal(fv.model.actuator_forcerange, want.actuator_forcerange)
+    assert forward_validation(sk, ("root",), gain_choice=None).search == {}
+    assert forward_validation(sk, ("root",), controller="plain").search == {}
+    assert forward_validation(sk, ("root",), gain_choice=GainChoice(share=0.0)).search == {}

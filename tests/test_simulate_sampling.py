@@ -106,6 +106,21 @@ def test_eval_samples_needs_simulate_and_a_positive_count(tmp_path, capsys):
         assert e.value.code == 2
 
 
+def test_eval_threads_reach_the_simulated_bodies_and_need_simulate(tmp_path, capsys, cmu_dir):
+    import pickle
+
+    from sidql.commands import main as cli
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.trial_physics import simulate_setup
+
+    out = str(tmp_path / "r.json")
+    assert cli.main(["eval", "--data", str(tmp_path), "--threads", "2", "--out", out]) == 2
+    assert capsys.readouterr().err.strip() == "sidql eval: error: --threads needs --simulate"
+    cases = load_cases(cmu_dir, progress=False)[0][:1]
+    (body,) = simulate_setup(cases, threads=2).values()
+    assert body.threads == 2 and pickle.loads(pickle.dumps(body)).threads == 2  # to workers
+
+
 def test_synth_with_samples_tracks_real_kinds_without_any_help(cmu_dir):
     """``synth --samples``: real-motion clips come from the sampler with no assistance at all
     (physical by construction, the sampler's seed recorded); procedural keeps its tracker."""

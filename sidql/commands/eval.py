@@ -91,6 +91,11 @@ def register(p) -> None:
     )
     add_samples(p, "with --simulate: track", old_option="--simulate-samples")
     p.add_argument(
+        "--threads", type=positive(int), default=1, metavar="N",
+        help="with --simulate: the sampler's rollouts on N threads in each worker (the figures "
+        "do not depend on it)",
+    )  # fmt: skip
+    p.add_argument(
         "--max-clips", type=positive(int), default=None, metavar="N",
         help="evaluate only the first N clips (e.g. to bound a --simulate run)",
     )  # fmt: skip
@@ -114,6 +119,8 @@ def _run(args) -> int:
     counts = check_keyframes(args, args.length)
     if args.samples and not args.simulate:
         raise UsageError("--samples needs --simulate")
+    if args.threads > 1 and not args.simulate:
+        raise UsageError("--threads needs --simulate")
     args.data = data_folder(args)
     cases, skipped = load_cases(
         args.data,
@@ -134,8 +141,8 @@ def _run(args) -> int:
     out = evaluate(
         cases, args.methods, counts, seed=args.seed, progress=not args.quiet,
         physics=args.physics, simulate=args.simulate,
-        simulate_samples=args.samples or 0, workers=args.workers, ray=args.ray,
-        reconstruction=args.reconstruction,
+        simulate_samples=args.samples or 0, simulate_threads=args.threads,
+        workers=args.workers, ray=args.ray, reconstruction=args.reconstruction,
     )  # fmt: skip
     out["skipped"] = skipped
     out["protocol"] = {

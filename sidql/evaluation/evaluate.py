@@ -45,6 +45,7 @@ def evaluate(
     physics: bool = False,
     simulate: bool = False,
     simulate_samples: int = 0,
+    simulate_threads: int = 1,
     workers: int = 1,
     ray: str | None = None,
     chunk: int = 4,
@@ -75,7 +76,8 @@ def evaluate(
         kept: ``keyframes`` = clip length, errors 0). With ``simulate`` (needs ``physics``)
         every row also carries the forward-simulation figures of
         :mod:`sim.simulate.validate` (result rows: means over clips); ``simulate_samples``:
-        rollouts per window of its sampling tracker (0: the plain tracker).
+        rollouts per window of its sampling tracker (0: its default controller);
+        ``simulate_threads``: the sampler's rollouts on that many threads (the same figures).
     """
     if simulate and not physics:
         raise UsageError("simulate needs physics (the IK fit it tracks)")
@@ -87,7 +89,7 @@ def evaluate(
         if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file
             methods.select(name, cases[0].clip, counts[0], seed=0)
     setup = physics_setup(cases) if physics else {}
-    bodies = simulate_setup(cases, simulate_samples) if simulate else {}
+    bodies = simulate_setup(cases, simulate_samples, simulate_threads) if simulate else {}
     if reconstruction is not None:
         reconstructions.get(reconstruction)  # fail early, listing the known ones
     items = _tasks(cases, chunk, setup, bodies)

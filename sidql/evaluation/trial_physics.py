@@ -99,16 +99,17 @@ def physics_setup(cases: Sequence[Case]) -> dict:
     return out
 
 
-def simulate_setup(cases: Sequence[Case], samples: int = 0) -> dict:
+def simulate_setup(cases: Sequence[Case], samples: int = 0, threads: int = 1) -> dict:
     """Per trial (``clip.source``): the :class:`sim.simulate.validate.ForwardValidation` of its
     subject (one torque-limited simulated body per skeleton) for :func:`sidql.evaluation.scoring.score`; ``samples``:
     its sampling tracker's rollouts per window (0: ``sim.simulate.validate``'s default
-    controller)."""
+    controller); ``threads``: the sampler's rollouts on that many threads."""
     bodies, out = {}, {}
     for c in cases:
         if c.asf not in bodies:
             skeleton = subject_model(c.asf)[0]
-            bodies[c.asf] = forward_validation(skeleton, _protocol_names(c.clip), samples=samples)
+            names = _protocol_names(c.clip)
+            bodies[c.asf] = forward_validation(skeleton, names, samples=samples, threads=threads)
         out[c.clip.source] = bodies[c.asf]
     return out
 

@@ -2,7 +2,8 @@
 
 A motion given as configurations (``qpos`` fitted to its points, e.g. by ``sim.physics``'s IK)
 is tracked in ``mj_step`` by a torque-limited controller (by default the sampler of
-``sim.simulate.sampling``, :data:`DEFAULT_CONTROLLER`) with no root assistance at all (``assist_limit = 0``): only the joints (within their human limits) and
+``sim.simulate.sampling``, :data:`DEFAULT_CONTROLLER`, choosing its feedback gains per window:
+:data:`DEFAULT_GAIN_CHOICE`) with no root assistance at all (``assist_limit = 0``): only the joints (within their human limits) and
 the floor move the body. The figures say how far the simulated body strays from the motion it
 tracks and from the original motion, whether and when it falls, and the torque it used.
 
@@ -28,7 +29,7 @@ from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
-from sim.simulate.gainchoice import choice_track
+from sim.simulate.gainchoice import GainChoice, choice_track, common_body
 from sim.simulate.model import CONTROL_HZ, Gains, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
@@ -73,11 +74,19 @@ DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
 DEFAULT_SAMPLES = 28
 #: the position actuators' feedback gains of the body ``eval --simulate`` and ``report
 #: --simulate`` track with (:func:`validation_model`): bandwidth and stiffness cap are the
-#: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these.
-#: Stiffer (0.1 rad, 12 Hz) on 64 clips: root-relative error 74 against 106 mm, but 3 clips
-#: lost and 1 kept up; chosen per window (``sim.simulate.gainchoice``): 2 lost, 1 kept
-#: (docs/synthetic.md): not the default
+#: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these
 DEFAULT_GAINS = Gains()
+#: the second gain set the sampler chooses from per window (:data:`DEFAULT_GAIN_CHOICE`): the
+#: stiff controller, stiffness cap 0.1 rad at 12 Hz, on the same body and torque limits
+STIFF_GAINS = Gains(min_deflection=0.1, omega=2 * np.pi * 12.0)
+#: the sampler's candidates spread per window over :data:`DEFAULT_GAINS` and
+#: :data:`STIFF_GAINS` (``sim.simulate.gainchoice``): half on each, the cost (falls included)
+#: choosing. On all 107 clips in one run (docs/results/simulate_stiffness.md, ``mix0.5``) against
+#: the default gains alone (``default28``, eval's default before): falls 0.23 against 0.24
+#: (paired -0.01 [-0.07, +0.05]), median root-relative error 89 against 110 mm (-17 [-25, -8]),
+#: global 245 against 267 mm (-15 [-39, +9]), skating 350 against 445 mm/s, 1.02x the CPU; the
+#: stiff gains alone (``ccstiff0.1w12``) 0.28 falls, 79 mm, 238 mm. None: the default gains only
+DEFAULT_GAIN_CHOICE = GainChoice(share=0.5)
 #: [rad] the sampler's ``noise_deflection`` here unless ``search`` names one (0: its noise a
 #: share of peak torque over the body's stiffness; a stiffer body's ``min_deflection`` before
 #: it: the noise keeps the angles it had on that body)
@@ -326,6 +335,8 @@ def forward_validation(
     samples: int = 0,
     controller: str | None = None,
     contact_reference: bool | None = None,
+    gain_choice: GainChoice | None = DEFAULT_GAIN_CHOICE,
+    threads: int = 1,
     **body,
 ) -> ForwardValidation:
     """The :class:`ForwardValidation` of ``skeleton``'s simulated body
@@ -333,13 +344,22 @@ def forward_validation(
     the actuators its controller needs) on points ``names``: ``samples`` > 0 the
     sampling tracker with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`,
     the sampler at :data:`DEFAULT_SAMPLES`); ``contact_reference``: it tracks the
-    contact-consistent reference (:class:`ForwardValidation`)."""
+    contact-consistent reference (:class:`ForwardValidation`). The sampler chooses its gains
+    per window by ``gain_choice`` between the body's gains and :data:`STIFF_GAINS` (one body:
+    ``common_body``); None or a share of 0: the body's gains only; ``threads``: the sampler's
+    rollouts on that many threads (the same figures)."""
     controller, _ = chosen_controller(samples, controller)
     actuators = "motor" if controller == "wholebody" else "position"
     model = validation_model(skeleton, actuators=actuators, **body)
+    search = {}
+    if controller == "sampling" and gain_choice is not None and gain_choice.share > 0:
+        stiff = validation_model(skeleton, actuators=actuators, **{**body, "gains": STIFF_GAINS})
+        model, stiff = common_body((model, stiff))
+        search = {"alternates": (stiff,), "choice": gain_choice}
     return ForwardValidation(
-        model, names, samples=samples, controller=controller, contact_reference=contact_reference
-    )
+        model, names, samples=samples, controller=controller, search=search, threads=threads,
+        contact_reference=contact_reference,
+    )  # fmt: skip
 
 
 def validation_model(skeleton, *, actuators: str = "position", **body) -> mujoco.MjModel:
