@@ -70,14 +70,12 @@ def evaluate(
         holds method, keyframes, clips, mean_q, mean_q_hermite, mean_geodesic_deg, mpjpe_mm,
         velocity_error_mm_s, mean_li_error_mm, median_decision_ms; a per-clip row holds source,
         start_frame, method, keyframes, indices, q and the other scores. With ``physics`` every
-        row also carries the
-        :mod:`sim.physics` figures (result rows: means over clips, :data:`sidql.evaluation.scoring.PHYSICS_KEYS`), and one
+        row also carries the :mod:`sim.physics` figures (means over clips: ``PHYSICS_KEYS``), and one
         result row (and per-clip rows) for method ``original``, the clip itself (all frames
         kept: ``keyframes`` = clip length, errors 0). With ``simulate`` (needs ``physics``)
         every row also carries the forward-simulation figures of
-        :mod:`sim.simulate.validate` (result rows: means over clips); ``simulate_samples``:
-        rollouts per window of its sampling tracker (0: its default controller);
-        ``simulate_threads``: the sampler's rollouts on that many threads (the same figures).
+        :mod:`sim.simulate.validate` (result rows: means over clips; ``simulate_samples``,
+        ``simulate_threads``: ``trial_physics.simulate_setup``'s ``samples``, ``threads``).
     """
     if simulate and not physics:
         raise UsageError("simulate needs physics (the IK fit it tracks)")

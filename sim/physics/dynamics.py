@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import savgol_filter
 
+from sim import mujoco_log  # noqa: F401  # MuJoCo's warnings on stderr, not in a file
 from sim.errors import UsageError
 from sim.model.angles import wrap_angle
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim import mujoco_log  # noqa: F401  # MuJoCo's warnings on stderr, not in a file
 from sim.errors import UnknownNameError, UsageError
 from sim.model import quaternion as quat
 from sim.model.angles import wrap_angle

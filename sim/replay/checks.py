@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim import mujoco_log  # noqa: F401  # MuJoCo's warnings on stderr, not in a file
 from sim.errors import UsageError, require_type
 from sim.model.capsules import Bones, adjacent_pairs, bone_poses, bones_of, scene_xml
 from sim.model.kinematics import SIDES

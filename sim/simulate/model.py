@@ -46,6 +46,7 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 
+from sim import mujoco_log  # noqa: F401  # MuJoCo's warnings on stderr, not in a file
 from sim.acclaim.records import Skeleton
 from sim.errors import UsageError
 from sim.model.humanoid import build_mjcf
