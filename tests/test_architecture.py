@@ -23,9 +23,10 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("sim", "sidql")
 
-#: What may be imported inside a function: heavy dependencies optional for most uses, and the
+#: What may be imported inside a function: heavy dependencies optional for most uses, numba where
+#: ``sim.jit`` imports it on purpose late (without SciPy; its loader patched once), and the
 #: project's own modules that carry torch (so that the CLI and ``import sidql`` stay torch-free).
-LAZY_ALLOWED = {"torch", "ray", "matplotlib", "imageio"}
+LAZY_ALLOWED = {"torch", "ray", "matplotlib", "imageio", "numba"}
 LAZY_ALLOWED_MODULES = {"sidql.learning.dqn", "sidql.learning.policy"}
 
 

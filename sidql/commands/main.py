@@ -27,6 +27,7 @@ from typing import NoReturn
 from sidql import __version__
 from sidql.commands.usage import ArgumentParser, HelpFormatter, one_line_warning
 from sim.errors import SidqlError
+from sim.jit import import_numba
 
 #: Every command, in the order ``sidql --help`` lists them, with its one-line summary.
 COMMANDS = {
@@ -122,7 +123,8 @@ def program() -> NoReturn:
     :func:`main` on ``sys.argv``, then exit with its code.
 
     A :data:`LEAN` command's process is its own: MuJoCo is imported without its GL context
-    (``MUJOCO_GL=disable``: about 0.03 s of CPU), the cyclic collector runs less often
+    (``MUJOCO_GL=disable``: about 0.03 s of CPU), numba without the packages its import only
+    checks for (:func:`sim.jit.import_numba`: about 0.03 s), the cyclic collector runs less often
     (:data:`LEAN_GC_THRESHOLD`: about 0.1 s), and once the command has returned with no other
     thread alive, the process flushes its standard streams, runs its exit handlers and ends
     (``os._exit``) without the interpreter's teardown, which frees numba's and LLVM's objects one
@@ -133,6 +135,7 @@ def program() -> NoReturn:
         os.environ["MUJOCO_GL"] = "disable"
     if lean:
         gc.set_threshold(LEAN_GC_THRESHOLD, *gc.get_threshold()[1:])
+        import_numba()
     code = main()
     if lean and threading.active_count() == 1:
         try:
