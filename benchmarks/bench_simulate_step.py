@@ -15,8 +15,8 @@ run (every control tick, just before its physics steps) are then
   each, the least CPU time per state kept (robust to a shared machine's load): microseconds per
   physics step, with MuJoCo's own timers per stage, contacts, constraint rows and solver
   iterations;
-* handed to the tick's Python parts (balance feedback, fall check, control writes) at their
-  tick: microseconds per call, likewise.
+* handed to the tick's Python parts (balance feedback, fall check, control writes, the check
+  for a diverged simulation) at their tick: microseconds per call, likewise.
 
 Then the whole tracking (search and replay) runs on both bodies in turn, ``--reps`` times: CPU
 seconds per simulated second, and whether the two give the same motion bit for bit. Written to
@@ -47,6 +47,7 @@ from sim.simulate.feedforward import reference_feedforward  # noqa: E402
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS  # noqa: E402
 from sim.simulate.reference import trial_qpos  # noqa: E402
 from sim.simulate.sampling import sample_track  # noqa: E402
+from sim.simulate.tracking import divergences  # noqa: E402
 from sim.simulate.validate import (  # noqa: E402
     DEFAULT_BALANCE,
     DEFAULT_NOISE_DEFLECTION,
@@ -136,7 +137,7 @@ def step_costs(models: dict, states: np.ndarray, reps: int) -> dict[str, dict]:
 def python_costs(model, ref: np.ndarray, states: np.ndarray, ticks: np.ndarray, reps: int) -> dict:
     """Microseconds per call of the tick's Python parts on the recorded states (least of
     ``reps`` per state): the balance feedback (at its own ticks only), the fall check, the
-    control writes."""
+    control writes, the divergence check."""
     data = mujoco.MjData(model)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     ref_qvel, _ = reference_feedforward(model, ref, data)
@@ -150,6 +151,7 @@ def python_costs(model, ref: np.ndarray, states: np.ndarray, ticks: np.ndarray, 
         ),
         "fall check": lambda k: has_fallen(model, data, falls, k),
         "control writes": lambda k: set_controls(model, data, target, 1.0),
+        "divergence check": lambda k: divergences(data),
     }
     out = {}
     for name, f in parts.items():

@@ -40,13 +40,14 @@ same human torque limits. Units: SI, z up, floor at z = 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 
 import mujoco
 import numpy as np
 
 from sim.errors import UsageError
-from sim.simulate.drift import drift_lead
+from sim.simulate.drift import drift_lead_xy
 from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS, G, total_mass
 
 #: [m] a reference foot (sole or toe box) whose lowest point is at most this high is in stance
@@ -56,6 +57,15 @@ STANCE_HEIGHT = 0.04
 #: near gimbal lock gets bounded torques
 DAMPING = 1e-3
 _DAMPED = DAMPING * np.eye(3)
+
+try:  # np.linalg.solve's own kernel (LAPACK's gesv on each matrix of a stack) without the
+    # checks and error state around it (the damped systems here are never singular): the same
+    # numbers for a third of the cost
+    from numpy.linalg import _umath_linalg
+
+    _solve = partial(_umath_linalg.solve, signature="dd->d")
+except (ImportError, AttributeError):  # a numpy without it
+    _solve = np.linalg.solve
 
 
 @dataclass(frozen=True)
@@ -135,6 +145,44 @@ class BalancePlan:
     xy: np.ndarray | None = None  # (T, 2) the root's horizontal position [m]; None: no drift term
     drift: tuple[float, float, float] = (0.0, 0.0, 0.0)  # k_drift [1/s], max, dead [m]
     drift_feet: bool = False  # xy is the stance feet's mid-point, compared with the body's
+    #: derived from the fields above when the plan is made (they are read-only from then on):
+    #: per tick None (no stance foot) or (share row (2,) view, its two shares and their sum as
+    #: floats, the swing side (0, 1) where one foot stands else -1, and the rows of ``angvel``,
+    #: ``vel``, ``com_off`` and ``xy`` (None without drift) as float lists); the rows of
+    #: ``xaxis`` gathered (12,), ``mask`` as (2, 2, 3, 1), and the valid hinges' actuator ids
+    #: and flat (2, 2, 3) positions
+    ticks: list = field(init=False, repr=False, compare=False)
+    hinge_rows: np.ndarray = field(init=False, repr=False, compare=False)
+    row_mask: np.ndarray = field(init=False, repr=False, compare=False)
+    valid_aids: np.ndarray = field(init=False, repr=False, compare=False)
+    valid_rows: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        derived = {
+            "ticks": _tick_rows(self),
+            "hinge_rows": np.ascontiguousarray(self.jids).reshape(-1),
+            "row_mask": np.asarray(self.mask, dtype=float)[..., None],
+            "valid_aids": self.aids[self.valid],
+            "valid_rows": np.flatnonzero(self.valid),
+        }
+        for name, value in derived.items():
+            object.__setattr__(self, name, value)
+
+
+def _tick_rows(plan: BalancePlan) -> list:
+    """``BalancePlan.ticks`` of ``plan`` (the sums and tests as the feedback made them per call)."""
+    lists = [a.tolist() for a in (plan.angvel, plan.vel, plan.com_off)]
+    xy = plan.xy.tolist() if plan.xy is not None else [None] * len(plan.share)
+    rows = []
+    for k, w in enumerate(plan.share):
+        if not w.any():
+            rows.append(None)
+            continue
+        one = w.sum() == 1.0 and w.max() == 1.0
+        swing = int(np.argmin(w)) if one else -1
+        w0, w1 = w.tolist()
+        rows.append((w, w0, w1, float(w.sum()), swing, *(a[k] for a in lists), xy[k]))
+    return rows
 
 
 def _hinges(model, side: str, bone: str) -> tuple[np.ndarray, np.ndarray]:
@@ -231,43 +279,65 @@ def _step_plan(model, aids: np.ndarray, mask: np.ndarray, gains: Balance) -> tup
 def balance_torques(model, data, plan: BalancePlan, k: int, out: np.ndarray) -> np.ndarray:
     """Write into ``out`` (nu,) the feedback torques [N m] at reference tick ``k`` for ``data``'s
     ``qpos``/``qvel`` (kinematics and centre of mass recomputed); zero off the stance legs and
-    where the reference has no stance foot. Returns ``out``."""
-    out[:] = 0.0
-    w = plan.share[k]  # (2,) each side's share of the moments: 1 / stance feet, 0 off stance
-    if not w.any():
+    where the reference has no stance foot. Returns ``out``.
+
+    The small vector algebra runs on Python floats (the same IEEE operations in the same order
+    as numpy's elementwise ones); every matrix product and solve is numpy's on the shapes it
+    always had (BLAS and LAPACK kernels, whose rounding is theirs), so the torques are the same
+    to the last bit however the arithmetic around them is arranged."""
+    out.fill(0.0)
+    tick = plan.ticks[k]
+    if tick is None:  # the reference has no stance foot
         return out
+    w, w0, w1, wsum, swing, angvel, vel, com_off, xy = tick
     mujoco.mj_kinematics(model, data)
     mujoco.mj_comPos(model, data)
     k_rot, d_rot, k_com, d_com = plan.gains
+    qpos = data.qpos
     e = np.zeros(3)
-    mujoco.mju_subQuat(e, plan.quat[k], data.qpos[3:7])  # local frame of the simulated root
-    de = plan.angvel[k] - data.qvel[3:6]  # local frame
-    rot = data.xmat[1].reshape(3, 3) @ (k_rot * e + d_rot * de)  # world [N m]
-    mid = w @ data.xpos[plan.feet] / w.sum()
-    f = k_com * ((data.subtree_com[1, :2] - mid[:2]) - plan.com_off[k])
-    if plan.xy is not None:  # the velocity target leads by the root's (feet's) position error
-        at = mid[:2] if plan.drift_feet else data.qpos[:2]
-        f -= d_com * drift_lead(plan.xy[k], at, *plan.drift)
-    f += d_com * (data.qvel[:2] - plan.vel[k])  # (2,) horizontal [N]
-    M = np.empty((2, 2, 3))  # per side and group (hip, ankle): the moment asked for [N m]
-    M[:, 0] = w[:, None] * rot
-    M[:, 1] = w[:, None] * (f[1], -f[0], 0.0)  # -(z x f)
+    mujoco.mju_subQuat(e, plan.quat[k], qpos[3:7])  # local frame of the simulated root
+    e0, e1, e2 = e.tolist()
+    v0, v1, _, om0, om1, om2 = data.qvel[:6].tolist()
+    pull = (  # k_rot e + d_rot de, de the angular velocity error (local frame)
+        k_rot * e0 + d_rot * (angvel[0] - om0),
+        k_rot * e1 + d_rot * (angvel[1] - om1),
+        k_rot * e2 + d_rot * (angvel[2] - om2),
+    )
+    r0, r1, r2 = (data.xmat[1].reshape(3, 3) @ np.array(pull)).tolist()  # world [N m]
+    m0, m1, _ = (w @ data.xpos.take(plan.feet, axis=0)).tolist()
+    m0, m1 = m0 / wsum, m1 / wsum  # the stance feet's mid-point
+    c0, c1, _ = data.subtree_com[1].tolist()
+    f0 = k_com * ((c0 - m0) - com_off[0])
+    f1 = k_com * ((c1 - m1) - com_off[1])
+    if xy is not None:  # the velocity target leads by the root's (feet's) position error
+        s0, s1 = (m0, m1) if plan.drift_feet else qpos[:2].tolist()
+        l0, l1 = drift_lead_xy(xy[0] - s0, xy[1] - s1, *plan.drift)
+        f0 -= d_com * l0
+        f1 -= d_com * l1
+    f0 += d_com * (v0 - vel[0])  # horizontal [N]
+    f1 += d_com * (v1 - vel[1])
+    M = np.array((  # per side and group (hip, ankle): the moment asked for [N m]; -(z x f)
+        w0 * r0, w0 * r1, w0 * r2, w0 * f1, w0 * -f0, w0 * 0.0,
+        w1 * r0, w1 * r1, w1 * r2, w1 * f1, w1 * -f0, w1 * 0.0,
+    )).reshape(2, 2, 3, 1)  # fmt: skip
     # damped least squares over each group's hinge axes X (rows: world axes; masked rows 0)
-    X = data.xaxis[plan.jids] * plan.mask[..., None]  # (2, 2, 3, 3)
-    XXt = X @ np.swapaxes(X, -1, -2) + _DAMPED
-    tau = np.linalg.solve(XXt, X @ M[..., None])
-    out[plan.aids[plan.valid]] = -tau.reshape(-1)[plan.valid.reshape(-1)]
-    if plan.step is not None and w.sum() == 1.0 and w.max() == 1.0:  # one stance foot
-        swing = int(np.argmin(w))
-        _place_swing_foot(data, plan, swing, k, mid, X[swing, 0], XXt[swing, 0], out)
+    X = data.xaxis.take(plan.hinge_rows, axis=0).reshape(2, 2, 3, 3)
+    X *= plan.row_mask
+    XXt = X @ X.swapaxes(-1, -2)
+    XXt += _DAMPED
+    tau = _solve(XXt, X @ M)
+    out[plan.valid_aids] = -tau.take(plan.valid_rows)
+    if plan.step is not None and swing >= 0:  # one stance foot
+        _place_swing_foot(data, plan, swing, k, (m0, m1), X[swing, 0], XXt[swing, 0], out)
     return out
 
 
 def _place_swing_foot(data, plan, side: int, k: int, mid, X, XXt, out) -> None:
     """Add to ``out`` the swing hip's placement torques (module docstring) of leg ``side``;
-    ``X`` (3, 3) its hip hinges' world axes (masked rows 0), ``XXt`` the damped ``X X^T``."""
+    ``mid`` the stance feet's horizontal mid-point (2,) [m], ``X`` (3, 3) the swing hip's hinges'
+    world axes (masked rows 0), ``XXt`` the damped ``X X^T``."""
     (c_d, c_v), kp, thighs = plan.step
-    e_c = data.subtree_com[1, :2] - mid[:2] - plan.com_off[k]  # [m]
+    e_c = data.subtree_com[1, :2] - np.asarray(mid) - plan.com_off[k]  # [m]
     de_c = data.qvel[:2] - plan.vel[k]  # [m/s]
     dp = c_d * e_c + c_v * de_c
     hip_to_ankle = data.xpos[plan.feet[side]] - data.xpos[thighs[side]]

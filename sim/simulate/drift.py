@@ -22,7 +22,23 @@ def drift_lead(
     if rate <= 0:
         return np.zeros(2)
     err = np.asarray(ref_xy, dtype=float) - np.asarray(sim_xy, dtype=float)
-    n = float(np.hypot(err[0], err[1]))
+    return np.array(drift_lead_xy(float(err[0]), float(err[1]), rate, max_len, dead))
+
+
+def drift_lead_xy(
+    ex: float, ey: float, rate: float, max_len: float, dead: float = 0.0
+) -> tuple[float, float]:
+    """:func:`drift_lead` of the error ``(ex, ey)`` [m] (reference less simulated), on floats
+    (a tick's feedback calls it: no arrays to build)."""
+    if rate <= 0:
+        return 0.0, 0.0
+    n = float(np.hypot(ex, ey))
     if dead <= 0:
-        return rate * (err if n <= max_len else err * (max_len / n))
-    return rate * err * (max(0.0, min(n, max_len) - dead) / n) if n > dead else np.zeros(2)
+        if n <= max_len:
+            return rate * ex, rate * ey
+        s = max_len / n
+        return rate * (ex * s), rate * (ey * s)
+    if n <= dead:
+        return 0.0, 0.0
+    s = max(0.0, min(n, max_len) - dead) / n
+    return rate * ex * s, rate * ey * s

@@ -8,6 +8,7 @@ and ``sim.simulate.wholebody``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from operator import itemgetter
 
 import mujoco
 import numpy as np
@@ -192,13 +193,15 @@ _DIVERGED = tuple(
     int(w) for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL,
                      mujoco.mjtWarning.mjWARN_BADQPOS)
 )  # fmt: skip
+_PICK_DIVERGED = itemgetter(*_DIVERGED)
 
 
 def divergences(data) -> int:
     """Whether MuJoCo found ``data``'s position, velocity or acceleration diverging (NaN, Inf
     or huge) and reset it to the model's initial state since ``data`` was made or
-    :func:`clear_divergences` (> 0: it did; a reset clears the counts, so this is no tally)."""
-    return sum(data.warning[w].number for w in _DIVERGED)
+    :func:`clear_divergences` (> 0: it did; a reset clears the counts, so this is no tally).
+    Read after every tick of every rollout: one read of the counts, not one per warning."""
+    return sum(_PICK_DIVERGED(data.warning.number.tolist()))
 
 
 def clear_divergences(data) -> None:
