@@ -4,39 +4,23 @@ controllers' table says where MuJoCo flagged an unstable simulation."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from benchmark_modules import load_benchmark
 
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.model import MIN_DEFLECTION, human_torque_limit
 from sim.simulate.validate import validation_model
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
-
-
-def _load(name: str):
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(BENCH))
-    return module
-
 
 @pytest.fixture(scope="module")
 def bench():
-    return _load("bench_simulate")
+    return load_benchmark("bench_simulate")
 
 
 @pytest.fixture(scope="module")
 def candidates():
-    return _load("simulate_controllers")
+    return load_benchmark("simulate_controllers")
 
 
 def test_stiff_candidates_are_eval_default_with_a_stiffer_body_of_human_strength(candidates):
