@@ -42,14 +42,8 @@ class Baseline:
         self.rev, self.data, self.n_clips = rev, str(Path(data).resolve()), int(n_clips)
 
     def __enter__(self) -> Baseline:
-        self._tmp = tempfile.TemporaryDirectory(prefix="sidql-baseline-")
+        self._tmp = revision_tree(self.rev, "sidql-baseline-")
         root = Path(self._tmp.name)
-        archive = subprocess.run(
-            ["git", "-C", str(REPO), "archive", "--format=tar", self.rev, "sim", "sidql"],
-            check=True, capture_output=True,
-        ).stdout  # fmt: skip
-        with tarfile.open(fileobj=_bytes(archive)) as tar:
-            tar.extractall(root, filter="data")
         env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_NUM_THREADS": "1"}
         env.pop("SIDQL_POLICY", None)  # the baseline's own shipped policy
         self._proc = subprocess.Popen(
@@ -79,10 +73,19 @@ class Baseline:
         self._tmp.cleanup()
 
 
-def _bytes(data: bytes):
+def revision_tree(rev: str, prefix: str) -> tempfile.TemporaryDirectory:
+    """A new temporary folder (name starting ``prefix``) holding commit ``rev``'s ``sim`` and
+    ``sidql`` packages (``git archive``): that commit's code, importable from the folder."""
     import io
 
-    return io.BytesIO(data)
+    tmp = tempfile.TemporaryDirectory(prefix=prefix)
+    archive = subprocess.run(
+        ["git", "-C", str(REPO), "archive", "--format=tar", rev, "sim", "sidql"],
+        check=True, capture_output=True,
+    ).stdout  # fmt: skip
+    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+        tar.extractall(tmp.name, filter="data")
+    return tmp
 
 
 def serve(data: str, n_clips: int) -> None:

@@ -28,12 +28,11 @@ import json
 import os
 import subprocess
 import sys
-import tarfile
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from baseline import revision_tree
 
 REPO = Path(__file__).resolve().parent.parent
 LOOPS = ("eval", "hot", "evaluate")
@@ -50,16 +49,8 @@ class Side:
     def __enter__(self) -> Side:
         root = REPO
         if self.rev is not None:
-            self._tmp = tempfile.TemporaryDirectory(prefix="sidql-side-")
+            self._tmp = revision_tree(self.rev, "sidql-side-")
             root = Path(self._tmp.name)
-            archive = subprocess.run(
-                ["git", "-C", str(REPO), "archive", "--format=tar", self.rev, "sim", "sidql"],
-                check=True, capture_output=True,
-            ).stdout  # fmt: skip
-            import io
-
-            with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-                tar.extractall(root, filter="data")
         env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_NUM_THREADS": "1"}
         if self.rev is not None:
             env.pop("SIDQL_POLICY", None)  # the commit's own shipped policy
