@@ -44,13 +44,7 @@ class Baseline:
     def __enter__(self) -> Baseline:
         self._tmp = revision_tree(self.rev, "sidql-baseline-")
         root = Path(self._tmp.name)
-        env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_NUM_THREADS": "1"}
-        env.pop("SIDQL_POLICY", None)  # the baseline's own shipped policy
-        self._proc = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--serve", self.data,
-             str(self.n_clips)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=root, env=env,
-        )  # fmt: skip
+        self._proc = serving_process(Path(__file__), root, self.data, self.n_clips)
         self.short = subprocess.run(
             ["git", "-C", str(REPO), "rev-parse", "--short", self.rev],
             check=True, capture_output=True, text=True,
@@ -71,6 +65,19 @@ class Baseline:
         self._proc.stdin.close()
         self._proc.wait(timeout=60)
         self._tmp.cleanup()
+
+
+def serving_process(script: Path, root: Path, data: str, n_clips: int, own_policy: bool = True):
+    """``script --serve data n_clips`` in a new process on the code under ``root`` (in its own
+    working folder, one numba thread), reading requests on its stdin, answering on its stdout;
+    ``own_policy``: without ``SIDQL_POLICY``, so a commit's code uses its own shipped policy."""
+    env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_NUM_THREADS": "1"}
+    if own_policy:
+        env.pop("SIDQL_POLICY", None)
+    return subprocess.Popen(
+        [sys.executable, str(Path(script).resolve()), "--serve", data, str(n_clips)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=root, env=env,
+    )  # fmt: skip
 
 
 def revision_tree(rev: str, prefix: str) -> tempfile.TemporaryDirectory:

@@ -25,14 +25,13 @@ between sides is paired within rounds (same minute) before its median is taken.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from baseline import revision_tree
+from baseline import revision_tree, serving_process
 
 REPO = Path(__file__).resolve().parent.parent
 LOOPS = ("eval", "hot", "evaluate")
@@ -51,14 +50,8 @@ class Side:
         if self.rev is not None:
             self._tmp = revision_tree(self.rev, "sidql-side-")
             root = Path(self._tmp.name)
-        env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_NUM_THREADS": "1"}
-        if self.rev is not None:
-            env.pop("SIDQL_POLICY", None)  # the commit's own shipped policy
-        self._proc = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--serve", self.data,
-             str(self.n_clips)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=root, env=env,
-        )  # fmt: skip
+        own_policy = self.rev is not None  # a commit's code with its own shipped policy
+        self._proc = serving_process(Path(__file__), root, self.data, self.n_clips, own_policy)
         return self
 
     def send(self, request: list) -> None:
