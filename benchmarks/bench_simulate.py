@@ -177,6 +177,28 @@ def jsonl_log(path: str | None):
     return log
 
 
+def read_log(path: str) -> dict[str, list[dict]]:
+    """Per controller name, the rows of a ``--log`` file (JSON lines), in clip order."""
+    import json
+
+    out: dict[str, list[dict]] = {}
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            if line.strip():
+                row = json.loads(line)
+                out.setdefault(row["controller"], []).append(row)
+    return out
+
+
+def label(name: str) -> str:
+    """The table label of a row name: a controller's, or ``<name> (<log>)`` for a baseline's
+    rows read from a log (``--baseline-log``: ``name@log``)."""
+    if "@" in name:
+        n, log = name.split("@", 1)
+        return f"{CONTROLLERS[n][0]}, the baseline's rows ({Path(log).name})"
+    return CONTROLLERS[name][0]
+
+
 def paired_markdown(rows: dict[str, list[dict]]) -> str:
     """Each controller against the first, paired over the clips both ran
     (``sidql.evaluation.significance.paired_bootstrap``: the mean difference, its 95 %
@@ -187,7 +209,7 @@ def paired_markdown(rows: dict[str, list[dict]]) -> str:
     names = list(rows)
     base = {r["clip"]: r for r in rows[names[0]]}
     head = (
-        f"Against the first row ({CONTROLLERS[names[0]][0]}), paired over the clips both ran: "
+        f"Against the first row ({label(names[0])}), paired over the clips both ran: "
         "mean difference [95 % interval]; the median per-clip change.\n\n"
         "| controller | clips | falls | root-relative [mm] | median change | global [mm] | "
         "median change |\n|---|---|---|---|---|---|---|\n"
@@ -195,7 +217,7 @@ def paired_markdown(rows: dict[str, list[dict]]) -> str:
     lines = []
     for n in names[1:]:
         both = [(r, base[r["clip"]]) for r in rows[n] if r["clip"] in base]
-        cells = [CONTROLLERS[n][0], str(len(both))]
+        cells = [label(n), str(len(both))]
         for key in ("sim_fell", "sim_error_local_mm", "sim_error_mm"):
             a = np.array([r[key] for r, _ in both], dtype=float)
             b = np.array([q[key] for _, q in both], dtype=float)
@@ -228,12 +250,12 @@ def controllers_markdown(rows: dict[str, list[dict]]) -> str:
         fell = float(np.mean([r["sim_fell"] for r in rs]))
         cpu = float(np.mean([r["sim_cpu_s_per_s"] for r in rs]))
         lines.append(
-            f"| {CONTROLLERS[n][0]} | {len(rs)} | {fell:.2f} | {med('sim_error_local_mm'):.0f} "
+            f"| {label(n)} | {len(rs)} | {fell:.2f} | {med('sim_error_local_mm'):.0f} "
             f"| {med('sim_error_mm'):.0f} | {med('sim_skate_mm_s'):.0f} "
             f"| {med('sim_skate_ref_mm_s'):.0f} | {cpu:.2f} |"
         )
     unstable = {n: sum(r.get("sim_unstable", 0) for r in rs) for n, rs in rows.items()}
-    note = "".join(f"\n{CONTROLLERS[n][0]}: MuJoCo flagged a diverging acceleration in {k} "
+    note = "".join(f"\n{label(n)}: MuJoCo flagged a diverging acceleration in {k} "
                    "clips.\n" for n, k in unstable.items() if k)  # fmt: skip
     return head + "\n".join(lines) + "\n" + note
 
@@ -287,6 +309,16 @@ def main() -> None:
         help="with --controllers: start no clip after S seconds (every fifth clip first); the "
         "page says how many were done",
     )  # fmt: skip
+    ap.add_argument(
+        "--baseline-log", default=None, metavar="LOG",
+        help="with --controllers: pair every controller against its rows in LOG (another "
+        "run's --log, e.g. of another commit on the same clips), the baseline's rows first",
+    )  # fmt: skip
+    ap.add_argument(
+        "--rows-log", default=None, metavar="LOG",
+        help="with --controllers: take this run's rows from LOG (a finished run's --log) "
+        "instead of simulating",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
     if not args.page.replace("_", "").isalnum():
@@ -296,9 +328,17 @@ def main() -> None:
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
     cases = cases[args.offset :: args.every][: args.max_clips]
     if args.controllers:
-        rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
-                               threads=args.threads, workers=args.workers,
-                               deadline=args.deadline)  # fmt: skip
+        if args.rows_log:
+            logged = read_log(args.rows_log)
+            rows = {n: logged[n] for n in args.controllers}
+        else:
+            rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
+                                   threads=args.threads, workers=args.workers,
+                                   deadline=args.deadline)  # fmt: skip
+        if args.baseline_log:  # the baseline's rows of each controller first, then this run's
+            logged = read_log(args.baseline_log)
+            rows = {**{f"{n}@{args.baseline_log}": logged[n] for n in rows if n in logged},
+                    **rows}  # fmt: skip
         limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
         limited += f", from clip {args.offset} (--offset)" if args.offset else ""
         done = len(next(iter(rows.values())))

@@ -58,3 +58,26 @@ def test_mix_half_is_eval_default_controller(candidates):
     _, kw, actuators, body = candidates.CONTROLLERS["mix0.5"]
     assert kw["search"] == {"choice": DEFAULT_GAIN_CHOICE} and kw["samples"] == DEFAULT_SAMPLES
     assert body == {"alternate_gains": (STIFF_GAINS,)} and actuators == "position"
+
+
+def test_a_baseline_log_pairs_clip_by_clip(bench, tmp_path):
+    """``--baseline-log``: another run's rows of the same controller, read from its log, are
+    the first row and every clip is paired with its own: the mean difference is computed here
+    by hand (one clip falls only in the baseline; errors 10 mm lower in each clip)."""
+    import json
+
+    def row(clip, fell, local, glob):
+        return {"clip": clip, "controller": "mix0.5", "sim_fell": fell, "sim_error_local_mm":
+                local, "sim_error_mm": glob, "sim_skate_mm_s": 1.0, "sim_skate_ref_mm_s": 1.0,
+                "sim_cpu_s_per_s": 1.0}  # fmt: skip
+
+    base = [row("a@0", 1, 100.0, 200.0), row("b@0", 0, 50.0, 80.0)]
+    new = [row("b@0", 0, 40.0, 70.0), row("a@0", 0, 90.0, 190.0)]  # another order
+    log = tmp_path / "base.jsonl"
+    log.write_text("".join(json.dumps(r) + "\n" for r in base))
+    logged = bench.read_log(str(log))
+    assert logged == {"mix0.5": base}
+    text = bench.paired_markdown({f"mix0.5@{log}": logged["mix0.5"], "mix0.5": new})
+    assert "the baseline's rows (base.jsonl)" in text
+    line = text.strip().splitlines()[-1]
+    assert "| 2 | -0.50 [" in line and "| -10 [" in line and line.count("| -10 |") == 2

@@ -288,6 +288,8 @@ class ForwardValidation:
         else:
             r = track(self.model, tracked, assist_limit=0.0, record_every=every)
         self.last_qpos = r.qpos  # the simulated states (F, nq) of the last run: for pictures
+        self.last_tracked = tracked  # the reference (T, nq, control rate) it tracked
+        self.last_fall_tick = int(getattr(r, "fall_tick", -1))  # the first fallen tick, or -1
         self.last_unstable = bool(r.unstable)  # MuJoCo flagged a diverging acceleration in it
         sim = self.points(r.qpos)
         n = len(sim)
