@@ -210,6 +210,7 @@ def _fall_details(fv, sim, ref, st, vz, drift, every) -> dict:
     return out
 
 
+TITLE = "Forward simulation: why the body falls, clip by clip"
 _WORKER: dict = {"setup": {}, "bodies": {}}
 
 
@@ -275,12 +276,25 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--log", default=None, help="append every clip's row to this new file")
     ap.add_argument("--page", default="simulate_falls")
+    ap.add_argument(
+        "--from-log", default=None, metavar="LOG",
+        help="write the page from a finished run's --log instead of simulating",
+    )  # fmt: skip
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     if not args.page.replace("_", "").isalnum():
         ap.error(f"--page must be a plain name; got {args.page!r}")
     command = "python benchmarks/bench_simulate_falls.py " + " ".join(sys.argv[1:])
     t0 = time.perf_counter()
+    if args.from_log:
+        with open(args.from_log, encoding="utf-8") as f:
+            rows = sorted((json.loads(line) for line in f if line.strip()),
+                          key=lambda r: (r["clip"].split("@")[0], int(r["clip"].split("@")[1])))  # fmt: skip
+        text = table_markdown(rows) + f"\n\nRows read from {Path(args.from_log).name}.\n"
+        print(text)
+        if not args.no_write:
+            write_results(args.page, TITLE, text, command)
+        return
     cases, _ = load_cases(args.data, progress=False, workers=1)
     cases = cases[args.offset :: args.every][: args.max_clips]
     by_trial: dict[str, list] = {}
@@ -306,8 +320,7 @@ def main() -> None:
     )
     print(text)
     if not args.no_write:
-        write_results(args.page, "Forward simulation: why the body falls, clip by clip", text,
-                      command)  # fmt: skip
+        write_results(args.page, TITLE, text, command)
 
 
 if __name__ == "__main__":

@@ -95,3 +95,57 @@ def test_a_body_without_strength_collapses_and_is_seen_falling(model):
     assert first_fall(weak, r.qpos, ref[::4]) >= 0
     strong = track(model, ref, assist_limit=0.0)
     assert first_fall(model, strong.qpos[:10], ref[::4][:10]) == -1
+
+
+def _kneel(model):
+    """Both knees on the floor: thighs upright, shins flat behind, the shins' lowest point 2 mm
+    into the floor (the feet, allowed anyway, may reach lower)."""
+    q = _pose(model, _quat([0, 0, 1], 0.0))
+    for side in "lr":
+        q[model.jnt_qposadr[model.joint(f"{side}tibia_rx").id]] = np.pi / 2
+    data = mujoco.MjData(model)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    shins = [model.geom(f"{s}tibia").id for s in "lr"]
+    q[2] -= geom_bottoms(model, data)[shins].min() + 0.002
+    return q
+
+
+def _stance_reference(model):
+    """The standing pose with its soles 2.5 cm into the floor, as the IK fits of motion capture
+    stand (their shins' ankle ends 3-5 cm above the floor in stance)."""
+    return _pose(model, _quat([0, 0, 1], 0.0), lowest=-0.025)
+
+
+def test_a_knee_on_the_floor_is_a_fall_where_the_reference_stands_on_that_leg(model):
+    """The reference's shin counts as on the floor by its lowest point (the ankle end, a few cm
+    up in stance), but the simulated body touches with the knee end, which the reference holds
+    half a metre up: a fall (the head, well above half the reference's, does not say so)."""
+    stand = _stance_reference(model)
+    kneel = _kneel(model)
+    ref = fall_reference(model, stand[None])
+    shins = [model.geom(f"{s}tibia").id for s in "lr"]
+    assert ref.on_floor[0, shins].all()  # the whole-geom rule would excuse the shins
+    data = _state(model, kneel)
+    touching = {model.geom(g).name for pair in data.contact.geom[: data.ncon] for g in pair}
+    assert touching & {"ltibia", "rtibia"}
+    head = model.geom("head").id
+    assert data.geom_xpos[head, 2] > 0.5 * ref.head_z[0]
+    assert fall_cause(model, data, ref, 0) in ("contact:ltibia", "contact:rtibia")
+    # the reference kneels too: the same parts on the floor, not a fall
+    assert fall_cause(model, data, fall_reference(model, kneel[None]), 0) is None
+
+
+def test_a_shin_touching_at_the_ankle_where_the_reference_stands_is_no_fall(model):
+    """The standing pose 4 cm lower (soles into the floor): the shins' ankle ends touch the
+    floor where the reference's ankle ends are within the gap: no fall."""
+    stand = _stance_reference(model)
+    ref = fall_reference(model, stand[None])
+    low = stand.copy()
+    data = _state(model, low)
+    shins = [model.geom(f"{s}tibia").id for s in "lr"]
+    low[2] -= geom_bottoms(model, data)[shins].min() + 0.002
+    data = _state(model, low)
+    touching = {model.geom(g).name for pair in data.contact.geom[: data.ncon] for g in pair}
+    assert touching & {"ltibia", "rtibia"}
+    assert fall_cause(model, data, ref, 0) is None

@@ -5,7 +5,9 @@ A simulated body **has fallen** at an instant when either
 * it touches the floor with a part other than its feet (sole boxes, foot and toe capsules), and
   the reference does not have that same part on the floor at that moment (within
   :data:`REFERENCE_GAP`): hands and knees in a crawl, the seat of a sitting motion are support,
-  a shoulder or a back that the reference holds up is a fall; or
+  a shoulder or a back that the reference holds up is a fall. For a capsule (a limb) the part
+  is the cross-section of the limb where the body touches: a shin whose ankle end the
+  reference holds a few centimetres above the floor does not excuse a knee on the floor; or
 * its head is below :data:`HEAD_SHARE` of the reference's head height at that moment (a body
   upside down, or folded over with its root still high, has fallen too).
 
@@ -65,12 +67,19 @@ class FallReference:
             feet are always allowed.
         floor, head: the floor's and the head's geom ids (looked up once: a fall is looked for
             every control tick of every rollout).
+        centre_z, axis_z: (T, ngeom) height [m] of each geom's centre and the vertical
+            component of its local z axis (a capsule's axis) in the reference; None: a
+            capsule's part is not told from the whole capsule.
+        limbs: (ngeom,) the geom is a capsule that is not a foot (its part is looked at).
     """
 
     head_z: np.ndarray
     on_floor: np.ndarray
     floor: int = -1
     head: int = -1
+    centre_z: np.ndarray | None = None
+    axis_z: np.ndarray | None = None
+    limbs: np.ndarray | None = None
 
 
 def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
@@ -80,13 +89,31 @@ def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
     allowed = _foot_mask(model)
     head_z = np.empty(len(ref_qpos))
     on_floor = np.empty((len(ref_qpos), model.ngeom), bool)
+    centre_z = np.empty((len(ref_qpos), model.ngeom))
+    axis_z = np.empty((len(ref_qpos), model.ngeom))
     for t, q in enumerate(ref_qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         head_z[t] = data.geom_xpos[head, 2]
         on_floor[t] = (geom_bottoms(model, data) <= REFERENCE_GAP) | allowed
+        centre_z[t] = data.geom_xpos[:, 2]
+        axis_z[t] = data.geom_xmat[:, 8]
     floor = model.geom("floor").id
-    return FallReference(head_z=head_z, on_floor=on_floor, floor=floor, head=head)
+    limbs = (model.geom_type == mujoco.mjtGeom.mjGEOM_CAPSULE) & ~allowed
+    return FallReference(head_z=head_z, on_floor=on_floor, floor=floor, head=head,
+                         centre_z=centre_z, axis_z=axis_z, limbs=limbs)  # fmt: skip
+
+
+def section_bottom(model, data, ref: FallReference, k: int, g: int, point) -> float:
+    """[m] the lowest surface point of capsule ``g``'s cross-section through ``point`` (3,)
+    [m, world, e.g. a contact's position on ``data``'s body] in the reference at tick ``k``:
+    the point's place along the capsule's axis (``data``'s pose, clipped to the axis
+    segment) carried to the reference's capsule, less the radius."""
+    axis = data.geom_xmat[g, 2::3]  # the capsule's local z axis, world frame
+    d = point - data.geom_xpos[g]
+    half = model.geom_size[g, 1]
+    a = min(half, max(-half, d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]))
+    return ref.centre_z[k, g] + a * ref.axis_z[k, g] - model.geom_size[g, 0]
 
 
 def _foot_mask(model) -> np.ndarray:
@@ -107,11 +134,14 @@ def fall_cause(model, data, ref: FallReference, k: int) -> str | None:
     allowed = ref.on_floor[k]
     n = data.ncon
     if n:  # a loop over Python ints: a handful of contacts costs less than numpy's calls
-        for g1, g2 in data.contact.geom[:n].tolist():
-            if g1 == floor and not allowed[g2]:
-                return f"contact:{model.geom(g2).name}"
-            if g2 == floor and not allowed[g1]:
-                return f"contact:{model.geom(g1).name}"
+        for i, (g1, g2) in enumerate(data.contact.geom[:n].tolist()):
+            if g1 == floor or g2 == floor:
+                g = g2 if g1 == floor else g1
+                if not allowed[g] or (
+                    ref.limbs is not None and ref.limbs[g]
+                    and section_bottom(model, data, ref, k, g, data.contact.pos[i]) > REFERENCE_GAP
+                ):  # fmt: skip
+                    return f"contact:{model.geom(g).name}"
     head = ref.head if ref.head >= 0 else model.geom(HEAD_GEOM).id
     if data.geom_xpos[head, 2] < HEAD_SHARE * ref.head_z[k]:
         return "head"
