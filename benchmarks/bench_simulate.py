@@ -190,13 +190,19 @@ def read_log(path: str) -> dict[str, list[dict]]:
     return out
 
 
+#: appended to the label of this run's rows (``--label``: what the code measured differs in)
+RUN_LABEL = {"text": ""}
+
+
 def label(name: str) -> str:
     """The table label of a row name: a controller's, or ``<name> (<log>)`` for a baseline's
-    rows read from a log (``--baseline-log``: ``name@log``)."""
+    rows read from a log (``--baseline-log``: ``name@log``); this run's rows carry
+    ``--label``."""
     if "@" in name:
         n, log = name.split("@", 1)
         return f"{CONTROLLERS[n][0]}, the baseline's rows ({Path(log).name})"
-    return CONTROLLERS[name][0]
+    extra = RUN_LABEL["text"]
+    return CONTROLLERS[name][0] + (f", {extra}" if extra else "")
 
 
 def paired_markdown(rows: dict[str, list[dict]]) -> str:
@@ -319,8 +325,12 @@ def main() -> None:
         help="with --controllers: take this run's rows from LOG (a finished run's --log) "
         "instead of simulating",
     )  # fmt: skip
+    ap.add_argument(
+        "--label", default="", help="with --controllers: appended to this run's rows' labels"
+    )
     ap.add_argument("--no-write", action="store_true", help="print only")
     args = ap.parse_args()
+    RUN_LABEL["text"] = args.label
     if not args.page.replace("_", "").isalnum():
         ap.error(f"--page must be a plain name (letters, digits, _); got {args.page!r}")
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])

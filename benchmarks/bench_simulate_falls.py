@@ -280,6 +280,9 @@ def main() -> None:
         "--from-log", default=None, metavar="LOG",
         help="write the page from a finished run's --log instead of simulating",
     )  # fmt: skip
+    ap.add_argument(
+        "--note", default="", help="with --from-log: a line for the page (the log's own run)"
+    )
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     if not args.page.replace("_", "").isalnum():
@@ -293,7 +296,7 @@ def main() -> None:
         text = table_markdown(rows) + f"\n\nRows read from {Path(args.from_log).name}.\n"
         print(text)
         if not args.no_write:
-            write_results(args.page, TITLE, text, command)
+            write_results(args.page, TITLE, text, command, notes=args.note)
         return
     cases, _ = load_cases(args.data, progress=False, workers=1)
     cases = cases[args.offset :: args.every][: args.max_clips]
