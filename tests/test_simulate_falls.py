@@ -149,3 +149,32 @@ def test_a_shin_touching_at_the_ankle_where_the_reference_stands_is_no_fall(mode
     touching = {model.geom(g).name for pair in data.contact.geom[: data.ncon] for g in pair}
     assert touching & {"ltibia", "rtibia"}
     assert fall_cause(model, data, ref, 0) is None
+
+
+def test_on_a_real_walk_the_stance_shin_is_excused_at_the_ankle_only(model, cmu_dir):
+    """The walk 02_01 as eval tracks it (on its floor, soles laid flat, stance soles on z = 0):
+    in its stance frames the shin's lowest point is within the allowance (so the whole-shin rule
+    excused a knee), while the cross-section through the knee (the tibia body's origin, the knee
+    joint) lies a capsule radius below the knee, half a metre up, and the one through the ankle
+    (the foot body's origin) within the allowance."""
+    from sim.simulate.falls import REFERENCE_GAP, section_bottom
+    from sim.simulate.reference import contact_consistent, flat_soles, on_floor, trial_qpos
+
+    q = trial_qpos(cmu_dir / "02" / "02.asf", cmu_dir / "02" / "02_01.amc")[:360:4]
+    ref_qpos = contact_consistent(
+        model, flat_soles(model, on_floor(model, q, 30.0, lift=0.0)), 30.0
+    )
+    ref = fall_reference(model, ref_qpos)
+    g = model.geom("ltibia").id
+    r = model.geom_size[g, 0]
+    stance = np.flatnonzero(ref.on_floor[:, g])
+    assert len(stance) > 10
+    data = mujoco.MjData(model)
+    for k in stance[:: max(1, len(stance) // 5)]:
+        data.qpos[:] = ref_qpos[k]
+        mujoco.mj_kinematics(model, data)
+        knee, ankle = data.xpos[model.body("ltibia").id], data.xpos[model.body("lfoot").id]
+        at_knee = section_bottom(model, data, ref, k, g, knee)
+        assert at_knee > 0.3 and abs(at_knee - (knee[2] - r)) < 0.03
+        at_ankle = section_bottom(model, data, ref, k, g, ankle)
+        assert at_ankle <= REFERENCE_GAP + 0.01 and abs(at_ankle - (ankle[2] - r)) < 0.03
