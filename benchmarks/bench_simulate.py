@@ -325,6 +325,7 @@ def main() -> None:
         help="with --controllers: take this run's rows from LOG (a finished run's --log) "
         "instead of simulating",
     )  # fmt: skip
+    ap.add_argument("--note", default="", help="a line for the page (where its rows came from)")
     ap.add_argument(
         "--label", default="", help="with --controllers: appended to this run's rows' labels"
     )
@@ -362,15 +363,18 @@ def main() -> None:
             f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
             "IK fit on the subject's skeleton) tracked by each controller with no assistance; a "
             "fall as `sim.simulate.falls` defines it; CPU time of every thread "
-            f"(--threads {args.threads}; one clip per process on --workers {args.workers}).\n\n"
+            + (f"(the rows read from {Path(args.rows_log).name}, a finished run's --log).\n\n"
+               if args.rows_log else f"(--threads {args.threads}; one clip per process on "
+               f"--workers {args.workers}).\n\n")
             + controllers_markdown(rows)
             + ("\n" + paired_markdown(rows) if len(rows) > 1 else "")
-            + f"\nWall time {time.perf_counter() - t0:.0f} s (loading and fits included).\n"
-        )
+            + ("" if args.rows_log else f"\nWall time {time.perf_counter() - t0:.0f} s "
+               "(loading and fits included).\n")
+        )  # fmt: skip
         print(text)
         if not args.no_write:
             write_results(args.page, "Forward simulation: the controllers on the "
-                          "original motion", text, command)  # fmt: skip
+                          "original motion", text, command, notes=args.note)  # fmt: skip
         return
     out = evaluate(cases, args.methods, args.keyframes, physics=True, simulate=True,
                    simulate_samples=args.samples, workers=args.workers,

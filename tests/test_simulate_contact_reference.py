@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -121,3 +122,65 @@ def test_the_option_goes_to_other_processes(bodies):
     lifted, contact = bodies
     assert not pickle.loads(pickle.dumps(lifted)).contact
     assert pickle.loads(pickle.dumps(contact)).contact
+
+
+def test_the_floor_bound_keeps_every_sole_above_the_floor(bodies, walk):
+    """A stamp as the IK fits of the Russian dances have (a foot dipping 12 cm through the
+    floor within 0.1 s, put here into the walk by lowering the root over 4 frames at 30 fps):
+    the contact-consistent shift smoothed alone leaves a sole centimetres under the floor; with
+    ``floor_bound`` it lifts the body over the stamp, so no sole box corner (each box's corners
+    computed here from its pose and half sizes) is below z = 0 in any tick, and the stance
+    soles elsewhere still touch the floor."""
+    from sim.simulate.reference import contact_shift
+
+    _, contact = bodies
+    qpos, floor = walk
+    stamped = qpos.copy()
+    stamped[40:44, 2] -= np.array([0.06, 0.12, 0.12, 0.06])
+    model = contact.model
+    ref = time_warp(model, stamped, 30.0, 1.0, CONTROL_HZ)
+    ref[:, 2] -= floor
+    ref = flat_soles(model, ref)  # as ForwardValidation.reference lays it before the shift
+    data = mujoco.MjData(model)
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    soles = [model.geom(n).id for n in ("lsole", "rsole", "ltoesole", "rtoesole")]
+
+    def lowest(shift):
+        out = np.empty(len(ref))
+        for t, q in enumerate(ref):
+            data.qpos[:] = q
+            data.qpos[2] -= shift[t]
+            mujoco.mj_kinematics(model, data)
+            z = [(data.geom_xpos[g] + (signs * model.geom_size[g]) @ data.geom_xmat[g].reshape(3, 3).T)[:, 2].min()
+                 for g in soles]  # fmt: skip
+            out[t] = min(z)
+        return out
+
+    assert lowest(contact_shift(model, ref)).min() < -0.02  # smoothing alone: under the floor
+    bound = lowest(contact_shift(model, ref, floor_bound=True))
+    assert bound.min() > -1e-9
+    stance = bound <= 0.03
+    assert stance.mean() > 0.5 and np.median(bound[stance]) < 0.002
+
+
+def test_a_flight_that_floats_is_stance_and_a_jump_stays_a_flight():
+    """``supported``: a 0.4 s flight whose root follows free fall (z = v t - g t^2 / 2) stays a
+    flight; the same 0.4 s with the root hovering at one height, or rising steadily, cannot be
+    a flight (nothing holds a body up but the floor) and becomes stance; a 0.1 s hover (a
+    run's flight, too short to judge) is kept."""
+    from sim.simulate.reference import supported
+
+    rate = 120.0
+    t = np.arange(48) / rate  # 0.4 s
+    stance = np.ones(120, bool)
+    stance[30:78] = False
+    jump = np.full(120, 0.9)
+    jump[30:78] += 1.96 * t - 9.81 * t**2 / 2  # take-off at 1.96 m/s: lands after 0.4 s
+    np.testing.assert_array_equal(supported(jump, stance, rate), stance)
+    hover = np.full(120, 0.9)
+    assert supported(hover, stance, rate).all()
+    rising = 0.9 + 0.3 * np.arange(120) / rate
+    assert supported(rising, stance, rate).all()
+    short = np.ones(120, bool)
+    short[30:42] = False
+    np.testing.assert_array_equal(supported(hover, short, rate), short)

@@ -212,22 +212,69 @@ def flat_soles(model, qpos: np.ndarray) -> np.ndarray:
 STANCE_GAP = 0.03
 #: [s] the vertical correction of :func:`contact_consistent` is smoothed over this scale
 CONSISTENT_SMOOTH_S = 0.05
+#: smoothing passes of :func:`contact_shift` with ``floor_bound``, each followed by the bound
+#: (a sole never below z = 0): the bound's kinks are smoothed by the next pass, the last holds
+FLOOR_PASSES = 3
+#: [s] a flight (no sole within :data:`STANCE_GAP`) at least this long is judged by its root
+#: height (:func:`supported`); shorter ones (a run's) are kept as they are
+MIN_FLIGHT_S = 0.15
+#: a flight is ballistic where the root's height, fitted by a parabola over it, falls with at
+#: least this share of gravity; one that floats is not a flight
+BALLISTIC_SHARE = 0.5
+GRAVITY = 9.81  # [m/s^2]
 
 
-def contact_shift(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
+def supported(root_z: np.ndarray, stance: np.ndarray, rate: float) -> np.ndarray:
+    """(T,) bool: ``stance`` (T,) with every flight that cannot be one set to stance. A body
+    off the floor falls freely: its root height over a flight is a parabola of curvature -g
+    (-g/2 t^2). Where the root's height ``root_z`` (T,) [m] over a run of non-stance ticks
+    of at least :data:`MIN_FLIGHT_S` (at ``rate`` [Hz]) fitted by a parabola curves down by
+    less than :data:`BALLISTIC_SHARE` of that, the reference floats: its feet hover over a
+    floor estimate that is too low, over equipment the scene lacks, or the IK fit's legs do not
+    reach the floor (the deep squats of the Russian dances 90_30 and 90_31 hover 5-30 cm for
+    half a second at a time with the root 0.4-0.6 m high), and the only support the scene has
+    is the floor under its lowest sole point: those ticks are stance."""
+    out = stance.copy()
+    edges = np.flatnonzero(np.diff(np.concatenate([[1], stance.astype(int), [1]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):  # runs [a, b) of flight
+        if (b - a) / rate < MIN_FLIGHT_S:
+            continue
+        t = np.arange(b - a) / rate
+        curvature = 2.0 * np.polyfit(t, root_z[a:b], 2)[0]  # d^2 z / dt^2 [m/s^2]
+        if curvature > -BALLISTIC_SHARE * GRAVITY:
+            out[a:b] = True
+    return out
+
+
+def contact_shift(
+    model, qpos: np.ndarray, rate: float = 120.0, *, floor_bound: bool = False,
+    floating: bool = False,
+) -> np.ndarray:  # fmt: skip
     """(T,) [m] the vertical shift :func:`contact_consistent` takes off ``qpos`` (T, nq, its
     floor near z = 0): in stance (the lowest sole point within :data:`STANCE_GAP`) that point's
     height, interpolated between stance frames (flight), smoothed by a Gaussian of
     :data:`CONSISTENT_SMOOTH_S`; zeros for a motion that never stands. Another motion shifted
-    by it stands on the same floor as ``qpos`` (a reconstruction on its original's)."""
+    by it stands on the same floor as ``qpos`` (a reconstruction on its original's).
+
+    Options (tried, not kept as defaults: docs/synthetic.md): ``floor_bound``, the shift is
+    also bounded by the lowest sole point in every frame, so that ``qpos`` shifted by it has no
+    sole below z = 0 (:data:`FLOOR_PASSES` rounds of smoothing and bound; smoothing alone
+    leaves the IK fits' stamps, a foot dipping 15 cm in 0.1 s, 5-8 cm through the floor in
+    90_30 and 90_31); ``floating``, a flight that floats instead of falling is stance
+    (:func:`supported`)."""
     low = lowest_foot_point(model, qpos)
     stance = low <= STANCE_GAP
+    if floating:
+        stance = supported(qpos[:, 2], stance, rate)
     if not stance.any():
         return np.zeros(len(qpos))
     t = np.arange(len(qpos))
     shift = np.interp(t, t[stance], low[stance])
     if len(qpos) > 1:
-        shift = gaussian_filter1d(shift, CONSISTENT_SMOOTH_S * rate, mode="nearest")
+        for _ in range(FLOOR_PASSES if floor_bound else 1):  # smooth[, then never below]
+            shift = gaussian_filter1d(shift, CONSISTENT_SMOOTH_S * rate, mode="nearest")
+            if floor_bound:
+                shift = np.minimum(shift, low)
     return shift
 
 
