@@ -266,7 +266,7 @@ def controllers_markdown(rows: dict[str, list[dict]]) -> str:
     return head + "\n".join(lines) + "\n" + note
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
         "--data", "--cmu", dest="cmu", default=default_data_dir(),
@@ -330,6 +330,53 @@ def main() -> None:
         "--label", default="", help="with --controllers: appended to this run's rows' labels"
     )
     ap.add_argument("--no-write", action="store_true", help="print only")
+    return ap
+
+
+def controllers_page(args, cases, command: str, t0: float) -> None:
+    """``--controllers``: each controller on the original motion of ``cases`` (or the rows
+    of ``--rows-log``), paired with the first row (``--baseline-log``'s rows first where
+    given); printed and written to ``docs/results/<--page>.md``."""
+    if args.rows_log:
+        logged = read_log(args.rows_log)
+        rows = {n: logged[n] for n in args.controllers}
+    else:
+        rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
+                               threads=args.threads, workers=args.workers,
+                               deadline=args.deadline)  # fmt: skip
+    if args.baseline_log:  # the baseline's rows of each controller first, then this run's
+        logged = read_log(args.baseline_log)
+        rows = {**{f"{n}@{args.baseline_log}": logged[n] for n in rows if n in logged},
+                **rows}  # fmt: skip
+    limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
+    limited += f", from clip {args.offset} (--offset)" if args.offset else ""
+    done = len(next(iter(rows.values())))
+    if done < len(cases):
+        limited += (
+            f"; {done} of these {len(cases)} clips done within --deadline "
+            f"{args.deadline:g} s (every fifth clip first, then the next fifth)"
+        )
+    text = (
+        f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
+        f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
+        "IK fit on the subject's skeleton) tracked by each controller with no assistance; a "
+        "fall as `sim.simulate.falls` defines it; CPU time of every thread "
+        + (f"(the rows read from {Path(args.rows_log).name}, a finished run's --log).\n\n"
+           if args.rows_log else f"(--threads {args.threads}; one clip per process on "
+           f"--workers {args.workers}).\n\n")
+        + controllers_markdown(rows)
+        + ("\n" + paired_markdown(rows) if len(rows) > 1 else "")
+        + ("" if args.rows_log else f"\nWall time {time.perf_counter() - t0:.0f} s "
+           "(loading and fits included).\n")
+    )  # fmt: skip
+    print(text)
+    if not args.no_write:
+        write_results(args.page, "Forward simulation: the controllers on the "
+                      "original motion", text, command, notes=args.note)  # fmt: skip
+
+
+def main() -> None:
+    ap = _parser()
     args = ap.parse_args()
     RUN_LABEL["text"] = args.label
     if not args.page.replace("_", "").isalnum():
@@ -339,42 +386,7 @@ def main() -> None:
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)
     cases = cases[args.offset :: args.every][: args.max_clips]
     if args.controllers:
-        if args.rows_log:
-            logged = read_log(args.rows_log)
-            rows = {n: logged[n] for n in args.controllers}
-        else:
-            rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
-                                   threads=args.threads, workers=args.workers,
-                                   deadline=args.deadline)  # fmt: skip
-        if args.baseline_log:  # the baseline's rows of each controller first, then this run's
-            logged = read_log(args.baseline_log)
-            rows = {**{f"{n}@{args.baseline_log}": logged[n] for n in rows if n in logged},
-                    **rows}  # fmt: skip
-        limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
-        limited += f", from clip {args.offset} (--offset)" if args.offset else ""
-        done = len(next(iter(rows.values())))
-        if done < len(cases):
-            limited += (
-                f"; {done} of these {len(cases)} clips done within --deadline "
-                f"{args.deadline:g} s (every fifth clip first, then the next fifth)"
-            )
-        text = (
-            f"{len(cases)} clips of 60 frames (30 fps, 2 s) from "
-            f"{len({c.clip.source for c in cases})} trials{limited}: the original motion (its "
-            "IK fit on the subject's skeleton) tracked by each controller with no assistance; a "
-            "fall as `sim.simulate.falls` defines it; CPU time of every thread "
-            + (f"(the rows read from {Path(args.rows_log).name}, a finished run's --log).\n\n"
-               if args.rows_log else f"(--threads {args.threads}; one clip per process on "
-               f"--workers {args.workers}).\n\n")
-            + controllers_markdown(rows)
-            + ("\n" + paired_markdown(rows) if len(rows) > 1 else "")
-            + ("" if args.rows_log else f"\nWall time {time.perf_counter() - t0:.0f} s "
-               "(loading and fits included).\n")
-        )  # fmt: skip
-        print(text)
-        if not args.no_write:
-            write_results(args.page, "Forward simulation: the controllers on the "
-                          "original motion", text, command, notes=args.note)  # fmt: skip
+        controllers_page(args, cases, command, t0)
         return
     out = evaluate(cases, args.methods, args.keyframes, physics=True, simulate=True,
                    simulate_samples=args.samples, workers=args.workers,
