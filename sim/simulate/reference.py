@@ -278,15 +278,17 @@ def contact_shift(
     return shift
 
 
-def contact_consistent(model, qpos: np.ndarray, rate: float = 120.0) -> np.ndarray:
+def contact_consistent(
+    model, qpos: np.ndarray, rate: float = 120.0, *, floating: bool = False
+) -> np.ndarray:
     """A copy of ``qpos`` (T, nq, its floor near z = 0, e.g. from :func:`on_floor` with no lift)
     shifted vertically frame by frame so that in stance the lower sole (its lowest surface
     point, :func:`lowest_foot_point`) touches the floor at z = 0: feet meet the floor where
     the reference stands on it, instead of hovering or sinking by the floor estimate's error.
     A frame is in stance when its lowest sole point is within :data:`STANCE_GAP`; between
     stance frames (flight) the shift is interpolated; the shift is then smoothed by a Gaussian
-    of :data:`CONSISTENT_SMOOTH_S` (no jumps): :func:`contact_shift`. A motion that never
-    stands comes back as is."""
+    of :data:`CONSISTENT_SMOOTH_S` (no jumps): :func:`contact_shift` (``floating``: its
+    option). A motion that never stands comes back as is."""
     out = qpos.copy()
-    out[:, 2] -= contact_shift(model, qpos, rate)
+    out[:, 2] -= contact_shift(model, qpos, rate, floating=floating)
     return out
