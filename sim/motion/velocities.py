@@ -436,17 +436,20 @@ def point_kinematics(model, data, qpos, qvel, body_ids, site_ids):
     site_xpos = np.empty((T, model.nsite, 3))
     cvel = np.empty((T, model.nbody, 6))  # [angular; linear] at the subtree com of the root body
     com = np.empty((T, model.nbody, 3))
+    # MjData's arrays are views of its buffers, made anew at every attribute access: once here
+    d_qpos, d_qvel, d_xpos, d_xquat = data.qpos, data.qvel, data.xpos, data.xquat
+    d_site, d_cvel, d_com = data.site_xpos, data.cvel, data.subtree_com
     for t in range(T):
-        data.qpos[:] = qpos[t]
-        data.qvel[:] = qvel[t]
+        d_qpos[:] = qpos[t]
+        d_qvel[:] = qvel[t]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         mujoco.mj_comVel(model, data)
-        xpos[t] = data.xpos
-        xquat[t] = data.xquat
-        site_xpos[t] = data.site_xpos
-        cvel[t] = data.cvel
-        com[t] = data.subtree_com
+        xpos[t] = d_xpos
+        xquat[t] = d_xquat
+        site_xpos[t] = d_site
+        cvel[t] = d_cvel
+        com[t] = d_com
     pos = xpos[:, body_ids]
     pos[:, has_site] = site_xpos[:, site_ids[has_site]]
     v = cvel[:, body_ids]
@@ -464,12 +467,13 @@ def _point_poses(model, data, qpos, body_ids, site_ids):
     xquat = np.empty((T, model.nbody, 4))
     site_xpos = np.empty((T, model.nsite, 3))
     data.qvel[:] = 0.0
+    d_qpos, d_xpos, d_xquat, d_site = data.qpos, data.xpos, data.xquat, data.site_xpos
     for t in range(T):
-        data.qpos[:] = qpos[t]
+        d_qpos[:] = qpos[t]
         mujoco.mj_kinematics(model, data)
-        xpos[t] = data.xpos
-        xquat[t] = data.xquat
-        site_xpos[t] = data.site_xpos
+        xpos[t] = d_xpos
+        xquat[t] = d_xquat
+        site_xpos[t] = d_site
     pos = xpos[:, body_ids]
     pos[:, has_site] = site_xpos[:, site_ids[has_site]]
     zero = np.zeros((T, len(body_ids), 3))
