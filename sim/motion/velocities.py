@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 
 import mujoco
+import numba
 import numpy as np
 
 from sim.model import quaternion as quat
@@ -29,25 +30,28 @@ def body_joint_rotations(model, qpos: np.ndarray) -> np.ndarray:
     (hinges, ball and free joints, composed as MuJoCo does; slides and jointless bodies:
     identity) in each frame of ``qpos`` (T, nq). The body's fixed offset is left out.
 
-    Composed component by component on contiguous (T,) rows (:func:`_body_rows`), each product
-    term for term :func:`sim.model.quaternion.mul`'s: the same numbers, faster than products of
-    (T, 4) columns strided across the bodies."""
+    Composed on contiguous component rows (:func:`_body_rows`), each product term for term
+    :func:`sim.model.quaternion.mul`'s in one compiled pass (:func:`_mul_rows`): the same
+    numbers, faster than numpy's products of (T, 4) columns strided across the bodies."""
     return np.ascontiguousarray(_body_rows(model, qpos).transpose(2, 0, 1))
 
 
-def _body_rows(model, qpos: np.ndarray) -> np.ndarray:
-    """(nbody, 4, T): :func:`body_joint_rotations`, each component a contiguous row."""
+def _body_rows(model, qpos: np.ndarray, only: int = -1) -> np.ndarray:
+    """(nbody, 4, T): :func:`body_joint_rotations`, each component a contiguous row (``only``
+    >= 0: that body's alone, the others left the identity)."""
     T = qpos.shape[0]
     rot = np.zeros((model.nbody, 4, T))
     rot[:, 0] = 1.0
     moved = np.zeros(model.nbody, dtype=bool)  # bodies whose rotation is no longer the identity
     for j in range(model.njnt):
         kind, adr, b = model.jnt_type[j], model.jnt_qposadr[j], model.jnt_bodyid[j]
+        if only >= 0 and b != only:
+            continue
         if kind == mujoco.mjtJoint.mjJNT_HINGE:
             half = 0.5 * qpos[:, adr]
-            s = np.sin(half)
-            axis = model.jnt_axis[j]
-            local = (np.cos(half), s * axis[0], s * axis[1], s * axis[2])
+            local = np.empty((4, T))
+            local[0] = np.cos(half)
+            np.multiply(np.sin(half), model.jnt_axis[j][:, None], out=local[1:])
         elif kind == mujoco.mjtJoint.mjJNT_BALL:
             local = np.ascontiguousarray(qpos[:, adr : adr + 4].T)
         elif kind == mujoco.mjtJoint.mjJNT_FREE:
@@ -58,21 +62,23 @@ def _body_rows(model, qpos: np.ndarray) -> np.ndarray:
         if moved[b]:
             _mul_rows(rot[b], local, rot[b])
         else:
-            for c in range(4):
-                rot[b, c] = local[c]
+            rot[b] = local
         moved[b] = True
     return rot
 
 
-def _mul_rows(a, b, out) -> None:
-    """The Hamilton product ``a * b`` of quaternions given as four (T,) component rows each, into
-    ``out`` (may be ``a``): :func:`sim.model.quaternion.mul`'s terms in its order."""
-    aw, ax, ay, az = (a[c].copy() for c in range(4))
-    bw, bx, by, bz = (b[c] for c in range(4))
-    out[0] = aw * bw - ax * bx - ay * by - az * bz
-    out[1] = aw * bx + ax * bw + ay * bz - az * by
-    out[2] = aw * by - ax * bz + ay * bw + az * bx
-    out[3] = aw * bz + ax * by - ay * bx + az * bw
+@numba.njit(cache=True, nogil=True)
+def _mul_rows(a, b, out):
+    """The Hamilton products ``a * b`` of quaternions laid out as (4, T) component rows, into
+    ``out`` (4, T) (may be ``a``): :func:`sim.model.quaternion.mul`'s terms in its order (no
+    fused or reordered operation: the same numbers)."""
+    for t in range(a.shape[1]):
+        aw, ax, ay, az = a[0, t], a[1, t], a[2, t], a[3, t]
+        bw, bx, by, bz = b[0, t], b[1, t], b[2, t], b[3, t]
+        out[0, t] = aw * bw - ax * bx - ay * by - az * bz
+        out[1, t] = aw * bx + ax * bw + ay * bz - az * by
+        out[2, t] = aw * by - ax * bz + ay * bw + az * bx
+        out[3, t] = aw * bz + ax * by - ay * bx + az * bw
 
 
 def rotation_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -85,15 +91,16 @@ def body_rotation_steps(model, qpos: np.ndarray) -> np.ndarray:
     """(T-1, nbody) angle [rad] by which each body turns relative to its parent from frame t to
     t+1 of ``qpos`` (T, nq), by its own joints (:func:`body_joint_rotations`).
 
-    :func:`rotation_angle` of consecutive frames with its products on the rows of
-    :func:`_body_rows` (its conjugate and product term for term) and its norm and arctangent on
-    the same (..., 3) and (...) layouts it uses: the same numbers."""
+    :func:`rotation_angle` of consecutive frames with its conjugate and product on the rows of
+    :func:`_body_rows` (term for term) and its norm and arctangent on the same (..., 3) and
+    (...) layouts it uses: the same numbers."""
     rows = _body_rows(model, qpos)
-    a, b = rows[:, :, :-1], rows[:, :, 1:]
+    nb, T = rows.shape[0], rows.shape[2]
     sign = np.array([1.0, -1.0, -1.0, -1.0])
-    conj = [a[:, c] * sign[c] for c in range(4)]  # quat.conj's product by the signs
-    rel = np.empty((4, *a[:, 0].shape))  # (4, nbody, T-1)
-    _mul_rows(conj, [b[:, c] for c in range(4)], rel)
+    conj = rows[:, :, :-1].transpose(1, 0, 2) * sign[:, None, None]  # quat.conj's product
+    after = np.ascontiguousarray(rows[:, :, 1:].transpose(1, 0, 2))  # (4, nbody, T-1)
+    rel = np.empty((4, nb, T - 1))
+    _mul_rows(conj.reshape(4, -1), after.reshape(4, -1), rel.reshape(4, -1))
     vec = np.stack([rel[1], rel[2], rel[3]], axis=-1)  # (nbody, T-1, 3), as rel[..., 1:]
     angle = 2 * np.arctan2(np.linalg.norm(vec, axis=-1), np.abs(rel[0]))
     return np.ascontiguousarray(angle.T)
@@ -222,7 +229,7 @@ def qvel_from_qpos(
     next_clean = np.minimum.accumulate(np.where(~J, steps_idx, T)[::-1], axis=0)[::-1]
     for i, c in np.argwhere(before & after):  # frames between two jumps: rare
         f, b = int(t[i, 0]), bodies[c]
-        rot = body_joint_rotations(model, qpos[f - 1 : f + 2])[:, b]  # frames f-1, f, f+1
+        rot = _body_rows(model, qpos[f - 1 : f + 2], only=b)[b].T  # frames f-1, f, f+1
         step_in, step_out = rotation_angle(rot[0], rot[1]), rotation_angle(rot[1], rot[2])
         if rotation_angle(rot[0], rot[2]) < min(step_in, step_out) / 2:
             continue  # a lone outlier frame: the central difference steps over it
