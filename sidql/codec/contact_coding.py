@@ -42,7 +42,13 @@ from sidql.keyframes.contact_pinning import (
 )
 from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.physical_costs import PHYSICS_WEIGHT, physical_band, scaled, segment_inputs
-from sidql.keyframes.spherical import SphericalSeries, chart, chart_arrays
+from sidql.keyframes.spherical import (
+    POINTS,
+    SphericalSeries,
+    chart,
+    chart_arrays,
+    protocol_maps,
+)
 from sidql.keyframes.unchart import positions_from_chart
 from sim.errors import UnmetTargetError, UsageError
 from sim.motion.clip import Clip
@@ -164,27 +170,69 @@ class FootTrack:
         return self.positions.shape[0]
 
 
+#: Frames (at the stream rate) of a take whose 23 protocol points the foot pass keeps for the
+#: windows, so that a take of up to this length is read once, not twice: 10 minutes at 30 fps,
+#: 552 bytes a frame of positions (~10 MB; twice that where the windows need velocities). A longer
+#: take's points are dropped when it passes this length and the take is read again.
+KEPT_FRAMES = 18000
+
+
 def foot_track(clips) -> FootTrack:
     """The :class:`FootTrack` of the take ``clips`` (consecutive clips, read one at a time:
     6 points a frame are kept, 288 bytes, not the whole clip)."""
+    return foot_pass(clips)[0]
+
+
+def foot_pass(clips, *, keep: int = 0, velocities: bool = False):
+    """``(track, kept)``: the :class:`FootTrack` of the take ``clips`` (as :func:`foot_track`)
+    and, when the take has at most ``keep`` frames, its clips on the 23 protocol points alone
+    (:func:`protocol_only`; velocities kept when ``velocities``, else zero), else None."""
     P, V, names, fps, source = [], [], (), 30.0, ""
+    kept, frames = [], 0
     for clip in clips:
         idx = [i for i, n in enumerate(clip.names) if n in FOOT_NAMES]
         names, fps, source = tuple(clip.names[i] for i in idx), clip.fps, clip.source
         P.append(np.ascontiguousarray(clip.positions[:, idx]))
         V.append(np.ascontiguousarray(clip.velocities[:, idx]))
+        frames += clip.n_frames
+        if kept is not None and frames <= keep:
+            kept.append(protocol_only(clip, velocities))
+        else:
+            kept = None  # too long to keep: read again
     if not P:
         raise UsageError("a take needs at least one clip")
-    return FootTrack(names, np.concatenate(P), np.concatenate(V), fps, source)
+    return FootTrack(names, np.concatenate(P), np.concatenate(V), fps, source), kept
 
 
-def streamed_contacts(clips):
-    """``(contacts, encode)`` of the take ``clips`` (a read of its own, with velocities): the
-    whole take's :class:`FootContacts` (floor estimated once on every frame, bits labelled on
-    it: the same as :func:`trial_contacts` of the whole clip) and the encoder of one window's
-    chart with its slice of them (:func:`encode_chart_with_contacts`), for
-    :func:`sidql.codec.windows.encode_windows`."""
-    return trial_contacts(foot_track(clips)), encode_chart_with_contacts
+def protocol_only(clip: Clip, velocities: bool = False) -> Clip:
+    """``clip`` on its 23 protocol points (:data:`~sidql.keyframes.spherical.POINTS`): their
+    positions [m] (a copy), their velocities [m/s] when ``velocities`` (else zero, as a read
+    without velocities gives them); no joint angles (``qpos``, ``qvel`` of width 0) and
+    identity rotations: what :func:`sidql.codec.windows.windows` reads of a clip, in 552 bytes
+    a frame (1104 with velocities)."""
+    idx, parents = protocol_maps(clip)
+    T = clip.n_frames
+    pos = clip.positions[:, idx]
+    vel = clip.velocities[:, idx] if velocities else np.broadcast_to(0.0, pos.shape)
+    return Clip(
+        names=POINTS, parents=np.array(parents, dtype=np.int64), positions=pos, velocities=vel,
+        qpos=np.empty((T, 0)), qvel=np.empty((T, 0)),
+        rotations=np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), (T, len(POINTS), 4)),
+        fps=clip.fps, source=clip.source, start_frame=clip.start_frame,
+        source_fps=clip.source_fps,
+    )  # fmt: skip
+
+
+def streamed_contacts(clips, again=None, *, velocities: bool = False, keep: int = KEPT_FRAMES):
+    """``(contacts, encode, windows)`` of the take ``clips`` (a read of its own, with
+    velocities): the whole take's :class:`FootContacts` (floor estimated once on every frame,
+    bits labelled on it: the same as :func:`trial_contacts` of the whole clip), the encoder of
+    one window's chart with its slice of them (:func:`encode_chart_with_contacts`), for
+    :func:`sidql.codec.windows.encode_windows`, and the take's clips for the windows: those of
+    this read on the protocol points (:func:`protocol_only`) for a take of at most ``keep``
+    frames, else ``again`` (a second read of the take, ``velocities`` as the windows need)."""
+    track, kept = foot_pass(clips, keep=keep, velocities=velocities)
+    return trial_contacts(track), encode_chart_with_contacts, again if kept is None else kept
 
 
 def pinned_errors(series: SphericalSeries, stream: sidq.Stream) -> tuple[float, float, float]:
