@@ -30,13 +30,14 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.contact_section import FootContacts
-from sidql.codec.decode import reconstruct_stream
+from sidql.codec.decode import decoded_chart
 from sidql.codec.encode import encode_series
 from sidql.codec.encoded import Encoded
 from sidql.codec.plan import DEFAULT_MAX_GAP, position_weights
 from sidql.keyframes.contact_pinning import (
     decode_floor,
     encode_floor,
+    pin_feet,
     sender_contacts,
     sender_ground,
 )
@@ -48,6 +49,7 @@ from sidql.keyframes.spherical import (
     chart,
     chart_arrays,
     protocol_maps,
+    split_channels,
 )
 from sidql.keyframes.unchart import positions_from_chart
 from sim.errors import UnmetTargetError, UsageError
@@ -237,12 +239,24 @@ def streamed_contacts(clips, again=None, *, velocities: bool = False, keep: int 
 
 def pinned_errors(series: SphericalSeries, stream: sidq.Stream) -> tuple[float, float, float]:
     """Q [rad] (eq. 18) and the mean and 95th-percentile Euclidean point error [mm] of the
-    decoded (pinned) stream against the true chart ``series``."""
-    rec = reconstruct_stream(stream)
+    decoded (pinned) stream against the true chart ``series``.
+
+    The decoded positions are :func:`sidql.codec.decode.reconstruct_stream`'s (the same
+    operations: its chart, its points, :func:`pin_feet` on the stream's bits, keyframes and
+    floor), without the velocities and accelerations neither figure reads (Q reads the angles,
+    which the chart takes from positions alone)."""
+    chart = decoded_chart(stream)
+    theta, phi, root = split_channels(chart["values"], stream.quantiser.n_bones)
+    dtheta, dphi, root_vel = split_channels(chart["rates"], stream.quantiser.n_bones)
+    del chart
+    P = positions_from_chart(root, root_vel, theta, phi, dtheta, dphi, stream.lengths,
+                             stream.parents)[0]  # fmt: skip
+    c = stream.contacts
+    P = pin_feet(P, c.bits, stream.keyframes, stream.fps, floor=c.floor)
     truth, _ = positions_from_chart(
         series.root_pos, series.root_vel, series.theta, series.phi, series.dtheta, series.dphi,
         series.lengths, series.parents,
     )  # fmt: skip
-    E = 1e3 * np.linalg.norm(rec.positions - truth, axis=-1)
-    s = chart_arrays(rec.positions, rec.velocities, series.parents, series.dt)
+    E = 1e3 * np.linalg.norm(P - truth, axis=-1)
+    s = chart_arrays(P, np.zeros_like(P), series.parents, series.dt)
     return q_from_angles(series, s.theta, s.phi), float(E.mean()), float(np.percentile(E, 95))
