@@ -45,6 +45,7 @@ from sim.simulate.sampling import (
     _first_state,
     _problem,
 )
+from sim.simulate.searchplan import SearchPlan, boosted, may_recover, stage_sizes, window_end_costs
 
 
 @dataclass(frozen=True)
@@ -112,11 +113,80 @@ def _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, po
     return cost
 
 
+@dataclass(frozen=True)
+class _Search:
+    """What every window of :func:`choice_search` shares: the gain sets' models, their
+    ``MjData`` per thread and problems, the cost's weights, the state spec, the proposal's
+    persistence, the choice, the plan, the thread pool and the state's size."""
+
+    models: tuple
+    datas: list
+    probs: list
+    weights: CostWeights
+    spec: object
+    persistence: float
+    choice: GainChoice
+    plan: SearchPlan
+    pool: object
+    size: int
+
+
+def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
+    """Candidates ``idx`` (n,) of a window rolled out from the kept states ``kept`` = (states,
+    last offsets, last gain sets): their parents (``idx`` modulo the kept), gain sets (``sets``,
+    else ``choice.share`` of them on ``models[1]``, last), offsets, costs and window-end
+    (states, ``qpos``)."""
+    states, last, last_set = kept
+    parents = idx % len(states)
+    if sets is None:
+        n_alt = int(round(ctx.choice.share * len(idx))) if len(ctx.models) > 1 else 0
+        sets = np.r_[np.zeros(len(idx) - n_alt, int), np.ones(n_alt, int)]
+    offs = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence)
+    out = np.empty((len(idx), ctx.size)), np.empty((len(idx), ctx.models[0].nq))
+    search = states, ctx.weights, ((), ()), ctx.spec
+    cost = _costs(ctx.models, ctx.datas, ctx.probs, search, parents, offs, sets, ticks, out,
+                  ctx.pool)  # fmt: skip
+    return parents, offs, sets, cost, out
+
+
+def _join(parts: list) -> tuple:
+    """The stages' (parents, offsets, sets, costs, (states, qpos)) as one window's."""
+    if len(parts) == 1:
+        return parts[0]
+    cat = [np.concatenate([p[i] for p in parts]) for i in range(4)]
+    out = tuple(np.concatenate([p[4][i] for p in parts]) for i in range(2))
+    return (*cat, out)
+
+
+def _window(ctx: _Search, rng, n: int, kept, ticks) -> tuple:
+    """One window's ``n`` candidates from ``kept`` (:func:`_stage`), staged as ``plan.first``
+    says, with the fallback on the default gains (``choice.fallback``) and the window-end cost
+    (``plan.end_cost``) added: (parents, offsets, sets, costs, (states, qpos)), and whether
+    every candidate fell."""
+    fall = ctx.weights.fall
+    n1, n2 = stage_sizes(n, ctx.plan.first)
+    parts = [_stage(ctx, rng, np.arange(n1), kept, ticks)]
+    if n2 and fall > 0 and parts[0][3].max() >= fall:  # one fell: a hard window, all of them
+        parts.append(_stage(ctx, rng, np.arange(n1, n), kept, ticks))
+    parents, offs, sets, cost, out = _join(parts)
+    fell = fall > 0 and cost.min() >= fall
+    if fell and ctx.choice.fallback and sets.any():  # the default gains too
+        fb = _stage(ctx, rng, np.arange(len(cost)), kept, ticks, np.zeros(len(cost), int))
+        parents, offs, sets, cost, out = _join([(parents, offs, sets, cost, out), fb])
+    if ctx.plan.end_cost:
+        prob = ctx.probs[0]  # the kinematics and the reference are every gain set's
+        end = window_end_costs(ctx.models[0], ctx.datas[0][0], prob, out[0], ctx.spec,
+                               ticks[1], ctx.weights, cost)  # fmt: skip
+        cost = cost + ctx.plan.end_cost * end
+    return (parents, offs, sets, cost, out), fell
+
+
 def choice_search(
     models,
     ref_qpos: np.ndarray,
     *,
     choice: GainChoice = GainChoice(),
+    plan: SearchPlan | None = None,
     samples: int = 64,
     keep: int = 8,
     window: int = 12,
@@ -132,14 +202,16 @@ def choice_search(
     """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
     sampling rollouts as ``sampling.search_offsets`` (the same arguments) with each window's
-    candidates spread over the gain sets by ``choice`` (module docstring).
+    candidates spread over the gain sets by ``choice`` (module docstring) and the rollouts
+    spent as ``plan`` says (``sim.simulate.searchplan``: recovery, staged windows, the
+    window-end cost).
 
     Returns:
         ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
         ``window_qpos`` (W, nq): on the chosen path, the rolled out ``qpos`` at each window's
         end (what the replay reaches there while the body is up).
     """
-    weights = weights or CostWeights()
+    weights, plan = weights or CostWeights(), plan or SearchPlan()
     T, nu = ref_qpos.shape[0], models[0].nu
     rng = np.random.default_rng(seed)
     n_threads = max(1, min(int(threads), samples))
@@ -152,37 +224,36 @@ def choice_search(
     ]  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
-    costs, last, last_set = np.zeros(1), np.zeros((1, nu)), np.zeros(1, dtype=int)
-    n_alt = int(round(choice.share * samples)) if len(models) > 1 else 0
-    cand_set = np.r_[np.zeros(samples - n_alt, int), np.ones(n_alt, int)]
-    size = states.shape[1]
-    history, set_history = [], []
+    kept = states, np.zeros((1, nu)), np.zeros(1, dtype=int)  # states, last offsets and sets
+    costs = np.zeros(1)
+    n_windows = -(-T // window)
     pool = ThreadPoolExecutor(n_threads) if n_threads > 1 else None
+    ctx = _Search(tuple(models), datas, probs, weights, spec, persistence, choice, plan, pool,
+                  states.shape[1])  # fmt: skip
+    history, set_history, snaps = [], [], []
+    tried, boost_to, spent, w = set(), -1, 0, 0
     try:
-        for k0 in range(0, T, window):
+        while w < n_windows:
+            k0 = w * window
             ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
-            parents = np.arange(samples) % len(states)
-            offs = _offsets(rng, last, last_set, parents, cand_set, probs, persistence)
-            search = states, weights, ((), ()), spec
-            out = np.empty((samples, size)), np.empty((samples, models[0].nq))
-            cost = _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool)
-            sets = cand_set
-            if choice.fallback and n_alt and weights.fall > 0 and cost.min() >= weights.fall:
-                fb_set = np.zeros(samples, int)  # every candidate fell: the default gains too
-                fb_offs = _offsets(rng, last, last_set, parents, fb_set, probs, persistence)
-                fb_out = np.empty((samples, size)), np.empty((samples, models[0].nq))
-                fb = _costs(models, datas, probs, search, parents, fb_offs, fb_set, ticks,
-                            fb_out, pool)  # fmt: skip
-                parents, offs, cost = np.r_[parents, parents], np.r_[offs, fb_offs], np.r_[cost, fb]
-                out = np.r_[out[0], fb_out[0]], np.r_[out[1], fb_out[1]]
-                sets = np.r_[cand_set, fb_set]
+            del snaps[w:]
+            snaps.append((kept, costs))
+            n = boosted(plan, samples) if w <= boost_to else samples
+            (parents, offs, sets, cost, out), fell = _window(ctx, rng, n, kept, ticks)
+            spent += len(cost)
+            back = may_recover(plan, w, tried, spent, (samples, n_windows)) if fell else -1
+            if back >= 0:  # every candidate fell: back up and search again with more
+                tried.add(w)
+                boost_to, (kept, costs), w = w, snaps[back], back
+                del history[back:], set_history[back:]
+                continue
             new_costs = costs[parents] + cost
             best = np.argsort(new_costs, kind="stable")[:keep]
             history.append((parents[best], offs[best], out[1][best].copy()))
             chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
             set_history.append((parents[best], chosen_sets, np.zeros((len(best), 1))))
-            states, costs = out[0][best].copy(), new_costs[best]
-            last, last_set = offs[best], sets[best]
+            kept, costs = (out[0][best].copy(), offs[best], sets[best]), new_costs[best]
+            w += 1
     finally:
         if pool is not None:
             pool.shutdown()
