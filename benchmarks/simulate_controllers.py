@@ -292,12 +292,13 @@ for _name, _entry in CONTROLLERS.items():
 #: with twice the samples (the recoveries adding at most ``extra`` of the clip's rollouts);
 #: ``end<w>`` each candidate's tracking cost at its window's end weighted w beside its
 #: lookahead's; ``stage<n>`` n samples, half rolled out first and the rest only where one of
-#: those fell
+#: those fell; ``adapt<r>`` each hinge's noise scale following its kept candidates' spread
 PLANS = {
     "rec1": (28, SearchPlan(recover=1), "recovery: back 1 window, 2x samples"),
     "rec2": (28, SearchPlan(recover=2, extra=0.5), "recovery: back 2 windows, 2x samples"),
     "end1": (28, SearchPlan(end_cost=1.0), "window-end cost 1"),
     "stage40": (40, SearchPlan(first=0.5), "40 samples, 20 first, the rest where one fell"),
+    "adapt0.3": (28, SearchPlan(adapt=0.3), "noise scale per hinge adapted at rate 0.3"),
 }
 for _name, (_n, _plan, _label) in PLANS.items():
     CONTROLLERS[_name] = (

@@ -101,7 +101,7 @@ def test_a_staged_window_rolls_out_the_rest_only_where_one_of_the_first_fell(
 
 
 def test_every_plan_gives_the_same_search_on_any_number_of_threads(bodies, walk):
-    plan = SearchPlan(recover=1, extra=0.5, first=0.5, end_cost=1.0)
+    plan = SearchPlan(recover=1, extra=0.5, first=0.5, end_cost=1.0, adapt=0.5)
     kw = dict(SEARCH, samples=8, weights=ALWAYS_FALLEN, plan=plan)
     one = choice_search(bodies, walk, threads=1, **kw)
     two = choice_search(bodies, walk, threads=3, **kw)
@@ -129,3 +129,14 @@ def test_the_window_end_cost_is_the_tracking_cost_of_the_state_kept(bodies, walk
     np.testing.assert_allclose(got, [0.0, w.height * dz**2], atol=1e-12)
     diverged = window_end_costs(model, data, prob, states, spec, k1, w, np.full(2, 1e15))
     np.testing.assert_array_equal(diverged, [0.0, 0.0])
+
+
+def test_the_noise_widens_where_the_kept_took_larger_steps_and_narrows_where_smaller():
+    from sim.simulate.searchplan import SCALE_RANGE, adapted_scale
+
+    scale = np.array([1.0, 1.0, 1.0, 2.0])
+    kept = np.array([[2.0, 0.5, 1.0, 0.0], [-2.0, -0.5, -1.0, 0.0]])  # mean squares 4, 1/4, 1, 0
+    got = adapted_scale(scale, kept, 0.5)
+    np.testing.assert_allclose(got, scale * np.exp(0.25 * np.array([3.0, -0.75, 0.0, -1.0])))
+    np.testing.assert_array_equal(adapted_scale(scale, kept, 0.0), scale)  # off
+    assert adapted_scale(np.full(4, 3.9), np.full((2, 4), 10.0), 1.0).max() == SCALE_RANGE[1]

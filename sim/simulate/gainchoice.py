@@ -45,7 +45,14 @@ from sim.simulate.sampling import (
     _first_state,
     _problem,
 )
-from sim.simulate.searchplan import SearchPlan, boosted, may_recover, stage_sizes, window_end_costs
+from sim.simulate.searchplan import (
+    SearchPlan,
+    adapted_scale,
+    boosted,
+    may_recover,
+    stage_sizes,
+    window_end_costs,
+)
 
 
 @dataclass(frozen=True)
@@ -85,10 +92,11 @@ def common_body(models) -> tuple:
     return tuple(models)
 
 
-def _offsets(rng, last, last_set, parents, cand_set, probs, persistence) -> np.ndarray:
+def _offsets(rng, last, last_set, parents, cand_set, probs, persistence, scale=None) -> tuple:
     """(S, nu) the candidates' offsets [rad]: each parent's last offset (``last`` (K, nu), on
     gains ``last_set`` (K,)) as the same torque on the candidate's gains ``cand_set`` (S,),
-    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``)."""
+    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``) times ``scale`` (nu,;
+    None: 1); and the standard normal draws (S, nu) of that noise."""
     noise = rng.standard_normal((len(parents), last.shape[1]))
     start = last[parents]
     moved = last_set[parents] != cand_set
@@ -96,7 +104,9 @@ def _offsets(rng, last, last_set, parents, cand_set, probs, persistence) -> np.n
         kp = np.array([p.kp for p in probs])
         start[moved] *= kp[last_set[parents][moved]] / kp[cand_set[moved]]
     sigma = np.array([p.sigma for p in probs])[cand_set]
-    return persistence * start + sigma * noise
+    if scale is not None:
+        sigma = sigma * scale
+    return persistence * start + sigma * noise, noise
 
 
 def _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool):
@@ -136,26 +146,26 @@ def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
     last offsets, last gain sets): their parents (``idx`` modulo the kept), gain sets (``sets``,
     else ``choice.share`` of them on ``models[1]``, last), offsets, costs and window-end
     (states, ``qpos``)."""
-    states, last, last_set = kept
+    states, last, last_set, scale = kept
     parents = idx % len(states)
     if sets is None:
         n_alt = int(round(ctx.choice.share * len(idx))) if len(ctx.models) > 1 else 0
         sets = np.r_[np.zeros(len(idx) - n_alt, int), np.ones(n_alt, int)]
-    offs = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence)
+    offs, noise = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence, scale)
     out = np.empty((len(idx), ctx.size)), np.empty((len(idx), ctx.models[0].nq))
     search = states, ctx.weights, ((), ()), ctx.spec
     cost = _costs(ctx.models, ctx.datas, ctx.probs, search, parents, offs, sets, ticks, out,
                   ctx.pool)  # fmt: skip
-    return parents, offs, sets, cost, out
+    return parents, offs, sets, cost, out, noise
 
 
 def _join(parts: list) -> tuple:
-    """The stages' (parents, offsets, sets, costs, (states, qpos)) as one window's."""
+    """The stages' (parents, offsets, sets, costs, (states, qpos), noise) as one window's."""
     if len(parts) == 1:
         return parts[0]
     cat = [np.concatenate([p[i] for p in parts]) for i in range(4)]
     out = tuple(np.concatenate([p[4][i] for p in parts]) for i in range(2))
-    return (*cat, out)
+    return (*cat, out, np.concatenate([p[5] for p in parts]))
 
 
 def _window(ctx: _Search, rng, n: int, kept, ticks) -> tuple:
@@ -168,17 +178,18 @@ def _window(ctx: _Search, rng, n: int, kept, ticks) -> tuple:
     parts = [_stage(ctx, rng, np.arange(n1), kept, ticks)]
     if n2 and fall > 0 and parts[0][3].max() >= fall:  # one fell: a hard window, all of them
         parts.append(_stage(ctx, rng, np.arange(n1, n), kept, ticks))
-    parents, offs, sets, cost, out = _join(parts)
-    fell = fall > 0 and cost.min() >= fall
-    if fell and ctx.choice.fallback and sets.any():  # the default gains too
-        fb = _stage(ctx, rng, np.arange(len(cost)), kept, ticks, np.zeros(len(cost), int))
-        parents, offs, sets, cost, out = _join([(parents, offs, sets, cost, out), fb])
+    cand = _join(parts)
+    fell = fall > 0 and cand[3].min() >= fall
+    if fell and ctx.choice.fallback and cand[2].any():  # the default gains too
+        n = len(cand[3])
+        cand = _join([cand, _stage(ctx, rng, np.arange(n), kept, ticks, np.zeros(n, int))])
+    parents, offs, sets, cost, out, noise = cand
     if ctx.plan.end_cost:
         prob = ctx.probs[0]  # the kinematics and the reference are every gain set's
         end = window_end_costs(ctx.models[0], ctx.datas[0][0], prob, out[0], ctx.spec,
                                ticks[1], ctx.weights, cost)  # fmt: skip
         cost = cost + ctx.plan.end_cost * end
-    return (parents, offs, sets, cost, out), fell
+    return (parents, offs, sets, cost, out, noise), fell
 
 
 def choice_search(
@@ -224,7 +235,8 @@ def choice_search(
     ]  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
-    kept = states, np.zeros((1, nu)), np.zeros(1, dtype=int)  # states, last offsets and sets
+    # the kept states, their last offsets and gain sets, and the noise's scale (nu,)
+    kept = states, np.zeros((1, nu)), np.zeros(1, dtype=int), np.ones(nu)
     costs = np.zeros(1)
     n_windows = -(-T // window)
     pool = ThreadPoolExecutor(n_threads) if n_threads > 1 else None
@@ -239,7 +251,7 @@ def choice_search(
             del snaps[w:]
             snaps.append((kept, costs))
             n = boosted(plan, samples) if w <= boost_to else samples
-            (parents, offs, sets, cost, out), fell = _window(ctx, rng, n, kept, ticks)
+            (parents, offs, sets, cost, out, noise), fell = _window(ctx, rng, n, kept, ticks)
             spent += len(cost)
             back = may_recover(plan, w, tried, spent, (samples, n_windows)) if fell else -1
             if back >= 0:  # every candidate fell: back up and search again with more
@@ -252,7 +264,8 @@ def choice_search(
             history.append((parents[best], offs[best], out[1][best].copy()))
             chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
             set_history.append((parents[best], chosen_sets, np.zeros((len(best), 1))))
-            kept, costs = (out[0][best].copy(), offs[best], sets[best]), new_costs[best]
+            scale = adapted_scale(kept[3], noise[best], plan.adapt)
+            kept, costs = (out[0][best].copy(), offs[best], sets[best], scale), new_costs[best]
             w += 1
     finally:
         if pool is not None:

@@ -2,7 +2,7 @@
 rollouts: where a window gets more or fewer candidates, when it backs up, and what its cost also
 looks at.
 
-Three options, each off by default (:class:`SearchPlan`), measured in docs/synthetic.md
+Four options, each off by default (:class:`SearchPlan`), measured in docs/synthetic.md
 ("Spending the samples"):
 
 * **Recovery** (SAMCON, Liu et al. 2010): where every candidate of a window falls, the search
@@ -14,6 +14,8 @@ Three options, each off by default (:class:`SearchPlan`), measured in docs/synth
 * **The window-end cost**: besides the lookahead's end, a candidate's state at its window's end
   (the one kept and replayed) pays ``end_cost`` times its tracking cost
   (``sampling.window_cost``) there (:func:`window_end_costs`).
+* **Proposal adaptation**: each hinge's noise widens or narrows with the spread of the kept
+  candidates' draws (``adapt``, :func:`adapted_scale`).
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ class SearchPlan:
     extra: [share of ``samples`` x windows] rollouts the recoveries may add to a clip.
     first: share (0..1] of each window's candidates rolled out before looking at falls; 1: all.
     end_cost: weight of each candidate's tracking cost at its window's end (0: off).
+    adapt: rate (0..1) at which each hinge's noise scale follows its kept candidates' spread
+        (:func:`adapted_scale`; 0: the fixed Gaussian).
     """
 
     recover: int = 0
@@ -43,6 +47,7 @@ class SearchPlan:
     extra: float = 0.25
     first: float = 1.0
     end_cost: float = 0.0
+    adapt: float = 0.0
 
     def __post_init__(self):
         if self.recover < 0 or self.boost < 1.0 or self.extra < 0.0 or self.end_cost < 0.0:
@@ -50,6 +55,8 @@ class SearchPlan:
                 "SearchPlan needs recover >= 0, boost >= 1, extra >= 0 and end_cost >= 0; got "
                 f"{self.recover}, {self.boost}, {self.extra}, {self.end_cost}"
             )
+        if not 0.0 <= self.adapt <= 1.0:
+            raise UsageError(f"SearchPlan.adapt must be within 0..1; got {self.adapt}")
         if not 0.0 < self.first <= 1.0:
             raise UsageError(f"SearchPlan.first must be within (0, 1]; got {self.first}")
 
@@ -78,6 +85,22 @@ def may_recover(plan: SearchPlan, w: int, tried: set, spent: int, size: tuple[in
 def boosted(plan: SearchPlan, samples: int) -> int:
     """Candidates of a window searched again: ``boost`` x ``samples``, rounded."""
     return int(round(plan.boost * samples))
+
+
+#: bounds of :func:`adapted_scale` (a share of the fixed noise)
+SCALE_RANGE = (0.25, 4.0)
+
+
+def adapted_scale(scale: np.ndarray, elite_noise: np.ndarray, rate: float) -> np.ndarray:
+    """(nu,) the next window's noise scale per hinge: ``scale`` (nu,) times ``exp(rate (v - 1)
+    / 2)``, ``v`` the mean square over the kept candidates of their standard normal draws
+    ``elite_noise`` (K, nu): selection that favoured larger steps along a hinge (``v`` > 1)
+    widens its noise, smaller ones narrow it (the diagonal of CMA-ES's rank-mu update, as Liu
+    et al. 2015 adapt SAMCON's proposal), within :data:`SCALE_RANGE`. ``rate`` 0: ``scale``."""
+    if not rate:
+        return scale
+    v = np.mean(elite_noise**2, axis=0)
+    return np.clip(scale * np.exp(0.5 * rate * (v - 1.0)), *SCALE_RANGE)
 
 
 def window_end_costs(model, data, prob, states, spec, k1: int, weights, cost) -> np.ndarray:
