@@ -299,6 +299,18 @@ PLANS = {
     "end1": (28, SearchPlan(end_cost=1.0), "window-end cost 1"),
     "stage40": (40, SearchPlan(first=0.5), "40 samples, 20 first, the rest where one fell"),
     "adapt0.3": (28, SearchPlan(adapt=0.3), "noise scale per hinge adapted at rate 0.3"),
+    "stage48f20": (48, SearchPlan(first=20 / 48), "48 samples, 20 first, the rest where one fell"),
+    "stage40f28": (40, SearchPlan(first=0.7), "40 samples, 28 first, the rest where one fell"),
+    "stage40end1": (
+        40,
+        SearchPlan(first=0.5, end_cost=1.0),
+        "40 samples, 20 first, the rest where one fell, window-end cost 1",
+    ),
+    "stage40adapt0.3": (
+        40,
+        SearchPlan(first=0.5, adapt=0.3),
+        "40 samples, 20 first, the rest where one fell, noise adapted at 0.3",
+    ),
 }
 for _name, (_n, _plan, _label) in PLANS.items():
     CONTROLLERS[_name] = (
