@@ -20,7 +20,9 @@ the first the fallback (the default gains):
 A parent's offset [rad] carries over to a child on other gains as the same torque (times the
 parent's ``kp`` over the child's). The chosen offsets and gains are replayed by
 ``sim.simulate.controller.track(..., switch=(models, choice))``: one ordinary simulation.
-Deterministic given ``seed``; with ``share`` 0 and no fallback it is ``sampling.search_offsets``
+How the rollouts are spent (recovery, staged windows, the window-end cost, proposal adaptation)
+is ``plan``'s (``sim.simulate.searchplan``; its defaults change nothing). Deterministic given
+``seed``; with ``share`` 0, no fallback and the default plan it is ``sampling.search_offsets``
 bit for bit.
 """
 
@@ -192,6 +194,23 @@ def _window(ctx: _Search, rng, n: int, kept, ticks) -> tuple:
     return (parents, offs, sets, cost, out, noise), fell
 
 
+def _select(kept, costs: np.ndarray, cand: tuple, keep: int, adapt: float) -> tuple:
+    """The ``keep`` cheapest of a window's candidates ``cand`` = (parents, offsets, sets,
+    costs, (states, qpos), noise), each paying its parent's cost ``costs`` too: the next
+    ``kept`` (states, offsets, sets, the noise's scale adapted at ``adapt``), their costs, and
+    the window's steps of the offsets' and the sets' histories (for ``_backtrack``)."""
+    parents, offs, sets, cost, out, noise = cand
+    new_costs = costs[parents] + cost
+    best = np.argsort(new_costs, kind="stable")[:keep]
+    chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
+    steps = (
+        (parents[best], offs[best], out[1][best].copy()),
+        (parents[best], chosen_sets, np.zeros((len(best), 1))),
+    )
+    scale = adapted_scale(kept[3], noise[best], adapt)
+    return (out[0][best].copy(), offs[best], sets[best], scale), new_costs[best], steps
+
+
 def choice_search(
     models,
     ref_qpos: np.ndarray,
@@ -259,13 +278,10 @@ def choice_search(
                 boost_to, (kept, costs), w = w, snaps[back], back
                 del history[back:], set_history[back:]
                 continue
-            new_costs = costs[parents] + cost
-            best = np.argsort(new_costs, kind="stable")[:keep]
-            history.append((parents[best], offs[best], out[1][best].copy()))
-            chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
-            set_history.append((parents[best], chosen_sets, np.zeros((len(best), 1))))
-            scale = adapted_scale(kept[3], noise[best], plan.adapt)
-            kept, costs = (out[0][best].copy(), offs[best], sets[best], scale), new_costs[best]
+            kept, costs, steps = _select(kept, costs, (parents, offs, sets, cost, out, noise),
+                                         keep, plan.adapt)  # fmt: skip
+            history.append(steps[0])
+            set_history.append(steps[1])
             w += 1
     finally:
         if pool is not None:
