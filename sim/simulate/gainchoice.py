@@ -34,7 +34,7 @@ import numpy as np
 
 from sim.errors import UsageError
 from sim.simulate.balance import Balance
-from sim.simulate.controller import Tracking, track
+from sim.simulate.controller import Push, Tracking, Weakening, track
 from sim.simulate.sampling import (
     BALANCE,
     LOOKAHEAD,
@@ -128,11 +128,14 @@ def choice_search(
     threads: int = 1,
     balance: Balance | None = BALANCE,
     noise_deflection: float = 0.0,
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
-    sampling rollouts as ``sampling.search_offsets`` (the same arguments) with each window's
-    candidates spread over the gain sets by ``choice`` (module docstring).
+    sampling rollouts as ``sampling.search_offsets`` (the same arguments, the perturbations
+    ``pushes`` and ``weakenings`` met by every rollout) with each window's candidates spread
+    over the gain sets by ``choice`` (module docstring).
 
     Returns:
         ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
@@ -146,7 +149,7 @@ def choice_search(
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
     probs = [
-        _problem(m, ref_qpos, d[0], torque_sigma, (), falls=weights.fall > 0, balance=balance,
+        _problem(m, ref_qpos, d[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
                  noise_deflection=noise_deflection)
         for m, d in zip(models, datas, strict=True)
     ]  # fmt: skip
@@ -163,7 +166,7 @@ def choice_search(
             ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
             parents = np.arange(samples) % len(states)
             offs = _offsets(rng, last, last_set, parents, cand_set, probs, persistence)
-            search = states, weights, ((), ()), spec
+            search = states, weights, (pushes, weakenings), spec
             out = np.empty((samples, size)), np.empty((samples, models[0].nq))
             cost = _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool)
             sets = cand_set
@@ -192,16 +195,20 @@ def choice_search(
 
 
 def choice_track(
-    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, **search
-) -> Tracking:
+    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, recorder=None,
+    pushes: tuple[Push, ...] = (), weakenings: tuple[Weakening, ...] = (), **search,
+) -> Tracking:  # fmt: skip
     """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance on ``model`` and
     ``alternates`` (the same body with other gains: :func:`common_body`), the hinge targets
     corrected and the gains chosen per window by :func:`choice_search` (``search``: its
-    keyword arguments), then replayed: ``track(model, ref_qpos, offsets=..., switch=((model,
-    *alternates), sets), balance=...)``."""
+    keyword arguments; ``pushes``, ``weakenings`` met by the search and the replay), then
+    replayed: ``track(model, ref_qpos, offsets=..., switch=((model, *alternates), sets),
+    balance=..., recorder=recorder)``."""
     models = (model, *alternates)
-    offsets, sets, _ = choice_search(models, ref_qpos, **search)
+    perturb = {"pushes": pushes, "weakenings": weakenings}
+    offsets, sets, _ = choice_search(models, ref_qpos, **perturb, **search)
     return track(
         model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
-        balance=search.get("balance", BALANCE), switch=(models, sets),
+        balance=search.get("balance", BALANCE), switch=(models, sets), recorder=recorder,
+        **perturb,
     )  # fmt: skip
