@@ -32,7 +32,7 @@ are noisy, re-run them on a quiet one.
 ``--samples N`` (another count) or ``--controller C`` (another controller): the same figures
 for that controller, written to ``docs/results/synth_sampled.md`` or ``synth_<C>.md``.
 ``--gain-choice SHARE``: the sampler's share of candidates on the stiff gains (another than
-synth's default writes ``synth_variant.md``); ``--against SHARE [...]``: the same tasks made in
+synth's default writes ``synth_gains.md``); ``--against SHARE [...]``: the same tasks made in
 the same run with those shares too (0: the body's gains alone), and a table of each beside
 the run's (clips up, the targets' figures, tracking error global and root-relative, the
 ticks on the stiff gains, CPU seconds per simulated second of this process). The
@@ -487,7 +487,7 @@ def main() -> None:
                         "default writes synth_variant.md")  # fmt: skip
     ap.add_argument("--gain-choice", type=float, default=SYNTH_GAIN_CHOICE, metavar="SHARE",
                     help="the sampler's share of candidates on the stiff gains (default: "
-                    f"synth's, {SYNTH_GAIN_CHOICE:g}); another writes synth_variant.md")  # fmt: skip
+                    f"synth's, {SYNTH_GAIN_CHOICE:g}); another writes synth_gains.md")  # fmt: skip
     ap.add_argument("--against", type=float, nargs="+", default=[], metavar="SHARE",
                     help="also make the same tasks with these gain-choice shares in this run "
                     "(0: the body's gains alone) and compare (one worker: CPU per simulated s)")  # fmt: skip
@@ -502,8 +502,8 @@ def main() -> None:
     chosen = (args.drift, args.contact_reference, args.lean)
     defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN)
     options = [d if v is None else v for v, d in zip(chosen, defaults, strict=True)]
-    variant = options != list(defaults) or args.gain_choice != SYNTH_GAIN_CHOICE
-    page = ("synth_variant" if variant
+    page = ("synth_variant" if options != list(defaults)
+            else "synth_gains" if args.gain_choice != SYNTH_GAIN_CHOICE
             else "synth" if (controller, samples) == chosen_controller()
             else "synth_sampled" if controller == "sampling" else f"synth_{controller}")  # fmt: skip
     run = controller + (f", {samples} samples" if samples else "")
@@ -541,7 +541,7 @@ def main() -> None:
     if not args.no_write:
         title = ("Synthetic clips: physical share, speeds, skating, contacts" if page == "synth"
                  else f"Synthetic clips tracked by the {run} controller")  # fmt: skip
-        if page == "synth_variant":
+        if page in ("synth_variant", "synth_gains"):
             args.no_speed = True  # the speed timings time the default's plain tracker
         write_results(page, title, table, command)
     if args.no_speed:
