@@ -122,10 +122,9 @@ SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 #: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion). Off:
 #: on bench_synth's 20 clips none kept more up or met more targets (docs/synthetic.md)
 SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
-#: the share of the sampler's candidates per window that roll out on the stiff gains
-#: (``sim.simulate.gainchoice``, ``validate.STIFF_GAINS`` scaled by the episode's gain draw),
-#: the rest on the body's, the gains chosen per window with the candidate; 0: the body's gains
-#: alone. Stored per tick (``sim_actuator_gains``), so every episode still replays bit for bit
+#: the sampler's share of candidates per window on the stiff gains (``sim.simulate.gainchoice``,
+#: ``validate.STIFF_GAINS`` times the episode's gain draw), the gains stored per tick; 0: the
+#: body's gains alone. Not the default: no win on bench_synth's 20 clips (docs/synthetic.md)
 SYNTH_GAIN_CHOICE = 0.0
 #: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True (non-zero)
 TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice")
@@ -267,12 +266,11 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     """Simulate one clip; returns it and a record of its parameters and tracking measures.
 
     The record holds ``generation`` (parameters and seed), ``tracking_mpjpe_mm`` (and
-    ``tracking_local_mm``, root-relative), ``fell`` (and
-    ``fall_frame``), ``mean_assistance`` (root assistance force [body weight], mean over frames),
-    ``mean_assist_torque`` (its torque [body weight x 1 m]), ``physical`` (:func:`is_physical`),
-    ``penetration_mm`` (deepest floor contact), ``self_penetration_mm`` (deepest contact between
-    two body geoms) and ``labels``: the per-frame arrays of
-    :data:`LABELS`, for the clip file, not the index.
+    ``tracking_local_mm``, root-relative), ``fell`` (and ``fall_frame``), ``mean_assistance``
+    (root assistance force [body weight], mean over frames), ``mean_assist_torque`` (its torque
+    [body weight x 1 m]), ``physical`` (:func:`is_physical`), ``penetration_mm`` (deepest floor
+    contact), ``self_penetration_mm`` (deepest contact between two body geoms) and ``labels``:
+    the per-frame arrays of :data:`LABELS`, for the clip file, not the index.
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
@@ -407,8 +405,9 @@ def simulate_episode(
         kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads,
               "balance": balance}  # fmt: skip
         if len(models) > 1:  # the gains chosen per window, recorded per tick
-            p["sampling"]["gain_choice"] = {"share": task.gain_choice,
-                                            "stiff": asdict(STIFF_GAINS.scaled(p["gain"]))}  # fmt: skip
+            stiff = {k: v if v is None else float(v)
+                     for k, v in asdict(STIFF_GAINS.scaled(p["gain"])).items()}  # fmt: skip
+            p["sampling"]["gain_choice"] = {"share": float(task.gain_choice), "stiff": stiff}
             choice = GainChoice(share=task.gain_choice)
             return choice_track(model, ref, alternates=models[1:], choice=choice, **kw, **tracking)
         return sample_track(model, ref, **kw, **tracking)
