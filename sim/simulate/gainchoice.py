@@ -36,7 +36,7 @@ import numpy as np
 
 from sim.errors import UsageError
 from sim.simulate.balance import Balance
-from sim.simulate.controller import Tracking, track
+from sim.simulate.controller import Push, Tracking, Weakening, track
 from sim.simulate.sampling import (
     BALANCE,
     LOOKAHEAD,
@@ -129,7 +129,8 @@ def _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, po
 class _Search:
     """What every window of :func:`choice_search` shares: the gain sets' models, their
     ``MjData`` per thread and problems, the cost's weights, the state spec, the proposal's
-    persistence, the choice, the plan, the thread pool and the state's size."""
+    persistence, the choice, the plan, the thread pool, the state's size and the perturbations
+    (pushes, weakenings) every rollout meets."""
 
     models: tuple
     datas: list
@@ -141,6 +142,7 @@ class _Search:
     plan: SearchPlan
     pool: object
     size: int
+    perturb: tuple = ((), ())
 
 
 def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
@@ -155,7 +157,7 @@ def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
         sets = np.r_[np.zeros(len(idx) - n_alt, int), np.ones(n_alt, int)]
     offs, noise = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence, scale)
     out = np.empty((len(idx), ctx.size)), np.empty((len(idx), ctx.models[0].nq))
-    search = states, ctx.weights, ((), ()), ctx.spec
+    search = states, ctx.weights, ctx.perturb, ctx.spec
     cost = _costs(ctx.models, ctx.datas, ctx.probs, search, parents, offs, sets, ticks, out,
                   ctx.pool)  # fmt: skip
     return parents, offs, sets, cost, out, noise
@@ -228,13 +230,15 @@ def choice_search(
     threads: int = 1,
     balance: Balance | None = BALANCE,
     noise_deflection: float = 0.0,
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
-    sampling rollouts as ``sampling.search_offsets`` (the same arguments) with each window's
-    candidates spread over the gain sets by ``choice`` (module docstring) and the rollouts
-    spent as ``plan`` says (``sim.simulate.searchplan``: recovery, staged windows, the
-    window-end cost).
+    sampling rollouts as ``sampling.search_offsets`` (the same arguments, the perturbations
+    ``pushes`` and ``weakenings`` met by every rollout) with each window's candidates spread
+    over the gain sets by ``choice`` (module docstring) and the rollouts spent as ``plan`` says
+    (``sim.simulate.searchplan``: recovery, staged windows, the window-end cost, adaptation).
 
     Returns:
         ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
@@ -248,7 +252,7 @@ def choice_search(
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
     probs = [
-        _problem(m, ref_qpos, d[0], torque_sigma, (), falls=weights.fall > 0, balance=balance,
+        _problem(m, ref_qpos, d[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
                  noise_deflection=noise_deflection)
         for m, d in zip(models, datas, strict=True)
     ]  # fmt: skip
@@ -260,7 +264,7 @@ def choice_search(
     n_windows = -(-T // window)
     pool = ThreadPoolExecutor(n_threads) if n_threads > 1 else None
     ctx = _Search(tuple(models), datas, probs, weights, spec, persistence, choice, plan, pool,
-                  states.shape[1])  # fmt: skip
+                  states.shape[1], (pushes, weakenings))  # fmt: skip
     history, set_history, snaps = [], [], []
     tried, boost_to, spent, w = set(), -1, 0, 0
     try:
@@ -292,16 +296,20 @@ def choice_search(
 
 
 def choice_track(
-    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, **search
-) -> Tracking:
+    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, recorder=None,
+    pushes: tuple[Push, ...] = (), weakenings: tuple[Weakening, ...] = (), **search,
+) -> Tracking:  # fmt: skip
     """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance on ``model`` and
     ``alternates`` (the same body with other gains: :func:`common_body`), the hinge targets
     corrected and the gains chosen per window by :func:`choice_search` (``search``: its
-    keyword arguments), then replayed: ``track(model, ref_qpos, offsets=..., switch=((model,
-    *alternates), sets), balance=...)``."""
+    keyword arguments; ``pushes``, ``weakenings`` met by the search and the replay), then
+    replayed: ``track(model, ref_qpos, offsets=..., switch=((model, *alternates), sets),
+    balance=..., recorder=recorder)``."""
     models = (model, *alternates)
-    offsets, sets, _ = choice_search(models, ref_qpos, **search)
+    perturb = {"pushes": pushes, "weakenings": weakenings}
+    offsets, sets, _ = choice_search(models, ref_qpos, **perturb, **search)
     return track(
         model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
-        balance=search.get("balance", BALANCE), switch=(models, sets),
+        balance=search.get("balance", BALANCE), switch=(models, sets), recorder=recorder,
+        **perturb,
     )  # fmt: skip
