@@ -85,7 +85,7 @@ def tick_states(model, ref: np.ndarray, samples: int) -> tuple[np.ndarray, np.nd
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states, ticks = [], []
 
-    def rec(k: int, data) -> None:
+    def rec(k: int, data, _model=None) -> None:
         if k < len(ref):
             states.append(np.empty(mujoco.mj_stateSize(model, spec)))
             mujoco.mj_getState(model, data, states[-1], spec)

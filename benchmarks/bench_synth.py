@@ -30,7 +30,12 @@ are noisy, re-run them on a quiet one.
 (``sim.simulate.audit``), written to ``docs/results/synth_audit.md``.
 
 ``--samples N`` (another count) or ``--controller C`` (another controller): the same figures
-for that controller, written to ``docs/results/synth_sampled.md`` or ``synth_<C>.md``. The
+for that controller, written to ``docs/results/synth_sampled.md`` or ``synth_<C>.md``.
+``--gain-choice SHARE``: the sampler's share of candidates on the stiff gains (another than
+synth's default writes ``synth_gains.md``); ``--against SHARE [...]``: the same tasks made in
+the same run with those shares too (0: the body's gains alone), and a table of each beside
+the run's (clips up, the targets' figures, tracking error global and root-relative, the
+ticks on the stiff gains, CPU seconds per simulated second of this process). The
 speed timings always time the plain tracker (``--no-speed`` skips them); the audit compares
 against recorded help, which only the plain tracker asked for help gives.
 """
@@ -39,11 +44,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -69,6 +76,7 @@ from sim.simulate.generate import (  # noqa: E402
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
     SYNTH_DRIFT,
+    SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
 )
 from sim.simulate.model import G, sim_model  # noqa: E402
@@ -138,14 +146,14 @@ def _until(clip, frames: int):
 
 def replays(folder: Path, rows: list[dict]) -> str:
     """One line: how many clips' episodes replay bit for bit (``sim.simulate.episode.replay``
-    of their stored actions and wrenches from their first state), and how many episodes end
+    of their stored actions, gains and wrenches from their first state), and how many episodes end
     in a fall (their last step is a termination)."""
     ok = falls = 0
     for r in rows:
         lab = load_extra(folder / r["file"], "sim_")
         q, v = replay(array_text(lab["sim_mjcf"]), lab["sim_initial_state"], lab["sim_actions"],
                       lab["sim_xfrc_applied"], lab["sim_qfrc_applied"],
-                      int(lab["sim_frame_skip"]))  # fmt: skip
+                      int(lab["sim_frame_skip"]), lab.get("sim_actuator_gains"))  # fmt: skip
         ok += bool(
             np.array_equal(q, lab["sim_tick_qpos"]) and np.array_equal(v, lab["sim_tick_qvel"])
         )
@@ -155,6 +163,67 @@ def replays(folder: Path, rows: list[dict]) -> str:
         f"replay every stored state bit for bit from their first state; {falls} end in a fall "
         "(terminated), the others at the time limit (truncated)."
     )
+
+
+def make(args, folder: Path, options: list, share: float) -> tuple[str, float]:
+    """Synthesize ``args.n`` clips into ``folder`` with the sampler's gain choice ``share``;
+    returns the cost line and the CPU seconds per simulated second (this process, one
+    worker; NaN with more)."""
+    controller, samples = chosen_controller(args.samples, args.controller)
+    t0, c0 = time.perf_counter(), time.process_time()
+    s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
+                   kinds=tuple(args.kinds), samples=samples, controller=controller,
+                   seconds=args.seconds, progress=False, drift=options[0],
+                   contact_reference=options[1], lean=options[2],
+                   gain_choice=share if controller == "sampling" else None)  # fmt: skip
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    simulated = sum(r["frames"] for r in s.written) / 30.0
+    per_s = cpu / simulated if args.workers == 1 else float("nan")
+    cost = (
+        f"Generation: {len(s.written)} clips, {simulated:.0f} simulated s in {wall:.0f} s "
+        f"on {args.workers} worker(s): {simulated / wall / args.workers:.2f} simulated s "
+        "per wall s per worker"
+        + (f"; {per_s:.1f} CPU s per simulated s (this process)." if args.workers == 1 else ".")
+    )  # fmt: skip
+    return cost, per_s
+
+
+def stiff_share(folder: Path, rows: list[dict]) -> float:
+    """The share of the control ticks whose gains are not the MJCF's (the stiff set)."""
+    on = total = 0
+    for r in rows:
+        lab = load_extra(folder / r["file"], "sim_")
+        g = lab.get("sim_actuator_gains")
+        if g is None:
+            total += len(lab["sim_actions"])
+            continue
+        body = mujoco.MjModel.from_xml_string(array_text(lab["sim_mjcf"]))
+        on += int(np.sum(np.any(g[:, 0] != body.actuator_gainprm[:, 0], axis=1)))
+        total += len(g)
+    return on / max(total, 1)
+
+
+def comparison(runs: list[tuple[str, Path, dict, float]]) -> str:
+    """The table of runs of the same tasks: (name, folder, quality figures, CPU per s)."""
+    lines = [
+        "| gain choice (share on the stiff gains) | clips | not fallen | p95 point speed / "
+        "real's, not fallen | skating in contact, not fallen [mm/s] | tracking error median, "
+        "global / root-relative [mm] (not fallen) | ticks on the stiff gains | CPU s per "
+        "simulated s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, folder, fig, per_s in runs:
+        rows = json.loads((folder / "index.json").read_text())["trials"]
+        up = [r for r in rows if not r["fell"]]
+        med = lambda key, rs: np.median([r[key] for r in rs]) if rs else float("nan")  # noqa: E731
+        f = fig["synthetic, not fallen"]
+        lines.append(
+            f"| {name} | {len(rows)} | {len(up)} | {f['p95_ratio']:.2f} | {f['skate_mm_s']:.0f} "
+            f"| {med('tracking_mpjpe_mm', rows):.0f} / {med('tracking_local_mm', rows):.0f} "
+            f"({med('tracking_mpjpe_mm', up):.0f} / {med('tracking_local_mm', up):.0f}) "
+            f"| {stiff_share(folder, rows):.2f} | {per_s:.2f} |"
+        )
+    return "\n".join(lines)
 
 
 def pct(x: np.ndarray) -> str:
@@ -416,6 +485,12 @@ def main() -> None:
         ap.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None,
                         help=f"{what} (default: synth's, {default}); another than synth's "
                         "default writes synth_variant.md")  # fmt: skip
+    ap.add_argument("--gain-choice", type=float, default=SYNTH_GAIN_CHOICE, metavar="SHARE",
+                    help="the sampler's share of candidates on the stiff gains (default: "
+                    f"synth's, {SYNTH_GAIN_CHOICE:g}); another writes synth_gains.md")  # fmt: skip
+    ap.add_argument("--against", type=float, nargs="+", default=[], metavar="SHARE",
+                    help="also make the same tasks with these gain-choice shares in this run "
+                    "(0: the body's gains alone) and compare (one worker: CPU per simulated s)")  # fmt: skip
     ap.add_argument("--seconds", type=float, default=CLIP_SECONDS, help="clip length [s]")
     ap.add_argument("--no-speed", action="store_true",
                     help="skip the speed timings (synth_speed.md stays as it is)")  # fmt: skip
@@ -428,36 +503,37 @@ def main() -> None:
     defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN)
     options = [d if v is None else v for v, d in zip(chosen, defaults, strict=True)]
     page = ("synth_variant" if options != list(defaults)
+            else "synth_gains" if args.gain_choice != SYNTH_GAIN_CHOICE
             else "synth" if (controller, samples) == chosen_controller()
             else "synth_sampled" if controller == "sampling" else f"synth_{controller}")  # fmt: skip
     run = controller + (f", {samples} samples" if samples else "")
     if controller == "sampling":
         run += ", " + ", ".join(w if on else f"no {w}" for w, on in zip(
             ("drift lead", "contact-consistent reference", "lean body"), options, strict=True))  # fmt: skip
+        run += (f", gain choice {args.gain_choice:g} on the stiff gains" if args.gain_choice
+                else ", the body's gains alone")  # fmt: skip
     label = f"`synthesize`: {run}"
     plot = args.plot if page == "synth" else args.plot.replace(".png", f"_{page[6:]}.png")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(args.synth or args.keep or Path(tmp) / "synth")
+        others = []
         if not args.synth:
-            t0, c0 = time.perf_counter(), time.process_time()
-            s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
-                           kinds=tuple(args.kinds), samples=samples, controller=controller,
-                           seconds=args.seconds, progress=False, drift=options[0],
-                           contact_reference=options[1], lean=options[2])  # fmt: skip
-            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-            simulated = sum(r["frames"] for r in s.written) / 30.0
-            cost = (
-                f"Generation: {len(s.written)} clips, {simulated:.0f} simulated s in {wall:.0f} s "
-                f"on {args.workers} worker(s): {simulated / wall / args.workers:.2f} simulated s "
-                "per wall s per worker"
-                + (f"; {cpu / simulated:.1f} CPU s per simulated s (this process)."
-                   if args.workers == 1 else ".")
-            )  # fmt: skip
+            for share in args.against:  # the same tasks with other shares first, then this run's
+                other = Path(tmp) / f"against_{share:g}"
+                _, per_s = make(args, other, options, share)
+                others.append((share, other, per_s))
+            cost, per_s = make(args, folder, options, args.gain_choice)
             print(cost)
         table, figures = quality(args.cmu, folder, None if args.no_write else plot, label,
                                  EARLIER.get(page), run)  # fmt: skip
         if not args.synth:
             table = cost + "\n\n" + table
+        if others:
+            runs = [(f"{args.gain_choice:g} (this run)", folder, figures, per_s)]
+            for share, other, cpu_s in others:
+                runs.append((f"{share:g}", other, quality(args.cmu, other, None)[1], cpu_s))
+            table += ("\n\nThe same tasks with other gain choices, made in this run (load "
+                      f"{os.getloadavg()[0]:.1f} at the end):\n\n" + comparison(runs))  # fmt: skip
         print(table)
         audit_table = audit(folder) if args.audit else None
         if audit_table:
@@ -465,7 +541,7 @@ def main() -> None:
     if not args.no_write:
         title = ("Synthetic clips: physical share, speeds, skating, contacts" if page == "synth"
                  else f"Synthetic clips tracked by the {run} controller")  # fmt: skip
-        if page == "synth_variant":
+        if page in ("synth_variant", "synth_gains"):
             args.no_speed = True  # the speed timings time the default's plain tracker
         write_results(page, title, table, command)
     if args.no_speed:

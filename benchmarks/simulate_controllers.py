@@ -21,6 +21,7 @@ from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
+from sim.simulate.searchplan import SearchPlan  # noqa: E402
 from sim.simulate.validate import DEFAULT_BALANCE, STIFF_GAINS  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
@@ -285,3 +286,37 @@ for _name, _choice in (
 for _name, _entry in CONTROLLERS.items():
     if not _name.startswith("default") and "contact_reference" not in _entry[1]:
         _entry[1]["contact_reference"] = False
+
+#: how eval's sampler (``mix0.5``) spends its rollouts (``sim.simulate.searchplan.SearchPlan``):
+#: ``rec<r>`` where every candidate of a window falls, back up r windows and search them again
+#: with twice the samples (the recoveries adding at most ``extra`` of the clip's rollouts);
+#: ``end<w>`` each candidate's tracking cost at its window's end weighted w beside its
+#: lookahead's; ``stage<n>`` n samples, half rolled out first and the rest only where one of
+#: those fell; ``adapt<r>`` each hinge's noise scale following its kept candidates' spread
+PLANS = {
+    "rec1": (28, SearchPlan(recover=1), "recovery: back 1 window, 2x samples"),
+    "rec2": (28, SearchPlan(recover=2, extra=0.5), "recovery: back 2 windows, 2x samples"),
+    "end1": (28, SearchPlan(end_cost=1.0), "window-end cost 1"),
+    "stage40": (40, SearchPlan(first=0.5), "40 samples, 20 first, the rest where one fell"),
+    "adapt0.3": (28, SearchPlan(adapt=0.3), "noise scale per hinge adapted at rate 0.3"),
+    "stage48f20": (48, SearchPlan(first=20 / 48), "48 samples, 20 first, the rest where one fell"),
+    "stage40f28": (40, SearchPlan(first=0.7), "40 samples, 28 first, the rest where one fell"),
+    "stage40end1": (
+        40,
+        SearchPlan(first=0.5, end_cost=1.0),
+        "40 samples, 20 first, the rest where one fell, window-end cost 1",
+    ),
+    "stage40adapt0.3": (
+        40,
+        SearchPlan(first=0.5, adapt=0.3),
+        "40 samples, 20 first, the rest where one fell, noise adapted at 0.3",
+    ),
+}
+for _name, (_n, _plan, _label) in PLANS.items():
+    CONTROLLERS[_name] = (
+        f"sampler, {_n} samples, eval's defaults (gains chosen per window), {_label}",
+        {"controller": "sampling", "samples": _n, "contact_reference": True,
+         "search": {"choice": GainChoice(share=0.5), "plan": _plan}},
+        "position",
+        {"alternate_gains": (_STIFF,)},
+    )  # fmt: skip

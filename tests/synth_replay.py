@@ -20,17 +20,25 @@ SECONDS = 1.0  # long enough for the pushes of track (from 0.3 s) and many of fa
 
 def oracle_replay(labels: dict, limits: np.ndarray):
     """Step the stored actions and wrenches one physics step at a time on the stored MJCF's
-    model (MuJoCo alone, nothing of ours); return the states before each action and after the
-    last, and the largest |hinge actuator torque| over its limit seen at any step."""
+    model (MuJoCo alone, nothing of ours), each tick's stored PD gains (``sim_actuator_gains``:
+    kp, kv) written into its position actuators first; return the states before each action
+    and after the last, and the largest |hinge actuator torque| over its limit seen at any
+    step."""
     model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
     data = mujoco.MjData(model)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     mujoco.mj_setState(model, data, labels["sim_initial_state"], spec)
     actions = labels["sim_actions"]
+    gains = labels.get("sim_actuator_gains")
+    limit_range = model.actuator_forcerange.copy()
     qpos, qvel, worst = [], [], 0.0
     for k in range(len(actions)):
         qpos.append(data.qpos.copy())
         qvel.append(data.qvel.copy())
+        if gains is not None:  # MuJoCo's position servo: gain kp, bias (0, -kp, -kv)
+            model.actuator_gainprm[:, 0] = gains[k, 0]
+            model.actuator_biasprm[:, 1] = -gains[k, 0]
+            model.actuator_biasprm[:, 2] = -gains[k, 1]
         data.ctrl[:] = actions[k]
         data.xfrc_applied[:] = labels["sim_xfrc_applied"][k]
         data.qfrc_applied[:] = labels["sim_qfrc_applied"][k]
@@ -39,13 +47,15 @@ def oracle_replay(labels: dict, limits: np.ndarray):
             worst = max(worst, float(np.max(np.abs(data.actuator_force) / limits)))
     qpos.append(data.qpos.copy())
     qvel.append(data.qvel.copy())
+    assert np.array_equal(model.actuator_forcerange, limit_range)  # no gain moves a limit
     return np.array(qpos), np.array(qvel), worst, model
 
 
 def check_replays(out, written, kinds) -> dict:
     """Every clip of ``written`` replays bit for bit within the human limits (the assertions
     below); returns counts of what the clips held."""
-    count = {k: 0 for k in kinds} | {"pushed": 0, "assisted": 0, "strong": 0, "weakened": 0}
+    count = {k: 0 for k in kinds} | {"pushed": 0, "assisted": 0, "strong": 0, "weakened": 0,
+                                     "switched": 0}  # fmt: skip
     for r in written:
         path = out / r["file"]
         labels, clip = load_extra(path, "sim_"), load_npz(path)
@@ -69,6 +79,19 @@ def check_replays(out, written, kinds) -> dict:
         assert worst <= 1 + 1e-12
         lo, hi = model.actuator_ctrlrange.T  # actions in the documented, bounded space
         assert np.all((labels["sim_actions"] >= lo) & (labels["sim_actions"] <= hi))
+        gains = labels.get("sim_actuator_gains")
+        if model.actuator_biasprm[:, 1].any():  # position actuators: gains at every tick
+            assert gains.shape == (T, 2, model.nu) and np.all(gains > 0)
+            sets = np.unique(gains.reshape(T, -1), axis=0)
+            choice = generation.get("sampling", {}).get("gain_choice")
+            assert len(sets) <= (2 if choice else 1)  # the body's gains, or the two sets
+            if len(sets) == 1:  # the MJCF's own (its model as compiled, before any replay)
+                body = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
+                assert np.array_equal(sets[0][: model.nu], body.actuator_gainprm[:, 0])
+                assert np.array_equal(sets[0][model.nu :], -body.actuator_biasprm[:, 2])
+            count["switched"] += len(sets) > 1
+        else:
+            assert gains is None
         # no help unless asked for: only the procedural kind asks (and is labelled so)
         helped = bool(np.any(labels["sim_qfrc_applied"]))
         assert (generation["assist_limit"] > 0) == (r["subject"] == "procedural")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import struct
 import zlib
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from keyframe_synth import smooth_clip
 from sidql.codec import format as sidq
 from sidql.codec.contact_coding import (
     encode_with_contacts,
+    foot_pass,
     foot_track,
     streamed_contacts,
     trial_contacts,
@@ -251,3 +253,24 @@ def test_streamed_contacts_over_windows_carry_the_whole_takes_floor_and_bits(cmu
     assert np.array_equal(np.concatenate(bits), whole.bits)
     rec = decode_to_reconstruction(out)  # pinned stream by stream
     assert rec.positions.shape == (clip.n_frames, 23, 3) and np.isfinite(rec.positions).all()
+
+
+def test_a_take_read_once_gives_the_windows_the_points_and_bytes_of_a_second_read(
+    cmu_dir, tmp_path
+):
+    asf, amc = cmu_dir / "01" / "01.asf", cmu_dir / "01" / "01_01.amc"  # 688 frames at 30 fps
+    again = list(stream_clips(asf, amc, fps=30.0, chunk_frames=50, velocities=False))
+    track, kept = foot_pass(stream_clips(asf, amc, fps=30.0, chunk_frames=50), keep=10**6)
+    assert foot_pass(stream_clips(asf, amc, fps=30.0, chunk_frames=50), keep=687)[1] is None
+    assert len(kept) == len(again) and track.n_frames == sum(c.n_frames for c in again)
+    for k, c in zip(kept, again, strict=True):
+        idx = [c.names.index(n) for n in k.names]
+        assert np.array_equal(k.positions, c.positions[:, idx])
+        assert not np.any(k.velocities) and k.start_frame == c.start_frame
+    paths = {}
+    for keep in (10**6, 100):  # kept whole; too long to keep: read again
+        paths[keep] = out = tmp_path / f"k{keep}.sidq"
+        enc = encode_files(asf, amc, out, rate=900.0, window=200,
+                           contacts=partial(streamed_contacts, keep=keep))  # fmt: skip
+        assert enc.streams >= 3
+    assert paths[10**6].read_bytes() == paths[100].read_bytes()

@@ -17,6 +17,7 @@ from sidql.keyframes.contact_pinning import (
     decode_runs,
     encode_floor,
     encode_runs,
+    foot_offsets,
     pin_feet,
     two_bone_ik,
 )
@@ -291,3 +292,42 @@ def test_evaluate_rebuilds_any_method_with_the_named_reconstruction():
         assert b["q_hermite"] == a["q"]
     with pytest.raises(ValueError, match="unknown reconstruction"):
         evaluate(cases, ["uniform"], [5], progress=False, reconstruction="nope")
+
+
+def _offsets_by_anchor(bottoms, contact, keyframes):
+    """The horizontal pin offsets as the docstring of ``foot_offsets`` words them, one anchor
+    per keyframe of a run (the offsets that keep the lowest sphere still, 0 at the keyframe),
+    each frame blending the anchors of the keyframes around it: written independently."""
+    N = len(contact)
+    low = bottoms[..., 2].argmin(axis=1)
+    out = np.zeros((N, 2))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], contact.astype(int), [0]])))
+    for a, e in zip(edges[::2], edges[1::2], strict=True):
+        keys = [k for k in keyframes if a <= k < e] or [a]  # none: held where it touched down
+        anchors = []
+        for k in keys:
+            A = np.zeros((e - a, 2))
+            for t in range(k + 1, e):  # after the keyframe: less each step forwards
+                A[t - a] = A[t - 1 - a] - (bottoms[t, low[t], :2] - bottoms[t - 1, low[t], :2])
+            for t in range(k - 1, a - 1, -1):  # before it: plus each step backwards
+                A[t - a] = A[t + 1 - a] + (bottoms[t + 1, low[t], :2] - bottoms[t, low[t], :2])
+            anchors.append(A)
+        for t in range(a, e):
+            i = max(0, min(sum(k <= t for k in keys) - 1, len(keys) - 1))
+            j = min(i + 1, len(keys) - 1)
+            s = 0.0 if t < keys[0] else min(max((t - keys[i]) / max(keys[j] - keys[i], 1), 0), 1)
+            out[t] = (1 - s) * anchors[i][t - a] + s * anchors[j][t - a]
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pinned_horizontal_offsets_are_the_blend_of_each_keyframes_anchor(seed):
+    rng = np.random.default_rng(seed)
+    N = 120
+    bottoms = np.cumsum(rng.normal(0, 0.01, (N, 3, 3)), axis=0)
+    contact = np.repeat(rng.random(N // 8 + 1) < 0.7, 8)[:N]
+    every = rng.random() < 0.3  # every frame a keyframe (dense rates), or some
+    keys = np.arange(N) if every else np.flatnonzero(rng.random(N) < 0.15)
+    got = foot_offsets(bottoms, contact, keys, None)[:, :2]
+    want = _offsets_by_anchor(bottoms, contact, keys)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)

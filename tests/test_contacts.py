@@ -254,13 +254,13 @@ def test_labels_match_mujocos_contacts_in_simulated_motion(cmu_dir, monkeypatch)
     Precision and recall >= 0.95 per foot, pooled over the walks."""
     import functools
 
-    from sim.simulate import generate as generation
+    from sim.simulate import episode_body as body
     from sim.simulate.generate import SynthTask, generate
 
     # The walks must stay up to be compared: on the default sole-box feet the plain tracker
     # with 0.5 body weight of assistance falls in 3 of these 6 (docs/synthetic.md), so they are
     # simulated on the capsule feet of motion capture, whose contacts the labels describe.
-    monkeypatch.setattr(generation, "sim_spec", functools.partial(generation.sim_spec, soles=False))
+    monkeypatch.setattr(body, "sim_spec", functools.partial(body.sim_spec, soles=False))
     counts = {s: np.zeros(3, int) for s in "lr"}  # true positives, labelled, truly in contact
     for subject, trial, seconds in SIMULATED:
         task = SynthTask(

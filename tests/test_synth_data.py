@@ -109,7 +109,7 @@ def test_the_sampling_tracker_replays_bit_for_bit(cmu_dir):
 
 def test_minari_loads_the_export_with_terminations_only_at_falls(synth, tmp_path, monkeypatch):
     minari = pytest.importorskip("minari")  # the test extra installs it
-    from sim.simulate.episode import replay
+    from sim.simulate.episode import replay, split_actions
     from sim.simulate.export import export_minari
 
     out, written = synth
@@ -132,15 +132,17 @@ def test_minari_loads_the_export_with_terminations_only_at_falls(synth, tmp_path
         assert len(ep.actions) == len(ep.rewards) == N and m["total_steps"] == N
         assert np.array_equal(ep.observations["qpos"], labels["sim_tick_qpos"][: N + 1])
         assert np.array_equal(ep.observations["qvel"], labels["sim_tick_qvel"][: N + 1])
-        assert np.array_equal(ep.actions, labels["sim_actions"][:N])
+        targets, gains = split_actions(ep.actions)  # PD targets, then kp and kv per actuator
+        assert np.array_equal(targets, labels["sim_actions"][:N])
+        assert np.array_equal(gains, labels["sim_actuator_gains"][:N])
         assert ds.action_space.contains(ep.actions[0])
         last = np.arange(N) == N - 1
         assert np.array_equal(ep.terminations, last & (fall > 0))
         assert np.array_equal(ep.truncations, last & (fall <= 0))
         assert m["seed"] == r["generation"]["seed"] and m["kind"] == r["subject"]
         assert json.loads(m["generation"]) == r["generation"]
-        q, v = replay(m["mjcf"], m["initial_state"], ep.actions, ep.infos["xfrc_applied"][1:],
-                      ep.infos["qfrc_applied"][1:], int(m["frame_skip"]))  # fmt: skip
+        q, v = replay(m["mjcf"], m["initial_state"], targets, ep.infos["xfrc_applied"][1:],
+                      ep.infos["qfrc_applied"][1:], int(m["frame_skip"]), gains)  # fmt: skip
         assert np.array_equal(q, ep.observations["qpos"]) and np.array_equal(
             v, ep.observations["qvel"]
         )
@@ -173,7 +175,7 @@ def test_minari_export_of_torque_actions_carries_the_torque_body(synth_wholebody
     meta = json.loads(
         (tmp_path / "root" / "sidql/wb-test-v0" / "data" / "metadata.json").read_text()
     )
-    assert meta["actions"] == "torque [N m]"
+    assert meta["actions"].startswith("torque [N m]")
     body = mujoco.MjModel.from_xml_string(meta["mjcf"])
     assert not body.actuator_biasprm[:, 1].any()  # torque actuators, not PD servos
     space = json.loads(meta["action_space"])

@@ -94,13 +94,8 @@ def test_the_contact_consistent_reference_stands_on_the_floor_when_asked(cmu_dir
     """The sampler's reference: with the option its stance soles touch z = 0 (lowest sole
     point within 2 mm in stance), lifted 1 cm without it; the same window either way."""
     from sim.model.humanoid import canonical_skeleton
-    from sim.simulate.generate import (
-        draw_parameters,
-        episode_model,
-        episode_rng,
-        episode_seed,
-        reference_motion,
-    )
+    from sim.simulate.episode_body import episode_model
+    from sim.simulate.generate import draw_parameters, episode_rng, episode_seed, reference_motion
     from sim.simulate.model import CONTROL_HZ, scaled_skeleton
     from sim.simulate.reference import STANCE_GAP, lowest_foot_point
 

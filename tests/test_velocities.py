@@ -248,3 +248,48 @@ def test_derivative_noise_beside_a_pose_jump_is_the_cut_points_own():
     assert g[41, 1] > g[40, 1] > g[39, 1]  # two samples: the nearest piece's fit, extrapolated
     assert np.allclose(g[8:30, 1], 1.0) and np.allclose(g[52 : T - 8, 1], 1.0)
     assert (derivative_noise(2, points=3) == NO_WINDOW_NOISE).all()
+
+
+def _rotations_by_columns(model, qpos):
+    """The oracle: each body's joints composed on (T, 4) quaternion columns with
+    ``quaternion.mul``, the steps as ``rotation_angle`` of consecutive frames."""
+    from sim.model import quaternion as quat
+
+    rot = np.zeros((qpos.shape[0], model.nbody, 4))
+    rot[..., 0] = 1.0
+    moved = np.zeros(model.nbody, dtype=bool)
+    for j in range(model.njnt):
+        kind, adr, b = model.jnt_type[j], model.jnt_qposadr[j], model.jnt_bodyid[j]
+        if kind == mujoco.mjtJoint.mjJNT_HINGE:
+            half = 0.5 * qpos[:, adr]
+            local = np.column_stack([np.cos(half), np.sin(half)[:, None] * model.jnt_axis[j]])
+        elif kind == mujoco.mjtJoint.mjJNT_BALL:
+            local = qpos[:, adr : adr + 4]
+        elif kind == mujoco.mjtJoint.mjJNT_FREE:
+            local = qpos[:, adr + 3 : adr + 7]
+        else:
+            continue
+        rot[:, b] = quat.mul(rot[:, b], local) if moved[b] else local
+        moved[b] = True
+    rel = quat.mul(quat.conj(rot[:-1]), rot[1:])
+    steps = 2 * np.arctan2(np.linalg.norm(rel[..., 1:], axis=-1), np.abs(rel[..., 0]))
+    return rot, steps
+
+
+@pytest.mark.parametrize("subject, trial", [("05", "05_06"), ("17", "17_10"), ("02", "02_01")])
+def test_body_rotations_and_their_steps_equal_quaternion_products_bit_for_bit(
+    cmu_dir, subject, trial
+):
+    from sim.acclaim.amc import parse_amc
+    from sim.motion.retarget import motion_to_qpos
+    from sim.motion.trial import subject_model
+    from sim.motion.velocities import body_joint_rotations
+
+    skeleton, model = subject_model(cmu_dir / subject / f"{subject}.asf")
+    qpos = motion_to_qpos(skeleton, parse_amc(cmu_dir / subject / f"{trial}.amc", skeleton), model)
+    rot, steps = _rotations_by_columns(model, qpos)
+    got = body_joint_rotations(model, qpos)
+    assert got.shape == rot.shape and np.array_equal(got, rot)
+    got_steps = body_rotation_steps(model, qpos)
+    assert got_steps.shape == steps.shape and got_steps.flags.c_contiguous
+    assert np.array_equal(got_steps, steps)

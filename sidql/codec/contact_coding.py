@@ -30,19 +30,27 @@ import numpy as np
 
 from sidql.codec import format as sidq
 from sidql.codec.contact_section import FootContacts
-from sidql.codec.decode import reconstruct_stream
+from sidql.codec.decode import decoded_chart
 from sidql.codec.encode import encode_series
 from sidql.codec.encoded import Encoded
 from sidql.codec.plan import DEFAULT_MAX_GAP, position_weights
 from sidql.keyframes.contact_pinning import (
     decode_floor,
     encode_floor,
+    pin_feet,
     sender_contacts,
     sender_ground,
 )
 from sidql.keyframes.metrics import q_from_angles
 from sidql.keyframes.physical_costs import PHYSICS_WEIGHT, physical_band, scaled, segment_inputs
-from sidql.keyframes.spherical import SphericalSeries, chart, chart_arrays
+from sidql.keyframes.spherical import (
+    POINTS,
+    SphericalSeries,
+    chart,
+    chart_arrays,
+    protocol_maps,
+    split_channels,
+)
 from sidql.keyframes.unchart import positions_from_chart
 from sim.errors import UnmetTargetError, UsageError
 from sim.motion.clip import Clip
@@ -164,37 +172,91 @@ class FootTrack:
         return self.positions.shape[0]
 
 
+#: Frames (at the stream rate) of a take whose 23 protocol points the foot pass keeps for the
+#: windows, so that a take of up to this length is read once, not twice: 10 minutes at 30 fps,
+#: 552 bytes a frame of positions (~10 MB; twice that where the windows need velocities). A longer
+#: take's points are dropped when it passes this length and the take is read again.
+KEPT_FRAMES = 18000
+
+
 def foot_track(clips) -> FootTrack:
     """The :class:`FootTrack` of the take ``clips`` (consecutive clips, read one at a time:
     6 points a frame are kept, 288 bytes, not the whole clip)."""
+    return foot_pass(clips)[0]
+
+
+def foot_pass(clips, *, keep: int = 0, velocities: bool = False):
+    """``(track, kept)``: the :class:`FootTrack` of the take ``clips`` (as :func:`foot_track`)
+    and, when the take has at most ``keep`` frames, its clips on the 23 protocol points alone
+    (:func:`protocol_only`; velocities kept when ``velocities``, else zero), else None."""
     P, V, names, fps, source = [], [], (), 30.0, ""
+    kept, frames = [], 0
     for clip in clips:
         idx = [i for i, n in enumerate(clip.names) if n in FOOT_NAMES]
         names, fps, source = tuple(clip.names[i] for i in idx), clip.fps, clip.source
         P.append(np.ascontiguousarray(clip.positions[:, idx]))
         V.append(np.ascontiguousarray(clip.velocities[:, idx]))
+        frames += clip.n_frames
+        if kept is not None and frames <= keep:
+            kept.append(protocol_only(clip, velocities))
+        else:
+            kept = None  # too long to keep: read again
     if not P:
         raise UsageError("a take needs at least one clip")
-    return FootTrack(names, np.concatenate(P), np.concatenate(V), fps, source)
+    return FootTrack(names, np.concatenate(P), np.concatenate(V), fps, source), kept
 
 
-def streamed_contacts(clips):
-    """``(contacts, encode)`` of the take ``clips`` (a read of its own, with velocities): the
-    whole take's :class:`FootContacts` (floor estimated once on every frame, bits labelled on
-    it: the same as :func:`trial_contacts` of the whole clip) and the encoder of one window's
-    chart with its slice of them (:func:`encode_chart_with_contacts`), for
-    :func:`sidql.codec.windows.encode_windows`."""
-    return trial_contacts(foot_track(clips)), encode_chart_with_contacts
+def protocol_only(clip: Clip, velocities: bool = False) -> Clip:
+    """``clip`` on its 23 protocol points (:data:`~sidql.keyframes.spherical.POINTS`): their
+    positions [m] (a copy), their velocities [m/s] when ``velocities`` (else zero, as a read
+    without velocities gives them); no joint angles (``qpos``, ``qvel`` of width 0) and
+    identity rotations: what :func:`sidql.codec.windows.windows` reads of a clip, in 552 bytes
+    a frame (1104 with velocities)."""
+    idx, parents = protocol_maps(clip)
+    T = clip.n_frames
+    pos = clip.positions[:, idx]
+    vel = clip.velocities[:, idx] if velocities else np.broadcast_to(0.0, pos.shape)
+    return Clip(
+        names=POINTS, parents=np.array(parents, dtype=np.int64), positions=pos, velocities=vel,
+        qpos=np.empty((T, 0)), qvel=np.empty((T, 0)),
+        rotations=np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), (T, len(POINTS), 4)),
+        fps=clip.fps, source=clip.source, start_frame=clip.start_frame,
+        source_fps=clip.source_fps,
+    )  # fmt: skip
+
+
+def streamed_contacts(clips, again=None, *, velocities: bool = False, keep: int = KEPT_FRAMES):
+    """``(contacts, encode, windows)`` of the take ``clips`` (a read of its own, with
+    velocities): the whole take's :class:`FootContacts` (floor estimated once on every frame,
+    bits labelled on it: the same as :func:`trial_contacts` of the whole clip), the encoder of
+    one window's chart with its slice of them (:func:`encode_chart_with_contacts`), for
+    :func:`sidql.codec.windows.encode_windows`, and the take's clips for the windows: those of
+    this read on the protocol points (:func:`protocol_only`) for a take of at most ``keep``
+    frames, else ``again`` (a second read of the take, ``velocities`` as the windows need)."""
+    track, kept = foot_pass(clips, keep=keep, velocities=velocities)
+    return trial_contacts(track), encode_chart_with_contacts, again if kept is None else kept
 
 
 def pinned_errors(series: SphericalSeries, stream: sidq.Stream) -> tuple[float, float, float]:
     """Q [rad] (eq. 18) and the mean and 95th-percentile Euclidean point error [mm] of the
-    decoded (pinned) stream against the true chart ``series``."""
-    rec = reconstruct_stream(stream)
+    decoded (pinned) stream against the true chart ``series``.
+
+    The decoded positions are :func:`sidql.codec.decode.reconstruct_stream`'s (the same
+    operations: its chart, its points, :func:`pin_feet` on the stream's bits, keyframes and
+    floor), without the velocities and accelerations neither figure reads (Q reads the angles,
+    which the chart takes from positions alone)."""
+    chart = decoded_chart(stream)
+    theta, phi, root = split_channels(chart["values"], stream.quantiser.n_bones)
+    dtheta, dphi, root_vel = split_channels(chart["rates"], stream.quantiser.n_bones)
+    del chart
+    P = positions_from_chart(root, root_vel, theta, phi, dtheta, dphi, stream.lengths,
+                             stream.parents)[0]  # fmt: skip
+    c = stream.contacts
+    P = pin_feet(P, c.bits, stream.keyframes, stream.fps, floor=c.floor)
     truth, _ = positions_from_chart(
         series.root_pos, series.root_vel, series.theta, series.phi, series.dtheta, series.dphi,
         series.lengths, series.parents,
     )  # fmt: skip
-    E = 1e3 * np.linalg.norm(rec.positions - truth, axis=-1)
-    s = chart_arrays(rec.positions, rec.velocities, series.parents, series.dt)
+    E = 1e3 * np.linalg.norm(P - truth, axis=-1)
+    s = chart_arrays(P, np.zeros_like(P), series.parents, series.dt)
     return q_from_angles(series, s.theta, s.phi), float(E.mean()), float(np.percentile(E, 95))

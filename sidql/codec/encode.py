@@ -199,10 +199,11 @@ def encode_files(
     skeleton's hash so the decoder can check the ASF it is given. ``kwargs``: the targets and
     options of :func:`encode_series`.
 
-    ``contacts(clips) -> (side, encode)`` (e.g.
-    :func:`sidql.codec.contact_coding.streamed_contacts`): the take is first read once more, with
-    velocities, for the whole take's side information ``side`` (its floor is estimated on every
-    frame), then encoded window by window by ``encode`` with each window's share of ``side``.
+    ``contacts(clips, again, velocities=) -> (side, encode, clips)`` (e.g.
+    :func:`sidql.codec.contact_coding.streamed_contacts`): the take is first read with
+    velocities for the whole take's side information ``side`` (its floor is estimated on every
+    frame), then encoded window by window by ``encode`` with each window's share of ``side``,
+    from the clips it returns (those it kept of its read, or ``again``: a second read).
     ``encoder(clip, **kwargs) -> Encoded``: when given (e.g.
     :func:`sidql.codec.contact_coding.encode_with_contacts` with the physical cost), the take is
     read whole (:func:`sim.motion.ingest.load_motion`) and encoded as one stream by it: memory
@@ -221,7 +222,7 @@ def encode_files(
         return one_stream(enc)
     encode, side = encode_series, None
     if contacts is not None:
-        side, encode = contacts(_take(asf, amc, fps, True))
+        side, encode, clips = contacts(_take(asf, amc, fps, True), clips, velocities=rates)
     done = []
 
     def write(f):

@@ -25,6 +25,7 @@ from sim.simulate.generate import (
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
     SYNTH_DRIFT,
+    SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
 )
 
@@ -96,6 +97,13 @@ def register(p) -> None:
         p.add_argument(f"--{flag}", action=BooleanOptionalAction, default=None,
                        help=f"{what} (default: {'on' if default else 'off'}; recorded)")  # fmt: skip
     p.add_argument(
+        "--gain-choice", type=float, default=None, metavar="SHARE",
+        help="share of the sampler's candidates per window that roll out on the stiff feedback "
+        "gains, the gains chosen with the candidate (0: the body's gains alone; default "
+        f"{SYNTH_GAIN_CHOICE:g}); each tick's gains are stored with its action, so episodes "
+        "still replay bit for bit (recorded)",
+    )  # fmt: skip
+    p.add_argument(
         "--resume", action="store_true",
         help="continue the run whose journal (OUT/journal.jsonl) is in --out: clips are stored "
         "as they arrive, so a stopped run keeps them and is not simulated again",
@@ -124,6 +132,10 @@ def run(args) -> int:
         raise UsageError(
             f"--assist must be 0 .. 1 body weights, with the plain tracker; got {args.assist}"
         )
+    if args.gain_choice is not None and not 0 <= args.gain_choice <= 1:
+        raise UsageError(f"--gain-choice must be a share 0 .. 1; got {args.gain_choice}")
+    if args.gain_choice and args.controller not in (None, "sampling"):
+        raise UsageError(f"--gain-choice is the sampler's; not for --controller {args.controller}")
     if not 0 <= args.seed < 2**31:
         raise UsageError(f"--seed must be in 0 .. 2**31 - 1; got {args.seed}")
     if args.export_minari and not DATASET_ID.match(args.minari_id):
@@ -136,6 +148,7 @@ def run(args) -> int:
         workers=args.workers, ray=args.ray,
         progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
         drift=args.drift, contact_reference=args.contact_reference, lean=args.lean,
+        gain_choice=args.gain_choice,
     )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "

@@ -196,7 +196,7 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
         proj: (N, 4K) the head's per-frame projections of the encoder output (self, left, right,
             segment); glob: (K,) its clip-wide term; cost: (N, N) segment costs; W: keyframes;
             use_prior: add the greedy-rollout prior (:mod:`sidql.learning.rollout`) as the torch head does.
-        ws, bs: the scalar-input layer (K, 11), (K,); w1, b1, w2, b2: the advantage MLP;
+        ws, bs: the scalar-input layer (K, 11) (as torch holds it), (K,); w1, b1, w2, b2: the advantage MLP;
         wv1, bv1, wv2, bv2: the value MLP (weights as in torch, ``out x in``).
     """
     n = cost.shape[0]
@@ -224,15 +224,16 @@ def decide_clip(proj, glob, cost, W, use_prior, ws, bs, w1, b1, w2, b2, wv1, bv1
     rows = np.empty(n, np.int64)
     seg_best = np.zeros(n)
     w1t = np.ascontiguousarray(w1.T)
+    wst = np.ascontiguousarray(ws.T)  # (11, K): rows along K
     for step in range(W - 2):
         rem = W - 2 - step
         e = _segments(mask, cost, s0, new_left, new_right)
         if use_prior:
             prior = rollout_values_seq(cost, mask, rem, seq, length)
-        _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_right, left,
+        _segment_features(mask, cost, s0, proj, glob, csum, wst, bs, new_left, new_right, left,
                           right, g1, base, gain2)  # fmt: skip
         top1, top2 = _two_best(mask, new_right, g1, seg_best)
-        adv_mean, value = _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1,
+        adv_mean, value = _advantages(mask, left, seg_best, base, wst, rem, top1, top2, w1t, b1,
                                       w2, b2, wv1, bv1, wv2, bv2, zs, zsum, rows, adv)  # fmt: skip
         best_a = _best_action(mask, g1, adv, prior, value, adv_mean, e, rem, use_prior)
         mask[best_a] = True
@@ -267,7 +268,8 @@ def _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_ri
     """The segment features of the free frames whose segment changed: their reward ``g1`` (N,)
     and the part of the head's scalar layer that depends on the segment, ``base`` (N, K).
     ``gain2``: (N, N) each segment's best split gain (:func:`sidql.learning.rollout.best_splits`,
-    -inf where none): the second-step gains left and right of a frame, floored at 0."""
+    -inf where none): the second-step gains left and right of a frame, floored at 0. ``ws``:
+    the scalar layer's weights as (11, K) (input by output: rows read along K vectorise)."""
     n = cost.shape[0]
     k = glob.shape[0]
     for a in range(n):
@@ -291,9 +293,9 @@ def _segment_features(mask, cost, s0, proj, glob, csum, ws, bs, new_left, new_ri
             base[a, j] = (
                 proj[a, j] + proj[l, k + j] + proj[r, 2 * k + j]
                 + (csum[r + 1, j] - csum[l, j]) * inv + glob[j] + bs[j]
-                + ws[j, 0] * s_0 + ws[j, 1] * s_1 + ws[j, 2] * s_2 + ws[j, 4] * g1[a]
-                + ws[j, 5] * g2l / s0 + ws[j, 6] * g2r / s0 + ws[j, 7] * c_lr / s0
-                + ws[j, 8] * c_la / s0 + ws[j, 9] * c_ar / s0
+                + ws[0, j] * s_0 + ws[1, j] * s_1 + ws[2, j] * s_2 + ws[4, j] * g1[a]
+                + ws[5, j] * g2l / s0 + ws[6, j] * g2r / s0 + ws[7, j] * c_lr / s0
+                + ws[8, j] * c_la / s0 + ws[9, j] * c_ar / s0
             )  # fmt: skip
 
 
@@ -324,9 +326,9 @@ def _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1, w2, b2
                 wv2, bv2, zs, zsum, rows, adv):  # fmt: skip
     """The advantage MLP of every free frame into ``adv`` (N,) and the value MLP over their
     mean hidden input; returns (mean advantage, value). ``seg_best``: each segment's best
-    reward (:func:`_two_best`); ``w1t``: the advantage MLP's first layer as (in, out), applied
-    to every free frame in one matrix product; ``zs`` (N, K), ``zsum`` (K,), ``rows`` (N,):
-    scratch."""
+    reward (:func:`_two_best`); ``ws``: the scalar layer as (11, K); ``w1t``: the advantage
+    MLP's first layer as (in, out), applied to every free frame in one matrix product; ``zs``
+    (N, K), ``zsum`` (K,), ``rows`` (N,): scratch."""
     n = mask.shape[0]
     k = base.shape[1]
     hdim = b1.shape[0]
@@ -340,7 +342,7 @@ def _advantages(mask, left, seg_best, base, ws, rem, top1, top2, w1t, b1, w2, b2
         if not np.isfinite(other) or other < 0.0:
             other = 0.0
         for j in range(k):
-            v = base[a, j] + ws[j, 3] * rem / n + ws[j, 10] * other
+            v = base[a, j] + ws[3, j] * rem / n + ws[10, j] * other
             zs[n_free, j] = v if v > 0.0 else 0.0
             zsum[j] += zs[n_free, j]
         rows[n_free] = a

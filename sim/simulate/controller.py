@@ -322,9 +322,9 @@ def track(
             (the corrections a sampling controller found: ``sim.simulate.sampling``); None: none.
         balance: gains of the balance feedback (``sim.simulate.balance``) whose torques are
             added to the targets (as ``tau / kp``) while the body is up; None: none.
-        recorder: called as ``recorder(k, data)`` at each control tick ``k`` just before its
-            ``SUBSTEPS`` physics steps (controls and applied forces set) and as ``recorder(T,
-            data)`` after the last (``sim.simulate.episode.Recorder``); None: none.
+        recorder: ``recorder(k, data, model)`` at each tick ``k`` before its physics steps
+            (controls, forces and the tick's model, ``switch``'s, set) and ``recorder(T, data,
+            model)`` after the last (``sim.simulate.episode.Recorder``); None: none.
         switch: (models, choice (T,) ints): tick ``k`` runs on ``models[choice[k]]``,
             ``model``'s body with other gains (``sim.simulate.gainchoice``); None: ``model``.
     """
@@ -359,7 +359,7 @@ def track(
             rec.fall(k)
         rec.contacts(data, plan.floor, i)
         if recorder is not None:
-            recorder(k, data)
+            recorder(k, data, model)  # this tick's model: its gains act
         mujoco.mj_step(model, data)  # the first step computes this tick's actuator force
         if i is not None:
             rec.torque[i] = data.actuator_force
@@ -367,5 +367,5 @@ def track(
         if SUBSTEPS > 1:
             mujoco.mj_step(model, data, nstep=SUBSTEPS - 1)
     if recorder is not None:
-        recorder(T, data)
+        recorder(T, data, model)
     return rec.result(model, data, fell)

@@ -41,6 +41,7 @@ from sim.simulate.generate import (
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
     SYNTH_DRIFT,
+    SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
     TASK_OPTIONS,
     SynthTask,
@@ -105,7 +106,7 @@ def iter_tasks(
     controller: str = SYNTH_DEFAULT_CONTROLLER,
     assist: float = 0.0,
     threads: int = 1,
-    **options: bool,
+    **options,
 ) -> Iterator[SynthTask]:
     """The plan: an endless stream of tasks cycling through ``kinds``; real-motion kinds take
     ``trials`` in seeded shuffled rounds (every trial once per round). Every prefix is the same
@@ -168,6 +169,7 @@ def synthesize(
     drift: bool | None = None,
     contact_reference: bool | None = None,
     lean: bool | None = None,
+    gain_choice: float | None = None,
 ) -> DatasetSummary:
     """Generate ``n`` clips into ``out_dir`` (see the module docstring).
 
@@ -187,7 +189,9 @@ def synthesize(
     worker (the clips do not depend on it). ``assist``: the real-motion kinds' root assistance
     bound [body weight], 0 (none) unless asked for (with the plain tracker only). ``drift``,
     ``contact_reference``, ``lean``: ``SynthTask``'s options (None: ``generate.SYNTH_DRIFT``,
-    ``SYNTH_CONTACT_REFERENCE``, ``SYNTH_LEAN``), recorded in the journal and the index.
+    ``SYNTH_CONTACT_REFERENCE``, ``SYNTH_LEAN``), recorded in the journal and the index;
+    ``gain_choice``: the sampler's share of candidates on the stiff gains (None:
+    ``SYNTH_GAIN_CHOICE`` with the sampler, 0 with another controller), likewise.
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
@@ -204,10 +208,16 @@ def synthesize(
     if not 0 <= assist <= 1 or (assist and controller != "plain"):
         raise UsageError(f"assistance {assist} BW: 0 .. 1, and only for the plain tracker")
     require_positive(threads, "threads")
-    chosen = zip(TASK_OPTIONS, (drift, contact_reference, lean),
+    if gain_choice is not None and not (0 <= gain_choice <= 1):
+        raise UsageError(f"gain choice {gain_choice}: expected a share 0 .. 1")
+    if gain_choice and controller != "sampling":
+        raise UsageError(f"a gain choice is the sampler's; not for the {controller} controller")
+    share = SYNTH_GAIN_CHOICE if gain_choice is None and controller == "sampling" else gain_choice
+    chosen = zip(TASK_OPTIONS[:3], (drift, contact_reference, lean),
                  (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN), strict=True)  # fmt: skip
     task = {"samples": samples, "controller": controller, "assist": float(assist),
-            "threads": int(threads), **{k: bool(d if v is None else v) for k, v, d in chosen}}  # fmt: skip
+            "threads": int(threads), **{k: bool(d if v is None else v) for k, v, d in chosen},
+            "gain_choice": float(share or 0.0)}  # fmt: skip
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
@@ -226,7 +236,7 @@ def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task_kw, workers, r
         "max_assistance": max_assistance, "max_tries": max_tries,
         **({"samples": task_kw["samples"]} if task_kw["samples"] else {}),
         "controller": task_kw["controller"], "assist": task_kw["assist"],
-        **{k: True for k in TASK_OPTIONS if task_kw[k]},  # absent: False (runs before them)
+        **{k: task_kw[k] for k in TASK_OPTIONS if task_kw[k]},  # absent: off (runs before them)
     }  # fmt: skip
     out_dir.mkdir(parents=True, exist_ok=True)  # after the input checks: bad input leaves nothing
     done = read_journal(out_dir, params, trials) if resume else {}  # checked before any write

@@ -11,11 +11,13 @@ the whole clip):
 * ``observations/qpos`` (N + 1, nq), ``observations/qvel`` (N + 1, nv): the simulator's state
   before each step and after the last (root position [m], quaternion wxyz, hinge angles [rad];
   velocities [m/s, rad/s], z up);
-* ``actions`` (N, U): the control of each step, inside each actuator's control range
-  (``sim.simulate.model.sim_spec``): the hinges' PD targets [rad], feed-forward folded in (plain
-  and sampling trackers), or their torques [N m] (the whole-body QP's torque actuators: the
-  torque that acts, ``sim.simulate.episode.Recorder``); one kind per dataset (metadata
-  ``actions``);
+* ``actions``: the action of each step. With position actuators (plain and sampling trackers)
+  (N, 3 U) variable-impedance actions (``sim.simulate.episode.impedance_actions``): the hinges'
+  PD targets [rad] (feed-forward folded in, inside each actuator's control range,
+  ``sim.simulate.model.sim_spec``), then each actuator's ``kp`` [N m/rad] and ``kv`` [N m s/rad]
+  of the step (the gain set the controller chose: ``sim_actuator_gains``); with torque
+  actuators (the whole-body QP) (N, U) their torques [N m] (the torque that acts,
+  ``sim.simulate.episode.Recorder``); one kind per dataset (metadata ``actions``);
 * ``rewards`` (N,): zeros (imitation data); ``terminations`` (N,): True only at the last step
   of an episode that ends in a fall (the state it reaches is the first fallen one);
   ``truncations`` (N,): True only at the last step of one that does not (the clip's length);
@@ -32,12 +34,15 @@ the whole clip):
 ``root/<dataset_id>/data/metadata.json`` (written last): Minari's keys (``dataset_id``,
 ``minari_version``, ``data_format``, ``total_episodes``, ``total_steps``, the serialised
 ``observation_space`` (a Dict of two Boxes) and ``action_space`` (a Box spanning every episode's
-control range)) plus ``frame_skip``, ``joint_names`` and the unscaled body's ``mjcf`` and
-``torque_limit`` (U,) [N m] (an episode of another body size carries its own).
+control range and, for variable-impedance actions, every gain seen)) plus ``frame_skip``,
+``joint_names``, ``actions`` (what an action is), ``action_layout`` (its columns) and the
+unscaled body's ``mjcf`` and ``torque_limit`` (U,) [N m] (an episode of another body size
+carries its own).
 
-Replaying an episode: ``sim.simulate.episode.replay(mjcf, initial_state, actions,
-infos["xfrc_applied"][1:], infos["qfrc_applied"][1:], frame_skip)`` gives back its observations
-bit for bit.
+Replaying an episode: ``targets, gains = sim.simulate.episode.split_actions(actions)`` (torque
+actions: ``actions``, ``None``), then ``replay(mjcf, initial_state, targets,
+infos["xfrc_applied"][1:], infos["qfrc_applied"][1:], frame_skip, gains)`` gives back its
+observations bit for bit.
 """
 
 from __future__ import annotations
@@ -56,8 +61,18 @@ from sim.files import write_atomic
 from sim.model.humanoid import canonical_skeleton
 from sim.motion.clip import load_extra
 from sim.motion.dataset import entry_file, read_index
-from sim.simulate.episode import array_text, torque_limits
-from sim.simulate.generate import EPISODE_LABELS, episode_model
+from sim.simulate.episode import array_text, impedance_actions, is_position, pd_gains, torque_limits
+from sim.simulate.episode_body import episode_model
+from sim.simulate.generate import EPISODE_LABELS
+
+#: the episode labels only a body of position actuators has
+POSITION_LABELS = ("sim_actuator_gains",)
+#: what an action is, per kind of actuators (metadata ``actions``), and its columns, U each
+ACTIONS = {
+    "motor": "torque [N m] per actuator",
+    "position": "variable impedance: PD target [rad], kp [N m/rad], kv [N m s/rad] per actuator",
+}
+LAYOUT = {"motor": ("torque",), "position": ("target", "kp", "kv")}
 
 MINARI_VERSION = "0.5.4"  # the dataset format written (Minari's supported_dataset_versions)
 DEFAULT_ID = "sidql/synth-v0"
@@ -79,20 +94,35 @@ def _box(low, high) -> dict:
             "low": low.tolist(), "high": high.tolist()}  # fmt: skip
 
 
+def episode_actions(labels: dict, model) -> np.ndarray:
+    """(T, 3 U) the variable-impedance actions of a clip's episode (its ``sim_`` ``labels``) on
+    a body of position actuators ``model`` (its MJCF's; the MJCF's gains at every tick where
+    the clip has no ``sim_actuator_gains``), or (T, U) the torques of torque actuators."""
+    actions = labels["sim_actions"]
+    if not is_position(model):
+        return actions
+    gains = labels.get("sim_actuator_gains")
+    if gains is None:
+        gains = np.broadcast_to(pd_gains(model), (len(actions), 2, model.nu))
+    return impedance_actions(actions, gains)
+
+
 def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray, str]:
     """Write clip ``r`` (its index entry, its ``sim_`` labels) as ``episode_<k>``; returns its
-    step count, its (U, 2) control range and its actuators (:func:`_actuators`; from its MJCF's
-    model)."""
-    missing = set(EPISODE_LABELS) - set(labels)
+    step count, its action box (2, A) (lowest and highest: the control range, and the gains
+    of its steps) and its actuators (:func:`_actuators`; from its MJCF's model)."""
+    missing = set(EPISODE_LABELS) - set(POSITION_LABELS) - set(labels)
     if missing:
         raise MotionDataError(r["file"], None, f"no {min(missing)}: not a synth episode")
+    model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
     N = episode_steps(labels)
     fell = 0 < int(labels["sim_fall_tick"]) <= N
     g = h.create_group(f"episode_{k}")
     obs = g.create_group("observations")
     obs.create_dataset("qpos", data=labels["sim_tick_qpos"][: N + 1])
     obs.create_dataset("qvel", data=labels["sim_tick_qvel"][: N + 1])
-    g.create_dataset("actions", data=labels["sim_actions"][:N])
+    actions = episode_actions(labels, model)[:N]
+    g.create_dataset("actions", data=actions)
     g.create_dataset("rewards", data=np.zeros(N))
     end = np.zeros(N, dtype=bool)
     end[-1] = True
@@ -113,14 +143,48 @@ def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray, s
         fall_tick=int(labels["sim_fall_tick"]), physical=bool(r.get("physical", False)),
         mean_assistance=float(r.get("mean_assistance", 0.0)),
     )  # fmt: skip
-    model = mujoco.MjModel.from_xml_string(array_text(labels["sim_mjcf"]))
-    return N, model.actuator_ctrlrange.copy(), _actuators(model)
+    lo, hi = model.actuator_ctrlrange.T
+    if actions.shape[1] > model.nu:  # the gains' columns: the lowest and highest seen
+        lo, hi = np.r_[lo, actions[:, model.nu :].min(0)], np.r_[hi, actions[:, model.nu :].max(0)]
+    return N, np.stack([lo, hi]), _actuators(model)
 
 
 def _actuators(model) -> str:
     """``"motor"`` (torque actuators: the action is a torque [N m]) or ``"position"`` (PD
     servos: the action is a target angle [rad]), as ``sim.simulate.model.sim_spec`` names them."""
-    return "position" if model.actuator_biasprm[:, 1].any() else "motor"
+    return "position" if is_position(model) else "motor"
+
+
+def _metadata(dataset_id: str, labels: dict, steps: list, ranges: np.ndarray, actuators: str):
+    """``metadata.json``'s content (module docstring): ``labels`` of the first episode,
+    ``steps`` per episode, ``ranges`` (E, 2, A) their action boxes, ``actuators`` their kind."""
+    model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0, actuators)
+    nq, nv = labels["sim_tick_qpos"].shape[1], labels["sim_tick_qvel"].shape[1]
+    inf = np.full(nq, np.inf)
+    return {
+        "dataset_id": dataset_id,
+        "minari_version": MINARI_VERSION,
+        "data_format": "hdf5",
+        "jpeg_encoding": False,
+        "total_episodes": len(steps),
+        "total_steps": int(sum(steps)),
+        "observation_space": json.dumps(
+            {
+                "type": "Dict",
+                "subspaces": {"qpos": _box(-inf, inf), "qvel": _box(-inf[:nv], inf[:nv])},
+            }
+        ),  # fmt: skip
+        "action_space": json.dumps(_box(ranges[:, 0].min(0), ranges[:, 1].max(0))),
+        "description": "sidql synth: simulated humanoid clips (docs/synthetic.md)",
+        "frame_skip": int(labels["sim_frame_skip"]),
+        "joint_names": [model.actuator(a).name for a in range(model.nu)],
+        "mjcf": mjcf,
+        "torque_limit": torque_limits(model).tolist(),
+        "actions": ACTIONS[actuators],
+        "action_layout": {
+            name: [i * model.nu, (i + 1) * model.nu] for i, name in enumerate(LAYOUT[actuators])
+        },  # fmt: skip
+    }
 
 
 def export_minari(
@@ -172,33 +236,9 @@ def export_minari(
                                           "folder: export the controllers' clips apart")  # fmt: skip
 
     write_atomic(out / "main_data.hdf5", write, root=root)
-    labels = load_extra(files[0][1], "sim_")
-    ranges = np.stack(ranges)
     (actuators,) = kinds
-    model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0, actuators)
-    nq, nv = labels["sim_tick_qpos"].shape[1], labels["sim_tick_qvel"].shape[1]
-    inf = np.full(nq, np.inf)
-    metadata = {
-        "dataset_id": dataset_id,
-        "minari_version": MINARI_VERSION,
-        "data_format": "hdf5",
-        "jpeg_encoding": False,
-        "total_episodes": len(files),
-        "total_steps": int(sum(steps)),
-        "observation_space": json.dumps(
-            {
-                "type": "Dict",
-                "subspaces": {"qpos": _box(-inf, inf), "qvel": _box(-inf[:nv], inf[:nv])},
-            }
-        ),  # fmt: skip
-        "action_space": json.dumps(_box(ranges[:, :, 0].min(0), ranges[:, :, 1].max(0))),
-        "description": "sidql synth: simulated humanoid clips (docs/synthetic.md)",
-        "frame_skip": int(labels["sim_frame_skip"]),
-        "joint_names": [model.actuator(a).name for a in range(model.nu)],
-        "mjcf": mjcf,
-        "torque_limit": torque_limits(model).tolist(),
-        "actions": "torque [N m]" if actuators == "motor" else "PD target [rad]",
-    }
+    metadata = _metadata(dataset_id, load_extra(files[0][1], "sim_"), steps, np.stack(ranges),
+                         actuators)  # fmt: skip
     text = json.dumps(metadata, indent=1).encode()
     write_atomic(out / "metadata.json", lambda f: f.write(text), root=root)
     return len(files)

@@ -20,7 +20,9 @@ the first the fallback (the default gains):
 A parent's offset [rad] carries over to a child on other gains as the same torque (times the
 parent's ``kp`` over the child's). The chosen offsets and gains are replayed by
 ``sim.simulate.controller.track(..., switch=(models, choice))``: one ordinary simulation.
-Deterministic given ``seed``; with ``share`` 0 and no fallback it is ``sampling.search_offsets``
+How the rollouts are spent (recovery, staged windows, the window-end cost, proposal adaptation)
+is ``plan``'s (``sim.simulate.searchplan``; its defaults change nothing). Deterministic given
+``seed``; with ``share`` 0, no fallback and the default plan it is ``sampling.search_offsets``
 bit for bit.
 """
 
@@ -34,7 +36,7 @@ import numpy as np
 
 from sim.errors import UsageError
 from sim.simulate.balance import Balance
-from sim.simulate.controller import Tracking, track
+from sim.simulate.controller import Push, Tracking, Weakening, track
 from sim.simulate.sampling import (
     BALANCE,
     LOOKAHEAD,
@@ -44,6 +46,14 @@ from sim.simulate.sampling import (
     _check_window,
     _first_state,
     _problem,
+)
+from sim.simulate.searchplan import (
+    SearchPlan,
+    adapted_scale,
+    boosted,
+    may_recover,
+    stage_sizes,
+    window_end_costs,
 )
 
 
@@ -84,10 +94,11 @@ def common_body(models) -> tuple:
     return tuple(models)
 
 
-def _offsets(rng, last, last_set, parents, cand_set, probs, persistence) -> np.ndarray:
+def _offsets(rng, last, last_set, parents, cand_set, probs, persistence, scale=None) -> tuple:
     """(S, nu) the candidates' offsets [rad]: each parent's last offset (``last`` (K, nu), on
     gains ``last_set`` (K,)) as the same torque on the candidate's gains ``cand_set`` (S,),
-    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``)."""
+    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``) times ``scale`` (nu,;
+    None: 1); and the standard normal draws (S, nu) of that noise."""
     noise = rng.standard_normal((len(parents), last.shape[1]))
     start = last[parents]
     moved = last_set[parents] != cand_set
@@ -95,7 +106,9 @@ def _offsets(rng, last, last_set, parents, cand_set, probs, persistence) -> np.n
         kp = np.array([p.kp for p in probs])
         start[moved] *= kp[last_set[parents][moved]] / kp[cand_set[moved]]
     sigma = np.array([p.sigma for p in probs])[cand_set]
-    return persistence * start + sigma * noise
+    if scale is not None:
+        sigma = sigma * scale
+    return persistence * start + sigma * noise, noise
 
 
 def _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool):
@@ -112,11 +125,100 @@ def _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, po
     return cost
 
 
+@dataclass(frozen=True)
+class _Search:
+    """What every window of :func:`choice_search` shares: the gain sets' models, their
+    ``MjData`` per thread and problems, the cost's weights, the state spec, the proposal's
+    persistence, the choice, the plan, the thread pool, the state's size and the perturbations
+    (pushes, weakenings) every rollout meets."""
+
+    models: tuple
+    datas: list
+    probs: list
+    weights: CostWeights
+    spec: object
+    persistence: float
+    choice: GainChoice
+    plan: SearchPlan
+    pool: object
+    size: int
+    perturb: tuple = ((), ())
+
+
+def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
+    """Candidates ``idx`` (n,) of a window rolled out from the kept states ``kept`` = (states,
+    last offsets, last gain sets): their parents (``idx`` modulo the kept), gain sets (``sets``,
+    else ``choice.share`` of them on ``models[1]``, last), offsets, costs and window-end
+    (states, ``qpos``)."""
+    states, last, last_set, scale = kept
+    parents = idx % len(states)
+    if sets is None:
+        n_alt = int(round(ctx.choice.share * len(idx))) if len(ctx.models) > 1 else 0
+        sets = np.r_[np.zeros(len(idx) - n_alt, int), np.ones(n_alt, int)]
+    offs, noise = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence, scale)
+    out = np.empty((len(idx), ctx.size)), np.empty((len(idx), ctx.models[0].nq))
+    search = states, ctx.weights, ctx.perturb, ctx.spec
+    cost = _costs(ctx.models, ctx.datas, ctx.probs, search, parents, offs, sets, ticks, out,
+                  ctx.pool)  # fmt: skip
+    return parents, offs, sets, cost, out, noise
+
+
+def _join(parts: list) -> tuple:
+    """The stages' (parents, offsets, sets, costs, (states, qpos), noise) as one window's."""
+    if len(parts) == 1:
+        return parts[0]
+    cat = [np.concatenate([p[i] for p in parts]) for i in range(4)]
+    out = tuple(np.concatenate([p[4][i] for p in parts]) for i in range(2))
+    return (*cat, out, np.concatenate([p[5] for p in parts]))
+
+
+def _window(ctx: _Search, rng, n: int, kept, ticks) -> tuple:
+    """One window's ``n`` candidates from ``kept`` (:func:`_stage`), staged as ``plan.first``
+    says, with the fallback on the default gains (``choice.fallback``) and the window-end cost
+    (``plan.end_cost``) added: (parents, offsets, sets, costs, (states, qpos)), and whether
+    every candidate fell."""
+    fall = ctx.weights.fall
+    n1, n2 = stage_sizes(n, ctx.plan.first)
+    parts = [_stage(ctx, rng, np.arange(n1), kept, ticks)]
+    if n2 and fall > 0 and parts[0][3].max() >= fall:  # one fell: a hard window, all of them
+        parts.append(_stage(ctx, rng, np.arange(n1, n), kept, ticks))
+    cand = _join(parts)
+    fell = fall > 0 and cand[3].min() >= fall
+    if fell and ctx.choice.fallback and cand[2].any():  # the default gains too
+        n = len(cand[3])
+        cand = _join([cand, _stage(ctx, rng, np.arange(n), kept, ticks, np.zeros(n, int))])
+    parents, offs, sets, cost, out, noise = cand
+    if ctx.plan.end_cost:
+        prob = ctx.probs[0]  # the kinematics and the reference are every gain set's
+        end = window_end_costs(ctx.models[0], ctx.datas[0][0], prob, out[0], ctx.spec,
+                               ticks[1], ctx.weights, cost)  # fmt: skip
+        cost = cost + ctx.plan.end_cost * end
+    return (parents, offs, sets, cost, out, noise), fell
+
+
+def _select(kept, costs: np.ndarray, cand: tuple, keep: int, adapt: float) -> tuple:
+    """The ``keep`` cheapest of a window's candidates ``cand`` = (parents, offsets, sets,
+    costs, (states, qpos), noise), each paying its parent's cost ``costs`` too: the next
+    ``kept`` (states, offsets, sets, the noise's scale adapted at ``adapt``), their costs, and
+    the window's steps of the offsets' and the sets' histories (for ``_backtrack``)."""
+    parents, offs, sets, cost, out, noise = cand
+    new_costs = costs[parents] + cost
+    best = np.argsort(new_costs, kind="stable")[:keep]
+    chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
+    steps = (
+        (parents[best], offs[best], out[1][best].copy()),
+        (parents[best], chosen_sets, np.zeros((len(best), 1))),
+    )
+    scale = adapted_scale(kept[3], noise[best], adapt)
+    return (out[0][best].copy(), offs[best], sets[best], scale), new_costs[best], steps
+
+
 def choice_search(
     models,
     ref_qpos: np.ndarray,
     *,
     choice: GainChoice = GainChoice(),
+    plan: SearchPlan | None = None,
     samples: int = 64,
     keep: int = 8,
     window: int = 12,
@@ -128,61 +230,63 @@ def choice_search(
     threads: int = 1,
     balance: Balance | None = BALANCE,
     noise_deflection: float = 0.0,
+    pushes: tuple[Push, ...] = (),
+    weakenings: tuple[Weakening, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
-    sampling rollouts as ``sampling.search_offsets`` (the same arguments) with each window's
-    candidates spread over the gain sets by ``choice`` (module docstring).
+    sampling rollouts as ``sampling.search_offsets`` (the same arguments, the perturbations
+    ``pushes`` and ``weakenings`` met by every rollout) with each window's candidates spread
+    over the gain sets by ``choice`` (module docstring) and the rollouts spent as ``plan`` says
+    (``sim.simulate.searchplan``: recovery, staged windows, the window-end cost, adaptation).
 
     Returns:
         ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
         ``window_qpos`` (W, nq): on the chosen path, the rolled out ``qpos`` at each window's
         end (what the replay reaches there while the body is up).
     """
-    weights = weights or CostWeights()
+    weights, plan = weights or CostWeights(), plan or SearchPlan()
     T, nu = ref_qpos.shape[0], models[0].nu
     rng = np.random.default_rng(seed)
     n_threads = max(1, min(int(threads), samples))
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
     probs = [
-        _problem(m, ref_qpos, d[0], torque_sigma, (), falls=weights.fall > 0, balance=balance,
+        _problem(m, ref_qpos, d[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
                  noise_deflection=noise_deflection)
         for m, d in zip(models, datas, strict=True)
     ]  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
-    costs, last, last_set = np.zeros(1), np.zeros((1, nu)), np.zeros(1, dtype=int)
-    n_alt = int(round(choice.share * samples)) if len(models) > 1 else 0
-    cand_set = np.r_[np.zeros(samples - n_alt, int), np.ones(n_alt, int)]
-    size = states.shape[1]
-    history, set_history = [], []
+    # the kept states, their last offsets and gain sets, and the noise's scale (nu,)
+    kept = states, np.zeros((1, nu)), np.zeros(1, dtype=int), np.ones(nu)
+    costs = np.zeros(1)
+    n_windows = -(-T // window)
     pool = ThreadPoolExecutor(n_threads) if n_threads > 1 else None
+    ctx = _Search(tuple(models), datas, probs, weights, spec, persistence, choice, plan, pool,
+                  states.shape[1], (pushes, weakenings))  # fmt: skip
+    history, set_history, snaps = [], [], []
+    tried, boost_to, spent, w = set(), -1, 0, 0
     try:
-        for k0 in range(0, T, window):
+        while w < n_windows:
+            k0 = w * window
             ticks = k0, min(T, k0 + window), min(T, k0 + window + lookahead)
-            parents = np.arange(samples) % len(states)
-            offs = _offsets(rng, last, last_set, parents, cand_set, probs, persistence)
-            search = states, weights, ((), ()), spec
-            out = np.empty((samples, size)), np.empty((samples, models[0].nq))
-            cost = _costs(models, datas, probs, search, parents, offs, cand_set, ticks, out, pool)
-            sets = cand_set
-            if choice.fallback and n_alt and weights.fall > 0 and cost.min() >= weights.fall:
-                fb_set = np.zeros(samples, int)  # every candidate fell: the default gains too
-                fb_offs = _offsets(rng, last, last_set, parents, fb_set, probs, persistence)
-                fb_out = np.empty((samples, size)), np.empty((samples, models[0].nq))
-                fb = _costs(models, datas, probs, search, parents, fb_offs, fb_set, ticks,
-                            fb_out, pool)  # fmt: skip
-                parents, offs, cost = np.r_[parents, parents], np.r_[offs, fb_offs], np.r_[cost, fb]
-                out = np.r_[out[0], fb_out[0]], np.r_[out[1], fb_out[1]]
-                sets = np.r_[cand_set, fb_set]
-            new_costs = costs[parents] + cost
-            best = np.argsort(new_costs, kind="stable")[:keep]
-            history.append((parents[best], offs[best], out[1][best].copy()))
-            chosen_sets = sets[best][:, None].astype(float)  # backtracked as a 1-wide offset
-            set_history.append((parents[best], chosen_sets, np.zeros((len(best), 1))))
-            states, costs = out[0][best].copy(), new_costs[best]
-            last, last_set = offs[best], sets[best]
+            del snaps[w:]
+            snaps.append((kept, costs))
+            n = boosted(plan, samples) if w <= boost_to else samples
+            (parents, offs, sets, cost, out, noise), fell = _window(ctx, rng, n, kept, ticks)
+            spent += len(cost)
+            back = may_recover(plan, w, tried, spent, (samples, n_windows)) if fell else -1
+            if back >= 0:  # every candidate fell: back up and search again with more
+                tried.add(w)
+                boost_to, (kept, costs), w = w, snaps[back], back
+                del history[back:], set_history[back:]
+                continue
+            kept, costs, steps = _select(kept, costs, (parents, offs, sets, cost, out, noise),
+                                         keep, plan.adapt)  # fmt: skip
+            history.append(steps[0])
+            set_history.append(steps[1])
+            w += 1
     finally:
         if pool is not None:
             pool.shutdown()
@@ -192,16 +296,20 @@ def choice_search(
 
 
 def choice_track(
-    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, **search
-) -> Tracking:
+    model, ref_qpos: np.ndarray, *, alternates=(), record_every: int = 4, recorder=None,
+    pushes: tuple[Push, ...] = (), weakenings: tuple[Weakening, ...] = (), **search,
+) -> Tracking:  # fmt: skip
     """Track ``ref_qpos`` (T, nq at ``CONTROL_HZ``) without assistance on ``model`` and
     ``alternates`` (the same body with other gains: :func:`common_body`), the hinge targets
     corrected and the gains chosen per window by :func:`choice_search` (``search``: its
-    keyword arguments), then replayed: ``track(model, ref_qpos, offsets=..., switch=((model,
-    *alternates), sets), balance=...)``."""
+    keyword arguments; ``pushes``, ``weakenings`` met by the search and the replay), then
+    replayed: ``track(model, ref_qpos, offsets=..., switch=((model, *alternates), sets),
+    balance=..., recorder=recorder)``."""
     models = (model, *alternates)
-    offsets, sets, _ = choice_search(models, ref_qpos, **search)
+    perturb = {"pushes": pushes, "weakenings": weakenings}
+    offsets, sets, _ = choice_search(models, ref_qpos, **perturb, **search)
     return track(
         model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
-        balance=search.get("balance", BALANCE), switch=(models, sets),
+        balance=search.get("balance", BALANCE), switch=(models, sets), recorder=recorder,
+        **perturb,
     )  # fmt: skip

@@ -37,17 +37,18 @@ import numpy as np
 from sim.errors import MotionDataError, UnknownNameError, UsageError
 from sim.model.humanoid import canonical_skeleton
 from sim.model.kinematics import point_names, point_parents
-from sim.model.mass import DEFAULT_BODY_MASS_KG
 from sim.motion.clip import Clip
 from sim.motion.retarget import local_rotations_from_world
 from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening, track
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
-from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, sim_spec, total_mass
+from sim.simulate.episode_body import episode_bodies
+from sim.simulate.gainchoice import GainChoice, choice_track
+from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, total_mass
 from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import BALANCE, LOOKAHEAD, CostWeights, sample_track
-from sim.simulate.validate import CONTROLLERS, DEFAULT_BALANCE, chosen_controller
+from sim.simulate.validate import CONTROLLERS, DEFAULT_BALANCE, STIFF_GAINS, chosen_controller
 from sim.simulate.wholebody import track_wholebody
 
 KINDS = ("track", "fall")  # the default mix: real motion, no assistance
@@ -65,6 +66,9 @@ EPISODE_LABELS = {
     "the MJCF builds (sim.simulate.episode.Recorder): PD target [rad], the feed-forward "
     "folded in, inside each actuator's control range (the joint range widened: "
     "sim.simulate.model.sim_spec), or with the whole-body QP the torque [N m] within its limit",
+    "sim_actuator_gains": "(T, 2, U) position actuators only: the feedback gains acting at each "
+    "tick, kp [N m/rad] and kv [N m s/rad] (the gain set the sampler chose, else the MJCF's): "
+    "a replay sets them before stepping (sim.simulate.episode.set_gains)",
     "sim_xfrc_applied": "(T, B, 6) applied body wrenches at each tick (pushes): force [N], "
     "torque [N m], world frame",
     "sim_qfrc_applied": "(T, nv) applied generalised forces at each tick (root assistance: "
@@ -118,8 +122,12 @@ SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 #: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion). Off:
 #: on bench_synth's 20 clips none kept more up or met more targets (docs/synthetic.md)
 SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
-#: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True
-TASK_OPTIONS = ("drift", "contact_reference", "lean")
+#: the sampler's share of candidates per window on the stiff gains (``sim.simulate.gainchoice``,
+#: ``validate.STIFF_GAINS`` times the episode's gain draw), the gains stored per tick; 0: the
+#: body's gains alone. Not the default: no win on bench_synth's 20 clips (docs/synthetic.md)
+SYNTH_GAIN_CHOICE = 0.0
+#: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True (non-zero)
+TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice")
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -150,6 +158,7 @@ class SynthTask:
     drift: bool = SYNTH_DRIFT  # the sampler's balance feedback with the drift lead
     contact_reference: bool = SYNTH_CONTACT_REFERENCE  # the sampler's (else lifted 1 cm)
     lean: bool = SYNTH_LEAN  # the body stepped lean (its MJCF says so)
+    gain_choice: float = SYNTH_GAIN_CHOICE  # the sampler's share on the stiff gains (0: none)
 
 
 def task_controller(task: SynthTask) -> tuple[str, int]:
@@ -240,6 +249,8 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
         raise UnknownNameError("kind", task.kind, ALL_KINDS)
     if not 0 <= task.assist <= 1:
         raise UsageError(f"assistance {task.assist} body weights: expected 0 .. 1")
+    if not 0 <= task.gain_choice <= 1:
+        raise UsageError(f"gain choice {task.gain_choice}: expected a share 0 .. 1")
     p["controller"] = task_controller(task)[0]
     if p["controller"] == "wholebody":  # its feedback gains are its own: no stiffness factor
         p["gain"] = 1.0
@@ -254,12 +265,12 @@ def draw_parameters(task: SynthTask, rng: np.random.Generator) -> dict:
 def generate(task: SynthTask) -> tuple[Clip, dict]:
     """Simulate one clip; returns it and a record of its parameters and tracking measures.
 
-    The record holds ``generation`` (parameters and seed), ``tracking_mpjpe_mm``, ``fell`` (and
-    ``fall_frame``), ``mean_assistance`` (root assistance force [body weight], mean over frames),
-    ``mean_assist_torque`` (its torque [body weight x 1 m]), ``physical`` (:func:`is_physical`),
-    ``penetration_mm`` (deepest floor contact), ``self_penetration_mm`` (deepest contact between
-    two body geoms) and ``labels``: the per-frame arrays of
-    :data:`LABELS`, for the clip file, not the index.
+    The record holds ``generation`` (parameters and seed), ``tracking_mpjpe_mm`` (and
+    ``tracking_local_mm``, root-relative), ``fell`` (and ``fall_frame``), ``mean_assistance``
+    (root assistance force [body weight], mean over frames), ``mean_assist_torque`` (its torque
+    [body weight x 1 m]), ``physical`` (:func:`is_physical`), ``penetration_mm`` (deepest floor
+    contact), ``self_penetration_mm`` (deepest contact between two body geoms) and ``labels``:
+    the per-frame arrays of :data:`LABELS`, for the clip file, not the index.
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
@@ -269,12 +280,15 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     p = draw_parameters(task, rng)
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
     actuators = "motor" if p["controller"] == "wholebody" else "position"
-    model, mjcf, gains = episode_model(skeleton, p["scale"], p["gain"], actuators, task.lean)
+    stiff = (STIFF_GAINS,) if p["controller"] == "sampling" and task.gain_choice > 0 else ()
+    models, mjcf, gains = episode_bodies(skeleton, p["scale"], p["gain"], actuators, task.lean,
+                                         stiff)  # fmt: skip
+    model = models[0]
     p["lean"] = bool(task.lean)
     n = int(round(task.seconds * CONTROL_HZ))
     ref = reference_motion(task, p, model, n, rng)
     recorder = Recorder(model, mjcf, n, FRAME_SKIP)
-    result = simulate_episode(task, p, model, gains, ref, recorder, rng)
+    result = simulate_episode(task, p, models, gains, ref, recorder, rng)
     if result.unstable:
         raise UnstableSimulation(f"{task.kind} task {task.index} (seed {task.seed}): diverged")
     out = simulated_clip(
@@ -357,14 +371,17 @@ def body_points(model, qpos: np.ndarray) -> np.ndarray:
 
 
 def simulate_episode(
-    task: SynthTask, p: dict, model, gains: Gains, ref: np.ndarray, recorder: Recorder,
+    task: SynthTask, p: dict, models: tuple, gains: Gains, ref: np.ndarray, recorder: Recorder,
     rng: np.random.Generator,
 ) -> Tracking:  # fmt: skip
     """Track ``ref`` (T, nq) with ``p``'s pushes and weakenings, every tick recorded by
     ``recorder``, by ``p["controller"]``: the sampling tracker (no assistance; its settings,
     balance feedback (with the drift lead where ``task.drift``) and seed, drawn from ``rng``,
-    recorded in ``p``), the whole-body QP (no assistance) or the plain
-    tracker with ``p["assist_limit"]`` (0 for real motion unless the task asked for it)."""
+    recorded in ``p``; with ``models`` of two gain sets (``episode_bodies``) its gains chosen
+    per window, ``task.gain_choice`` of its candidates on the second), the whole-body QP (no
+    assistance) or the plain tracker with ``p["assist_limit"]`` (0 for real motion unless the
+    task asked for it), all on ``models[0]``."""
+    model = models[0]
     tracking = {  # what both trackers take: the perturbations and the clip rate
         "pushes": tuple(
             Push(**{k: v for k, v in q.items() if k != "impulse"}) for q in p["pushes"]
@@ -387,6 +404,12 @@ def simulate_episode(
         }
         kw = {"samples": samples, "seed": p["sampling"]["seed"], "threads": task.threads,
               "balance": balance}  # fmt: skip
+        if len(models) > 1:  # the gains chosen per window, recorded per tick
+            stiff = {k: v if v is None else float(v)
+                     for k, v in asdict(STIFF_GAINS.scaled(p["gain"])).items()}  # fmt: skip
+            p["sampling"]["gain_choice"] = {"share": float(task.gain_choice), "stiff": stiff}
+            choice = GainChoice(share=task.gain_choice)
+            return choice_track(model, ref, alternates=models[1:], choice=choice, **kw, **tracking)
         return sample_track(model, ref, **kw, **tracking)
     return track(model, ref, gains=gains, assist_limit=p["assist_limit"], **tracking)
 
@@ -396,12 +419,14 @@ def episode_record(p: dict, model, result: Tracking, pos: np.ndarray, ref_pos: n
     ``p``, assistance, tracking error of the simulated points ``pos`` (F, P, 3) [m] against the
     reference's ``ref_pos``, fall and penetration figures."""
     weight = total_mass(model) * G
+    local = (pos - pos[:, :1]) - (ref_pos - ref_pos[:, :1])  # root-relative (the root first)
     torque = np.linalg.norm(result.assist_wrench[:, 3:], axis=1) / (weight * ROOT_TORQUE_LEVER)
     return {
         "generation": p,
         "mean_assistance": float(result.assistance.mean()),
         "mean_assist_torque": float(torque.mean()),
         "tracking_mpjpe_mm": float(1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean()),
+        "tracking_local_mm": float(1000 * np.linalg.norm(local, axis=-1).mean()),
         "fell": bool(result.fell),
         "fall_frame": int(result.fall_frame),
         "fall_tick": int(result.fall_tick),
@@ -419,6 +444,7 @@ def episode_labels(p: dict, model, mjcf: str, result: Tracking, episode) -> dict
         fallen[result.fall_frame :] = True
     return {
         "sim_actions": episode.actions,
+        **({} if episode.gains is None else {"sim_actuator_gains": episode.gains}),
         "sim_xfrc_applied": episode.xfrc_applied,
         "sim_qfrc_applied": episode.qfrc_applied,
         "sim_tick_qpos": episode.qpos,
@@ -436,33 +462,6 @@ def episode_labels(p: dict, model, mjcf: str, result: Tracking, episode) -> dict
         "sim_contact_penetration": result.contact_penetration,
         "sim_fallen": fallen,
     }
-
-
-def episode_model(
-    skeleton, scale: float, gain: float, actuators: str = "position", lean: bool = False
-) -> tuple[mujoco.MjModel, str, Gains]:
-    """The simulated body of an episode: ``skeleton`` (already scaled by ``scale``) with mass
-    scaling as its cube, the hinges' stiffness times ``gain`` (bandwidth times its square root;
-    the torque limits are the human ones, never scaled, rounded down to the 6 digits an MJCF
-    keeps), ``actuators`` ``"position"`` or ``"motor"`` and ``lean`` (``sim_spec``'s, in the
-    MJCF's options); the model compiled
-    from its MJCF (the model simulated, so the MJCF rebuilds it exactly), the MJCF itself and
-    the gains."""
-    gains = Gains().scaled(gain)
-    spec = sim_spec(skeleton, body_mass_kg=DEFAULT_BODY_MASS_KG * scale**3, gains=gains,
-                    actuators=actuators, lean=lean)  # fmt: skip
-    for a in spec.actuators:  # the MJCF keeps 6 digits: round the limits down, never up
-        a.forcerange = [-_down6(a.forcerange[1]), _down6(a.forcerange[1])]
-        if actuators == "motor":  # a torque's control range is its limit
-            a.ctrlrange = a.forcerange
-    mjcf = spec.to_xml()
-    return mujoco.MjModel.from_xml_string(mjcf), mjcf, gains
-
-
-def _down6(x: float) -> float:
-    """``x`` > 0 rounded down to 6 significant digits (what an MJCF writes)."""
-    step = 10.0 ** (np.floor(np.log10(x)) - 5)
-    return float(np.floor(x / step) * step)
 
 
 def simulated_clip(model, skeleton, qpos, qvel, fps: float, source: str) -> Clip:
