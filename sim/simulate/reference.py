@@ -21,7 +21,7 @@ from sim.motion.ingest import check_memory
 from sim.motion.resample import resample_qpos, resampled_frames
 from sim.motion.retarget import leg_length, motion_to_qpos, retarget_rotations
 from sim.motion.trial import CMU_FPS, read_trial, trial_files
-from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS
+from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS, G
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -221,7 +221,6 @@ MIN_FLIGHT_S = 0.15
 #: a flight is ballistic where the root's height, fitted by a parabola over it, falls with at
 #: least this share of gravity; one that floats is not a flight
 BALLISTIC_SHARE = 0.5
-GRAVITY = 9.81  # [m/s^2]
 
 
 def supported(root_z: np.ndarray, stance: np.ndarray, rate: float) -> np.ndarray:
@@ -241,7 +240,7 @@ def supported(root_z: np.ndarray, stance: np.ndarray, rate: float) -> np.ndarray
             continue
         t = np.arange(b - a) / rate
         curvature = 2.0 * np.polyfit(t, root_z[a:b], 2)[0]  # d^2 z / dt^2 [m/s^2]
-        if curvature > -BALLISTIC_SHARE * GRAVITY:
+        if curvature > -BALLISTIC_SHARE * G:
             out[a:b] = True
     return out
 
