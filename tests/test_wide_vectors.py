@@ -71,3 +71,18 @@ def test_the_wide_segment_costs_are_the_default_width_ones_to_the_last_bit(walk_
         X, R = np.ascontiguousarray(X), np.ascontiguousarray(R)
         args = (X, turn_rates(R), weights_of(len(X)))
         assert np.array_equal(single_cost_matrix(*args), plain(*args))
+
+
+def test_the_protocol_width_compiled_as_a_constant_keeps_the_bits_of_the_runtime_width(walk_clip):
+    """single_cost_matrix passes the protocol's 48 channels to its loops as a constant; the
+    same loops compiled for a width known only at run time give the same numbers."""
+    from sidql.keyframes.single_costs import PROTOCOL_LANES, _cost_passes
+
+    rng = np.random.default_rng(5)
+    X0, R0 = clip_stacked(walk_clip)
+    for X, R in ((X0, R0), (X0 + rng.normal(0, 2.0, X0.shape), R0 * 3.0)):
+        X, R = np.ascontiguousarray(X), np.ascontiguousarray(R)
+        args = (X, turn_rates(R), weights_of(len(X)))
+        assert args[1].shape[1] == PROTOCOL_LANES
+        runtime_width = int(np.int64(args[1].shape[1]))  # a plain argument: not a constant
+        assert np.array_equal(single_cost_matrix(*args), _cost_passes(*args, runtime_width))

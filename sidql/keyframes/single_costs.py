@@ -81,6 +81,11 @@ def _turn_distance(v):
     return abs(v - ((v + _ROUND) - _ROUND))
 
 
+#: The padded channel count of the protocol's chart (22 bones: 44 angle channels): the one
+#: :func:`single_cost_matrix` compiles with a constant width, whole vectors and no loop control.
+PROTOCOL_LANES = 48
+
+
 @numba.njit(cache=True, fastmath=_CONTRACT)
 def single_cost_matrix(X, R, H):
     """(N, N) Hermite segment costs [rad], float32 values held in float64, from (N, D) float64
@@ -92,10 +97,21 @@ def single_cost_matrix(X, R, H):
     frame n of segment (i, j) is then ``E[n] - h01 E[j] + h10 r_i + h11 r_j`` [turns]. Four
     frames share one pass over the channels; each channel's sum over the frames is kept in
     ``acc`` (Dp,) (elementwise, so the passes vectorise without reordering any sum), in the
-    widest vectors the processor has (:mod:`sidql.keyframes.wide_vectors`: the same bits)."""
+    widest vectors the processor has (:mod:`sidql.keyframes.wide_vectors`: the same bits).
+    The protocol's width (Dp = :data:`PROTOCOL_LANES`) is passed as a constant: the compiler
+    then unrolls each pass into whole vectors (about 0.8x the time; the same operations in the
+    same order, so the same bits)."""
     wide_vectors()
+    if R.shape[1] == PROTOCOL_LANES:
+        return _cost_passes(X, R, H, PROTOCOL_LANES)
+    return _cost_passes(X, R, H, R.shape[1])
+
+
+@numba.njit(cache=True, fastmath=_CONTRACT, inline="always")
+def _cost_passes(X, R, H, Dp):
+    """The loops of :func:`single_cost_matrix` over ``Dp`` (a multiple of :data:`LANES`)
+    channels; inlined, so that a constant ``Dp`` reaches the compiler as one."""
     N, D = X.shape
-    Dp = R.shape[1]
     C = np.zeros((N, N))
     E = np.zeros((N, Dp), np.float32)
     acc = np.empty(Dp, np.float32)
