@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from sidql.keyframes.segment_costs import clip_stacked
-from sidql.keyframes.single_costs import _CONTRACT, single_cost_matrix, turn_rates, weights_of
+from sidql.keyframes.single_costs import (
+    _CONTRACT,
+    _turn_distance,
+    single_cost_matrix,
+    turn_rates,
+    weights_of,
+)
 from sidql.keyframes.wide_vectors import ATTRIBUTES, wide_vectors
 
 
@@ -86,3 +92,24 @@ def test_the_protocol_width_compiled_as_a_constant_keeps_the_bits_of_the_runtime
         assert args[1].shape[1] == PROTOCOL_LANES
         runtime_width = int(np.int64(args[1].shape[1]))  # a plain argument: not a constant
         assert np.array_equal(single_cost_matrix(*args), _cost_passes(*args, runtime_width))
+
+
+@numba.njit
+def _distances(v):
+    out = np.empty_like(v)
+    for k in range(v.shape[0]):
+        out[k] = _turn_distance(v[k])
+    return out
+
+
+def test_the_turn_distance_is_the_add_and_subtract_rounding_it_replaced():
+    """|v - rint(v)| in float32 equals |v - ((v + 1.5 2^23) - 1.5 2^23)| (numpy's float32
+    arithmetic, the rounding the costs used before) for |v| < 2^22, ties included."""
+    rng = np.random.default_rng(7)
+    ties = np.arange(-40, 40, dtype=np.float32) + np.float32(0.5)
+    v = np.concatenate([
+        ties, rng.normal(0, 3, 4000), rng.uniform(-(2.0**22), 2.0**22, 4000),
+        [0.0, -0.0, 2.0**22 - 0.5, -(2.0**22) + 0.5, 1e-30, 0.49999997],
+    ]).astype(np.float32)  # fmt: skip
+    big = np.float32(1.5 * 2**23)
+    assert np.array_equal(_distances(v), np.abs(v - ((v + big) - big)))
