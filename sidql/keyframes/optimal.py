@@ -321,7 +321,8 @@ def _screened_costs(X, R, H, W):
     (:func:`single_lower_bounds`) the least the rest of the clip costs around each segment;
     only the segments within U of that are summed exactly (and abandoned once over it). The
     single-precision matrix runs in the processor's widest vectors
-    (:mod:`sidql.keyframes.wide_vectors`)."""
+    (:mod:`sidql.keyframes.wide_vectors`), over the protocol's 48 channels as a compile-time
+    width (its disk cache, like this one's, refreshed by an edit of this file)."""
     N = X.shape[0]
     C32 = single_cost_matrix(X, turn_rates(R), H)
     lb = single_lower_bounds(X, R, C32)
