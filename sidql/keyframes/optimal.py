@@ -264,9 +264,11 @@ def _banded_costs(X, R, linear, W):
 
 
 #: :func:`_optimum_costs` screens with the single-precision matrix when the band of
-#: :func:`_banded_costs` spans more than 1 / sqrt(SCREEN_SHARE) of the clip (measured on 60-frame
-#: clips: the screen is the faster for W <= 6, the band for W >= 7).
-SCREEN_SHARE = 12.0
+#: :func:`_banded_costs` spans more than 1 / sqrt(SCREEN_SHARE) of the clip (measured on the 107
+#: eval clips, one in two, best of 5, with the single-precision kernel's constant width: the
+#: screen 0.24-0.25 ms against the band's 0.26-0.30 ms for W = 7-9, even at W = 10, the band
+#: the faster from W = 12: 60-frame clips screen for W <= 9).
+SCREEN_SHARE = 25.0
 
 #: Unit roundoff of float32: the rounding error of each of its operations, relative.
 _U32 = 2.0**-24
