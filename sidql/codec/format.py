@@ -1,4 +1,4 @@
-"""The ``.sidq`` container, versions 1 to 5: bytes <-> :class:`Stream`.
+"""The ``.sidq`` container, versions 1 to 6: bytes <-> :class:`Stream`.
 
 The byte format is specified once, in ``docs/codec.md`` ("The .sidq format"): version 1 carries
 codings 0 (fixed-size records, for live streaming) and 1 (packed, LZMA, offline), versions 2
