@@ -11,8 +11,11 @@ by normalised least mean squares (rate ``mu``, kept in [lo, hi]). The value is s
 ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
 ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being the
 same keyframe's decoded theta of that bone, each times the keyframe's factor (:func:`steps`,
-version 5). In version 5 there is no partner term (``partners`` all -1) and a channel's first
-keyframe is predicted from its parent bone's same angle (``firsts``) instead of 0.
+version 5). In versions 5 and 6 there is no partner term (``partners`` all -1) and a channel's
+first keyframe is predicted from its parent bone's same angle (``firsts``) instead of 0. In
+version 6 a bone on cones (``cones`` (M, 3): alpha, r, beta; all -1 for none) is predicted on
+them at every keyframe (:func:`sidql.codec.cones.predict_cone`), and a bone with a second cone
+about a bone r of its depth is visited after the others of that depth (:func:`depth_order`).
 
 Every value a channel's prediction, step or target needs is decoded before it: its own channel
 at the keyframes before, its bone's theta (for phi) and its parent bone (partner innovation, the
@@ -207,6 +210,7 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
             (version 5: the parent bone's same angle; -1: predicted 0). Encoding, each bone's
             phi is first moved by whole turns onto its parent's branch (:func:`same_branch`).
         rows: (W,) int64 row of ``values`` and ``basis`` of each keyframe.
+        cones: (M, 3) per bone its cones (alpha, r, beta) (version 6; all -1: none).
 
     Returns the decoded (W, 2 M + 3) values.
     """

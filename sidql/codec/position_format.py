@@ -1,4 +1,4 @@
-"""Coding 2's fields of a ``.sidq`` stream (versions 2 to 5): the bone lengths, the quantiser's
+"""Coding 2's fields of a ``.sidq`` stream (versions 2 to 6): the bone lengths, the quantiser's
 parameters and the range-coded block of keyframe residuals, written and read.
 
 Specified in ``docs/codec.md`` ("Versions 2 to 4"); :mod:`sidql.codec.format` reads the rest of
