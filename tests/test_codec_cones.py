@@ -16,9 +16,9 @@ from keyframe_synth import smooth_clip
 from test_codec_dpcm import _run, oracle
 
 from sidql.codec import format as sidq
-from sidql.codec.cones import CONE_UNIT, cone_bytes, read_cones, rigid_cones
+from sidql.codec.cones import CONE_UNIT, cone_array, cone_bytes, read_cones, rigid_cones
 from sidql.codec.decode import decoded_chart
-from sidql.codec.dpcm import dpcm
+from sidql.codec.dpcm import dpcm, followers
 from sidql.codec.encode import encode_series
 from sidql.codec.quantise import PositionQuantiser, aim_basis
 from sidql.keyframes.spherical import SphericalSeries, chart
@@ -140,9 +140,24 @@ def test_bones_on_cones_cost_less_than_their_own_past_predicts():
         size[name] = np.abs(codes[1:, cols]).mean()
         assert np.abs(kv - values[keys])[:, 2 * M :].max() < 0.004  # the root: within a step
     assert size["cones"] < 0.5 * size["plain"]
+    # a wrist along its forearm is left at its prediction (nothing sent: the forearm aims at the
+    # wrist point), so it decodes to the forearm's direction
     wrists = [LWRIST, RWRIST, M + LWRIST, M + RWRIST]
-    codes, _ = _quantiser(series, cones).encode_keyframes(values, keys, True, basis, rows=keys)
-    assert np.mean(codes[1:, wrists] == 0) > 0.5  # along the forearm: mostly nothing to send
+    codes, kv = _quantiser(series, cones).encode_keyframes(values, keys, True, basis, rows=keys)
+    assert not codes[:, wrists].any()
+    assert np.array_equal(kv[:, [LWRIST, M + LWRIST]], kv[:, [LRADIUS, M + LRADIUS]])
+
+
+def test_followers_are_the_bones_along_their_parent_and_reach_to_their_far_end():
+    series, _ = coned_series(N=60)
+    values, _ = series.channels()
+    cones = cone_array(rigid_cones(values, series.n_bones, series.parents), series.n_bones)
+    lengths = np.asarray(series.lengths, dtype=np.float64)
+    silent, reach = followers(cones, np.asarray(series.parents, dtype=np.int64), lengths)
+    assert np.flatnonzero(silent).tolist() == [LWRIST, RWRIST]
+    far = lengths.copy()
+    far[[LRADIUS, RRADIUS]] += lengths[[LWRIST, RWRIST]]
+    assert np.array_equal(reach, far)
 
 
 def test_a_coned_stream_round_trips_and_older_versions_cannot_carry_it():

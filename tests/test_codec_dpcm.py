@@ -43,6 +43,13 @@ def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths,
     innov, kappa = np.zeros(D), np.zeros(partners.shape)
     aim = encode and basis.shape[0] == W
     err = np.zeros((M + 1, 3))
+    # a bone on its parent's direction is left at its prediction, and its parent aims at the far
+    # end of the chain of such bones below it
+    silent = [cones[b, 0] == 0 and cones[b, 1] < 0 for b in range(M)]
+    reach = list(lengths)
+    for b in reversed(range(M)):
+        if silent[b] and parents[b + 1] > 0:
+            reach[parents[b + 1] - 1] += reach[b]
 
     def predict(w, d):
         if w == 0:
@@ -74,7 +81,7 @@ def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths,
             if encode:
                 target = values[w, d]
                 if aim and d < M:
-                    p, L, g = parents[d + 1], max(lengths[d], 1e-6), basis[w, d]
+                    p, L, g = parents[d + 1], max(reach[d], 1e-6), basis[w, d]
                     e = err[p]
                     dt = -(e[0] * g[0] + e[1] * g[1] + e[2] * g[2]) / L
                     dp = -(e[0] * g[3] + e[1] * g[4]) / (L * max(-g[2], SIN_FLOOR))
@@ -90,7 +97,7 @@ def oracle(values, codes, keys, scale, M, rho, encode, partners, basis, lengths,
                 a = abs(r)
                 if a > 0 and (a & (a - 1)) == 0 and a - abs(q) > 0.5 - RDO_BAND:
                     r -= 1 if r > 0 else -1
-                codes[w, d] = r
+                codes[w, d] = 0 if aim and d < 2 * M and silent[d % M] else r
             out[w, d] = pred + float(codes[w, d]) * step
             own = out[w, d] - temporal
             for j, pc in enumerate(partners[d]):

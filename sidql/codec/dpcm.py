@@ -107,7 +107,7 @@ def visit_order(parents, deferred):
 @numba.njit(cache=True, inline="always")
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
               lengths, parents, innov, kappa, err, aim, root_rho, order, target_phi,
-              v, kstep, firsts, cones, cone_phi):  # fmt: skip
+              v, kstep, firsts, cones, cone_phi, silent, reach):  # fmt: skip
     """Keyframe w of :func:`dpcm`: channels in ``order`` (:func:`visit_order`). With ``aim``,
     ``err`` (J, 3) holds the decoded points' errors [m] to first order, and a bone's targets
     are its true angles minus its parent point's error along the bone's theta and phi
@@ -145,7 +145,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             target = values[v, d]
             if aim and d < M:  # theta; phi's target comes with it
                 p = parents[d + 1]
-                L = max(lengths[d], 1e-6)
+                L = max(reach[d], 1e-6)
                 e0, e1, e2 = err[p, 0], err[p, 1], err[p, 2]
                 g0, g1, g2 = basis[v, d, 0], basis[v, d, 1], basis[v, d, 2]
                 dt = -(e0 * g0 + e1 * g1 + e2 * g2) / L
@@ -157,14 +157,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             if M <= d < 2 * M and max(cones[d - M, 0], cones[d - M, 1]) >= 0.0:  # its branch
                 turn = 2.0 * np.pi * np.rint((target - pred) / (2.0 * np.pi))
                 target -= turn
-            q = (target - pred) / step
-            r = np.int64(np.floor(q + 0.5))
-            a = abs(r)
-            # one class down (a bit or more saved, little error) where |r| is a power of two:
-            # without a branch, which the processor would guess wrong half the time
-            down = (a > 0) & ((a & (a - 1)) == 0) & (a - abs(q) > 0.5 - RDO_BAND)
-            r -= np.int64(down) * (np.int64(r > 0) - np.int64(r < 0))
-            codes[w, d] = r
+            codes[w, d] = 0 if aim and d < 2 * M and silent[d % M] else _code(target, pred, step)
         out[w, d] = pred + codes[w, d] * step
         own = out[w, d] - temporal
         for j in range(P):  # normalised least mean squares towards this keyframe's miss
@@ -230,12 +223,13 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
     order = visit_order(parents, cones[:, 1] >= 0.0)
     target_phi = np.zeros(M)
     cone_phi = np.zeros(M)
+    silent, reach = followers(cones, parents, lengths)
     if encode:
         values = same_branch(values, firsts, M, rows)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi,
                   basis, lengths, parents, innov, kappa, err, aim, root_rho, order,
-                  target_phi, rows[w], kstep, firsts, cones, cone_phi)  # fmt: skip
+                  target_phi, rows[w], kstep, firsts, cones, cone_phi, silent, reach)  # fmt: skip
     return out
 
 
@@ -275,6 +269,7 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
     out = np.zeros((W, D))
     err = np.zeros((M + 1, 3))
     pred = np.zeros(D)
+    silent, reach = followers(cones, parents, lengths)
     for w in range(W):
         v, ks = rows[w], kstep[w]
         if w >= 2:
@@ -301,10 +296,10 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
                     pred[b], pred[M + b] = predict_cone(out[w], p - 1, cones[b], pred[b],
                                                          pred[M + b], M)  # fmt: skip
                 dt = -(err[p, 0] * basis[v, b, 0] + err[p, 1] * basis[v, b, 1]
-                       + err[p, 2] * basis[v, b, 2]) / max(lengths[b], 1e-6)  # fmt: skip
+                       + err[p, 2] * basis[v, b, 2]) / max(reach[b], 1e-6)  # fmt: skip
                 target = values[v, b]
                 target += min(max(dt, -0.5), 0.5)
-                codes[w, b] = _code(target, pred[b], scale[b] * ks)
+                codes[w, b] = 0 if silent[b] else _code(target, pred[b], scale[b] * ks)
                 out[w, b] = pred[b] + codes[w, b] * (scale[b] * ks)
             for i in range(starts[level], starts[level + 1]):
                 b = bones[i]
@@ -312,7 +307,7 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
                 g0, g1, g2, g3, g4 = basis[v, b, 0], basis[v, b, 1], basis[v, b, 2], \
                     basis[v, b, 3], basis[v, b, 4]  # fmt: skip
                 dp = -(err[p, 0] * g3 + err[p, 1] * g4) / (
-                    max(lengths[b], 1e-6) * max(-g2, SIN_FLOOR)
+                    max(reach[b], 1e-6) * max(-g2, SIN_FLOOR)
                 )
                 target_phi = values[v, d] + min(max(dp, -0.5), 0.5)
                 turn = 0.0
@@ -320,7 +315,7 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
                     turn = 2.0 * np.pi * np.rint((target_phi - pred[d]) / (2.0 * np.pi))
                     target_phi -= turn
                 step = min(scale[d] * ks / max(np.sin(out[w, b]), SIN_FLOOR), MAX_PHI_STEP)
-                codes[w, d] = _code(target_phi, pred[d], step)
+                codes[w, d] = 0 if silent[b] else _code(target_phi, pred[d], step)
                 out[w, d] = pred[d] + codes[w, d] * step
                 a = lengths[b] * (out[w, b] - values[v, b])
                 f = -lengths[b] * g2 * (out[w, d] + turn - values[v, d])
@@ -328,6 +323,23 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
                 err[b + 1, 1] = err[p, 1] + a * g1 + f * g4
                 err[b + 1, 2] = err[p, 2] + a * g2
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def followers(cones, parents, lengths):
+    """((M,) bool, (M,) float64): the bones on their parent's direction (cone angle 0, no
+    second bone), which the encoder leaves at their prediction (code 0: aiming them costs more
+    bytes than the error it takes off), and each bone's reach [m], its length plus its chain
+    of such followers': a bone aims at its followers' far end, the point its direction moves
+    most (on a forearm with its wrist: the wrist point's error 0, the forearm's a third of the
+    elbow's, against a half at the wrist aiming at its own end)."""
+    M = lengths.shape[0]
+    silent = (cones[:, 0] == 0.0) & (cones[:, 1] < 0.0)
+    reach = lengths.copy()
+    for j in range(M, 0, -1):  # children after their parents
+        if silent[j - 1] and parents[j] > 0:
+            reach[parents[j] - 1] += reach[j - 1]
+    return silent, reach
 
 
 @numba.njit(cache=True, inline="always")
