@@ -12,8 +12,9 @@ by the original's floor track (``sim.simulate.reference.floor_track``), so a rec
 own height errors stay in it.
 
 Controllers (``ForwardValidation(controller=...)``): ``"plain"`` (``track``), ``"sampling"``
-(``sim.simulate.sampling``) and ``"wholebody"`` (``sim.simulate.wholebody``'s inverse-dynamics
-QP; it needs the torque-actuated body, ``sim_model(..., actuators="motor")``, and tracks a
+(``sim.simulate.sampling``), ``"lqr"`` (``sim.simulate.lqr``, either body, the
+contact-consistent reference by default) and ``"wholebody"`` (``sim.simulate.wholebody``'s
+inverse-dynamics QP; it needs the torque-actuated body, ``sim_model(..., actuators="motor")``, and tracks a
 contact-consistent reference: no floor lift, stance soles laid on the floor). The plain
 tracker tracks a reference lifted by ``FLOOR_LIFT`` unless asked for the contact-consistent
 one (``ForwardValidation(contact_reference=True)``); the sampler tracks the contact-consistent
@@ -51,7 +52,11 @@ SIMULATE_KEYS = (
 )  # fmt: skip
 #: further figures of :meth:`ForwardValidation.run` (not in the evaluation's tables)
 SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
-CONTROLLERS = ("plain", "sampling", "wholebody", "lqr")
+CONTROLLERS = ("plain", "sampling", "wholebody")
+#: what ``ForwardValidation`` runs besides: the time-varying LQR (``sim.simulate.lqr``), an
+#: option measured against the others (``benchmarks/bench_simulate.py --controllers lqr``), not
+#: offered by the commands (``synth`` and ``eval`` keep :data:`CONTROLLERS`)
+OPTIONAL_CONTROLLERS = ("lqr",)
 #: the controllers that compute torques themselves (the body's torque actuators,
 #: ``sim_model(actuators="motor")``); ``"lqr"`` runs on either body
 TORQUE_CONTROLLERS = ("wholebody",)
@@ -163,8 +168,9 @@ class ForwardValidation:
         contact_reference: bool | None = None,
     ):
         controller, samples = chosen_controller(samples, controller)
-        if controller not in CONTROLLERS:
-            raise UsageError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
+        known = CONTROLLERS + OPTIONAL_CONTROLLERS
+        if controller not in known:
+            raise UsageError(f"unknown controller {controller!r}; known: {', '.join(known)}")
         torque = controller in TORQUE_CONTROLLERS
         if controller != "lqr" and torque != (not model.actuator_biasprm[:, 1].any()):
             raise UsageError(
