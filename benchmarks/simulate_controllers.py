@@ -342,3 +342,16 @@ for _name, _w, _act, _label in (
         {"controller": "lqr", "contact_reference": True, "search": {"weights": _w}},
         _act,
     )  # fmt: skip
+
+#: the LQR as the sampler's base policy (``sim.simulate.sampling_lqr``) on eval's default
+#: (``mix0.5``): one gain per window, linearised at its cheapest kept start state, shared by all
+#: its rollouts and the replay; ``mix0.5lqr`` the full gain, ``mix0.5lqr<s>`` s times it
+for _name, _scale in (("mix0.5lqr", 1.0), ("mix0.5lqr0.5", 0.5), ("mix0.5lqr0.25", 0.25)):
+    CONTROLLERS[_name] = (
+        f"sampler, 28 samples, eval's defaults (gains chosen per window), the LQR's gain per "
+        f"window times {_scale:g} in every rollout",
+        {"controller": "sampling", "samples": 28, "contact_reference": True,
+         "search": {"choice": GainChoice(share=0.5), "lqr_feedback": _scale}},
+        "position",
+        {"alternate_gains": (_STIFF,)},
+    )  # fmt: skip

@@ -261,15 +261,17 @@ def _control_tick(model, data, plan: _Plan, ref_qpos, k: int, target, factor, as
     data.qfrc_applied[3:6] = torque
 
 
-def _target(model, data, plan: _Plan, ref_qpos, k: int, offsets, balance) -> np.ndarray:
+def _target(model, data, plan: _Plan, ref_qpos, k: int, offsets, balance, feedback=None):
     """(nu,) tick ``k``'s hinge targets [rad] of a body that is up. The actuator carries PD and
     feed-forward, MuJoCo clamps their sum: the target leads by kv/kp * v_ref (kp (q_ref - q) +
     kv (v_ref - v) applied) and by ff / kp; plus ``offsets[k]`` (None: none) and the balance
     feedback's torques over kp (``balance``: (its plan, (nu,) the torques held from tick to
-    tick, updated here) or None)."""
+    tick, updated here) or None) after ``feedback(model, data, k)`` (None: none)."""
     target = ref_qpos[k, 7:] + plan.lead * plan.ref_qvel[k, 6:] + plan.ref_force[k, 6:] / plan.kp
     if offsets is not None:
         target += offsets[k]
+    if feedback is not None:
+        target += feedback(model, data, k)
     if balance is not None:
         target += held_torques(model, data, balance[0], k, balance[1]) / plan.kp
     return target
@@ -303,6 +305,7 @@ def track(
     balance: Balance | None = None,
     recorder=None,
     switch: tuple | None = None,
+    feedback=None,
 ) -> Tracking:
     """Simulate ``model`` following ``ref_qpos`` (T, nq) sampled at ``CONTROL_HZ``: a
     :class:`sim.simulate.tracking.Tracking`, states at ticks 0, record_every, 2 record_every...
@@ -327,6 +330,8 @@ def track(
             model)`` after the last (``sim.simulate.episode.Recorder``); None: none.
         switch: (models, choice (T,) ints): tick ``k`` runs on ``models[choice[k]]``,
             ``model``'s body with other gains (``sim.simulate.gainchoice``); None: ``model``.
+        feedback: ``feedback(model, data, k)`` (nu,) [rad] added to the targets while the body
+            is up, after ``offsets`` (``sim.simulate.sampling_lqr.WindowLQR.feedback``); None.
     """
     T = ref_qpos.shape[0]
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
@@ -344,7 +349,7 @@ def track(
             factor = min(factor, FALLEN_TONE)
             target = fallen_pose  # no tracking of a standing motion, no feed-forward
         else:  # PD, feed-forward, offsets and balance feedback
-            target = _target(model, data, plan, ref_qpos, k, offsets, bal)
+            target = _target(model, data, plan, ref_qpos, k, offsets, bal, feedback)
         helped = rec.fall_frame < 0 and assist_limit > 0  # a fallen body gets no help up
         on = helped and (assist_in_flight or _floor_contact(data, plan.floor))
         _control_tick(model, data, plan, ref_qpos, k, target, factor, assist_limit if on else 0.0)

@@ -29,7 +29,7 @@ bit for bit.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -47,6 +47,7 @@ from sim.simulate.sampling import (
     _first_state,
     _problem,
 )
+from sim.simulate.sampling_lqr import WindowLQR
 from sim.simulate.searchplan import (
     SearchPlan,
     adapted_scale,
@@ -213,6 +214,29 @@ def _select(kept, costs: np.ndarray, cand: tuple, keep: int, adapt: float) -> tu
     return (out[0][best].copy(), offs[best], sets[best], scale), new_costs[best], steps
 
 
+def _problems(models, datas, ref_qpos, how: tuple, lqr, window: int) -> list:
+    """Each gain set's ``sampling._problem`` (``how`` = torque_sigma, pushes, falls, balance,
+    noise_deflection), carrying ``lqr`` (bound to the reference here; None: none)."""
+    sigma, pushes, falls, balance, deflection = how
+    probs = [
+        _problem(m, ref_qpos, d[0], sigma, pushes, falls=falls, balance=balance,
+                 noise_deflection=deflection)
+        for m, d in zip(models, datas, strict=True)
+    ]  # fmt: skip
+    if lqr is None:
+        return probs
+    lqr.start(ref_qpos, probs[0].ref_qvel, window)
+    return [replace(p, lqr=lqr) for p in probs]
+
+
+def _window_gain(ctx: _Search, lqr, kept, k0: int) -> None:
+    """``lqr``'s gain for the window from tick ``k0``, in the main thread before its rollouts:
+    linearised at the cheapest kept state on the gains it was reached with, the reference's
+    target the operating control."""
+    j = kept[2][0]
+    lqr.set_window(k0, ctx.models[j], ctx.datas[j][0], kept[0][0], ctx.spec, ctx.probs[j].base[k0])
+
+
 def choice_search(
     models,
     ref_qpos: np.ndarray,
@@ -232,6 +256,7 @@ def choice_search(
     noise_deflection: float = 0.0,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
+    lqr=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
@@ -239,6 +264,7 @@ def choice_search(
     ``pushes`` and ``weakenings`` met by every rollout) with each window's candidates spread
     over the gain sets by ``choice`` (module docstring) and the rollouts spent as ``plan`` says
     (``sim.simulate.searchplan``: recovery, staged windows, the window-end cost, adaptation).
+    ``lqr``: a ``sampling_lqr.WindowLQR``, its gain per window in every rollout; None: none.
 
     Returns:
         ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
@@ -246,16 +272,12 @@ def choice_search(
         end (what the replay reaches there while the body is up).
     """
     weights, plan = weights or CostWeights(), plan or SearchPlan()
-    T, nu = ref_qpos.shape[0], models[0].nu
-    rng = np.random.default_rng(seed)
+    T, nu, rng = ref_qpos.shape[0], models[0].nu, np.random.default_rng(seed)
     n_threads = max(1, min(int(threads), samples))
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
-    probs = [
-        _problem(m, ref_qpos, d[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
-                 noise_deflection=noise_deflection)
-        for m, d in zip(models, datas, strict=True)
-    ]  # fmt: skip
+    probs = _problems(models, datas, ref_qpos, (torque_sigma, pushes, weights.fall > 0, balance,
+                                                noise_deflection), lqr, window)  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
     # the kept states, their last offsets and gain sets, and the noise's scale (nu,)
@@ -274,6 +296,8 @@ def choice_search(
             del snaps[w:]
             snaps.append((kept, costs))
             n = boosted(plan, samples) if w <= boost_to else samples
+            if lqr is not None:  # one gain for the window, at its cheapest kept state
+                _window_gain(ctx, lqr, kept, k0)
             (parents, offs, sets, cost, out, noise), fell = _window(ctx, rng, n, kept, ticks)
             spent += len(cost)
             back = may_recover(plan, w, tried, spent, (samples, n_windows)) if fell else -1
@@ -304,12 +328,15 @@ def choice_track(
     corrected and the gains chosen per window by :func:`choice_search` (``search``: its
     keyword arguments; ``pushes``, ``weakenings`` met by the search and the replay), then
     replayed: ``track(model, ref_qpos, offsets=..., switch=((model, *alternates), sets),
-    balance=..., recorder=recorder)``."""
+    balance=..., recorder=recorder)``; ``search["lqr_feedback"]`` (a scale; None: off): the
+    LQR's gain per window in the rollouts and the replay (``sim.simulate.sampling_lqr``)."""
     models = (model, *alternates)
     perturb = {"pushes": pushes, "weakenings": weakenings}
-    offsets, sets, _ = choice_search(models, ref_qpos, **perturb, **search)
+    scale = search.pop("lqr_feedback", None)
+    lqr = None if scale is None else WindowLQR(scale)
+    offsets, sets, _ = choice_search(models, ref_qpos, lqr=lqr, **perturb, **search)
     return track(
         model, ref_qpos, assist_limit=0.0, record_every=record_every, offsets=offsets,
         balance=search.get("balance", BALANCE), switch=(models, sets), recorder=recorder,
-        **perturb,
+        feedback=None if lqr is None else lqr.feedback, **perturb,
     )  # fmt: skip

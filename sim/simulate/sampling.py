@@ -217,6 +217,7 @@ class _Problem:
     balance: object | None = None
     soles: slice | None = None  # the sole geoms' rows where foot holding is costed
     ref_soles: tuple | None = None  # footholding.reference_soles, capture=True
+    lqr: object | None = None  # sampling_lqr.WindowLQR: its gain's feedback in every rollout
 
 
 def _problem(
@@ -274,10 +275,9 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
     ``keep`` = (state row, qpos row, state spec, soles), ``soles`` None or the sole boxes'
     positions (k1 - k0, 2, 3), orientations (k1 - k0, 2, 9) and the centre of mass (k1 - k0,
-    3) written after each tick of the
-    window (``prob.soles``; as the tick's last substep computed them). A rollout that falls (``sim.simulate.falls``,
-    checked after every tick where ``prob.fall_ref`` is set) stops at the fall or at the
-    window's end, whichever is later.
+    3) written after each tick of the window (``prob.soles``; as the tick's last substep
+    computed them). A rollout that falls (``sim.simulate.falls``, checked after every tick where
+    ``prob.fall_ref`` is set) stops at the fall or at the window's end, whichever is later.
 
     Returns:
         the tick ``data`` is left at, negated where the body fell (``-k``, k >= 1) or the
@@ -295,6 +295,8 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
         if pushes:  # else no external force: the kept states carry none
             apply_pushes(data, pushes, prob.push_ids, t)
         target = prob.base[k] + off
+        if prob.lqr is not None:  # as track's feedback: this window's gain, the same state
+            target += prob.lqr.feedback(model, data, k, k0)
         if prob.balance is not None:  # as track's: the same state, the same torques
             target += held_torques(model, data, prob.balance, k, fb) / prob.kp
         set_controls(model, data, target, weakening_factor(weakenings, t))
