@@ -43,12 +43,23 @@ def test_off_is_the_sampler_bit_for_bit(bodies, walk):
     none = choice_track(default, walk, alternates=(stiff,), record_every=1, lqr_feedback=None,
                         **KW)  # fmt: skip
     np.testing.assert_array_equal(plain.qpos, none.qpos)
+    # a zero scale runs every step of the hook (linearisations on the rollouts' scratch data,
+    # the feedback added to every target) and must change nothing: x + (-0.0) is x
+    lqr = WindowLQR(0.0)
+    zero = choice_search(bodies, walk, lqr=lqr, **KW)
+    assert len(lqr.gains) == 5
+    for a, b in zip(before, zero, strict=True):
+        np.testing.assert_array_equal(a, b)
+    again = choice_track(default, walk, alternates=(stiff,), record_every=1, lqr_feedback=0.0,
+                         **KW)  # fmt: skip
+    np.testing.assert_array_equal(again.qpos, plain.qpos)
 
 
 class _Log:
     """A recorder: each tick's state, applied control and model (as an episode records)."""
 
-    def __init__(self, model):
+    def __init__(self, model, ticks: int):
+        self.ticks = ticks
         self.spec = mujoco.mjtState.mjSTATE_INTEGRATION
         self.start = np.empty(mujoco.mj_stateSize(model, self.spec))
         self.ctrl, self.models, self.qpos = [], [], []
@@ -56,8 +67,8 @@ class _Log:
     def __call__(self, k, data, model):
         if k == 0:
             mujoco.mj_getState(model, data, self.start, self.spec)
-        self.qpos.append(data.qpos.copy())
-        if model is not None and len(self.ctrl) == k:
+        self.qpos.append(data.qpos.copy())  # the state before tick k's steps
+        if k < self.ticks:
             self.ctrl.append(data.ctrl.copy())
             self.models.append(model)
 
@@ -68,7 +79,7 @@ def test_on_it_replays_the_rolled_out_states_and_its_actions_bit_for_bit(bodies,
     off, sets, reached = choice_search(bodies, walk, lqr=lqr, **KW)
     assert sorted(lqr.gains) == list(range(5))  # one gain per window (5 of 12 ticks)
     assert any(np.abs(g).max() > 0 for g in lqr.gains.values())
-    log = _Log(default)
+    log = _Log(default, len(walk))
     r = track(default, walk, assist_limit=0.0, offsets=off, record_every=1, balance=BALANCE,
               switch=(bodies, sets), feedback=lqr.feedback, recorder=log)  # fmt: skip
     assert not r.fell

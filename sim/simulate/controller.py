@@ -330,15 +330,13 @@ def track(
             model)`` after the last (``sim.simulate.episode.Recorder``); None: none.
         switch: (models, choice (T,) ints): tick ``k`` runs on ``models[choice[k]]``,
             ``model``'s body with other gains (``sim.simulate.gainchoice``); None: ``model``.
-        feedback: ``feedback(model, data, k)`` (nu,) [rad] added to the targets while the body
-            is up, after ``offsets`` (``sim.simulate.sampling_lqr.WindowLQR.feedback``); None.
+        feedback: ``feedback(model, data, k)`` (nu,) [rad] added after ``offsets``; None: none.
     """
     T = ref_qpos.shape[0]
     data = mujoco.MjData(model)  # the one MjData: precomputation first, then the simulation
     plan = _plan(model, ref_qpos, gains or Gains(), pushes, data)
     rec = TrackRecord(model, T, record_every)
-    fell, fallen_pose = False, None
-    dt = 1.0 / CONTROL_HZ
+    fell, fallen_pose, dt = False, None, 1.0 / CONTROL_HZ
     bal = balance and (balance_plan(model, ref_qpos, plan.ref_qvel, balance), np.zeros(model.nu))
     models, plans, which = _switched(model, plan, switch, T)
     for k in range(T):
@@ -356,9 +354,8 @@ def track(
         rec.assist[k] = np.linalg.norm(data.qfrc_applied[:3]) / plan.weight
         rec.wrench[k] = data.qfrc_applied[:6]
         apply_pushes(data, pushes, plan.push_ids, t)
-        i = k // record_every if k % record_every == 0 else None  # a recorded tick's frame
-        if i is not None:
-            rec.state(i, data)
+        if (i := k // record_every if k % record_every == 0 else None) is not None:
+            rec.state(i, data)  # a recorded tick's frame
         if not fell and has_fallen(model, data, plan.fall_ref, k):
             fell, fallen_pose = True, data.qpos[7:].copy()
             rec.fall(k)
