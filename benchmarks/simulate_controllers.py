@@ -356,3 +356,12 @@ for _name, _scale in (("mix0.5lqr", 0.5), ("mix0.5lqr1", 1.0), ("mix0.5lqr0.25",
         "position",
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
+#: ``mix0.5lqrnobal``: half the LQR's gain in place of the balance feedback (none)
+CONTROLLERS["mix0.5lqrnobal"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), the LQR's gain per window "
+    "times 0.5 in every rollout, no balance feedback",
+    {"controller": "sampling", "samples": 28, "contact_reference": True,
+     "search": {"choice": GainChoice(share=0.5), "lqr_feedback": 0.5, "balance": None}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
