@@ -365,3 +365,11 @@ CONTROLLERS["mix0.5lqrnobal"] = (
     "position",
     {"alternate_gains": (_STIFF,)},
 )  # fmt: skip
+#: ``mix0.5nobal``: eval's default without the balance feedback (the control for the above)
+CONTROLLERS["mix0.5nobal"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), no balance feedback",
+    {"controller": "sampling", "samples": 28, "contact_reference": True,
+     "search": {"choice": GainChoice(share=0.5), "balance": None}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
