@@ -16,7 +16,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from sim.simulate.model import SOLE_GEOMS
+from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS
 
 #: [m] a sole box whose lowest corner is at most this high is in stance (``reference.STANCE_GAP``)
 LOCK_GAP = 0.03
@@ -33,6 +33,10 @@ LOCK_ITERATIONS = 10
 LOCK_DAMPING = 1e-3  # [m^2] Levenberg damping of the Gauss-Newton steps
 LOCK_MAX_STEP = 0.3  # [rad] largest joint step per iteration
 LOCK_TOLERANCE = 1e-5  # [m] or [rad]: converged
+#: [m] or [rad] a locked pose the leg misses by more (out of its reach: the root has moved on
+#: at push-off, or the captured knee is straight) ends the interval there: it is trimmed to its
+#: first and last frames within reach, the rest left to the blend
+LOCK_REACH = 0.003
 
 
 def _sole_pose(model, data, g: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -79,8 +83,8 @@ def _locked_targets(centres: np.ndarray, rots: np.ndarray, a: int, b: int, half:
 
 def _solve_leg(model, data, g, body, dofs, adr, lo, hi, q, target) -> np.ndarray:
     """Leg angles (6,) from ``q`` (6,) that put sole ``g`` at ``target`` = (centre (3,),
-    rotation (3, 3)), by damped Gauss-Newton within the hinges' ranges; ``data.qpos`` holds the
-    frame's other coordinates."""
+    rotation (3, 3)), by damped Gauss-Newton within the hinges' ranges, and the largest
+    remaining error [m or rad]; ``data.qpos`` holds the frame's other coordinates."""
     centre, R_t = target
     jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
@@ -93,7 +97,7 @@ def _solve_leg(model, data, g, body, dofs, adr, lo, hi, q, target) -> np.ndarray
     e, damping = error(q), LOCK_DAMPING
     for _ in range(LOCK_ITERATIONS):
         if np.abs(e).max() < LOCK_TOLERANCE:
-            break
+            return q, float(np.abs(e).max())
         mujoco.mj_comPos(model, data)
         mujoco.mj_jac(model, data, jacp, jacr, data.geom_xpos[g], body)
         J = np.vstack([jacp[:, dofs], jacr[:, dofs]])
@@ -106,7 +110,26 @@ def _solve_leg(model, data, g, body, dofs, adr, lo, hi, q, target) -> np.ndarray
         else:  # out of reach or past a joint limit: shorter steps
             damping *= 8
             error(q)  # data back at q for the next Jacobian
-    return q
+    return q, float(np.abs(e).max())
+
+
+def _lock_interval(model, data, qpos: np.ndarray, leg, target):
+    """The leg's angle changes over one stance interval's frames ``qpos`` (n, nq) that hold
+    its sole at ``target`` (:func:`_solve_leg`; ``leg`` = its sole geom, body, dof and qpos
+    addresses, ranges), each frame warm-started by the previous one's change: (the first
+    frame within :data:`LOCK_REACH`, (m, 6) the changes from it to the last such frame), or
+    None where fewer than :data:`MIN_LOCK_S` of frames are within reach."""
+    g, body, dofs, adr, lo, hi = leg
+    prev, miss, delta = np.zeros(len(adr)), np.empty(len(qpos)), np.empty((len(qpos), len(adr)))
+    for t, q0 in enumerate(qpos):
+        data.qpos[:] = q0
+        start = np.clip(q0[adr] + prev, lo, hi)
+        q, miss[t] = _solve_leg(model, data, g, body, dofs, adr, lo, hi, start, target)
+        delta[t] = prev = q - q0[adr]
+    reach = np.flatnonzero(miss <= LOCK_REACH)
+    if len(reach) == 0 or reach[-1] + 1 - reach[0] < MIN_LOCK_S * CONTROL_HZ:
+        return None
+    return int(reach[0]), delta[reach[0] : reach[-1] + 1]
 
 
 def _ramp(n: int) -> np.ndarray:
@@ -137,13 +160,12 @@ def lock_leg(model, qpos: np.ndarray, side: str, rate: float) -> np.ndarray:
     n = max(1, int(round(BLEND_S * rate)))
     for a, b in lock_intervals(low, centres, rate):
         target = _locked_targets(centres, rots, a, b, half)
-        prev = np.zeros(len(adr))
-        for t in range(a, b):  # warm-started by the previous frame's change
-            data.qpos[:] = qpos[t]
-            q0 = qpos[t, adr]
-            prev = _solve_leg(model, data, g, body, dofs, adr, lo, hi, np.clip(q0 + prev, lo, hi),
-                              target) - q0  # fmt: skip
-            delta[t], weight[t] = prev, 1.0
+        solved = _lock_interval(model, data, qpos[a:b], (g, body, dofs, adr, lo, hi), target)
+        if solved is None:  # out of reach throughout: left as it was
+            continue
+        first, d = solved
+        a, b = a + first, a + first + len(d)
+        delta[a:b], weight[a:b] = d, 1.0
         for edge, frames in ((a, np.arange(a - 1, a - n - 1, -1)), (b - 1, np.arange(b, b + n))):
             for t, w in zip(frames, _ramp(n), strict=True):  # blended out into the swing
                 if 0 <= t < T and weight[t] < 1.0:
