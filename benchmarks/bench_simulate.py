@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from results import write_results  # noqa: E402
+from results import keep_rows, write_results  # noqa: E402
 from simulate_controllers import CONTROLLERS  # noqa: E402
 
 from sidql.evaluation.cases import load_cases  # noqa: E402
@@ -344,8 +344,10 @@ def controllers_page(args, cases, command: str, t0: float) -> None:
         rows = controller_rows(cases, args.controllers, log=jsonl_log(args.log),
                                threads=args.threads, workers=args.workers,
                                deadline=args.deadline)  # fmt: skip
+    kept = {"": [r | {"controller": n} for n in rows for r in rows[n]]}
     if args.baseline_log:  # the baseline's rows of each controller first, then this run's
         logged = read_log(args.baseline_log)
+        kept[".baseline"] = [r for n in rows if n in logged for r in logged[n]]
         rows = {**{f"{n}@{args.baseline_log}": logged[n] for n in rows if n in logged},
                 **rows}  # fmt: skip
     limited = f", one clip in {args.every} only (--every)" if args.every > 1 else ""
@@ -371,8 +373,23 @@ def controllers_page(args, cases, command: str, t0: float) -> None:
     )  # fmt: skip
     print(text)
     if not args.no_write:
+        notes = args.note + "\n\n" + _kept_rows_note(args, kept)
         write_results(args.page, "Forward simulation: the controllers on the "
-                      "original motion", text, command, notes=args.note)  # fmt: skip
+                      "original motion", text, command, notes=notes.strip())  # fmt: skip
+
+
+def _kept_rows_note(args, kept: dict[str, list[dict]]) -> str:
+    """Keep the page's rows in ``docs/results/rows/`` and say how to write the page again
+    from them alone (no simulation)."""
+    paths = {suffix: keep_rows(args.page, rows, suffix) for suffix, rows in kept.items()}
+    again = (
+        f"python benchmarks/bench_simulate.py --data {args.cmu} --controllers "
+        f"{' '.join(args.controllers)} --every {args.every} --offset {args.offset} "
+        f"--rows-log {paths['']}"
+        + (f" --baseline-log {paths['.baseline']}" if ".baseline" in paths else "")
+        + f" --page {args.page}"
+    )
+    return f"The rows are kept in {', '.join(paths.values())}; the page again from them: `{again}`."
 
 
 def main() -> None:

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_simulate import jsonl_log  # noqa: E402
-from results import write_results  # noqa: E402
+from results import keep_rows, write_results  # noqa: E402
 
 from sidql.evaluation.cases import load_cases  # noqa: E402
 from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
@@ -296,7 +296,8 @@ def main() -> None:
         text = table_markdown(rows) + f"\n\nRows read from {Path(args.from_log).name}.\n"
         print(text)
         if not args.no_write:
-            write_results(args.page, TITLE, text, command, notes=args.note)
+            write_results(args.page, TITLE, text, command,
+                          notes=(args.note + "\n\n" + _kept_rows_note(args, rows)).strip())  # fmt: skip
         return
     cases, _ = load_cases(args.data, progress=False, workers=1)
     cases = cases[args.offset :: args.every][: args.max_clips]
@@ -323,7 +324,14 @@ def main() -> None:
     )
     print(text)
     if not args.no_write:
-        write_results(args.page, TITLE, text, command)
+        write_results(args.page, TITLE, text, command, notes=_kept_rows_note(args, rows))
+
+
+def _kept_rows_note(args, rows: list[dict]) -> str:
+    """Keep the page's rows in ``docs/results/rows/`` and say how to write it again from them."""
+    path = keep_rows(args.page, rows)
+    return (f"The rows are kept in {path}; the page again from them: `python "
+            f"benchmarks/bench_simulate_falls.py --from-log {path} --page {args.page}`.")  # fmt: skip
 
 
 if __name__ == "__main__":

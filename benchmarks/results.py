@@ -56,6 +56,19 @@ def write_results(name: str, title: str, markdown: str, command: str, notes: str
     return path
 
 
+def keep_rows(page: str, rows: list[dict], suffix: str = "") -> str:
+    """Keep the per-clip rows a page was written from beside it, as JSON lines in
+    ``docs/results/rows/<page><suffix>.jsonl`` (atomically), so the page can be written again
+    from the repository alone and a later run can pair against them. Returns the path
+    relative to the repository root, as the page's regenerating command names it."""
+    import json
+
+    path = RESULTS_DIR / "rows" / f"{page}{suffix}.jsonl"
+    body = "".join(json.dumps(row, sort_keys=True) + "\n" for row in rows).encode()
+    write_atomic(path, lambda f: f.write(body), root=RESULTS_DIR)
+    return str(path.relative_to(RESULTS_DIR.parents[1]))
+
+
 def load_trials(data, min_frames: int = 60) -> tuple[list, list[str]]:
     """Every trial under ``data`` read by ``load_motion`` (30 fps clips, MuJoCo forward
     kinematics): ``(clips, skipped)``, where ``skipped`` names each trial left out and why (it does

@@ -81,3 +81,26 @@ def test_a_baseline_log_pairs_clip_by_clip(bench, tmp_path):
     assert "the baseline's rows (base.jsonl)" in text
     line = text.strip().splitlines()[-1]
     assert "| 2 | -0.50 [" in line and "| -10 [" in line and line.count("| -10 |") == 2
+
+
+def test_kept_rows_write_the_page_again(bench, tmp_path, monkeypatch):
+    """A page's rows are kept beside it (``docs/results/rows/<page>.jsonl``) and read back by
+    ``--rows-log`` as the same rows per controller; the note names the command that writes the
+    page again from them, baseline included."""
+    import argparse
+
+    results = load_benchmark("results")
+    monkeypatch.setattr(results, "RESULTS_DIR", tmp_path / "docs" / "results")
+    monkeypatch.setattr(bench, "keep_rows", results.keep_rows)
+    a = {"clip": "a@0", "sim_fell": 0, "sim_error_mm": 12.5}
+    b = {"clip": "b@0", "sim_fell": 1, "sim_error_mm": 99.0}
+    kept = {"": [a | {"controller": "mix0.5"}, b | {"controller": "mix0.5"}],
+            ".baseline": [b | {"controller": "mix0.5"}]}  # fmt: skip
+    args = argparse.Namespace(page="demo_page", cmu="DATA", controllers=["mix0.5"], every=5,
+                              offset=2)  # fmt: skip
+    note = bench._kept_rows_note(args, kept)
+    rows_path = tmp_path / "docs" / "results" / "rows" / "demo_page.jsonl"
+    assert bench.read_log(str(rows_path)) == {"mix0.5": kept[""]}
+    assert "--rows-log docs/results/rows/demo_page.jsonl" in note
+    assert "--baseline-log docs/results/rows/demo_page.baseline.jsonl" in note
+    assert "--every 5 --offset 2" in note and "--page demo_page" in note
