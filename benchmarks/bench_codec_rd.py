@@ -1,6 +1,8 @@
 """The codec against what a user would do instead: rate against joint position error.
 
     python benchmarks/bench_codec_rd.py [--data ../shared/cmu] [--plot docs/codec_rd.png]
+    # a fast screen of the position coding alone (no page written)
+    python benchmarks/bench_codec_rd.py --codec-only [--targets 1,3,10] [--no-cones]
 
 Every trial of ``--data`` (at least 60 frames) is read at 30 fps on its own skeleton; its 23
 protocol points come from MuJoCo's forward kinematics of the ASF/AMC (``load_motion``), which the
@@ -45,6 +47,7 @@ import scipy.fft  # noqa: E402
 from results import load_trials, write_results  # noqa: E402
 
 from sidql.codec import format as sidq  # noqa: E402
+from sidql.codec import position_coding  # noqa: E402
 from sidql.codec.decode import reconstruct_stream  # noqa: E402
 from sidql.codec.encode import encode_series  # noqa: E402
 from sidql.keyframes.metrics import q_from_angles  # noqa: E402
@@ -174,9 +177,9 @@ def baselines(trials) -> dict[str, list[dict]]:
     return out
 
 
-def codec_position(trials) -> list[dict]:
+def codec_position(trials, targets=CODEC_TARGETS_MM) -> list[dict]:
     rows = []
-    for e in CODEC_TARGETS_MM:
+    for e in targets:
         pool = Pool()
         t0 = time.perf_counter()
         for t in trials:
@@ -415,6 +418,26 @@ def _points_and_coders(base, codec, angle, coders, seconds) -> list[str]:
     return lines
 
 
+def screen(trials, args) -> int:
+    """The position coding alone: its points, then its B/s read at equal mean error and p95."""
+    targets = CODEC_TARGETS_MM
+    if args.targets:
+        targets = tuple(float(x) for x in args.targets.split(","))
+    codec = codec_position(trials, targets)
+    for r in codec:
+        print(f"--max-error {r['max_error_mm']:g}: {r['bytes_per_second']:.1f} B/s, mean "
+              f"{r['mean_mm']:.3f} mm, p95 {r['p95_mm']:.2f} mm, {r['seconds']:.1f} s")  # fmt: skip
+    means = {e: at_error(codec, e) for e in ERRORS_MM}
+    p95s = {e: at_error(codec, e, by="p95_mm") for e in P95_MM}
+    print("B/s at mean error: " + ", ".join(f"{e} mm {b:.1f}" for e, b in means.items()
+                                              if np.isfinite(b)))  # fmt: skip
+    print("B/s at p95: " + ", ".join(f"{e:g} mm {b:.1f}" for e, b in p95s.items()
+                                       if np.isfinite(b)))  # fmt: skip
+    if args.json:
+        args.json.write_text(json.dumps({"codec": codec, "at_mean": means, "at_p95": p95s}))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=default_data_dir())
@@ -423,12 +446,23 @@ def main(argv=None) -> int:
     ap.add_argument("--no-write", action="store_true", help="print only (no docs/results file)")
     ap.add_argument("--physics", action="store_true", help="also foot contacts at equal rate "
                     "(benchmarks/codec_physics.py, which alone writes its own page)")  # fmt: skip
+    ap.add_argument("--codec-only", action="store_true", help="only the position coding's "
+                    "points and its bytes read at equal mean error and p95 (a fast screen: "
+                    "writes no page)")  # fmt: skip
+    ap.add_argument("--targets", type=str, default=None, help="with --codec-only: its "
+                    "--max-error targets [mm], comma-separated (default: the page's)")  # fmt: skip
+    ap.add_argument("--no-cones", action="store_true", help="the position coding without "
+                    "cones (sidql.codec.position_coding.CONES off: version 5's prediction)")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.no_cones:
+        position_coding.CONES = False
 
     clips, skipped = load_trials(args.data)
     trials = [Trial(clip) for clip in clips]
     seconds = sum(t.n * t.dt for t in trials)
     print(f"{len(trials)} trials, {seconds:.1f} s at 30 fps; skipped: {skipped}")
+    if args.codec_only:
+        return screen(trials, args)
     base = baselines(trials)
     codec = codec_position(trials)
     angle, coders = codec_angle(trials)

@@ -210,7 +210,7 @@ class Stream:
         kv = _forced_aimed(
             same_branch(self.values, q.firsts(), M, k), codes, k, q.scales(), float(q.rho),
             self.basis, self.lengths, self.parents, float(q.root_slope),
-            steps(k, int(round(4 * q.gap_exponent))), q.firsts(), depth_order(self.parents)[0],
+            steps(k, int(round(4 * q.gap_exponent))), q.firsts(), depth_order(self.parents, np.zeros(len(self.parents) - 1, bool))[0],
             forced, fmask,
         )  # fmt: skip
         return codes, kv

@@ -157,7 +157,8 @@ def _fig(rounds, key, i: int = 0) -> str:
 def sides_table(rounds: list[dict], names: list[str], methods, counts) -> str:
     """Markdown: per W, method and side, eval's loop (CPU and wall), the hot loop (CPU),
     eval's own median (wall) and eval loop / hot loop paired; then per W and method the
-    verdict against :data:`AIMS` and the first side over each other side, paired."""
+    verdict against :data:`AIMS` and the first side over each other side, paired (eval's loop,
+    and the hot loop in brackets)."""
     lines = [
         "| W | method | code | eval's loop, CPU ms [range over rounds] | eval's loop, wall ms | "
         "hot loop, CPU ms | `evaluate` itself, wall ms | eval's loop / hot loop, CPU |",
@@ -178,6 +179,7 @@ def sides_table(rounds: list[dict], names: list[str], methods, counts) -> str:
             verdict = "met" if med[0] <= AIMS[m] else "UNMET"
             against = "; ".join(
                 f"/ {o}: {paired_ratio(rounds, (names[0], 'eval', m, W), (o, 'eval', m, W))[0][0]:.2f}x"
+                f" (hot loop {paired_ratio(rounds, (names[0], 'hot', m, W), (o, 'hot', m, W))[0][0]:.2f}x)"
                 for o in names[1:]
             )  # fmt: skip
             notes.append(

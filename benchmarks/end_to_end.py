@@ -57,7 +57,7 @@ def columns(clip, W: int, policy, with_dqn: bool) -> dict:
             clip, w_max=W
         ).keyframes(W),
         "  optimal part: chart + costs it can use": lambda: optimum_cost_matrix(clip, W),
-        "  optimal part before: chart + the band's costs (the route before the screen, W <= 6)": (
+        "  optimal part before: chart + the band's costs (the route before the screen, W <= 9)": (
             lambda: _banded_costs(*clip_stacked(clip), False, W)
         ),
     }

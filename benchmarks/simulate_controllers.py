@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
+from sim.simulate.lqr import LQRWeights  # noqa: E402
 from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.searchplan import SearchPlan  # noqa: E402
@@ -329,4 +330,25 @@ for _name, (_n, _plan, _label) in PLANS.items():
          "search": {"choice": GainChoice(share=0.5), "plan": _plan}},
         "position",
         {"alternate_gains": (_STIFF,)},
+    )  # fmt: skip
+
+#: the time-varying LQR tracker (``sim.simulate.lqr``, no sampler): ``lqr`` linearised at the
+#: simulated state every tick (``mjd_transitionFD``, one Riccati step a
+#: tick from the last value matrix) on the servo body, its feedback offsetting the plain
+#: tracker's targets; ``lqrref`` the gains of one Riccati pass along the reference (linearised
+#: there, the stance soles sunk 0.5 mm into the floor)
+_LQR = LQRWeights()
+for _name, _w, _act, _label in (
+    ("lqr", _LQR, "position", "linearised at the simulated state, servo body"),
+    (
+        "lqrref",
+        dataclasses.replace(_LQR, online=False),
+        "position",
+        "one Riccati pass along the reference, servo body",
+    ),
+):
+    CONTROLLERS[_name] = (
+        f"time-varying LQR, {_label}",
+        {"controller": "lqr", "contact_reference": True, "search": {"weights": _w}},
+        _act,
     )  # fmt: skip

@@ -1,4 +1,4 @@
-"""The position coding (coding 2, .sidq versions 2 to 5): range coder, position quantiser, the
+"""The position coding (coding 2, .sidq versions 2 to 6): range coder, position quantiser, the
 encoder's error measure against the decoder, targets, the container and hostile bytes."""
 
 from __future__ import annotations
@@ -502,7 +502,10 @@ def test_a_stream_of_the_version_5_encoder_decodes_bit_for_bit():
     assert q.root_rho == 1.0 and q.exponent == 0.125
     values = np.ascontiguousarray(decoded_chart(s)["values"])
     assert hashlib.sha256(values.tobytes()).hexdigest() == V5_CHART_SHA256
-    assert sidq.to_bytes(s) == V5_STREAM
+    assert sidq.to_bytes(s, position_version=5) == V5_STREAM
+    v6 = sidq.to_bytes(s)  # version 6 adds only the cone count (0) after the gap exponent
+    assert v6[4] == 6 and len(v6) == len(V5_STREAM) + 1
+    assert np.array_equal(decoded_chart(sidq.from_bytes(v6))["values"], values)
 
 
 def test_a_root_at_constant_velocity_costs_no_residuals_after_two_keyframes():
@@ -531,7 +534,7 @@ def test_a_bad_lever_exponent_root_predictor_or_gap_exponent_is_one_line(encoded
     at = 23 + 1 + 2 * 22 + 4 + offset  # header, length unit and codes, step, then rho
     q = encoded.stream.quantiser
     byte = (16 * q.exponent, 8 * q.root_slope, 4 * q.gap_exponent)[offset - 1]
-    assert raw[4] == 5 and raw[at] == round(byte)
+    assert raw[4] == sidq.VERSION_POSITION and raw[at] == round(byte)
     raw[at] = 17
     raw += struct.pack("<I", zlib.crc32(bytes(raw)))
     with pytest.raises(MotionDataError, match=rf"^bad\.sidq: bad position step .*{what} 17"):

@@ -52,6 +52,19 @@ def test_ratios_are_paired_within_rounds_so_a_drift_of_the_machine_cancels():
     np.testing.assert_allclose(hi, 1.5)
 
 
+def test_the_table_gives_each_loop_s_ratio_against_another_side_paired_within_rounds():
+    # side A: eval's loop 0.8 of B's, the hot loop 0.6 of B's, in every round whatever its speed
+    rounds = []
+    for s in (1.0, 1.6, 0.7):
+        r = {}
+        for loop, a in (("eval", 0.8), ("hot", 0.6), ("evaluate", 1.0)):
+            r[("A", loop, "dqn", 15)] = (a * s, a * s)
+            r[("B", loop, "dqn", 15)] = (s, s)
+        rounds.append(r)
+    table = sides.sides_table(rounds, ["A", "B"], ["dqn"], [15])
+    assert "/ B: 0.80x (hot loop 0.60x)" in table
+
+
 def test_a_side_process_answers_every_loop_on_real_clips(cmu_dir):
     with sides.Side(None, cmu_dir, 2) as side:
         sides.warm([side])

@@ -10,6 +10,7 @@ import pytest
 from keyframe_synth import smooth_clip
 
 from sidql.keyframes.optimal import (
+    SCREEN_SHARE,
     _banded_costs,
     _dp,
     _screenable,
@@ -82,11 +83,14 @@ def test_the_screen_refuses_angles_too_large_for_single_precision(walk_clip):
     assert not _screenable(X, R)
 
 
-@pytest.mark.parametrize("W", [3, 5])
+@pytest.mark.parametrize("W", [3, 5, 9])
 def test_the_optimal_method_takes_the_screen_for_few_keyframes(W, walk_clip):
     from sidql.keyframes.methods import select
 
     clip = walk_clip.slice(0, 60)
+    N = clip.n_frames
+    band = min(N, int(np.ceil(1.5 * (N - 1) / (W - 1))) + 1)
+    assert band * band * SCREEN_SHARE >= N * N  # the screen's route, W <= 9 on 60 frames
     assert np.array_equal(
         select("optimal", clip, W), clip_optimal_table(clip, w_max=W).keyframes(W)
     )

@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from sidql.keyframes.segment_costs import clip_stacked
-from sidql.keyframes.single_costs import _CONTRACT, single_cost_matrix, turn_rates, weights_of
+from sidql.keyframes.single_costs import (
+    _CONTRACT,
+    _turn_distance,
+    single_cost_matrix,
+    turn_rates,
+    weights_of,
+)
 from sidql.keyframes.wide_vectors import ATTRIBUTES, wide_vectors
 
 
@@ -71,3 +77,39 @@ def test_the_wide_segment_costs_are_the_default_width_ones_to_the_last_bit(walk_
         X, R = np.ascontiguousarray(X), np.ascontiguousarray(R)
         args = (X, turn_rates(R), weights_of(len(X)))
         assert np.array_equal(single_cost_matrix(*args), plain(*args))
+
+
+def test_the_protocol_width_compiled_as_a_constant_keeps_the_bits_of_the_runtime_width(walk_clip):
+    """single_cost_matrix passes the protocol's 48 channels to its loops as a constant; the
+    same loops compiled for a width known only at run time give the same numbers."""
+    from sidql.keyframes.single_costs import PROTOCOL_LANES, _cost_passes
+
+    rng = np.random.default_rng(5)
+    X0, R0 = clip_stacked(walk_clip)
+    for X, R in ((X0, R0), (X0 + rng.normal(0, 2.0, X0.shape), R0 * 3.0)):
+        X, R = np.ascontiguousarray(X), np.ascontiguousarray(R)
+        args = (X, turn_rates(R), weights_of(len(X)))
+        assert args[1].shape[1] == PROTOCOL_LANES
+        runtime_width = int(np.int64(args[1].shape[1]))  # a plain argument: not a constant
+        assert np.array_equal(single_cost_matrix(*args), _cost_passes(*args, runtime_width))
+
+
+@numba.njit
+def _distances(v):
+    out = np.empty_like(v)
+    for k in range(v.shape[0]):
+        out[k] = _turn_distance(v[k])
+    return out
+
+
+def test_the_turn_distance_is_the_add_and_subtract_rounding_it_replaced():
+    """|v - rint(v)| in float32 equals |v - ((v + 1.5 2^23) - 1.5 2^23)| (numpy's float32
+    arithmetic, the rounding the costs used before) for |v| < 2^22, ties included."""
+    rng = np.random.default_rng(7)
+    ties = np.arange(-40, 40, dtype=np.float32) + np.float32(0.5)
+    v = np.concatenate([
+        ties, rng.normal(0, 3, 4000), rng.uniform(-(2.0**22), 2.0**22, 4000),
+        [0.0, -0.0, 2.0**22 - 0.5, -(2.0**22) + 0.5, 1e-30, 0.49999997],
+    ]).astype(np.float32)  # fmt: skip
+    big = np.float32(1.5 * 2**23)
+    assert np.array_equal(_distances(v), np.abs(v - ((v + big) - big)))

@@ -11,8 +11,11 @@ by normalised least mean squares (rate ``mu``, kept in [lo, hi]). The value is s
 ``p + r step``. ``step`` is ``scale[d]`` for theta and root channels and
 ``min(scale[d] / max(sin(theta_hat), SIN_FLOOR), MAX_PHI_STEP)`` for phi, theta_hat being the
 same keyframe's decoded theta of that bone, each times the keyframe's factor (:func:`steps`,
-version 5). In version 5 there is no partner term (``partners`` all -1) and a channel's first
-keyframe is predicted from its parent bone's same angle (``firsts``) instead of 0.
+version 5). In versions 5 and 6 there is no partner term (``partners`` all -1) and a channel's
+first keyframe is predicted from its parent bone's same angle (``firsts``) instead of 0. In
+version 6 a bone on cones (``cones`` (M, 3): alpha, r, beta; all -1 for none) is predicted on
+them at every keyframe (:func:`sidql.codec.cones.predict_cone`), and a bone with a second cone
+about a bone r of its depth is visited after the others of that depth (:func:`depth_order`).
 
 Every value a channel's prediction, step or target needs is decoded before it: its own channel
 at the keyframes before, its bone's theta (for phi) and its parent bone (partner innovation, the
@@ -35,6 +38,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from sidql.codec.cones import predict_cone
+
 #: phi of a bone is quantised with a step divided by ``max(sin(theta), SIN_FLOOR)`` (its effect on
 #: positions), capped at :data:`MAX_PHI_STEP` [rad] so the azimuth stays continuous near a pole.
 SIN_FLOOR = 0.05
@@ -49,11 +54,13 @@ RDO_BAND = 0.1
 
 
 @numba.njit(cache=True, nogil=True)
-def depth_order(parents):
+def depth_order(parents, deferred):
     """(M,) bones (point index - 1) by depth in the tree, (L + 1,) start of each depth in it.
 
     ``parents``: (M + 1,) point parent indices, -1 for the root (point 0). When a parent does not
-    precede its child, every bone is its own depth, in index order."""
+    precede its child, every bone is its own depth, in index order. ``deferred`` (M,) bool: a
+    bone predicted from another bone of its depth (a second cone, :func:`sidql.codec.cones.predict_cone`) comes
+    after the other bones of its depth, in a level of its own."""
     J = parents.shape[0]
     depth = np.zeros(J, dtype=np.int64)
     ordered = parents[0] < 0
@@ -62,9 +69,12 @@ def depth_order(parents):
         if p < 0 or p >= j:
             ordered = False
         else:
-            depth[j] = depth[p] + 1
+            depth[j] = depth[p] + 2  # even: a depth in the tree; odd: its deferred bones
     if not ordered:
         return np.arange(J - 1), np.arange(J)
+    for j in range(1, J):
+        if deferred[j - 1]:
+            depth[j] += 1
     top = depth.max()
     bones = np.argsort(depth[1:], kind="mergesort")  # stable: index order within a depth
     starts = np.searchsorted(depth[1:][bones], np.arange(1, top + 2))
@@ -72,14 +82,15 @@ def depth_order(parents):
 
 
 @numba.njit(cache=True, nogil=True)
-def visit_order(parents):
+def visit_order(parents, deferred):
     """(2 M + 3,) channels in the order the kernel visits them: the root's three, then for each
-    depth in the tree the thetas of its bones, then their phis (see the module docstring).
+    depth in the tree the thetas of its bones, then their phis (see the module docstring; the
+    deferred bones of a depth after the others, :func:`depth_order`).
 
     ``parents``: (M + 1,) point parent indices, -1 for the root (point 0)."""
     J = parents.shape[0]
     M = J - 1
-    bones, starts = depth_order(parents)
+    bones, starts = depth_order(parents, deferred)
     order = np.empty(2 * M + 3, dtype=np.int64)
     order[:3] = 2 * M + np.arange(3)
     i = 3
@@ -96,7 +107,7 @@ def visit_order(parents):
 @numba.njit(cache=True, inline="always")
 def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi, basis,
               lengths, parents, innov, kappa, err, aim, root_rho, order, target_phi,
-              v, kstep, firsts):  # fmt: skip
+              v, kstep, firsts, cones, cone_phi, silent, reach):  # fmt: skip
     """Keyframe w of :func:`dpcm`: channels in ``order`` (:func:`visit_order`). With ``aim``,
     ``err`` (J, 3) holds the decoded points' errors [m] to first order, and a bone's targets
     are its true angles minus its parent point's error along the bone's theta and phi
@@ -117,7 +128,10 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
         elif w >= 2:
             slope = root_rho if d >= 2 * M else rho
             pred = out[w - 1, d] + slope * ratio * (out[w - 1, d] - out[w - 2, d])
+        pred = _on_cone(w, d, pred, out, parents, cones, cone_phi, firsts, rho, root_rho, ratio,
+                        M)  # fmt: skip
         temporal = pred
+        turn = 0.0  # whole turns the target of a phi on a cone moved by
         norm = 1e-8
         for j in range(P):
             pc = partners[d, j]
@@ -131,7 +145,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             target = values[v, d]
             if aim and d < M:  # theta; phi's target comes with it
                 p = parents[d + 1]
-                L = max(lengths[d], 1e-6)
+                L = max(reach[d], 1e-6)
                 e0, e1, e2 = err[p, 0], err[p, 1], err[p, 2]
                 g0, g1, g2 = basis[v, d, 0], basis[v, d, 1], basis[v, d, 2]
                 dt = -(e0 * g0 + e1 * g1 + e2 * g2) / L
@@ -140,14 +154,10 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
                 target_phi[d] = values[v, M + d] + min(max(dp, -0.5), 0.5)
             elif aim and d < 2 * M:
                 target = target_phi[d - M]
-            q = (target - pred) / step
-            r = np.int64(np.floor(q + 0.5))
-            a = abs(r)
-            # one class down (a bit or more saved, little error) where |r| is a power of two:
-            # without a branch, which the processor would guess wrong half the time
-            down = (a > 0) & ((a & (a - 1)) == 0) & (a - abs(q) > 0.5 - RDO_BAND)
-            r -= np.int64(down) * (np.int64(r > 0) - np.int64(r < 0))
-            codes[w, d] = r
+            if M <= d < 2 * M and max(cones[d - M, 0], cones[d - M, 1]) >= 0.0:  # its branch
+                turn = 2.0 * np.pi * np.rint((target - pred) / (2.0 * np.pi))
+                target -= turn
+            codes[w, d] = 0 if aim and d < 2 * M and silent[d % M] else _code(target, pred, step)
         out[w, d] = pred + codes[w, d] * step
         own = out[w, d] - temporal
         for j in range(P):  # normalised least mean squares towards this keyframe's miss
@@ -162,7 +172,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
             b = d - M
             g0, g1, g2 = basis[v, b, 0], basis[v, b, 1], basis[v, b, 2]
             a = lengths[b] * (out[w, b] - values[v, b])
-            f = -lengths[b] * g2 * (out[w, d] - values[v, d])
+            f = -lengths[b] * g2 * (out[w, d] + turn - values[v, d])
             p = parents[b + 1]
             err[b + 1, 0] = err[p, 0] + a * g0 + f * basis[v, b, 3]
             err[b + 1, 1] = err[p, 1] + a * g1 + f * basis[v, b, 4]
@@ -171,7 +181,7 @@ def _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, 
 
 @numba.njit(cache=True, nogil=True)
 def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi, basis, lengths,
-         parents, root_rho, quarters, firsts, rows):  # fmt: skip
+         parents, root_rho, quarters, firsts, rows, cones):  # fmt: skip
     """Closed-loop prediction and quantisation of keyframe values (see the module docstring).
 
     Args:
@@ -193,6 +203,7 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
             (version 5: the parent bone's same angle; -1: predicted 0). Encoding, each bone's
             phi is first moved by whole turns onto its parent's branch (:func:`same_branch`).
         rows: (W,) int64 row of ``values`` and ``basis`` of each keyframe.
+        cones: (M, 3) per bone its cones (alpha, r, beta) (version 6; all -1: none).
 
     Returns the decoded (W, 2 M + 3) values.
     """
@@ -201,22 +212,24 @@ def dpcm(values, codes, keys, scale, n_bones, rho, encode, partners, mu, lo, hi,
     kstep = steps(keys, quarters)
     if encode and basis.shape[0] > 0 and _tree_ordered(parents) and np.all(partners < 0):
         values = same_branch(values, firsts, M, rows)
-        bones, starts = depth_order(parents)
+        bones, starts = depth_order(parents, cones[:, 1] >= 0.0)
         return _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho,
-                      kstep, firsts, rows, bones, starts)  # fmt: skip
+                      kstep, firsts, rows, bones, starts, cones)  # fmt: skip
     out = np.zeros((W, D))
     innov = np.zeros(D)
     kappa = np.zeros((D, partners.shape[1]))
     aim = encode and basis.shape[0] > 0
     err = np.zeros((M + 1, 3))
-    order = visit_order(parents)
+    order = visit_order(parents, cones[:, 1] >= 0.0)
     target_phi = np.zeros(M)
+    cone_phi = np.zeros(M)
+    silent, reach = followers(cones, parents, lengths)
     if encode:
         values = same_branch(values, firsts, M, rows)
     for w in range(W):
         _keyframe(w, values, codes, out, keys, scale, M, rho, encode, partners, mu, lo, hi,
                   basis, lengths, parents, innov, kappa, err, aim, root_rho, order,
-                  target_phi, rows[w], kstep, firsts)  # fmt: skip
+                  target_phi, rows[w], kstep, firsts, cones, cone_phi, silent, reach)  # fmt: skip
     return out
 
 
@@ -244,7 +257,7 @@ def _tree_ordered(parents):
 
 @numba.njit(cache=True, nogil=True)
 def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho, kstep, firsts,
-           rows, bones, starts):  # fmt: skip
+           rows, bones, starts, cones):  # fmt: skip
     """:func:`dpcm` encoding with aiming, without partner channels (version 5), parents before
     children (``bones``, ``starts``: :func:`depth_order`'s): :func:`_keyframe`'s operations on
     each value, without its branches. Per keyframe the temporal predictions (the keyframes
@@ -256,6 +269,7 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
     out = np.zeros((W, D))
     err = np.zeros((M + 1, 3))
     pred = np.zeros(D)
+    silent, reach = followers(cones, parents, lengths)
     for w in range(W):
         v, ks = rows[w], kstep[w]
         if w >= 2:
@@ -278,11 +292,14 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
                     pred[b] = out[0, firsts[b]] if firsts[b] >= 0 else 0.0
                     pred[M + b] = out[0, firsts[M + b]] if firsts[M + b] >= 0 else 0.0
                 p = parents[b + 1]
+                if max(cones[b, 0], cones[b, 1]) >= 0.0:  # on cones about decoded directions
+                    pred[b], pred[M + b] = predict_cone(out[w], p - 1, cones[b], pred[b],
+                                                         pred[M + b], M)  # fmt: skip
                 dt = -(err[p, 0] * basis[v, b, 0] + err[p, 1] * basis[v, b, 1]
-                       + err[p, 2] * basis[v, b, 2]) / max(lengths[b], 1e-6)  # fmt: skip
+                       + err[p, 2] * basis[v, b, 2]) / max(reach[b], 1e-6)  # fmt: skip
                 target = values[v, b]
                 target += min(max(dt, -0.5), 0.5)
-                codes[w, b] = _code(target, pred[b], scale[b] * ks)
+                codes[w, b] = 0 if silent[b] else _code(target, pred[b], scale[b] * ks)
                 out[w, b] = pred[b] + codes[w, b] * (scale[b] * ks)
             for i in range(starts[level], starts[level + 1]):
                 b = bones[i]
@@ -290,18 +307,62 @@ def _aimed(values, codes, keys, scale, M, rho, basis, lengths, parents, root_rho
                 g0, g1, g2, g3, g4 = basis[v, b, 0], basis[v, b, 1], basis[v, b, 2], \
                     basis[v, b, 3], basis[v, b, 4]  # fmt: skip
                 dp = -(err[p, 0] * g3 + err[p, 1] * g4) / (
-                    max(lengths[b], 1e-6) * max(-g2, SIN_FLOOR)
+                    max(reach[b], 1e-6) * max(-g2, SIN_FLOOR)
                 )
                 target_phi = values[v, d] + min(max(dp, -0.5), 0.5)
+                turn = 0.0
+                if max(cones[b, 0], cones[b, 1]) >= 0.0:  # the branch of the prediction
+                    turn = 2.0 * np.pi * np.rint((target_phi - pred[d]) / (2.0 * np.pi))
+                    target_phi -= turn
                 step = min(scale[d] * ks / max(np.sin(out[w, b]), SIN_FLOOR), MAX_PHI_STEP)
-                codes[w, d] = _code(target_phi, pred[d], step)
+                codes[w, d] = 0 if silent[b] else _code(target_phi, pred[d], step)
                 out[w, d] = pred[d] + codes[w, d] * step
                 a = lengths[b] * (out[w, b] - values[v, b])
-                f = -lengths[b] * g2 * (out[w, d] - values[v, d])
+                f = -lengths[b] * g2 * (out[w, d] + turn - values[v, d])
                 err[b + 1, 0] = err[p, 0] + a * g0 + f * g3
                 err[b + 1, 1] = err[p, 1] + a * g1 + f * g4
                 err[b + 1, 2] = err[p, 2] + a * g2
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def followers(cones, parents, lengths):
+    """((M,) bool, (M,) float64): the bones on their parent's direction (cone angle 0, no
+    second bone), which the encoder leaves at their prediction (code 0: aiming them costs more
+    bytes than the error it takes off), and each bone's reach [m], its length plus its chain
+    of such followers': a bone aims at its followers' far end, the point its direction moves
+    most (on a forearm with its wrist: the wrist point's error 0, the forearm's a third of the
+    elbow's, against a half at the wrist aiming at its own end)."""
+    M = lengths.shape[0]
+    silent = (cones[:, 0] == 0.0) & (cones[:, 1] < 0.0)
+    reach = lengths.copy()
+    for j in range(M, 0, -1):  # children after their parents
+        if silent[j - 1] and parents[j] > 0:
+            reach[parents[j] - 1] += reach[j - 1]
+    return silent, reach
+
+
+@numba.njit(cache=True, inline="always")
+def _on_cone(w, d, pred, out, parents, cones, cone_phi, firsts, rho, root_rho, ratio, M):
+    """Channel d's prediction at keyframe w: ``pred`` (temporal), or for a bone on cones its
+    theta's and phi's (:func:`sidql.codec.cones.predict_cone`, phi's kept in ``cone_phi``)."""
+    if d < M and max(cones[d, 0], cones[d, 1]) >= 0.0:
+        pt = _temporal(w, M + d, out, firsts, rho, root_rho, ratio, M)
+        pred, cone_phi[d] = predict_cone(out[w], parents[d + 1] - 1, cones[d], pred, pt, M)
+    elif M <= d < 2 * M and max(cones[d - M, 0], cones[d - M, 1]) >= 0.0:
+        pred = cone_phi[d - M]
+    return pred
+
+
+@numba.njit(cache=True, inline="always")
+def _temporal(w, d, out, firsts, rho, root_rho, ratio, M):
+    """Channel d's prediction at keyframe w from the keyframes before (as :func:`_keyframe`)."""
+    if w == 0:
+        return out[0, firsts[d]] if firsts[d] >= 0 else 0.0
+    if w == 1:
+        return out[0, d]
+    slope = root_rho if d >= 2 * M else rho
+    return out[w - 1, d] + slope * ratio * (out[w - 1, d] - out[w - 2, d])
 
 
 @numba.njit(cache=True, nogil=True)

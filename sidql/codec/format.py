@@ -1,8 +1,8 @@
-"""The ``.sidq`` container, versions 1 to 5: bytes <-> :class:`Stream`.
+"""The ``.sidq`` container, versions 1 to 6: bytes <-> :class:`Stream`.
 
 The byte format is specified once, in ``docs/codec.md`` ("The .sidq format"): version 1 carries
 codings 0 (fixed-size records, for live streaming) and 1 (packed, LZMA, offline), versions 2
-to 5 coding 2, the position coding (its fields: :mod:`sidql.codec.position_format`; values as
+to 6 coding 2, the position coding (its fields: :mod:`sidql.codec.position_format`; values as
 :class:`sidql.codec.quantise.PositionQuantiser` rebuilds them). All numbers are little-endian;
 the header names the reconstruction (its index in :data:`sidql.keyframes.curves.CURVES`), the
 stream rate, the skeleton's hash (:func:`sidql.codec.skeleton.skeleton_hash`) and the points

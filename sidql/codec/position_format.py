@@ -1,4 +1,4 @@
-"""Coding 2's fields of a ``.sidq`` stream (versions 2 to 5): the bone lengths, the quantiser's
+"""Coding 2's fields of a ``.sidq`` stream (versions 2 to 6): the bone lengths, the quantiser's
 parameters and the range-coded block of keyframe residuals, written and read.
 
 Specified in ``docs/codec.md`` ("Versions 2 to 4"); :mod:`sidql.codec.format` reads the rest of
@@ -8,6 +8,8 @@ and chosen by each integer's expected magnitude (:func:`sidql.codec.entropy.enco
 ``kinds``); versions 2 and 3 (one context set per channel) are still read. Version 5 drops the
 parent-innovation term of the prediction and scales each keyframe's step by how many frames its
 value moves (:func:`sidql.codec.quantise.keyframe_steps`, the exponent in one more byte).
+Version 6 adds the cones (:mod:`sidql.codec.cones`): bones predicted at a fixed angle to bones
+decoded before them.
 """
 
 from __future__ import annotations
@@ -16,14 +18,15 @@ import struct
 
 import numpy as np
 
+from sidql.codec.cones import cone_bytes, read_cones
 from sidql.codec.entropy import decode_integers, encode_integers, estimate_split
 from sidql.codec.quantise import PositionQuantiser
 from sim.errors import MotionDataError, UsageError
 
 #: coding 2 as written, and as read (2: no lever exponent byte, 1/2 implied; 2 and 3: no root
 #: slope byte, the root predicted like the angles, and one context set per channel; 2 to 4: the
-#: parent bone's innovation in the prediction, one step for every keyframe)
-VERSION_POSITION, POSITION_VERSIONS = 5, (2, 3, 4, 5)
+#: parent bone's innovation in the prediction, one step for every keyframe; 2 to 5: no cones)
+VERSION_POSITION, POSITION_VERSIONS = 6, (2, 3, 4, 5, 6)
 #: the largest gap exponent byte (version 5: the exponent x 4)
 MAX_GAP_QUARTERS = 4
 #: the largest magnitude a decoded coding-2 keyframe value may have [rad or m].
@@ -92,8 +95,8 @@ def block_bytes(
 
 def quantiser_bytes(q: PositionQuantiser, version: int = VERSION_POSITION) -> bytes:
     """The position step (float32), the slope weight x 8, then (version 3 on) the lever exponent
-    x 16, (version 4 on) the root's slope weight x 8 and (version 5) the gap exponent x 4, uint8
-    each. Older versions are written for tests of the readers only; one that cannot say ``q``
+    x 16, (version 4 on) the root's slope weight x 8 and (version 5 on) the gap exponent x 4,
+    uint8 each, then (version 6) the cones (:func:`sidql.codec.cones.cone_bytes`). Older versions are written for tests of the readers only; one that cannot say ``q``
     is refused."""
     if (
         version not in POSITION_VERSIONS
@@ -101,12 +104,14 @@ def quantiser_bytes(q: PositionQuantiser, version: int = VERSION_POSITION) -> by
         or (version < 3 and q.exponent != 0.5)
         or (version < 5 and (q.gap_exponent != 0 or not q.partner))
         or (version >= 5 and q.partner)
+        or (version < 6 and q.cones is not None)
     ):
         raise UsageError(f"version {version} cannot carry this quantiser")
     out = struct.pack("<fB", q.step, round(q.rho * 8))
     out += bytes([round(q.exponent * 16)]) if version >= 3 else b""
     out += bytes([round(q.root_slope * 8)]) if version >= 4 else b""
-    return out + (bytes([round(q.gap_exponent * 4)]) if version >= 5 else b"")
+    out += bytes([round(q.gap_exponent * 4)]) if version >= 5 else b""
+    return out + (cone_bytes(q.cones) if version >= 6 else b"")
 
 
 def read_quantiser(take, version: int, where: str, M: int, lengths, parents) -> PositionQuantiser:
@@ -126,10 +131,11 @@ def read_quantiser(take, version: int, where: str, M: int, lengths, parents) -> 
             where, None, f"bad position step {step}, predictor {rho8}, lever exponent "
             f"{lever16}, root predictor {root8} or gap exponent {gap4}",
         )  # fmt: skip
+    cones = read_cones(take, where, M, parents) if version >= 6 else None
     return PositionQuantiser(
         M, lengths, parents, float(step), rho8 / 8.0, exponent=lever16 / 16,
         root_rho=root8 / 8.0 if version >= 4 else None, gap_exponent=gap4 / 4,
-        partner=version < 5,
+        partner=version < 5, cones=cones,
     )  # fmt: skip
 
 

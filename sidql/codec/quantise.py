@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sidql.codec.cones import cone_array
 from sidql.codec.dpcm import PARTNER_RATE, PARTNER_WEIGHTS, dpcm, steps
 from sidql.codec.plan import subtree_sizes
 from sim.errors import UsageError
@@ -210,8 +211,10 @@ class PositionQuantiser:
         root_rho: the root channels' slope weight (None: ``rho``).
         gap_exponent: g, each keyframe's step times :func:`keyframe_steps` (k / 4 for k in 0..4).
         partner: True (versions 2 to 4): each prediction adds the parent bone's innovation;
-            False (version 5): it does not (with aiming that cost bytes), and the first
+            False (versions 5 and 6): it does not (with aiming that cost bytes), and the first
             keyframe of a bone is predicted from its parent's (:meth:`firsts`).
+        cones: (version 6) per bone its cone (alpha, r, beta) or None, or None for no bone
+            (:mod:`sidql.codec.cones`): such a bone is predicted on its cones.
     """
 
     n_bones: int
@@ -224,6 +227,11 @@ class PositionQuantiser:
     root_rho: float | None = None
     gap_exponent: float = 0.0
     partner: bool = True
+    cones: tuple | None = None
+
+    def cone_array(self) -> np.ndarray:
+        """(M, 3) per bone its cone (alpha, r, beta), all -1 for none (:mod:`sidql.codec.cones`)."""
+        return cone_array(self.cones, self.n_bones)
 
     @property
     def root_slope(self) -> float:
@@ -300,6 +308,7 @@ class PositionQuantiser:
             int(round(4 * self.gap_exponent)),
             self.firsts(),
             r,
+            self.cone_array(),
         )
         return codes, out
 
@@ -324,4 +333,5 @@ class PositionQuantiser:
             int(round(4 * self.gap_exponent)),
             self.firsts(),
             np.arange(len(k)),
+            self.cone_array(),
         )

@@ -264,9 +264,11 @@ def _banded_costs(X, R, linear, W):
 
 
 #: :func:`_optimum_costs` screens with the single-precision matrix when the band of
-#: :func:`_banded_costs` spans more than 1 / sqrt(SCREEN_SHARE) of the clip (measured on 60-frame
-#: clips: the screen is the faster for W <= 6, the band for W >= 7).
-SCREEN_SHARE = 12.0
+#: :func:`_banded_costs` spans more than 1 / sqrt(SCREEN_SHARE) of the clip (measured on the 107
+#: eval clips, one in two, best of 5, with the single-precision kernel's constant width: the
+#: screen 0.24-0.25 ms against the band's 0.26-0.30 ms for W = 7-9, even at W = 10, the band
+#: the faster from W = 12: 60-frame clips screen for W <= 9).
+SCREEN_SHARE = 25.0
 
 #: Unit roundoff of float32: the rounding error of each of its operations, relative.
 _U32 = 2.0**-24
@@ -321,7 +323,8 @@ def _screened_costs(X, R, H, W):
     (:func:`single_lower_bounds`) the least the rest of the clip costs around each segment;
     only the segments within U of that are summed exactly (and abandoned once over it). The
     single-precision matrix runs in the processor's widest vectors
-    (:mod:`sidql.keyframes.wide_vectors`)."""
+    (:mod:`sidql.keyframes.wide_vectors`), over the protocol's 48 channels as a compile-time
+    width (its disk cache, like this one's, refreshed by an edit of this file)."""
     N = X.shape[0]
     C32 = single_cost_matrix(X, turn_rates(R), H)
     lb = single_lower_bounds(X, R, C32)

@@ -168,7 +168,8 @@ def select_clip(positions, velocities, idx, parents, dt, sin_eps, H, W, use_prio
     (:func:`sidql.keyframes.single_costs.single_cost_matrix`, ``H`` its weight table of N) and
     the head (:func:`decide_clip`); ``enc_w``, ``head_w``: :func:`encoder_weights`,
     :func:`head_weights`. One call instead of six: a decision waits for no Python in between.
-    The costs run in the processor's widest vectors (:mod:`sidql.keyframes.wide_vectors`; this
+    The costs run in the processor's widest vectors (:mod:`sidql.keyframes.wide_vectors`), over
+    the protocol's 48 channels as a compile-time width (the same bits; this
     kernel's disk cache does not notice a change in the kernels it calls: clear
     ``sidql/learning/__pycache__/*.nb*`` after one).
 

@@ -12,8 +12,9 @@ by the original's floor track (``sim.simulate.reference.floor_track``), so a rec
 own height errors stay in it.
 
 Controllers (``ForwardValidation(controller=...)``): ``"plain"`` (``track``), ``"sampling"``
-(``sim.simulate.sampling``) and ``"wholebody"`` (``sim.simulate.wholebody``'s inverse-dynamics
-QP; it needs the torque-actuated body, ``sim_model(..., actuators="motor")``, and tracks a
+(``sim.simulate.sampling``), ``"lqr"`` (``sim.simulate.lqr``, either body, the
+contact-consistent reference by default) and ``"wholebody"`` (``sim.simulate.wholebody``'s
+inverse-dynamics QP; it needs the torque-actuated body, ``sim_model(..., actuators="motor")``, and tracks a
 contact-consistent reference: no floor lift, stance soles laid on the floor). The plain
 tracker tracks a reference lifted by ``FLOOR_LIFT`` unless asked for the contact-consistent
 one (``ForwardValidation(contact_reference=True)``); the sampler tracks the contact-consistent
@@ -31,6 +32,7 @@ from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
 from sim.simulate.footlock import foot_locked
 from sim.simulate.gainchoice import GainChoice, choice_track, common_body
+from sim.simulate.lqr import track_lqr
 from sim.simulate.model import CONTROL_HZ, Gains, sim_model, total_mass
 from sim.simulate.reference import (
     FLOOR_LIFT,
@@ -52,6 +54,13 @@ SIMULATE_KEYS = (
 #: further figures of :meth:`ForwardValidation.run` (not in the evaluation's tables)
 SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
 CONTROLLERS = ("plain", "sampling", "wholebody")
+#: what ``ForwardValidation`` runs besides: the time-varying LQR (``sim.simulate.lqr``), an
+#: option measured against the others (``benchmarks/bench_simulate.py --controllers lqr``), not
+#: offered by the commands (``synth`` and ``eval`` keep :data:`CONTROLLERS`)
+OPTIONAL_CONTROLLERS = ("lqr",)
+#: the controllers that compute torques themselves (the body's torque actuators,
+#: ``sim_model(actuators="motor")``); ``"lqr"`` runs on either body
+TORQUE_CONTROLLERS = ("wholebody",)
 #: the controller of ``eval --physics --simulate`` and ``report --simulate`` without
 #: ``--samples``: the sampler with falls in its cost and the balance feedback with the drift
 #: lead (:data:`DEFAULT_BALANCE`) at :data:`DEFAULT_SAMPLES`, because within the budget of 5 CPU
@@ -168,12 +177,14 @@ class ForwardValidation:
         foot_lock: bool = DEFAULT_FOOT_LOCK,
     ):
         controller, samples = chosen_controller(samples, controller)
-        if controller not in CONTROLLERS:
-            raise UsageError(f"unknown controller {controller!r}; known: {', '.join(CONTROLLERS)}")
-        if (controller == "wholebody") != (not model.actuator_biasprm[:, 1].any()):
+        known = CONTROLLERS + OPTIONAL_CONTROLLERS
+        if controller not in known:
+            raise UsageError(f"unknown controller {controller!r}; known: {', '.join(known)}")
+        torque = controller in TORQUE_CONTROLLERS
+        if controller != "lqr" and torque != (not model.actuator_biasprm[:, 1].any()):
             raise UsageError(
                 f"controller {controller!r} needs sim_model(..., actuators="
-                f"{'motor' if controller == 'wholebody' else 'position'!r})"
+                f"{'motor' if torque else 'position'!r})"
             )
         self.model = model
         self.names = tuple(names)
@@ -183,7 +194,9 @@ class ForwardValidation:
         self.threads = int(threads)
         #: the tracked reference is contact-consistent (always for the whole-body QP)
         if contact_reference is None:
-            contact_reference = controller == "sampling" and DEFAULT_CONTACT_REFERENCE
+            contact_reference = controller == "lqr" or (
+                controller == "sampling" and DEFAULT_CONTACT_REFERENCE
+            )
         self.contact = bool(contact_reference) or controller == "wholebody"
         if foot_lock and not self.contact:
             raise UsageError("foot_lock needs the contact-consistent reference")
@@ -308,6 +321,8 @@ class ForwardValidation:
                         threads=self.threads, **search)  # fmt: skip
         elif self.controller == "wholebody":
             r = track_wholebody(self.model, tracked, record_every=every)
+        elif self.controller == "lqr":
+            r = track_lqr(self.model, tracked, record_every=every, **self.search)
         else:
             r = track(self.model, tracked, assist_limit=0.0, record_every=every)
         self.last_qpos = r.qpos  # the simulated states (F, nq) of the last run: for pictures
@@ -374,7 +389,7 @@ def forward_validation(
     ``common_body``); None or a share of 0: the body's gains only; ``threads``: the sampler's
     rollouts on that many threads (the same figures)."""
     controller, _ = chosen_controller(samples, controller)
-    actuators = "motor" if controller == "wholebody" else "position"
+    actuators = "motor" if controller in TORQUE_CONTROLLERS else "position"
     model = validation_model(skeleton, actuators=actuators, **body)
     search = {}
     if controller == "sampling" and gain_choice is not None and gain_choice.share > 0:
