@@ -282,6 +282,16 @@ for _name, _choice in (
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
 
+#: ``mix0.5lock``: eval's default (``mix0.5``) tracking the foot-locked reference (its stance
+#: soles held still, flat on the floor, by the legs: ``ForwardValidation(foot_lock=True)``)
+CONTROLLERS["mix0.5lock"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), the foot-locked reference",
+    {"controller": "sampling", "samples": 28, "contact_reference": True, "foot_lock": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
+
 #: every candidate but eval's own defaults (``default<n>``) keeps the reference it was measured
 #: with: the lifted one, eval's default before the contact-consistent one
 for _name, _entry in CONTROLLERS.items():

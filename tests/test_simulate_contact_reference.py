@@ -206,3 +206,53 @@ def test_eval_sets_a_floating_reference_on_the_floor(bodies, walk, monkeypatch):
     plain = flat_soles(contact.model, plain)
     plain[:, 2] -= contact_shift(contact.model, plain)
     assert lowest_foot_point(contact.model, plain[mid]).min() > 0.05
+
+
+def _body_positions(model, qpos) -> np.ndarray:
+    """(T, nbody, 3) every body's world position [m] by MuJoCo's kinematics of ``qpos``."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), model.nbody, 3))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[t] = data.xpos
+    return out
+
+
+def test_hinges_whole_turns_off_their_range_are_wrapped_to_the_same_pose(bodies, trial_on_floor):
+    """CMU's 60_01 holds the left foot's rx near 6.3 rad and a thumb at 20 rad, whole turns
+    outside their ranges: ``wrap_hinges`` brings every limited hinge's median within half a
+    turn of its range's middle with no jump of half a turn between frames, leaves a hinge
+    already there bit for bit, and the bodies stand where they stood (MuJoCo's kinematics of
+    both); ``time_warp`` tracks the wrapped angles."""
+    from sim.simulate.reference import wrap_hinges
+
+    model = bodies[0].model
+    qpos = trial_on_floor(model, "60_01")[:2400:4]
+    hinge = (model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE) & (model.jnt_limited != 0)
+    adr, mid = model.jnt_qposadr[hinge], model.jnt_range[hinge].mean(axis=1)
+    assert np.abs(qpos[:, adr] - mid).max() > 2 * np.pi  # the trial does hold such angles
+    wrapped = wrap_hinges(model, qpos)
+    assert np.abs(np.median(wrapped[:, adr], axis=0) - mid).max() <= np.pi + 1e-12
+    assert np.abs(np.diff(wrapped[:, adr], axis=0)).max() <= np.pi
+    near = (np.abs(qpos[:, adr] - mid) < np.pi).all(axis=0)  # hinges never a half turn out
+    near &= (np.abs(np.diff(qpos[:, adr], axis=0)) < np.pi).all(axis=0)
+    assert near.sum() > 30 and (wrapped[:, adr[near]] == qpos[:, adr[near]]).all()
+    turns = (wrapped - qpos) / (2 * np.pi)
+    assert np.allclose(turns, np.round(turns), atol=1e-9)
+    assert np.abs(_body_positions(model, wrapped) - _body_positions(model, qpos)).max() < 1e-9
+    warped = time_warp(model, qpos, 30.0, 1.0, CONTROL_HZ)
+    assert np.abs(np.median(warped[:, adr], axis=0) - mid).max() <= np.pi + 1e-12
+
+
+def test_a_turn_between_two_frames_does_not_sweep_the_limb_round(bodies):
+    """A hinge that reads just inside its range in one frame and the same angle plus a turn in
+    the next is the same pose twice: the frames between them stay there too."""
+    model = bodies[0].model
+    j = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+             and model.jnt_limited[j])  # fmt: skip
+    q = np.tile(model.qpos0, (2, 1))
+    angle = model.jnt_range[j].mean()
+    q[:, model.jnt_qposadr[j]] = angle, angle + 2 * np.pi
+    warped = time_warp(model, q, 30.0, 1.0, CONTROL_HZ)
+    assert np.allclose(warped[:, model.jnt_qposadr[j]], angle, atol=1e-9)

@@ -114,14 +114,37 @@ def on_floor(model, qpos: np.ndarray, rate: float = 120.0, lift: float = FLOOR_L
     return out
 
 
+def wrap_hinges(model, qpos: np.ndarray) -> np.ndarray:
+    """(T, nq) ``qpos`` with every limited hinge's angles [rad] unwrapped along time (a jump of
+    more than half a turn between frames is taken as a whole turn) and then moved by the whole
+    turns that bring their median within half a turn of the range's middle: the same poses
+    (the points do not move) and no new jump, but targets the tracker can reach. IK fits and
+    CMU's own angles hold some hinges whole turns outside their range (a foot at 6.3 rad, a
+    thigh's twist at 7.5) or jump a turn between frames, which linear interpolation would
+    sweep round."""
+    out = np.array(qpos, dtype=float)
+    hinge = (model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE) & (model.jnt_limited != 0)
+    hinge &= np.diff(model.jnt_range, axis=1)[:, 0] < 2 * np.pi  # else in range may move
+    adr = model.jnt_qposadr[hinge]
+    mid = model.jnt_range[hinge].mean(axis=1)
+    if len(out) == 0:
+        return out
+    angles = np.unwrap(out[:, adr], axis=0)
+    two_pi = 2 * np.pi
+    out[:, adr] = angles - two_pi * np.round((np.median(angles, axis=0) - mid) / two_pi)
+    return out
+
+
 def time_warp(model, qpos: np.ndarray, rate: float, speed: float, out_rate: float) -> np.ndarray:
     """``qpos`` sampled at ``rate`` replayed ``speed`` times faster, resampled at ``out_rate``.
 
-    Positions and hinges are interpolated linearly; the root quaternion by slerp on the
+    Hinge angles are first moved by whole turns towards their ranges (:func:`wrap_hinges`);
+    positions and hinges are interpolated linearly; the root quaternion by slerp on the
     shortest arc. Returns (T', nq) covering the same motion.
     """
     if speed <= 0:
         raise UsageError(f"speed must be positive; got {speed}")
+    qpos = wrap_hinges(model, qpos)
     T = len(qpos)
     duration = (T - 1) / rate / speed
     n = int(np.floor(duration * out_rate + 1e-9)) + 1

@@ -30,6 +30,7 @@ from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
+from sim.simulate.footlock import foot_locked
 from sim.simulate.gainchoice import GainChoice, choice_track, common_body
 from sim.simulate.lqr import track_lqr
 from sim.simulate.model import CONTROL_HZ, Gains, sim_model, total_mass
@@ -118,6 +119,9 @@ DEFAULT_CONTACT_REFERENCE = True
 #: medians -4 / -7 mm, skating higher, and eval's decision lost pitch on every figure (falls
 #: +0.08 [+0.00, +0.17]; docs/synthetic.md)
 DEFAULT_FLOATING = False
+#: the tracked reference's stance soles held still, flat on the floor, by the legs' angles
+#: (``ForwardValidation(foot_lock=True)``, ``sim.simulate.footlock``): off (docs/synthetic.md)
+DEFAULT_FOOT_LOCK = False
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator; the
 #: sampler's foot holding uses the same height)
 SKATE_CONTACT = CONTACT_HEIGHT
@@ -155,6 +159,10 @@ class ForwardValidation:
             instead of the lifted one; None: the sampler :data:`DEFAULT_CONTACT_REFERENCE`,
             the plain tracker the lifted one. The figures are measured as with the lifted one
             either way (:meth:`run`).
+        foot_lock: the contact-consistent reference tracked has its stance soles held still,
+            flat on the floor, by the legs' angles (``sim.simulate.footlock.foot_locked``);
+            off by default (:data:`DEFAULT_FOOT_LOCK`); it needs the contact-consistent
+            reference. The figures are measured as without it.
     """
 
     def __init__(
@@ -166,6 +174,7 @@ class ForwardValidation:
         search: dict | None = None,
         threads: int = 1,
         contact_reference: bool | None = None,
+        foot_lock: bool = DEFAULT_FOOT_LOCK,
     ):
         controller, samples = chosen_controller(samples, controller)
         known = CONTROLLERS + OPTIONAL_CONTROLLERS
@@ -189,13 +198,16 @@ class ForwardValidation:
                 controller == "sampling" and DEFAULT_CONTACT_REFERENCE
             )
         self.contact = bool(contact_reference) or controller == "wholebody"
+        if foot_lock and not self.contact:
+            raise UsageError("foot_lock needs the contact-consistent reference")
+        self.foot_lock = bool(foot_lock)
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
 
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
         args = self.model, self.names, self.samples, self.controller, self.search, self.threads
-        return (ForwardValidation, (*args, self.contact))
+        return (ForwardValidation, (*args, self.contact, self.foot_lock))
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -298,6 +310,8 @@ class ForwardValidation:
         if self.contact and lifted:
             shift = self.stance_shift(original_qpos, fps, floor)
             tracked = self.reference(qpos, fps, floor, shift, contact=True)
+        if self.foot_lock:  # its stance soles held still on the floor by the legs
+            tracked = foot_locked(self.model, tracked, CONTROL_HZ)
         every = int(round(CONTROL_HZ / fps))
         if self.controller == "sampling":
             search = {"balance": DEFAULT_BALANCE, "noise_deflection": DEFAULT_NOISE_DEFLECTION,
