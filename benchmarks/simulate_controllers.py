@@ -20,10 +20,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.lqr import LQRWeights  # noqa: E402
-from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
+from sim.simulate.model import MIN_DEFLECTION, PAD_SOLE, Gains, SoftSole  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.searchplan import SearchPlan  # noqa: E402
 from sim.simulate.validate import DEFAULT_BALANCE, STIFF_GAINS  # noqa: E402
+from sim.simulate.wholebody import WholeBodyGains  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
 #: balance feedback
@@ -382,4 +383,63 @@ CONTROLLERS["mix0.5nobal"] = (
      "search": {"choice": GainChoice(share=0.5), "balance": None}},
     "position",
     {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
+
+#: compliant soles (``sim_model(soft_soles=SoftSole(timeconst))``: the sole and toe boxes'
+#: floor contacts at that time constant instead of the stiff floor's 0.005 s, friction kept):
+#: ``wholebodysoft`` the QP on them (0.02 s, MuJoCo's default), ``wholebodysoft0.01`` at
+#: 0.01 s; ``mix0.5soft`` eval's default (``mix0.5``) on the 0.02 s soles
+for _name, _tc in (("wholebodysoft", 0.02), ("wholebodysoft0.01", 0.01)):
+    CONTROLLERS[_name] = (
+        f"whole-body QP, compliant soles (contact time constant {_tc:g} s)",
+        {"controller": "wholebody"},
+        "motor",
+        {"soft_soles": SoftSole(timeconst=_tc)},
+    )
+CONTROLLERS["mix0.5soft"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), compliant soles (contact "
+    "time constant 0.02 s)",
+    {"controller": "sampling", "samples": 28, "contact_reference": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,), "soft_soles": SoftSole(timeconst=0.02)},
+)  # fmt: skip
+#: ``wholebodyff``: the QP with its swing soles' orientation tracking the reference's angular
+#: velocity and acceleration (``WholeBodyGains(swing_feedforward=True)``); ``wholebodyffsoft``
+#: and on the 0.02 s compliant soles
+_FF = {"gains": WholeBodyGains(swing_feedforward=True)}
+CONTROLLERS["wholebodyff"] = (
+    "whole-body QP, swing soles' orientation with the reference's angular velocity",
+    {"controller": "wholebody", "search": _FF},
+    "motor",
+)
+CONTROLLERS["wholebodyffsoft"] = (
+    "whole-body QP, swing soles' orientation with the reference's angular velocity, compliant "
+    "soles (0.02 s)",
+    {"controller": "wholebody", "search": _FF},
+    "motor",
+    {"soft_soles": SoftSole(timeconst=0.02)},
+)
+#: the pad (``PAD_SOLE``: the floor's 0.005 s, a low impedance at the surface rising to the
+#: floor's over 6 mm: soft for the first millimetres, as stiff as the floor deeper):
+#: ``wholebodypad`` the QP, ``wholebodyffpad`` with the swing feed-forward, ``mix0.5pad``
+#: eval's default on it
+CONTROLLERS["wholebodypad"] = (
+    "whole-body QP, padded soles",
+    {"controller": "wholebody"},
+    "motor",
+    {"soft_soles": PAD_SOLE},
+)
+CONTROLLERS["wholebodyffpad"] = (
+    "whole-body QP, swing soles' orientation with the reference's angular velocity, padded soles",
+    {"controller": "wholebody", "search": _FF},
+    "motor",
+    {"soft_soles": PAD_SOLE},
+)
+CONTROLLERS["mix0.5pad"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), padded soles",
+    {"controller": "sampling", "samples": 28, "contact_reference": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,), "soft_soles": PAD_SOLE},
 )  # fmt: skip

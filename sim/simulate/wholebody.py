@@ -105,6 +105,9 @@ class WholeBodyGains:
     limit_horizon: float = 0.05  # [s] hinge accelerations keep the range this far ahead (0: off)
     contact_damping: float = 20.0  # [1/s] a supporting point's velocity to zero
     w_contact: float = 100.0
+    # a swing sole's orientation tracks the reference's angular velocity and acceleration too
+    # (False: a PD towards its orientation at rest, lagging about 2 / foot_omega behind)
+    swing_feedforward: bool = False
 
 
 def _edges(mu: float) -> np.ndarray:
@@ -240,7 +243,10 @@ def _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task) -
             target[:2] = (1 - gains.placement) * target[:2] + gains.placement * rel
         kf, df = gains.foot_omega**2, 2 * gains.foot_omega
         lin = ref.sole_acc[k, side] + kf * (target - p) + df * (ref.sole_vel[k, side] - vel[:3])
-        task(A, np.concatenate([lin, kf * err - df * vel[3:]]), gains.w_swing)
+        ang = kf * err - df * vel[3:]
+        if gains.swing_feedforward:
+            ang = ref.sole_angacc[k, side] + kf * err + df * (ref.sole_angvel[k, side] - vel[3:])
+        task(A, np.concatenate([lin, ang]), gains.w_swing)
 
 
 def _limits(model, data, gains, scratch, C: int, h, limit):
