@@ -86,7 +86,9 @@ def test_the_soles_floor_contacts_take_their_parameters_and_the_floors_friction(
     feet = {model.geom(n).id for n in FEET}
     on_sole = np.array([bool(set(g) & feet) for g in pad.contact.geom])
     assert on_sole.any()
-    np.testing.assert_allclose(pad.contact.solref[on_sole], [[FLOOR_TIMECONST, 1.0]] * on_sole.sum())
+    np.testing.assert_allclose(
+        pad.contact.solref[on_sole], [[FLOOR_TIMECONST, 1.0]] * on_sole.sum()
+    )
     np.testing.assert_allclose(pad.contact.solimp[on_sole], [PAD_SOLE.solimp] * on_sole.sum())
     np.testing.assert_allclose(rigid.contact.solimp[on_sole], [FLOOR_SOLIMP] * on_sole.sum())
     with pytest.raises(UsageError):
@@ -103,7 +105,7 @@ def _bearing(model, qpos) -> tuple[float, float, float]:
     for q in qpos:
         data.qpos[:] = q
         mujoco.mj_forward(model, data)
-        for sole, toes in zip(SOLE_GEOMS, TOE_GEOMS):
+        for sole, toes in zip(SOLE_GEOMS, TOE_GEOMS, strict=True):
             g, t = model.geom(sole).id, model.geom(toes).id
             axis, centre = data.geom_xmat[g].reshape(3, 3)[:, 0], data.geom_xpos[g]
             along = []

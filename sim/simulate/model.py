@@ -217,18 +217,7 @@ def sim_spec(
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.disableflags |= LEAN_DISABLED if lean else 0
-    for g in spec.geoms:
-        if g.name == "floor":
-            g.contype, g.conaffinity = FLOOR_BITS
-            g.solref = [FLOOR_TIMECONST, FLOOR_DAMPRATIO]
-            g.solimp = list(FLOOR_SOLIMP)
-            g.priority = 1  # the floor's contact parameters win (not averaged with the body's)
-        else:
-            g.contype, g.conaffinity = BODY_BITS
-            g.solref = [SELF_TIMECONST, 1.0]
-    for a, b in self_collision_exclusions(spec.compile()):
-        e = spec.add_exclude()
-        e.bodyname1, e.bodyname2 = a, b
+    _set_contacts(spec)
     if soles:
         add_soles(spec, soft_soles)
     plain = spec.compile()
@@ -264,6 +253,23 @@ def sim_spec(
         joint = spec.joint(name)
         joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
     return spec
+
+
+def _set_contacts(spec) -> None:
+    """The stiff floor (with priority) and self-collision (bar
+    :func:`self_collision_exclusions`) of ``spec``, in place."""
+    for g in spec.geoms:
+        if g.name == "floor":
+            g.contype, g.conaffinity = FLOOR_BITS
+            g.solref = [FLOOR_TIMECONST, FLOOR_DAMPRATIO]
+            g.solimp = list(FLOOR_SOLIMP)
+            g.priority = 1  # the floor's contact parameters win (not averaged with the body's)
+        else:
+            g.contype, g.conaffinity = BODY_BITS
+            g.solref = [SELF_TIMECONST, 1.0]
+    for a, b in self_collision_exclusions(spec.compile()):
+        e = spec.add_exclude()
+        e.bodyname1, e.bodyname2 = a, b
 
 
 _D = mujoco.mjtDisableBit
