@@ -27,6 +27,8 @@ module edits its output through ``mujoco.MjSpec``:
   ``a0`` of hundreds of m/s^2 (light segment, body weight through it): measured, the humanoid
   holding a pose under its weight sinks 0.4 mm on two feet, 0.7 mm on one, and a walking stance
   foot 0.4-0.8 mm (median), landings 5-15 mm;
+* opt-in compliant soles (``soft_soles``: :class:`SoftSole`, :data:`PAD_SOLE`): the sole and
+  toe boxes' floor contacts with their own ``solref``/``solimp``, the floor's friction kept;
 * self-collision: body geoms collide with each other except bodies within two joints of each
   other and pairs overlapping in the rest pose (:func:`self_collision_exclusions`), so a
   falling body's limbs cannot pass through each other or through its trunk;
