@@ -443,3 +443,39 @@ CONTROLLERS["mix0.5pad"] = (
     "position",
     {"alternate_gains": (_STIFF,), "soft_soles": PAD_SOLE},
 )  # fmt: skip
+#: the QP's feet (issue 27, docs/synthetic.md "The QP's feet, one cause at a time"), each with
+#: the swing feed-forward (``ff``) unless named without: ``land`` a foot the reference stands
+#: on that does not touch aims ``land_depth`` below its sole; ``free`` the contact points of a
+#: foot the reference has in the air not held still (``hold_swing=False``); ``pl<p>v<v>`` the
+#: swing foot placed by the CoM's error (``placement`` p) and its velocity's (``placement_v`` v)
+_PL, _LAND = {"placement": 1.0, "placement_v": 0.1}, {"land_depth": 0.03}
+QPFEET = {
+    "wholebodyffland": _LAND,
+    "wholebodyffland5w30": {"land_depth": 0.05, "w_land": 30.0},
+    "wholebodyfffree": {"hold_swing": False},
+    "wholebodyfree": {"swing_feedforward": False, "hold_swing": False},
+    "wholebodyffpl1v0.1": _PL,
+    "wholebodyffpl0.5v0.1": {**_PL, "placement": 0.5},
+    "wholebodyffpl1v0.2": {**_PL, "placement_v": 0.2},
+    "wholebodyffpl1v0.1land": {**_PL, **_LAND},
+    "wholebodyffpl1v0.2land": {**_PL, **_LAND, "placement_v": 0.2},
+    "wholebodyffpl1v0.3land": {**_PL, **_LAND, "placement_v": 0.3},
+    "wholebodyffpl1v0.1land5w30": {**_PL, "land_depth": 0.05, "w_land": 30.0},
+    "wholebodyffpl1v0.1landfree": {**_PL, **_LAND, "hold_swing": False},
+    "wholebodyffpl1v0.2landfree": {**_PL, **_LAND, "placement_v": 0.2, "hold_swing": False},
+    "wholebodyffpl1v0.1landf3": {**_PL, **_LAND, "foot_omega": 2 * np.pi * 3.0},
+    **{f"wholebodyffpl1v0.1landcom{_w}": {**_PL, **_LAND, "w_com": float(_w)}
+       for _w in (20, 30, 50, 100)},
+    "wholebodyffcom30": {"w_com": 30.0},
+    **{f"wholebodyffpl1v0.1landcom30gap{_g}": {**_PL, **_LAND, "w_com": 30.0,
+                                               "sole_gap": _g / 1000} for _g in (3, 5)},
+}  # fmt: skip
+for _name, _kw in QPFEET.items():
+    _g = WholeBodyGains(**{"swing_feedforward": True, **_kw})
+    CONTROLLERS[_name] = (
+        "whole-body QP, "
+        + ", ".join(f"{_k}={_v}" for _k, _v in _kw.items())
+        + (", swing feed-forward" if _g.swing_feedforward else ""),
+        {"controller": "wholebody", "search": {"gains": _g}},
+        "motor",
+    )
