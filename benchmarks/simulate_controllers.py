@@ -283,6 +283,17 @@ for _name, _choice in (
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
 
+#: ``mix0.5s<n>``: eval's default (``mix0.5``) with ``n`` rollouts per window instead of 28 (the
+#: budget's headroom: 28 cost 3.0-3.3 CPU s per simulated s, docs/results/simulate_soles.md)
+for _n in (36, 40, 48):
+    CONTROLLERS[f"mix0.5s{_n}"] = (
+        f"sampler, {_n} samples, eval's defaults (gains chosen per window)",
+        {"controller": "sampling", "samples": _n, "contact_reference": True,
+         "search": {"choice": GainChoice(share=0.5)}},
+        "position",
+        {"alternate_gains": (_STIFF,)},
+    )  # fmt: skip
+
 #: ``mix0.5lock``: eval's default (``mix0.5``) tracking the foot-locked reference (its stance
 #: soles held still, flat on the floor, by the legs: ``ForwardValidation(foot_lock=True)``)
 CONTROLLERS["mix0.5lock"] = (
