@@ -12,7 +12,8 @@ import pytest
 from synth_replay import PER_KIND, REAL, SECONDS, check_replays
 
 from sim.motion.clip import load_extra, load_npz
-from sim.simulate.validate import DEFAULT_CONTROLLER, DEFAULT_SAMPLES
+from sim.simulate.generate import SYNTH_SAMPLES
+from sim.simulate.validate import DEFAULT_CONTROLLER
 
 SHORT = 0.5  # [s] the default count costs about 5 CPU s per simulated second
 
@@ -52,11 +53,11 @@ def test_the_default_is_eval_s_sampler_with_no_help_and_it_replays_bit_for_bit(d
     index = json.loads((out / "index.json").read_text())["synthetic"]
     assert DEFAULT_CONTROLLER == "sampling"  # the premise: eval's default samples
     assert (index["controller"], index["samples"], index["assist"]) == (
-        DEFAULT_CONTROLLER, DEFAULT_SAMPLES, 0.0
+        DEFAULT_CONTROLLER, SYNTH_SAMPLES, 0.0
     )  # fmt: skip
     for r in written:
         g = r["generation"]
-        assert g["controller"] == "sampling" and g["sampling"]["samples"] == DEFAULT_SAMPLES
+        assert g["controller"] == "sampling" and g["sampling"]["samples"] == SYNTH_SAMPLES
         assert g["assist_limit"] == 0 and r["mean_assistance"] == 0 and r["physical"]
         labels = load_extra(out / r["file"], "sim_")
         assert not labels["sim_qfrc_applied"].any() and not labels["sim_assist_wrench"].any()

@@ -126,6 +126,9 @@ SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
 #: ``validate.STIFF_GAINS`` times the episode's gain draw), the gains stored per tick; 0: the
 #: body's gains alone. Not the default: no win on bench_synth's 20 clips (docs/synthetic.md)
 SYNTH_GAIN_CHOICE = 0.0
+#: the sampler's rollouts per window unless a task names a count: 28, the count its figures
+#: were measured with (docs/results/synth.md); eval's default is 40 (``validate.DEFAULT_SAMPLES``)
+SYNTH_SAMPLES = 28
 #: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True (non-zero)
 TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice")
 
@@ -178,7 +181,7 @@ def task_controller(task: SynthTask) -> tuple[str, int]:
     if task.samples and task.controller != "sampling":
         raise UsageError(f"{task.samples} samples: only the sampling controller samples, not "
                          f"{task.controller!r}")  # fmt: skip
-    return chosen_controller(task.samples, task.controller)
+    return chosen_controller(task.samples, task.controller, SYNTH_SAMPLES)
 
 
 def episode_seed(task: SynthTask) -> int:

@@ -79,9 +79,11 @@ DEFAULT_CONTROLLER = "sampling"
 #: sampler's chaos (lower global error in 7 of the 16 clips both keep up, higher in 5).
 #: ``synth`` keeps ``sampling.BALANCE`` (20 clips: 10 up with the lead, 11 without; synthetic.md)
 DEFAULT_BALANCE = Balance(k_drift=2.0, drift_max=0.4, drift_dead=0.1)
-#: the sampler's rollouts per window where it is chosen without a count (with the feedback,
-#: 32 cost 5.22 CPU s per simulated s: over the budget)
-DEFAULT_SAMPLES = 28
+#: the sampler's rollouts per window where it is chosen without a count: 40 (all 107 clips of
+#: ``../shared``, one run against 28 with the same rows: falls 0.19 against 0.21, medians 82 /
+#: 217 mm root-relative / global against 88 / 245, 4.43 against 3.30 CPU s per simulated s on
+#: 2 workers; docs/results/simulate_samples.md)
+DEFAULT_SAMPLES = 40
 #: the position actuators' feedback gains of the body ``eval --simulate`` and ``report
 #: --simulate`` track with (:func:`validation_model`): bandwidth and stiffness cap are the
 #: controller's (``Gains.min_deflection``); the torque limits stay the human ones whatever these
@@ -127,12 +129,15 @@ DEFAULT_FOOT_LOCK = False
 SKATE_CONTACT = CONTACT_HEIGHT
 
 
-def chosen_controller(samples: int = 0, controller: str | None = None) -> tuple[str, int]:
+def chosen_controller(
+    samples: int = 0, controller: str | None = None, default_samples: int = DEFAULT_SAMPLES
+) -> tuple[str, int]:
     """The controller and sample count a forward validation runs with: ``samples`` > 0 the
     sampler with that count, else ``controller`` (default :data:`DEFAULT_CONTROLLER`; the
-    sampler at :data:`DEFAULT_SAMPLES`); the count is 0 for the other controllers."""
+    sampler at ``default_samples``, eval's :data:`DEFAULT_SAMPLES`); the count is 0 for the
+    other controllers."""
     controller = controller or ("sampling" if samples else DEFAULT_CONTROLLER)
-    return controller, int(samples or DEFAULT_SAMPLES) if controller == "sampling" else 0
+    return controller, int(samples or default_samples) if controller == "sampling" else 0
 
 
 class ForwardValidation:
