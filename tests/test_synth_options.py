@@ -157,8 +157,13 @@ def test_a_foot_locked_episode_is_recorded_tracks_the_locked_reference_and_repla
     from sim.model.humanoid import canonical_skeleton
     from sim.simulate.episode_body import episode_model
     from sim.simulate.footlock import foot_locked
-    from sim.simulate.generate import draw_parameters, episode_rng, episode_seed, generate
-    from sim.simulate.generate import reference_motion
+    from sim.simulate.generate import (
+        draw_parameters,
+        episode_rng,
+        episode_seed,
+        generate,
+        reference_motion,
+    )
     from sim.simulate.model import CONTROL_HZ, scaled_skeleton
 
     task = replace(_task(cmu_dir, contact_reference=True, foot_lock=True), seconds=1.0)
@@ -180,9 +185,7 @@ def test_a_foot_locked_episode_is_recorded_tracks_the_locked_reference_and_repla
     assert json.loads(array_text(labels["sim_generation"])) == g
     limits = np.array([human_torque_limit(nm, 75.0 * g["scale"] ** 3) for nm in clip.joint_names])
     q, v, worst, _ = oracle_replay(labels, limits)
-    assert np.array_equal(q, labels["sim_tick_qpos"]) and np.array_equal(
-        v, labels["sim_tick_qvel"]
-    )
+    assert np.array_equal(q, labels["sim_tick_qpos"]) and np.array_equal(v, labels["sim_tick_qvel"])
     assert worst <= 1 + 1e-12
 
 

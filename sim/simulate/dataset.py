@@ -194,8 +194,7 @@ def synthesize(
     ``SYNTH_CONTACT_REFERENCE``, ``SYNTH_LEAN``), recorded in the journal and the index;
     ``gain_choice``: the sampler's share of candidates on the stiff gains (None:
     ``SYNTH_GAIN_CHOICE`` with the sampler, 0 with another controller), likewise;
-    ``foot_lock``: the contact-consistent reference foot-locked (None: ``SYNTH_FOOT_LOCK``;
-    with the sampler it needs ``contact_reference``, the whole-body QP's reference is one).
+    ``foot_lock``: the contact-consistent reference foot-locked (None: ``SYNTH_FOOT_LOCK``).
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
@@ -224,8 +223,7 @@ def synthesize(
     task = {"samples": samples, "controller": controller, "assist": float(assist),
             "threads": int(threads), **{k: bool(d if v is None else v) for k, v, d in chosen},
             "gain_choice": float(share or 0.0)}  # fmt: skip
-    contact = controller == "wholebody" or (controller == "sampling" and task["contact_reference"])
-    if task["foot_lock"] and not contact:
+    if task["foot_lock"] and not (controller == "wholebody" or task["contact_reference"]):
         raise UsageError("a foot lock needs the contact-consistent reference (--contact-reference)")
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
