@@ -122,14 +122,17 @@ SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 #: unless a task says otherwise: the sampler's balance feedback with eval's drift lead
 #: (``validate.DEFAULT_BALANCE``, else ``sampling.BALANCE``), its reference contact-consistent
 #: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion). Off:
-#: on bench_synth's 20 clips none kept more up or met more targets (docs/synthetic.md)
+#: on bench_synth's 20 clips none kept more up or met more targets; the contact-consistent
+#: reference kept fewer up on 60 clips x 2 seeds too (docs/synthetic.md)
 SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
 #: the sampler's share of candidates per window on the stiff gains (``sim.simulate.gainchoice``,
 #: ``validate.STIFF_GAINS`` times the episode's gain draw), the gains stored per tick; 0: the
-#: body's gains alone. Not the default: no win on bench_synth's 20 clips (docs/synthetic.md)
+#: body's gains alone. Not the default: on 60 clips x 2 seeds 0.25 kept more up and skated less,
+#: but lowered the p95 speed ratio on one seed (docs/synthetic.md)
 SYNTH_GAIN_CHOICE = 0.0
 #: the contact-consistent reference foot-locked (``sim.simulate.footlock``: its stance soles
-#: held still, flat on the floor, by the legs), as ``ForwardValidation(foot_lock=True)``
+#: held still, flat on the floor, by the legs), as ``ForwardValidation(foot_lock=True)``. Off:
+#: on 60 clips it kept fewer up on one of two seeds (docs/synthetic.md)
 SYNTH_FOOT_LOCK = False
 #: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True (non-zero)
 TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice", "foot_lock")
