@@ -20,10 +20,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sim.simulate.balance import Balance  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.lqr import LQRWeights  # noqa: E402
-from sim.simulate.model import MIN_DEFLECTION, Gains  # noqa: E402
+from sim.simulate.model import MIN_DEFLECTION, PAD_SOLE, Gains, SoftSole  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.searchplan import SearchPlan  # noqa: E402
 from sim.simulate.validate import DEFAULT_BALANCE, STIFF_GAINS  # noqa: E402
+from sim.simulate.wholebody import WholeBodyGains  # noqa: E402
 
 #: the sampler as first built: no fall in its cost, rollouts judged 0.4 s past their window, no
 #: balance feedback
@@ -282,6 +283,17 @@ for _name, _choice in (
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
 
+#: ``mix0.5s<n>``: eval's default (``mix0.5``) with ``n`` rollouts per window instead of 28 (the
+#: budget's headroom: 28 cost 3.0-3.3 CPU s per simulated s, docs/results/simulate_soles.md)
+for _n in (36, 40, 48):
+    CONTROLLERS[f"mix0.5s{_n}"] = (
+        f"sampler, {_n} samples, eval's defaults (gains chosen per window)",
+        {"controller": "sampling", "samples": _n, "contact_reference": True,
+         "search": {"choice": GainChoice(share=0.5)}},
+        "position",
+        {"alternate_gains": (_STIFF,)},
+    )  # fmt: skip
+
 #: ``mix0.5lock``: eval's default (``mix0.5``) tracking the foot-locked reference (its stance
 #: soles held still, flat on the floor, by the legs: ``ForwardValidation(foot_lock=True)``)
 CONTROLLERS["mix0.5lock"] = (
@@ -383,3 +395,98 @@ CONTROLLERS["mix0.5nobal"] = (
     "position",
     {"alternate_gains": (_STIFF,)},
 )  # fmt: skip
+
+#: compliant soles (``sim_model(soft_soles=SoftSole(timeconst))``: the sole and toe boxes'
+#: floor contacts at that time constant instead of the stiff floor's 0.005 s, friction kept):
+#: ``wholebodysoft`` the QP on them (0.02 s, MuJoCo's default), ``wholebodysoft0.01`` at
+#: 0.01 s; ``mix0.5soft`` eval's default (``mix0.5``) on the 0.02 s soles
+for _name, _tc in (("wholebodysoft", 0.02), ("wholebodysoft0.01", 0.01)):
+    CONTROLLERS[_name] = (
+        f"whole-body QP, compliant soles (contact time constant {_tc:g} s)",
+        {"controller": "wholebody"},
+        "motor",
+        {"soft_soles": SoftSole(timeconst=_tc)},
+    )
+CONTROLLERS["mix0.5soft"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), compliant soles (contact "
+    "time constant 0.02 s)",
+    {"controller": "sampling", "samples": 28, "contact_reference": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,), "soft_soles": SoftSole(timeconst=0.02)},
+)  # fmt: skip
+#: ``wholebodyff``: the QP with its swing soles' orientation tracking the reference's angular
+#: velocity and acceleration (``WholeBodyGains(swing_feedforward=True)``); ``wholebodyffsoft``
+#: and on the 0.02 s compliant soles
+_FF = {"gains": WholeBodyGains(swing_feedforward=True)}
+CONTROLLERS["wholebodyff"] = (
+    "whole-body QP, swing soles' orientation with the reference's angular velocity",
+    {"controller": "wholebody", "search": _FF},
+    "motor",
+)
+CONTROLLERS["wholebodyffsoft"] = (
+    "whole-body QP, swing soles' orientation with the reference's angular velocity, compliant "
+    "soles (0.02 s)",
+    {"controller": "wholebody", "search": _FF},
+    "motor",
+    {"soft_soles": SoftSole(timeconst=0.02)},
+)
+#: the pad (``PAD_SOLE``: the floor's 0.005 s, a low impedance at the surface rising to the
+#: floor's over 6 mm: soft for the first millimetres, as stiff as the floor deeper):
+#: ``wholebodypad`` the QP, ``wholebodyffpad`` with the swing feed-forward, ``mix0.5pad``
+#: eval's default on it
+CONTROLLERS["wholebodypad"] = (
+    "whole-body QP, padded soles",
+    {"controller": "wholebody"},
+    "motor",
+    {"soft_soles": PAD_SOLE},
+)
+CONTROLLERS["wholebodyffpad"] = (
+    "whole-body QP, swing soles' orientation with the reference's angular velocity, padded soles",
+    {"controller": "wholebody", "search": _FF},
+    "motor",
+    {"soft_soles": PAD_SOLE},
+)
+CONTROLLERS["mix0.5pad"] = (
+    "sampler, 28 samples, eval's defaults (gains chosen per window), padded soles",
+    {"controller": "sampling", "samples": 28, "contact_reference": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,), "soft_soles": PAD_SOLE},
+)  # fmt: skip
+#: the QP's feet (issue 27, docs/synthetic.md "The QP's feet, one cause at a time"), each with
+#: the swing feed-forward (``ff``) unless named without: ``land`` a foot the reference stands
+#: on that does not touch aims ``land_depth`` below its sole; ``free`` the contact points of a
+#: foot the reference has in the air not held still (``hold_swing=False``); ``pl<p>v<v>`` the
+#: swing foot placed by the CoM's error (``placement`` p) and its velocity's (``placement_v`` v)
+_PL, _LAND = {"placement": 1.0, "placement_v": 0.1}, {"land_depth": 0.03}
+QPFEET = {
+    "wholebodyffland": _LAND,
+    "wholebodyffland5w30": {"land_depth": 0.05, "w_land": 30.0},
+    "wholebodyfffree": {"hold_swing": False},
+    "wholebodyfree": {"swing_feedforward": False, "hold_swing": False},
+    "wholebodyffpl1v0.1": _PL,
+    "wholebodyffpl0.5v0.1": {**_PL, "placement": 0.5},
+    "wholebodyffpl1v0.2": {**_PL, "placement_v": 0.2},
+    "wholebodyffpl1v0.1land": {**_PL, **_LAND},
+    "wholebodyffpl1v0.2land": {**_PL, **_LAND, "placement_v": 0.2},
+    "wholebodyffpl1v0.3land": {**_PL, **_LAND, "placement_v": 0.3},
+    "wholebodyffpl1v0.1land5w30": {**_PL, "land_depth": 0.05, "w_land": 30.0},
+    "wholebodyffpl1v0.1landfree": {**_PL, **_LAND, "hold_swing": False},
+    "wholebodyffpl1v0.2landfree": {**_PL, **_LAND, "placement_v": 0.2, "hold_swing": False},
+    "wholebodyffpl1v0.1landf3": {**_PL, **_LAND, "foot_omega": 2 * np.pi * 3.0},
+    **{f"wholebodyffpl1v0.1landcom{_w}": {**_PL, **_LAND, "w_com": float(_w)}
+       for _w in (20, 30, 50, 100)},
+    "wholebodyffcom30": {"w_com": 30.0},
+    **{f"wholebodyffpl1v0.1landcom30gap{_g}": {**_PL, **_LAND, "w_com": 30.0,
+                                               "sole_gap": _g / 1000} for _g in (3, 5)},
+}  # fmt: skip
+for _name, _kw in QPFEET.items():
+    _g = WholeBodyGains(**{"swing_feedforward": True, **_kw})
+    CONTROLLERS[_name] = (
+        "whole-body QP, "
+        + ", ".join(f"{_k}={_v}" for _k, _v in _kw.items())
+        + (", swing feed-forward" if _g.swing_feedforward else ""),
+        {"controller": "wholebody", "search": {"gains": _g}},
+        "motor",
+    )

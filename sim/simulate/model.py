@@ -27,6 +27,8 @@ module edits its output through ``mujoco.MjSpec``:
   ``a0`` of hundreds of m/s^2 (light segment, body weight through it): measured, the humanoid
   holding a pose under its weight sinks 0.4 mm on two feet, 0.7 mm on one, and a walking stance
   foot 0.4-0.8 mm (median), landings 5-15 mm;
+* opt-in compliant soles (``soft_soles``: :class:`SoftSole`, :data:`PAD_SOLE`): the sole and
+  toe boxes' floor contacts with their own ``solref``/``solimp``, the floor's friction kept;
 * self-collision: body geoms collide with each other except bodies within two joints of each
   other and pairs overlapping in the rest pose (:func:`self_collision_exclusions`), so a
   falling body's limbs cannot pass through each other or through its trunk;
@@ -113,6 +115,27 @@ FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)  # MuJoCo's default impedance
 
 
 @dataclass(frozen=True)
+class SoftSole:
+    """Contact parameters of compliant soles (``sim_spec(soft_soles=...)``): the sole and toe
+    boxes' own ``solref`` (``timeconst`` [s], ``dampratio``) and ``solimp`` for their contacts
+    with the floor, in place of the stiff floor's (:data:`FLOOR_TIMECONST`); friction and
+    everything else as the floor's. A softer contact lets a loaded sole sink a few millimetres
+    (a heel pad compresses 5-10 mm under body weight), so a sole tilted a degree or two still
+    bears load at heel and ball instead of on one edge."""
+
+    timeconst: float = 0.02
+    dampratio: float = 1.0
+    solimp: tuple = FLOOR_SOLIMP
+
+
+#: a padded sole: the floor's time constant, but an impedance of 0.2 at the surface rising to
+#: the floor's 0.95 over 6 mm (MuJoCo's ``solimp``): the first millimetres give (a loaded sole
+#: sinks 2-3 mm), deeper it is as stiff as the floor (a landing stops within about 5-15 mm);
+#: a softer time constant instead (0.02 s) let stamping feet sink 20-50 mm
+PAD_SOLE = SoftSole(timeconst=FLOOR_TIMECONST, solimp=(0.2, 0.95, 0.006, 0.5, 2.0))
+
+
+@dataclass(frozen=True)
 class Gains:
     """Tracking gains of the position actuators' feedback: hinge bandwidth ``omega`` [rad/s] and
     damping ratio; root ones likewise; ``min_deflection`` [rad] caps each hinge's stiffness at
@@ -167,6 +190,7 @@ def sim_spec(
     stance_ankles: bool = False,
     actuators: str = "position",
     lean: bool = False,
+    soft_soles: SoftSole | None = None,
 ) -> mujoco.MjSpec:
     """The ``MjSpec`` of :func:`sim_model` (``spec.to_xml()``: the MJCF a dataset stores).
 
@@ -183,7 +207,11 @@ def sim_spec(
     output clamped to the human limit) or ``"motor"`` (``ctrl`` is the torque [N m], clamped to
     the human limit); the armature is the same in both, so both are one body. ``lean``: MuJoCo
     skips the stages this body has nothing for (:data:`LEAN_DISABLED`; the same motion).
+    ``soft_soles``: the soles' contacts with the floor use these parameters (:class:`SoftSole`)
+    instead of the floor's (None: the stiff floor's, as for every other geom); needs ``soles``.
     """
+    if soft_soles is not None and not soles:
+        raise UsageError("soft_soles needs soles=True")
     if actuators not in ("position", "motor"):
         raise UsageError(f"unknown actuators {actuators!r}; known: 'position', 'motor'")
     gains = gains or Gains()
@@ -191,20 +219,9 @@ def sim_spec(
     spec.option.timestep = 1.0 / (CONTROL_HZ * SUBSTEPS)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.disableflags |= LEAN_DISABLED if lean else 0
-    for g in spec.geoms:
-        if g.name == "floor":
-            g.contype, g.conaffinity = FLOOR_BITS
-            g.solref = [FLOOR_TIMECONST, FLOOR_DAMPRATIO]
-            g.solimp = list(FLOOR_SOLIMP)
-            g.priority = 1  # the floor's contact parameters win (not averaged with the body's)
-        else:
-            g.contype, g.conaffinity = BODY_BITS
-            g.solref = [SELF_TIMECONST, 1.0]
-    for a, b in self_collision_exclusions(spec.compile()):
-        e = spec.add_exclude()
-        e.bodyname1, e.bodyname2 = a, b
+    _set_contacts(spec)
     if soles:
-        add_soles(spec)
+        add_soles(spec, soft_soles)
     plain = spec.compile()
     inertia, _ = rest_inertia(plain)
     stance = stance_stiffness(plain) if stance_ankles else 0.0
@@ -238,6 +255,23 @@ def sim_spec(
         joint = spec.joint(name)
         joint.armature = max(float(plain.dof_armature[5 + j]), kp * spec.option.timestep**2)
     return spec
+
+
+def _set_contacts(spec) -> None:
+    """The stiff floor (with priority) and self-collision (bar
+    :func:`self_collision_exclusions`) of ``spec``, in place."""
+    for g in spec.geoms:
+        if g.name == "floor":
+            g.contype, g.conaffinity = FLOOR_BITS
+            g.solref = [FLOOR_TIMECONST, FLOOR_DAMPRATIO]
+            g.solimp = list(FLOOR_SOLIMP)
+            g.priority = 1  # the floor's contact parameters win (not averaged with the body's)
+        else:
+            g.contype, g.conaffinity = BODY_BITS
+            g.solref = [SELF_TIMECONST, 1.0]
+    for a, b in self_collision_exclusions(spec.compile()):
+        e = spec.add_exclude()
+        e.bodyname1, e.bodyname2 = a, b
 
 
 _D = mujoco.mjtDisableBit
@@ -352,12 +386,14 @@ def sole_boxes(model) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     return out
 
 
-def add_soles(spec) -> None:
+def add_soles(spec, soft: SoftSole | None = None) -> None:
     """Give each foot of ``spec`` a massless sole box (:func:`sole_boxes`, heel to ball) and its
     toes a toe box (ball to tip), which alone touch the floor for it: a foot then stands on a
     flat sole, not on the point or edge where a capsule meets a plane, nor on a toe capsule
     that the captured toe angle holds below the sole; on its ball it stands on its toes' box.
-    The foot and toe capsules keep colliding with the other body geoms."""
+    The foot and toe capsules keep colliding with the other body geoms. ``soft``: the boxes
+    take priority over the floor with these contact parameters (:class:`SoftSole`), the
+    floor's friction kept (None: the floor's parameters, the stiff floor)."""
     boxes = sole_boxes(spec.compile())
     for body, (pos, quat, size) in boxes.items():
         b = spec.body(body)
@@ -372,6 +408,13 @@ def add_soles(spec) -> None:
         g.contype, g.conaffinity = SOLE_BITS
         g.group = 3
         g.solref = [SELF_TIMECONST, 1.0]
+        if soft is not None:  # the sole's parameters win for its floor contacts; friction kept
+            floor = spec.geom("floor")
+            g.priority = floor.priority + 1
+            g.solref = [soft.timeconst, soft.dampratio]
+            g.solimp = list(soft.solimp)
+            g.friction = floor.friction
+            g.condim = floor.condim
         for name in (body, body[0] + "toes"):
             capsule = spec.geom(name)
             if capsule is not None:

@@ -153,6 +153,8 @@ class ForwardValidation:
             its gains chosen per window); None: its defaults, but for
             ``balance`` and ``noise_deflection``: :data:`DEFAULT_BALANCE` and
             :data:`DEFAULT_NOISE_DEFLECTION` unless ``search`` names them.
+            The whole-body QP and the LQR take theirs (``track_wholebody``'s ``gains``,
+            ``track_lqr``'s keywords).
         threads: the sampler's rollouts run on this many threads (the same result for any).
         contact_reference: the plain tracker and the sampler track the contact-consistent
             reference (no floor lift, stance soles on z = 0, as the whole-body QP always does)
@@ -320,7 +322,7 @@ class ForwardValidation:
             r = tracker(self.model, tracked, samples=self.samples, record_every=every,
                         threads=self.threads, **search)  # fmt: skip
         elif self.controller == "wholebody":
-            r = track_wholebody(self.model, tracked, record_every=every)
+            r = track_wholebody(self.model, tracked, record_every=every, **self.search)
         elif self.controller == "lqr":
             r = track_lqr(self.model, tracked, record_every=every, **self.search)
         else:

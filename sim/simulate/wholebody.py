@@ -30,7 +30,12 @@ feed-forward acceleration:
   the floor); a foot the reference has on the floor (its sole within :data:`STANCE_GAP`) that
   touches it turns to the reference sole's orientation (flat, or rolling heel to toe); every
   other foot tracks the reference's sole pose (position and orientation, world frame, moved
-  with the support offset, :func:`_anchor`): the reference's foot placement;
+  with the support offset, :func:`_anchor`): the reference's foot placement. Options
+  (:class:`WholeBodyGains`, all off by default): the swing sole's orientation with the
+  reference's angular velocity (``swing_feedforward``), its target moved by the CoM's error
+  (``placement``, ``placement_v``: SIMBICON's ``c_d e + c_v de``), a foot the reference stands
+  on that does not touch driven into the floor (``land_depth``), a swing foot's contact
+  points not held (``hold_swing``);
 * a small regularisation of ``qdd`` and the forces (a unique solution).
 
 ``M`` (``mj_fullM``), ``h`` (``qfrc_bias - qfrc_passive``) and the point Jacobians (``mj_jac`` at
@@ -70,6 +75,7 @@ from sim.simulate.tracking import Tracking, divergences, foot_forces
 from sim.simulate.wholebody_reference import (
     WholeBodyReference,
     foot_box_ids,
+    sole_corners,
     wholebody_reference,
 )
 
@@ -105,6 +111,20 @@ class WholeBodyGains:
     limit_horizon: float = 0.05  # [s] hinge accelerations keep the range this far ahead (0: off)
     contact_damping: float = 20.0  # [1/s] a supporting point's velocity to zero
     w_contact: float = 100.0
+    # a swing sole's orientation tracks the reference's angular velocity and acceleration too
+    # (False: a PD towards its orientation at rest, lagging about 2 / foot_omega behind)
+    swing_feedforward: bool = False
+    # [m] a foot the reference has on the floor that does not touch it aims this far below
+    # its reference sole (0: at the sole): it seeks the floor instead of hovering above it
+    land_depth: float = 0.0
+    w_land: float | None = None  # that foot's pose weight (None: ``w_swing``)
+    # the contact points of a foot the reference has in the air are held still too (False:
+    # a toe that scuffs the floor mid-swing does not pin the foot there)
+    hold_swing: bool = True
+    # [m] a stance sole (the reference stands on it, it touches) also offers its box's bottom
+    # corners within this height of the floor as support (0: MuJoCo's contact points only): a
+    # flat foot resting on one edge can still plan its centre of pressure over the whole sole
+    sole_gap: float = 0.0
 
 
 def _edges(mu: float) -> np.ndarray:
@@ -134,16 +154,18 @@ def _touching(model, data, floor: int) -> set[int]:
     return set(g[g[:, 0] == floor, 1].tolist()) | set(g[g[:, 1] == floor, 0].tolist())
 
 
-def _support(model, data, gains: WholeBodyGains, scratch: dict):
+def _support(model, data, gains: WholeBodyGains, scratch: dict, stance: np.ndarray):
     """The support points and their edge matrices at ``data``'s state: ``points`` (C, 3), ``JE``
     (nv, 4C) the generalised force of each pyramid edge's unit force, ``wrench`` (6, 4C) each
-    edge's force and moment about the CoM, and the set of geoms touching the floor."""
+    edge's force and moment about the CoM, ``Jc`` (3C, nv) the points' Jacobians, the set of
+    geoms touching the floor and ``sides`` (C,) each point's foot (0 left, 1 right);
+    ``stance`` (2,) the reference's feet on the floor (``gains.sole_gap``)."""
     soles, toes = scratch["ids"]
     E, jacp = scratch["E"], scratch["jacp"]
     touching = _touching(model, data, scratch["floor"])
     com = data.subtree_com[1]
-    points, bodies = [], []
-    feet = {int(g) for g in (*soles, *toes)}
+    points, bodies, sides = [], [], []
+    feet = {int(g): s for s in range(2) for g in (soles[s], toes[s])}
     floor = scratch["floor"]
     for i in range(data.ncon):  # MuJoCo's own contact points of the feet on the floor
         g1, g2 = data.contact.geom[i]
@@ -151,6 +173,14 @@ def _support(model, data, gains: WholeBodyGains, scratch: dict):
         if g in feet:
             points.append(data.contact.pos[i].copy())
             bodies.append(int(model.geom_bodyid[g]))
+            sides.append(feet[g])
+    for side in range(2) if gains.sole_gap > 0 else ():  # a stance sole's corners near the floor
+        if stance[side] and soles[side] in touching:
+            for p in sole_corners(model, data, soles[side]):
+                if p[2] < gains.sole_gap:
+                    points.append(p)
+                    bodies.append(int(model.geom_bodyid[soles[side]]))
+                    sides.append(side)
     C = len(points)
     JE = np.empty((model.nv, 4 * C))
     wrench = np.zeros((6, 4 * C))
@@ -161,7 +191,7 @@ def _support(model, data, gains: WholeBodyGains, scratch: dict):
         JE[:, 4 * c : 4 * c + 4] = jacp.T @ E
         wrench[:3, 4 * c : 4 * c + 4] = E
         wrench[3:, 4 * c : 4 * c + 4] = np.cross(p - com, E.T).T
-    return np.array(points).reshape(C, 3), JE, wrench, Jc, touching
+    return np.array(points).reshape(C, 3), JE, wrench, Jc, touching, np.array(sides, dtype=int)
 
 
 def _anchor(data, ref: WholeBodyReference, k: int, gains, touching, scratch) -> np.ndarray:
@@ -233,6 +263,9 @@ def _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task) -
             task(A[3:], ks * err - ds * vel[3:], gains.w_stance)
             continue
         target = ref.sole_pos[k, side] + delta
+        landing = bool(ref.stance[k, side]) and gains.land_depth > 0
+        if landing:  # the reference stands on it: seek the floor
+            target = target - [0.0, 0.0, gains.land_depth]
         if gains.placement:  # foot placement relative to the body's own centre of mass
             dv = (data.subtree_linvel[1] - ref.com_vel[k])[:2]
             rel = com[:2] + ref.sole_pos[k, side, :2] - ref.com[k, :2] + gains.placement_v * dv
@@ -240,7 +273,11 @@ def _foot_tasks(model, data, ref, k, gains, n, touching, delta, scratch, task) -
             target[:2] = (1 - gains.placement) * target[:2] + gains.placement * rel
         kf, df = gains.foot_omega**2, 2 * gains.foot_omega
         lin = ref.sole_acc[k, side] + kf * (target - p) + df * (ref.sole_vel[k, side] - vel[:3])
-        task(A, np.concatenate([lin, kf * err - df * vel[3:]]), gains.w_swing)
+        ang = kf * err - df * vel[3:]
+        if gains.swing_feedforward:
+            ang = ref.sole_angacc[k, side] + kf * err + df * (ref.sole_angvel[k, side] - vel[3:])
+        w = gains.w_land if landing and gains.w_land is not None else gains.w_swing
+        task(A, np.concatenate([lin, ang]), w)
 
 
 def _limits(model, data, gains, scratch, C: int, h, limit):
@@ -278,7 +315,7 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
     mujoco.mj_fullM(model, data, M)
     mujoco.mj_subtreeVel(model, data)
     h = data.qfrc_bias - data.qfrc_passive
-    points, JE, wrench, Jc, touching = _support(model, data, gains, scratch)
+    points, JE, wrench, Jc, touching, sides = _support(model, data, gains, scratch, ref.stance[k])
     C = len(points)
     n = nv + 4 * C
     delta = _anchor(data, ref, k, gains, touching, scratch)
@@ -294,7 +331,11 @@ def qp_tick(model, data, ref: WholeBodyReference, k: int, gains: WholeBodyGains,
     if C:  # the supporting points keep still: no slip, no push into the floor
         A = np.zeros((3 * C, n))
         A[:, :nv] = Jc
-        task(A, -gains.contact_damping * (Jc @ data.qvel), gains.w_contact)
+        held = np.ones(3 * C, dtype=bool)
+        if not gains.hold_swing:  # not those of a foot the reference has in the air
+            held = np.repeat(ref.stance[k, sides], 3)
+        if held.any():
+            task(A[held], -gains.contact_damping * (Jc[held] @ data.qvel), gains.w_contact)
     A, b = np.vstack(rows), np.concatenate(rhs)
     Aw = A * np.concatenate(weights)[:, None]
     H = A.T @ Aw

@@ -28,8 +28,10 @@ class WholeBodyReference:
     """What the QP tracks, per control tick (T ticks): ``qpos`` (T, nq), ``qvel``/``qacc``
     (T, nv), centre of mass ``com``/``com_vel``/``com_acc`` (T, 3), centroidal angular momentum
     ``angmom``/``angmom_rate`` (T, 3), per foot (left, right) the sole's centre ``sole_pos`` /
-    ``sole_vel`` / ``sole_acc`` (T, 2, 3), its orientation ``sole_mat`` (T, 2, 3, 3) and
-    ``stance`` (T, 2) (the sole within :data:`STANCE_GAP` of the floor)."""
+    ``sole_vel`` / ``sole_acc`` (T, 2, 3), its orientation ``sole_mat`` (T, 2, 3, 3), its
+    angular velocity ``sole_angvel`` [rad/s] and acceleration ``sole_angacc`` [rad/s^2]
+    (T, 2, 3, world frame) and ``stance`` (T, 2) (the sole within :data:`STANCE_GAP` of the
+    floor)."""
 
     qpos: np.ndarray
     qvel: np.ndarray
@@ -44,6 +46,8 @@ class WholeBodyReference:
     sole_acc: np.ndarray
     sole_mat: np.ndarray
     stance: np.ndarray
+    sole_angvel: np.ndarray
+    sole_angacc: np.ndarray
 
 
 def foot_box_ids(model) -> tuple[np.ndarray, np.ndarray]:
@@ -96,6 +100,12 @@ def wholebody_reference(model, ref_qpos: np.ndarray) -> WholeBodyReference:
             return np.zeros_like(x)
         return gaussian_filter1d(np.gradient(x, dt, axis=0), sigma, axis=0, mode="nearest")
 
+    # the soles' angular velocity: the axial part of dR/dt R^T (world frame), smoothed
+    w = np.zeros((T, 2, 3))
+    if T > 1:
+        W = np.gradient(sole_mat, dt, axis=0) @ np.swapaxes(sole_mat, -1, -2)
+        w = 0.5 * (W[..., [2, 0, 1], [1, 2, 0]] - W[..., [1, 2, 0], [2, 0, 1]])
+        w = gaussian_filter1d(w, sigma, axis=0, mode="nearest")
     stance = low <= STANCE_GAP
     # contact-consistent: a stance sole's target sits on the floor (its lowest corner at z = 0),
     # whatever height the capture's floor estimate left it at
@@ -104,5 +114,6 @@ def wholebody_reference(model, ref_qpos: np.ndarray) -> WholeBodyReference:
     return WholeBodyReference(
         qpos=ref_qpos, qvel=qvel, qacc=qacc, com=com, com_vel=com_vel, com_acc=d(com_vel),
         angmom=angmom, angmom_rate=d(angmom), sole_pos=sole_pos, sole_vel=sole_vel,
-        sole_acc=d(sole_vel), sole_mat=sole_mat, stance=stance,
+        sole_acc=d(sole_vel), sole_mat=sole_mat, stance=stance, sole_angvel=w,
+        sole_angacc=d(w),
     )  # fmt: skip
