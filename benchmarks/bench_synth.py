@@ -76,6 +76,7 @@ from sim.simulate.generate import (  # noqa: E402
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
     SYNTH_DRIFT,
+    SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
 )
@@ -148,6 +149,17 @@ def replays(folder: Path, rows: list[dict]) -> str:
     """One line: how many clips' episodes replay bit for bit (``sim.simulate.episode.replay``
     of their stored actions, gains and wrenches from their first state), and how many episodes end
     in a fall (their last step is a termination)."""
+    ok, falls = replay_counts(folder, rows)
+    return (
+        f"Episodes (actions at the control rate, 120 Hz, frame_skip 4): {ok} of {len(rows)} "
+        f"replay every stored state bit for bit from their first state; {falls} end in a fall "
+        "(terminated), the others at the time limit (truncated)."
+    )
+
+
+def replay_counts(folder: Path, rows: list[dict]) -> tuple[int, int]:
+    """How many of ``rows``' episodes replay every stored state bit for bit, and how many end
+    in a fall."""
     ok = falls = 0
     for r in rows:
         lab = load_extra(folder / r["file"], "sim_")
@@ -158,11 +170,7 @@ def replays(folder: Path, rows: list[dict]) -> str:
             np.array_equal(q, lab["sim_tick_qpos"]) and np.array_equal(v, lab["sim_tick_qvel"])
         )
         falls += int(lab["sim_fall_tick"]) > 0
-    return (
-        f"Episodes (actions at the control rate, 120 Hz, frame_skip 4): {ok} of {len(rows)} "
-        f"replay every stored state bit for bit from their first state; {falls} end in a fall "
-        "(terminated), the others at the time limit (truncated)."
-    )
+    return ok, falls
 
 
 def make(args, folder: Path, options: list, share: float) -> tuple[str, float]:
@@ -174,7 +182,7 @@ def make(args, folder: Path, options: list, share: float) -> tuple[str, float]:
     s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
                    kinds=tuple(args.kinds), samples=samples, controller=controller,
                    seconds=args.seconds, progress=False, drift=options[0],
-                   contact_reference=options[1], lean=options[2],
+                   contact_reference=options[1], lean=options[2], foot_lock=options[3],
                    gain_choice=share if controller == "sampling" else None)  # fmt: skip
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     simulated = sum(r["frames"] for r in s.written) / 30.0
@@ -209,8 +217,8 @@ def comparison(runs: list[tuple[str, Path, dict, float]]) -> str:
         "| gain choice (share on the stiff gains) | clips | not fallen | p95 point speed / "
         "real's, not fallen | skating in contact, not fallen [mm/s] | tracking error median, "
         "global / root-relative [mm] (not fallen) | ticks on the stiff gains | CPU s per "
-        "simulated s |",
-        "|---|---|---|---|---|---|---|---|",
+        "simulated s | replay bit for bit |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, folder, fig, per_s in runs:
         rows = json.loads((folder / "index.json").read_text())["trials"]
@@ -221,7 +229,8 @@ def comparison(runs: list[tuple[str, Path, dict, float]]) -> str:
             f"| {name} | {len(rows)} | {len(up)} | {f['p95_ratio']:.2f} | {f['skate_mm_s']:.0f} "
             f"| {med('tracking_mpjpe_mm', rows):.0f} / {med('tracking_local_mm', rows):.0f} "
             f"({med('tracking_mpjpe_mm', up):.0f} / {med('tracking_local_mm', up):.0f}) "
-            f"| {stiff_share(folder, rows):.2f} | {per_s:.2f} |"
+            f"| {stiff_share(folder, rows):.2f} | {per_s:.2f} "
+            f"| {replay_counts(folder, rows)[0]} of {len(rows)} |"
         )
     return "\n".join(lines)
 
@@ -481,6 +490,8 @@ def main() -> None:
         ("contact-reference", SYNTH_CONTACT_REFERENCE, "the sampler tracks the "
          "contact-consistent reference (else lifted 1 cm)"),
         ("lean", SYNTH_LEAN, "the body stepped lean (the same motion, cheaper steps)"),
+        ("foot-lock", SYNTH_FOOT_LOCK, "the contact-consistent reference foot-locked (its "
+         "stance soles held still on the floor by the legs)"),
     ):  # fmt: skip
         ap.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None,
                         help=f"{what} (default: synth's, {default}); another than synth's "
@@ -499,8 +510,8 @@ def main() -> None:
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
 
     controller, samples = chosen_controller(args.samples, args.controller)
-    chosen = (args.drift, args.contact_reference, args.lean)
-    defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN)
+    chosen = (args.drift, args.contact_reference, args.lean, args.foot_lock)
+    defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK)
     options = [d if v is None else v for v, d in zip(chosen, defaults, strict=True)]
     page = ("synth_variant" if options != list(defaults)
             else "synth_gains" if args.gain_choice != SYNTH_GAIN_CHOICE
@@ -509,7 +520,8 @@ def main() -> None:
     run = controller + (f", {samples} samples" if samples else "")
     if controller == "sampling":
         run += ", " + ", ".join(w if on else f"no {w}" for w, on in zip(
-            ("drift lead", "contact-consistent reference", "lean body"), options, strict=True))  # fmt: skip
+            ("drift lead", "contact-consistent reference", "lean body", "foot lock"), options,
+            strict=True))  # fmt: skip
         run += (f", gain choice {args.gain_choice:g} on the stiff gains" if args.gain_choice
                 else ", the body's gains alone")  # fmt: skip
     label = f"`synthesize`: {run}"

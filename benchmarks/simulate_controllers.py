@@ -262,7 +262,7 @@ CONTROLLERS["ccstiff0.1w12rad"] = (
 )
 
 #: the gains chosen per window (``sim.simulate.gainchoice``) between the default and the stiff
-#: controller (cap 0.1 rad, 12 Hz), eval's default otherwise (``mix0.5`` is eval's default:
+#: controller (cap 0.1 rad, 12 Hz), eval's default otherwise (``mix0.5`` was eval's default at 28:
 #: ``sim.simulate.validate.DEFAULT_GAIN_CHOICE``): ``mix<share>`` that share of each
 #: window's 28 candidates on the stiff gains; ``stifffb`` all on the stiff gains, a window whose
 #: candidates all fall tried again on the default ones; ``mix<share>fb`` both
@@ -283,8 +283,8 @@ for _name, _choice in (
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
 
-#: ``mix0.5s<n>``: eval's default (``mix0.5``) with ``n`` rollouts per window instead of 28 (the
-#: budget's headroom: 28 cost 3.0-3.3 CPU s per simulated s, docs/results/simulate_soles.md)
+#: ``mix0.5s<n>``: ``mix0.5`` with ``n`` rollouts per window instead of 28; ``mix0.5s40`` is
+#: eval's default (``validate.DEFAULT_SAMPLES``; docs/results/simulate_samples.md)
 for _n in (36, 40, 48):
     CONTROLLERS[f"mix0.5s{_n}"] = (
         f"sampler, {_n} samples, eval's defaults (gains chosen per window)",

@@ -52,10 +52,10 @@ def test_the_table_says_where_a_simulation_went_unstable(bench):
     assert "diverging acceleration in 1 clips" in text
 
 
-def test_mix_half_is_eval_default_controller(candidates):
+def test_mix_half_at_eval_s_count_is_eval_default_controller(candidates):
     from sim.simulate.validate import DEFAULT_GAIN_CHOICE, DEFAULT_SAMPLES, STIFF_GAINS
 
-    _, kw, actuators, body = candidates.CONTROLLERS["mix0.5"]
+    _, kw, actuators, body = candidates.CONTROLLERS[f"mix0.5s{DEFAULT_SAMPLES}"]
     assert kw["search"] == {"choice": DEFAULT_GAIN_CHOICE} and kw["samples"] == DEFAULT_SAMPLES
     assert body == {"alternate_gains": (STIFF_GAINS,)} and actuators == "position"
 

@@ -146,3 +146,56 @@ def test_the_cli_flags_reach_synthesize(cmu_dir, tmp_path, monkeypatch):
     argv = ["synth", "--data", str(cmu_dir), "--n", "1", "--out", str(tmp_path / "o")]
     assert cli.main([*argv, "--drift", "--no-lean"]) in (0, None)
     assert (seen["drift"], seen["contact_reference"], seen["lean"]) == (True, None, False)
+    assert cli.main([*argv, "--contact-reference", "--foot-lock"]) in (0, None)
+    assert (seen["contact_reference"], seen["foot_lock"]) == (True, True)
+
+
+def test_a_foot_locked_episode_is_recorded_tracks_the_locked_reference_and_replays(cmu_dir):
+    """``SynthTask.foot_lock``: the sampler tracks ``foot_locked`` of the contact-consistent
+    reference (the same window: the reference built here by the module's own functions), the
+    generation says so, and the episode replays bit for bit under MuJoCo alone."""
+    from sim.model.humanoid import canonical_skeleton
+    from sim.simulate.episode_body import episode_model
+    from sim.simulate.footlock import foot_locked
+    from sim.simulate.generate import (
+        draw_parameters,
+        episode_rng,
+        episode_seed,
+        generate,
+        reference_motion,
+    )
+    from sim.simulate.model import CONTROL_HZ, scaled_skeleton
+
+    task = replace(_task(cmu_dir, contact_reference=True, foot_lock=True), seconds=1.0)
+    n = int(task.seconds * CONTROL_HZ)
+    refs = {}
+    for lock in (False, True):
+        t = replace(task, foot_lock=lock)
+        rng = episode_rng(episode_seed(t))
+        p = draw_parameters(t, rng)
+        model = episode_model(scaled_skeleton(canonical_skeleton(), p["scale"]), p["scale"],
+                              p["gain"])[0]  # fmt: skip
+        refs[lock] = reference_motion(t, p, model, n, rng)
+    np.testing.assert_array_equal(refs[True], foot_locked(model, refs[False], CONTROL_HZ))
+    assert not np.array_equal(refs[True], refs[False])  # the lock moved some leg
+    clip, rec = generate(task)
+    g = rec["generation"]
+    assert g["reference"] == "contact-consistent, foot-locked"
+    labels = rec["labels"]
+    assert json.loads(array_text(labels["sim_generation"])) == g
+    limits = np.array([human_torque_limit(nm, 75.0 * g["scale"] ** 3) for nm in clip.joint_names])
+    q, v, worst, _ = oracle_replay(labels, limits)
+    assert np.array_equal(q, labels["sim_tick_qpos"]) and np.array_equal(v, labels["sim_tick_qvel"])
+    assert worst <= 1 + 1e-12
+
+
+def test_a_foot_lock_needs_the_contact_consistent_reference(cmu_dir, tmp_path):
+    from sim.errors import UsageError
+    from sim.simulate.dataset import synthesize
+    from sim.simulate.generate import generate
+
+    with pytest.raises(UsageError, match="contact-consistent"):
+        generate(_task(cmu_dir, foot_lock=True))
+    with pytest.raises(UsageError, match="contact-consistent"):
+        synthesize(cmu_dir, tmp_path / "o", 1, seconds=SHORT, samples=4, workers=1,
+                   progress=False, foot_lock=True)  # fmt: skip

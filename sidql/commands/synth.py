@@ -25,6 +25,7 @@ from sim.simulate.generate import (
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
     SYNTH_DRIFT,
+    SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
 )
@@ -93,6 +94,8 @@ def register(p) -> None:
         ("contact-reference", SYNTH_CONTACT_REFERENCE,
          "the sampler tracks the contact-consistent reference (else lifted 1 cm)"),
         ("lean", SYNTH_LEAN, "the body stepped lean (the same motion, cheaper steps)"),
+        ("foot-lock", SYNTH_FOOT_LOCK, "the contact-consistent reference's stance soles held "
+         "still, flat on the floor, by the legs (needs --contact-reference with the sampler)"),
     ):  # fmt: skip
         p.add_argument(f"--{flag}", action=BooleanOptionalAction, default=None,
                        help=f"{what} (default: {'on' if default else 'off'}; recorded)")  # fmt: skip
@@ -148,7 +151,7 @@ def run(args) -> int:
         workers=args.workers, ray=args.ray,
         progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
         drift=args.drift, contact_reference=args.contact_reference, lean=args.lean,
-        gain_choice=args.gain_choice,
+        gain_choice=args.gain_choice, foot_lock=args.foot_lock,
     )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "

@@ -41,6 +41,7 @@ from sim.simulate.generate import (
     SYNTH_CONTROLLERS,
     SYNTH_DEFAULT_CONTROLLER,
     SYNTH_DRIFT,
+    SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
     SYNTH_SAMPLES,
@@ -171,6 +172,7 @@ def synthesize(
     contact_reference: bool | None = None,
     lean: bool | None = None,
     gain_choice: float | None = None,
+    foot_lock: bool | None = None,
 ) -> DatasetSummary:
     """Generate ``n`` clips into ``out_dir`` (see the module docstring).
 
@@ -192,7 +194,8 @@ def synthesize(
     ``contact_reference``, ``lean``: ``SynthTask``'s options (None: ``generate.SYNTH_DRIFT``,
     ``SYNTH_CONTACT_REFERENCE``, ``SYNTH_LEAN``), recorded in the journal and the index;
     ``gain_choice``: the sampler's share of candidates on the stiff gains (None:
-    ``SYNTH_GAIN_CHOICE`` with the sampler, 0 with another controller), likewise.
+    ``SYNTH_GAIN_CHOICE`` with the sampler, 0 with another controller), likewise;
+    ``foot_lock``: the contact-consistent reference foot-locked (None: ``SYNTH_FOOT_LOCK``).
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
@@ -214,11 +217,15 @@ def synthesize(
     if gain_choice and controller != "sampling":
         raise UsageError(f"a gain choice is the sampler's; not for the {controller} controller")
     share = SYNTH_GAIN_CHOICE if gain_choice is None and controller == "sampling" else gain_choice
-    chosen = zip(TASK_OPTIONS[:3], (drift, contact_reference, lean),
-                 (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN), strict=True)  # fmt: skip
+    chosen = zip(("drift", "contact_reference", "lean", "foot_lock"),
+                 (drift, contact_reference, lean, foot_lock),
+                 (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK),
+                 strict=True)  # fmt: skip
     task = {"samples": samples, "controller": controller, "assist": float(assist),
             "threads": int(threads), **{k: bool(d if v is None else v) for k, v, d in chosen},
             "gain_choice": float(share or 0.0)}  # fmt: skip
+    if task["foot_lock"] and not (controller == "wholebody" or task["contact_reference"]):
+        raise UsageError("a foot lock needs the contact-consistent reference (--contact-reference)")
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip

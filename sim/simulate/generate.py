@@ -44,12 +44,14 @@ from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening, track
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
 from sim.simulate.episode_body import episode_bodies
+from sim.simulate.footlock import foot_locked
 from sim.simulate.gainchoice import GainChoice, choice_track
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, total_mass
 from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import BALANCE, LOOKAHEAD, CostWeights, sample_track
 from sim.simulate.validate import CONTROLLERS, DEFAULT_BALANCE, STIFF_GAINS, chosen_controller
 from sim.simulate.wholebody import track_wholebody
+from sim.simulate.windows import body_points, fastest_window
 
 KINDS = ("track", "fall")  # the default mix: real motion, no assistance
 #: [s] a clip's length unless asked otherwise: the protocol's 60 frames at 30 fps (the length
@@ -120,17 +122,22 @@ SYNTH_DEFAULT_CONTROLLER = chosen_controller()[0]
 #: unless a task says otherwise: the sampler's balance feedback with eval's drift lead
 #: (``validate.DEFAULT_BALANCE``, else ``sampling.BALANCE``), its reference contact-consistent
 #: (else lifted 1 cm), the body stepped lean (``sim_spec(lean=True)``: the same motion). Off:
-#: on bench_synth's 20 clips none kept more up or met more targets (docs/synthetic.md)
+#: on bench_synth's 20 clips none kept more up or met more targets; the contact-consistent
+#: reference kept fewer up on 60 clips x 2 seeds too (docs/synthetic.md)
 SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
 #: the sampler's share of candidates per window on the stiff gains (``sim.simulate.gainchoice``,
 #: ``validate.STIFF_GAINS`` times the episode's gain draw), the gains stored per tick; 0: the
-#: body's gains alone. Not the default: no win on bench_synth's 20 clips (docs/synthetic.md)
+#: body's gains alone. Not the default: on 60 clips x 2 seeds 0.25 kept more up and skated less,
+#: but lowered the p95 speed ratio on one seed (docs/synthetic.md)
 SYNTH_GAIN_CHOICE = 0.0
-#: the sampler's rollouts per window unless a task names a count: 28, the count its figures
-#: were measured with (docs/results/synth.md); eval's default is 40 (``validate.DEFAULT_SAMPLES``)
+#: the sampler's rollouts per window unless a task names one (eval's: ``DEFAULT_SAMPLES``, 40)
 SYNTH_SAMPLES = 28
+#: the contact-consistent reference foot-locked (``sim.simulate.footlock``: its stance soles
+#: held still, flat on the floor, by the legs), as ``ForwardValidation(foot_lock=True)``. Off:
+#: on 60 clips it kept fewer up on one of two seeds (docs/synthetic.md)
+SYNTH_FOOT_LOCK = False
 #: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True (non-zero)
-TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice")
+TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice", "foot_lock")
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -162,6 +169,7 @@ class SynthTask:
     contact_reference: bool = SYNTH_CONTACT_REFERENCE  # the sampler's (else lifted 1 cm)
     lean: bool = SYNTH_LEAN  # the body stepped lean (its MJCF says so)
     gain_choice: float = SYNTH_GAIN_CHOICE  # the sampler's share on the stiff gains (0: none)
+    foot_lock: bool = SYNTH_FOOT_LOCK  # the contact-consistent reference foot-locked
 
 
 def task_controller(task: SynthTask) -> tuple[str, int]:
@@ -312,11 +320,13 @@ def reference_motion(
     """The (n, nq) reference the body tracks at ``CONTROL_HZ``: the procedural motion, or a
     window of the source trial time-warped by ``p["speed"]`` (lowered to the fastest warp that
     still fills the clip) and set on the floor, lifted 1 cm or contact-consistent (the
-    whole-body QP's; the sampler's where ``task.contact_reference``); records ``source``,
-    ``reference`` (and ``start_tick``, drawn from ``rng``) in ``p``.
+    whole-body QP's; the sampler's where ``task.contact_reference``), foot-locked where
+    ``task.foot_lock``; records ``source``, ``reference`` (and ``start_tick``, drawn from
+    ``rng``) in ``p``.
 
     Raises:
         MotionDataError: the source trial is unreadable or shorter than one clip.
+        UsageError: a foot lock asked of a reference that is not contact-consistent.
     """
     if task.kind == "procedural":
         slow, _ = synthetic_qpos(
@@ -345,32 +355,16 @@ def reference_motion(
     c = p["controller"]
     contact = c == "wholebody" or (c == "sampling" and bool(task.contact_reference))
     p["reference"] = "contact-consistent" if contact else "lifted"
-    if contact:  # feet meet the floor: no lift, stance soles on it
-        return contact_consistent(model, flat_soles(model, on_floor(model, window, lift=0.0)))
+    if task.foot_lock and not contact:
+        raise UsageError("a foot lock needs the contact-consistent reference")
+    if contact:  # feet meet the floor: no lift, stance soles on it (held still: foot_lock)
+        ref = contact_consistent(model, flat_soles(model, on_floor(model, window, lift=0.0)))
+        if task.foot_lock:
+            p["reference"] += ", foot-locked"
+            return foot_locked(model, ref, CONTROL_HZ)
+        return ref
     # the 1 cm lift, and soles near the floor laid flat
     return flat_soles(model, on_floor(model, window))
-
-
-def fastest_window(points: np.ndarray, n: int, starts: np.ndarray) -> int:
-    """Of the windows ``points[s : s + n]`` (points (T, P, 3) [m] sampled at one rate), the
-    start ``s`` of ``starts`` whose points move fastest: the largest 95th percentile, over the
-    window's samples and points, of each point's step between consecutive samples (its speed
-    times the sampling interval: the rate cancels); the first of equals."""
-    step = np.linalg.norm(np.diff(points, axis=0), axis=-1)  # (T - 1, P)
-    starts = np.asarray(starts, dtype=np.int64)
-    score = [np.percentile(step[s : s + n - 1], 95) for s in starts]
-    return int(starts[int(np.argmax(score))])
-
-
-def body_points(model, qpos: np.ndarray) -> np.ndarray:
-    """(T, B - 1, 3) [m] the origin of every body but the world at each ``qpos`` (T, nq)."""
-    data = mujoco.MjData(model)
-    out = np.empty((len(qpos), model.nbody - 1, 3))
-    for t, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        out[t] = data.xpos[1:]
-    return out
 
 
 def simulate_episode(
