@@ -30,6 +30,21 @@ def _task(cmu_dir, kind="track", **kw):
     return SynthTask(kind, seed=3, index=1, asf=asf, amc=amc, seconds=SHORT, samples=4, **kw)
 
 
+def _reference(task, ticks: int):
+    """(p, model, ref): ``task``'s drawn parameters, its episode body and the reference the
+    sampler tracks (``ticks`` control ticks), built by the generator's own functions."""
+    from sim.model.humanoid import canonical_skeleton
+    from sim.simulate.episode_body import episode_model
+    from sim.simulate.generate import draw_parameters, episode_rng, episode_seed, reference_motion
+    from sim.simulate.model import scaled_skeleton
+
+    rng = episode_rng(episode_seed(task))
+    p = draw_parameters(task, rng)
+    model = episode_model(scaled_skeleton(canonical_skeleton(), p["scale"]), p["scale"],
+                          p["gain"])[0]  # fmt: skip
+    return p, model, reference_motion(task, p, model, ticks, rng)
+
+
 @pytest.fixture(scope="module")
 def optioned_run(cmu_dir, tmp_path_factory):
     from sim.simulate.dataset import synthesize
@@ -93,20 +108,14 @@ def test_the_lean_body_moves_as_the_full_one_bit_for_bit(cmu_dir):
 def test_the_contact_consistent_reference_stands_on_the_floor_when_asked(cmu_dir):
     """The sampler's reference: with the option its stance soles touch z = 0 (lowest sole
     point within 2 mm in stance), lifted 1 cm without it; the same window either way."""
-    from sim.model.humanoid import canonical_skeleton
-    from sim.simulate.episode_body import episode_model
-    from sim.simulate.generate import draw_parameters, episode_rng, episode_seed, reference_motion
-    from sim.simulate.model import CONTROL_HZ, scaled_skeleton
+    from sim.simulate.model import CONTROL_HZ
     from sim.simulate.reference import STANCE_GAP, lowest_foot_point
 
     lows, starts = {}, {}
     for contact in (False, True):
-        task = _task(cmu_dir, contact_reference=contact)
-        rng = episode_rng(episode_seed(task))
-        p = draw_parameters(task, rng)
-        model = episode_model(scaled_skeleton(canonical_skeleton(), p["scale"]), p["scale"],
-                              p["gain"])[0]  # fmt: skip
-        ref = reference_motion(task, p, model, int(SHORT * CONTROL_HZ), rng)
+        p, model, ref = _reference(
+            _task(cmu_dir, contact_reference=contact), int(SHORT * CONTROL_HZ)
+        )
         assert p["reference"] == ("contact-consistent" if contact else "lifted")
         low = lowest_foot_point(model, ref)
         lows[contact], starts[contact] = low[low <= STANCE_GAP + 0.01], p["start_tick"]
@@ -154,28 +163,15 @@ def test_a_foot_locked_episode_is_recorded_tracks_the_locked_reference_and_repla
     """``SynthTask.foot_lock``: the sampler tracks ``foot_locked`` of the contact-consistent
     reference (the same window: the reference built here by the module's own functions), the
     generation says so, and the episode replays bit for bit under MuJoCo alone."""
-    from sim.model.humanoid import canonical_skeleton
-    from sim.simulate.episode_body import episode_model
     from sim.simulate.footlock import foot_locked
-    from sim.simulate.generate import (
-        draw_parameters,
-        episode_rng,
-        episode_seed,
-        generate,
-        reference_motion,
-    )
-    from sim.simulate.model import CONTROL_HZ, scaled_skeleton
+    from sim.simulate.generate import generate
+    from sim.simulate.model import CONTROL_HZ
 
     task = replace(_task(cmu_dir, contact_reference=True, foot_lock=True), seconds=1.0)
     n = int(task.seconds * CONTROL_HZ)
     refs = {}
     for lock in (False, True):
-        t = replace(task, foot_lock=lock)
-        rng = episode_rng(episode_seed(t))
-        p = draw_parameters(t, rng)
-        model = episode_model(scaled_skeleton(canonical_skeleton(), p["scale"]), p["scale"],
-                              p["gain"])[0]  # fmt: skip
-        refs[lock] = reference_motion(t, p, model, n, rng)
+        _, model, refs[lock] = _reference(replace(task, foot_lock=lock), n)
     np.testing.assert_array_equal(refs[True], foot_locked(model, refs[False], CONTROL_HZ))
     assert not np.array_equal(refs[True], refs[False])  # the lock moved some leg
     clip, rec = generate(task)
