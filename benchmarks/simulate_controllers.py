@@ -454,7 +454,7 @@ CONTROLLERS["mix0.5pad"] = (
     "position",
     {"alternate_gains": (_STIFF,), "soft_soles": PAD_SOLE},
 )  # fmt: skip
-#: the QP's feet (issue 27, docs/synthetic.md "The QP's feet, one cause at a time"), each with
+#: the QP's feet (docs/synthetic.md "The QP's feet, one cause at a time"), each with
 #: the swing feed-forward (``ff``) unless named without: ``land`` a foot the reference stands
 #: on that does not touch aims ``land_depth`` below its sole; ``free`` the contact points of a
 #: foot the reference has in the air not held still (``hold_swing=False``); ``pl<p>v<v>`` the

@@ -1,4 +1,4 @@
-"""Hostile outputs and resume state, one finding at a time (issue 26): nothing written, deleted or
+"""Hostile outputs and resume state, one finding at a time: nothing written, deleted or
 read outside the folder the user named; the resume journal read as hostile input; memory bounded
 by the input; printable messages naming the file read.
 
