@@ -79,11 +79,10 @@ from sim.simulate.generate import (  # noqa: E402
     SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
-    SYNTH_SAMPLES,
+    synth_controller,
 )
 from sim.simulate.model import G, sim_model  # noqa: E402
 from sim.simulate.reference import on_floor, trial_qpos  # noqa: E402
-from sim.simulate.validate import chosen_controller  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 Q = (50, 95, 99)
@@ -178,7 +177,7 @@ def make(args, folder: Path, options: list, share: float) -> tuple[str, float]:
     """Synthesize ``args.n`` clips into ``folder`` with the sampler's gain choice ``share``;
     returns the cost line and the CPU seconds per simulated second (this process, one
     worker; NaN with more)."""
-    controller, samples = chosen_controller(args.samples, args.controller, SYNTH_SAMPLES)
+    controller, samples = synth_controller(args.samples, args.controller)
     t0, c0 = time.perf_counter(), time.process_time()
     s = synthesize(args.cmu, folder, args.n, seed=args.seed, workers=args.workers,
                    kinds=tuple(args.kinds), samples=samples, controller=controller,
@@ -510,13 +509,13 @@ def main() -> None:
     args = ap.parse_args()
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
 
-    controller, samples = chosen_controller(args.samples, args.controller, SYNTH_SAMPLES)
+    controller, samples = synth_controller(args.samples, args.controller)
     chosen = (args.drift, args.contact_reference, args.lean, args.foot_lock)
     defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK)
     options = [d if v is None else v for v, d in zip(chosen, defaults, strict=True)]
     page = ("synth_variant" if options != list(defaults)
             else "synth_gains" if args.gain_choice != SYNTH_GAIN_CHOICE
-            else "synth" if (controller, samples) == chosen_controller(0, None, SYNTH_SAMPLES)
+            else "synth" if (controller, samples) == synth_controller()
             else "synth_sampled" if controller == "sampling" else f"synth_{controller}")  # fmt: skip
     run = controller + (f", {samples} samples" if samples else "")
     if controller == "sampling":

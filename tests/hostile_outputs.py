@@ -82,11 +82,9 @@ def seed_case(kind: str = "output", seeds=None) -> OutCase:
 
 def journal_params(n: int) -> dict:
     """The parameters a procedural ``synth`` run of ``n`` clips writes at its journal's head."""
-    from sim.simulate.generate import SYNTH_SAMPLES
-    from sim.simulate.validate import chosen_controller
+    from sim.simulate.generate import synth_controller
 
-    # what synthesize resolves its default to
-    controller, samples = chosen_controller(0, None, SYNTH_SAMPLES)
+    controller, samples = synth_controller()  # what synthesize resolves its default to
     return {"source": None, "n": n, "seed": 0, "kinds": ["procedural"], "seconds": 0.5,
             "fps": 30.0, "max_assistance": None, "max_tries": 20,
             **({"samples": samples} if samples else {}), "controller": controller,
@@ -99,11 +97,9 @@ def kept_entry(i: int, **change) -> dict:
     from sim.simulate.journal import clip_name
 
     name = clip_name("procedural", i)
-    from sim.simulate.generate import SYNTH_SAMPLES
-    from sim.simulate.validate import chosen_controller
+    from sim.simulate.generate import synth_controller
 
-    # what synthesize resolves its default to
-    controller, samples = chosen_controller(0, None, SYNTH_SAMPLES)
+    controller, samples = synth_controller()  # what synthesize resolves its default to
     task = task_dict(SynthTask("procedural", 0, i, None, None, 0.5, 30.0, samples, controller))
     return {"subject": "procedural", "trial": name.stem, "asf": None, "amc": None,
             "file": str(name), "frames": 15, "fps": 30.0, "notes": [], "task": task,

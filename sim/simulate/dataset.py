@@ -44,15 +44,14 @@ from sim.simulate.generate import (
     SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
-    SYNTH_SAMPLES,
     TASK_OPTIONS,
     SynthTask,
     generate,
+    synth_controller,
     task_dict,
 )
 from sim.simulate.journal import JOURNAL, clip_name, open_journal  # noqa: F401 (JOURNAL: its name)
 from sim.simulate.journal import read as read_journal
-from sim.simulate.validate import chosen_controller
 
 
 def readable_trials(
@@ -187,7 +186,7 @@ def synthesize(
     ``controller``: of the real-motion kinds (``sim.simulate.generate.SYNTH_CONTROLLERS``;
     None: ``SYNTH_DEFAULT_CONTROLLER``, ``eval --simulate``'s, the sampler); ``samples``: the
     sampler's rollouts per window (0: synth's default count, ``sim.simulate.generate.
-    SYNTH_SAMPLES``; > 0 with no ``controller``: the sampler); both are resolved here and
+    synth_controller``; > 0 with no ``controller``: the sampler); both are resolved here and
     recorded in the journal and the index. ``threads``: the sampler's rollout threads in each
     worker (the clips do not depend on it). ``assist``: the real-motion kinds' root assistance
     bound [body weight], 0 (none) unless asked for (with the plain tracker only). ``drift``,
@@ -208,7 +207,7 @@ def synthesize(
         raise UnknownNameError("controller", controller, SYNTH_CONTROLLERS)
     if samples and controller not in (None, "sampling"):
         raise UsageError(f"{samples} samples: only the sampling controller samples")
-    controller, samples = chosen_controller(samples, controller, SYNTH_SAMPLES)
+    controller, samples = synth_controller(samples, controller)
     if not 0 <= assist <= 1 or (assist and controller != "plain"):
         raise UsageError(f"assistance {assist} BW: 0 .. 1, and only for the plain tracker")
     require_positive(threads, "threads")

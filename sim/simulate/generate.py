@@ -172,11 +172,16 @@ class SynthTask:
     foot_lock: bool = SYNTH_FOOT_LOCK  # the contact-consistent reference foot-locked
 
 
+def synth_controller(samples: int = 0, controller: str | None = None) -> tuple[str, int]:
+    """``validate.chosen_controller`` at synth's default count (:data:`SYNTH_SAMPLES`)."""
+    return chosen_controller(samples, controller, SYNTH_SAMPLES)
+
+
 def task_controller(task: SynthTask) -> tuple[str, int]:
     """The controller that tracks ``task`` and its sample count (0 but for the sampler): the
     plain tracker for procedural motion (its assistance), else ``task.controller`` (the
-    sampler at ``task.samples`` rollouts per window, its default count where 0:
-    ``sim.simulate.validate.chosen_controller``).
+    sampler at ``task.samples`` rollouts per window, synth's default count where 0:
+    :func:`synth_controller`).
 
     Raises:
         UnknownNameError: an unknown controller.
@@ -189,7 +194,7 @@ def task_controller(task: SynthTask) -> tuple[str, int]:
     if task.samples and task.controller != "sampling":
         raise UsageError(f"{task.samples} samples: only the sampling controller samples, not "
                          f"{task.controller!r}")  # fmt: skip
-    return chosen_controller(task.samples, task.controller, SYNTH_SAMPLES)
+    return synth_controller(task.samples, task.controller)
 
 
 def episode_seed(task: SynthTask) -> int:
