@@ -294,6 +294,18 @@ for _n in (36, 40, 48):
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
 
+#: ``mix0.5s40terrain``: eval's default (``mix0.5s40``), each clip tracked in the scene inferred
+#: from its original motion (``ForwardValidation(terrain=True)``, ``sim.simulate.terrain``: boxes
+#: under the feet that stand on steps, the ground from the ground-level stances)
+CONTROLLERS["mix0.5s40terrain"] = (
+    "sampler, 40 samples, eval's defaults (gains chosen per window), the scene inferred from the "
+    "motion",
+    {"controller": "sampling", "samples": 40, "contact_reference": True, "terrain": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
+
 #: ``mix0.5lock``: eval's default (``mix0.5``) tracking the foot-locked reference (its stance
 #: soles held still, flat on the floor, by the legs: ``ForwardValidation(foot_lock=True)``)
 CONTROLLERS["mix0.5lock"] = (
