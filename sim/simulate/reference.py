@@ -22,7 +22,7 @@ from sim.motion.resample import resample_qpos, resampled_frames
 from sim.motion.retarget import leg_length, motion_to_qpos, retarget_rotations
 from sim.motion.trial import CMU_FPS, read_trial, trial_files
 from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS, G
-from sim.simulate.terrain import surface_height, terrain_geoms
+from sim.simulate.terrain import running_floor, surface_height, terrain_geoms
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -99,18 +99,6 @@ def floor_track(
     trial leaves feet hovering or sunk; a running low percentile follows the stance foot.
     """
     return running_floor(lowest_foot_point(model, qpos), rate, window, percentile)
-
-
-def running_floor(
-    low: np.ndarray, rate: float, window: float = 1.5, percentile: float = 10.0
-) -> np.ndarray:
-    """(T,) [m] :func:`floor_track` of a lowest foot point ``low`` (T,) [m] at ``rate`` [Hz]."""
-    half = max(1, int(round(window * rate / 2)))
-    pad = np.pad(low, half, mode="edge")
-    wins = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1)
-    floor = np.percentile(wins, percentile, axis=1)
-    pad = np.pad(floor, half, mode="edge")
-    return np.convolve(pad, np.ones(2 * half + 1) / (2 * half + 1), mode="valid")
 
 
 FLOOR_LIFT = 0.01  # [m]

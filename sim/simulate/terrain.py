@@ -208,13 +208,11 @@ def find_terrain(model, qpos: np.ndarray, rate: float) -> tuple[list[Box], np.nd
 
     Returns:
         the boxes (:class:`Box`, merged) in the frame of ``qpos`` shifted down by the ground
-        track, and the ground track (T,) [m]: ``sim.simulate.reference.running_floor`` of the
+        track, and the ground track (T,) [m]: :func:`running_floor` of the
         lowest foot point with the frames off the ground (more than :data:`GROUND_GAP` above the
         ground level) filled from their neighbours, so the platforms do not pull it up; ``([],
         None)`` where no support is found (the caller keeps its own floor track).
     """
-    from sim.simulate.reference import running_floor  # reference reads terrain geoms
-
     tracks = foot_tracks(model, qpos)
     if tracks is None:
         return [], None
@@ -243,6 +241,20 @@ def find_terrain(model, qpos: np.ndarray, rate: float) -> tuple[list[Box], np.nd
         top = h - float(track[a:b].mean())
         boxes.append(box_of(corners[a:b, f].reshape(-1, 2), yaw, top))
     return merge_boxes(boxes), track
+
+
+def running_floor(
+    low: np.ndarray, rate: float, window: float = 1.5, percentile: float = 10.0
+) -> np.ndarray:
+    """(T,) [m] the floor under each frame of a lowest foot point ``low`` (T,) [m] at ``rate``
+    [Hz]: its ``percentile`` over a ``window``-second window centred on the frame, then averaged
+    over the same window (``sim.simulate.reference.floor_track`` of a motion)."""
+    half = max(1, int(round(window * rate / 2)))
+    pad = np.pad(low, half, mode="edge")
+    wins = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1)
+    floor = np.percentile(wins, percentile, axis=1)
+    pad = np.pad(floor, half, mode="edge")
+    return np.convolve(pad, np.ones(2 * half + 1) / (2 * half + 1), mode="valid")
 
 
 def terrain_geoms(model) -> tuple | None:

@@ -327,13 +327,7 @@ class ForwardValidation:
         original_qpos = qpos if original_qpos is None else original_qpos
         orig = time_warp(self.model, original_qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(orig)
-        model, search = self.model, self.search
-        self.last_boxes = []
-        if self.terrain:  # the scene of the original motion: its steps, its ground track
-            boxes, ground = find_terrain(self.model, orig, CONTROL_HZ)
-            if boxes:
-                floor, self.last_boxes = ground, boxes
-                model, search = self.scene(boxes)
+        floor, model, search = self._terrain(orig, floor)
         # The yardstick: the motion and the original on the original's floor, with the same
         # feet (``ref``, ``orig``): lifted for the plain tracker and the sampler, contact-
         # consistent for the QP, whatever they track. With ``contact_reference`` the body
@@ -387,6 +381,19 @@ class ForwardValidation:
             "sim_torque_rms_nm_kg": float(np.sqrt(np.mean(tau**2)) / total_mass(self.model)),
             "sim_torque_saturated": float(np.mean(np.abs(tau) >= lim * (1 - 1e-6))),
         }
+
+    def _terrain(self, orig: np.ndarray, floor: np.ndarray) -> tuple:
+        """The floor track (T',), model and ``search`` a clip whose original is ``orig`` (T', nq,
+        control rate) is tracked with: with :attr:`terrain` and supports found in ``orig``
+        (kept in :attr:`last_boxes`), its ground track and :meth:`scene`; else ``floor`` and
+        this object's own."""
+        self.last_boxes = []
+        if self.terrain:  # the scene of the original motion: its steps, its ground track
+            boxes, ground = find_terrain(self.model, orig, CONTROL_HZ)
+            if boxes:
+                self.last_boxes = boxes
+                return (ground, *self.scene(boxes))
+        return floor, self.model, self.search
 
     def scene(self, boxes: list) -> tuple:
         """The body's model and ``search`` (its ``alternates``) compiled anew with ``boxes``
