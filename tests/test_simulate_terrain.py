@@ -14,7 +14,10 @@ from sim.simulate.falls import fall_cause, fall_reference, geom_bottoms
 from sim.simulate.model import CONTROL_HZ, sim_model, sim_spec
 from sim.simulate.reference import floor_track, lowest_foot_point
 from sim.simulate.terrain import (
+    CLEAR,
+    DROP,
     Box,
+    carve,
     find_terrain,
     foot_tracks,
     merge_boxes,
@@ -65,7 +68,7 @@ def test_a_step_stood_on_gets_a_box_at_its_height_and_the_ground_stays_down(mode
     assert boxes, "the step was not found"
     for b in boxes:
         assert b.top == pytest.approx(STEP, abs=0.01)
-    _, corners, _, _ = foot_tracks(model, motion[-1:])
+    _, corners, _, _, _ = foot_tracks(model, motion[-1:])
     for f in range(2):  # each sole stands inside a box (its footprint's centre)
         assert surface_height(_as_terrain(boxes), corners[0, f].mean(axis=0)) == pytest.approx(
             STEP, abs=0.01
@@ -82,7 +85,7 @@ def test_a_foot_held_still_in_the_air_gets_no_pedestal(model):
     knee = model.jnt_qposadr[model.joint("ltibia_rx").id]
     motion[n:, hip] -= 1.2  # the left thigh raised forward and held (a held kick)
     motion[n:, knee] += 0.3
-    low, _, _, _ = foot_tracks(model, motion)
+    low, _, _, _, _ = foot_tracks(model, motion)
     assert low[-1, 0] > 0.2 and low[-1, 1] < 0.01  # the left foot high and still, the right down
     assert find_terrain(model, motion, CONTROL_HZ) == ([], None)
 
@@ -122,6 +125,25 @@ def test_boxes_of_one_height_that_overlap_merge_and_others_do_not():
     np.testing.assert_allclose(one.half[:2], [0.35, 0.1], atol=1e-9)
 
 
+def test_a_box_leaves_free_where_the_feet_were_below_its_top():
+    box = Box(np.array([0.0, 0.0, 0.1]), np.array([0.3, 0.2, 0.2]), 0.0)  # top 0.3, x -0.3..0.3
+    core = [np.array([[-0.1, -0.05], [0.1, 0.05]])]  # the stance on it
+    # a foot on the floor beside it at x = 0.2 (outside the stance): that side is cut back
+    cut = carve(box, core, np.array([[0.2, 0.0]]), np.array([0.0]))
+    assert cut.centre[0] + cut.half[0] == pytest.approx(0.2 - CLEAR)
+    assert cut.centre[0] - cut.half[0] == pytest.approx(-0.3)
+    assert cut.centre[2] - cut.half[2] == pytest.approx(box.centre[2] - box.half[2])  # solid
+    # a foot under the stance (a lower rung, 0.1 m up): the box becomes a rung above it
+    rung = carve(box, core, np.array([[0.0, 0.0]]), np.array([0.1]))
+    assert rung.top == pytest.approx(0.3) and rung.half[:2] == pytest.approx(box.half[:2])
+    assert rung.centre[2] - rung.half[2] == pytest.approx(0.1 + CLEAR)
+    thin = carve(box, core, np.array([[0.0, 0.0]]), np.array([0.3 - DROP - 0.01]))
+    assert 2 * thin.half[2] == pytest.approx(DROP + 0.01 - CLEAR)
+    # a foot on it (less than DROP below its top) changes nothing
+    same = carve(box, core, np.array([[0.2, 0.0]]), np.array([0.3 - DROP + 0.01]))
+    np.testing.assert_allclose([*same.centre, *same.half], [*box.centre, *box.half])
+
+
 def test_the_scene_adds_boxes_without_changing_the_body(spec, model):
     box = Box(np.array([0.5, 0.0, 0.1]), np.array([0.2, 0.15, 0.2]), 0.3)
     scene = scene_model(spec, [box], like=model)
@@ -138,7 +160,7 @@ def test_the_scene_adds_boxes_without_changing_the_body(spec, model):
 def test_a_sole_on_a_step_is_at_zero_above_it(spec, model):
     q = _standing(model)
     q[2] += STEP
-    _, corners, _, _ = foot_tracks(model, q[None])
+    _, corners, _, _, _ = foot_tracks(model, q[None])
     centre = corners[0].reshape(-1, 2).mean(axis=0)
     box = Box(np.array([*centre, 0.5 * (STEP - 0.1)]), np.array([0.4, 0.4, 0.5 * (STEP + 0.1)]), 0)
     scene = scene_model(spec, [box], like=model)

@@ -52,6 +52,10 @@ RELY_S = 0.2
 COM_REACH = 0.35
 #: [m] a box reaches this far beyond the footprint of the sole that stood on it
 MARGIN = 0.04
+#: [m] a box keeps this clear of where the motion's feet were lower than its top (:func:`carve`)
+CLEAR = 0.03
+#: [m] a foot point this far below a box's top is beside or under it, not on it (:func:`carve`)
+DROP = 0.08
 #: [m] boxes whose tops are within this and whose footprints overlap are merged
 MERGE_HEIGHT = 0.06
 #: [m] a box reaches this far below the ground (no gap where it meets the floor)
@@ -79,8 +83,8 @@ class Box:
 def foot_tracks(model, qpos: np.ndarray) -> tuple:
     """Per frame of ``qpos`` (T, nq) and foot (left, right): the lowest bottom corner's height
     (T, 2) [m], the bottom corners' horizontal positions (T, 2, 8, 2) [m] (sole and toe box),
-    the sole's heading (T, 2) [rad] (its box's local x axis) and the centre of mass (T, 3) [m].
-    None where the model has no soles."""
+    the sole's heading (T, 2) [rad] (its box's local x axis), the centre of mass (T, 3) [m] and
+    the bottom corners' heights (T, 2, 8) [m]. None where the model has no soles."""
     ids = []
     for names in _SIDES:
         side = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in names]
@@ -91,7 +95,7 @@ def foot_tracks(model, qpos: np.ndarray) -> tuple:
     signs = np.array([[i, j, -1.0] for i in (-1, 1) for j in (-1, 1)])  # bottom corners
     data = mujoco.MjData(model)
     T = len(qpos)
-    low, corners = np.empty((T, 2)), np.empty((T, 2, 8, 2))
+    low, corners, heights = np.empty((T, 2)), np.empty((T, 2, 8, 2)), np.empty((T, 2, 8))
     heading, com = np.empty((T, 2)), np.empty((T, 3))
     for t in range(T):
         data.qpos[:] = qpos[t]
@@ -105,18 +109,19 @@ def foot_tracks(model, qpos: np.ndarray) -> tuple:
                 pts.append(data.geom_xpos[g] + (signs * model.geom_size[g]) @ R.T)
             pts = np.concatenate(pts)  # (8, 3)
             low[t, f] = pts[:, 2].min()
-            corners[t, f] = pts[:, :2]
+            corners[t, f], heights[t, f] = pts[:, :2], pts[:, 2]
             R = data.geom_xmat[ids[f, 0]].reshape(3, 3)
             heading[t, f] = np.arctan2(R[1, 0], R[0, 0])
-    return low, corners, heading, com
+    return low, corners, heading, com, heights
 
 
 def stances(
     low: np.ndarray, corners: np.ndarray, rate: float, min_s: float = MIN_STANCE_S
 ) -> list[list[tuple[int, int]]]:
-    """Per foot, the runs [a, b) of frames (at ``rate`` [Hz]) of at least ``min_s`` [s] in which the sole (``low`` (T, 2) [m] and ``corners`` (T, 2, 8, 2) [m] of
-    :func:`foot_tracks`) moves slower than :data:`STILL_SPEED` (3-D speed of its bottom corners'
-    mean at its lowest height, smoothed by :data:`SPEED_SMOOTH_S`)."""
+    """Per foot, the runs [a, b) of frames (at ``rate`` [Hz]) of at least ``min_s`` [s] in which
+    the sole (``low`` (T, 2) [m] and ``corners`` (T, 2, 8, 2) [m] of :func:`foot_tracks`) moves
+    slower than :data:`STILL_SPEED` (3-D speed of its bottom corners' mean at its lowest height,
+    smoothed by :data:`SPEED_SMOOTH_S`)."""
     T = len(low)
     out: list[list[tuple[int, int]]] = [[], []]
     if T < 3:
@@ -216,7 +221,7 @@ def find_terrain(model, qpos: np.ndarray, rate: float) -> tuple[list[Box], np.nd
     tracks = foot_tracks(model, qpos)
     if tracks is None:
         return [], None
-    low, corners, heading, com = tracks
+    low, corners, heading, com, heights = tracks
     segs = stances(low, corners, rate)
     levels = [(f, s, float(np.median(low[s[0] : s[1], f]))) for f in range(2) for s in segs[f]]
     if not levels:
@@ -235,12 +240,59 @@ def find_terrain(model, qpos: np.ndarray, rate: float) -> tuple[list[Box], np.nd
     on = lowest <= ground + GROUND_GAP
     t = np.arange(len(lowest))
     track = running_floor(np.interp(t, t[on], lowest[on]), rate)
-    boxes = []
+    boxes, cores = [], []
     for f, (a, b), h in raised:
         yaw = float(np.angle(np.exp(1j * heading[a:b, f]).mean()))
         top = h - float(track[a:b].mean())
-        boxes.append(box_of(corners[a:b, f].reshape(-1, 2), yaw, top))
-    return merge_boxes(boxes), track
+        cores.append(corners[a:b, f].reshape(-1, 2))
+        boxes.append(box_of(cores[-1], yaw, top))
+    # the feet's corners, their heights above the ground track: where the feet were
+    feet = (corners.reshape(-1, 2), (heights - track[:, None, None]).reshape(-1))
+    return [carve(b, cores, *feet) for b in merge_boxes(boxes)], track
+
+
+def carve(box: Box, cores: list, xy: np.ndarray, z: np.ndarray) -> Box:
+    """``box`` made to leave free the space the motion's feet passed through: the points ``xy``
+    (M, 2) [m] at heights ``z`` (M,) [m] more than :data:`DROP` below its top (a foot beside or
+    below the step; the foot on it sinks a few centimetres in a fit). Its sides are cut back, one at a time, to :data:`CLEAR` short of each
+    such point within :data:`CLEAR` of its footprint, keeping the footprints ``cores`` ((N_i,
+    2) [m] each: the stances on it) whose centre it holds; a point within those (a foot on a
+    lower rung, its toes under this one) raises the box's bottom to :data:`CLEAR` above it
+    instead (a rung)."""
+    c, s = np.cos(box.yaw), np.sin(box.yaw)
+    rot = np.array([[c, -s], [s, c]])  # world (x, y) rows @ rot: the box's frame
+    lo, hi = -box.half[:2].copy(), box.half[:2].copy()
+    mine = [k for k in cores if np.all(np.abs((k.mean(axis=0) - box.centre[:2]) @ rot) <= hi)]
+    if not mine:
+        return box
+    core = (np.concatenate(mine) - box.centre[:2]) @ rot
+    clo, chi = core.min(axis=0), core.max(axis=0)
+    low = z < box.top - DROP
+    local = np.column_stack([(xy[low] - box.centre[:2]) @ rot, z[low]])  # (x, y, z) rows
+    local = local[np.argsort(np.abs(local[:, :2] - 0.5 * (clo + chi)).max(axis=1))]  # nearest first
+    for p in local[:, :2]:
+        if np.any(p <= lo - CLEAR) or np.any(p >= hi + CLEAR):
+            continue  # clear of the box already
+        best, area = None, -1.0
+        for k in range(2):  # cut one side back to CLEAR short of the point, the largest left
+            for side, ok in ((hi, p[k] - CLEAR >= chi[k]), (lo, p[k] + CLEAR <= clo[k])):
+                if ok:
+                    new_lo, new_hi = lo.copy(), hi.copy()
+                    (new_hi if side is hi else new_lo)[k] = (
+                        p[k] - CLEAR if side is hi else p[k] + CLEAR
+                    )
+                    a = float(np.prod(new_hi - new_lo))
+                    if a > area:
+                        best, area = (new_lo, new_hi), a
+        if best is not None:
+            lo, hi = best
+    under = np.all((local[:, :2] > lo - CLEAR) & (local[:, :2] < hi + CLEAR), axis=1)
+    bottom = box.centre[2] - box.half[2]
+    if under.any():  # feet below it within its footprint: a rung above them
+        bottom = max(bottom, float(local[under, 2].max()) + CLEAR)  # < top: DROP > CLEAR
+    mid = 0.5 * (lo + hi)
+    centre = np.array([*(box.centre[:2] + rot @ mid), 0.5 * (box.top + bottom)])
+    return Box(centre, np.array([*(0.5 * (hi - lo)), 0.5 * (box.top - bottom)]), box.yaw)
 
 
 def running_floor(
