@@ -166,6 +166,13 @@ def test_a_sole_on_a_step_is_at_zero_above_it(spec, model):
     scene = scene_model(spec, [box], like=model)
     assert lowest_foot_point(model, q[None])[0] == pytest.approx(STEP, abs=0.01)
     assert lowest_foot_point(scene, q[None])[0] == pytest.approx(0.0, abs=0.01)
+    # skating counts the soles on the step as in contact (still: 0 mm/s), not as in the air
+    from sim.simulate.validate import ForwardValidation
+
+    fv = ForwardValidation(model, ("root",), controller="plain")
+    still = np.repeat(q[None], 10, axis=0)
+    assert fv.skating(still, 30.0) is None
+    assert fv.skating(still, 30.0, terrain_geoms(scene)) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_a_hand_on_a_step_is_a_fall_unless_the_reference_has_it_there(spec, model):

@@ -43,7 +43,7 @@ from sim.simulate.reference import (
     time_warp,
 )
 from sim.simulate.sampling import sample_track
-from sim.simulate.terrain import find_terrain, scene_model
+from sim.simulate.terrain import find_terrain, scene_model, surface_height, terrain_geoms
 from sim.simulate.wholebody import track_wholebody
 from sim.simulate.wholebody_reference import sole_corners
 
@@ -288,17 +288,19 @@ class ForwardValidation:
         ref[:, 2] -= floor
         return contact_shift(scene, flat_soles(scene, ref), floating=DEFAULT_FLOATING)
 
-    def skating_reference(self, ref: np.ndarray) -> np.ndarray:
+    def skating_reference(self, ref: np.ndarray, model=None) -> np.ndarray:
         """The tracked motion as :meth:`skating` measures it: ``ref`` (T, nq, from
         :meth:`reference`) with its floor at z = 0 and its stance soles on it
         (``contact_consistent``), whatever the controller: a lifted reference's soles reach the
         contact threshold only where its floor estimate is high, so its contact frames are not
-        the simulated body's (which stands on z = 0)."""
+        the simulated body's (which stands on z = 0). ``model``: the scene whose supports its
+        stance soles stand on (default the body's: the floor)."""
         if self.controller == "wholebody":  # its reference is contact-consistent already
             return ref
         out = ref.copy()
         out[:, 2] -= FLOOR_LIFT  # its floor back at z = 0
-        return contact_consistent(self.model, out, floating=DEFAULT_FLOATING)
+        scene = self.model if model is None else model
+        return contact_consistent(scene, out, floating=DEFAULT_FLOATING)
 
     def floor_of(self, ref120: np.ndarray) -> np.ndarray:
         """(T',) floor height [m] under a control-rate ``qpos`` stream."""
@@ -328,6 +330,7 @@ class ForwardValidation:
         orig = time_warp(self.model, original_qpos, fps, 1.0, CONTROL_HZ)
         floor = self.floor_of(orig)
         floor, model, search = self._terrain(orig, floor)
+        terrain = terrain_geoms(model) if self.last_boxes else None  # skating on the steps too
         # The yardstick: the motion and the original on the original's floor, with the same
         # feet (``ref``, ``orig``): lifted for the plain tracker and the sampler, contact-
         # consistent for the QP, whatever they track. With ``contact_reference`` the body
@@ -373,8 +376,10 @@ class ForwardValidation:
         return {
             "sim_error_mm": 1e3 * float(np.linalg.norm(sim - target, axis=-1).mean()),
             "sim_error_local_mm": 1e3 * float(np.linalg.norm(local, axis=-1).mean()),
-            "sim_skate_mm_s": self.skating(r.qpos, fps),
-            "sim_skate_ref_mm_s": self.skating(self.skating_reference(ref)[::every][:n], fps),
+            "sim_skate_mm_s": self.skating(r.qpos, fps, terrain),
+            "sim_skate_ref_mm_s": self.skating(
+                self.skating_reference(ref, model)[::every][:n], fps, terrain
+            ),
             "sim_error_original_mm": 1e3 * float(np.linalg.norm(sim - original, axis=-1).mean()),
             "sim_fell": int(r.fell),
             "sim_fall_s": None if r.fall_frame < 0 else r.fall_frame / fps,
@@ -405,11 +410,13 @@ class ForwardValidation:
         search = {**self.search, "alternates": tuple(models[1:])} if alternates else self.search
         return models[0], search
 
-    def skating(self, qpos: np.ndarray, fps: float) -> float | None:
+    def skating(self, qpos: np.ndarray, fps: float, terrain: tuple | None = None) -> float | None:
         """Foot skating in contact [mm/s] of a motion ``qpos`` (F, nq at ``fps``): the mean
         horizontal speed of each sole box's bottom centre over the frames where its lowest
-        corner is at most :data:`SKATE_CONTACT` high (central differences); NaN without soles
-        or without contact: None. One geometric estimator for simulated and reference motion alike."""
+        corner is at most :data:`SKATE_CONTACT` high (central differences) above the floor or
+        a ``terrain`` box under that centre (``sim.simulate.terrain.terrain_geoms``); NaN
+        without soles or without contact: None. One geometric estimator for simulated and
+        reference motion alike."""
         soles = sole_ids(self.model)
         if soles is None or len(qpos) < 3:
             return None
@@ -421,6 +428,8 @@ class ForwardValidation:
                 c = sole_corners(self.model, self.data, g)
                 low[t, s] = c.mean(axis=0)[0], c.mean(axis=0)[1], c[:, 2].min()
         speed = np.linalg.norm(np.gradient(low[..., :2], 1.0 / fps, axis=0), axis=-1)
+        if terrain is not None:  # a sole on a step touches it
+            low[..., 2] -= surface_height(terrain, low[..., :2])
         contact = low[..., 2] <= SKATE_CONTACT
         return 1e3 * float(speed[contact].mean()) if contact.any() else None
 
