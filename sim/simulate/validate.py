@@ -341,8 +341,8 @@ class ForwardValidation:
         # is taken against the same points and floor as the lifted reference's run, so the two
         # compare clip by clip (the root-relative error does not see a vertical shift at all).
         lifted = self.controller != "wholebody"
-        ref = self.reference(qpos, fps, floor, contact=not lifted)
-        orig = self.reference(original_qpos, fps, floor, contact=not lifted)  # same floor, feet
+        ref = self.reference(qpos, fps, floor, contact=not lifted, model=model)
+        orig = self.reference(original_qpos, fps, floor, contact=not lifted, model=model)
         tracked = ref
         if self.contact and lifted:
             shift = self.stance_shift(original_qpos, fps, floor, model)
