@@ -11,13 +11,14 @@ Per foot (its sole and toe boxes, ``sim.simulate.model.add_soles``), per frame: 
 bottom corner's height and the bottom corners' horizontal positions. A **stance** is a run of at
 least :data:`MIN_STANCE_S` in which the sole moves slower than :data:`STILL_SPEED`. The
 **ground** is the lowest stance level (or a floor the feet touch briefly well below it:
-:data:`GROUND_PERCENTILE`); a stance at least :data:`MIN_RAISE` above
-it is **raised**. A raised stance becomes a support only if the body relies on it
-(:func:`relies`): for at least :data:`RELY_S` the other foot is off the ground (not within
-:data:`GROUND_GAP` of it) while the centre of mass is within :data:`COM_REACH` horizontally of
-this foot. A foot held still in the air (an arabesque, a held kick) has the other foot on the
-ground, or the centre of mass away from it: no box. Boxes of similar height that overlap are
-merged (:func:`merge_boxes`).
+:data:`GROUND_PERCENTILE`); a stance at least :data:`MIN_RAISE` above it is **raised**. A
+raised stance becomes a support only if the body relies on it (:func:`relies`): for at least
+:data:`RELY_S` the other foot is off the ground (not within :data:`GROUND_GAP` of it) while the
+centre of mass is within :data:`COM_REACH` horizontally of this foot. A foot held still in the
+air (an arabesque, a held kick) has the other foot on the ground, or the centre of mass away
+from it: no box. Boxes of similar height that overlap are merged (:func:`merge_boxes`);
+optionally (:data:`CARVE`, off) cut back from where the motion's feet passed (:func:`carve`).
+The ground track is the running floor (:func:`running_floor`) of the ground-level frames only.
 
 Units: metres, seconds, radians; z up. Boxes are given in the frame of the reference after the
 ground shift (:func:`find_terrain`'s ground track at z = 0). Terrain geoms in a model are the
