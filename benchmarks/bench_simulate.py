@@ -39,7 +39,7 @@ from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noq
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.simulate.gainchoice import common_body  # noqa: E402
-from sim.simulate.validate import ForwardValidation, validation_model  # noqa: E402
+from sim.simulate.validate import ForwardValidation, validation_spec  # noqa: E402
 
 
 def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
@@ -54,11 +54,14 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         if (c.asf, n) not in bodies:
             skeleton = subject_model(c.asf)[0]
             alternate = model_kw.pop("alternate_gains", ())  # gain sets chosen per window
-            models = [validation_model(skeleton, actuators=actuators, **{**model_kw, **g})
-                      for g in ({}, *({"gains": a} for a in alternate))]  # fmt: skip
+            specs = [validation_spec(skeleton, actuators=actuators, **{**model_kw, **g})
+                     for g in ({}, *({"gains": a} for a in alternate))]  # fmt: skip
+            models = [x.compile() for x in specs]  # validation_model's bodies
             model, *alts = common_body(models) if alternate else models
             if alts:
                 kw = {**kw, "search": {**kw.get("search", {}), "alternates": tuple(alts)}}
+            if kw.get("terrain"):  # a clip's scene is compiled from these
+                kw = {**kw, "specs": tuple(specs)}
             bodies[c.asf, n] = ForwardValidation(
                 model, _protocol_names(c.clip), threads=threads, **kw
             )
@@ -71,6 +74,9 @@ def _clip_rows(c, setup, names, bodies: dict, threads: int) -> dict[str, dict]:
         out[n] = {"clip": f"{c.clip.source}@{c.clip.start_frame}", **row,
                   "sim_unstable": int(bodies[c.asf, n].last_unstable),
                   "sim_cpu_s_per_s": cpu, "sim_wall_s_per_s": wall}  # fmt: skip
+        if bodies[c.asf, n].terrain:  # the scene's boxes: [top, half x, half y] [m]
+            out[n]["sim_terrain"] = [[round(b.top, 3), *np.round(b.half[:2], 3).tolist()]
+                                     for b in bodies[c.asf, n].last_boxes]  # fmt: skip
     return out
 
 

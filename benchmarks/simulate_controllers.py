@@ -284,7 +284,7 @@ for _name, _choice in (
     )  # fmt: skip
 
 #: ``mix0.5s<n>``: ``mix0.5`` with ``n`` rollouts per window instead of 28; ``mix0.5s40`` is
-#: eval's default (``validate.DEFAULT_SAMPLES``; docs/results/simulate_samples.md)
+#: eval's rollouts (``validate.DEFAULT_SAMPLES``; docs/results/simulate_samples.md) on the empty floor
 for _n in (36, 40, 48):
     CONTROLLERS[f"mix0.5s{_n}"] = (
         f"sampler, {_n} samples, eval's defaults (gains chosen per window)",
@@ -293,6 +293,19 @@ for _n in (36, 40, 48):
         "position",
         {"alternate_gains": (_STIFF,)},
     )  # fmt: skip
+
+#: ``mix0.5s40terrain``: eval's default, ``mix0.5s40`` with each clip tracked in the scene inferred
+#: from its original motion (``ForwardValidation(terrain=True)``, ``sim.simulate.terrain``: boxes
+#: under the feet that stand on steps, the ground from the ground-level stances;
+#: ``validate.DEFAULT_TERRAIN``, docs/results/simulate_terrain.md)
+CONTROLLERS["mix0.5s40terrain"] = (
+    "sampler, 40 samples, eval's defaults (gains chosen per window), the scene inferred from the "
+    "motion",
+    {"controller": "sampling", "samples": 40, "contact_reference": True, "terrain": True,
+     "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
 
 #: ``mix0.5lock``: eval's default (``mix0.5``) tracking the foot-locked reference (its stance
 #: soles held still, flat on the floor, by the legs: ``ForwardValidation(foot_lock=True)``)

@@ -49,6 +49,7 @@ import numpy as np
 from sim.errors import UsageError
 from sim.simulate.drift import drift_lead_xy
 from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS, G, total_mass
+from sim.simulate.terrain import surface_height, terrain_geoms
 
 #: [m] a reference foot (sole or toe box) whose lowest point is at most this high is in stance
 #: (the reference may be lifted by ``sim.simulate.reference.FLOOR_LIFT``)
@@ -210,6 +211,11 @@ def _bottom(model, data, g: int) -> float:
     return float(data.geom_xpos[g, 2] - np.abs(data.geom_xmat[g, 6:9]) @ model.geom_size[g])
 
 
+def _under(terrain, data, g: int) -> float:
+    """[m] the support's height under geom ``g``'s centre (0: the floor)."""
+    return float(surface_height(terrain, data.geom_xpos[g, :2]))
+
+
 def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balance) -> BalancePlan:
     """:class:`BalancePlan` of a reference ``ref_qpos`` (T, nq) with velocities ``ref_qvel``
     (T, nv) at the control rate."""
@@ -220,13 +226,16 @@ def balance_plan(model, ref_qpos: np.ndarray, ref_qvel: np.ndarray, gains: Balan
     stance = np.zeros((T, 2), dtype=bool)
     com_off = np.zeros((T, 2))
     mid = np.zeros((T, 2))  # the stance feet's mid-point (both feet where none stands)
+    terrain = terrain_geoms(model)  # a foot on a step stands
     for t in range(T):
         data.qpos[:] = ref_qpos[t]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         for s in range(2):
             stance[t, s] = (
-                bool(geoms[s]) and min(_bottom(model, data, g) for g in geoms[s]) <= STANCE_HEIGHT
+                bool(geoms[s])
+                and min(_bottom(model, data, g) - _under(terrain, data, g) for g in geoms[s])
+                <= STANCE_HEIGHT
             )
         on = stance[t] if stance[t].any() else np.ones(2, dtype=bool)
         mid[t] = data.xpos[feet[on]].mean(axis=0)[:2]

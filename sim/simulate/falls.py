@@ -14,6 +14,10 @@ A simulated body **has fallen** at an instant when either
 Root height alone does not decide it: a body lying on its side with the pelvis propped up, or
 standing on its head, has fallen whatever the root does.
 
+On a model with terrain (``sim.simulate.terrain.add_terrain``: steps and platforms inferred from
+the motion) the terrain's boxes are floor: a knee on a step is on the floor, and a reference part
+is on the floor within :data:`REFERENCE_GAP` of the support under it.
+
 Units: metres, z up, the floor at z = 0 (a reference lifted by ``sim.simulate.reference``'s
 ``FLOOR_LIFT`` counts its parts within :data:`REFERENCE_GAP` of that).
 """
@@ -27,6 +31,7 @@ import numpy as np
 
 from sim.model.kinematics import SOLE_POINTS
 from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS
+from sim.simulate.terrain import surface_height, terrain_geoms
 
 #: geoms that may always touch the floor: the feet (capsules, sole and toe boxes)
 FOOT_GEOMS = SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
@@ -71,6 +76,8 @@ class FallReference:
             component of its local z axis (a capsule's axis) in the reference; None: a
             capsule's part is not told from the whole capsule.
         limbs: (ngeom,) the geom is a capsule that is not a foot (its part is looked at).
+        floors: the ids of the floor and of the terrain's boxes (empty: ``floor`` alone).
+        tops: (ngeom,) [m] the top of each of ``floors`` (0 for the floor; None: all 0).
     """
 
     head_z: np.ndarray
@@ -80,6 +87,8 @@ class FallReference:
     centre_z: np.ndarray | None = None
     axis_z: np.ndarray | None = None
     limbs: np.ndarray | None = None
+    floors: tuple = ()
+    tops: np.ndarray | None = None
 
 
 def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
@@ -91,17 +100,27 @@ def fall_reference(model, ref_qpos: np.ndarray) -> FallReference:
     on_floor = np.empty((len(ref_qpos), model.ngeom), bool)
     centre_z = np.empty((len(ref_qpos), model.ngeom))
     axis_z = np.empty((len(ref_qpos), model.ngeom))
+    terrain = terrain_geoms(model)
     for t, q in enumerate(ref_qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         head_z[t] = data.geom_xpos[head, 2]
-        on_floor[t] = (geom_bottoms(model, data) <= REFERENCE_GAP) | allowed
+        bottoms = geom_bottoms(model, data)
+        if terrain is not None:  # above the support under each geom's centre
+            bottoms = bottoms - surface_height(terrain, data.geom_xpos[:, :2])
+        on_floor[t] = (bottoms <= REFERENCE_GAP) | allowed
         centre_z[t] = data.geom_xpos[:, 2]
         axis_z[t] = data.geom_xmat[:, 8]
     floor = model.geom("floor").id
     limbs = (model.geom_type == mujoco.mjtGeom.mjGEOM_CAPSULE) & ~allowed
+    tops = np.zeros(model.ngeom)
+    floors = (floor,)
+    if terrain is not None:
+        floors += tuple(int(g) for g in terrain[0])
+        tops[terrain[0]] = terrain[1]
     return FallReference(head_z=head_z, on_floor=on_floor, floor=floor, head=head,
-                         centre_z=centre_z, axis_z=axis_z, limbs=limbs)  # fmt: skip
+                         centre_z=centre_z, axis_z=axis_z, limbs=limbs, floors=floors,
+                         tops=tops)  # fmt: skip
 
 
 def section_bottom(model, data, ref: FallReference, k: int, g: int, point) -> float:
@@ -130,16 +149,18 @@ def fall_cause(model, data, ref: FallReference, k: int) -> str | None:
     ``"contact:<geom>"`` (a part the reference does not have on the floor touches it, among
     ``data``'s contacts of its last step) or ``"head"`` (head below :data:`HEAD_SHARE` of the
     reference's head height; ``data``'s kinematics must be current)."""
-    floor = ref.floor if ref.floor >= 0 else model.geom("floor").id
+    floors = ref.floors or ((ref.floor if ref.floor >= 0 else model.geom("floor").id),)
     allowed = ref.on_floor[k]
     n = data.ncon
     if n:  # a loop over Python ints: a handful of contacts costs less than numpy's calls
         for i, (g1, g2) in enumerate(data.contact.geom[:n].tolist()):
-            if g1 == floor or g2 == floor:
-                g = g2 if g1 == floor else g1
+            if g1 in floors or g2 in floors:
+                f, g = (g1, g2) if g1 in floors else (g2, g1)
+                top = 0.0 if ref.tops is None else ref.tops[f]  # the step's top, the floor's 0
                 if not allowed[g] or (
                     ref.limbs is not None and ref.limbs[g]
-                    and section_bottom(model, data, ref, k, g, data.contact.pos[i]) > REFERENCE_GAP
+                    and section_bottom(model, data, ref, k, g, data.contact.pos[i])
+                    > REFERENCE_GAP + top
                 ):  # fmt: skip
                     return f"contact:{model.geom(g).name}"
     head = ref.head if ref.head >= 0 else model.geom(HEAD_GEOM).id

@@ -31,6 +31,7 @@ import numpy as np
 
 from sim.simulate.balance import STANCE_HEIGHT
 from sim.simulate.model import CONTROL_HZ, SOLE_GEOMS
+from sim.simulate.terrain import surface_height, terrain_geoms
 
 #: [m] a simulated sole whose lowest corner is at most this high touches the floor (skating's
 #: estimator, ``sim.simulate.validate.SKATE_CONTACT``, is this height)
@@ -68,7 +69,8 @@ def sole_lowest(xpos: np.ndarray, xmat: np.ndarray, size: np.ndarray) -> np.ndar
 def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray, capture: bool = False) -> tuple:
     """Of a reference ``ref_qpos`` (T, nq at ``CONTROL_HZ``), per tick and sole (left, right):
     the horizontal bottom centre (T, 2, 2) [m] and whether the reference stands on it (T, 2)
-    (the box's lowest corner at most ``sim.simulate.balance.STANCE_HEIGHT`` high); with
+    (the box's lowest corner at most ``sim.simulate.balance.STANCE_HEIGHT`` above the floor or
+    the terrain's step under its centre, ``sim.simulate.terrain``); with
     ``capture``, third, whether its capture point lies inside the soles it stands on (T,)
     (:func:`capture_supported`)."""
     data = mujoco.MjData(model)
@@ -83,7 +85,11 @@ def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray, capture: bool 
             mujoco.mj_comPos(model, data)
             com[t] = data.subtree_com[1]
     xy = sole_bottoms(xpos, xmat, size[:, 2])[..., :2]
-    stance = sole_lowest(xpos, xmat, size) <= STANCE_HEIGHT
+    low = sole_lowest(xpos, xmat, size)
+    terrain = terrain_geoms(model)
+    if terrain is not None:  # a sole on a step stands on it
+        low = low - surface_height(terrain, xpos[..., :2])
+    stance = low <= STANCE_HEIGHT
     if not capture:
         return xy, stance
     return (

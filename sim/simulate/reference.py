@@ -22,6 +22,7 @@ from sim.motion.resample import resample_qpos, resampled_frames
 from sim.motion.retarget import leg_length, motion_to_qpos, retarget_rotations
 from sim.motion.trial import CMU_FPS, read_trial, trial_files
 from sim.simulate.model import FLOOR_BITS, SOLE_GEOMS, TOE_GEOMS, G
+from sim.simulate.terrain import running_floor, surface_height, terrain_geoms
 
 
 def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
@@ -53,8 +54,11 @@ def trial_qpos(asf: str | os.PathLike, amc: str | os.PathLike) -> np.ndarray:
 def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     """(T,) height [m] of the lowest surface point of the feet's geoms that touch the floor in
     each frame: the sole boxes where the model has them (``sim.simulate.model.add_soles``; the
-    foot and toe capsules then touch the body only), else the foot and toe capsules."""
+    foot and toe capsules then touch the body only), else the foot and toe capsules. On a
+    model with terrain (``sim.simulate.terrain.add_terrain``) each geom's height is taken above
+    the support under its centre (``surface_height``): a sole on a step is at 0."""
     data = mujoco.MjData(model)
+    terrain = terrain_geoms(model)
     names = SOLE_POINTS + SOLE_GEOMS + TOE_GEOMS
     ids = [
         model.geom(n).id
@@ -66,19 +70,23 @@ def lowest_foot_point(model, qpos: np.ndarray) -> np.ndarray:
     for t, q in enumerate(qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
-        z = np.inf
-        for g in ids:
-            c = data.geom_xpos[g, 2]
-            r = model.geom_size[g, 0]
-            if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
-                half = model.geom_size[g, 1] * abs(data.geom_xmat[g, 8])
-                z = min(z, c - half - r)
-            elif model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:  # its lowest corner
-                z = min(z, c - np.abs(data.geom_xmat[g, 6:9]) @ model.geom_size[g])
-            else:
-                z = min(z, c - r)
+        if terrain is None:
+            z = min((_geom_low(model, data, g) for g in ids), default=np.inf)
+        else:  # the same lowest point, above the support under each geom
+            z = min(_geom_low(model, data, g) - surface_height(terrain, data.geom_xpos[g, :2])
+                    for g in ids)  # fmt: skip
         low[t] = z
     return low
+
+
+def _geom_low(model, data, g: int) -> float:
+    """[m] the lowest surface point of geom ``g`` (capsule, box or sphere) of ``data``."""
+    c, r = data.geom_xpos[g, 2], model.geom_size[g, 0]
+    if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return c - model.geom_size[g, 1] * abs(data.geom_xmat[g, 8]) - r
+    if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+        return c - np.abs(data.geom_xmat[g, 6:9]) @ model.geom_size[g]
+    return c - r
 
 
 def floor_track(
@@ -90,13 +98,7 @@ def floor_track(
     CMU floors drift within a trial (02_01's stance foot rises 5 cm over 3 s), so one offset per
     trial leaves feet hovering or sunk; a running low percentile follows the stance foot.
     """
-    low = lowest_foot_point(model, qpos)
-    half = max(1, int(round(window * rate / 2)))
-    pad = np.pad(low, half, mode="edge")
-    wins = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1)
-    floor = np.percentile(wins, percentile, axis=1)
-    pad = np.pad(floor, half, mode="edge")
-    return np.convolve(pad, np.ones(2 * half + 1) / (2 * half + 1), mode="valid")
+    return running_floor(lowest_foot_point(model, qpos), rate, window, percentile)
 
 
 FLOOR_LIFT = 0.01  # [m]
