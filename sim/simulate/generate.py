@@ -130,7 +130,7 @@ SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN = False, False, False
 #: body's gains alone. Not the default: on 60 clips x 2 seeds 0.25 kept more up and skated less,
 #: but lowered the p95 speed ratio on one seed (docs/synthetic.md)
 SYNTH_GAIN_CHOICE = 0.0
-#: the sampler's rollouts per window unless a task names one (eval's: ``DEFAULT_SAMPLES``, 40)
+#: the sampler's rollouts per window unless a task names one (not eval's 40: docs/synthetic.md)
 SYNTH_SAMPLES = 28
 #: the contact-consistent reference foot-locked (``sim.simulate.footlock``: its stance soles
 #: held still, flat on the floor, by the legs), as ``ForwardValidation(foot_lock=True)``. Off:
