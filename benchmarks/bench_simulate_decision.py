@@ -34,7 +34,7 @@ from sidql.evaluation.evaluate import evaluate  # noqa: E402
 from sidql.evaluation.significance import versus_original_markdown  # noqa: E402
 from sidql.evaluation.tables import simulate_markdown  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
-from sim.simulate.validate import DEFAULT_CONTROLLER  # noqa: E402
+from sim.simulate.validate import DEFAULT_CONTROLLER, DEFAULT_TERRAIN  # noqa: E402
 
 
 def main() -> None:
@@ -60,6 +60,8 @@ def main() -> None:
                    progress=False)  # fmt: skip
     controller = (f"the sampling tracker, {args.samples} samples" if args.samples
                   else f"`{DEFAULT_CONTROLLER}`, the default controller")  # fmt: skip
+    if DEFAULT_TERRAIN:  # eval's bodies stand in the scene inferred from the original motion
+        controller += ", in the scene inferred from each clip's original motion"
     sampled = f" --samples {args.samples}" if args.samples else ""
     more = [r for r in out["versus_original"] if r["more"]]
     verdict = (
