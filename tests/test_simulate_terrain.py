@@ -262,3 +262,24 @@ def test_the_playground_climb_gets_its_three_platforms(cmu_dir):
     levels = np.array([0.28, 0.55, 0.8])  # where its lowest foot point stands still [m]
     assert np.abs(tops[:, None] - levels).min(axis=1).max() < 0.1
     assert set(np.abs(tops[:, None] - levels).argmin(axis=1)) == {0, 1, 2}
+
+
+def test_flat_floor_reaches_eval_and_report_bodies_and_needs_simulate(tmp_path, capsys, cmu_dir):
+    import pickle
+
+    from sidql.commands import main as cli
+    from sidql.evaluation.cases import load_cases
+    from sidql.evaluation.trial_physics import simulate_setup
+
+    out = str(tmp_path / "r.json")
+    assert cli.main(["eval", "--data", str(tmp_path), "--flat-floor", "--out", out]) == 2
+    assert capsys.readouterr().err.strip() == "sidql eval: error: --flat-floor needs --simulate"
+    asf, amc = f"{cmu_dir}/07/07.asf", f"{cmu_dir}/07/07_01.amc"
+    assert cli.main(["report", asf, amc, "--flat-floor", "--out", str(tmp_path / "r")]) == 2
+    assert capsys.readouterr().err.strip() == "sidql report: error: --flat-floor needs --simulate"
+    assert not (tmp_path / "r").exists()  # refused before anything was written
+    cases = load_cases(cmu_dir, progress=False, subjects=["07"])[0][:1]
+    (inferred,) = simulate_setup(cases).values()  # eval's default: the inferred scene
+    (flat,) = simulate_setup(cases, terrain=False).values()
+    assert inferred.terrain and not flat.terrain
+    assert pickle.loads(pickle.dumps(inferred)).terrain  # to workers with its specs

@@ -8,6 +8,7 @@ from pathlib import Path
 from sidql.commands.usage import (
     UsageError,
     add_data,
+    add_flat_floor,
     add_keyframes,
     add_methods,
     add_quiet,
@@ -90,6 +91,7 @@ def register(p) -> None:
         "adds tracking errors, falls and torque per method (sim.simulate.validate)",
     )
     add_samples(p, "with --simulate: track", old_option="--simulate-samples")
+    add_flat_floor(p)
     p.add_argument(
         "--threads", type=positive(int), default=1, metavar="N",
         help="with --simulate: the sampler's rollouts on N threads in each worker (the figures "
@@ -117,10 +119,7 @@ def _run(args) -> int:
     if args.reconstruction is not None:
         reconstructions.get(args.reconstruction)
     counts = check_keyframes(args, args.length)
-    if args.samples and not args.simulate:
-        raise UsageError("--samples needs --simulate")
-    if args.threads > 1 and not args.simulate:
-        raise UsageError("--threads needs --simulate")
+    _check_simulation_options(args)
     args.data = data_folder(args)
     cases, skipped = load_cases(
         args.data,
@@ -142,6 +141,7 @@ def _run(args) -> int:
         cases, args.methods, counts, seed=args.seed, progress=not args.quiet,
         physics=args.physics, simulate=args.simulate,
         simulate_samples=args.samples or 0, simulate_threads=args.threads,
+        simulate_terrain=not args.flat_floor,
         workers=args.workers, ray=args.ray, reconstruction=args.reconstruction,
     )  # fmt: skip
     out["skipped"] = skipped
@@ -156,6 +156,8 @@ def _run(args) -> int:
         "simulate": bool(args.simulate),
         # the controller that ran (the default: the sampler at its default count)
         **_simulation_protocol(args.samples or 0),
+        # the scene the bodies stood in (sim.simulate.terrain: inferred from each clip's motion)
+        "simulate_scene": "flat floor" if args.flat_floor else "inferred",
         "max_clips": args.max_clips,
         "reconstruction": args.reconstruction,
     }
@@ -188,6 +190,14 @@ def _run(args) -> int:
         write_atomic(data, lambda f: f.write(json.dumps(rd, indent=1).encode()))
         print(f"wrote {png} and {data}")
     return 0
+
+
+def _check_simulation_options(args) -> None:
+    """``--samples``, ``--threads`` and ``--flat-floor`` are ``--simulate``'s."""
+    for given, flag in ((args.samples, "--samples"), (args.threads > 1, "--threads"),
+                        (args.flat_floor, "--flat-floor")):  # fmt: skip
+        if given and not args.simulate:
+            raise UsageError(f"{flag} needs --simulate")
 
 
 def _simulation_protocol(samples: int) -> dict:

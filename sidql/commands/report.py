@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from sidql.commands.usage import (
+    UsageError,
+    add_flat_floor,
     add_keyframes,
     add_methods,
     add_quiet,
@@ -54,6 +56,7 @@ def register(p) -> None:
         "with the subject's human-strength body and no assistance: tracking error, falls and "
         "torque per method (could a body perform this motion?)",
     )  # fmt: skip
+    add_flat_floor(p)
     add_reconstruction(p)
     add_workers(p, "validating clips")
     add_ray(p, "the clips' validation")
@@ -69,11 +72,14 @@ def run(args) -> int:
     if args.reconstruction is not None:
         reconstructions.get(args.reconstruction)
     check_keyframes(args, 60)
+    if args.flat_floor and not args.simulate:
+        raise UsageError("--flat-floor needs --simulate")
     page = report_trial(
         args.asf, args.amc, args.out, W=args.W, methods=methods, streams=streams,
         clips=args.clips, seed=args.seed, videos=not args.no_video,
         style=RenderStyle(layout=args.layout), workers=args.workers, ray=args.ray,
         progress=not args.quiet, simulate=args.simulate, reconstruction=args.reconstruction,
+        terrain=not args.flat_floor,
     )  # fmt: skip
     print(f"report: {page}")
     return 0

@@ -254,6 +254,17 @@ def add_samples(
                             action=OldSpelling, new="--samples N")  # fmt: skip
 
 
+def add_flat_floor(parser: argparse.ArgumentParser) -> None:
+    """``--flat-floor``: with ``--simulate``, the body on the empty floor instead of the scene
+    inferred from each clip's original motion (``sim.simulate.terrain``; the default)."""
+    parser.add_argument(
+        "--flat-floor", action="store_true",
+        help="with --simulate: track on the empty floor, without the scene inferred from each "
+        "clip's original motion (static steps under feet that stand on something, the default: "
+        "docs/synthetic.md)",
+    )  # fmt: skip
+
+
 def add_workers(parser: argparse.ArgumentParser, what: str) -> None:
     """``--workers N``: ``what`` in N worker processes; 1, the default everywhere, runs them in
     this process (no pool: predictable memory and undisturbed timings)."""

@@ -32,7 +32,7 @@ from sidql.keyframes import methods, reconstructions
 from sidql.keyframes.counts import check_counts
 from sim.batch import Shared, iter_batch, shared_value
 from sim.errors import UsageError
-from sim.simulate.validate import SIMULATE_KEYS
+from sim.simulate.validate import DEFAULT_TERRAIN, SIMULATE_KEYS
 
 
 def evaluate(
@@ -46,6 +46,7 @@ def evaluate(
     simulate: bool = False,
     simulate_samples: int = 0,
     simulate_threads: int = 1,
+    simulate_terrain: bool = DEFAULT_TERRAIN,
     workers: int = 1,
     ray: str | None = None,
     chunk: int = 4,
@@ -75,21 +76,18 @@ def evaluate(
         kept: ``keyframes`` = clip length, errors 0). With ``simulate`` (needs ``physics``)
         every row also carries the forward-simulation figures of
         :mod:`sim.simulate.validate` (result rows: means over clips; ``simulate_samples``,
-        ``simulate_threads``: ``trial_physics.simulate_setup``'s ``samples``, ``threads``).
+        ``simulate_threads``, ``simulate_terrain``: ``trial_physics.simulate_setup``'s
+        ``samples``, ``threads``, ``terrain``).
     """
     if simulate and not physics:
         raise UsageError("simulate needs physics (the IK fit it tracks)")
     method_names = list(method_names)
     counts = list(keyframe_counts)
     check_counts(counts, min((c.clip.n_frames for c in cases), default=2**31 - 1))
-    for name in method_names:
-        methods.get(name)  # fail early, listing the known methods
-        if cases and counts:  # and here, not in a worker: e.g. a learned method's missing file
-            methods.select(name, cases[0].clip, counts[0], seed=0)
+    _check_names(cases, method_names, counts, reconstruction)
     setup = physics_setup(cases) if physics else {}
-    bodies = simulate_setup(cases, simulate_samples, simulate_threads) if simulate else {}
-    if reconstruction is not None:
-        reconstructions.get(reconstruction)  # fail early, listing the known ones
+    bodies = (simulate_setup(cases, simulate_samples, simulate_threads, simulate_terrain)
+              if simulate else {})  # fmt: skip
     items = _tasks(cases, chunk, setup, bodies)
     task = partial(_evaluate_chunk, method_names=tuple(method_names), counts=tuple(counts),
                    seed=seed, reconstruction=reconstruction)  # fmt: skip
@@ -115,6 +113,18 @@ def evaluate(
         out["versus_original"] = versus_original(per_clip, method_names, seed=seed)
     out["failed"] = failed
     return out
+
+
+def _check_names(cases, method_names: list, counts: list, reconstruction: str | None) -> None:
+    """Fail before any work, here and not in a worker, on an unknown method or reconstruction
+    name (listing the known ones) or a method that cannot choose (a learned one's missing
+    file)."""
+    for name in method_names:
+        methods.get(name)
+        if cases and counts:
+            methods.select(name, cases[0].clip, counts[0], seed=0)
+    if reconstruction is not None:
+        reconstructions.get(reconstruction)
 
 
 def _collect(

@@ -36,7 +36,7 @@ from sim.motion.ingest import load_motion
 from sim.motion.trial import is_bvh, subject_model
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
-from sim.simulate.validate import forward_validation
+from sim.simulate.validate import DEFAULT_TERRAIN, forward_validation
 
 
 def report_clips(
@@ -124,12 +124,14 @@ def report_trial(
     ray: str | None = None,
     simulate: bool = False,
     reconstruction: str | None = None,
+    terrain: bool = DEFAULT_TERRAIN,
 ) -> Path:
     """Ingest a CMU trial, cut it into 60-frame clips at 30 fps and report the clips numbered
     ``clips`` (see :func:`report_clips`); joint limits come from the subject's humanoid.
     ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods.
     ``simulate``: also track every motion in forward simulation (the subject's torque-limited
-    body, no assistance: :mod:`sim.simulate.validate`). ``reconstruction``: every method's
+    body, no assistance: :mod:`sim.simulate.validate`), in the scene inferred from each clip's
+    original motion unless ``terrain`` is False (the empty floor). ``reconstruction``: every method's
     keyframes rebuilt with it (:func:`report_clips`). A BVH file stands for both ``asf`` and
     ``amc`` (``amc`` None)."""
     amc = asf if amc is None and is_bvh(asf) else amc
@@ -156,7 +158,7 @@ def report_trial(
     forward = None
     if simulate:
         names = from_clip(all_clips[0]).restrict(POINTS).names
-        forward = forward_validation(skeleton, names)
+        forward = forward_validation(skeleton, names, terrain=terrain)
     return report_clips(
         [all_clips[c] for c in clips], out_dir, W=W, methods=methods, seed=seed,
         joint_ranges=joint_ranges(model), videos=videos, style=style,

@@ -22,7 +22,7 @@ from sim.motion.trial import subject_model
 from sim.physics.contacts import Contacts, trial_contacts
 from sim.physics.ground import Ground, estimate_ground
 from sim.replay.checks import from_clip
-from sim.simulate.validate import forward_validation
+from sim.simulate.validate import DEFAULT_TERRAIN, forward_validation
 
 
 @dataclass(frozen=True)
@@ -99,17 +99,22 @@ def physics_setup(cases: Sequence[Case]) -> dict:
     return out
 
 
-def simulate_setup(cases: Sequence[Case], samples: int = 0, threads: int = 1) -> dict:
+def simulate_setup(
+    cases: Sequence[Case], samples: int = 0, threads: int = 1, terrain: bool = DEFAULT_TERRAIN
+) -> dict:
     """Per trial (``clip.source``): the :class:`sim.simulate.validate.ForwardValidation` of its
     subject (one torque-limited simulated body per skeleton) for :func:`sidql.evaluation.scoring.score`; ``samples``:
     its sampling tracker's rollouts per window (0: ``sim.simulate.validate``'s default
-    controller); ``threads``: the sampler's rollouts on that many threads."""
+    controller); ``threads``: the sampler's rollouts on that many threads; ``terrain``: each
+    clip in the scene inferred from its original motion (False: the empty floor)."""
     bodies, out = {}, {}
     for c in cases:
         if c.asf not in bodies:
             skeleton = subject_model(c.asf)[0]
             names = _protocol_names(c.clip)
-            bodies[c.asf] = forward_validation(skeleton, names, samples=samples, threads=threads)
+            bodies[c.asf] = forward_validation(
+                skeleton, names, samples=samples, threads=threads, terrain=terrain
+            )
         out[c.clip.source] = bodies[c.asf]
     return out
 
