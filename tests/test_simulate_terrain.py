@@ -216,7 +216,7 @@ def test_a_clip_without_terrain_runs_bit_for_bit_as_without_the_option(spec, mod
                                specs=(spec,))  # fmt: skip
         rows.append(fv.run(still, CONTROL_HZ))
         assert fv.last_boxes == []
-    assert rows[0] == rows[1]
+    assert rows[0] == rows[1] and rows[0]["sim_steps"] == 0
 
 
 def test_a_clip_on_a_step_is_tracked_in_its_scene(spec, model):
@@ -225,8 +225,9 @@ def test_a_clip_on_a_step_is_tracked_in_its_scene(spec, model):
     motion = _step_up(model)[::2]  # 3 s at 60 Hz
     ngeom = model.ngeom
     fv = ForwardValidation(model, ("root",), controller="plain", terrain=True, specs=(spec,))
-    fv.run(motion, CONTROL_HZ / 2)
+    row = fv.run(motion, CONTROL_HZ / 2)
     assert fv.last_boxes and all(b.top == pytest.approx(STEP, abs=0.01) for b in fv.last_boxes)
+    assert row["sim_steps"] == len(fv.last_boxes)  # the row says the scene was not empty
     assert model.ngeom == ngeom  # the body's model is not changed
     # the tracked reference stands on the step: its root as high above the floor as before
     tracked = fv.last_tracked

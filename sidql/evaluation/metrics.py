@@ -117,6 +117,10 @@ METRICS: tuple[Metric, ...] = (
            group="simulation"),
     Metric("sim_fall_s", "fall time", "s", "higher",
            "when the simulated body fell (n/a: it did not)", "{:.2f}", group="simulation"),
+    Metric("sim_steps", "inferred steps", "", "",
+           "static boxes under the feet that stand on something in the original motion "
+           "(sim.simulate.terrain), the same scene for every method; 0: the empty floor", "{:d}",
+           group="simulation"),
     Metric("sim_torque_rms_nm_kg", "sim. joint torque RMS", "N m/kg", "lower",
            "RMS joint torque the simulated body applied, per kg", "{:.2f}", group="simulation"),
     Metric("sim_torque_saturated", "torque at limit", "", "lower",

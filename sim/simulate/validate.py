@@ -53,7 +53,7 @@ SIMULATE_KEYS = (
     "sim_torque_rms_nm_kg", "sim_torque_saturated",
 )  # fmt: skip
 #: further figures of :meth:`ForwardValidation.run` (not in the evaluation's tables)
-SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s")
+SIMULATE_EXTRA_KEYS = ("sim_skate_mm_s", "sim_skate_ref_mm_s", "sim_steps")
 CONTROLLERS = ("plain", "sampling", "wholebody")
 #: what ``ForwardValidation`` runs besides: the time-varying LQR (``sim.simulate.lqr``), an
 #: option measured against the others (``benchmarks/bench_simulate.py --controllers lqr``), not
@@ -319,10 +319,8 @@ class ForwardValidation:
         * ``sim_error_mm``: mean distance [mm] of the simulated points to the tracked motion's
           (placed as :meth:`reference` places it without ``contact``, lifted, for the plain
           tracker and the sampler even where they track the contact-consistent one);
-        * ``sim_error_original_mm``: the same against ``original_qpos`` (the motion itself when
-          None);
-        * ``sim_error_local_mm``: as ``sim_error_mm`` with each frame's points relative to the
-          root (root-relative: the pose, without the path);
+        * ``sim_error_original_mm``: the same against ``original_qpos`` (default the motion);
+        * ``sim_error_local_mm``: as ``sim_error_mm``, each frame's points relative to the root;
         * ``sim_skate_mm_s`` and ``sim_skate_ref_mm_s``: foot skating in contact of the
           simulated and the tracked motion, one estimator for both (:meth:`skating`), the
           tracked motion's with its stance soles on the floor (:meth:`skating_reference`);
@@ -330,7 +328,8 @@ class ForwardValidation:
           as ``sim.simulate.falls`` defines it (a part other than the feet on the floor where
           the reference has none, or the head below half the reference's);
         * ``sim_torque_rms_nm_kg``: RMS joint torque [N m / kg] applied;
-        * ``sim_torque_saturated``: share of (frame, joint) samples at their torque limit.
+        * ``sim_torque_saturated``: share of (frame, joint) samples at their torque limit;
+        * ``sim_steps``: the inferred scene's boxes (:attr:`terrain`; 0: the empty floor).
         """
         original_qpos = qpos if original_qpos is None else original_qpos
         orig = time_warp(self.model, original_qpos, fps, 1.0, CONTROL_HZ)
@@ -389,6 +388,7 @@ class ForwardValidation:
             "sim_error_original_mm": 1e3 * float(np.linalg.norm(sim - original, axis=-1).mean()),
             "sim_fell": int(r.fell),
             "sim_fall_s": None if r.fall_frame < 0 else r.fall_frame / fps,
+            "sim_steps": len(self.last_boxes),  # the scene's inferred steps (0: the empty floor)
             "sim_torque_rms_nm_kg": float(np.sqrt(np.mean(tau**2)) / total_mass(self.model)),
             "sim_torque_saturated": float(np.mean(np.abs(tau) >= lim * (1 - 1e-6))),
         }
