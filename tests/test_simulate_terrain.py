@@ -146,7 +146,7 @@ def test_a_box_leaves_free_where_the_feet_were_below_its_top():
 
 def test_the_scene_adds_boxes_without_changing_the_body(spec, model):
     box = Box(np.array([0.5, 0.0, 0.1]), np.array([0.2, 0.15, 0.2]), 0.3)
-    scene = scene_model(spec, [box], like=model)
+    scene = scene_model(spec, [box])
     assert scene.ngeom == model.ngeom + 1 and terrain_geoms(model) is None
     ids, tops, centres, halves, yaws = terrain_geoms(scene)
     assert tops == pytest.approx([0.3]) and yaws == pytest.approx([0.3])
@@ -163,7 +163,7 @@ def test_a_sole_on_a_step_is_at_zero_above_it(spec, model):
     _, corners, _, _, _ = foot_tracks(model, q[None])
     centre = corners[0].reshape(-1, 2).mean(axis=0)
     box = Box(np.array([*centre, 0.5 * (STEP - 0.1)]), np.array([0.4, 0.4, 0.5 * (STEP + 0.1)]), 0)
-    scene = scene_model(spec, [box], like=model)
+    scene = scene_model(spec, [box])
     assert lowest_foot_point(model, q[None])[0] == pytest.approx(STEP, abs=0.01)
     assert lowest_foot_point(scene, q[None])[0] == pytest.approx(0.0, abs=0.01)
     # skating counts the soles on the step as in contact (still: 0 mm/s), not as in the air
@@ -184,7 +184,7 @@ def test_a_hand_on_a_step_is_a_fall_unless_the_reference_has_it_there(spec, mode
     top = geom_bottoms(model, data)[hand] + 0.005  # the hand 5 mm into the step's top
     xy = data.geom_xpos[hand, :2]
     box = Box(np.array([*xy, 0.5 * (top - 0.1)]), np.array([0.03, 0.03, 0.5 * (top + 0.1)]), 0)
-    scene = scene_model(spec, [box], like=model)
+    scene = scene_model(spec, [box])
     state = mujoco.MjData(scene)
     state.qpos[:] = stand
     mujoco.mj_forward(scene, state)

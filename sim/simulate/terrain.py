@@ -375,15 +375,9 @@ def add_terrain(spec, boxes: list[Box]) -> None:
         g.rgba = [0.6, 0.5, 0.4, 1.0]
 
 
-def scene_model(spec, boxes: list[Box], like=None) -> mujoco.MjModel:
+def scene_model(spec, boxes: list[Box]) -> mujoco.MjModel:
     """``spec`` (a body's ``MjSpec``, not changed) compiled with ``boxes`` added
-    (:func:`add_terrain`); ``like``: a compiled model of the same body whose joints' armature
-    it takes (``sim.simulate.gainchoice.common_body`` sets it after compiling), the constants
-    that follow from it recomputed."""
+    (:func:`add_terrain`)."""
     scene = spec.copy()
     add_terrain(scene, boxes)
-    model = scene.compile()
-    if like is not None:
-        model.dof_armature[:] = like.dof_armature
-        mujoco.mj_setConst(model, mujoco.MjData(model))
-    return model
+    return scene.compile()

@@ -411,9 +411,10 @@ class ForwardValidation:
         (``sim.simulate.terrain.scene_model`` of :attr:`specs`; this object's models are not
         changed)."""
         alternates = self.search.get("alternates", ())
-        models = [scene_model(x, boxes, like=m)
-                  for x, m in zip(self.specs, (self.model, *alternates), strict=True)]  # fmt: skip
-        search = {**self.search, "alternates": tuple(models[1:])} if alternates else self.search
+        models = tuple(scene_model(x, boxes) for x in self.specs)
+        if alternates:  # one body again, as forward_validation made this object's (common_body)
+            models = common_body(models)
+        search = {**self.search, "alternates": models[1:]} if alternates else self.search
         return models[0], search
 
     def skating(self, qpos: np.ndarray, fps: float, terrain: tuple | None = None) -> float | None:
