@@ -106,16 +106,9 @@ class SkeletonRenderer:
         self.ground_z = float(ground_z)
         self.boxes = scene_boxes(boxes)
         self.bones = bones_of(names, parents, lengths)
-        xml = scene_xml(
-            self.bones,
-            skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)),
-            floor_z=self.ground_z,
-            visual=True,
-            quality=(style.multisample, style.slices, style.stacks, 4096 if style.shadows else 0),
-            boxes=self.boxes,
-            box_rgba=BOX_RGBA,
-        )
-        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.model = self._compile(self.boxes)
+        if self.boxes:  # MuJoCo scales its clipping planes by the model's extent: keep the view's
+            self.model.stat.extent = self._compile(()).stat.extent  # (the horizon's) unchanged
         self.data = mujoco.MjData(self.model)
         B = len(self.bones.child)
         self._geo = np.flatnonzero(self.model.geom_bodyid > 0)  # the capsules (world: floor, boxes)
@@ -144,6 +137,20 @@ class SkeletonRenderer:
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera.distance = style.distance
         self.camera.elevation = style.elevation
+
+    def _compile(self, boxes) -> mujoco.MjModel:
+        """The model of the two skeletons, the floor and ``boxes``."""
+        style = self.style
+        xml = scene_xml(
+            self.bones,
+            skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)),
+            floor_z=self.ground_z,
+            visual=True,
+            quality=(style.multisample, style.slices, style.stacks, 4096 if style.shadows else 0),
+            boxes=boxes,
+            box_rgba=BOX_RGBA,
+        )
+        return mujoco.MjModel.from_xml_string(xml)
 
     def __enter__(self):
         return self
