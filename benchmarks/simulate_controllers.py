@@ -307,6 +307,18 @@ CONTROLLERS["mix0.5s40terrain"] = (
     {"alternate_gains": (_STIFF,)},
 )  # fmt: skip
 
+#: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too
+#: (``ForwardValidation(hand_supports=True)``, ``sim.simulate.handholds``: a hand still above the
+#: ground while the centre of mass is outside the soles' footprint; docs/synthetic.md)
+CONTROLLERS["mix0.5s40hands"] = (
+    "sampler, 40 samples, eval's defaults (gains chosen per window), the scene inferred from the "
+    "motion with supports under the hands",
+    {"controller": "sampling", "samples": 40, "contact_reference": True, "terrain": True,
+     "hand_supports": True, "search": {"choice": GainChoice(share=0.5)}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
+
 #: ``mix0.5lock``: eval's default (``mix0.5``) tracking the foot-locked reference (its stance
 #: soles held still, flat on the floor, by the legs: ``ForwardValidation(foot_lock=True)``)
 CONTROLLERS["mix0.5lock"] = (

@@ -11,11 +11,13 @@ import pytest
 
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.falls import fall_cause, fall_reference, geom_bottoms
+from sim.simulate.handholds import find_handholds
 from sim.simulate.model import CONTROL_HZ, sim_model, sim_spec
 from sim.simulate.reference import floor_track, lowest_foot_point
 from sim.simulate.terrain import (
     CLEAR,
     DROP,
+    GROUND_GAP,
     Box,
     carve,
     find_terrain,
@@ -263,9 +265,9 @@ def test_the_drawn_scene_lies_where_the_motion_stood_in_its_own_frame(model):
     assert clip_scene(model, flat, CONTROL_HZ) == ((), None)
 
 
-def _trial_boxes(cmu_dir, trial: str) -> list[tuple[int, float]]:
+def _trial_boxes(cmu_dir, trial: str, hands: bool = False) -> list[tuple[int, float]]:
     """(clip start, absolute top [m]) of every box found in each 2 s clip of a CMU trial on the
-    shared humanoid."""
+    shared humanoid (``hands``: with the hands' boxes, :func:`find_handholds`)."""
     from sim.simulate.reference import time_warp, trial_qpos
 
     model = sim_model(canonical_skeleton())
@@ -274,7 +276,7 @@ def _trial_boxes(cmu_dir, trial: str) -> list[tuple[int, float]]:
     out = []
     for s in range(0, len(q) - 239, 240):
         clip = time_warp(model, q[s : s + 240], 120.0, 1.0, CONTROL_HZ)
-        boxes, ground = find_terrain(model, clip, CONTROL_HZ)
+        boxes, ground = (find_handholds if hands else find_terrain)(model, clip, CONTROL_HZ)
         out += [(s, b.top + float(ground.mean())) for b in boxes]
     return out
 
@@ -310,3 +312,94 @@ def test_flat_floor_reaches_eval_and_report_bodies_and_needs_simulate(tmp_path, 
     (flat,) = simulate_setup(cases, terrain=False).values()
     assert inferred.terrain and not flat.terrain
     assert pickle.loads(pickle.dumps(inferred)).terrain  # to workers with its specs
+
+
+def _held_up(model, swing: bool = True, along: int = 1, rate=CONTROL_HZ) -> np.ndarray:
+    """(T, nq) 1 s standing on the floor, then the body raised 0.3 m (0.25 s), carried 0.5 m
+    along y at that height (0.25 s; clear of where its arms were) and held there 1 s: nothing under the feet, the hands
+    still in the world (hanging on something). ``swing``: the legs swing back and forth from
+    the raise on (the feet never still) instead of being held; ``along``: 0 carries it along
+    x instead, the arms' line (one hand ends where an arm was before the raise)."""
+    q = _standing(model)
+    n, k = int(1.0 * rate), int(0.25 * rate)
+    out = np.repeat(q[None], 2 * n + 2 * k, axis=0)
+    out[n : n + k, 2] += np.linspace(0.0, 0.3, k)
+    out[n + k :, 2] += 0.3
+    out[n + k : n + 2 * k, along] += np.linspace(0.0, 0.5, k)  # y: across the arms held out
+    out[n + 2 * k :, along] += 0.5
+    if swing:
+        t = np.arange(len(out) - n) / rate
+        for joint, sign in (("lfemur_rx", 1.0), ("rfemur_rx", -1.0)):
+            out[n:, model.jnt_qposadr[model.joint(joint).id]] += sign * 0.6 * np.sin(4 * np.pi * t)
+    return out
+
+
+def _hand_geoms(model) -> list[list[int]]:
+    return [[model.geom(f"{s}{p}").id for p in ("hand", "fingers", "thumb")] for s in "lr"]
+
+
+def test_hands_that_hold_the_body_up_get_boxes_at_their_height(model):
+    motion = _held_up(model)
+    assert find_terrain(model, motion, CONTROL_HZ) == ([], None)  # no step under the feet
+    boxes, ground = find_handholds(model, motion, CONTROL_HZ)
+    assert len(boxes) == 2 and np.abs(ground).max() < GROUND_GAP  # the floor it stood on
+    last = motion[-1].copy()
+    last[2] -= ground[-120:].mean()  # the boxes' frame: the ground track (held 1 s) at z = 0
+    data = mujoco.MjData(model)
+    data.qpos[:] = last
+    mujoco.mj_kinematics(model, data)
+    bottoms = geom_bottoms(model, data)
+    for hand in _hand_geoms(model):  # one box per hand: its top at the hand's lowest point
+        xy = data.geom_xpos[hand, :2].mean(axis=0)
+        tops = [b.top for b in boxes if surface_height(_as_terrain([b]), xy) > 0]
+        assert tops == [pytest.approx(bottoms[hand].min(), abs=0.005)]
+    # the scene's fall rule: the reference's hands on their boxes are support
+    scene = scene_model(sim_spec(canonical_skeleton()), boxes)
+    ref = fall_reference(scene, last[None])
+    assert all(ref.on_floor[0, g] for hand in _hand_geoms(scene) for g in hand)
+
+
+def test_hands_still_while_the_feet_carry_the_body_get_no_box(model):
+    still = np.repeat(_standing(model)[None], 240, axis=0)  # arms held out still, 2 s
+    assert find_handholds(model, still, CONTROL_HZ) == ([], None)
+    # held up with the feet held still too: a step under the feet, nothing under the hands
+    boxes, ground = find_handholds(model, _held_up(model, swing=False), CONTROL_HZ)
+    assert boxes and all(b.top == pytest.approx(0.3, abs=GROUND_GAP) for b in boxes)
+    plain = find_terrain(model, _held_up(model, swing=False), CONTROL_HZ)
+    assert len(plain[0]) == len(boxes) and np.array_equal(plain[1], ground)
+
+
+@pytest.mark.parametrize("trial", ["02_01", "05_10", "17_10", "90_31"])
+def test_hands_still_in_the_air_get_no_box(cmu_dir, trial):
+    assert _trial_boxes(cmu_dir, trial, hands=True) == []
+
+
+def test_a_clip_where_no_hand_holds_the_body_runs_bit_for_bit_as_without_hands(spec, model):
+    from sim.simulate.validate import ForwardValidation
+
+    motion = _step_up(model)[::2]  # 3 s at 60 Hz: a step under the feet, the hands free
+    rows, boxes = [], []
+    for hands in (False, True):
+        fv = ForwardValidation(model, ("root",), controller="plain", terrain=True, specs=(spec,),
+                               hand_supports=hands)  # fmt: skip
+        rows.append(fv.run(motion, CONTROL_HZ / 2))
+        boxes.append(fv.last_boxes)
+    assert boxes[0] and len(boxes[0]) == len(boxes[1]) and rows[0] == rows[1]
+    for a, b in zip(*boxes, strict=True):
+        assert np.array_equal(a.centre, b.centre) and np.array_equal(a.half, b.half)
+    import pickle
+
+    assert pickle.loads(pickle.dumps(fv)).hand_supports  # the option travels to a worker
+
+
+def test_no_hand_box_where_the_motions_body_was_below_its_top(model):
+    """Carried along its arms' line, the trailing hand ends 0.5 m along from where it stood,
+    above where the arm was 0.3 m lower: only the leading hand gets a box."""
+    boxes, _ = find_handholds(model, _held_up(model, along=0), CONTROL_HZ)
+    assert len(boxes) == 1
+    data = mujoco.MjData(model)
+    data.qpos[:] = _standing(model)
+    mujoco.mj_kinematics(model, data)
+    arm = [data.geom_xpos[model.geom(f"{s}humerus").id, :2] for s in "lr"]
+    # the box is not over either arm's place before the raise
+    assert all(surface_height(_as_terrain(boxes), xy) == 0 for xy in arm)

@@ -226,14 +226,22 @@ def find_terrain(
         ground level) filled from their neighbours, so the platforms do not pull it up; ``([],
         None)`` where no support is found (the caller keeps its own floor track).
     """
+    boxes, track, _ = feet_scene(model, qpos, rate, carved)
+    return (boxes, track) if boxes else ([], None)
+
+
+def feet_scene(model, qpos: np.ndarray, rate: float, carved: bool = CARVE) -> tuple:
+    """:func:`find_terrain`'s boxes (possibly none) and ground track (T,) [m], with the
+    :func:`foot_tracks` of ``qpos`` they were found from; the track and tracks are None where
+    the model has no soles or the motion no stance."""
     tracks = foot_tracks(model, qpos)
     if tracks is None:
-        return [], None
+        return [], None, None
     low, corners, heading, com, heights = tracks
     segs = stances(low, corners, rate)
     levels = [(f, s, float(np.median(low[s[0] : s[1], f]))) for f in range(2) for s in segs[f]]
     if not levels:
-        return [], None
+        return [], None, None
     lowest = low.min(axis=1)
     ground = min(h for _, _, h in levels)
     touched = float(np.percentile(lowest, GROUND_PERCENTILE))
@@ -243,8 +251,6 @@ def find_terrain(
         for f, s, h in levels
         if h >= ground + MIN_RAISE and relies(f, s, low, corners, com, ground, rate)
     ]
-    if not raised:
-        return [], None
     on = lowest <= ground + GROUND_GAP
     t = np.arange(len(lowest))
     track = running_floor(np.interp(t, t[on], lowest[on]), rate)
@@ -257,7 +263,7 @@ def find_terrain(
     # the feet's corners, their heights above the ground track: where the feet were
     feet = (corners.reshape(-1, 2), (heights - track[:, None, None]).reshape(-1))
     boxes = merge_boxes(boxes)
-    return [carve(b, cores, *feet) for b in boxes] if carved else boxes, track
+    return [carve(b, cores, *feet) for b in boxes] if carved else boxes, track, tracks
 
 
 def carve(box: Box, cores: list, xy: np.ndarray, z: np.ndarray) -> Box:
@@ -350,6 +356,15 @@ def surface_height(terrain: tuple | None, xy: np.ndarray) -> np.ndarray:
         inside = (np.abs(lx) <= h[0]) & (np.abs(ly) <= h[1])
         out = np.where(inside, np.maximum(out, top), out)
     return out
+
+
+def boxes_terrain(boxes: list[Box]) -> tuple | None:
+    """``boxes`` as :func:`terrain_geoms` gives a model's (no ids; None where there are none),
+    for :func:`surface_height`."""
+    if not boxes:
+        return None
+    return (None, np.array([b.top for b in boxes]), np.array([b.centre[:2] for b in boxes]),
+            np.array([b.half[:2] for b in boxes]), np.array([b.yaw for b in boxes]))  # fmt: skip
 
 
 def add_terrain(spec, boxes: list[Box]) -> None:

@@ -32,6 +32,7 @@ from sim.simulate.controller import track
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_ids
 from sim.simulate.footlock import foot_locked
 from sim.simulate.gainchoice import GainChoice, choice_track, common_body
+from sim.simulate.handholds import find_handholds
 from sim.simulate.lqr import track_lqr
 from sim.simulate.model import CONTROL_HZ, Gains, sim_spec, total_mass
 from sim.simulate.reference import (
@@ -187,6 +188,8 @@ class ForwardValidation:
         specs: the ``MjSpec`` (or its XML) of ``model`` and of each of ``search``'s
             ``alternates``, in that order: a clip with terrain compiles copies with its boxes
             (the models here are not changed).
+        hand_supports: with ``terrain``, boxes under the hands that hold the body up too
+            (``sim.simulate.handholds``); off; a clip where none is found runs as without.
     """
 
     def __init__(
@@ -201,6 +204,7 @@ class ForwardValidation:
         foot_lock: bool = DEFAULT_FOOT_LOCK,
         terrain: bool = False,
         specs: tuple = (),
+        hand_supports: bool = False,
     ):
         controller, samples = chosen_controller(samples, controller)
         known = CONTROLLERS + OPTIONAL_CONTROLLERS
@@ -230,7 +234,7 @@ class ForwardValidation:
         self.specs = tuple(mujoco.MjSpec.from_string(x) if isinstance(x, str) else x for x in specs)
         if terrain and len(self.specs) != 1 + len(self.search.get("alternates", ())):
             raise UsageError("terrain needs the specs of the model and of its alternates")
-        self.terrain = bool(terrain)
+        self.terrain, self.hand_supports = bool(terrain), bool(hand_supports)
         self.last_boxes: list = []
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
@@ -239,7 +243,8 @@ class ForwardValidation:
     def __reduce__(self):  # to another process: rebuilt there with fresh MuJoCo data
         args = self.model, self.names, self.samples, self.controller, self.search, self.threads
         specs = tuple(x.to_xml() for x in self.specs)  # an MjSpec does not pickle
-        return (ForwardValidation, (*args, self.contact, self.foot_lock, self.terrain, specs))
+        return (ForwardValidation, (*args, self.contact, self.foot_lock, self.terrain, specs,
+                                    self.hand_supports))  # fmt: skip
 
     def points(self, qpos: np.ndarray) -> np.ndarray:
         """(T, P, 3) the model's points [m] at each ``qpos`` (T, nq)."""
@@ -400,7 +405,8 @@ class ForwardValidation:
         this object's own."""
         self.last_boxes = []
         if self.terrain:  # the scene of the original motion: its steps, its ground track
-            boxes, ground = find_terrain(self.model, orig, CONTROL_HZ)
+            find = find_handholds if self.hand_supports else find_terrain
+            boxes, ground = find(self.model, orig, CONTROL_HZ)
             if boxes:
                 self.last_boxes = boxes
                 return (ground, *self.scene(boxes))
