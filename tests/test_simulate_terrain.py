@@ -343,6 +343,7 @@ def test_hands_that_hold_the_body_up_get_boxes_at_their_height(model):
     assert find_terrain(model, motion, CONTROL_HZ) == ([], None)  # no step under the feet
     boxes, ground = find_handholds(model, motion, CONTROL_HZ)
     assert len(boxes) == 2 and np.abs(ground).max() < GROUND_GAP  # the floor it stood on
+    assert all(b.hand for b in boxes)  # holds: the hands touch them, nothing else
     last = motion[-1].copy()
     last[2] -= ground[-120:].mean()  # the boxes' frame: the ground track (held 1 s) at z = 0
     data = mujoco.MjData(model)
@@ -403,3 +404,31 @@ def test_no_hand_box_where_the_motions_body_was_below_its_top(model):
     arm = [data.geom_xpos[model.geom(f"{s}humerus").id, :2] for s in "lr"]
     # the box is not over either arm's place before the raise
     assert all(surface_height(_as_terrain(boxes), xy) == 0 for xy in arm)
+
+
+def test_a_box_under_a_hand_touches_the_hands_only(spec, model):
+    stand = _standing(model)
+    data = mujoco.MjData(model)
+    data.qpos[:] = stand
+    mujoco.mj_kinematics(model, data)
+    bottoms = geom_bottoms(model, data)
+
+    def under(name: str, hand: bool) -> Box:  # a box 5 mm into the geom's lowest point
+        xy, top = data.geom_xpos[model.geom(name).id, :2], bottoms[model.geom(name).id] + 0.005
+        return Box(np.array([*xy, top - 0.025]), np.array([0.03, 0.03, 0.025]), 0.0, hand=hand)
+
+    for hand, touched in ((True, {"terrain0": {"lhand"}}), (False, {"terrain0": {"lhand"},
+                                                                   "terrain1": {"lfemur"}})):  # fmt: skip
+        scene = scene_model(spec, [under("lhand", True), under("lfemur", hand)])
+        state = mujoco.MjData(scene)
+        state.qpos[:] = stand
+        mujoco.mj_forward(scene, state)
+        found: dict[str, set] = {}
+        for g1, g2 in state.contact.geom[: state.ncon]:
+            a, b = scene.geom(g1).name, scene.geom(g2).name
+            for box, part in ((a, b), (b, a)):
+                if box.startswith("terrain"):
+                    found.setdefault(box, set()).add(part)
+        # a hold under the thigh touches nothing; a step there touches the thigh
+        assert {k: v & {"lhand", "lfemur"} for k, v in found.items()} == touched
+    assert scene.geom("lfemur").conaffinity == model.geom("lfemur").conaffinity  # body as it was

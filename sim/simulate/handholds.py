@@ -34,6 +34,7 @@ from sim.simulate.terrain import (
     CLEAR,
     DROP,
     GROUND_GAP,
+    HANDS,
     MIN_RAISE,
     RELY_S,
     Box,
@@ -45,8 +46,6 @@ from sim.simulate.terrain import (
     surface_height,
 )
 
-#: the geoms of each hand (left, right): the hand's lowest point is the lowest of theirs
-HANDS = (("lhand", "lfingers", "lthumb"), ("rhand", "rfingers", "rthumb"))
 #: geoms that may lie as low as the hand on its support (the wrist's capsule joins it)
 NEXT_TO_HAND = ("lwrist", "rwrist")
 #: [m] the body relies on a still hand where its centre of mass is this far or more outside the
@@ -145,7 +144,7 @@ def hand_supports(model, qpos, rate, boxes: list[Box], track, tracks) -> list[Bo
             box = box_of(hpts[a:b, h].reshape(-1, 2), 0.0, top)
             if clear_of(box, *feet, DROP) and clear_of(box, *body, CLEAR, grow=radii + CLEAR):
                 out.append(box)
-    return merge_boxes(out)
+    return [Box(b.centre, b.half, b.yaw, hand=True) for b in merge_boxes(out)]
 
 
 def clear_of(box: Box, xy: np.ndarray, z: np.ndarray, depth: float, grow=0.0) -> bool:

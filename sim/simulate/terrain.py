@@ -68,16 +68,25 @@ BURY = 0.1
 #: [s] the sole's speed is taken after a Gaussian of this scale (marker noise)
 SPEED_SMOOTH_S = 0.03
 TERRAIN_PREFIX = "terrain"
+#: the geoms of each hand (left, right)
+HANDS = (("lhand", "lfingers", "lthumb"), ("rhand", "rfingers", "rthumb"))
+#: contype, conaffinity of a box under a hand: the hands' geoms get its contype as a
+#: conaffinity bit in a scene with one, so only they touch it (a thigh or an arm beside the
+#: hand passes by it, as by a rail)
+HOLD_BITS = (8, 0)
 _SIDES = (("lsole", "ltoesole"), ("rsole", "rtoesole"))
 
 
 @dataclass(frozen=True)
 class Box:
-    """A static box: ``centre`` (3,) [m], half sizes ``half`` (3,) [m], ``yaw`` [rad] about z."""
+    """A static box: ``centre`` (3,) [m], half sizes ``half`` (3,) [m], ``yaw`` [rad] about z;
+    ``hand``: under a hand, touched by the hands only."""
 
     centre: np.ndarray
     half: np.ndarray
     yaw: float
+    #: a hold under a hand (``sim.simulate.handholds``): only the hands touch it (:data:`HOLD_BITS`)
+    hand: bool = False
 
     @property
     def top(self) -> float:
@@ -370,7 +379,8 @@ def boxes_terrain(boxes: list[Box]) -> tuple | None:
 def add_terrain(spec, boxes: list[Box]) -> None:
     """Add ``boxes`` to ``spec`` in place: static geoms ``terrain<k>`` of a body ``terrain``
     at the origin, added last (the body's geom ids do not move), with the floor's contact
-    bits, parameters and friction (a part touching one touches the floor)."""
+    bits, parameters and friction (a part touching one touches the floor); a box under a hand
+    (``Box.hand``) touches the hands only (:data:`HOLD_BITS`)."""
     floor = spec.geom("floor")
     body = spec.worldbody.add_body()
     body.name = TERRAIN_PREFIX
@@ -388,6 +398,11 @@ def add_terrain(spec, boxes: list[Box]) -> None:
         g.friction = floor.friction
         g.condim = floor.condim
         g.rgba = [0.6, 0.5, 0.4, 1.0]
+        if b.hand:
+            g.contype, g.conaffinity = HOLD_BITS
+    if any(b.hand for b in boxes):  # the hands touch the holds
+        for name in (n for side in HANDS for n in side):
+            spec.geom(name).conaffinity |= HOLD_BITS[0]
 
 
 def scene_model(spec, boxes: list[Box]) -> mujoco.MjModel:
