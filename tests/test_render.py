@@ -115,7 +115,7 @@ def test_a_reused_renderer_draws_what_a_fresh_one_draws(renderer, motion):
     for a, b, c in zip(fresh, shared, again, strict=True):
         assert same_picture(a, b) and same_picture(a, c)
     assert not any(same_picture(a, b) for a, b in zip(alone, fresh, strict=True))
-    with pytest.raises(ValueError, match="other points, another style or ground"):
+    with pytest.raises(ValueError, match="other points, another style, ground or scene"):
         list(
             render_frames(motion, rec, keyframes=keys, style=RenderStyle(64, 48), renderer=renderer)
         )

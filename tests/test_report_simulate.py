@@ -18,6 +18,7 @@ def test_report_adds_forward_simulation_per_method_with_the_original_as_baseline
     clip = json.loads((tmp_path / "r" / "checks.json").read_text())["clips"][0]
     rows = [clip["original"], *clip["methods"]]
     assert [r.get("method") for r in clip["methods"]] == ["uniform", "optimal"]
+    assert "scene" not in clip  # a flat walk: no inferred steps, nothing drawn nor written
     for r in rows:
         sim = {k: r["physics"][k] for k in SIMULATE_KEYS}
         assert sim["sim_error_mm"] > 0 and 0 <= sim["sim_torque_saturated"] <= 1

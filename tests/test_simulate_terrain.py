@@ -238,11 +238,38 @@ def test_a_clip_on_a_step_is_tracked_in_its_scene(spec, model):
     assert fv.last_boxes and all(b.top == pytest.approx(STEP, abs=0.01) for b in fv.last_boxes)
     assert row["sim_steps"] == len(fv.last_boxes)  # the row says the scene was not empty
     assert model.ngeom == ngeom  # the body's model is not changed
+    # the report draws the boxes it was simulated in, lifted to the original's frame
+    from sidql.evaluation.validation import clip_scene
+
+    drawn, ground = clip_scene(model, motion, CONTROL_HZ / 2)
+    assert len(drawn) == len(fv.last_boxes) and abs(ground) < 0.01
+    for d, b in zip(drawn, fv.last_boxes, strict=True):
+        np.testing.assert_allclose(d.centre - [0, 0, ground], b.centre, atol=1e-12)
+        np.testing.assert_array_equal(d.half, b.half)
+        assert d.yaw == b.yaw
     # the tracked reference stands on the step: its root as high above the floor as before
     tracked = fv.last_tracked
     assert tracked[-1, 2] - tracked[0, 2] == pytest.approx(STEP, abs=0.02)
     with pytest.raises(Exception, match="specs"):
         ForwardValidation(model, ("root",), controller="plain", terrain=True)
+
+
+def test_the_drawn_scene_lies_where_the_motion_stood_in_its_own_frame(model):
+    """A motion standing on a 0.5 m platform, then stepping onto a 0.3 m step on it: the
+    scene's ground is the platform and the box's top the step, in the motion's own frame
+    (its sole heights, :func:`foot_tracks`), not the simulation's (platform at z = 0)."""
+    from sidql.evaluation.validation import clip_scene
+
+    motion = _step_up(model)
+    motion[:, 2] += 0.5
+    boxes, ground = clip_scene(model, motion, CONTROL_HZ)
+    low = foot_tracks(model, motion)[0].min(axis=1)  # (T,) the lowest sole corner [m]
+    assert ground == pytest.approx(low[0], abs=0.01) and ground == pytest.approx(0.5, abs=0.01)
+    assert boxes and all(b.top == pytest.approx(low[-1], abs=0.01) for b in boxes)
+    assert low[-1] == pytest.approx(0.5 + STEP, abs=0.01)
+    assert clip_scene(None, motion, CONTROL_HZ) == ((), None)  # no body: no scene
+    flat = np.repeat(motion[:1], len(motion), axis=0)  # standing still on the platform
+    assert clip_scene(model, flat, CONTROL_HZ) == ((), None)
 
 
 def _trial_boxes(cmu_dir, trial: str) -> list[tuple[int, float]]:

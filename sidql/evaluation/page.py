@@ -6,9 +6,11 @@ filmstrip (``.png``), per clip the two plots (:mod:`sidql.evaluation.plots`), an
 embeds every image and video as base64 so it can be mailed or archived alone. Every file is
 written atomically.
 
-Per clip the page shows the trial's floor in a sentence, one table per metric group
-(:data:`sidql.evaluation.metrics.GROUPS`) with the original's row, its noise floor and the best
-method per column, a legend of the shown metrics, the plots, the videos under one control that
+Every video and filmstrip of a clip draws its scene (:attr:`ClipValidation.scene`: the steps
+inferred under the original's feet, the boxes its simulated bodies stood on, on the scene's
+ground: :func:`drawn_floor`). Per clip the page shows the trial's floor in a sentence, one
+table per metric group (:data:`sidql.evaluation.metrics.GROUPS`) with the original's row, its
+noise floor and the best method per column, a legend of the shown metrics, the plots, the videos under one control that
 plays, pauses and seeks them together, and the filmstrips. Clips are labelled by their real
 numbers in the trial, frames are numbered from 0 everywhere, and every video's poster is its
 worst-error frame. The page's style sheet and script are package files (``sidql/data/report.css``,
@@ -188,17 +190,35 @@ def floor_sentence(physics: dict) -> str:
     )
 
 
+def scene_sentence(v: ClipValidation) -> str:
+    """One sentence on a clip's inferred scene (:attr:`ClipValidation.scene`)."""
+    tops = ", ".join(f"{b.top - v.scene_ground:.2f}" for b in v.scene)
+    return (
+        f"Scene inferred from the original's feet (sim.simulate.terrain): {len(v.scene)} "
+        f"step(s), tops {tops} m above its ground at z = {v.scene_ground:.3f} m; drawn in every "
+        "video and filmstrip (sand-coloured boxes, the floor at that ground), the scene "
+        "report --simulate's bodies are simulated in."
+    )
+
+
 def trial_floor(v: ClipValidation):
     """The floor the page draws: the trial's ground (:mod:`sim.physics.ground`), or one estimated
     from the clip when the report had no trial ground."""
     return v.ground or estimate_ground(v.clip.positions, v.clip.names, v.clip.fps)
 
 
+def drawn_floor(v: ClipValidation) -> float:
+    """[m] the height of the floor a clip's videos draw: its scene's ground where it has a scene
+    (:attr:`ClipValidation.scene_ground`: what the boxes stand on and the simulated bodies
+    walked on), else :func:`trial_floor`'s."""
+    return trial_floor(v).floor_z if v.scene_ground is None else v.scene_ground
+
+
 def ground_and_feet(v: ClipValidation, run: MethodRun) -> tuple[float, FootState]:
-    """Floor height [m] and foot states drawn for one method's video: :func:`trial_floor` and the
-    contact labels and flags of :func:`sim.physics.foot_state.foot_states`."""
-    ground = trial_floor(v)
-    return ground.floor_z, foot_states(v.original, run.motion, ground)
+    """Floor height [m] and foot states drawn for one method's video: :func:`drawn_floor` and
+    the contact labels and flags of :func:`sim.physics.foot_state.foot_states` (on
+    :func:`trial_floor`, as the figures are measured)."""
+    return drawn_floor(v), foot_states(v.original, run.motion, trial_floor(v))
 
 
 def _data_uri(mime: str, data: bytes) -> str:
@@ -280,6 +300,8 @@ def _clip_section(
     ]
     if v.physics:
         parts.append(f"<p class='note'>{html.escape(floor_sentence(v.physics))}</p>")
+    if v.scene:
+        parts.append(f"<p class='note'>{html.escape(scene_sentence(v))}</p>")
     parts.append(_tables(v, colours))
     parts.append(legend_html(shown_metrics(v)))
     bars = summary_plot(v, colours)
@@ -296,8 +318,12 @@ def _clip_section(
         if videos and v.runs:
             renderer = stack.enter_context(
                 SkeletonRenderer(
-                    v.original.names, v.original.parents, style, ground_z=trial_floor(v).floor_z
-                )
+                    v.original.names,
+                    v.original.parents,
+                    style,
+                    ground_z=drawn_floor(v),
+                    boxes=v.scene,
+                )  # fmt: skip
             )
         if videos:  # the original as the simulated body performed it
             cards.append(_simulated_card(v, "original", v.physics, "#555555",
@@ -340,7 +366,8 @@ def _simulated_card(
                        v.clip.fps)  # fmt: skip
     name = f"{label}, simulated"
     frames = render_frames(v.original, body, method=name, style=style,
-                           ground_z=trial_floor(v).floor_z, renderer=renderer)  # fmt: skip
+                           ground_z=drawn_floor(v), renderer=renderer,
+                           boxes=v.scene)  # fmt: skip
     mp4 = write_video(frames, stem.with_name(stem.name + "_simulated.mp4"), v.clip.fps)
     fell = physics.get("sim_fall_s")
     note = "did not fall" if fell is None else f"fell at {fell:.2f} s"
@@ -383,7 +410,7 @@ def _method_media(
 
         frames = render_frames(
             v.original, r.motion, keyframes=r.keyframes, method=r.label, style=style, feet=feet,
-            ground_z=ground, renderer=renderer,
+            ground_z=ground, renderer=renderer, boxes=v.scene,
         )  # fmt: skip
         mp4 = write_video(keep(frames), stem.with_name(stem.name + ".mp4"), v.clip.fps)
         jpg = poster["jpg"]
@@ -403,7 +430,7 @@ def _method_media(
     )
     png = keyframe_sheet(
         v.original, r.motion, r.keyframes, stem.with_name(stem.name + "_keyframes.png"),
-        method=r.label, feet=feet, ground_z=ground,
+        method=r.label, feet=feet, ground_z=ground, boxes=v.scene,
     )  # fmt: skip
     sheet = (
         f"<p class='sheetcap' style='color:{colour}'>{html.escape(r.label)}</p>"

@@ -36,7 +36,7 @@ from sim.motion.ingest import load_motion
 from sim.motion.trial import is_bvh, subject_model
 from sim.replay.checks import from_clip
 from sim.replay.render import DEFAULT_STYLE, RenderStyle
-from sim.simulate.validate import DEFAULT_TERRAIN, forward_validation
+from sim.simulate.validate import DEFAULT_TERRAIN, forward_validation, validation_model
 
 
 def report_clips(
@@ -61,6 +61,7 @@ def report_clips(
     ray: str | None = None,
     simulate=None,
     reconstruction: str | None = None,
+    scene_body=None,
 ) -> Path:
     """Validate every clip in ``clips`` with every method (and decoded ``streams``) and write the
     report; returns ``out_dir/index.html``. ``clip_numbers``: the clips' numbers in their trial, for
@@ -70,7 +71,9 @@ def report_clips(
     ``simulate`` (a :class:`sim.simulate.validate.ForwardValidation`) the forward simulation's. Clips are
     validated through ``sim.batch.run_batch`` (``workers`` processes or Ray); a clip that fails is
     listed in the report's ``failed`` field. ``reconstruction``: every method's keyframes rebuilt
-    with it alone (default: Hermite, and the method's own where it differs).
+    with it alone (default: Hermite, and the method's own where it differs). ``scene_body``:
+    without ``simulate``, the body whose soles find each clip's scene (drawn only:
+    :func:`sidql.evaluation.validation.clip_scene`).
 
     Raises:
         UnknownNameError: an unknown method. UsageError: W out of range for a clip (both before
@@ -86,7 +89,7 @@ def report_clips(
     validate = partial(
         validate_clip, methods=list(methods), W=W, seed=seed, joint_ranges=joint_ranges,
         streams=streams, physics=job, ground=ground, contacts=contacts,
-        simulate=simulate if job else None, reconstruction=reconstruction,
+        simulate=simulate if job else None, reconstruction=reconstruction, scene_body=scene_body,
     )  # fmt: skip
     outcomes = run_batch(
         validate, clips, workers=workers, ray=ray, desc="replay", progress=progress
@@ -131,7 +134,9 @@ def report_trial(
     ``streams``: paths of ``.sidq`` files encoded from this trial, reported beside the methods.
     ``simulate``: also track every motion in forward simulation (the subject's torque-limited
     body, no assistance: :mod:`sim.simulate.validate`), in the scene inferred from each clip's
-    original motion unless ``terrain`` is False (the empty floor). ``reconstruction``: every method's
+    original motion unless ``terrain`` is False (the empty floor). Every video and filmstrip
+    draws that scene (none on the empty floor); without ``simulate`` too, inferred alike from the
+    original (unless ``terrain`` is False). ``reconstruction``: every method's
     keyframes rebuilt with it (:func:`report_clips`). A BVH file stands for both ``asf`` and
     ``amc`` (``amc`` None)."""
     amc = asf if amc is None and is_bvh(asf) else amc
@@ -155,10 +160,12 @@ def report_trial(
         raise UsageError(f"clip numbers {bad} out of range: the trial has {len(all_clips)} clips")
     skeleton, model = subject_model(asf)
     ground = trial_ground(all_clips)
-    forward = None
+    forward = scene_body = None
     if simulate:
         names = from_clip(all_clips[0]).restrict(POINTS).names
         forward = forward_validation(skeleton, names, terrain=terrain)
+    elif terrain:  # the scene is the original's alone: drawn without a simulation too
+        scene_body = validation_model(skeleton)
     return report_clips(
         [all_clips[c] for c in clips], out_dir, W=W, methods=methods, seed=seed,
         joint_ranges=joint_ranges(model), videos=videos, style=style,
@@ -166,5 +173,5 @@ def report_trial(
         meta={"asf": str(asf), "amc": str(amc), "clips": " ".join(map(str, clips))},
         progress=progress, clip_numbers=list(clips), streams=decoded, model=model,
         ground=ground, contacts=trial_contacts_by_clip(all_clips, ground), workers=workers,
-        ray=ray, simulate=forward, reconstruction=reconstruction,
+        ray=ray, simulate=forward, reconstruction=reconstruction, scene_body=scene_body,
     )  # fmt: skip

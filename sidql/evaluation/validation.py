@@ -50,6 +50,9 @@ from sim.replay.checks import (
     replay,
     summarise,
 )
+from sim.simulate.model import CONTROL_HZ
+from sim.simulate.reference import time_warp
+from sim.simulate.terrain import Box, find_terrain
 
 
 @dataclass
@@ -94,6 +97,11 @@ class ClipValidation:
     physics: dict = field(default_factory=dict)
     ground: Ground | None = None  # the trial's, when the replay used one
     noise: dict = field(default_factory=dict)  # the original re-captured with marker noise
+    #: the scene inferred from the original (:func:`clip_scene`): its boxes
+    #: (``sim.simulate.terrain.Box``) and ground height [m] (None: no scene, the trial's floor),
+    #: in the original's frame; drawn in the clip's videos and filmstrips
+    scene: tuple = ()
+    scene_ground: float | None = None
 
     @property
     def noise_floor(self) -> dict:
@@ -194,6 +202,7 @@ def validate_clip(
     simulate=None,
     contacts=None,
     reconstruction: str | None = None,
+    scene_body=None,
 ) -> ClipValidation:
     """Keyframes by every method, reconstruction, replay and figures for one clip.
 
@@ -214,6 +223,8 @@ def validate_clip(
             ``start_frame`` (:func:`trial_contacts`); default: labelled on the clip.
         reconstruction: rebuild every method's keyframes with this one alone (default: Hermite,
             and the method's own where it differs).
+        scene_body: without ``simulate``, a body with soles (``sim.simulate.validate.
+            validation_model``) to infer the clip's scene with (:func:`clip_scene`; drawn only).
     """
     if physics is not None and ground is None:
         ground = estimate_ground(clip.positions, clip.names, clip.fps)
@@ -231,29 +242,50 @@ def validate_clip(
     if physics is not None:
         out.physics = physics.analyse(clip, None, ground, contacts=trial_labels)
         out.noise = physics.noise_floor(clip, ground, contacts=trial_labels, seed=seed)
+        qpos = out.physics["per_frame"]["qpos"]
         if simulate is not None:
-            out.physics.update(simulate.run(out.physics["per_frame"]["qpos"], clip.fps))
-            out.physics["per_frame"]["sim_positions"] = simulated_points(simulate, clip, floor_z)
+            # the scene it simulates in: none on the empty floor
+            scene_body = simulate.model if getattr(simulate, "terrain", False) else None
+        out.scene, out.scene_ground = clip_scene(scene_body, qpos, clip.fps)
+        if simulate is not None:
+            out.physics.update(simulate.run(qpos, clip.fps))
+            out.physics["per_frame"]["sim_positions"] = simulated_points(simulate, clip, out)
         analyse = partial(_run_physics, out, physics, simulate, ground, trial_labels)
     for m in methods:
         out.runs += _method_runs(out, m, W, seed, full, kw, analyse, reconstruction)
     for stream in streams:
-        keys, rec = stream.clip_part(clip)
-        checks = replay(rec, full, **kw)
-        s = summarise(checks)
-        run = MethodRun(
-            stream.label,
-            stream.motion.reconstruction,
-            keys,
-            rec,
-            checks,
-            s,
-            excess(s, out.baseline),
-        )
-        if analyse is not None:
-            run.physics = analyse(rec, stream.accelerations(clip))
-        out.runs.append(run)
+        out.runs.append(_stream_run(out, stream, full, kw, analyse))
     return out
+
+
+def _stream_run(out: ClipValidation, stream: DecodedStream, full, kw: dict, analyse) -> MethodRun:
+    """A decoded stream's run on ``out.clip``, measured like a method's."""
+    keys, rec = stream.clip_part(out.clip)
+    checks = replay(rec, full, **kw)
+    s = summarise(checks)
+    run = MethodRun(stream.label, stream.motion.reconstruction, keys, rec, checks, s,
+                    excess(s, out.baseline))  # fmt: skip
+    if analyse is not None:
+        run.physics = analyse(rec, stream.accelerations(out.clip))
+    return run
+
+
+def clip_scene(body, qpos: np.ndarray, fps: float) -> tuple[tuple, float | None]:
+    """The scene inferred from the original's IK fit ``qpos`` (T, nq at ``fps``) with ``body``'s
+    soles (``sim.simulate.validate.validation_model``, or the forward validation's model: the
+    boxes it simulates in; None: no scene), as forward validation infers it (``find_terrain`` at
+    the control rate), in the original's frame: its boxes (``sim.simulate.terrain.Box``) and
+    its ground height [m], the ground track's mean, which the boxes are lifted by (the
+    simulation's frame is the original's less that track: its ground at z = 0); ``((), None)``
+    without supports."""
+    if body is None:
+        return (), None
+    boxes, track = find_terrain(body, time_warp(body, qpos, fps, 1.0, CONTROL_HZ), CONTROL_HZ)
+    if not boxes:
+        return (), None
+    ground = float(np.mean(track))
+    lift = np.array([0.0, 0.0, ground])
+    return tuple(Box(b.centre + lift, b.half.copy(), b.yaw) for b in boxes), ground
 
 
 def _run_physics(out: ClipValidation, physics, simulate, ground, trial_labels, rec, acc=None):
@@ -272,16 +304,18 @@ def _run_physics(out: ClipValidation, physics, simulate, ground, trial_labels, r
     if simulate is not None:  # the forward simulation's figures join the physics
         original_qpos = out.physics["per_frame"]["qpos"]
         figures.update(simulate.run(figures["per_frame"]["qpos"], clip.fps, original_qpos))
-        floor_z = out.ground.floor_z if out.ground is not None else 0.0
-        figures["per_frame"]["sim_positions"] = simulated_points(simulate, clip, floor_z)
+        figures["per_frame"]["sim_positions"] = simulated_points(simulate, clip, out)
     return figures
 
 
-def simulated_points(simulate, clip: Clip, floor_z: float) -> np.ndarray:
+def simulated_points(simulate, clip: Clip, out: ClipValidation) -> np.ndarray:
     """(T, P, 3) [m] the protocol points of the simulated body in ``simulate``'s last run
     (:class:`sim.simulate.validate.ForwardValidation`), one per frame of ``clip`` (T frames),
-    lifted from the simulation's floor (z = 0) to the trial's ``floor_z``: the body as it
-    moved, to be drawn beside the motion it tracked."""
+    lifted from the simulation's floor (z = 0) to the ground ``out`` draws: its scene's
+    (:func:`clip_scene`; the body then stands on the drawn boxes), else the trial's floor: the
+    body as it moved, to be drawn beside the motion it tracked."""
+    floor_z = out.ground.floor_z if out.ground is not None else 0.0
+    floor_z = floor_z if out.scene_ground is None else out.scene_ground
     pos = simulate.points(simulate.last_qpos)[: clip.n_frames]
     if len(pos) < clip.n_frames:  # (a clip's last frame between control ticks: held)
         pos = np.concatenate([pos, np.repeat(pos[-1:], clip.n_frames - len(pos), axis=0)])
@@ -389,6 +423,7 @@ def checks_document(validations: list[ClipValidation], meta: dict) -> dict:
                 "frames": v.clip.n_frames,
                 "fps": v.clip.fps,
                 "keyframes": v.W,
+                **_scene_entry(v),
                 "original": {
                     "summary": v.baseline,
                     "per_frame": per_frame(v.baseline_checks),
@@ -420,6 +455,15 @@ def with_physics(summary: dict, physics: dict) -> dict:
         for k in HEIGHT_KEYS:
             out[k] = None
     return out
+
+
+def _scene_entry(v: ClipValidation) -> dict:
+    """A clip's inferred scene in checks.json (nothing without one): its ground height [m] and
+    per box its centre and half sizes [m] and yaw [rad], in the original's frame, as drawn."""
+    if not v.scene:
+        return {}
+    boxes = [{"centre": b.centre, "half": b.half, "yaw": b.yaw} for b in v.scene]
+    return {"scene_ground": v.scene_ground, "scene": boxes}
 
 
 def _physics_entry(physics: dict) -> dict:

@@ -89,6 +89,24 @@ def _rgba(c) -> str:
     return " ".join(f"{x:.3g}" for x in c)
 
 
+def _box_geoms(boxes, rgba) -> list[str]:
+    """MJCF lines of static world boxes ``(centre, half sizes, yaw)`` (:func:`scene_xml`)."""
+    return [
+        f'    <geom name="scene{k}" type="box" pos="{_vec(centre)}" size="{_vec(half)}" '
+        f'quat="{_vec(_yaw_quat(yaw))}" rgba="{_rgba(rgba)}" contype="0" conaffinity="0"/>'
+        for k, (centre, half, yaw) in enumerate(boxes)
+    ]
+
+
+def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
+    """``wxyz`` of a turn by ``yaw`` [rad] about z (MJCF's euler would read degrees)."""
+    return (float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2)))
+
+
+def _vec(v) -> str:
+    return " ".join(f"{float(x):.9g}" for x in v)
+
+
 def scene_xml(
     bones: Bones,
     *,
@@ -100,6 +118,8 @@ def scene_xml(
     floor_margin: float = 0.0,
     visual: bool = False,
     quality: tuple[int, int, int, int] = (0, 16, 8, 0),
+    boxes=(),
+    box_rgba: tuple[float, float, float, float] = (0.7, 0.6, 0.47, 1.0),
 ) -> str:
     """MJCF text of ``len(skeletons)`` copies of ``bones`` as mocap capsules plus a floor.
 
@@ -116,6 +136,9 @@ def scene_xml(
         quality: ``(offsamples, numslices, numstacks, shadowsize)`` of MuJoCo's ``<quality>``:
             multisampling, capsule tessellation and shadow-map size (MuJoCo's defaults: 4, 28, 16,
             4096; ours are cheap for software rendering).
+        boxes: static world boxes ``(centre (3,), half sizes (3,), yaw [rad] about z)`` named
+            ``scene<k>``, in ``box_rgba``, never collided with (a clip's steps, drawn); none: the
+            text is as without the argument.
     """
     ms, slices, stacks, shadow = quality
     w: list[str] = ['<mujoco model="capsules">', '  <option gravity="0 0 0"/>']
@@ -137,6 +160,7 @@ def scene_xml(
         f'    <geom name="{FLOOR}" type="plane" pos="0 0 {floor_z:.9g}" size="0 0 1"{mat} '
         'contype="0" conaffinity="0"/>'
     )
+    w += _box_geoms(boxes, box_rgba)
     if visual:
         w.append('    <light directional="true" pos="0 0 5" dir="0.3 0.2 -1" castshadow="false"/>')
     for prefix, rgba in skeletons:

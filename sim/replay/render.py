@@ -11,7 +11,10 @@ same pixels (no stripes that look like error): only where the reconstruction dep
 Feet (:class:`sim.physics.foot_state.FootState`): the original's foot capsules turn teal and a teal
 footprint lies on the ground while a foot point is in contact; the reconstruction's foot point is
 marked by a blue ball when it floats, red when it sinks, magenta when it skates. A soft disc under
-the body stands in for a shadow (real shadow maps cost most of a frame in software). The camera
+the body stands in for a shadow (real shadow maps cost most of a frame in software). A clip's
+scene (``boxes``: the steps and platforms inferred under its feet, ``sim.simulate.terrain``) is
+drawn as solid sand-coloured boxes, footprints and shadow on their tops; a clip without draws the
+same frames as before. The camera
 follows the original's root from the side of its travel. A caption gives method, W, frame number
 (from 0, as everywhere in the report) and running error; a timeline at the bottom marks every
 keyframe.
@@ -39,6 +42,7 @@ GHOST_RGBA = (1.0, 0.55, 0.15, 0.5)
 KEY_RGBA = (0.15, 0.8, 0.3, 0.7)
 CONTACT_RGBA = (0.0, 0.62, 0.56, 1.0)  # original's foot in contact: capsule and footprint
 SHADOW_RGBA = (0.15, 0.17, 0.2, 0.22)
+BOX_RGBA = (0.7, 0.6, 0.47, 1.0)  # a clip's steps: opaque, unlike the floor's greys
 #: Reconstruction's foot point flags: ball colour per flag (float, sink, skate).
 FLAG_RGBA = {
     "float": (0.15, 0.45, 1.0, 0.95),
@@ -90,28 +94,25 @@ class SkeletonRenderer:
     """Owns a MuJoCo model of two capsule skeletons (original, ghost) and an offscreen renderer.
 
     Use as a context manager (closes the GL context). ``draw(original (P, 3), ghost (P, 3) or None,
-    lookat (3,), azimuth [deg], key)`` returns an (H, W, 3) uint8 image.
+    lookat (3,), azimuth [deg], key)`` returns an (H, W, 3) uint8 image. ``boxes``: the clip's
+    static scene (:func:`scene_boxes`), in the frame of the drawn points.
     """
 
     def __init__(
-        self, names, parents, style: RenderStyle = DEFAULT_STYLE, lengths=None, *, ground_z=0.0
-    ):
+        self, names, parents, style: RenderStyle = DEFAULT_STYLE, lengths=None, *, ground_z=0.0,
+        boxes=(),
+    ):  # fmt: skip
         self.style = style
         self.ground_z = float(ground_z)
+        self.boxes = scene_boxes(boxes)
         self.bones = bones_of(names, parents, lengths)
-        xml = scene_xml(
-            self.bones,
-            skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)),
-            floor_z=self.ground_z,
-            visual=True,
-            quality=(style.multisample, style.slices, style.stacks, 4096 if style.shadows else 0),
-        )
-        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.model = self._compile(self.boxes)
+        if self.boxes:  # MuJoCo scales its clipping planes by the model's extent: keep the view's
+            self.model.stat.extent = self._compile(()).stat.extent  # (the horizon's) unchanged
         self.data = mujoco.MjData(self.model)
         B = len(self.bones.child)
-        self._geo = np.arange(1, 2 * B + 1)
-        self._orig = np.arange(1, B + 1)
-        self._ghost = np.arange(B + 1, 2 * B + 1)
+        self._geo = np.flatnonzero(self.model.geom_bodyid > 0)  # the capsules (world: floor, boxes)
+        self._orig, self._ghost = self._geo[:B], self._geo[B:]
         self.model.geom_size[self._ghost, 0] *= GHOST_RADIUS_SCALE
         # foot capsules of each foot point's side: the bones ending at that side's ball and toes
         self._foot_bones = {
@@ -136,6 +137,20 @@ class SkeletonRenderer:
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera.distance = style.distance
         self.camera.elevation = style.elevation
+
+    def _compile(self, boxes) -> mujoco.MjModel:
+        """The model of the two skeletons, the floor and ``boxes``."""
+        style = self.style
+        xml = scene_xml(
+            self.bones,
+            skeletons=(("o_", ORIGINAL_RGBA), ("g_", GHOST_RGBA)),
+            floor_z=self.ground_z,
+            visual=True,
+            quality=(style.multisample, style.slices, style.stacks, 4096 if style.shadows else 0),
+            boxes=boxes,
+            box_rgba=BOX_RGBA,
+        )
+        return mujoco.MjModel.from_xml_string(xml)
 
     def __enter__(self):
         return self
@@ -223,16 +238,28 @@ class SkeletonRenderer:
             g.ellipse([u - r, w - r, u + r, w + r], outline=colour, width=max(2, r // 4))
         return np.asarray(pil)
 
+    def surface(self, xy) -> float:
+        """[m] the height of what a point at ``xy`` (2,) [m] stands on: the highest top of the
+        scene's boxes over it, else the ground."""
+        z = self.ground_z
+        for (cx, cy, cz), (hx, hy, hz), yaw in self.boxes:
+            dx, dy = xy[0] - cx, xy[1] - cy
+            c, s = np.cos(yaw), np.sin(yaw)
+            if abs(c * dx + s * dy) <= hx and abs(c * dy - s * dx) <= hy:
+                z = max(z, cz + hz)
+        return z
+
     def _disc(self, xy, radius, rgba, lift):
-        """A flat disc lying on the ground, ``lift`` [m] above it (separate layers never fight)."""
-        pos = np.array([xy[0], xy[1], self.ground_z + lift])
+        """A flat disc lying on what is under ``xy`` (:meth:`surface`), ``lift`` [m] above it
+        (separate layers never fight)."""
+        pos = np.array([xy[0], xy[1], self.surface(xy) + lift])
         return (mujoco.mjtGeom.mjGEOM_CYLINDER, [radius, 0.0005, 0.0], pos, rgba)
 
     def _shadow(self, points):
         """A soft blob under the body: a disc below the points' mean, fading with the height of
         the lowest point (a cheap stand-in for a shadow map)."""
         p = np.asarray(points)
-        up = max(0.0, float(p[:, 2].min() - self.ground_z))
+        up = max(0.0, float(p[:, 2].min() - self.surface(p[:, :2].mean(axis=0))))
         rgba = (*SHADOW_RGBA[:3], SHADOW_RGBA[3] * max(0.3, 1.0 - up / 0.5))
         return [self._disc(p[:, :2].mean(axis=0), 0.32, rgba, 0.001)]
 
@@ -270,6 +297,17 @@ class SkeletonRenderer:
                 np.asarray(pos, np.float64), eye, np.asarray(rgba, np.float32),
             )  # fmt: skip
             scn.ngeom += 1
+
+
+def scene_boxes(boxes) -> tuple:
+    """A clip's static scene as the renderer keeps it: per box ``((cx, cy, cz), (hx, hy, hz),
+    yaw)`` in floats (centre [m], half sizes [m], yaw [rad] about z), from objects with
+    ``centre``, ``half`` and ``yaw`` (``sim.simulate.terrain.Box``) or such triples."""
+    out = []
+    for b in boxes:
+        centre, half, yaw = (b.centre, b.half, b.yaw) if hasattr(b, "centre") else b
+        out.append((tuple(map(float, centre)), tuple(map(float, half)), float(yaw)))
+    return tuple(out)
 
 
 def camera_path(root: np.ndarray, fps: float, *, height: float = 0.9, smooth_s: float = 0.3):

@@ -65,6 +65,7 @@ def keyframe_sheet(
     style: RenderStyle = SHEET_TILE,
     feet: FootState | None = None,
     ground_z: float = 0.0,
+    boxes=(),
 ) -> Path:
     """PNG filmstrip of a method's keyframes and what happens between them.
 
@@ -72,7 +73,8 @@ def keyframe_sheet(
     them there). Bottom row, set between its two keyframes: the frame of largest MPJPE inside each
     interval, the reconstruction's ghost over the original, labelled with frame and error. Frames
     numbered from 0. Tiles are portrait crops (``style``, default 224x320) with the camera on the
-    tile's own root, all from the clip's side, so poses read large and distinct.
+    tile's own root, all from the clip's side, so poses read large and distinct. ``boxes``: the
+    clip's static scene (:class:`~sim.replay.render.SkeletonRenderer`), drawn in every tile.
     """
     keys = sorted(int(k) for k in keyframes)
     rec = reconstruction
@@ -93,7 +95,7 @@ def keyframe_sheet(
         else ""
     )
     g.text((6, 6), head, fill=(30, 30, 30), font=default_font(22))
-    with SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z) as r:
+    with SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z, boxes=boxes) as r:
 
         def tile(t, ghost, x, y, label, colour):
             look = np.array([*orig.positions[t, 0, :2], ground_z + 0.9])

@@ -17,7 +17,13 @@ from sim.files import written_by
 from sim.motion.points import PointMotion
 from sim.physics.foot_state import FootState
 from sim.replay.annotate import annotate, caption, foot_frame
-from sim.replay.render import DEFAULT_STYLE, RenderStyle, SkeletonRenderer, camera_path
+from sim.replay.render import (
+    DEFAULT_STYLE,
+    RenderStyle,
+    SkeletonRenderer,
+    camera_path,
+    scene_boxes,
+)
 
 
 def render_frames(
@@ -32,6 +38,7 @@ def render_frames(
     feet: FootState | None = None,
     ground_z: float = 0.0,
     renderer: SkeletonRenderer | None = None,
+    boxes=(),
 ):
     """Yield annotated (H, W, 3) uint8 frames of ``original`` with ``reconstruction`` as a ghost.
 
@@ -43,8 +50,10 @@ def render_frames(
         frames: which frame indices to render (default all).
         feet: foot contact and flags per frame (e.g. :func:`sim.physics.foot_state.foot_states`).
         ground_z: height of the drawn floor [m].
+        boxes: the clip's static scene in the points' frame (``sim.simulate.terrain.Box``
+            or :func:`~sim.replay.render.scene_boxes` triples; default none).
         renderer: the clip's :class:`SkeletonRenderer` (same points, style and ground), reused
-            and left open; one is made and closed here when None.
+            and left open (same boxes too); one is made and closed here when None.
 
     Raises (when called, before any frame):
         ArgumentTypeError: ``original`` or ``reconstruction`` not a :class:`PointMotion`.
@@ -53,11 +62,11 @@ def render_frames(
     if reconstruction is not None:
         require_type(reconstruction, PointMotion, "reconstruction")
     return _frames(original, reconstruction, keyframes, method, style, frames, progress, feet,
-                   ground_z, renderer)  # fmt: skip
+                   ground_z, renderer, scene_boxes(boxes))  # fmt: skip
 
 
 def _frames(original, reconstruction, keyframes, method, style, frames, progress, feet, ground_z,
-            renderer):  # fmt: skip
+            renderer, boxes):  # fmt: skip
     """The generator behind :func:`render_frames` (arguments checked)."""
     rec = reconstruction
     orig = original if rec is None else original.restrict(rec.names)
@@ -76,10 +85,13 @@ def _frames(original, reconstruction, keyframes, method, style, frames, progress
         renderer.bones.names != orig.names
         or renderer.style != style
         or renderer.ground_z != float(ground_z)
+        or renderer.boxes != boxes
     ):
-        raise UsageError("the renderer was built for other points, another style or ground")
+        raise UsageError("the renderer was built for other points, another style, ground or scene")
     owned = renderer is None
-    r = SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z) if owned else renderer
+    r = renderer
+    if owned:
+        r = SkeletonRenderer(orig.names, orig.parents, style, ground_z=ground_z, boxes=boxes)
     try:
         for t in it:
             marks, flags = foot_frame(feet, t)
