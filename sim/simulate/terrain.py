@@ -379,8 +379,10 @@ def boxes_terrain(boxes: list[Box]) -> tuple | None:
 def add_terrain(spec, boxes: list[Box]) -> None:
     """Add ``boxes`` to ``spec`` in place: static geoms ``terrain<k>`` of a body ``terrain``
     at the origin, added last (the body's geom ids do not move), with the floor's contact
-    bits, parameters and friction (a part touching one touches the floor); a box under a hand
-    (``Box.hand``) touches the hands only (:data:`HOLD_BITS`)."""
+    bits, parameters and friction (a part touching one touches the floor), and no mass: they
+    are the world's, not the figure's (``total_mass``, which the balance feedback's gains
+    scale with, stays the body's: the boxes of eval's 2 s clips of 01_02 weighed 20-70 kg); a
+    box under a hand (``Box.hand``) touches the hands only (:data:`HOLD_BITS`)."""
     floor = spec.geom("floor")
     body = spec.worldbody.add_body()
     body.name = TERRAIN_PREFIX
@@ -397,6 +399,7 @@ def add_terrain(spec, boxes: list[Box]) -> None:
         g.priority = floor.priority
         g.friction = floor.friction
         g.condim = floor.condim
+        g.density = 0.0  # static either way: only the figures of the body's mass see it
         g.rgba = [0.6, 0.5, 0.4, 1.0]
         if b.hand:
             g.contype, g.conaffinity = HOLD_BITS
