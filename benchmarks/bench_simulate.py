@@ -173,7 +173,10 @@ def jsonl_log(path: str | None):
 
     fd = None
     if path:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+        except OSError as e:  # refused before any clip runs: a long run never ends on this
+            raise SystemExit(f"{path}: {e.strerror}: --log takes a new file") from None
 
     def log(message: str, row: dict | None = None) -> None:
         print(message, flush=True)
@@ -404,6 +407,8 @@ def main() -> None:
     RUN_LABEL["text"] = args.label
     if not args.page.replace("_", "").isalnum():
         ap.error(f"--page must be a plain name (letters, digits, _); got {args.page!r}")
+    if args.log and os.path.lexists(args.log):  # before the fits: --log takes a new file
+        ap.error(f"--log {args.log}: exists; the rows go to a new file")
     command = "python benchmarks/bench_simulate.py " + " ".join(sys.argv[1:])
     t0 = time.perf_counter()
     cases, skipped = load_cases(args.cmu, progress=False, workers=args.workers)

@@ -79,6 +79,7 @@ from sim.simulate.generate import (  # noqa: E402
     SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
+    SYNTH_TERRAIN,
     synth_controller,
 )
 from sim.simulate.model import G, sim_model  # noqa: E402
@@ -183,15 +184,19 @@ def make(args, folder: Path, options: list, share: float) -> tuple[str, float]:
                    kinds=tuple(args.kinds), samples=samples, controller=controller,
                    seconds=args.seconds, progress=False, drift=options[0],
                    contact_reference=options[1], lean=options[2], foot_lock=options[3],
+                   terrain=options[4],
                    gain_choice=share if controller == "sampling" else None)  # fmt: skip
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     simulated = sum(r["frames"] for r in s.written) / 30.0
     per_s = cpu / simulated if args.workers == 1 else float("nan")
+    stepped = [r for r in s.written if r["generation"].get("scene", {}).get("boxes")]
     cost = (
         f"Generation: {len(s.written)} clips, {simulated:.0f} simulated s in {wall:.0f} s "
         f"on {args.workers} worker(s): {simulated / wall / args.workers:.2f} simulated s "
         "per wall s per worker"
-        + (f"; {per_s:.1f} CPU s per simulated s (this process)." if args.workers == 1 else ".")
+        + (f"; {per_s:.1f} CPU s per simulated s (this process)" if args.workers == 1 else "")
+        + f"; {len(stepped)} clips in a scene with inferred steps"
+        + (f" ({', '.join(sorted({Path(r['amc']).stem for r in stepped}))})." if stepped else ".")
     )  # fmt: skip
     return cost, per_s
 
@@ -492,10 +497,14 @@ def main() -> None:
         ("lean", SYNTH_LEAN, "the body stepped lean (the same motion, cheaper steps)"),
         ("foot-lock", SYNTH_FOOT_LOCK, "the contact-consistent reference foot-locked (its "
          "stance soles held still on the floor by the legs)"),
+        ("terrain", SYNTH_TERRAIN, "the real-motion kinds in the scene inferred from their "
+         "trials (--flat-floor: --no-terrain)"),
     ):  # fmt: skip
         ap.add_argument(f"--{flag}", action=argparse.BooleanOptionalAction, default=None,
                         help=f"{what} (default: synth's, {default}); another than synth's "
                         "default writes synth_variant.md")  # fmt: skip
+    ap.add_argument("--flat-floor", dest="terrain", action="store_false",
+                    help="as synth --flat-floor: --no-terrain")  # fmt: skip
     ap.add_argument("--gain-choice", type=float, default=SYNTH_GAIN_CHOICE, metavar="SHARE",
                     help="the sampler's share of candidates on the stiff gains (default: "
                     f"synth's, {SYNTH_GAIN_CHOICE:g}); another writes synth_gains.md")  # fmt: skip
@@ -510,8 +519,8 @@ def main() -> None:
     command = "python benchmarks/bench_synth.py " + " ".join(sys.argv[1:])
 
     controller, samples = synth_controller(args.samples, args.controller)
-    chosen = (args.drift, args.contact_reference, args.lean, args.foot_lock)
-    defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK)
+    chosen = (args.drift, args.contact_reference, args.lean, args.foot_lock, args.terrain)
+    defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK, SYNTH_TERRAIN)
     options = [d if v is None else v for v, d in zip(chosen, defaults, strict=True)]
     page = ("synth_variant" if options != list(defaults)
             else "synth_gains" if args.gain_choice != SYNTH_GAIN_CHOICE
@@ -520,8 +529,8 @@ def main() -> None:
     run = controller + (f", {samples} samples" if samples else "")
     if controller == "sampling":
         run += ", " + ", ".join(w if on else f"no {w}" for w, on in zip(
-            ("drift lead", "contact-consistent reference", "lean body", "foot lock"), options,
-            strict=True))  # fmt: skip
+            ("drift lead", "contact-consistent reference", "lean body", "foot lock",
+             "inferred scene"), options, strict=True))  # fmt: skip
         run += (f", gain choice {args.gain_choice:g} on the stiff gains" if args.gain_choice
                 else ", the body's gains alone")  # fmt: skip
     label = f"`synthesize`: {run}"

@@ -100,7 +100,8 @@ def kept_entry(i: int, **change) -> dict:
     from sim.simulate.generate import synth_controller
 
     controller, samples = synth_controller()  # what synthesize resolves its default to
-    task = task_dict(SynthTask("procedural", 0, i, None, None, 0.5, 30.0, samples, controller))
+    task = task_dict(SynthTask("procedural", 0, i, None, None, 0.5, 30.0, samples, controller,
+                               terrain=False))  # a procedural run has no scene to infer  # fmt: skip
     return {"subject": "procedural", "trial": name.stem, "asf": None, "amc": None,
             "file": str(name), "frames": 15, "fps": 30.0, "notes": [], "task": task,
             "mean_assistance": 0.0, **change}  # fmt: skip

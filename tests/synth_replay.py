@@ -51,11 +51,28 @@ def oracle_replay(labels: dict, limits: np.ndarray):
     return np.array(qpos), np.array(qvel), worst, model
 
 
+def _scene_in_mjcf(generation: dict, model) -> bool:
+    """Whether the episode's scene has steps; its MJCF's static boxes ``terrain<k>`` are the
+    ones its parameters record (``scene``), on a body whose mass they do not add to."""
+    boxes = generation["scene"]["boxes"]
+    names = [model.geom(g).name for g in range(model.ngeom)]
+    ids = [g for g, name in enumerate(names) if name.startswith("terrain")]
+    assert len(ids) == len(boxes)
+    assert not boxes or generation["scene"]["inferred"]
+    for g, b in zip(ids, boxes, strict=True):
+        assert model.geom_bodyid[g] == model.nbody - 1 and model.body_mass[-1] == 0.0
+        assert np.allclose(model.geom_pos[g], b["centre"], atol=1e-5)
+        assert np.allclose(model.geom_size[g], b["half"], atol=1e-5)
+        assert np.isclose(2 * np.arctan2(model.geom_quat[g, 3], model.geom_quat[g, 0]), b["yaw"],
+                          atol=1e-5)  # fmt: skip
+    return bool(boxes)
+
+
 def check_replays(out, written, kinds) -> dict:
     """Every clip of ``written`` replays bit for bit within the human limits (the assertions
     below); returns counts of what the clips held."""
     count = {k: 0 for k in kinds} | {"pushed": 0, "assisted": 0, "strong": 0, "weakened": 0,
-                                     "switched": 0}  # fmt: skip
+                                     "switched": 0, "stepped": 0}  # fmt: skip
     for r in written:
         path = out / r["file"]
         labels, clip = load_extra(path, "sim_"), load_npz(path)
@@ -101,6 +118,7 @@ def check_replays(out, written, kinds) -> dict:
         count["assisted"] += helped
         count["strong"] += generation["gain"] > 1.2
         count["weakened"] += any(w["start"] < SECONDS - 0.1 for w in generation["weakenings"])
+        count["stepped"] += _scene_in_mjcf(generation, model)
     assert all(count[k] >= PER_KIND for k in kinds), count
     seeds = [r["generation"]["seed"] for r in written]
     assert len(set(seeds)) == len(seeds)  # a seed per episode, not the run's

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from sim.model.humanoid import canonical_skeleton
+from sim.simulate import tracking
 from sim.simulate.falls import fall_cause, fall_reference, geom_bottoms
-from sim.simulate.model import CONTROL_HZ, sim_model, sim_spec
+from sim.simulate.model import CONTROL_HZ, sim_model, sim_spec, total_mass
 from sim.simulate.reference import floor_track, lowest_foot_point
 from sim.simulate.terrain import (
     CLEAR,
@@ -155,6 +156,14 @@ def test_the_scene_adds_boxes_without_changing_the_body(spec, model):
         np.testing.assert_array_equal(getattr(scene, field)[: getattr(model, field).shape[0]],
                                       getattr(model, field))  # fmt: skip
     assert np.array_equal(scene.geom_size[: model.ngeom], model.geom_size)
+    # the box is the world's: the body's mass and centre of mass, which the balance feedback's
+    # gains scale with, are the body's (a 0.12 m^3 box of density 1000 would weigh 120 kg)
+    assert scene.body_mass[-1] == 0.0 and total_mass(scene) == total_mass(model)
+    data, body = mujoco.MjData(scene), mujoco.MjData(model)
+    for m, d in ((scene, data), (model, body)):
+        mujoco.mj_forward(m, d)
+    assert np.array_equal(data.subtree_com[0], body.subtree_com[0])
+    assert np.array_equal(tracking.floor_ids(scene), [scene.geom("floor").id, *ids])
 
 
 def test_a_sole_on_a_step_is_at_zero_above_it(spec, model):

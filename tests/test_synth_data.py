@@ -49,6 +49,7 @@ def synth_wholebody(cmu_dir, tmp_path_factory):
 def test_stored_actions_replay_every_state_bit_for_bit_within_human_torque_limits(synth):
     count = check_replays(*synth, KINDS)
     assert count["pushed"] >= 10 and count["assisted"] >= 20 and count["strong"] >= 3
+    assert count["stepped"] >= 1  # an episode in the scene inferred from its trial (01_02, 03_0x)
     assert count["weakened"] >= 5  # the wrenches, assistance, gains and weakenings were there
     assert all(r["generation"]["controller"] == "plain" for r in synth[1])
 
@@ -150,6 +151,11 @@ def test_minari_loads_the_export_with_terminations_only_at_falls(synth, tmp_path
         falls += fall > 0
     assert ds.total_steps == steps
     assert falls >= 1  # a fall ended some episode (and its terminations were checked)
+    # episodes in a scene with steps replayed on their own MJCF (above); the dataset's is the
+    # empty floor's, and says how many carry steps
+    stepped = sum('name="terrain0"' in m["mjcf"] for m in metadata)
+    assert stepped >= 1 and 'name="terrain' not in meta["mjcf"]
+    assert f"{stepped} of {len(written)} episodes carry steps" in meta["scenes"]
 
 
 def test_cli_synth_exports_minari_and_refuses_a_bad_id(tmp_path, monkeypatch, capsys):

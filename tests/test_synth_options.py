@@ -34,15 +34,15 @@ def _reference(task, ticks: int):
     """(p, model, ref): ``task``'s drawn parameters, its episode body and the reference the
     sampler tracks (``ticks`` control ticks), built by the generator's own functions."""
     from sim.model.humanoid import canonical_skeleton
-    from sim.simulate.episode_body import episode_model
-    from sim.simulate.generate import draw_parameters, episode_rng, episode_seed, reference_motion
+    from sim.simulate.episode_scene import episode_setup
+    from sim.simulate.generate import draw_parameters, episode_rng, episode_seed
     from sim.simulate.model import scaled_skeleton
 
     rng = episode_rng(episode_seed(task))
     p = draw_parameters(task, rng)
-    model = episode_model(scaled_skeleton(canonical_skeleton(), p["scale"]), p["scale"],
-                          p["gain"])[0]  # fmt: skip
-    return p, model, reference_motion(task, p, model, ticks, rng)
+    skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
+    models, _, _, ref = episode_setup(task, p, skeleton, (), ticks, rng)
+    return p, models[0], ref
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.simulate.generate import fastest_window
+from sim.simulate.windows import fastest_window
 
 
 def test_the_window_whose_points_move_fastest_is_chosen():

@@ -7,6 +7,7 @@ from argparse import BooleanOptionalAction
 from sidql.commands.usage import (
     UsageError,
     add_data,
+    add_flat_floor,
     add_quiet,
     add_ray,
     add_samples,
@@ -35,7 +36,9 @@ DESCRIPTION = (
     "eval --simulate's sampler; time warps, body scaling, gain changes, pushes), make the figure "
     "fall and recover, or track procedural "
     "motion; the body has human strength and no help unless --assist asks for it (procedural "
-    "clips are tracked with help, recorded); write OUT/<kind>/<kind>_NNNNN.npz in the `sidql "
+    "clips are tracked with help, recorded), and real trials are tracked in the scene inferred "
+    "from them, as eval --simulate does (steps under feet that stand on something; "
+    "--flat-floor: the empty floor); write OUT/<kind>/<kind>_NNNNN.npz in the `sidql "
     "dataset` format plus OUT/index.json "
     "recording every clip's parameters, seed, per-frame root assistance and tracking error. "
     "Positions and velocities are the simulator's state. The same --seed gives the same clips bit "
@@ -99,6 +102,7 @@ def register(p) -> None:
     ):  # fmt: skip
         p.add_argument(f"--{flag}", action=BooleanOptionalAction, default=None,
                        help=f"{what} (default: {'on' if default else 'off'}; recorded)")  # fmt: skip
+    add_flat_floor(p, "track the real-motion kinds", "trial")
     p.add_argument(
         "--gain-choice", type=float, default=None, metavar="SHARE",
         help="share of the sampler's candidates per window that roll out on the stiff feedback "
@@ -152,6 +156,7 @@ def run(args) -> int:
         progress=not args.quiet, max_assistance=args.max_assistance, resume=args.resume,
         drift=args.drift, contact_reference=args.contact_reference, lean=args.lean,
         gain_choice=args.gain_choice, foot_lock=args.foot_lock,
+        terrain=False if args.flat_floor else None,
     )  # fmt: skip
     frames = sum(r["frames"] for r in s.written)
     print(f"simulated {len(s.written)} clips ({frames} frames) in {s.seconds:.1f} s -> "

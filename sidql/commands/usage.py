@@ -254,13 +254,16 @@ def add_samples(
                             action=OldSpelling, new="--samples N")  # fmt: skip
 
 
-def add_flat_floor(parser: argparse.ArgumentParser) -> None:
-    """``--flat-floor``: with ``--simulate``, the body on the empty floor instead of the scene
-    inferred from each clip's original motion (``sim.simulate.terrain``; the default)."""
+def add_flat_floor(
+    parser: argparse.ArgumentParser, lead: str = "with --simulate: track", what: str = "clip"
+) -> None:
+    """``--flat-floor``: the body on the empty floor instead of the scene inferred from each
+    ``what``'s original motion (``sim.simulate.terrain``; the default); ``lead`` begins the
+    help (when, and what is tracked)."""
     parser.add_argument(
         "--flat-floor", action="store_true",
-        help="with --simulate: track on the empty floor, without the scene inferred from each "
-        "clip's original motion (static steps under feet that stand on something, the default: "
+        help=f"{lead} on the empty floor, without the scene inferred from each {what}'s "
+        "original motion (static steps under feet that stand on something, the default: "
         "docs/synthetic.md)",
     )  # fmt: skip
 

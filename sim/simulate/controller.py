@@ -49,7 +49,7 @@ from sim.simulate.balance import Balance, balance_plan, held_torques
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS, G, Gains, total_mass
-from sim.simulate.tracking import Tracking, TrackRecord, foot_forces, foot_sides
+from sim.simulate.tracking import Tracking, TrackRecord, floor_ids, foot_forces, foot_sides
 
 ROOT_TORQUE_LEVER = 1.0  # [m]: root torque bound = assist_limit * body weight * this lever
 FALLEN_TONE = 0.3  # share of effort with which a fallen body holds its pose
@@ -142,13 +142,13 @@ def _root_inertia(model, qpos, data) -> np.ndarray:
     return out
 
 
-def _floor_contact(data, floor: int) -> bool:
-    """Whether any contact of ``data``'s last step involves geom ``floor``."""
+def _floor_contact(data, floor) -> bool:
+    """Whether any contact of ``data``'s last step involves a geom of ``floor`` (ids:
+    ``tracking.floor_ids``, the floor and the scene's terrain boxes)."""
     n = data.ncon
     if not n:
         return False
-    g = data.contact.geom[:n]
-    return bool(np.any(g == floor))
+    return bool(np.isin(data.contact.geom[:n], floor).any())
 
 
 def weakening_factor(weakenings: tuple[Weakening, ...], t: float) -> float:
@@ -205,7 +205,7 @@ class _Plan:
     kp_r: float
     kd_r: float
     weight: float
-    floor: int
+    floor: np.ndarray  # the floor geom and the terrain boxes (tracking.floor_ids)
     side: np.ndarray
     push_ids: list
 
@@ -230,7 +230,7 @@ def _plan(model, ref_qpos: np.ndarray, gains: Gains, pushes: tuple[Push, ...], d
         kp_r=gains.root_omega**2,
         kd_r=2 * gains.root_zeta * gains.root_omega,
         weight=total_mass(model) * G,
-        floor=model.geom("floor").id,
+        floor=floor_ids(model),
         side=foot_sides(model),
         push_ids=[model.body(p.body).id for p in pushes],
     )

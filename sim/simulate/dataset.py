@@ -44,6 +44,7 @@ from sim.simulate.generate import (
     SYNTH_FOOT_LOCK,
     SYNTH_GAIN_CHOICE,
     SYNTH_LEAN,
+    SYNTH_TERRAIN,
     TASK_OPTIONS,
     SynthTask,
     generate,
@@ -172,6 +173,7 @@ def synthesize(
     lean: bool | None = None,
     gain_choice: float | None = None,
     foot_lock: bool | None = None,
+    terrain: bool | None = None,
 ) -> DatasetSummary:
     """Generate ``n`` clips into ``out_dir`` (see the module docstring).
 
@@ -194,7 +196,9 @@ def synthesize(
     ``SYNTH_CONTACT_REFERENCE``, ``SYNTH_LEAN``), recorded in the journal and the index;
     ``gain_choice``: the sampler's share of candidates on the stiff gains (None:
     ``SYNTH_GAIN_CHOICE`` with the sampler, 0 with another controller), likewise;
-    ``foot_lock``: the contact-consistent reference foot-locked (None: ``SYNTH_FOOT_LOCK``).
+    ``foot_lock``: the contact-consistent reference foot-locked (None: ``SYNTH_FOOT_LOCK``);
+    ``terrain``: real motion in the scene inferred from its trial (None: ``SYNTH_TERRAIN``;
+    ``episode_scene``), off where every kind is procedural, recorded only where on.
 
     ``resume``: continue the run whose journal is in ``out_dir`` (same parameters but perhaps
     another ``n``, else a ``UsageError``); its finished tasks are not simulated again.
@@ -216,18 +220,23 @@ def synthesize(
     if gain_choice and controller != "sampling":
         raise UsageError(f"a gain choice is the sampler's; not for the {controller} controller")
     share = SYNTH_GAIN_CHOICE if gain_choice is None and controller == "sampling" else gain_choice
-    chosen = zip(("drift", "contact_reference", "lean", "foot_lock"),
-                 (drift, contact_reference, lean, foot_lock),
-                 (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK),
-                 strict=True)  # fmt: skip
+    real = any(k != "procedural" for k in kinds)  # a trial to infer a scene from
     task = {"samples": samples, "controller": controller, "assist": float(assist),
-            "threads": int(threads), **{k: bool(d if v is None else v) for k, v, d in chosen},
-            "gain_choice": float(share or 0.0)}  # fmt: skip
+            "threads": int(threads), "gain_choice": float(share or 0.0),
+            **_switches(drift, contact_reference, lean, foot_lock, terrain if real else False)}  # fmt: skip
     if task["foot_lock"] and not (controller == "wholebody" or task["contact_reference"]):
         raise UsageError("a foot lock needs the contact-consistent reference (--contact-reference)")
     with ray_session(ray, workers):  # Ray started or joined once for both batches
         return _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task, workers, ray, progress,
                            max_assistance, max_tries, resume)  # fmt: skip
+
+
+def _switches(*chosen) -> dict:
+    """``SynthTask``'s switches ``drift``, ``contact_reference``, ``lean``, ``foot_lock`` and
+    ``terrain`` as chosen (None: synth's default, ``generate.SYNTH_*``)."""
+    names = ("drift", "contact_reference", "lean", "foot_lock", "terrain")
+    defaults = (SYNTH_DRIFT, SYNTH_CONTACT_REFERENCE, SYNTH_LEAN, SYNTH_FOOT_LOCK, SYNTH_TERRAIN)
+    return {k: bool(d if v is None else v) for k, v, d in zip(names, chosen, defaults, strict=True)}
 
 
 def _synthesize(root, out_dir, n, seed, kinds, seconds, fps, task_kw, workers, ray, progress,

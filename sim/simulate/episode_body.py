@@ -19,6 +19,7 @@ import numpy as np
 from sim.model.mass import DEFAULT_BODY_MASS_KG
 from sim.simulate.episode import pd_gains, set_gains
 from sim.simulate.model import Gains, sim_spec
+from sim.simulate.terrain import add_terrain
 
 
 def episode_model(
@@ -41,14 +42,17 @@ def episode_bodies(
     actuators: str = "position",
     lean: bool = False,
     alternates: tuple[Gains, ...] = (),
+    terrain: list = (),
 ) -> tuple[tuple, str, Gains]:
     """:func:`episode_model`'s body with further gain sets: ``alternates`` (each scaled by
-    ``gain`` like the default ``Gains()``), position actuators only.
+    ``gain`` like the default ``Gains()``), position actuators only; in the scene of the boxes
+    ``terrain`` (``sim.simulate.terrain.Box``, added by ``add_terrain`` after the body: its
+    ids do not move; none: the empty floor).
 
     Returns:
         the models (the MJCF's, then one per alternate: the MJCF's with that set's ``kp``,
-        ``kv``), the MJCF (armature and control ranges common to all sets: module docstring)
-        and the default set's gains.
+        ``kv``), the MJCF (armature and control ranges common to all sets: module docstring;
+        the boxes in it) and the default set's gains.
     """
     gains = Gains().scaled(gain)
     sets = [gains, *(g.scaled(gain) for g in alternates)]
@@ -65,6 +69,8 @@ def episode_bodies(
         hi = np.max([m.actuator_ctrlrange[:, 1] for m in own], axis=0)
         for i, a in enumerate(specs[0].actuators):
             a.ctrlrange = [lo[i], hi[i]]
+    if len(terrain):  # a fresh spec of this episode's: no cached body is changed
+        add_terrain(specs[0], list(terrain))
     mjcf = specs[0].to_xml()
     models = [mujoco.MjModel.from_xml_string(mjcf)]
     for m in own[1:]:

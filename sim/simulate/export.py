@@ -35,9 +35,12 @@ the whole clip):
 ``minari_version``, ``data_format``, ``total_episodes``, ``total_steps``, the serialised
 ``observation_space`` (a Dict of two Boxes) and ``action_space`` (a Box spanning every episode's
 control range and, for variable-impedance actions, every gain seen)) plus ``frame_skip``,
-``joint_names``, ``actions`` (what an action is), ``action_layout`` (its columns) and the
-unscaled body's ``mjcf`` and ``torque_limit`` (U,) [N m] (an episode of another body size
-carries its own).
+``joint_names``, ``actions`` (what an action is), ``action_layout`` (its columns), the
+unscaled body's ``mjcf`` on the empty floor and its ``torque_limit`` (U,) [N m] (an episode of
+another body size, or in a scene with inferred steps, carries its own ``mjcf``: replay each
+episode on its own), and ``scenes``: what ``mjcf`` is, and how many episodes carry steps
+(their MJCF's static boxes ``terrain<k>``, their ``xfrc_applied`` one body wider;
+``sim.simulate.episode_scene``).
 
 Replaying an episode: ``targets, gains = sim.simulate.episode.split_actions(actions)`` (torque
 actions: ``actions``, ``None``), then ``replay(mjcf, initial_state, targets,
@@ -64,6 +67,7 @@ from sim.motion.dataset import entry_file, read_index
 from sim.simulate.episode import array_text, impedance_actions, is_position, pd_gains, torque_limits
 from sim.simulate.episode_body import episode_model
 from sim.simulate.generate import EPISODE_LABELS
+from sim.simulate.terrain import terrain_geoms
 
 #: the episode labels only a body of position actuators has
 POSITION_LABELS = ("sim_actuator_gains",)
@@ -107,10 +111,11 @@ def episode_actions(labels: dict, model) -> np.ndarray:
     return impedance_actions(actions, gains)
 
 
-def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray, str]:
+def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray, str, bool]:
     """Write clip ``r`` (its index entry, its ``sim_`` labels) as ``episode_<k>``; returns its
     step count, its action box (2, A) (lowest and highest: the control range, and the gains
-    of its steps) and its actuators (:func:`_actuators`; from its MJCF's model)."""
+    of its steps), its actuators (:func:`_actuators`; from its MJCF's model) and whether its
+    scene has steps (``terrain`` geoms in its MJCF)."""
     missing = set(EPISODE_LABELS) - set(POSITION_LABELS) - set(labels)
     if missing:
         raise MotionDataError(r["file"], None, f"no {min(missing)}: not a synth episode")
@@ -146,7 +151,7 @@ def _write_episode(h, k: int, r: dict, labels: dict) -> tuple[int, np.ndarray, s
     lo, hi = model.actuator_ctrlrange.T
     if actions.shape[1] > model.nu:  # the gains' columns: the lowest and highest seen
         lo, hi = np.r_[lo, actions[:, model.nu :].min(0)], np.r_[hi, actions[:, model.nu :].max(0)]
-    return N, np.stack([lo, hi]), _actuators(model)
+    return N, np.stack([lo, hi]), _actuators(model), terrain_geoms(model) is not None
 
 
 def _actuators(model) -> str:
@@ -155,9 +160,11 @@ def _actuators(model) -> str:
     return "position" if is_position(model) else "motor"
 
 
-def _metadata(dataset_id: str, labels: dict, steps: list, ranges: np.ndarray, actuators: str):
+def _metadata(dataset_id: str, labels: dict, steps: list, ranges: np.ndarray, actuators: str,
+              stepped: int):  # fmt: skip
     """``metadata.json``'s content (module docstring): ``labels`` of the first episode,
-    ``steps`` per episode, ``ranges`` (E, 2, A) their action boxes, ``actuators`` their kind."""
+    ``steps`` per episode, ``ranges`` (E, 2, A) their action boxes, ``actuators`` their kind,
+    ``stepped`` how many of them are in a scene with steps."""
     model, mjcf, _ = episode_model(canonical_skeleton(), 1.0, 1.0, actuators)
     nq, nv = labels["sim_tick_qpos"].shape[1], labels["sim_tick_qvel"].shape[1]
     inf = np.full(nq, np.inf)
@@ -180,6 +187,9 @@ def _metadata(dataset_id: str, labels: dict, steps: list, ranges: np.ndarray, ac
         "joint_names": [model.actuator(a).name for a in range(model.nu)],
         "mjcf": mjcf,
         "torque_limit": torque_limits(model).tolist(),
+        "scenes": f"mjcf: the unscaled body on the empty floor; {stepped} of {len(steps)} "
+        "episodes carry steps inferred from their trial (static boxes terrain<k>) in their own "
+        "mjcf, every episode its own body",
         "actions": ACTIONS[actuators],
         "action_layout": {
             name: [i * model.nu, (i + 1) * model.nu] for i, name in enumerate(LAYOUT[actuators])
@@ -222,13 +232,14 @@ def export_minari(
     files = [(index["trials"][i], entry_file(src, index, i)) for i in chosen]  # inside src
     root = Path(root)
     out = root / dataset_id / "data"  # made by the writer below root, through no link
-    steps, ranges, kinds = [], [], set()
+    steps, ranges, kinds, stepped = [], [], set(), []
 
     def write(f) -> None:
         with h5py.File(f, "w", track_order=True) as h:
             for k, (r, file) in enumerate(files):
-                n, rng, actuators = _write_episode(h, k, r, load_extra(file, "sim_"))
+                n, rng, actuators, scene = _write_episode(h, k, r, load_extra(file, "sim_"))
                 steps.append(n)
+                stepped.append(scene)
                 ranges.append(rng)
                 kinds.add(actuators)
                 if len(kinds) > 1:  # one action space per dataset
@@ -238,7 +249,7 @@ def export_minari(
     write_atomic(out / "main_data.hdf5", write, root=root)
     (actuators,) = kinds
     metadata = _metadata(dataset_id, load_extra(files[0][1], "sim_"), steps, np.stack(ranges),
-                         actuators)  # fmt: skip
+                         actuators, sum(stepped))  # fmt: skip
     text = json.dumps(metadata, indent=1).encode()
     write_atomic(out / "metadata.json", lambda f: f.write(text), root=root)
     return len(files)

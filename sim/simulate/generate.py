@@ -19,7 +19,10 @@ otherwise. Kinds (each clip's parameters are drawn from its own seed, :func:`epi
   with up to :data:`PROCEDURAL_ASSIST` body weight of recorded root assistance.
 
 The real-motion kinds get no assistance unless their task asks for it (``SynthTask.assist``):
-only the joints, within the human torque limits, and the floor move the body.
+only the joints, within the human torque limits, and the floor move the body. They are tracked
+in the scene inferred from their trial unless their task says otherwise (``SynthTask.terrain``,
+:data:`SYNTH_TERRAIN`; ``sim.simulate.episode_scene``): static boxes under feet that stand on
+raised supports, held in the episode's MJCF and recorded in its parameters (``scene``).
 
 Positions, point velocities and ``qvel`` of a clip are the simulator's state sampled at the clip
 rate; point velocities come from the kinematic chain (``point_kinematics`` with the simulator's
@@ -34,24 +37,20 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from sim.errors import MotionDataError, UnknownNameError, UsageError
+from sim.errors import UnknownNameError, UsageError
 from sim.model.humanoid import canonical_skeleton
 from sim.model.kinematics import point_names, point_parents
 from sim.motion.clip import Clip
 from sim.motion.retarget import local_rotations_from_world
-from sim.motion.synthetic import synthetic_qpos
 from sim.motion.velocities import point_kinematics
 from sim.simulate.controller import ROOT_TORQUE_LEVER, Push, Tracking, Weakening, track
 from sim.simulate.episode import FRAME_SKIP, Recorder, text_array, torque_limits
-from sim.simulate.episode_body import episode_bodies
-from sim.simulate.footlock import foot_locked
+from sim.simulate.episode_scene import SYNTH_TERRAIN, episode_setup
 from sim.simulate.gainchoice import GainChoice, choice_track
 from sim.simulate.model import CONTROL_HZ, G, Gains, scaled_skeleton, total_mass
-from sim.simulate.reference import contact_consistent, flat_soles, on_floor, time_warp, trial_qpos
 from sim.simulate.sampling import BALANCE, LOOKAHEAD, CostWeights, sample_track
 from sim.simulate.validate import CONTROLLERS, DEFAULT_BALANCE, STIFF_GAINS, chosen_controller
 from sim.simulate.wholebody import track_wholebody
-from sim.simulate.windows import body_points, fastest_window
 
 KINDS = ("track", "fall")  # the default mix: real motion, no assistance
 #: [s] a clip's length unless asked otherwise: the protocol's 60 frames at 30 fps (the length
@@ -79,7 +78,7 @@ EPISODE_LABELS = {
     "sim_tick_qvel": "(T + 1, nv) qvel likewise",
     "sim_initial_state": "(S,) mj_getState(mjSTATE_INTEGRATION) before the first tick",
     "sim_mjcf": "(n,) uint8: the body's MJCF (UTF-8; sim.simulate.episode.array_text), the "
-    "model simulated",
+    "model simulated, with its scene's static boxes (terrain<k>) where it has any",
     "sim_frame_skip": "() int: physics steps per action",
     "sim_torque_limit": "(U,) each actuator's torque limit [N m] (the human peak torque)",
     "sim_generation": "(n,) uint8: JSON (UTF-8) of the generation parameters, the episode's "
@@ -91,9 +90,12 @@ LABELS = {
     **EPISODE_LABELS,
     "sim_joint_torque": "(F, U) applied hinge torques [N m] (within the human limits)",
     "sim_assist_wrench": "(F, 6) root assistance: force [N] world frame, torque [N m] root frame",
-    "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor",
-    "sim_foot_force": "(F, 2, 3) floor contact force [N, world frame] on the left, right foot",
-    "sim_contact_penetration": "(F,) deepest floor contact penetration [m], 0 without contact",
+    "sim_foot_contact": "(F, 2) bool: left, right foot (foot or toe) touches the floor (or a "
+    "box of the scene)",
+    "sim_foot_force": "(F, 2, 3) floor (and boxes') contact force [N, world frame] on the left, "
+    "right foot",
+    "sim_contact_penetration": "(F,) deepest floor (or box) contact penetration [m], 0 without "
+    "contact",
     "sim_fallen": "(F,) bool: the figure has fallen (sim.simulate.falls: a part other than the feet on the floor where the reference has none, or the head below half the reference's)",
 }
 ALL_KINDS = (*KINDS, "follow", "procedural")
@@ -103,9 +105,6 @@ REAL_KINDS = ("track", "fall", "follow")
 # whole body weight, recorded per tick and per frame; the real-motion kinds get none unless a
 # task asks for it (``SynthTask.assist``)
 PROCEDURAL_ASSIST = 1.0
-#: windows drawn per clip of a kind, the fastest kept (:func:`fastest_window`): the ``track``
-#: kind is velocity-rich on purpose, the others take one window at random
-WINDOW_CANDIDATES = {"track": 4}
 #: [s] the ``track`` kind draws 0 to 1 + (its length // this) pushes: 0-1 in a 2 s clip, 0-2
 #: in 4 s (a short clip is not pushed more often than a long one)
 PUSH_SECONDS = 4.0
@@ -137,7 +136,9 @@ SYNTH_SAMPLES = 28
 #: on 60 clips it kept fewer up on one of two seeds (docs/synthetic.md)
 SYNTH_FOOT_LOCK = False
 #: :class:`SynthTask`'s options: in a task's dict and a run's journal only where True (non-zero)
-TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice", "foot_lock")
+#: (``terrain`` is on by default: a run without it in its journal, from before it, was on the
+#: empty floor, as one with ``--flat-floor`` is)
+TASK_OPTIONS = ("drift", "contact_reference", "lean", "gain_choice", "foot_lock", "terrain")
 
 
 def is_physical(mean_force_bw: float, mean_torque_bw_m: float) -> bool:
@@ -170,6 +171,7 @@ class SynthTask:
     lean: bool = SYNTH_LEAN  # the body stepped lean (its MJCF says so)
     gain_choice: float = SYNTH_GAIN_CHOICE  # the sampler's share on the stiff gains (0: none)
     foot_lock: bool = SYNTH_FOOT_LOCK  # the contact-consistent reference foot-locked
+    terrain: bool = SYNTH_TERRAIN  # real motion in the scene inferred from its trial
 
 
 def synth_controller(samples: int = 0, controller: str | None = None) -> tuple[str, int]:
@@ -295,14 +297,11 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     rng = episode_rng(episode_seed(task))
     p = draw_parameters(task, rng)
     skeleton = scaled_skeleton(canonical_skeleton(), p["scale"])
-    actuators = "motor" if p["controller"] == "wholebody" else "position"
     stiff = (STIFF_GAINS,) if p["controller"] == "sampling" and task.gain_choice > 0 else ()
-    models, mjcf, gains = episode_bodies(skeleton, p["scale"], p["gain"], actuators, task.lean,
-                                         stiff)  # fmt: skip
-    model = models[0]
     p["lean"] = bool(task.lean)
     n = int(round(task.seconds * CONTROL_HZ))
-    ref = reference_motion(task, p, model, n, rng)
+    models, mjcf, gains, ref = episode_setup(task, p, skeleton, stiff, n, rng)  # in its scene
+    model = models[0]
     recorder = Recorder(model, mjcf, n, FRAME_SKIP)
     result = simulate_episode(task, p, models, gains, ref, recorder, rng)
     if result.unstable:
@@ -317,59 +316,6 @@ def generate(task: SynthTask) -> tuple[Clip, dict]:
     record = episode_record(p, model, result, out.positions, ref_pos)
     record["labels"] = episode_labels(p, model, mjcf, result, recorder.episode())
     return out, record
-
-
-def reference_motion(
-    task: SynthTask, p: dict, model, n: int, rng: np.random.Generator
-) -> np.ndarray:
-    """The (n, nq) reference the body tracks at ``CONTROL_HZ``: the procedural motion, or a
-    window of the source trial time-warped by ``p["speed"]`` (lowered to the fastest warp that
-    still fills the clip) and set on the floor, lifted 1 cm or contact-consistent (the
-    whole-body QP's; the sampler's where ``task.contact_reference``), foot-locked where
-    ``task.foot_lock``; records ``source``, ``reference`` (and ``start_tick``, drawn from
-    ``rng``) in ``p``.
-
-    Raises:
-        MotionDataError: the source trial is unreadable or shorter than one clip.
-        UsageError: a foot lock asked of a reference that is not contact-consistent.
-    """
-    if task.kind == "procedural":
-        slow, _ = synthetic_qpos(
-            model, task.seconds * p["speed"] + 0.1, seed=p["motion_seed"], rate=CONTROL_HZ,
-            energy=p["energy"],
-        )  # fmt: skip
-        p["source"] = ""
-        return time_warp(model, slow, CONTROL_HZ, p["speed"], CONTROL_HZ)[:n]
-    qpos = trial_qpos(task.asf, task.amc)  # CMU's 120 Hz = the control rate
-    qpos[:, :3] *= p["scale"]
-    fit = (len(qpos) - 1) / max(n - 1, 1)  # the fastest replay that still fills the clip
-    if p["speed"] > fit >= 0.5:
-        p["speed"] = fit
-    warped = time_warp(model, qpos, CONTROL_HZ, p["speed"], CONTROL_HZ)
-    if len(warped) < n:
-        raise MotionDataError(
-            str(task.amc), None, f"{len(warped) / CONTROL_HZ:.2f} s after a {p['speed']:.2f}x"
-            f" time warp: shorter than one {task.seconds:g} s clip"
-        )  # fmt: skip
-    starts = rng.integers(0, len(warped) - n + 1, WINDOW_CANDIDATES.get(task.kind, 1))
-    start = int(starts[0]) if len(starts) == 1 else fastest_window(body_points(model, warped),
-                                                                   n, starts)  # fmt: skip
-    p["source"] = str(task.amc)
-    p["start_tick"] = start
-    window = warped[start : start + n]
-    c = p["controller"]
-    contact = c == "wholebody" or (c == "sampling" and bool(task.contact_reference))
-    p["reference"] = "contact-consistent" if contact else "lifted"
-    if task.foot_lock and not contact:
-        raise UsageError("a foot lock needs the contact-consistent reference")
-    if contact:  # feet meet the floor: no lift, stance soles on it (held still: foot_lock)
-        ref = contact_consistent(model, flat_soles(model, on_floor(model, window, lift=0.0)))
-        if task.foot_lock:
-            p["reference"] += ", foot-locked"
-            return foot_locked(model, ref, CONTROL_HZ)
-        return ref
-    # the 1 cm lift, and soles near the floor laid flat
-    return flat_soles(model, on_floor(model, window))
 
 
 def simulate_episode(

@@ -48,7 +48,7 @@ from sim.simulate.feedforward import (
     reference_derivatives,
 )
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
-from sim.simulate.tracking import TrackRecord, foot_forces, foot_sides
+from sim.simulate.tracking import TrackRecord, floor_ids, foot_forces, foot_sides
 from sim.simulate.wholebody_reference import SMOOTH_S
 
 
@@ -242,7 +242,7 @@ def track_lqr(model, ref_qpos: np.ndarray, *, weights: LQRWeights | None = None,
     data = mujoco.MjData(model)
     data.qpos[:], data.qvel[:] = ref_qpos[0], qvel[0]
     mujoco.mj_forward(model, data)
-    floor, side = model.geom("floor").id, foot_sides(model)
+    floor, side = floor_ids(model), foot_sides(model)
     rec = TrackRecord(model, T, record_every)
     rec.assist[:], rec.wrench[:] = 0.0, 0.0
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]

@@ -355,7 +355,9 @@ def surface_height(terrain: tuple | None, xy: np.ndarray) -> np.ndarray:
 def add_terrain(spec, boxes: list[Box]) -> None:
     """Add ``boxes`` to ``spec`` in place: static geoms ``terrain<k>`` of a body ``terrain``
     at the origin, added last (the body's geom ids do not move), with the floor's contact
-    bits, parameters and friction (a part touching one touches the floor)."""
+    bits, parameters and friction (a part touching one touches the floor), and no mass: they
+    are the world's, not the figure's (``total_mass``, which the balance feedback's gains
+    scale with, stays the body's: the boxes of eval's 2 s clips of 01_02 weighed 20-70 kg)."""
     floor = spec.geom("floor")
     body = spec.worldbody.add_body()
     body.name = TERRAIN_PREFIX
@@ -372,6 +374,7 @@ def add_terrain(spec, boxes: list[Box]) -> None:
         g.priority = floor.priority
         g.friction = floor.friction
         g.condim = floor.condim
+        g.density = 0.0  # static either way: only the figures of the body's mass see it
         g.rgba = [0.6, 0.5, 0.4, 1.0]
 
 

@@ -2,7 +2,8 @@
 keeps while it runs (:class:`TrackRecord`): states, controls, torques and the floor's forces on
 the feet every ``record_every`` control ticks, the root wrench of every tick, the deepest
 contact penetrations and the fall. Shared by ``sim.simulate.controller`` (the plain tracker)
-and ``sim.simulate.wholebody``.
+and ``sim.simulate.wholebody``. "The floor" is the floor geom and the scene's terrain boxes
+(:func:`floor_ids`, ``sim.simulate.terrain``): a foot on a step is on the floor.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 
 from sim.model.kinematics import SOLE_POINTS
 from sim.simulate.model import SOLE_GEOMS, TOE_GEOMS, G, total_mass
+from sim.simulate.terrain import terrain_geoms
 
 
 @dataclass
@@ -70,17 +72,27 @@ class Tracking:
     fall_tick: int = -1
 
 
-def foot_forces(model, data, floor: int, side: np.ndarray, out: np.ndarray) -> None:
+def floor_ids(model) -> np.ndarray:
+    """(K,) the geoms that are floor: the ``floor`` geom, then the scene's terrain boxes
+    (``sim.simulate.terrain.terrain_geoms``; none on the empty floor)."""
+    terrain = terrain_geoms(model)
+    boxes = [] if terrain is None else terrain[0].tolist()
+    return np.array([model.geom("floor").id, *boxes])
+
+
+def foot_forces(model, data, floor, side: np.ndarray, out: np.ndarray) -> None:
     """Write into ``out`` (2, 3) the floor's contact force [N, world frame] on the left (row 0)
-    and right (row 1) foot: ``side`` (ngeom,) is 0/1 for a foot geom of that side, -1 else."""
+    and right (row 1) foot: ``floor`` the floor's geom id or ids (:func:`floor_ids`); ``side``
+    (ngeom,) is 0/1 for a foot geom of that side, -1 else."""
     out[:] = 0.0
     f6 = np.zeros(6)
+    floor = np.atleast_1d(floor)
     for c in range(data.ncon):
         con = data.contact[c]
         g1, g2 = con.geom
-        if g1 == floor:
+        if g1 in floor:
             s, sign = side[g2], 1.0  # the force acts from geom1 on geom2
-        elif g2 == floor:
+        elif g2 in floor:
             s, sign = side[g1], -1.0
         else:
             continue
@@ -101,13 +113,14 @@ def foot_sides(model) -> np.ndarray:
     return side
 
 
-def contact_depths(data, floor: int) -> tuple[float, float]:
-    """The deepest penetration [m] (>= 0) of ``data``'s contacts with geom ``floor`` and of
-    those between two other geoms (the body's self-contacts); 0 where there is none."""
+def contact_depths(data, floor) -> tuple[float, float]:
+    """The deepest penetration [m] (>= 0) of ``data``'s contacts with geom ``floor`` (an id or
+    ids: :func:`floor_ids`) and of those between two other geoms (the body's self-contacts); 0
+    where there is none."""
     n = data.ncon
     if not n:
         return 0.0, 0.0
-    on_floor = (data.contact.geom[:n] == floor).any(axis=1)
+    on_floor = np.isin(data.contact.geom[:n], floor).any(axis=1)
     depth = -data.contact.dist[:n]
     floor_depth = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
     self_depth = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
@@ -144,7 +157,7 @@ class TrackRecord:
         self.fall_tick = k
         self.fall_frame = min(self.F - 1, -(-k // self.every))
 
-    def contacts(self, data, floor: int, i: int | None) -> None:
+    def contacts(self, data, floor, i: int | None) -> None:
         """Deepest penetrations so far, with ``data``'s contacts (frame ``i``'s floor depth
         too where it is recorded, else None)."""
         if not data.ncon:

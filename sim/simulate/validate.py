@@ -130,8 +130,9 @@ DEFAULT_FOOT_LOCK = False
 #: boxes under feet that stand on steps). On all 107 clips (docs/results/simulate_terrain.md)
 #: it found steps in 11 (01_02, 03_01, 03_02) and left the other 96 rows the same bit for bit;
 #: falls 0.16 against 0.19 (3 kept up, none lost), root-relative error -5 [-10, -2] mm, global
-#: -14 [-35, +4] mm, 1.01x the CPU. A ``ForwardValidation`` built directly has it only on request
-#: (it needs the bodies' specs)
+#: -14 [-35, +4] mm, 1.01x the CPU (the boxes then weighed 20-70 kg in ``total_mass``; massless,
+#: 18 falls against 17: docs/synthetic.md). A ``ForwardValidation`` built directly has it only
+#: on request (it needs the bodies' specs)
 DEFAULT_TERRAIN = True
 #: [m] a sole whose lowest corner is this high or lower is in contact (skating's estimator; the
 #: sampler's foot holding uses the same height)

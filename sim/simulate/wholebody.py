@@ -71,7 +71,7 @@ from sim.simulate.model import (
     rest_inertia,
     total_mass,
 )
-from sim.simulate.tracking import Tracking, divergences, foot_forces
+from sim.simulate.tracking import Tracking, divergences, floor_ids, foot_forces
 from sim.simulate.wholebody_reference import (
     WholeBodyReference,
     foot_box_ids,
@@ -365,12 +365,13 @@ def _foot_sides(model) -> np.ndarray:
     return side
 
 
-def _penetration(data, floor: int) -> tuple[float, float]:
-    """The deepest floor contact and the deepest body-body contact [m] (>= 0) of ``data``."""
+def _penetration(data, floor) -> tuple[float, float]:
+    """The deepest floor contact (``floor``: its geom ids) and the deepest body-body contact
+    [m] (>= 0) of ``data``."""
     n = data.ncon
     if not n:
         return 0.0, 0.0
-    on_floor = (data.contact.geom[:n] == floor).any(axis=1)
+    on_floor = np.isin(data.contact.geom[:n], floor).any(axis=1)
     depth = -data.contact.dist[:n]
     fd = max(0.0, float(depth[on_floor].max())) if on_floor.any() else 0.0
     sd = max(0.0, float(depth[~on_floor].max())) if not on_floor.all() else 0.0
@@ -423,7 +424,7 @@ def track_wholebody(
     data = mujoco.MjData(model)
     data.qpos[:], data.qvel[:] = ref_qpos[0], ref.qvel[0]
     mujoco.mj_forward(model, data)
-    floor = model.geom("floor").id
+    floor = floor_ids(model)  # what the record counts as floor: the terrain's boxes too
     side = _foot_sides(model)
     push_ids = [model.body(p.body).id for p in pushes]
     F = (T + record_every - 1) // record_every
