@@ -73,5 +73,5 @@ def test_the_page_says_when_the_capture_is_not_supported_by_the_floor():
     assert support_sentence({"support_missing_share": 0.05}) == ""  # at the rule: supported
     assert support_sentence({}) == ""  # no physics figures
     text = support_sentence({"support_missing_share": 0.62, "sim_fall_s": 0.37})
-    assert "NOT SUPPORTED" in text and "62 %" in text and "fell at 0.37 s" in text
+    assert "lacks support" in text and "62 %" in text and "fell at 0.37 s" in text
     assert "fell" not in support_sentence({"support_missing_share": 0.62, "sim_fall_s": None})

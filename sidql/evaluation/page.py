@@ -194,18 +194,20 @@ def floor_sentence(physics: dict) -> str:
 def support_sentence(physics: dict) -> str:
     """One sentence when a clip's original capture lacks support on the floor
     (:func:`sim.physics.support.capture_unsupported` of its ``support_missing_share``), saying
-    that a simulated fall there is the capture's; "" when it has support."""
+    that a fall of the simulated original there is the capture's; "" when it has support."""
     missing = physics.get("support_missing_share")
     if not capture_unsupported(missing):
         return ""
     fell = physics.get("sim_fall_s")
     then = "" if fell is None else f" (the original's fell at {fell:.2f} s)"
     return (
-        f"THE CAPTURE IS NOT SUPPORTED by this floor: in {100 * missing:.0f} % of its measured "
-        f"frames the original needs more than {SUPPORT_MISSING_BW:g} body weight from outside with "
-        "nothing on the floor (sim.physics inverse dynamics; a squat held up by nothing, a "
-        "climb on equipment, a partner's hold). No body performs it as captured on this "
-        f"floor: a fall of the simulated body here{then} is the capture's, not the method's."
+        f"The capture lacks support on this floor: in {100 * missing:.0f} % of its measured "
+        f"frames the original needs more than {SUPPORT_MISSING_BW:g} body weight from outside "
+        "with nothing on the floor (sim.physics inverse dynamics: a squat held up by nothing, a "
+        "climb on equipment, a partner's hold). As captured, no body performs those frames on "
+        f"this floor: a fall of the simulated original here{then} is the capture's, and the "
+        "methods' simulated figures on this clip are measured against an original that needs "
+        "help (docs/results/capture_support.md: such clips, fallen or not)."
     )
 
 
