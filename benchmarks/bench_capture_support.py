@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/bench_capture_support.py --data ../shared/cmu \
         [--rows ROWS.jsonl] [--controller mix0.5s40terrain] [--force-share 1.5] [--reach 0.4] \
-        [--page capture_support] [--no-write]
+        [--residual] [--page capture_support] [--no-write]
 
 Per clip of eval's cases (60 frames), on the CMU capture's own joint positions (no IK fit, no
 simulation) above its trial's floor (``sim.physics.ground.estimate_ground`` over the trial's
@@ -15,6 +15,11 @@ of the floor or the nearest such joint is over 0.4 m from the root horizontally 
 :data:`MIN_UNSUPPORTED_S` of such frames cannot be performed as captured by any body without
 help. With ``--rows`` (a ``bench_simulate.py --log`` of eval's forward simulation) each clip's
 fall is set beside it, and a second table counts the clips flagged under other thresholds.
+With ``--residual`` the original's inverse dynamics (``eval --physics``: the residual force no
+ground contact supplies, ``sim.physics``) is set beside it, clip by clip, and with ``--rows``
+both are scored against the falls: each signal's AUC, and the clips each rule flags at a
+threshold set before the falls were looked at (the physics' own ``SUPPORT_MISSING_BW`` and
+``SUPPORT_FLAG_SHARE``, the trial rule of ``sim.physics.support.support_verdict``).
 Writes ``docs/results/<page>.md``.
 """
 
@@ -34,8 +39,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results import write_results  # noqa: E402
 
 from sidql.evaluation.cases import load_cases  # noqa: E402
+from sidql.evaluation.trial_physics import physics_setup  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
 from sim.physics.ground import estimate_ground  # noqa: E402
+from sim.physics.support import (  # noqa: E402
+    SUPPORT_FLAG_SHARE,
+    SUPPORT_MISSING_BW,
+    capture_unsupported,
+)
 from sim.simulate.capture_support import (  # noqa: E402
     FORCE_SHARE,
     NEAR_FLOOR,
@@ -154,6 +165,134 @@ def sensitivity(cases, falls: dict[str, dict]) -> str:
     return text
 
 
+def long_runs(mask: np.ndarray, n: int) -> np.ndarray:
+    """(T,) bool: the frames of ``mask`` (T,) bool in runs of at least ``n`` True frames."""
+    out = np.zeros(len(mask), dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask, np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        out[a:b] = b - a >= n
+    return out
+
+
+def residual_rows(cases) -> list[dict]:
+    """Per case (in order): the original's inverse dynamics as ``eval --physics`` runs it
+    (``physics_setup``: the trial's floor and contacts over all its clips among ``cases``): its
+    residual force's mean and p95 [BW], torque [N m/kg], ``support_missing_share``, and the
+    seconds of measured frames in runs of at least :data:`MIN_UNSUPPORTED_S` whose residual
+    exceeds ``SUPPORT_MISSING_BW`` (``over_s``; ``over_first_s`` the first, None if none)."""
+    setup = physics_setup(cases)
+    rows = []
+    for c in cases:
+        a = setup[c.clip.source].analyse(c.clip)
+        pf = a["per_frame"]
+        over = (np.asarray(pf["residual_force_bw"]) > SUPPORT_MISSING_BW) & np.asarray(
+            pf["dynamics_measured"], dtype=bool
+        )
+        run = long_runs(over, int(round(MIN_UNSUPPORTED_S * c.clip.fps)))
+        rows.append({
+            "residual_bw": float(a["residual_force_bw"]),
+            "residual_p95_bw": float(a["residual_force_bw_p95"]),
+            "residual_torque": float(a["residual_torque_nm_kg"]),
+            "missing_share": float(a["support_missing_share"]),
+            "over_s": float(run.sum() / c.clip.fps),
+            "over_first_s": float(np.argmax(run) / c.clip.fps) if run.any() else None,
+        })  # fmt: skip
+    return rows
+
+
+def auc(scores, positive) -> float:
+    """The area under the ROC curve of ``scores`` (N,) for ``positive`` (N,) bool: the chance
+    that a positive scores above a negative, ties counting half (Mann-Whitney)."""
+    s, y = np.asarray(scores, dtype=float), np.asarray(positive, dtype=bool)
+    pos, neg = s[y][:, None], s[~y][None, :]
+    return float(((pos > neg) + 0.5 * (pos == neg)).mean())
+
+
+def auc_gain(better, worse, positive, resamples: int = 2000, seed: int = 0) -> tuple:
+    """``auc(better) - auc(worse)`` over the same clips and its 95 % interval, the clips
+    resampled with replacement (``resamples`` times, seeded; resamples without a positive or
+    without a negative are skipped)."""
+    a, b = np.asarray(better, dtype=float), np.asarray(worse, dtype=float)
+    y = np.asarray(positive, dtype=bool)
+    rng = np.random.default_rng(seed)
+    gains = []
+    for _ in range(resamples):
+        i = rng.integers(0, len(y), len(y))
+        if 0 < y[i].sum() < len(i):
+            gains.append(auc(a[i], y[i]) - auc(b[i], y[i]))
+    lo, hi = np.percentile(gains, [2.5, 97.5])
+    return auc(a, y) - auc(b, y), float(lo), float(hi)
+
+
+#: (label, key of the joined row, its unit) of the signals compared
+SIGNALS = (
+    ("capture_support: unsupported", "unsupported_s", "s"),
+    ("residual force, mean", "residual_bw", "BW"),
+    ("residual force, p95", "residual_p95_bw", "BW"),
+    (f"residual force > {SUPPORT_MISSING_BW:g} BW for >= {MIN_UNSUPPORTED_S:g} s", "over_s", "s"),
+    ("support missing (nothing on the floor, > 0.5 BW)", "missing_share", "share"),
+    ("residual torque, mean", "residual_torque", "N m/kg"),
+)
+
+
+def comparison(rows: list[dict], falls: dict[str, dict]) -> str:
+    """Markdown: each signal's AUC for the falls of ``falls`` over the joined per-clip ``rows``
+    (``clip_rows`` and ``residual_rows`` merged), then the clips each rule flags at a threshold
+    set before the falls were looked at, and how many of them fall."""
+    rows = [r for r in rows if r["clip"] in falls]
+    fell = np.array([bool(falls[r["clip"]].get("sim_fell")) for r in rows])
+    text = (f"\n**Against the falls** ({len(rows)} clips, {int(fell.sum())} falls): the area under "
+            "the ROC curve of each per-clip signal (0.5: chance; 1: every fall above every clip "
+            "that stays up).\n\n| signal | unit | AUC |\n|---|---|---|\n")  # fmt: skip
+    for label, key, unit in SIGNALS:
+        text += f"| {label} | {unit} | {auc([r[key] for r in rows], fell):.3f} |\n"
+    gain = auc_gain([r["missing_share"] for r in rows], [r["unsupported_s"] for r in rows], fell)
+    text += ("\nSupport missing against capture_support, paired over the clips: AUC "
+             "{:+.3f}, 95 % interval [{:+.3f}, {:+.3f}] (2000 resamples).\n").format(*gain)  # fmt: skip
+    rules = (
+        (f"capture_support >= {MIN_UNSUPPORTED_S:g} s (thresholds chosen on these clips)",
+         lambda r: r["unsupported_s"] >= MIN_UNSUPPORTED_S - 1e-9, "first_s"),
+        (f"residual > {SUPPORT_MISSING_BW:g} BW for >= {MIN_UNSUPPORTED_S:g} s",
+         lambda r: r["over_s"] >= MIN_UNSUPPORTED_S - 1e-9, "over_first_s"),
+        (f"support missing in > {SUPPORT_FLAG_SHARE:.0%} of frames (`capture_unsupported`)",
+         lambda r: capture_unsupported(r["missing_share"]), None),
+    )  # fmt: skip
+    text += ("\n| rule | clips flagged | of them fall | flagged before the fall | falls missed "
+             "| stay up |\n|---|---|---|---|---|---|\n")  # fmt: skip
+    for label, rule, first in rules:
+        hit = np.array([rule(r) for r in rows], dtype=bool)
+        early = "-" if first is None else str(sum(
+            1 for r, h, f in zip(rows, hit, fell, strict=True)
+            if h and f and r[first] < falls[r["clip"]]["sim_fall_s"]
+        ))  # fmt: skip
+        up = [r["clip"] for r, h, f in zip(rows, hit, fell, strict=True) if h and not f]
+        text += (f"| {label} | {hit.sum()} | {(hit & fell).sum()} | {early} | "
+                 f"{(~hit & fell).sum()} | {', '.join(up) or '-'} |\n")  # fmt: skip
+    return text
+
+
+def joined_table(rows: list[dict], falls: dict[str, dict]) -> str:
+    """Markdown: per clip that falls or that any signal flags, the signals side by side."""
+    text = ("\nPer clip that falls or that any rule flags (first: the first flagged frame):\n"
+            "\n| clip | fell [s] | capture_support [s] (first) | residual mean / p95 [BW] | "
+            f"residual > {SUPPORT_MISSING_BW:g} BW [s] (first) | support missing [share] |\n"
+            "|---|---|---|---|---|---|\n")  # fmt: skip
+
+    def first(v):
+        return "" if v is None else f" ({v:.2f})"
+
+    for r in rows:
+        f = falls.get(r["clip"], {})
+        flags = (r["unsupported_s"] > 0, r["over_s"] > 0, capture_unsupported(r["missing_share"]))
+        if not (f.get("sim_fell") or any(flags)):
+            continue
+        fell = "-" if not f else f"{f['sim_fall_s']:.2f}" if f.get("sim_fell") else "no"
+        text += (f"| {r['clip']} | {fell} | {r['unsupported_s']:.2f}{first(r['first_s'])} | "
+                 f"{r['residual_bw']:.2f} / {r['residual_p95_bw']:.2f} | "
+                 f"{r['over_s']:.2f}{first(r['over_first_s'])} | {r['missing_share']:.2f} |\n")  # fmt: skip
+    return text
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", default=default_data_dir())
@@ -173,6 +312,11 @@ def main() -> None:
         default=REACH,
         help="[m] a joint on the floor farther than this from the root is not under it",
     )
+    ap.add_argument(
+        "--residual",
+        action="store_true",
+        help="set the original's inverse dynamics (eval --physics's residual) beside it",
+    )
     ap.add_argument("--page", default="capture_support")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
@@ -183,8 +327,12 @@ def main() -> None:
     cases, _ = load_cases(args.data, progress=False, workers=1)
     cases = cases[args.offset :: args.every]
     falls = read_falls(args.rows, args.controller)
-    text = page(clip_rows(cases, args.force_share, args.reach), falls, args.controller, args)
-    text += sensitivity(cases, falls)
+    rows = clip_rows(cases, args.force_share, args.reach)
+    text = page(rows, falls, args.controller, args) + sensitivity(cases, falls)
+    if args.residual:
+        rows = [{**r, **p} for r, p in zip(rows, residual_rows(cases), strict=True)]
+        text += comparison(rows, falls) if falls else ""
+        text += joined_table(rows, falls)
     print(text)
     print(f"({time.perf_counter() - t0:.0f} s)")
     if not args.no_write:

@@ -39,6 +39,7 @@ from sidql.evaluation.cases import load_cases  # noqa: E402
 from sidql.evaluation.trial_physics import _protocol_names, physics_setup  # noqa: E402
 from sim.model.humanoid import subject_model  # noqa: E402
 from sim.paths import default_data_dir  # noqa: E402
+from sim.physics.support import capture_unsupported  # noqa: E402
 from sim.simulate.falls import (  # noqa: E402
     HEAD_GEOM,
     fall_cause,
@@ -99,16 +100,21 @@ def reference_state(model, ref: np.ndarray) -> dict:
     return {"low_part": low_part, "low_name": low_name, "bottoms": bottoms, "head_z": head_z}
 
 
-def fall_category(row: dict) -> str:
+def fall_category(row: dict, capture: bool = True) -> str:
     """One word for why a clip fell (None: it did not), from its row's figures, in this order:
-    ``reference-part`` (the touching part is within :data:`LOW_PART` of the floor in the
+    ``capture-unsupported`` (the original capture itself needs support found nowhere on the
+    floor, ``sim.physics.support.capture_unsupported`` of its inverse dynamics: no body performs
+    it as captured), ``reference-unsupported`` (the reference's soles are off the floor for
+    :data:`LONG_FLIGHT` around the fall), ``reference-part`` (the touching part is within :data:`LOW_PART` of the floor in the
     reference near the fall: the reference nearly puts it there), ``head-reference-low`` (the
     reference's own head is low then: a crouch, a roll), ``jump`` (the reference's root rises
     faster than :data:`JUMP_SPEED` within 0.5 s before), ``drift`` (the root is more than 0.3 m
     off the reference's path at the fall), ``balance`` (none of these: the body lost its balance
-    on a motion that looks possible)."""
+    on a motion that looks possible). ``capture`` False: the category the rest gives."""
     if not row["fell"]:
         return ""
+    if capture and capture_unsupported(row.get("orig_support_missing_share")):
+        return "capture-unsupported"
     if row["ref_flight_near_s"] >= LONG_FLIGHT:
         return "reference-unsupported"
     if row["ref_part_near_m"] is not None and row["ref_part_near_m"] <= LOW_PART:
@@ -122,8 +128,10 @@ def fall_category(row: dict) -> str:
     return "balance"
 
 
-def clip_row(fv, qpos: np.ndarray, fps: float, clip: str) -> dict:
-    """Eval's forward simulation of ``qpos`` (F, nq at ``fps``) on ``fv`` and the diagnosis."""
+def clip_row(fv, qpos: np.ndarray, fps: float, clip: str, original: dict | None = None) -> dict:
+    """Eval's forward simulation of ``qpos`` (F, nq at ``fps``) on ``fv`` and the diagnosis;
+    ``original``: the original's physics figures (``PhysicsJob.analyse``), whose support the
+    row carries (``orig_support_missing_share``, ``orig_residual_force_bw``)."""
     t0 = time.process_time()
     figures = fv.run(qpos, fps)
     cpu = time.process_time() - t0
@@ -174,6 +182,9 @@ def clip_row(fv, qpos: np.ndarray, fps: float, clip: str) -> dict:
         k = fv.last_fall_tick
         around = sole_low[max(0, k - int(0.5 * CONTROL_HZ)) : k + int(0.5 * CONTROL_HZ) + 1]
         row["ref_flight_near_s"] = longest_run(around > STANCE_GAP) / CONTROL_HZ
+    original = original or {}
+    row["orig_support_missing_share"] = original.get("support_missing_share")
+    row["orig_residual_force_bw"] = original.get("residual_force_bw")
     row["category"] = fall_category(row)
     return row
 
@@ -221,18 +232,19 @@ def _task(item) -> dict:
     if c.asf not in _WORKER["bodies"]:
         _WORKER["bodies"][c.asf] = forward_validation(subject_model(c.asf)[0],
                                                       _protocol_names(c.clip))  # fmt: skip
-    qpos = _WORKER["setup"][c.clip.source].analyse(c.clip)["per_frame"]["qpos"]
-    return clip_row(_WORKER["bodies"][c.asf], qpos, c.clip.fps,
-                    f"{Path(c.clip.source).stem}@{c.clip.start_frame}")  # fmt: skip
+    original = _WORKER["setup"][c.clip.source].analyse(c.clip)
+    return clip_row(_WORKER["bodies"][c.asf], original["per_frame"]["qpos"], c.clip.fps,
+                    f"{Path(c.clip.source).stem}@{c.clip.start_frame}", original)  # fmt: skip
 
 
 def table_markdown(rows: list[dict]) -> str:
     """The per-clip table and the fall categories' counts."""
     head = (
         "| clip | fell [s] | cause | reference's part then / nearest [m] | head sim / ref [m] | "
-        "category | reference: lowest part [m], lowest sole [m], longest flight, root up [m/s] | drift "
-        "mid / end [m] | root-relative / global [mm] | worst points [mm] |\n"
-        "|---|---|---|---|---|---|---|---|---|---|\n"
+        "category | original: support missing [share], residual force [BW] | reference: lowest "
+        "part [m], lowest sole [m], longest flight, root up [m/s] | drift mid / end [m] | "
+        "root-relative / global [mm] | worst points [mm] |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
 
     def m(v, fmt=".2f"):
@@ -244,7 +256,9 @@ def table_markdown(rows: list[dict]) -> str:
         lines.append(
             f"| {r['clip']} | {fell} | {r['cause'] or ''} | {m(r['ref_part_at_fall_m'])} / "
             f"{m(r['ref_part_near_m'])} | {m(r['sim_head_at_fall_m'])} / "
-            f"{m(r['ref_head_at_fall_m'])} | {r['category']} | {r['ref_min_part']} "
+            f"{m(r['ref_head_at_fall_m'])} | {r['category']} | "
+            f"{m(r.get('orig_support_missing_share'))}, {m(r.get('orig_residual_force_bw'))} | "
+            f"{r['ref_min_part']} "
             f"{r['ref_min_part_m']:.2f}, {r['ref_min_sole_m']:+.3f}, "
             f"{r['ref_longest_flight_s']:.2f} s, {r['ref_root_vz_max']:.2f} | {r['drift_mid_m']:.2f} / "
             f"{r['drift_end_m']:.2f} | {r['sim_error_local_mm']:.0f} / {r['sim_error_mm']:.0f} | "
@@ -254,7 +268,9 @@ def table_markdown(rows: list[dict]) -> str:
     cats: dict[str, list[str]] = {}
     for r in rows:
         if r["fell"]:
-            cats.setdefault(r["category"], []).append(r["clip"])
+            rest = fall_category(r, capture=False)  # what else explains it, shown beside
+            name = r["clip"] if rest == r["category"] else f"{r['clip']} ({rest})"
+            cats.setdefault(r["category"], []).append(name)
     summary = "\n".join(f"- **{k}**: {len(v)} ({', '.join(v)})" for k, v in sorted(cats.items()))
     fell = np.mean([r["fell"] for r in rows])
     med = np.median
@@ -263,7 +279,8 @@ def table_markdown(rows: list[dict]) -> str:
         f"{med([r['sim_error_local_mm'] for r in rows]):.0f} mm, global "
         f"{med([r['sim_error_mm'] for r in rows]):.0f} mm; median root drift at the end "
         f"{med([r['drift_end_m'] for r in rows]):.2f} m.\n\nFalls by category "
-        "(`bench_simulate_falls.fall_category`):\n\n" + summary + "\n\n" + head + "\n".join(lines)
+        "(`bench_simulate_falls.fall_category`; in brackets, the category the rest of the rule "
+        "gives a capture-unsupported fall):\n\n" + summary + "\n\n" + head + "\n".join(lines)
     )
 
 
@@ -293,6 +310,8 @@ def main() -> None:
         with open(args.from_log, encoding="utf-8") as f:
             rows = sorted((json.loads(line) for line in f if line.strip()),
                           key=lambda r: (r["clip"].split("@")[0], int(r["clip"].split("@")[1])))  # fmt: skip
+        for r in rows:  # by this script's rule (a log's own category may be older)
+            r["category"] = fall_category(r)
         text = table_markdown(rows) + f"\n\nRows read from {Path(args.from_log).name}.\n"
         print(text)
         if not args.no_write:

@@ -105,3 +105,54 @@ def test_the_benchmark_page_counts_flagged_clips_and_their_falls(tmp_path):
     assert "of its 2 falls 1 are in these clips" in text
     assert "| 90_30@480 | 0.20 |" in text and "| 17_10@720 | 0.07 |" in text
     assert "02_01@0 |" not in text  # no unsupported frame: no row
+
+
+def test_the_benchmark_scores_both_signals_against_the_falls():
+    """``long_runs`` keeps runs of at least n frames; ``auc`` is the chance a fall scores above a
+    clip that stays up (ties half); the comparison counts each rule's flagged clips and falls."""
+    from benchmark_modules import load_benchmark
+
+    bench = load_benchmark("bench_capture_support")
+    mask = np.array([1, 1, 0, 1, 1, 1, 0, 1], bool)
+    assert bench.long_runs(mask, 3).tolist() == [0, 0, 0, 1, 1, 1, 0, 0]
+    assert not bench.long_runs(np.zeros(4, bool), 1).any()
+    fell = np.array([1, 1, 0, 0, 0], bool)
+    assert bench.auc([3, 2, 1, 0, 0], fell) == 1.0
+    assert bench.auc([0, 0, 1, 2, 3], fell) == 0.0
+    assert bench.auc([1, 1, 1, 1, 1], fell) == 0.5
+    assert np.isclose(bench.auc([2, 0, 1, 3, 0], fell), 2.5 / 6)  # 2 > 1, 0; 0 ties 0: half
+
+    def row(clip, cap, over, missing):
+        return {"clip": clip, "unsupported_s": cap, "first_s": 0.2 if cap else None,
+                "residual_bw": over, "residual_p95_bw": over, "residual_torque": 0.0,
+                "over_s": over, "over_first_s": 0.1 if over else None, "missing_share": missing}  # fmt: skip
+
+    rows = [row("a@0", 0.5, 0.9, 0.4), row("b@0", 0.0, 0.6, 0.3), row("c@0", 0.0, 0.5, 0.2),
+            row("d@0", 0.0, 0.0, 0.0)]  # fmt: skip
+    falls = {"a@0": {"sim_fell": 1, "sim_fall_s": 0.5}, "b@0": {"sim_fell": 1, "sim_fall_s": 0.05},
+             "c@0": {"sim_fell": 0}, "d@0": {"sim_fell": 0}}  # fmt: skip
+    text = bench.comparison(rows, falls)
+    assert "(4 clips, 2 falls)" in text
+    assert "| capture_support: unsupported | s | 0.750 |" in text  # a above c, d; b ties them
+    assert "| residual force, mean | BW | 1.000 |" in text
+    # capture: a only, before its fall; residual runs: a, b, c, b's run after its fall
+    assert "(thresholds chosen on these clips) | 1 | 1 | 1 | 1 | - |" in text
+    assert "for >= 0.1 s | 3 | 2 | 1 | 0 | c@0 |" in text
+    assert "(`capture_unsupported`) | 3 | 2 | - | 0 | c@0 |" in text
+    table = bench.joined_table(rows, falls)
+    assert "| a@0 | 0.50 | 0.50 (0.20) | 0.90 / 0.90 | 0.90 (0.10) | 0.40 |" in table
+    assert "d@0" not in table  # neither fell nor flagged
+
+
+def test_the_auc_gain_interval_holds_its_estimate_and_excludes_zero_for_a_clear_gain():
+    from benchmark_modules import load_benchmark
+
+    bench = load_benchmark("bench_capture_support")
+    rng = np.random.default_rng(1)
+    fell = np.arange(60) < 15
+    perfect = fell + 0.1 * rng.random(60)  # every fall above every other clip
+    noise = rng.random(60)
+    gain, lo, hi = bench.auc_gain(perfect, noise, fell)
+    assert np.isclose(gain, 1.0 - bench.auc(noise, fell)) and lo <= gain <= hi and lo > 0
+    gain, lo, hi = bench.auc_gain(noise, noise, fell)
+    assert gain == lo == hi == 0.0

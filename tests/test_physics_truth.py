@@ -297,3 +297,36 @@ def test_a_sustained_pull_is_held_by_something_else_an_impact_and_a_landing_are_
     sim = _simulate(humanoid[1], seconds=0.9, z0=1.05, floor=True, kp=300.0, kd=10.0)
     mp, _ = _analyse(humanoid, sim, ground=Ground(0.0))
     assert not held_frames(mp.dynamics.residual_force, mp.dynamics.weight, FPS, mp.measured).any()
+
+
+def test_a_bounce_held_up_by_nothing_is_unsupported_and_standing_is_not(humanoid):
+    """:func:`capture_unsupported` on the analysis of an original, as ``bench_simulate_falls``
+    and the report read it. A body bouncing at 1.5 Hz with its feet 15+ cm above the floor
+    (limbs moving), held up by a push of 0.4-1.6 body weights that no floor gives (the Russian
+    dances' squats: a bounce's bottom with nothing under the body): unsupported in most frames.
+    Standing on the floor with the arms moving: supported."""
+    from sim.physics.support import capture_unsupported
+
+    model = humanoid[1]
+    W = float(mujoco.mj_getTotalmass(model)) * 9.81
+    held = [("thorax", np.array([0.0, 0.0, W]), 0.0, 9.0, "box")]
+    for k in range(3):  # the bounce: +-0.6 W in half sines at 1.5 Hz
+        a = k / 1.5
+        held += [("thorax", np.array([0.0, 0.0, 0.6 * W]), a, a + 1 / 3, "sine"),
+                 ("thorax", np.array([0.0, 0.0, -0.6 * W]), a + 1 / 3, a + 2 / 3, "sine")]  # fmt: skip
+    v0 = (0.0, 0.0, -0.6 * 9.81 / (2 * np.pi * 1.5))  # no drift: z = z0 - 6.6 cm sin(wt)
+    sim = _simulate(model, seconds=2.0, z0=1.3, v0=v0, pushes=held)
+    job, clip, _ = _job_and_clip(humanoid, sim)
+    bounce = job.analyse(clip, None, Ground(0.0))
+    assert 150 < bounce["per_frame"]["foot_height_mm"].min()  # nothing near the floor
+    assert bounce["unsupported_share"] == 1.0
+    assert bounce["residual_force_bw_p95"] > 1.4  # the bottoms ask for more than the weight
+    assert bounce["support_missing_share"] > 0.8
+    assert capture_unsupported(bounce["support_missing_share"])
+    sim = _simulate(model, seconds=2.0, z0=None, floor=True, kp=600.0, kd=20.0, driven=ARMS)
+    _limbs_move(model, sim["qpos"], ARMS)
+    job, clip, _ = _job_and_clip(humanoid, sim)
+    standing = job.analyse(clip, None, Ground(0.0))
+    assert standing["support_missing_share"] == 0.0
+    assert not capture_unsupported(standing["support_missing_share"])
+    assert not capture_unsupported(None)  # not measured

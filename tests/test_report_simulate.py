@@ -62,3 +62,16 @@ def test_report_shows_the_simulated_body_beside_each_reconstruction(cmu_dir, tmp
         # the reference's 1 cm lift, not the metres of another floor
         assert np.linalg.norm(sim[0] - first, axis=-1).mean() < 0.05
         assert np.linalg.norm(sim[-1] - first, axis=-1).mean() > 0.05  # and then it moved
+
+
+def test_the_page_says_when_the_capture_is_not_supported_by_the_floor():
+    """The sentence follows ``capture_unsupported`` (more than 5 % of the measured frames need
+    over 0.5 BW with nothing on the floor) and names the original's fall time when it fell."""
+    from sidql.evaluation.page import support_sentence
+
+    assert support_sentence({"support_missing_share": 0.0, "sim_fall_s": 0.5}) == ""
+    assert support_sentence({"support_missing_share": 0.05}) == ""  # at the rule: supported
+    assert support_sentence({}) == ""  # no physics figures
+    text = support_sentence({"support_missing_share": 0.62, "sim_fall_s": 0.37})
+    assert "lacks support" in text and "62 %" in text and "fell at 0.37 s" in text
+    assert "fell" not in support_sentence({"support_missing_share": 0.62, "sim_fall_s": None})

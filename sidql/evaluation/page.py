@@ -51,6 +51,7 @@ from sim.motion.points import PointMotion
 from sim.physics.foot_state import FootState, foot_states
 from sim.physics.ground import estimate_ground
 from sim.physics.noise import NOISE_MM
+from sim.physics.support import SUPPORT_MISSING_BW, capture_unsupported
 from sim.replay.render import DEFAULT_STYLE, RenderStyle, SkeletonRenderer
 from sim.replay.sheets import keyframe_sheet
 from sim.replay.video import render_frames, write_video
@@ -190,6 +191,26 @@ def floor_sentence(physics: dict) -> str:
     )
 
 
+def support_sentence(physics: dict) -> str:
+    """One sentence when a clip's original capture lacks support on the floor
+    (:func:`sim.physics.support.capture_unsupported` of its ``support_missing_share``), saying
+    that a fall of the simulated original there is the capture's; "" when it has support."""
+    missing = physics.get("support_missing_share")
+    if not capture_unsupported(missing):
+        return ""
+    fell = physics.get("sim_fall_s")
+    then = "" if fell is None else f" (the original's fell at {fell:.2f} s)"
+    return (
+        f"The capture lacks support on this floor: in {100 * missing:.0f} % of its measured "
+        f"frames the original needs more than {SUPPORT_MISSING_BW:g} body weight from outside "
+        "with nothing on the floor (sim.physics inverse dynamics: a squat held up by nothing, a "
+        "climb on equipment, a partner's hold). As captured, no body performs those frames on "
+        f"this floor: a fall of the simulated original here{then} is the capture's, and the "
+        "methods' simulated figures on this clip are measured against an original that needs "
+        "help (docs/results/capture_support.md: such clips, fallen or not)."
+    )
+
+
 def scene_sentence(v: ClipValidation) -> str:
     """One sentence on a clip's inferred scene (:attr:`ClipValidation.scene`)."""
     tops = ", ".join(f"{b.top - v.scene_ground:.2f}" for b in v.scene)
@@ -300,6 +321,8 @@ def _clip_section(
     ]
     if v.physics:
         parts.append(f"<p class='note'>{html.escape(floor_sentence(v.physics))}</p>")
+        if support_sentence(v.physics):
+            parts.append(f"<p class='note'>{html.escape(support_sentence(v.physics))}</p>")
     if v.scene:
         parts.append(f"<p class='note'>{html.escape(scene_sentence(v))}</p>")
     parts.append(_tables(v, colours))

@@ -80,6 +80,16 @@ def residual_causes(
     return out
 
 
+def capture_unsupported(missing: float | None) -> bool:
+    """Whether a clip's original capture lacks support on the floor, from the share of its
+    measured frames that need more than :data:`SUPPORT_MISSING_BW` from outside with nothing on
+    the floor (``missing``: its ``support_missing_share``; None: not measured, False): more than
+    :data:`SUPPORT_FLAG_SHARE`, the trial's rule (:func:`support_verdict`) applied to the clip. No
+    body performs such a capture as captured on that floor: a squat held up by nothing, a climb
+    on equipment, a partner's hold."""
+    return missing is not None and missing > SUPPORT_FLAG_SHARE
+
+
 def support_verdict(
     missing: float,
     above: float,
