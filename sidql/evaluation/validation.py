@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -243,12 +243,13 @@ def validate_clip(
         out.physics = physics.analyse(clip, None, ground, contacts=trial_labels)
         out.noise = physics.noise_floor(clip, ground, contacts=trial_labels, seed=seed)
         qpos = out.physics["per_frame"]["qpos"]
-        if simulate is not None:
-            # the scene it simulates in: none on the empty floor
-            scene_body = simulate.model if getattr(simulate, "terrain", False) else None
-        out.scene, out.scene_ground = clip_scene(scene_body, qpos, clip.fps)
-        if simulate is not None:
+        if simulate is None:
+            out.scene, out.scene_ground = clip_scene(scene_body, qpos, clip.fps)
+        else:  # the scene it simulated in (the empty floor: none), as it found it
             out.physics.update(simulate.run(qpos, clip.fps))
+            out.scene, out.scene_ground = lifted_scene(
+                getattr(simulate, "last_boxes", []), getattr(simulate, "last_ground", None)
+            )
             out.physics["per_frame"]["sim_positions"] = simulated_points(simulate, clip, out)
         analyse = partial(_run_physics, out, physics, simulate, ground, trial_labels)
     for m in methods:
@@ -272,20 +273,29 @@ def _stream_run(out: ClipValidation, stream: DecodedStream, full, kw: dict, anal
 
 def clip_scene(body, qpos: np.ndarray, fps: float) -> tuple[tuple, float | None]:
     """The scene inferred from the original's IK fit ``qpos`` (T, nq at ``fps``) with ``body``'s
-    soles (``sim.simulate.validate.validation_model``, or the forward validation's model: the
-    boxes it simulates in; None: no scene), as forward validation infers it (``find_terrain`` at
-    the control rate), in the original's frame: its boxes (``sim.simulate.terrain.Box``) and
-    its ground height [m], the ground track's mean, which the boxes are lifted by (the
-    simulation's frame is the original's less that track: its ground at z = 0); ``((), None)``
-    without supports."""
+    soles (``sim.simulate.validate.validation_model``; None: no scene), as forward validation
+    infers it (``find_terrain`` at the control rate; a report that simulates draws the scene its
+    ``ForwardValidation`` found instead: :func:`lifted_scene`), in the original's frame: its
+    boxes (``sim.simulate.terrain.Box``) and its ground height [m], the ground track's mean,
+    which the boxes are lifted by (the simulation's frame is the original's less that track:
+    its ground at z = 0); ``((), None)`` without supports."""
     if body is None:
         return (), None
-    boxes, track = find_terrain(body, time_warp(body, qpos, fps, 1.0, CONTROL_HZ), CONTROL_HZ)
+    return lifted_scene(
+        *find_terrain(body, time_warp(body, qpos, fps, 1.0, CONTROL_HZ), CONTROL_HZ)
+    )
+
+
+def lifted_scene(boxes: list[Box], track: np.ndarray | None) -> tuple[tuple, float | None]:
+    """``boxes`` found in the simulation's frame, whose ground ``track`` (T,) [m] is the
+    original's ground (:func:`sim.simulate.terrain.find_terrain`, or a ``ForwardValidation``'s
+    ``last_boxes`` and ``last_ground``), in the original's frame: lifted by the track's mean,
+    with that mean as the ground height [m]; ``((), None)`` without boxes."""
     if not boxes:
         return (), None
     ground = float(np.mean(track))
     lift = np.array([0.0, 0.0, ground])
-    return tuple(Box(b.centre + lift, b.half.copy(), b.yaw) for b in boxes), ground
+    return tuple(replace(b, centre=b.centre + lift, half=b.half.copy()) for b in boxes), ground
 
 
 def _run_physics(out: ClipValidation, physics, simulate, ground, trial_labels, rec, acc=None):

@@ -235,7 +235,7 @@ class ForwardValidation:
         if terrain and len(self.specs) != 1 + len(self.search.get("alternates", ())):
             raise UsageError("terrain needs the specs of the model and of its alternates")
         self.terrain, self.hand_supports = bool(terrain), bool(hand_supports)
-        self.last_boxes: list = []
+        self.last_boxes, self.last_ground = [], None  # the last scene's boxes, ground (T',) [m]
         self.data = mujoco.MjData(model)
         self._sites = [-1 if n == "root" else model.site(f"{n}_end").id for n in self.names]
         self._root = model.body("root").id
@@ -401,14 +401,14 @@ class ForwardValidation:
     def _terrain(self, orig: np.ndarray, floor: np.ndarray) -> tuple:
         """The floor track (T',), model and ``search`` a clip whose original is ``orig`` (T', nq,
         control rate) is tracked with: with :attr:`terrain` and supports found in ``orig``
-        (kept in :attr:`last_boxes`), its ground track and :meth:`scene`; else ``floor`` and
-        this object's own."""
-        self.last_boxes = []
+        (kept in :attr:`last_boxes` and :attr:`last_ground`), its ground track and :meth:`scene`;
+        else ``floor`` and this object's own."""
+        self.last_boxes, self.last_ground = [], None
         if self.terrain:  # the scene of the original motion: its steps, its ground track
             find = find_handholds if self.hand_supports else find_terrain
             boxes, ground = find(self.model, orig, CONTROL_HZ)
             if boxes:
-                self.last_boxes = boxes
+                self.last_boxes, self.last_ground = boxes, ground
                 return (ground, *self.scene(boxes))
         return floor, self.model, self.search
 
