@@ -18,6 +18,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sim.simulate.balance import Balance  # noqa: E402
+from sim.simulate.friction import Friction  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.lqr import LQRWeights  # noqa: E402
 from sim.simulate.model import MIN_DEFLECTION, PAD_SOLE, Gains, SoftSole  # noqa: E402
@@ -514,4 +515,29 @@ for _name, _kw in QPFEET.items():
         + (", swing feed-forward" if _g.swing_feedforward else ""),
         {"controller": "wholebody", "search": {"gains": _g}},
         "motor",
+    )
+
+#: eval's default (``mix0.5s40terrain``) with the friction cone enforced harder
+#: (``sim_model(friction=Friction(...))``, ``sim.simulate.friction``; the friction coefficient
+#: kept): ``ell<r>`` the elliptic cone at impratio ``r``, ``ns<n>`` ``n`` noslip iterations,
+#: ``tor`` the soles' floor contacts with torsional friction (condim 4; ``tor20`` at 0.02 m, the
+#: patch of a heel or forefoot, instead of the floor's 0.005 m); ``null`` a control: impratio
+#: 1.000001, no change to the physics but a different last bit, which the sampler's search
+#: amplifies into another draw of the same controller; docs/synthetic.md
+FRICTIONS = {
+    "ell5": Friction(elliptic=True, impratio=5.0),
+    "ell10": Friction(elliptic=True, impratio=10.0),
+    "ns3": Friction(noslip_iterations=3),
+    "ell10ns3": Friction(elliptic=True, impratio=10.0, noslip_iterations=3),
+    "ell10tor": Friction(elliptic=True, impratio=10.0, sole_condim=4),
+    "tor20": Friction(sole_condim=4, torsion=0.02),
+    "ell10tor20": Friction(elliptic=True, impratio=10.0, sole_condim=4, torsion=0.02),
+    "null": Friction(impratio=1.000001),
+}
+for _name, _f in FRICTIONS.items():
+    CONTROLLERS[f"mix0.5s40terrain{_name}"] = (
+        CONTROLLERS["mix0.5s40terrain"][0] + f", friction {_f}",
+        CONTROLLERS["mix0.5s40terrain"][1],
+        "position",
+        {"alternate_gains": (_STIFF,), "friction": _f},
     )

@@ -53,6 +53,7 @@ from sim.acclaim.records import Skeleton
 from sim.errors import UsageError
 from sim.model.humanoid import build_mjcf
 from sim.model.mass import DEFAULT_BODY_MASS_KG
+from sim.simulate.friction import Friction, apply_friction
 
 CONTROL_HZ = 120.0
 SUBSTEPS = 4
@@ -191,6 +192,7 @@ def sim_spec(
     actuators: str = "position",
     lean: bool = False,
     soft_soles: SoftSole | None = None,
+    friction: Friction | None = None,
 ) -> mujoco.MjSpec:
     """The ``MjSpec`` of :func:`sim_model` (``spec.to_xml()``: the MJCF a dataset stores).
 
@@ -209,6 +211,8 @@ def sim_spec(
     skips the stages this body has nothing for (:data:`LEAN_DISABLED`; the same motion).
     ``soft_soles``: the soles' contacts with the floor use these parameters (:class:`SoftSole`)
     instead of the floor's (None: the stiff floor's, as for every other geom); needs ``soles``.
+    ``friction``: how hard the friction cone is enforced (``sim.simulate.friction.Friction``;
+    None: MuJoCo's default, the pyramidal cone at impratio 1).
     """
     if soft_soles is not None and not soles:
         raise UsageError("soft_soles needs soles=True")
@@ -222,6 +226,8 @@ def sim_spec(
     _set_contacts(spec)
     if soles:
         add_soles(spec, soft_soles)
+    if friction is not None:
+        apply_friction(spec, friction, SOLE_GEOMS + TOE_GEOMS)
     plain = spec.compile()
     inertia, _ = rest_inertia(plain)
     stance = stance_stiffness(plain) if stance_ankles else 0.0
