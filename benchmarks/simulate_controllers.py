@@ -521,9 +521,7 @@ for _name, _kw in QPFEET.items():
 #: (``sim_model(friction=Friction(...))``, ``sim.simulate.friction``; the friction coefficient
 #: kept): ``ell<r>`` the elliptic cone at impratio ``r``, ``ns<n>`` ``n`` noslip iterations,
 #: ``tor`` the soles' floor contacts with torsional friction (condim 4; ``tor20`` at 0.02 m, the
-#: patch of a heel or forefoot, instead of the floor's 0.005 m); ``null`` a control: impratio
-#: 1.000001, no change to the physics but a different last bit, which the sampler's search
-#: amplifies into another draw of the same controller; docs/synthetic.md
+#: patch of a heel or forefoot, instead of the floor's 0.005 m); docs/synthetic.md
 FRICTIONS = {
     "ell5": Friction(elliptic=True, impratio=5.0),
     "ell10": Friction(elliptic=True, impratio=10.0),
@@ -532,7 +530,6 @@ FRICTIONS = {
     "ell10tor": Friction(elliptic=True, impratio=10.0, sole_condim=4),
     "tor20": Friction(sole_condim=4, torsion=0.02),
     "ell10tor20": Friction(elliptic=True, impratio=10.0, sole_condim=4, torsion=0.02),
-    "null": Friction(impratio=1.000001),
 }
 for _name, _f in FRICTIONS.items():
     CONTROLLERS[f"mix0.5s40terrain{_name}"] = (
@@ -541,3 +538,12 @@ for _name, _f in FRICTIONS.items():
         "position",
         {"alternate_gains": (_STIFF,), "friction": _f},
     )
+#: ``mix0.5s40terrainseed1``: eval's default with its sampler's noise seeded 1 instead of 0: another
+#: draw of the same controller, the yardstick of how far a change's figures move by chance alone
+CONTROLLERS["mix0.5s40terrainseed1"] = (
+    CONTROLLERS["mix0.5s40terrain"][0] + ", its noise seeded 1",
+    {**CONTROLLERS["mix0.5s40terrain"][1],
+     "search": {**CONTROLLERS["mix0.5s40terrain"][1]["search"], "seed": 1}},
+    "position",
+    {"alternate_gains": (_STIFF,)},
+)  # fmt: skip
