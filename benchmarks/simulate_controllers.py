@@ -307,6 +307,22 @@ CONTROLLERS["mix0.5s40terrain"] = (
     {"alternate_gains": (_STIFF,)},
 )  # fmt: skip
 
+#: ``fp<w>``: eval's default (``mix0.5s40terrain``) with footprints (``sim.simulate.footprints``,
+#: ``CostWeights(footprint=w)``: a sole down where the reference stands on it pays w times its
+#: squared distance from the reference's, averaged over the window); ``fpland<w>`` only at
+#: touch-down (``footprint_landing``)
+for _w in (10, 30, 100):
+    for _land in (False, True):
+        CONTROLLERS[f"fp{'land' if _land else ''}{_w}"] = (
+            f"sampler, 40 samples, eval's defaults (gains chosen per window), the scene inferred "
+            f"from the motion, footprints {_w}{' at touch-down' if _land else ''}",
+            {"controller": "sampling", "samples": 40, "contact_reference": True, "terrain": True,
+             "search": {"choice": GainChoice(share=0.5),
+                        "weights": CostWeights(footprint=float(_w), footprint_landing=_land)}},
+            "position",
+            {"alternate_gains": (_STIFF,)},
+        )  # fmt: skip
+
 #: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too
 #: (``ForwardValidation(hand_supports=True)``, ``sim.simulate.handholds``: a hand still above the
 #: ground while the centre of mass is outside the soles' footprint; docs/synthetic.md)
