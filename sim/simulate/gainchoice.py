@@ -230,6 +230,12 @@ def _problems(models, datas, ref_qpos, how: tuple, lqr, window: int) -> list:
     return [replace(p, lqr=lqr) for p in probs]
 
 
+def _soles(weights: CostWeights) -> bool:
+    """Whether the rollouts record the soles: the cost has a sole term (foot holding or
+    footprints)."""
+    return weights.hold > 0 or weights.footprint > 0
+
+
 def _window_gain(ctx: _Search, lqr, kept, k0: int) -> None:
     """``lqr``'s gain for the window from tick ``k0``, in the main thread before its rollouts:
     linearised at the cheapest kept state on the gains it was reached with, the reference's
@@ -277,9 +283,8 @@ def choice_search(
     n_threads = max(1, min(int(threads), samples))
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
-    soles = weights.hold > 0 or weights.footprint > 0  # sole terms in the cost
-    probs = _problems(models, datas, ref_qpos, (torque_sigma, pushes, weights.fall > 0, balance,
-                                                noise_deflection, soles), lqr, window)  # fmt: skip
+    how = torque_sigma, pushes, weights.fall > 0, balance, noise_deflection, _soles(weights)
+    probs = _problems(models, datas, ref_qpos, how, lqr, window)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
     # the kept states, their last offsets and gain sets, and the noise's scale (nu,)
