@@ -114,6 +114,10 @@ def test_a_window_counts_soles_on_the_floor_or_on_a_box():
     np.testing.assert_allclose(
         window_footprint_costs((up, mat), SIZE, ref, terrain, False), [0.0, 0.01], atol=1e-15
     )
+    stopped = pos.copy()
+    stopped[1, 5:] = np.nan  # the rollout stopped after 4 ticks: 4 of 12 count
+    got = window_footprint_costs((stopped, mat), SIZE, ref, None, False)
+    np.testing.assert_allclose(got, [0.0, 0.01 * 4 / 12], atol=1e-15)
     # landing: the sole was down at the window's start, so no touch-down in the window
     np.testing.assert_allclose(window_footprint_costs((pos, mat), SIZE, ref, None, True), 0.0)
 
@@ -181,3 +185,16 @@ def test_the_gain_choosing_sampler_costs_the_footprints_too(trial_on_floor):
         np.testing.assert_array_equal(x, y)
     heavy = choice_search(models, ref, weights=CostWeights(footprint=2000.0), **kw)
     assert not np.array_equal(heavy[0], base[0])
+
+
+def test_the_sampler_looking_at_the_lookahead_s_footprints_is_another_search(trial_on_floor, model):
+    ref = trial_on_floor(model, "07_01")[:48]
+    kw = dict(samples=6, keep=2, window=12, lookahead=12, seed=4)
+    base, rb = search_offsets(model, ref, **kw)
+    look = dict(footprint_lookahead=True)
+    tiny, rt = search_offsets(model, ref, weights=CostWeights(footprint=1e-300, **look), **kw)
+    np.testing.assert_array_equal(tiny, base)
+    np.testing.assert_array_equal(rt, rb)
+    a, _ = search_offsets(model, ref, weights=CostWeights(footprint=2000.0, **look), **kw)
+    w, _ = search_offsets(model, ref, weights=CostWeights(footprint=2000.0), **kw)
+    assert not np.array_equal(a, base) and not np.array_equal(a, w)

@@ -15,7 +15,9 @@ horizontal distance between the two soles' bottom centres::
 not at k - 1: the foot put down, or the reference putting its own down under a foot already
 there) pay, summed instead of averaged: the foot's placement, not where a stance foot already
 down stays. Zero on the reference itself; a sole in the air or where the reference lifts its
-foot pays nothing. Units: metres, z up, floor at z = 0.
+foot pays nothing. The sampler looks at a window's ticks, or with ``footprint_lookahead`` at
+its lookahead's too (where a candidate's constant offset puts the next foot down). Units:
+metres, z up, floor at z = 0.
 """
 
 from __future__ import annotations
@@ -62,7 +64,8 @@ def window_footprint_costs(
 
     Args:
         records: the sole boxes' positions (S, K + 1, 2, 3) [m] and orientations (S, K + 1, 2,
-            9): at the window's start, then after each of its K ticks.
+            9): at the window's start, then after each of its K ticks (NaN after a rollout
+            stopped: no sole touches there).
         size: (2, 3) the sole boxes' half sizes [m].
         ref: the reference at the same K + 1 instants (``footholding.reference_soles``): sole
             bottom centres (K + 1, 2, 2) [m] and stance (K + 1, 2).
@@ -81,20 +84,24 @@ def sole_costs(model, prob, weights, ticks: tuple, records: tuple) -> np.ndarray
     """(S,) the sole terms of ``sim.simulate.sampling.window_cost``'s candidates, weighted:
     ``weights.hold`` times foot holding (``footholding.window_hold_costs``) plus
     ``weights.footprint`` times :func:`window_footprint_costs`, of the window ``ticks`` = (k0,
-    k1, ...) from the rollouts' records (positions (S, K + 1, 2, 3), orientations (S, K + 1, 2,
-    9), centre of mass (S, K + 1, 3): the window's start, then after each tick), against the
+    k1, ...) from the rollouts' records (positions (S, R, 2, 3), orientations (S, R, 2, 9),
+    centre of mass (S, R, 3): the window's start, then after each tick, R - 1 >= k1 - k0:
+    foot holding looks at the window's ticks, footprints at all R; NaN where a rollout
+    stopped: a sole there touches nothing), against the
     reference's soles ``prob.ref_soles`` (``footholding.reference_soles`` with ``capture``) a
     tick later (a tick's record is the state at its end, less its last substep)."""
-    at = np.minimum(np.arange(ticks[0], ticks[1] + 1), len(prob.base) - 1)  # (K + 1,)
+    R = records[0].shape[1]  # the window's start and its ticks (and its lookahead's)
+    at = np.minimum(np.arange(ticks[0], ticks[0] + R), len(prob.base) - 1)  # (R,)
     ref = tuple(r[at] for r in prob.ref_soles)
     size = model.geom_size[prob.soles]
     cost = np.zeros(len(records[0]))
-    if weights.hold > 0:
+    if weights.hold > 0:  # over the window's ticks
         release = weights.hold_capture, weights.hold_capture_ref
-        ticks_only = tuple(r[:, 1:] for r in records)
+        K = ticks[1] - ticks[0]
+        ticks_only = tuple(r[:, 1 : K + 1] for r in records)
         cost += weights.hold * window_hold_costs(
-            ticks_only, size, tuple(r[1:] for r in ref), 1.0 / CONTROL_HZ, weights.hold_contact,
-            release,
+            ticks_only, size, tuple(r[1 : K + 1] for r in ref), 1.0 / CONTROL_HZ,
+            weights.hold_contact, release,
         )  # fmt: skip
     if weights.footprint > 0:
         terrain = terrain_geoms(model)

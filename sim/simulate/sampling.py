@@ -105,11 +105,11 @@ class CostWeights:
     hold_capture: bool = False
     #: with ``hold_capture``: only where the reference's capture point is inside its support
     hold_capture_ref: bool = False
-    #: footprints (``sim.simulate.footprints``) [1/m^2]: a sole down where the reference stands
-    #: on it, its squared horizontal distance from the reference's, averaged over the window;
-    #: 0: not looked at. ``footprint_landing``: only where a sole starts to count, summed
+    #: footprints (``sim.simulate.footprints``) [1/m^2], 0: off; ``footprint_landing``: at
+    #: touch-down only; ``footprint_lookahead``: over the window and its lookahead
     footprint: float = 0.0
     footprint_landing: bool = False
+    footprint_lookahead: bool = False
 
 
 @dataclass(frozen=True)
@@ -280,9 +280,9 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
     ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
     ``keep`` = (state row, qpos row, state spec, soles), ``soles`` None or the sole boxes'
-    positions (k1 - k0 + 1, 2, 3), orientations (k1 - k0 + 1, 2, 9) and the centre of mass
-    (k1 - k0 + 1, 3) at the window's start, then after each of its ticks (``prob.soles``; as
-    the tick's last substep computed them). A rollout that falls (``sim.simulate.falls``, checked after every tick where
+    positions (R, 2, 3), orientations (R, 2, 9) and the centre of mass (R, 3) at the window's
+    start, then after each of its first R - 1 ticks (R - 1 >= k1 - k0; ``prob.soles``; as the
+    tick's last substep computed them; rows after a stop left as they were). A rollout that falls (``sim.simulate.falls``, checked after every tick where
     ``prob.fall_ref`` is set) stops at the fall or at the window's end, whichever is later.
 
     Returns:
@@ -314,7 +314,7 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
         if divergences(data):  # MuJoCo reset the state: no motion goes on from it
             return -(k + 1)
-        if soles is not None and k < k1:
+        if soles is not None and k - k0 + 1 < len(soles[0]):
             i = k - k0 + 1
             soles[0][i], soles[1][i] = data.geom_xpos[prob.soles], data.geom_xmat[prob.soles]
             soles[2][i] = data.subtree_com[1]
@@ -358,8 +358,8 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     S = len(offs)
     cost = np.empty(S)
     hold = prob.soles is not None and (weights.hold > 0 or weights.footprint > 0)
-    K = k1 - k0 + 1  # the window's start and each of its ticks
-    soles = (np.zeros((S, K, 2, 3)), np.zeros((S, K, 2, 9)), np.zeros((S, K, 3))) if hold else None
+    K = (k2 if weights.footprint_lookahead else k1) - k0 + 1  # the start and each tick
+    soles = tuple(np.full((S, K, *n), np.nan) for n in ((2, 3), (2, 9), (3,))) if hold else None
 
     def run(chunk: np.ndarray, data) -> None:
         for s in chunk:
@@ -380,8 +380,8 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
         run(chunks[0], datas[0])
     else:
         list(pool.map(run, chunks, datas))
-    if hold:
-        cost += sole_costs(model, prob, weights, ticks, soles)
+    if hold:  # rows a rollout did not reach are NaN: they count nothing
+        cost += np.nan_to_num(sole_costs(model, prob, weights, ticks, soles), nan=0.0)
     return cost
 
 
