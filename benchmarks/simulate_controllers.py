@@ -307,6 +307,27 @@ CONTROLLERS["mix0.5s40terrain"] = (
     {"alternate_gains": (_STIFF,)},
 )  # fmt: skip
 
+#: ``fp<w>``: eval's default (``mix0.5s40terrain``) with footprints (``sim.simulate.footprints``,
+#: ``CostWeights(footprint=w)``: a sole down where the reference stands on it pays w times its
+#: squared distance from the reference's, averaged over the window); ``fpland<w>`` only at
+#: touch-down (``footprint_landing``); ``fplook<w>`` over the window and its lookahead
+#: (``footprint_lookahead``)
+for _w in (10, 30, 100, 300):
+    for _how, _kw, _said in (
+        ("", {}, ""),
+        ("land", {"footprint_landing": True}, " at touch-down"),
+        ("look", {"footprint_lookahead": True}, " over the lookahead too"),
+    ):
+        CONTROLLERS[f"fp{_how}{_w}"] = (
+            f"sampler, 40 samples, eval's defaults (gains chosen per window), the scene inferred "
+            f"from the motion, footprints {_w}{_said}",
+            {"controller": "sampling", "samples": 40, "contact_reference": True, "terrain": True,
+             "search": {"choice": GainChoice(share=0.5),
+                        "weights": CostWeights(footprint=float(_w), **_kw)}},
+            "position",
+            {"alternate_gains": (_STIFF,)},
+        )  # fmt: skip
+
 #: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too
 #: (``ForwardValidation(hand_supports=True)``, ``sim.simulate.handholds``: a hand still above the
 #: ground while the centre of mass is outside the soles' footprint; docs/synthetic.md)

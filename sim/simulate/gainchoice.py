@@ -216,10 +216,11 @@ def _select(kept, costs: np.ndarray, cand: tuple, keep: int, adapt: float) -> tu
 
 def _problems(models, datas, ref_qpos, how: tuple, lqr, window: int) -> list:
     """Each gain set's ``sampling._problem`` (``how`` = torque_sigma, pushes, falls, balance,
-    noise_deflection), carrying ``lqr`` (bound to the reference here; None: none)."""
-    sigma, pushes, falls, balance, deflection = how
+    noise_deflection, soles: the rollouts record the soles for their cost terms), carrying
+    ``lqr`` (bound to the reference here; None: none)."""
+    sigma, pushes, falls, balance, deflection, soles = how
     probs = [
-        _problem(m, ref_qpos, d[0], sigma, pushes, falls=falls, balance=balance,
+        _problem(m, ref_qpos, d[0], sigma, pushes, falls=falls, balance=balance, hold=soles,
                  noise_deflection=deflection)
         for m, d in zip(models, datas, strict=True)
     ]  # fmt: skip
@@ -227,6 +228,12 @@ def _problems(models, datas, ref_qpos, how: tuple, lqr, window: int) -> list:
         return probs
     lqr.start(ref_qpos, probs[0].ref_qvel, window)
     return [replace(p, lqr=lqr) for p in probs]
+
+
+def _soles(weights: CostWeights) -> bool:
+    """Whether the rollouts record the soles: the cost has a sole term (foot holding or
+    footprints)."""
+    return weights.hold > 0 or weights.footprint > 0
 
 
 def _window_gain(ctx: _Search, lqr, kept, k0: int) -> None:
@@ -276,8 +283,8 @@ def choice_search(
     n_threads = max(1, min(int(threads), samples))
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
-    probs = _problems(models, datas, ref_qpos, (torque_sigma, pushes, weights.fall > 0, balance,
-                                                noise_deflection), lqr, window)  # fmt: skip
+    how = torque_sigma, pushes, weights.fall > 0, balance, noise_deflection, _soles(weights)
+    probs = _problems(models, datas, ref_qpos, how, lqr, window)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
     # the kept states, their last offsets and gain sets, and the noise's scale (nu,)

@@ -51,7 +51,8 @@ from sim.simulate.controller import (
 from sim.simulate.drift import drift_lead
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
-from sim.simulate.footholding import as_slice, reference_soles, sole_ids, window_hold_costs
+from sim.simulate.footholding import as_slice, reference_soles, sole_ids
+from sim.simulate.footprints import sole_costs
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
 from sim.simulate.tracking import clear_divergences, divergences
 
@@ -104,6 +105,11 @@ class CostWeights:
     hold_capture: bool = False
     #: with ``hold_capture``: only where the reference's capture point is inside its support
     hold_capture_ref: bool = False
+    #: footprints (``sim.simulate.footprints``) [1/m^2], 0: off; ``footprint_landing``: at
+    #: touch-down only; ``footprint_lookahead``: over the window and its lookahead
+    footprint: float = 0.0
+    footprint_landing: bool = False
+    footprint_lookahead: bool = False
 
 
 @dataclass(frozen=True)
@@ -215,7 +221,7 @@ class _Problem:
     fall_ref: object | None
     kp: np.ndarray | None = None
     balance: object | None = None
-    soles: slice | None = None  # the sole geoms' rows where foot holding is costed
+    soles: slice | None = None  # the sole geoms' rows where foot holding or footprints are costed
     ref_soles: tuple | None = None  # footholding.reference_soles, capture=True
     lqr: object | None = None  # sampling_lqr.WindowLQR: its gain's feedback in every rollout
 
@@ -233,7 +239,7 @@ def _problem(
 ) -> _Problem:
     """:class:`_Problem` of ``ref_qpos`` (T, nq); ``data`` is overwritten. ``falls``: the
     rollouts look for falls (``fall_ref`` set) or not (None); ``hold``: they record the soles
-    for the foot-holding cost (where the body has soles)."""
+    for the foot-holding and footprint costs (where the body has soles)."""
     nu = model.nu
     ref_qvel, ref_force = reference_feedforward(model, ref_qpos, data)
     kp = model.actuator_gainprm[:, 0].copy()
@@ -274,9 +280,9 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     tick ``k0`` through the window's end ``k1`` and on to ``k2`` (``ticks``), meeting the
     ``perturb`` = (pushes, weakenings); at the window's end its state and ``qpos`` go into
     ``keep`` = (state row, qpos row, state spec, soles), ``soles`` None or the sole boxes'
-    positions (k1 - k0, 2, 3), orientations (k1 - k0, 2, 9) and the centre of mass (k1 - k0,
-    3) written after each tick of the window (``prob.soles``; as the tick's last substep
-    computed them). A rollout that falls (``sim.simulate.falls``, checked after every tick where
+    positions (R, 2, 3), orientations (R, 2, 9) and the centre of mass (R, 3) at the window's
+    start, then after each of its first R - 1 ticks (R - 1 >= k1 - k0; ``prob.soles``; as the
+    tick's last substep computed them; rows after a stop left as they were). A rollout that falls (``sim.simulate.falls``, checked after every tick where
     ``prob.fall_ref`` is set) stops at the fall or at the window's end, whichever is later.
 
     Returns:
@@ -290,6 +296,11 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     T = len(prob.base)
     fell = False
     fb = np.zeros(model.nu)
+    if soles is not None:  # the window's start (kinematics only: the step recomputes them)
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        soles[0][0], soles[1][0] = data.geom_xpos[prob.soles], data.geom_xmat[prob.soles]
+        soles[2][0] = data.subtree_com[1]
     for k in range(k0, k2):  # the window, then on with the same offset
         t = k / CONTROL_HZ
         if pushes:  # else no external force: the kept states carry none
@@ -303,8 +314,8 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
         mujoco.mj_step(model, data, nstep=SUBSTEPS)
         if divergences(data):  # MuJoCo reset the state: no motion goes on from it
             return -(k + 1)
-        if soles is not None and k < k1:
-            i = k - k0
+        if soles is not None and k - k0 + 1 < len(soles[0]):
+            i = k - k0 + 1
             soles[0][i], soles[1][i] = data.geom_xpos[prob.soles], data.geom_xmat[prob.soles]
             soles[2][i] = data.subtree_com[1]
         if k == k1 - 1:  # the window's end: the state kept
@@ -346,9 +357,9 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     T = len(prob.base)
     S = len(offs)
     cost = np.empty(S)
-    hold = prob.soles is not None and weights.hold > 0
-    K = k1 - k0
-    soles = (np.empty((S, K, 2, 3)), np.empty((S, K, 2, 9)), np.empty((S, K, 3))) if hold else None
+    hold = prob.soles is not None and (weights.hold > 0 or weights.footprint > 0)
+    K = (k2 if weights.footprint_lookahead else k1) - k0 + 1  # the start and each tick
+    soles = tuple(np.full((S, K, *n), np.nan) for n in ((2, 3), (2, 9), (3,))) if hold else None
 
     def run(chunk: np.ndarray, data) -> None:
         for s in chunk:
@@ -369,20 +380,9 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
         run(chunks[0], datas[0])
     else:
         list(pool.map(run, chunks, datas))
-    if hold:
-        cost += weights.hold * _hold_costs(model, prob, weights, ticks, soles)
+    if hold:  # rows a rollout did not reach are NaN: they count nothing
+        cost += np.nan_to_num(sole_costs(model, prob, weights, ticks, soles), nan=0.0)
     return cost
-
-
-def _hold_costs(model, prob: _Problem, weights: CostWeights, ticks, soles) -> np.ndarray:
-    """(S,) ``footholding.window_hold_costs`` of the window ``ticks`` from the soles' records
-    ``soles`` (:func:`_rollout`), against the reference a tick later (a tick's record is the
-    state at its end, less its last substep)."""
-    later = np.minimum(np.arange(ticks[0], ticks[1]) + 1, len(prob.base) - 1)
-    ref = tuple(r[later] for r in prob.ref_soles)
-    release = weights.hold_capture, weights.hold_capture_ref
-    size = model.geom_size[prob.soles]
-    return window_hold_costs(soles, size, ref, 1.0 / CONTROL_HZ, weights.hold_contact, release)
 
 
 def _proposals(rng, last: np.ndarray, parents: np.ndarray, sigma: np.ndarray, how) -> np.ndarray:
@@ -474,7 +474,7 @@ def search_offsets(
     _check_window(window, balance)
     prob = _problem(
         model, ref_qpos, datas[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
-        hold=weights.hold > 0, noise_deflection=noise_deflection,
+        hold=weights.hold > 0 or weights.footprint > 0, noise_deflection=noise_deflection,
     )  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(model, datas[0], ref_qpos[0], prob.ref_qvel[0], spec)
