@@ -7,6 +7,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from sole_tracks import still_soles
 
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.balance import STANCE_HEIGHT
@@ -33,16 +34,9 @@ def model():
     return sim_model(canonical_skeleton())
 
 
-def _still(K: int = 12) -> np.ndarray:
-    """(K, 2, 2) two soles standing still 0.3 m apart."""
-    xy = np.zeros((K, 2, 2))
-    xy[:, 1, 1] = 0.3
-    return xy
-
-
 def test_a_sliding_stance_foot_costs_its_squared_excess_speed_a_held_one_nothing():
     K = 12
-    ref = _still(K)
+    ref = still_soles(K)
     stance = np.ones((K, 2), dtype=bool)
     assert slide_cost(ref, ref, stance, DT) == 0.0  # the reference itself
     slid = ref.copy()
@@ -66,11 +60,11 @@ def test_a_dragged_foot_costs_its_squared_speed_a_lifted_one_nothing():
     a step) may not move at all: it pays its whole speed squared; one in the air pays nothing,
     whatever its speed."""
     K = 9
-    ref = _still(K)
+    ref = still_soles(K)
     ref[:, 0, 0] += 2.0 * DT * np.arange(K)  # the reference swings its left foot at 2 m/s
     stance = np.ones((K, 2), dtype=bool)
     stance[:, 0] = False
-    sim = _still(K)
+    sim = still_soles(K)
     sim[:, 0, 0] += 0.3 * DT * np.arange(K)  # the simulated left sole moves at 0.3 m/s
     touch = np.zeros((K, 2), dtype=bool)
     assert slide_cost(sim, ref, stance, DT, touch) == 0.0  # in the air
@@ -87,9 +81,9 @@ def test_a_foot_no_faster_than_the_reference_s_costs_nothing():
     """The term asks for no less sliding than the motion itself has: a simulated sole moving
     as fast as (or slower than) the reference's, in any direction, costs nothing."""
     K = 10
-    ref = _still(K)
+    ref = still_soles(K)
     ref[:, 0, 0] += 0.4 * DT * np.arange(K)  # the reference slides at 0.4 m/s along x
-    sim = _still(K)
+    sim = still_soles(K)
     sim[:, 0, 1] += 0.4 * DT * np.arange(K)  # the simulated one as fast along y
     stance = np.ones((K, 2), dtype=bool)
     assert slide_cost(sim, ref, stance, DT) == pytest.approx(0.0, abs=1e-18)
@@ -139,7 +133,7 @@ def test_search_with_foot_holding_is_deterministic_and_another_search(trial_on_f
 def test_many_motions_at_once_cost_what_each_costs_alone():
     rng = np.random.default_rng(0)
     K = 7
-    ref = _still(K)
+    ref = still_soles(K)
     sims = ref + 0.01 * rng.standard_normal((5, K, 2, 2))
     stance = rng.random((K, 2)) > 0.3
     touch = rng.random((5, K, 2)) > 0.5
@@ -194,7 +188,7 @@ def test_a_sliding_foot_costs_nothing_while_the_capture_point_is_outside():
     sliding at 0.5 m/s over 12 ticks, unsupported at tick 5, pays for 9 of its 11 steps; all
     supported, what it pays without the mask; none, nothing."""
     K = 12
-    ref = _still(K)
+    ref = still_soles(K)
     stance = np.ones((K, 2), dtype=bool)
     slid = ref.copy()
     slid[:, 0, 0] += 0.5 * DT * np.arange(K)
@@ -249,7 +243,7 @@ def test_a_window_gives_the_feet_up_only_where_asked():
     pos[:, :, 0, 0] += 0.5 * DT * np.arange(K)
     mat = np.broadcast_to(np.eye(3).reshape(9), (S, K, 2, 9))
     com = np.broadcast_to([1.0, 0.15, 0.9], (S, K, 3))
-    ref_xy = _still(K)
+    ref_xy = still_soles(K)
     stance = np.ones((K, 2), dtype=bool)
     out = np.zeros(K, dtype=bool)
     records = (pos, mat, com)

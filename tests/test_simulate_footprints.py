@@ -10,6 +10,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from sole_tracks import still_soles
 
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.footholding import reference_soles, sole_ids
@@ -28,16 +29,9 @@ def model():
     return sim_model(canonical_skeleton())
 
 
-def _still(K: int = 12) -> np.ndarray:
-    """(K, 2, 2) two soles standing still 0.3 m apart."""
-    xy = np.zeros((K, 2, 2))
-    xy[:, 1, 1] = 0.3
-    return xy
-
-
 def test_a_sole_down_off_the_reference_s_pays_its_squared_distance():
     K = 12
-    ref = _still(K)
+    ref = still_soles(K)
     both = np.ones((K, 2), dtype=bool)
     assert footprint_cost(ref, ref, both, both) == 0.0  # the reference itself
     off = ref.copy()
@@ -55,7 +49,7 @@ def test_a_sole_down_off_the_reference_s_pays_its_squared_distance():
 
 def test_the_landing_variant_pays_once_per_touch_down():
     K = 12
-    ref = _still(K)
+    ref = still_soles(K)
     off = ref.copy()
     off[:, 0, 0] += 0.1 * np.arange(1, K + 1)  # the left sole 0.1 m further each tick
     stance = np.ones((K, 2), dtype=bool)
@@ -102,7 +96,7 @@ def test_a_window_counts_soles_on_the_floor_or_on_a_box():
     S, K = 2, 12
     pos, mat, com = _records(S, K)
     pos[1, :, 0, 0] += 0.1  # the second rollout's left sole 10 cm off
-    ref = (_still(K + 1), np.ones((K + 1, 2), dtype=bool))
+    ref = (still_soles(K + 1), np.ones((K + 1, 2), dtype=bool))
     got = window_footprint_costs((pos, mat), SIZE, ref, None, False)
     np.testing.assert_allclose(got, [0.0, 0.01], atol=1e-15)
     up = _records(S, K, lift=0.3)[0]
@@ -153,7 +147,7 @@ def test_sole_costs_weigh_the_footprints_and_nothing_else_where_hold_is_off(mode
     class Prob:  # what sole_costs reads of sampling._Problem
         base = np.zeros((40, 1))
         soles = slice(int(ids[0]), int(ids[1]) + 1, int(ids[1] - ids[0]))
-        ref_soles = (_still(40), np.ones((40, 2), dtype=bool), np.ones(40, dtype=bool))
+        ref_soles = (still_soles(40), np.ones((40, 2), dtype=bool), np.ones(40, dtype=bool))
 
     got = sole_costs(model, Prob, CostWeights(footprint=30.0), (8, 8 + K), (pos, mat, com))
     np.testing.assert_allclose(got, [0.0, 0.3, 0.3], atol=1e-12)
