@@ -319,14 +319,12 @@ for _w in (10, 30, 100, 300):
         ("land", {"footprint_landing": True}, " at touch-down"),
         ("look", {"footprint_lookahead": True}, " over the lookahead too"),
     ):
+        _base = CONTROLLERS["mix0.5s40terrain"]
         CONTROLLERS[f"fp{_how}{_w}"] = (
-            f"sampler, 40 samples, eval's defaults (gains chosen per window), the scene inferred "
-            f"from the motion, footprints {_w}{_said}",
-            {"controller": "sampling", "samples": 40, "contact_reference": True, "terrain": True,
-             "search": {"choice": GainChoice(share=0.5),
-                        "weights": CostWeights(footprint=float(_w), **_kw)}},
-            "position",
-            {"alternate_gains": (_STIFF,)},
+            _base[0] + f", footprints {_w}{_said}",
+            {**_base[1], "search": {**_base[1]["search"],
+                                    "weights": CostWeights(footprint=float(_w), **_kw)}},
+            *_base[2:],
         )  # fmt: skip
 
 #: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too

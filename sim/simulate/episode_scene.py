@@ -193,7 +193,7 @@ def _window(task, p: dict, model, qpos: np.ndarray, n: int, rng) -> tuple[np.nda
         return warped, start
     floor, cap, highest = band
     p["window_band"] = {"floor": floor, "cap": cap, "highest": highest, "drawn_speed": p["speed"]}
-    fast = float(window_steps(points, n, [start])[0]) * CONTROL_HZ
+    fast = float(window_steps(points[start : start + n], n, [0])[0]) * CONTROL_HZ  # this one
     speed = p["speed"]
     if fast > cap and speed > 1.0:
         speed = max(1.0, speed * cap / fast)
