@@ -22,6 +22,7 @@ from sim.simulate.friction import Friction  # noqa: E402
 from sim.simulate.gainchoice import GainChoice  # noqa: E402
 from sim.simulate.lqr import LQRWeights  # noqa: E402
 from sim.simulate.model import MIN_DEFLECTION, PAD_SOLE, Gains, SoftSole  # noqa: E402
+from sim.simulate.noisescale import NoiseScale  # noqa: E402
 from sim.simulate.sampling import CostWeights, search_offsets  # noqa: E402
 from sim.simulate.searchplan import SearchPlan  # noqa: E402
 from sim.simulate.validate import DEFAULT_BALANCE, STIFF_GAINS  # noqa: E402
@@ -326,6 +327,29 @@ for _w in (10, 30, 100, 300):
                                     "weights": CostWeights(footprint=float(_w), **_kw)}},
             *_base[2:],
         )  # fmt: skip
+
+#: ``sig<s>``: eval's default (``mix0.5s40terrain``) with the sampler's offset noise at s of each
+#: joint's peak torque instead of 0.3 (``search_offsets(torque_sigma=s)``); ``trunk<s>``: the
+#: offset noise of the trunk's hinges (``lowerback``, ``upperback``, ``thorax``) s times the
+#: legs' (``sim.simulate.noisescale``); ``pers0.5``: a child's offset starts from half its
+#: parent's instead of 0.8 (``persistence``); ``...seed1``: its noise seeded 1, a second draw
+#: (docs/synthetic.md, "What the root-relative error is made of")
+_NOISE = {
+    **{f"sig{_s:g}": ({"torque_sigma": _s}, f"offset noise {_s:g} of peak torque")
+       for _s in (0.1, 0.15, 0.2)},
+    **{f"trunk{_s:g}": ({"noise_scale": NoiseScale(scale=_s)},
+                        f"the trunk's offset noise {_s:g} times the legs'")
+       for _s in (0.5,)},
+    "pers0.5": ({"persistence": 0.5}, "offsets persisting 0.5 instead of 0.8 per window"),
+}  # fmt: skip
+for _name, (_search, _label) in _NOISE.items():
+    _base = CONTROLLERS["mix0.5s40terrain"]
+    for _seed in (0, 1):
+        CONTROLLERS[_name + ("seed1" if _seed else "")] = (
+            _base[0] + f", {_label}" + (", its noise seeded 1" if _seed else ""),
+            {**_base[1], "search": {**_base[1]["search"], **_search, "seed": _seed}},
+            *_base[2:],
+        )
 
 #: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too
 #: (``ForwardValidation(hand_supports=True)``, ``sim.simulate.handholds``: a hand still above the

@@ -37,6 +37,7 @@ import numpy as np
 from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import Push, Tracking, Weakening, track
+from sim.simulate.noisescale import NoiseScale, scaled_sigma
 from sim.simulate.sampling import (
     BALANCE,
     LOOKAHEAD,
@@ -216,14 +217,18 @@ def _select(kept, costs: np.ndarray, cand: tuple, keep: int, adapt: float) -> tu
 
 def _problems(models, datas, ref_qpos, how: tuple, lqr, window: int) -> list:
     """Each gain set's ``sampling._problem`` (``how`` = torque_sigma, pushes, falls, balance,
-    noise_deflection, soles: the rollouts record the soles for their cost terms), carrying
-    ``lqr`` (bound to the reference here; None: none)."""
-    sigma, pushes, falls, balance, deflection, soles = how
+    noise_deflection, soles: the rollouts record the soles for their cost terms, noise_scale:
+    ``sim.simulate.noisescale.NoiseScale`` or None), carrying ``lqr`` (bound to the reference
+    here; None: none)."""
+    sigma, pushes, falls, balance, deflection, soles, noise = how
     probs = [
         _problem(m, ref_qpos, d[0], sigma, pushes, falls=falls, balance=balance, hold=soles,
                  noise_deflection=deflection)
         for m, d in zip(models, datas, strict=True)
     ]  # fmt: skip
+    if noise is not None:  # the noise of some bones' hinges scaled
+        pairs = zip(models, probs, strict=True)
+        probs = [replace(p, sigma=scaled_sigma(m, p.sigma, noise)) for m, p in pairs]
     if lqr is None:
         return probs
     lqr.start(ref_qpos, probs[0].ref_qvel, window)
@@ -263,15 +268,15 @@ def choice_search(
     noise_deflection: float = 0.0,
     pushes: tuple[Push, ...] = (),
     weakenings: tuple[Weakening, ...] = (),
-    lqr=None,
-) -> tuple[np.ndarray, np.ndarray]:
+    lqr=None, noise_scale: NoiseScale | None = None,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The cheapest hinge-target corrections and gain sets for tracking ``ref_qpos`` (T, nq at
     ``CONTROL_HZ``) on ``models`` (:func:`common_body`; ``models[0]`` the fallback), found by
     sampling rollouts as ``sampling.search_offsets`` (the same arguments, the perturbations
     ``pushes`` and ``weakenings`` met by every rollout) with each window's candidates spread
-    over the gain sets by ``choice`` (module docstring) and the rollouts spent as ``plan`` says
-    (``sim.simulate.searchplan``: recovery, staged windows, the window-end cost, adaptation).
-    ``lqr``: a ``sampling_lqr.WindowLQR``, its gain per window in every rollout; None: none.
+    over the gain sets by ``choice`` (module docstring), the rollouts spent as ``plan`` says.
+    ``lqr``: a ``sampling_lqr.WindowLQR``, its gain per window in every rollout; ``noise_scale``:
+    some bones' offset noise scaled (``sim.simulate.noisescale``); None: none (either).
 
     Returns:
         ``offsets`` (T, nu) [rad], ``sets`` (T,) the gain set of each tick (ints), and
@@ -284,7 +289,7 @@ def choice_search(
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
     _check_window(window, balance)
     how = torque_sigma, pushes, weights.fall > 0, balance, noise_deflection, _soles(weights)
-    probs = _problems(models, datas, ref_qpos, how, lqr, window)
+    probs = _problems(models, datas, ref_qpos, (*how, noise_scale), lqr, window)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
     states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
     # the kept states, their last offsets and gain sets, and the noise's scale (nu,)
