@@ -332,7 +332,8 @@ for _w in (10, 30, 100, 300):
 #: joint's peak torque instead of 0.3 (``search_offsets(torque_sigma=s)``); ``trunk<s>``: the
 #: offset noise of the trunk's hinges (``lowerback``, ``upperback``, ``thorax``) s times the
 #: legs' (``sim.simulate.noisescale``); ``pers0.5``: a child's offset starts from half its
-#: parent's instead of 0.8 (``persistence``); ``...seed1``: its noise seeded 1, a second draw
+#: parent's instead of 0.8 (``persistence``); ``sig0.15rec1``: noise 0.15 with ``rec1``'s recovery
+#: (``SearchPlan(recover=1)``, below); ``...seed1``: its noise seeded 1, a second draw
 #: (docs/synthetic.md, "What the root-relative error is made of")
 _NOISE = {
     **{f"sig{_s:g}": ({"torque_sigma": _s}, f"offset noise {_s:g} of peak torque")
@@ -341,6 +342,8 @@ _NOISE = {
                         f"the trunk's offset noise {_s:g} times the legs'")
        for _s in (0.5,)},
     "pers0.5": ({"persistence": 0.5}, "offsets persisting 0.5 instead of 0.8 per window"),
+    "sig0.15rec1": ({"torque_sigma": 0.15, "plan": SearchPlan(recover=1)},
+                    "offset noise 0.15 of peak torque, recovery: back 1 window, 2x samples"),
 }  # fmt: skip
 for _name, (_search, _label) in _NOISE.items():
     _base = CONTROLLERS["mix0.5s40terrain"]
