@@ -336,7 +336,7 @@ for _name, _kw in (
     *((f"clear{_w:g}", {"clearance": _w}) for _w in (100.0, 300.0, 1000.0, 3000.0)),
     *((f"pivot{_w:g}", {"pivot": _w}) for _w in (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)),
     *((f"clear{_c:g}pivot{_p:g}", {"clearance": _c, "pivot": _p})
-      for _c, _p in ((300.0, 0.1), (1000.0, 0.1), (1000.0, 0.3))),
+      for _c, _p in ((300.0, 0.03), (1000.0, 0.03), (1000.0, 0.1))),
 ):  # fmt: skip
     _base = CONTROLLERS["mix0.5s40terrain"]
     _said = ", ".join(f"{k} {v:g}" for k, v in _kw.items())
@@ -345,6 +345,13 @@ for _name, _kw in (
         {**_base[1], "search": {**_base[1]["search"], "weights": CostWeights(**_kw)}},
         *_base[2:],
     )
+#: ``pivot0.03seed1``: ``pivot0.03`` with its noise seeded 1 (its own chance yardstick)
+CONTROLLERS["pivot0.03seed1"] = (
+    CONTROLLERS["pivot0.03"][0] + ", its noise seeded 1",
+    {**CONTROLLERS["pivot0.03"][1],
+     "search": {**CONTROLLERS["pivot0.03"][1]["search"], "seed": 1}},
+    *CONTROLLERS["pivot0.03"][2:],
+)  # fmt: skip
 
 #: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too
 #: (``ForwardValidation(hand_supports=True)``, ``sim.simulate.handholds``: a hand still above the
