@@ -354,6 +354,32 @@ for _name, (_search, _label) in _NOISE.items():
             *_base[2:],
         )
 
+#: ``clear<w>``, ``pivot<w>``, ``clear<w>pivot<v>``: eval's default (``mix0.5s40terrain``) with
+#: swing clearance and stance pivot (``sim.simulate.swingstance``, ``CostWeights(clearance=w,
+#: pivot=v)``: a sole lower than the reference's swing sole, capped at 3 cm, pays w times the
+#: squared shortfall [m^2]; a sole on its support where the reference stands on it pays v times
+#: its yaw rate's squared difference from the reference's [rad^2/s^2]; means over the window)
+for _name, _kw in (
+    *((f"clear{_w:g}", {"clearance": _w}) for _w in (100.0, 300.0, 1000.0, 3000.0)),
+    *((f"pivot{_w:g}", {"pivot": _w}) for _w in (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)),
+    *((f"clear{_c:g}pivot{_p:g}", {"clearance": _c, "pivot": _p})
+      for _c, _p in ((300.0, 0.03), (1000.0, 0.03), (1000.0, 0.1))),
+):  # fmt: skip
+    _base = CONTROLLERS["mix0.5s40terrain"]
+    _said = ", ".join(f"{k} {v:g}" for k, v in _kw.items())
+    CONTROLLERS[_name] = (
+        _base[0] + f", {_said}",
+        {**_base[1], "search": {**_base[1]["search"], "weights": CostWeights(**_kw)}},
+        *_base[2:],
+    )
+#: ``pivot0.03seed1``: ``pivot0.03`` with its noise seeded 1 (its own chance yardstick)
+CONTROLLERS["pivot0.03seed1"] = (
+    CONTROLLERS["pivot0.03"][0] + ", its noise seeded 1",
+    {**CONTROLLERS["pivot0.03"][1],
+     "search": {**CONTROLLERS["pivot0.03"][1]["search"], "seed": 1}},
+    *CONTROLLERS["pivot0.03"][2:],
+)  # fmt: skip
+
 #: ``mix0.5s40hands``: ``mix0.5s40terrain`` with boxes under the hands that hold the body up too
 #: (``ForwardValidation(hand_supports=True)``, ``sim.simulate.handholds``: a hand still above the
 #: ground while the centre of mass is outside the soles' footprint; docs/synthetic.md)

@@ -71,8 +71,9 @@ def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray, capture: bool 
     the horizontal bottom centre (T, 2, 2) [m] and whether the reference stands on it (T, 2)
     (the box's lowest corner at most ``sim.simulate.balance.STANCE_HEIGHT`` above the floor or
     the terrain's step under its centre, ``sim.simulate.terrain``); with
-    ``capture``, third, whether its capture point lies inside the soles it stands on (T,)
-    (:func:`capture_supported`)."""
+    ``capture`` (the sampler's view), third, whether its capture point lies inside the soles it
+    stands on (T,) (:func:`capture_supported`), fourth, the lowest corner's height above that
+    support (T, 2) [m], and fifth, each sole's heading (T, 2) [rad] (:func:`sole_yaw`)."""
     data = mujoco.MjData(model)
     T = len(ref_qpos)
     xpos, xmat, com = np.empty((T, 2, 3)), np.empty((T, 2, 9)), np.empty((T, 3))
@@ -96,7 +97,15 @@ def reference_soles(model, ref_qpos: np.ndarray, ids: np.ndarray, capture: bool 
         xy,
         stance,
         capture_supported(com, sole_corners(xpos, xmat, size), stance, 1 / CONTROL_HZ),
+        low,
+        sole_yaw(xmat),
     )
+
+
+def sole_yaw(xmat: np.ndarray) -> np.ndarray:
+    """(...,) the heading [rad] (about z, from +x) of the local x axis (the foot's length) of
+    boxes with orientations ``xmat`` (..., 9) (row-major)."""
+    return np.arctan2(xmat[..., 3], xmat[..., 0])
 
 
 def slide_cost(

@@ -26,6 +26,7 @@ import numpy as np
 
 from sim.simulate.footholding import CONTACT_HEIGHT, sole_bottoms, sole_lowest, window_hold_costs
 from sim.simulate.model import CONTROL_HZ
+from sim.simulate.swingstance import window_swing_stance_costs
 from sim.simulate.terrain import surface_height, terrain_geoms
 
 
@@ -80,10 +81,18 @@ def window_footprint_costs(
     return footprint_cost(xy[:, 1:], ref[0][1:], ref[1][1:], touch[:, 1:], landing, before)
 
 
+def sole_terms(weights) -> bool:
+    """Whether ``weights`` (``sampling.CostWeights``) has a sole term (:func:`sole_costs`):
+    then the rollouts record the soles."""
+    return weights.hold > 0 or weights.footprint > 0 or weights.clearance > 0 or weights.pivot > 0
+
+
 def sole_costs(model, prob, weights, ticks: tuple, records: tuple) -> np.ndarray:
     """(S,) the sole terms of ``sim.simulate.sampling.window_cost``'s candidates, weighted:
     ``weights.hold`` times foot holding (``footholding.window_hold_costs``) plus
-    ``weights.footprint`` times :func:`window_footprint_costs`, of the window ``ticks`` = (k0,
+    ``weights.footprint`` times :func:`window_footprint_costs` plus ``weights.clearance`` and
+    ``weights.pivot`` times swing clearance and stance pivot over the window's ticks
+    (``swingstance.window_swing_stance_costs``), of the window ``ticks`` = (k0,
     k1, ...) from the rollouts' records (positions (S, R, 2, 3), orientations (S, R, 2, 9),
     centre of mass (S, R, 3): the window's start, then after each tick, R - 1 >= k1 - k0:
     foot holding looks at the window's ticks, footprints at all R; NaN where a rollout
@@ -103,9 +112,15 @@ def sole_costs(model, prob, weights, ticks: tuple, records: tuple) -> np.ndarray
             ticks_only, size, tuple(r[1 : K + 1] for r in ref), 1.0 / CONTROL_HZ,
             weights.hold_contact, release,
         )  # fmt: skip
+    terrain = terrain_geoms(model)
     if weights.footprint > 0:
-        terrain = terrain_geoms(model)
         cost += weights.footprint * window_footprint_costs(
             records, size, ref, terrain, weights.footprint_landing
         )
+    if weights.clearance > 0 or weights.pivot > 0:  # the window's start and ticks
+        K = ticks[1] - ticks[0]
+        cost += window_swing_stance_costs(
+            tuple(r[:, : K + 1] for r in records[:2]), size, tuple(r[: K + 1] for r in ref),
+            terrain, 1.0 / CONTROL_HZ, (weights.clearance, weights.pivot),
+        )  # fmt: skip
     return cost

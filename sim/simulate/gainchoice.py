@@ -37,15 +37,13 @@ import numpy as np
 from sim.errors import UsageError
 from sim.simulate.balance import Balance
 from sim.simulate.controller import Push, Tracking, Weakening, track
+from sim.simulate.footprints import sole_terms
 from sim.simulate.noisescale import NoiseScale, scaled_sigma
 from sim.simulate.sampling import (
     BALANCE,
     LOOKAHEAD,
     CostWeights,
-    _backtrack,
     _candidate_costs,
-    _check_window,
-    _first_state,
     _problem,
 )
 from sim.simulate.sampling_lqr import WindowLQR
@@ -57,6 +55,7 @@ from sim.simulate.searchplan import (
     stage_sizes,
     window_end_costs,
 )
+from sim.simulate.searchsteps import backtrack, check_window, first_state
 
 
 @dataclass(frozen=True)
@@ -202,7 +201,7 @@ def _select(kept, costs: np.ndarray, cand: tuple, keep: int, adapt: float) -> tu
     """The ``keep`` cheapest of a window's candidates ``cand`` = (parents, offsets, sets,
     costs, (states, qpos), noise), each paying its parent's cost ``costs`` too: the next
     ``kept`` (states, offsets, sets, the noise's scale adapted at ``adapt``), their costs, and
-    the window's steps of the offsets' and the sets' histories (for ``_backtrack``)."""
+    the window's steps of the offsets' and the sets' histories (for ``searchsteps.backtrack``)."""
     parents, offs, sets, cost, out, noise = cand
     new_costs = costs[parents] + cost
     best = np.argsort(new_costs, kind="stable")[:keep]
@@ -233,12 +232,6 @@ def _problems(models, datas, ref_qpos, how: tuple, lqr, window: int) -> list:
         return probs
     lqr.start(ref_qpos, probs[0].ref_qvel, window)
     return [replace(p, lqr=lqr) for p in probs]
-
-
-def _soles(weights: CostWeights) -> bool:
-    """Whether the rollouts record the soles: the cost has a sole term (foot holding or
-    footprints)."""
-    return weights.hold > 0 or weights.footprint > 0
 
 
 def _window_gain(ctx: _Search, lqr, kept, k0: int) -> None:
@@ -287,11 +280,11 @@ def choice_search(
     T, nu, rng = ref_qpos.shape[0], models[0].nu, np.random.default_rng(seed)
     n_threads = max(1, min(int(threads), samples))
     datas = [[mujoco.MjData(m) for _ in range(n_threads)] for m in models]
-    _check_window(window, balance)
-    how = torque_sigma, pushes, weights.fall > 0, balance, noise_deflection, _soles(weights)
+    check_window(window, balance)
+    how = torque_sigma, pushes, weights.fall > 0, balance, noise_deflection, sole_terms(weights)
     probs = _problems(models, datas, ref_qpos, (*how, noise_scale), lqr, window)
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    states = _first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
+    states = first_state(models[0], datas[0][0], ref_qpos[0], probs[0].ref_qvel[0], spec)
     # the kept states, their last offsets and gain sets, and the noise's scale (nu,)
     kept = states, np.zeros((1, nu)), np.zeros(1, dtype=int), np.ones(nu)
     costs = np.zeros(1)
@@ -326,8 +319,8 @@ def choice_search(
     finally:
         if pool is not None:
             pool.shutdown()
-    offsets, window_qpos = _backtrack(history, T, window, nu, models[0].nq)
-    chosen, _ = _backtrack(set_history, T, window, 1, 1)
+    offsets, window_qpos = backtrack(history, T, window, nu, models[0].nq)
+    chosen, _ = backtrack(set_history, T, window, 1, 1)
     return offsets, chosen[:, 0].astype(int), window_qpos
 
 

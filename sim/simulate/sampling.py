@@ -37,7 +37,6 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.errors import UsageError
 from sim.simulate.balance import Balance, balance_plan, held_torques
 from sim.simulate.controller import (
     Push,
@@ -52,8 +51,9 @@ from sim.simulate.drift import drift_lead
 from sim.simulate.falls import fall_reference, has_fallen
 from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.footholding import as_slice, reference_soles, sole_ids
-from sim.simulate.footprints import sole_costs
+from sim.simulate.footprints import sole_costs, sole_terms
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
+from sim.simulate.searchsteps import backtrack, check_window, first_state
 from sim.simulate.tracking import clear_divergences, divergences
 
 #: bones whose hinges get sampled corrections (the ones that carry and balance the body)
@@ -110,6 +110,11 @@ class CostWeights:
     footprint: float = 0.0
     footprint_landing: bool = False
     footprint_lookahead: bool = False
+    #: swing clearance [1/m^2] and stance pivot [s^2/rad^2] (``sim.simulate.swingstance``) over
+    #: the window's ticks: a sole lower than the reference's swing sole (capped at 3 cm), a
+    #: stance sole turning faster than the reference's; 0: off
+    clearance: float = 0.0
+    pivot: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -221,7 +226,7 @@ class _Problem:
     fall_ref: object | None
     kp: np.ndarray | None = None
     balance: object | None = None
-    soles: slice | None = None  # the sole geoms' rows where foot holding or footprints are costed
+    soles: slice | None = None  # the sole geoms' rows where a sole term is costed
     ref_soles: tuple | None = None  # footholding.reference_soles, capture=True
     lqr: object | None = None  # sampling_lqr.WindowLQR: its gain's feedback in every rollout
 
@@ -328,21 +333,6 @@ def _rollout(model, data, prob: _Problem, off, ticks: tuple[int, int, int], pert
     return k2
 
 
-def _backtrack(history, T: int, window: int, nu: int, nq: int):
-    """The cheapest final state's offsets (T, nu) and window-end ``qpos`` (W, nq), window by
-    window back to the start through ``history`` (per window, of the kept states: parent index,
-    offset, ``qpos`` reached; the cheapest kept first)."""
-    offsets = np.zeros((T, nu))
-    window_qpos = np.empty((len(history), nq))
-    j = 0
-    for w in range(len(history) - 1, -1, -1):
-        parent, off, reached = history[w]
-        offsets[w * window : min(T, (w + 1) * window)] = off[j]
-        window_qpos[w] = reached[j]
-        j = parent[j]
-    return offsets, window_qpos
-
-
 def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool) -> np.ndarray:
     """(S,) each candidate's cost, its parent's cost not included: candidate ``s`` rolled out
     (:func:`_rollout`) from kept state ``parents[s]`` with offset ``offs[s]`` (nu,), judged by
@@ -357,7 +347,7 @@ def _candidate_costs(model, datas, prob, search, parents, offs, ticks, out, pool
     T = len(prob.base)
     S = len(offs)
     cost = np.empty(S)
-    hold = prob.soles is not None and (weights.hold > 0 or weights.footprint > 0)
+    hold = prob.soles is not None and sole_terms(weights)
     K = (k2 if weights.footprint_lookahead else k1) - k0 + 1  # the start and each tick
     soles = tuple(np.full((S, K, *n), np.nan) for n in ((2, 3), (2, 9), (3,))) if hold else None
 
@@ -396,26 +386,6 @@ def _proposals(rng, last: np.ndarray, parents: np.ndarray, sigma: np.ndarray, ho
     n_elite = min(int(elite), len(last), len(parents))
     offs[:n_elite] = last[parents[:n_elite]]
     return offs
-
-
-def _check_window(window: int, balance: Balance | None) -> None:
-    """Refuse windows that start between two updates of the balance feedback (a rollout could
-    not start where the replay holds torques computed before it)."""
-    if balance is not None and window % balance.every:
-        raise UsageError(
-            f"window ({window} ticks) must be a multiple of Balance.every ({balance.every}): "
-            "a rollout starts where the replay updates its feedback"
-        )
-
-
-def _first_state(model, data, qpos: np.ndarray, qvel: np.ndarray, spec) -> np.ndarray:
-    """(1, state size) the full state of ``data`` reset to ``qpos`` (nq,) and ``qvel`` (nv,)."""
-    mujoco.mj_resetData(model, data)
-    data.qpos[:], data.qvel[:] = qpos, qvel
-    mujoco.mj_forward(model, data)
-    state = np.empty((1, mujoco.mj_stateSize(model, spec)))
-    mujoco.mj_getState(model, data, state[0], spec)
-    return state
 
 
 def search_offsets(
@@ -471,13 +441,13 @@ def search_offsets(
     T, nu = ref_qpos.shape[0], model.nu
     rng = np.random.default_rng(seed)
     datas = [mujoco.MjData(model) for _ in range(max(1, min(int(threads), samples)))]
-    _check_window(window, balance)
+    check_window(window, balance)
     prob = _problem(
         model, ref_qpos, datas[0], torque_sigma, pushes, falls=weights.fall > 0, balance=balance,
-        hold=weights.hold > 0 or weights.footprint > 0, noise_deflection=noise_deflection,
+        hold=sole_terms(weights), noise_deflection=noise_deflection,
     )  # fmt: skip
     spec = mujoco.mjtState.mjSTATE_INTEGRATION
-    states = _first_state(model, datas[0], ref_qpos[0], prob.ref_qvel[0], spec)
+    states = first_state(model, datas[0], ref_qpos[0], prob.ref_qvel[0], spec)
     costs = np.zeros(1)
     last = np.zeros((1, nu))  # each kept state's offset in its last window
     history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -497,4 +467,4 @@ def search_offsets(
     finally:
         if pool is not None:
             pool.shutdown()
-    return _backtrack(history, T, window, nu, model.nq)
+    return backtrack(history, T, window, nu, model.nq)
