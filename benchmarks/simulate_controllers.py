@@ -333,8 +333,9 @@ for _w in (10, 30, 100, 300):
 #: offset noise of the trunk's hinges (``lowerback``, ``upperback``, ``thorax``) s times the
 #: legs' (``sim.simulate.noisescale``); ``pers0.5``: a child's offset starts from half its
 #: parent's instead of 0.8 (``persistence``); ``sig0.15rec1``: noise 0.15 with ``rec1``'s recovery
-#: (``SearchPlan(recover=1)``, below); ``...seed1``: its noise seeded 1, a second draw
-#: (docs/synthetic.md, "What the root-relative error is made of")
+#: (``SearchPlan(recover=1)``, below); ``narrow<f>of<h>``: a share h of each window's
+#: candidates, drawn at random, with their noise times f (``SearchPlan(narrow=f,
+#: narrow_share=h)``); ``...seed1``: its noise seeded 1, a second draw (docs/synthetic.md, "What the root-relative error is made of")
 _NOISE = {
     **{f"sig{_s:g}": ({"torque_sigma": _s}, f"offset noise {_s:g} of peak torque")
        for _s in (0.1, 0.15, 0.2)},
@@ -344,6 +345,9 @@ _NOISE = {
     "pers0.5": ({"persistence": 0.5}, "offsets persisting 0.5 instead of 0.8 per window"),
     "sig0.15rec1": ({"torque_sigma": 0.15, "plan": SearchPlan(recover=1)},
                     "offset noise 0.15 of peak torque, recovery: back 1 window, 2x samples"),
+    **{f"narrow{_f:g}of{_h:g}": ({"plan": SearchPlan(narrow=_f, narrow_share=_h)},
+                                 f"{_h:g} of the candidates with the offset noise times {_f:g}")
+       for _f, _h in ((0.5, 0.5), (0.5, 0.75), (0.33, 0.5))},
 }  # fmt: skip
 for _name, (_search, _label) in _NOISE.items():
     _base = CONTROLLERS["mix0.5s40terrain"]

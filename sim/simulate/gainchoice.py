@@ -52,6 +52,7 @@ from sim.simulate.searchplan import (
     adapted_scale,
     boosted,
     may_recover,
+    narrowed,
     stage_sizes,
     window_end_costs,
 )
@@ -98,8 +99,8 @@ def common_body(models) -> tuple:
 def _offsets(rng, last, last_set, parents, cand_set, probs, persistence, scale=None) -> tuple:
     """(S, nu) the candidates' offsets [rad]: each parent's last offset (``last`` (K, nu), on
     gains ``last_set`` (K,)) as the same torque on the candidate's gains ``cand_set`` (S,),
-    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``) times ``scale`` (nu,;
-    None: 1); and the standard normal draws (S, nu) of that noise."""
+    shrunk by ``persistence``, plus that set's noise (``probs[j].sigma``) times ``scale`` (nu,
+    or per candidate (S, nu); None: 1); and the standard normal draws (S, nu) of that noise."""
     noise = rng.standard_normal((len(parents), last.shape[1]))
     start = last[parents]
     moved = last_set[parents] != cand_set
@@ -156,6 +157,8 @@ def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
     if sets is None:
         n_alt = int(round(ctx.choice.share * len(idx))) if len(ctx.models) > 1 else 0
         sets = np.r_[np.zeros(len(idx) - n_alt, int), np.ones(n_alt, int)]
+    factor = narrowed(ctx.plan, rng, len(idx))  # (n, 1) or None: a share drawn narrow
+    scale = scale if factor is None else scale * factor
     offs, noise = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence, scale)
     out = np.empty((len(idx), ctx.size)), np.empty((len(idx), ctx.models[0].nq))
     search = states, ctx.weights, ctx.perturb, ctx.spec
