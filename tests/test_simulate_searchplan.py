@@ -1,8 +1,9 @@
 """How the gain-choosing sampler spends its rollouts (``sim.simulate.searchplan``): a recovery
 backs up and searches again only within its budget, and the replay still passes through the
 states its rollouts reached; a staged window rolls out the rest of its candidates only where one
-of the first fell; the window-end cost is the tracking cost of the state kept; every option is
-deterministic whatever the number of threads."""
+of the first fell; the window-end cost is the tracking cost of the state kept; narrow candidates are exactly their
+share, drawn at random, and search with their noise narrowed; every option is deterministic
+whatever the number of threads."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from sim.simulate.controller import track
 from sim.simulate.gainchoice import GainChoice, choice_search, common_body
 from sim.simulate.model import Gains, sim_model
 from sim.simulate.sampling import BALANCE, CostWeights, _problem
-from sim.simulate.searchplan import SearchPlan, window_end_costs
+from sim.simulate.searchplan import SearchPlan, narrowed, window_end_costs
 
 STIFF = Gains(min_deflection=0.1, omega=2 * np.pi * 12.0)
 #: every candidate of every window counts as fallen (its cost is never below this)
@@ -140,3 +141,32 @@ def test_the_noise_widens_where_the_kept_took_larger_steps_and_narrows_where_sma
     np.testing.assert_allclose(got, scale * np.exp(0.25 * np.array([3.0, -0.75, 0.0, -1.0])))
     np.testing.assert_array_equal(adapted_scale(scale, kept, 0.0), scale)  # off
     assert adapted_scale(np.full(4, 3.9), np.full((2, 4), 10.0), 1.0).max() == SCALE_RANGE[1]
+
+
+def test_narrowed_draws_exactly_its_share_at_random_and_nothing_where_off():
+    rng = np.random.default_rng(5)
+    factor = narrowed(SearchPlan(narrow=0.5, narrow_share=0.25), rng, 8)
+    assert factor.shape == (8, 1)
+    assert sorted(factor[:, 0]) == [0.5, 0.5] + [1.0] * 6  # round(0.25 * 8) narrow
+    picks = {tuple(narrowed(SearchPlan(narrow=0.5, narrow_share=0.25), rng, 8)[:, 0])
+             for _ in range(20)}  # fmt: skip
+    assert len(picks) > 1  # chosen at random, not always the same candidates
+    for off in (SearchPlan(), SearchPlan(narrow=0.5), SearchPlan(narrow=1.0, narrow_share=0.5)):
+        before = rng.bit_generator.state
+        assert narrowed(off, rng, 8) is None
+        assert rng.bit_generator.state == before  # the default's draws untouched
+    for bad in ({"narrow": 0.0}, {"narrow_share": -0.1}, {"narrow_share": 1.5}):
+        with pytest.raises(UsageError, match="narrow"):
+            SearchPlan(**bad)
+
+
+def test_narrow_candidates_search_with_their_noise_narrowed(bodies, walk):
+    default = choice_search(bodies, walk, **SEARCH)
+    off = choice_search(bodies, walk, plan=SearchPlan(narrow=1.0, narrow_share=0.5), **SEARCH)
+    for a, b in zip(default, off, strict=True):
+        np.testing.assert_array_equal(a, b)  # a factor of 1: the search bit for bit
+    tiny = choice_search(bodies, walk, plan=SearchPlan(narrow=1e-9, narrow_share=1.0), **SEARCH)
+    assert np.abs(default[0]).max() > 1e-2
+    assert np.abs(tiny[0]).max() < 1e-6  # every candidate's noise 1e-9 times: no offset grows
+    half = choice_search(bodies, walk, plan=SearchPlan(narrow=1e-9, narrow_share=0.5), **SEARCH)
+    assert not np.array_equal(half[0], default[0])
