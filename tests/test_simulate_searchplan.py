@@ -1,9 +1,9 @@
 """How the gain-choosing sampler spends its rollouts (``sim.simulate.searchplan``): a recovery
 backs up and searches again only within its budget, and the replay still passes through the
 states its rollouts reached; a staged window rolls out the rest of its candidates only where one
-of the first fell; the window-end cost is the tracking cost of the state kept; narrow candidates are exactly their
-share, drawn at random, and search with their noise narrowed; every option is deterministic
-whatever the number of threads."""
+of the first fell; the window-end cost is the tracking cost of the state kept; narrow candidates
+are exactly their share, drawn at random, and search with their noise narrowed; every option is
+deterministic whatever the number of threads."""
 
 from __future__ import annotations
 
