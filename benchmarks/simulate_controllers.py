@@ -331,7 +331,8 @@ for _w in (10, 30, 100, 300):
 #: ``sig<s>``: eval's default (``mix0.5s40terrain``) with the sampler's offset noise at s of each
 #: joint's peak torque instead of 0.3 (``search_offsets(torque_sigma=s)``); ``trunk<s>``: the
 #: offset noise of the trunk's hinges (``lowerback``, ``upperback``, ``thorax``) s times the
-#: legs' (``sim.simulate.noisescale``); ``pers0.5``: a child's offset starts from half its
+#: legs' (``sim.simulate.noisescale``); ``feet<s>``: the ankles' and toes' s times the rest's
+#: (their low stiffness gives them the widest noise in radians); ``pers0.5``: a child's offset starts from half its
 #: parent's instead of 0.8 (``persistence``); ``sig0.15rec1``: noise 0.15 with ``rec1``'s recovery
 #: (``SearchPlan(recover=1)``, below); ``narrow<f>of<h>``: a share h of each window's
 #: candidates, drawn at random, with their noise times f (``SearchPlan(narrow=f,
@@ -345,6 +346,9 @@ _NOISE = {
     "pers0.5": ({"persistence": 0.5}, "offsets persisting 0.5 instead of 0.8 per window"),
     "sig0.15rec1": ({"torque_sigma": 0.15, "plan": SearchPlan(recover=1)},
                     "offset noise 0.15 of peak torque, recovery: back 1 window, 2x samples"),
+    **{f"feet{_s:g}": ({"noise_scale": NoiseScale(scale=_s, bones=("foot", "toes"))},
+                       f"the ankles' and toes' offset noise {_s:g} times the rest's")
+       for _s in (0.25, 0.5)},
     **{f"narrow{_f:g}of{_h:g}": ({"plan": SearchPlan(narrow=_f, narrow_share=_h)},
                                  f"{_h:g} of the candidates with the offset noise times {_f:g}")
        for _f, _h in ((0.5, 0.5), (0.5, 0.75), (0.33, 0.5))},
