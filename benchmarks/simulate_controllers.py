@@ -362,6 +362,20 @@ for _name, (_search, _label) in _NOISE.items():
             *_base[2:],
         )
 
+#: ``nf<f>s<n>f<h>``: eval's default with ``n`` samples a window, the first ``h`` of them rolled
+#: out with their noise times ``f`` and the rest at full noise only where one of those fell
+#: (``SearchPlan(first=h, narrow=f, narrow_first=True)``: small corrections of the posture
+#: where the body is safe, the full search where a fall threatens)
+for _f, _n, _h in ((0.5, 40, 0.5), (0.5, 60, 0.67)):
+    _base = CONTROLLERS["mix0.5s40terrain"]
+    CONTROLLERS[f"nf{_f:g}s{_n}f{_h:g}"] = (
+        _base[0] + f", {_n} samples: the first {_h:g} with the offset noise times {_f:g}, the rest"
+        " at full noise where one of those fell",
+        {**_base[1], "samples": _n, "search": {
+            **_base[1]["search"], "plan": SearchPlan(first=_h, narrow=_f, narrow_first=True)}},
+        *_base[2:],
+    )  # fmt: skip
+
 #: ``clear<w>``, ``pivot<w>``, ``clear<w>pivot<v>``: eval's default (``mix0.5s40terrain``) with
 #: swing clearance and stance pivot (``sim.simulate.swingstance``, ``CostWeights(clearance=w,
 #: pivot=v)``: a sole lower than the reference's swing sole, capped at 3 cm, pays w times the

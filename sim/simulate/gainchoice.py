@@ -147,17 +147,17 @@ class _Search:
     perturb: tuple = ((), ())
 
 
-def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None) -> tuple:
+def _stage(ctx: _Search, rng, idx: np.ndarray, kept, ticks, sets=None, first=True) -> tuple:
     """Candidates ``idx`` (n,) of a window rolled out from the kept states ``kept`` = (states,
     last offsets, last gain sets): their parents (``idx`` modulo the kept), gain sets (``sets``,
     else ``choice.share`` of them on ``models[1]``, last), offsets, costs and window-end
-    (states, ``qpos``)."""
+    (states, ``qpos``). ``first``: the window's first stage (``searchplan.narrowed``)."""
     states, last, last_set, scale = kept
     parents = idx % len(states)
     if sets is None:
         n_alt = int(round(ctx.choice.share * len(idx))) if len(ctx.models) > 1 else 0
         sets = np.r_[np.zeros(len(idx) - n_alt, int), np.ones(n_alt, int)]
-    factor = narrowed(ctx.plan, rng, len(idx))  # (n, 1) or None: a share drawn narrow
+    factor = narrowed(ctx.plan, rng, len(idx), first)  # (n, 1) or None: some drawn narrow
     scale = scale if factor is None else scale * factor
     offs, noise = _offsets(rng, last, last_set, parents, sets, ctx.probs, ctx.persistence, scale)
     out = np.empty((len(idx), ctx.size)), np.empty((len(idx), ctx.models[0].nq))
@@ -185,12 +185,12 @@ def _window(ctx: _Search, rng, n: int, kept, ticks) -> tuple:
     n1, n2 = stage_sizes(n, ctx.plan.first)
     parts = [_stage(ctx, rng, np.arange(n1), kept, ticks)]
     if n2 and fall > 0 and parts[0][3].max() >= fall:  # one fell: a hard window, all of them
-        parts.append(_stage(ctx, rng, np.arange(n1, n), kept, ticks))
+        parts.append(_stage(ctx, rng, np.arange(n1, n), kept, ticks, first=False))
     cand = _join(parts)
     fell = fall > 0 and cand[3].min() >= fall
     if fell and ctx.choice.fallback and cand[2].any():  # the default gains too
         n = len(cand[3])
-        cand = _join([cand, _stage(ctx, rng, np.arange(n), kept, ticks, np.zeros(n, int))])
+        cand = _join([cand, _stage(ctx, rng, np.arange(n), kept, ticks, np.zeros(n, int), False)])
     parents, offs, sets, cost, out, noise = cand
     if ctx.plan.end_cost:
         prob = ctx.probs[0]  # the kinematics and the reference are every gain set's

@@ -16,9 +16,10 @@ Five options, each off by default (:class:`SearchPlan`), measured in docs/synthe
   (``sampling.window_cost``) there (:func:`window_end_costs`).
 * **Proposal adaptation**: each hinge's noise widens or narrows with the spread of the kept
   candidates' draws (``adapt``, :func:`adapted_scale`).
-* **Narrow candidates**: ``narrow_share`` of each stage's candidates, chosen at random, draw
-  their noise times ``narrow`` (:func:`narrowed`): fine corrections of the posture beside the
-  wide ones that catch a fall ("What the root-relative error is made of").
+* **Narrow candidates**: ``narrow_share`` of each stage's candidates, chosen at random, or
+  (``narrow_first``) all of a window's first stage, draw their noise times ``narrow``
+  (:func:`narrowed`): fine corrections of the posture, with wide ones to catch a fall ("What
+  the root-relative error is made of").
 """
 
 from __future__ import annotations
@@ -45,6 +46,9 @@ class SearchPlan:
         (:func:`adapted_scale`; 0: the fixed Gaussian).
     narrow: factor (> 0) of the noise of the narrow candidates (:func:`narrowed`).
     narrow_share: share (0..1) of each stage's candidates drawn narrow (0: none).
+    narrow_first: every candidate of a window's first stage narrow and the rest (``first``:
+        rolled out only where one of those fell) and the fallback's at full noise; it replaces
+        ``narrow_share``.
     """
 
     recover: int = 0
@@ -55,6 +59,7 @@ class SearchPlan:
     adapt: float = 0.0
     narrow: float = 1.0
     narrow_share: float = 0.0
+    narrow_first: bool = False
 
     def __post_init__(self):
         if self.recover < 0 or self.boost < 1.0 or self.extra < 0.0 or self.end_cost < 0.0:
@@ -73,14 +78,19 @@ class SearchPlan:
             )
 
 
-def narrowed(plan: SearchPlan, rng, n: int) -> np.ndarray | None:
-    """(n, 1) the noise factor of each of ``n`` candidates: ``plan.narrow`` for
-    ``round(plan.narrow_share * n)`` of them chosen at random by ``rng``, 1 for the rest; None
-    where off (``rng`` not drawn from). A small search noise tracks the posture better but
-    catches fewer falls (docs/synthetic.md, "What the root-relative error is made of"): the
-    wide candidates keep the reach."""
+def narrowed(plan: SearchPlan, rng, n: int, first: bool = True) -> np.ndarray | None:
+    """(n, 1) the noise factor of each of ``n`` candidates of a stage (``first``: a window's
+    first): ``plan.narrow`` for all of a first stage's with ``plan.narrow_first`` (none of a
+    later one's), else for ``round(plan.narrow_share * n)`` of them chosen at random by
+    ``rng``, 1 for the rest; None where none is narrow (``rng`` not drawn from). A small search
+    noise tracks the posture better but catches fewer falls (docs/synthetic.md, "What the
+    root-relative error is made of"): the wide candidates keep the reach."""
+    if plan.narrow == 1.0:
+        return None
+    if plan.narrow_first:
+        return np.full((n, 1), plan.narrow) if first else None
     k = int(round(plan.narrow_share * n))
-    if k == 0 or plan.narrow == 1.0:
+    if k == 0:
         return None
     return np.where(rng.permutation(n) < k, plan.narrow, 1.0)[:, None]
 
