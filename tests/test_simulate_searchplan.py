@@ -2,8 +2,8 @@
 backs up and searches again only within its budget, and the replay still passes through the
 states its rollouts reached; a staged window rolls out the rest of its candidates only where one
 of the first fell; the window-end cost is the tracking cost of the state kept; narrow candidates
-are exactly their share, drawn at random, and search with their noise narrowed; every option is
-deterministic whatever the number of threads."""
+are exactly their share, drawn at random, or a window's first stage, and search with their noise
+narrowed; every option is deterministic whatever the number of threads."""
 
 from __future__ import annotations
 
@@ -170,3 +170,16 @@ def test_narrow_candidates_search_with_their_noise_narrowed(bodies, walk):
     assert np.abs(tiny[0]).max() < 1e-6  # every candidate's noise 1e-9 times: no offset grows
     half = choice_search(bodies, walk, plan=SearchPlan(narrow=1e-9, narrow_share=0.5), **SEARCH)
     assert not np.array_equal(half[0], default[0])
+
+
+def test_narrow_first_narrows_the_first_stage_and_widens_where_one_of_it_fell(bodies, walk):
+    rng = np.random.default_rng(5)
+    plan = SearchPlan(first=0.5, narrow=1e-9, narrow_first=True)
+    before = rng.bit_generator.state
+    np.testing.assert_array_equal(narrowed(plan, rng, 4), np.full((4, 1), 1e-9))
+    assert narrowed(plan, rng, 4, first=False) is None  # the rest at full noise
+    assert rng.bit_generator.state == before
+    easy = choice_search(bodies, walk, plan=plan, weights=CostWeights(fall=0.0), **SEARCH)
+    assert np.abs(easy[0]).max() < 1e-6  # no fall looked for: the first stage alone, narrow
+    hard = choice_search(bodies, walk, plan=plan, weights=ALWAYS_FALLEN, **SEARCH)
+    assert np.abs(hard[0]).max() > 1e-2  # every window hard: the wide rest kept too
