@@ -332,11 +332,12 @@ for _w in (10, 30, 100, 300):
 #: joint's peak torque instead of 0.3 (``search_offsets(torque_sigma=s)``); ``trunk<s>``: the
 #: offset noise of the trunk's hinges (``lowerback``, ``upperback``, ``thorax``) s times the
 #: legs' (``sim.simulate.noisescale``); ``feet<s>``: the ankles' and toes' s times the rest's
-#: (their low stiffness gives them the widest noise in radians); ``pers0.5``: a child's offset starts from half its
-#: parent's instead of 0.8 (``persistence``); ``sig0.15rec1``: noise 0.15 with ``rec1``'s recovery
-#: (``SearchPlan(recover=1)``, below); ``narrow<f>of<h>``: a share h of each window's
-#: candidates, drawn at random, with their noise times f (``SearchPlan(narrow=f,
-#: narrow_share=h)``); ``...seed1``: its noise seeded 1, a second draw (docs/synthetic.md, "What the root-relative error is made of")
+#: (their low stiffness gives them the widest noise in radians); ``pers0.5``: a child's offset
+#: starts from half its parent's instead of 0.8 (``persistence``); ``sig0.15rec1``: noise 0.15
+#: with ``rec1``'s recovery (``SearchPlan(recover=1)``, below); ``narrow<f>of<h>``: a share h of
+#: each window's candidates, drawn at random, with their noise times f (``SearchPlan(narrow=f,
+#: narrow_share=h)``); ``...seed1``: its noise seeded 1, a second draw (docs/synthetic.md, "What
+#: the root-relative error is made of")
 _NOISE = {
     **{f"sig{_s:g}": ({"torque_sigma": _s}, f"offset noise {_s:g} of peak torque")
        for _s in (0.1, 0.15, 0.2)},
@@ -369,8 +370,8 @@ for _name, (_search, _label) in _NOISE.items():
 for _f, _n, _h in ((0.5, 40, 0.5), (0.5, 60, 0.67), (0.5, 80, 0.5)):
     _base = CONTROLLERS["mix0.5s40terrain"]
     CONTROLLERS[f"nf{_f:g}s{_n}f{_h:g}"] = (
-        _base[0] + f", {_n} samples: the first {_h:g} with the offset noise times {_f:g}, the rest"
-        " at full noise where one of those fell",
+        _base[0] + f", {_n} samples instead: the first {_h:g} with the offset noise times {_f:g}, "
+        "the rest at full noise where one of those fell",
         {**_base[1], "samples": _n, "search": {
             **_base[1]["search"], "plan": SearchPlan(first=_h, narrow=_f, narrow_first=True)}},
         *_base[2:],

@@ -1,6 +1,6 @@
-"""The sampler's bookkeeping between windows (``sim.simulate.sampling``, ``sim.simulate.gainchoice``):
-the first state, the window's check against the balance feedback, and the cheapest path traced
-back through the kept states."""
+"""The sampler's bookkeeping between windows (``sim.simulate.sampling``,
+``sim.simulate.gainchoice``): the first state, the window's check against the balance feedback,
+and the cheapest path traced back through the kept states."""
 
 from __future__ import annotations
 
