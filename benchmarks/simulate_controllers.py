@@ -367,7 +367,7 @@ for _name, (_search, _label) in _NOISE.items():
 #: out with their noise times ``f`` and the rest at full noise only where one of those fell
 #: (``SearchPlan(first=h, narrow=f, narrow_first=True)``: small corrections of the posture
 #: where the body is safe, the full search where a fall threatens)
-for _f, _n, _h in ((0.5, 40, 0.5), (0.5, 60, 0.67), (0.5, 80, 0.5)):
+for _f, _n, _h in ((0.5, 40, 0.5), (0.5, 60, 0.67), (0.7, 60, 0.67), (0.5, 80, 0.5)):
     _base = CONTROLLERS["mix0.5s40terrain"]
     CONTROLLERS[f"nf{_f:g}s{_n}f{_h:g}"] = (
         _base[0] + f", {_n} samples instead: the first {_h:g} with the offset noise times {_f:g}, "
