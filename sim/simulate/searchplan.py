@@ -18,8 +18,8 @@ Five options, each off by default (:class:`SearchPlan`), measured in docs/synthe
   candidates' draws (``adapt``, :func:`adapted_scale`).
 * **Narrow candidates**: ``narrow_share`` of each stage's candidates, chosen at random, or
   (``narrow_first``) all of a window's first stage, draw their noise times ``narrow``
-  (:func:`narrowed`): fine corrections of the posture, with wide ones to catch a fall ("What
-  the root-relative error is made of").
+  (:func:`narrowed`): fine corrections of the posture, with wide ones to catch a fall
+  ("Narrow candidates": a narrowed first stage tracks better but falls more).
 """
 
 from __future__ import annotations
