@@ -153,32 +153,40 @@ def test_sole_costs_weigh_the_footprints_and_nothing_else_where_hold_is_off(mode
     np.testing.assert_allclose(got, [0.0, 0.3, 0.3], atol=1e-12)
 
 
-def test_the_sampler_with_footprints_off_is_today_s_search_bit_for_bit(trial_on_floor, model):
+#: each sole term (``footprints.sole_costs``) at a weight that moves the search
+SOLE_TERMS = [("footprint", 2000.0), ("clearance", 1e5), ("pivot", 10.0)]
+
+
+@pytest.mark.parametrize(("term", "heavy"), SOLE_TERMS)
+def test_the_sampler_with_a_sole_term_off_is_today_s_search_bit_for_bit(
+    trial_on_floor, model, term, heavy
+):
     ref = trial_on_floor(model, "07_01")[:48]
     kw = dict(samples=6, keep=2, window=12, lookahead=12, seed=4)
     base, rb = search_offsets(model, ref, **kw)
     # soles recorded (their kinematics at each rollout's start too), the term too small to move
     # a sum: the same rollouts, the same choices
-    tiny, rt = search_offsets(model, ref, weights=CostWeights(footprint=1e-300), **kw)
+    tiny, rt = search_offsets(model, ref, weights=CostWeights(**{term: 1e-300}), **kw)
     np.testing.assert_array_equal(tiny, base)
     np.testing.assert_array_equal(rt, rb)
-    a, ra = search_offsets(model, ref, weights=CostWeights(footprint=2000.0), **kw)
-    b, _ = search_offsets(model, ref, weights=CostWeights(footprint=2000.0), **kw)
+    a, ra = search_offsets(model, ref, weights=CostWeights(**{term: heavy}), **kw)
+    b, _ = search_offsets(model, ref, weights=CostWeights(**{term: heavy}), **kw)
     np.testing.assert_array_equal(a, b)  # deterministic
     assert not np.array_equal(a, base)  # the term changes which candidates are kept
 
 
-def test_the_gain_choosing_sampler_costs_the_footprints_too(trial_on_floor):
+@pytest.mark.parametrize(("term", "heavy"), SOLE_TERMS)
+def test_the_gain_choosing_sampler_costs_every_sole_term_too(trial_on_floor, term, heavy):
     sk = canonical_skeleton()
     models = common_body([sim_model(sk), sim_model(sk, gains=Gains(min_deflection=0.1))])
     ref = trial_on_floor(models[0], "07_01")[:48]
     kw = dict(samples=6, keep=2, window=12, lookahead=12, seed=4, choice=GainChoice(share=0.5))
     base = choice_search(models, ref, **kw)
-    tiny = choice_search(models, ref, weights=CostWeights(footprint=1e-300), **kw)
+    tiny = choice_search(models, ref, weights=CostWeights(**{term: 1e-300}), **kw)
     for x, y in zip(base, tiny, strict=True):
         np.testing.assert_array_equal(x, y)
-    heavy = choice_search(models, ref, weights=CostWeights(footprint=2000.0), **kw)
-    assert not np.array_equal(heavy[0], base[0])
+    heavy_search = choice_search(models, ref, weights=CostWeights(**{term: heavy}), **kw)
+    assert not np.array_equal(heavy_search[0], base[0])
 
 
 def test_the_sampler_looking_at_the_lookahead_s_footprints_is_another_search(trial_on_floor, model):

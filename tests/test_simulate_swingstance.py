@@ -2,9 +2,8 @@
 reference's swing sole (capped) pays its squared shortfall, a sole on its support turning
 faster than the reference's stance sole pays the squared rate difference (by hand); the
 reference itself pays nothing; stopped rollouts, terrain boxes and the heading's wrap are
-handled; in the sampler, both terms weighted 0 (or too little to move a sum) are today's search
-bit for bit, and weighted they give another, deterministic search, also where the gains are
-chosen per window."""
+handled. In the sampler, with the footprints, in tests/test_simulate_footprints.py (every sole
+term off is today's search bit for bit, weighted another, deterministic one)."""
 
 from __future__ import annotations
 
@@ -16,10 +15,9 @@ from sole_tracks import still_soles
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.footholding import reference_soles, sole_ids
 from sim.simulate.footprints import sole_costs
-from sim.simulate.gainchoice import GainChoice, choice_search, common_body
-from sim.simulate.model import Gains, sim_model
+from sim.simulate.model import sim_model
 from sim.simulate.reference import contact_consistent
-from sim.simulate.sampling import CostWeights, search_offsets
+from sim.simulate.sampling import CostWeights
 from sim.simulate.swingstance import (
     CLEARANCE_CAP,
     clearance_cost,
@@ -175,33 +173,3 @@ def test_sole_costs_weigh_clearance_and_pivot_and_nothing_else(model):
     w = CostWeights(clearance=100.0, pivot=0.25)
     got = sole_costs(model, Prob, w, (8, 8 + K), (pos, mat, com))
     np.testing.assert_allclose(got, [0.09, 0.01, 0.01 + 0.25 * 4.0], rtol=1e-9)
-
-
-@pytest.mark.parametrize("term", ["clearance", "pivot"])
-def test_the_sampler_with_either_term_off_is_today_s_search_bit_for_bit(
-    trial_on_floor, model, term
-):
-    ref = trial_on_floor(model, "07_01")[:48]
-    kw = dict(samples=6, keep=2, window=12, lookahead=12, seed=4)
-    base, rb = search_offsets(model, ref, **kw)
-    tiny, rt = search_offsets(model, ref, weights=CostWeights(**{term: 1e-300}), **kw)
-    np.testing.assert_array_equal(tiny, base)
-    np.testing.assert_array_equal(rt, rb)
-    heavy = {"clearance": 1e5, "pivot": 10.0}[term]
-    a, _ = search_offsets(model, ref, weights=CostWeights(**{term: heavy}), **kw)
-    b, _ = search_offsets(model, ref, weights=CostWeights(**{term: heavy}), **kw)
-    np.testing.assert_array_equal(a, b)  # deterministic
-    assert not np.array_equal(a, base)  # the term changes which candidates are kept
-
-
-def test_the_gain_choosing_sampler_costs_clearance_and_pivot_too(trial_on_floor):
-    sk = canonical_skeleton()
-    models = common_body([sim_model(sk), sim_model(sk, gains=Gains(min_deflection=0.1))])
-    ref = trial_on_floor(models[0], "07_01")[:48]
-    kw = dict(samples=6, keep=2, window=12, lookahead=12, seed=4, choice=GainChoice(share=0.5))
-    base = choice_search(models, ref, **kw)
-    tiny = choice_search(models, ref, weights=CostWeights(clearance=1e-300, pivot=1e-300), **kw)
-    for x, y in zip(base, tiny, strict=True):
-        np.testing.assert_array_equal(x, y)
-    heavy = choice_search(models, ref, weights=CostWeights(clearance=1e5, pivot=10.0), **kw)
-    assert not np.array_equal(heavy[0], base[0])
