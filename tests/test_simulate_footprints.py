@@ -7,10 +7,9 @@ deterministic search, also where the gains are chosen per window."""
 
 from __future__ import annotations
 
-import mujoco
 import numpy as np
 import pytest
-from sole_tracks import still_soles
+from sole_tracks import reference_sole_boxes, still_soles
 
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.footholding import reference_soles, sole_ids
@@ -119,13 +118,7 @@ def test_a_window_counts_soles_on_the_floor_or_on_a_box():
 def test_the_reference_s_own_soles_cost_nothing_and_a_shift_costs_its_square(trial_on_floor, model):
     ref_qpos = contact_consistent(model, trial_on_floor(model, "07_01")[:37])
     ids = sole_ids(model)
-    data = mujoco.MjData(model)
-    K = len(ref_qpos) - 1
-    pos, mat = np.empty((1, K + 1, 2, 3)), np.empty((1, K + 1, 2, 9))
-    for t, q in enumerate(ref_qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        pos[0, t], mat[0, t] = data.geom_xpos[ids], data.geom_xmat[ids]
+    pos, mat = reference_sole_boxes(model, ref_qpos, ids)
     ref = reference_soles(model, ref_qpos, ids)
     size = model.geom_size[ids]
     assert window_footprint_costs((pos, mat), size, ref, None, False)[0] == 0.0
@@ -133,7 +126,7 @@ def test_the_reference_s_own_soles_cost_nothing_and_a_shift_costs_its_square(tri
     low = pos[0, 1:, :, 2] - np.sum(np.abs(mat[0, 1:, :, 6:9]) * size, axis=-1)
     counted = (low <= 0.01) & ref[1][1:]
     assert counted.any()  # the walk stands on its soles
-    want = 0.05**2 * counted.sum() / K
+    want = 0.05**2 * counted.sum() / (len(ref_qpos) - 1)
     got = window_footprint_costs((moved, mat), size, ref, None, False)[0]
     assert got == pytest.approx(want, rel=1e-9)
 

@@ -7,10 +7,9 @@ term off is today's search bit for bit, weighted another, deterministic one)."""
 
 from __future__ import annotations
 
-import mujoco
 import numpy as np
 import pytest
-from sole_tracks import still_soles
+from sole_tracks import reference_sole_boxes, still_soles
 
 from sim.model.humanoid import canonical_skeleton
 from sim.simulate.footholding import reference_soles, sole_ids
@@ -134,13 +133,7 @@ def test_the_reference_s_own_soles_cost_nothing_and_a_lowered_swing_sole_pays(
 ):
     ref_qpos = contact_consistent(model, trial_on_floor(model, "07_01")[:61])
     ids = sole_ids(model)
-    data = mujoco.MjData(model)
-    K = len(ref_qpos) - 1
-    pos, mat = np.empty((1, K + 1, 2, 3)), np.empty((1, K + 1, 2, 9))
-    for t, q in enumerate(ref_qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        pos[0, t], mat[0, t] = data.geom_xpos[ids], data.geom_xmat[ids]
+    pos, mat = reference_sole_boxes(model, ref_qpos, ids)
     ref = reference_soles(model, ref_qpos, ids, capture=True)
     size, dt = model.geom_size[ids], 1 / 120
     weights = (1000.0, 1.0)
@@ -149,7 +142,7 @@ def test_the_reference_s_own_soles_cost_nothing_and_a_lowered_swing_sole_pays(
     swing = h > 0.01
     assert swing.any() and (~swing).any()  # the walk lifts a foot and stands on one
     lowered = pos - np.array([0.0, 0.0, 0.005])  # the whole body 5 mm lower
-    want = np.sum(np.maximum(0.0, np.minimum(h, 0.03) - (h - 0.005))[swing] ** 2) / K
+    want = np.sum(np.maximum(0.0, np.minimum(h, 0.03) - (h - 0.005))[swing] ** 2) / len(h)
     assert want > 0
     got = window_swing_stance_costs((lowered, mat), size, ref, None, dt, (1.0, 0.0))[0]
     assert got == pytest.approx(want, rel=1e-9)
