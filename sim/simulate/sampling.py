@@ -53,6 +53,7 @@ from sim.simulate.feedforward import reference_feedforward
 from sim.simulate.footholding import as_slice, reference_soles, sole_ids
 from sim.simulate.footprints import sole_costs, sole_terms
 from sim.simulate.model import CONTROL_HZ, SUBSTEPS
+from sim.simulate.noisescale import hinge_bone
 from sim.simulate.searchsteps import backtrack, check_window, first_state
 from sim.simulate.tracking import clear_divergences, divergences
 
@@ -173,12 +174,6 @@ def window_cost(sim: Features, ref: Features, w: CostWeights, hinge_w: np.ndarra
     return c
 
 
-def _bone(joint: str) -> str:
-    """``"lfemur_rx"`` -> ``"femur"``, ``"lowerback_rz"`` -> ``"lowerback"``."""
-    bone = joint.rsplit("_", 1)[0]
-    return bone[1:] if bone[:1] in "lr" and bone[1:] in CORRECTED else bone
-
-
 def sample_track(
     model,
     ref_qpos: np.ndarray,
@@ -251,7 +246,7 @@ def _problem(
     lead = model.actuator_biasprm[:, 2] / model.actuator_biasprm[:, 1]
     base = ref_qpos[:, 7:] + lead * ref_qvel[:, 6:] + ref_force[:, 6:] / kp  # (T, nu) targets
     names = [model.actuator(a).name for a in range(nu)]
-    corrected = np.array([_bone(n) in CORRECTED for n in names])
+    corrected = np.array([hinge_bone(n) in CORRECTED for n in names])
     lim = model.actuator_forcerange[:, 1]
     stiff = np.minimum(kp, lim / noise_deflection) if noise_deflection else kp
     sigma = np.where(corrected, torque_sigma * lim / stiff, 0.0)
