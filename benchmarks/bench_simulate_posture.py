@@ -44,6 +44,8 @@ import bench_simulate as bs  # noqa: E402
 import sim.simulate.gainchoice as gainchoice  # noqa: E402
 import sim.simulate.validate as validate  # noqa: E402
 from sidql.evaluation.cases import load_cases  # noqa: E402
+from sim.files import write_atomic  # noqa: E402
+from sim.simulate.footholding import sole_yaw  # noqa: E402
 from sim.simulate.model import CONTROL_HZ  # noqa: E402
 from sim.simulate.noisescale import hinge_bone  # noqa: E402
 
@@ -99,19 +101,24 @@ class Kept:
         gainchoice.choice_search, validate.choice_track = search_, track_
 
 
+def _point_errors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(P,) each point's root-relative error [mm], mean over frames, of points (F, P, 3)
+    against (F, P, 3) (root first)."""
+    return 1e3 * np.linalg.norm((a - a[:, :1]) - (b - b[:, :1]), axis=-1).mean(0)
+
+
 def _err(a: np.ndarray, b: np.ndarray) -> float:
-    """Root-relative error [mm] of points (F, P, 3) against (F, P, 3) (root first)."""
-    return 1e3 * float(np.linalg.norm((a - a[:, :1]) - (b - b[:, :1]), axis=-1).mean())
+    """Root-relative error [mm] of points (F, P, 3) against (F, P, 3) (root first): as
+    ``sim_error_local_mm``, the mean over frames and points."""
+    return float(_point_errors(a, b).mean())
 
 
 def _yaw(quats: np.ndarray) -> np.ndarray:
-    """(F,) heading [rad] of (F, 4) quaternions (the x axis's direction in the ground plane)."""
-    out = np.empty(len(quats))
+    """(F,) heading [rad] of (F, 4) quaternions (``footholding.sole_yaw`` of their matrices)."""
+    mats = np.empty((len(quats), 9))
     for i, q in enumerate(quats):
-        m = np.zeros(9)
-        mujoco.mju_quat2Mat(m, q)
-        out[i] = np.arctan2(m[3], m[0])
-    return out
+        mujoco.mju_quat2Mat(mats[i], q)
+    return sole_yaw(mats)
 
 
 def _turned(quats: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -170,8 +177,7 @@ def decompose(fv, kept: Kept, every: int = 4) -> dict:
     for b in ("femur", "tibia", "foot", "toes", *GROUPS):
         cols = group[b] if b in GROUPS else adr[bones == b]
         out[f"{b}_deg"] = float(np.degrees(np.sqrt(np.mean((sim[:, cols] - qref[:, cols]) ** 2))))
-    out["points"] = dict(zip(fv.names, 1e3 * np.linalg.norm(
-        (p_sim - p_sim[:, :1]) - (p_ref - p_ref[:, :1]), axis=-1).mean(0), strict=True))  # fmt: skip
+    out["points"] = dict(zip(fv.names, _point_errors(p_sim, p_ref), strict=True))
     out.update(_offsets(sim, ref, kept, adr, frames))
     return out
 
@@ -239,7 +245,8 @@ def main() -> None:
               flush=True)  # fmt: skip
     print(markdown(rows))
     if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
+        text = json.dumps(rows, indent=1).encode()
+        write_atomic(Path(args.json), lambda f: f.write(text))
 
 
 if __name__ == "__main__":
