@@ -112,12 +112,14 @@ def sole_costs(model, prob, weights, ticks: tuple, records: tuple) -> np.ndarray
             ticks_only, size, tuple(r[1 : K + 1] for r in ref), 1.0 / CONTROL_HZ,
             weights.hold_contact, release,
         )  # fmt: skip
-    terrain = terrain_geoms(model)
+    swing_stance = weights.clearance > 0 or weights.pivot > 0
+    # the boxes under the soles, where a term reads them (foot holding does not)
+    terrain = terrain_geoms(model) if weights.footprint > 0 or swing_stance else None
     if weights.footprint > 0:
         cost += weights.footprint * window_footprint_costs(
             records, size, ref, terrain, weights.footprint_landing
         )
-    if weights.clearance > 0 or weights.pivot > 0:  # the window's start and ticks
+    if swing_stance:  # the window's start and ticks
         K = ticks[1] - ticks[0]
         cost += window_swing_stance_costs(
             tuple(r[:, : K + 1] for r in records[:2]), size, tuple(r[: K + 1] for r in ref),
